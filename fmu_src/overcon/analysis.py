@@ -1,0 +1,589 @@
+"""Reaction-uniqueness analysis of a constraint Jacobian (Fraczek & Wojtyra 2011, §2.2, App. B).
+
+Pure functions on plain numpy arrays; nothing here knows about models, scenes or joint types.
+
+Glossary (paper symbols, spelled for code)
+------------------------------------------
+``J``            (n, m)  transposed constraint Jacobian ``Phi_q.T`` (Eq. 10-11); for spatial systems
+                         the modified Jacobian of Eq. 7.  n coordinates (rows), m equations (columns).
+``columns``      0-based column indices of ``J`` owned by one joint P (any order, need not be
+                 consecutive).  ``J_P = J[:, columns]``, ``J_-P`` = all other columns.
+``r``            ``rank(J)``; ``dof = n - r``; ``redundant = m - r`` (Eq. 13: ``dim Z = r < m``).
+``f_P``          generalized reaction of joint P, ``f_P = J_P lam_P`` (Eq. 10).  ``lam`` solves the
+                 rank-deficient Eq. 11, so ``lam`` is unique only up to ``null(J)``.
+``N``            (m, m - r) orthonormal basis of ``null(J)``.
+
+Theory (§2.2).  With ``Z = span(J)`` (Eq. 12), ``X = span(J_P)`` (Eq. 14) and ``Y = span(J_-P)``
+(Eq. 16), ``f_P`` is uniquely determined iff ``Z = X (+) Y`` (direct sum).  Equivalently, iff
+``J_P nu_P = 0`` for every ``nu`` in ``null(J)``: any two solutions ``lam`` differ by such a ``nu``.
+For a set of joints K = {P1..Pp} the condition is Eq. 17, ``Z = X1 (+) ... (+) Xp (+) Y`` with Y
+spanned by the columns of no member; it holds iff every member is individually unique (both say
+``J_Pi nu_Pi = 0`` for all null vectors ``nu``), so the set verdict is checked both ways.
+
+The three numerical tests ([7] of the paper, used in App. B.10-B.12 and B.19-B.21)
+----------------------------------------------------------------------------------
+rank comparison (B.10)
+    ``rank_defect = rank(J_P) + rank(J_-P) - rank(J)``; 0 means direct sum (unique), > 0 not.
+    For a set (Eq. 17): ``sum_i rank(J_Pi) + rank(J_Y) - rank(J)``.
+SVD (B.11)
+    ``J = U S V^T`` with V (m, m).  ``V_P`` = rows of V of joint P (k, m).  Since
+    ``J V = sum_P J_P V_P = [U_r S_r | 0]``, ``J_P V_P = [D_P (n, r) | B_P (n, m - r)]`` where
+    ``B_P = J_P N_P`` with ``N = V[:, r:]``.  Unique iff ``B_P == 0``.
+QR (B.12)
+    Column-pivoted QR of ``Phi_q = J^T`` (m, n): ``J^T Pi = Q R`` with Q (m, m).  The first r
+    columns of Q span ``range(J^T)``, so the last m - r span its orthogonal complement
+    ``null(J)``.  ``Q_P`` = rows of Q of joint P, ``J_P Q_P = [D_P | B_P]``, unique iff ``B_P == 0``.
+    The same r (from the SVD) is used by all three methods.
+
+Both B matrices are ``J_P`` times an orthonormal basis of the same null space, so
+``B_qr = B_svd W`` for an orthogonal W: entries differ (and a null vector's sign is arbitrary),
+but the row norms of B are identical in exact arithmetic.  The zero test below uses row norms.
+
+Equilibration (what the decisions are computed on)
+--------------------------------------------------
+All three criteria are exactly invariant under ``J -> D_r J D_c`` for invertible diagonal D_r
+(coordinate units: translational rows against rotational rows) and D_c (equation units):
+``null(D_r J D_c) = D_c^-1 null(J)``, ``span(J_P D_cP)`` is just ``span(J_P)`` mapped by D_r, and
+rank and direct sums survive invertible maps.  To make the *numerical* verdicts invariant too,
+the decisions run on ``Jh = D_r J D_c`` from ``equilibrate`` (Ruiz 2001 iteration: rows and
+columns scaled to unit max-norm, <= 50 sweeps, stop when all norms are within 1e-3 of 1).  Before
+that, rows and columns whose max-norm is ``<= NOISE_FACTOR * max(n, m) * eps * max|J|``
+(``NOISE_FACTOR = 100``) are round-off (e.g. ``cos(pi/2)`` products) and are set to zero, so they
+are not blown up.  Reported ``B_svd`` / ``B_qr`` are the paper's, computed from the raw J (B.11
+magnitudes, J's units); the zero test uses the equilibrated ones.  Pass ``equilibrate=False`` to
+decide on the raw J.
+
+Tolerances (all relative to the matrix scale)
+---------------------------------------------
+``eps`` = float64 machine epsilon; ``A`` is the matrix decided on (``Jh``, or J);
+``sigma_1 = ||A||_2``; ``rtol`` defaults to ``DEFAULT_RTOL = 1e-9``.
+
+rank
+    A singular value counts iff ``sigma > tol``, ``tol = max(rtol, max(n, m) * eps) * sigma_1``
+    (``rank_tolerance``).  The *same absolute* ``tol`` (from the whole matrix) is used for
+    ``rank(J)``, ``rank(J_P)``, ``rank(J_-P)`` and ``rank(J_Y)``, so the dimension count of the
+    direct-sum test is consistent.  Configurations with ``sigma_r / sigma_1 > rtol`` count as
+    non-singular (the planar mechanism 1e-8 rad from its singular position K = L = O has
+    ``sigma_r / sigma_1 ~ 5e-9`` and is still rank 11; at 1e-9 rad it is rank 10); a numerically
+    drifted configuration whose "broken" redundancy leaves ``sigma / sigma_1 <= 1e-9`` is still
+    seen as redundant.  ``rtol`` moves the boundary.
+B_P == 0 (SVD and QR)
+    ``max_i ||B_P[i, :]||_2 <= b_rtol * sigma_1`` with
+    ``b_rtol = max(rtol, B_NOISE_FACTOR * max(n, m) * eps * kappa)``, ``B_NOISE_FACTOR = 100``,
+    ``kappa = sigma_1 / sigma_r``.  The second term bounds the round-off of a computed null-space
+    basis (Wedin: angle error ~ eps * sigma_1 / sigma_r), so near-singular but non-singular
+    configurations give no spurious nonzero B.  The row 2-norm is invariant to the choice of
+    orthonormal null basis, so the SVD and QR B's are measured identically.  ``b_rtol`` can be
+    overridden (keyword ``b_rtol``).
+
+Scale invariance.  Scalar multiples of J change nothing; diagonal row/column scalings (units) are
+removed by equilibration up to rounding.  Tests cover 1e-12..1e12 overall, 1e3 / 1e-3 / 1e6
+coordinate-group row scalings and equation scalings, random diagonal scalings up to ~1e3 per
+row/column, and random invertible row mixes.  Without equilibration (``equilibrate=False``, the
+paper's raw form) a 1e6 ratio between translational and rotational rows already makes the raw
+SVD/QR B tests miss genuine non-uniqueness while the rank test still answers correctly, and a
+1e9 ratio breaks the rank test too.  The reported ``unique`` always follows the rank method; the
+SVD/QR verdicts are reported beside it and any disagreement sets ``agree = False`` (never hidden).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+import scipy.linalg
+
+__all__ = [
+    "DEFAULT_RTOL",
+    "B_NOISE_FACTOR",
+    "NOISE_FACTOR",
+    "rank_tolerance",
+    "numerical_rank",
+    "equilibrate",
+    "null_space",
+    "independent_columns",
+    "auto_eliminate",
+    "JointVerdict",
+    "SetVerdict",
+    "Analysis",
+    "joint_uniqueness",
+    "analyse",
+    "to_json",
+]
+
+EPS = float(np.finfo(float).eps)
+#: Default relative rank threshold: singular values <= DEFAULT_RTOL * sigma_1 are zero.
+DEFAULT_RTOL = 1e-9
+#: Safety factor on the round-off bound of a computed null-space basis (B_P == 0 test).
+B_NOISE_FACTOR = 100.0
+#: Rows/columns with max-norm <= NOISE_FACTOR * max(n, m) * eps * max|J| are round-off.
+NOISE_FACTOR = 100.0
+
+_METHODS = ("rank", "svd", "qr")
+_RUIZ_SWEEPS = 50
+_RUIZ_TOL = 1e-3
+
+
+# --------------------------------------------------------------------------- basic helpers
+
+
+def _as_matrix(A) -> np.ndarray:
+    A = np.asarray(A, dtype=float)
+    if A.ndim != 2:
+        raise ValueError(f"expected a 2-D matrix, got shape {A.shape}")
+    if not np.all(np.isfinite(A)):
+        raise ValueError("matrix contains NaN or inf")
+    return A
+
+
+def _svdvals(A: np.ndarray) -> np.ndarray:
+    if A.size == 0:
+        return np.zeros(0)
+    return np.linalg.svd(A, compute_uv=False)
+
+
+def _rtol(rtol: float | None, name: str = "rtol") -> float:
+    if rtol is None:
+        return DEFAULT_RTOL
+    value = float(rtol)
+    if not (np.isfinite(value) and value >= 0.0):
+        raise ValueError(f"{name} must be a finite non-negative number, got {rtol!r}")
+    return value
+
+
+def _tol_from(s: np.ndarray, shape: tuple[int, int], rtol: float) -> float:
+    if s.size == 0:
+        return 0.0
+    return max(rtol, max(shape) * EPS) * float(s[0])
+
+
+def _rank_abs(A: np.ndarray, tol: float) -> int:
+    if A.size == 0:
+        return 0
+    return int(np.count_nonzero(_svdvals(A) > tol))
+
+
+def rank_tolerance(A, rtol: float | None = None) -> float:
+    """Absolute singular-value threshold of ``A``: ``max(rtol, max(n, m) * eps) * ||A||_2``.
+
+    ``rtol`` defaults to ``DEFAULT_RTOL`` (1e-9) and is never allowed below the LAPACK round-off
+    level ``max(n, m) * eps``.  0.0 for an empty or all-zero matrix.
+    """
+    A = _as_matrix(A)
+    return _tol_from(_svdvals(A), A.shape, _rtol(rtol))
+
+
+def numerical_rank(A, rtol: float | None = None, *, tol: float | None = None) -> int:
+    """Number of singular values of ``A`` that are ``> tol``.
+
+    ``tol`` (absolute) defaults to ``rank_tolerance(A, rtol)``; pass it explicitly to rank a
+    submatrix against the scale of a larger matrix (as the uniqueness tests do).  No
+    equilibration here: this is the plain numerical rank of the given array.
+    """
+    A = _as_matrix(A)
+    if tol is None:
+        s = _svdvals(A)
+        return int(np.count_nonzero(s > _tol_from(s, A.shape, _rtol(rtol))))
+    return _rank_abs(A, float(tol))
+
+
+def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return ``(Jh, d_r, d_c)`` with ``Jh = d_r[:, None] * J0 * d_c[None, :]``, rows and columns
+    of unit max-norm (within 1e-3; Ruiz iteration, at most 50 sweeps).
+
+    ``J0`` is J with round-off rows and columns (max-norm <= ``NOISE_FACTOR * max(n, m) * eps *
+    max|J|``) set to zero; zero rows/columns keep scale 1.  Diagonal scaling preserves rank,
+    null spaces (up to ``d_c``) and direct sums, so the uniqueness verdicts on Jh are those of J.
+    """
+    A = _as_matrix(J).copy()
+    n, m = A.shape
+    d_r, d_c = np.ones(n), np.ones(m)
+    if A.size == 0:
+        return A, d_r, d_c
+    amax = float(np.abs(A).max())
+    if amax == 0.0:
+        return A, d_r, d_c
+    floor = NOISE_FACTOR * max(n, m) * EPS * amax
+    A[np.abs(A).max(axis=1) <= floor, :] = 0.0
+    A[:, np.abs(A).max(axis=0) <= floor] = 0.0
+    for _ in range(_RUIZ_SWEEPS):
+        rn = np.abs(A).max(axis=1)
+        cn = np.abs(A).max(axis=0)
+        dev = max(
+            float(np.abs(1.0 - rn[rn > 0]).max(initial=0.0)),
+            float(np.abs(1.0 - cn[cn > 0]).max(initial=0.0)),
+        )
+        if dev <= _RUIZ_TOL:
+            break
+        sr = np.where(rn > 0, 1.0 / np.sqrt(np.where(rn > 0, rn, 1.0)), 1.0)
+        sc = np.where(cn > 0, 1.0 / np.sqrt(np.where(cn > 0, cn, 1.0)), 1.0)
+        A = sr[:, None] * A * sc[None, :]
+        d_r *= sr
+        d_c *= sc
+    return A, d_r, d_c
+
+
+def _null_basis(J: np.ndarray, r: int, method: str) -> np.ndarray:
+    m = J.shape[1]
+    if r <= 0:
+        return np.eye(m)
+    if r >= m:
+        return np.zeros((m, 0))
+    if method == "svd":
+        _, _, vh = np.linalg.svd(J, full_matrices=True)
+        return vh.T[:, r:].copy()
+    if method == "qr":
+        q, _, _ = scipy.linalg.qr(J.T, mode="full", pivoting=True)
+        return q[:, r:].copy()
+    raise ValueError(f"unknown null-space method {method!r} (use 'svd' or 'qr')")
+
+
+def null_space(J, rtol: float | None = None, *, method: str = "svd") -> np.ndarray:
+    """Orthonormal basis (m, m - r) of ``null(J)`` of the raw ``J`` (n, m), r = ``numerical_rank(J, rtol)``.
+
+    ``method="svd"``: the last m - r right singular vectors, ``V[:, r:]`` (App. B.11).
+    ``method="qr"``: the last m - r columns of Q of the column-pivoted QR ``J^T Pi = Q R`` (B.12).
+    """
+    J = _as_matrix(J)
+    s = _svdvals(J)
+    r = int(np.count_nonzero(s > _tol_from(s, J.shape, _rtol(rtol))))
+    return _null_basis(J, r, method)
+
+
+def _decision_matrix(J: np.ndarray, use_equilibration: bool) -> np.ndarray:
+    return equilibrate(J)[0] if use_equilibration else J
+
+
+def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = True) -> list[int]:
+    """A maximal linearly independent set of columns (equations) of ``J``, sorted, 0-based.
+
+    The first r pivots of the column-pivoted QR (``scipy.linalg.qr(..., pivoting=True)``) of the
+    equilibrated J (raw J if ``equilibrate=False``), r = the rank ``analyse`` reports.  Any
+    maximal independent set is valid and the reactions of unique joints do not depend on the
+    choice.  The result is verified to have rank r (greedy fallback in pivot order otherwise).
+    """
+    A = _decision_matrix(_as_matrix(J), equilibrate)
+    s = _svdvals(A)
+    tol = _tol_from(s, A.shape, _rtol(rtol))
+    r = int(np.count_nonzero(s > tol))
+    if r == 0:
+        return []
+    _, piv = scipy.linalg.qr(A, mode="r", pivoting=True)
+    chosen = sorted(int(c) for c in piv[:r])
+    if _rank_abs(A[:, chosen], tol) == r:
+        return chosen
+    chosen = []  # pragma: no cover - pivoted QR failed to reveal the rank (Kahan-type matrix)
+    for c in piv:  # pragma: no cover
+        trial = chosen + [int(c)]
+        if _rank_abs(A[:, trial], tol) == len(trial):
+            chosen = trial
+        if len(chosen) == r:
+            break
+    return sorted(chosen)  # pragma: no cover
+
+
+def auto_eliminate(J, rtol: float | None = None, *, equilibrate: bool = True) -> list[int]:
+    """Equations an automatic elimination removes: the complement of ``independent_columns``,
+    sorted, 0-based (``m - rank`` of them)."""
+    J = _as_matrix(J)
+    keep = set(independent_columns(J, rtol, equilibrate=equilibrate))
+    return [c for c in range(J.shape[1]) if c not in keep]
+
+
+# --------------------------------------------------------------------------- verdict types
+
+
+@dataclass(frozen=True, eq=False)
+class JointVerdict:
+    """Uniqueness of one joint's generalized reaction ``f_P = J_P lam_P``.
+
+    unique        agreed verdict; follows the rank method if the methods disagree
+    methods       {"rank": bool, "svd": bool, "qr": bool} (True = unique)
+    rank_defect   rank(J_P) + rank(J_-P) - rank(J) (B.10); > 0 means not unique
+    B_svd         (n, m - r) ``J_P V_P[:, r:]`` from the raw J (B.11), in J's units
+    B_qr          (n, m - r) ``J_P Q_P[:, r:]`` from the raw J (B.12)
+    agree         all three methods give the same answer
+    columns       the joint's columns, as given
+    rank_P        rank(J_P); ``lam_P`` itself is unique only if unique and rank_P == len(columns)
+    b_ratio_svd   max row norm of the decision B_P / (b_rtol * sigma_1); <= 1 means B_P == 0
+    b_ratio_qr    the same for the QR basis
+    """
+
+    unique: bool
+    methods: dict
+    rank_defect: int
+    B_svd: np.ndarray = field(repr=False)
+    B_qr: np.ndarray = field(repr=False)
+    agree: bool
+    columns: tuple = ()
+    rank_P: int = 0
+    b_ratio_svd: float = 0.0
+    b_ratio_qr: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class SetVerdict:
+    """Uniqueness of the reactions of a set K of joints (Eq. 17).
+
+    unique        agreed verdict (follows the rank form of Eq. 17 on disagreement)
+    methods       {"rank": Eq. 17 by ranks, "svd": every member's B_svd == 0, "qr": every B_qr == 0}
+    rank_defect   sum_i rank(J_Pi) + rank(J_Y) - rank(J)
+    agree         the three agree (they are mathematically equivalent)
+    names         the members, in the order given
+    """
+
+    unique: bool
+    methods: dict
+    rank_defect: int
+    agree: bool
+    names: tuple = ()
+
+
+@dataclass(frozen=True, eq=False)
+class _Context:
+    J: np.ndarray  # raw, for the reported B matrices
+    A: np.ndarray  # matrix the decisions are made on (equilibrated J, or J)
+    sigma: np.ndarray  # singular values of A
+    tol: float  # absolute rank threshold on A
+    r: int
+    b_rtol: float
+    N_svd: np.ndarray  # null bases of A (decisions)
+    N_qr: np.ndarray
+    N_svd_raw: np.ndarray  # null bases of J (reports)
+    N_qr_raw: np.ndarray
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+def _context(J, rtol, b_rtol, use_equilibration: bool) -> _Context:
+    J = _readonly(_as_matrix(J).copy())
+    rt = _rtol(rtol)
+    A = _readonly(_decision_matrix(J, use_equilibration).copy())
+    s = _svdvals(A)
+    tol = _tol_from(s, A.shape, rt)
+    r = int(np.count_nonzero(s > tol))
+    if b_rtol is None:
+        kappa = float(s[0] / s[r - 1]) if r > 0 else 1.0
+        brt = max(rt, B_NOISE_FACTOR * max(A.shape) * EPS * kappa)
+    else:
+        brt = _rtol(b_rtol, "b_rtol")
+    return _Context(
+        J=J,
+        A=A,
+        sigma=_readonly(s),
+        tol=tol,
+        r=r,
+        b_rtol=brt,
+        N_svd=_null_basis(A, r, "svd"),
+        N_qr=_null_basis(A, r, "qr"),
+        N_svd_raw=_null_basis(J, r, "svd"),
+        N_qr_raw=_null_basis(J, r, "qr"),
+    )
+
+
+def _check_columns(columns: Iterable[int], m: int, what: str = "columns") -> tuple[int, ...]:
+    if isinstance(columns, (str, bytes)):
+        raise TypeError(f"{what}: expected a sequence of column indices, got {columns!r}")
+    cols = []
+    for c in columns:
+        if isinstance(c, (bool, np.bool_)) or not isinstance(c, (int, np.integer)):
+            raise TypeError(f"{what}: column indices must be integers, got {c!r}")
+        c = int(c)
+        if not 0 <= c < m:
+            raise ValueError(f"{what}: column index {c} out of range for {m} equations")
+        cols.append(c)
+    if len(set(cols)) != len(cols):
+        raise ValueError(f"{what}: duplicate column indices {cols}")
+    return tuple(cols)
+
+
+def _B(M: np.ndarray, N: np.ndarray, cols: tuple[int, ...]) -> np.ndarray:
+    idx = list(cols)
+    if not idx:
+        return _readonly(np.zeros((M.shape[0], N.shape[1])))
+    return _readonly(M[:, idx] @ N[idx, :])
+
+
+def _b_ratio(ctx: _Context, B: np.ndarray) -> float:
+    if B.size == 0:
+        return 0.0
+    peak = float(np.linalg.norm(B, axis=1).max())
+    limit = ctx.b_rtol * (float(ctx.sigma[0]) if ctx.sigma.size else 0.0)
+    if peak == 0.0:
+        return 0.0
+    return peak / limit if limit > 0.0 else float("inf")
+
+
+def _rank_defect(ctx: _Context, member_columns: Sequence[tuple[int, ...]]) -> int:
+    """sum_i rank(A_Pi) + rank(A_rest) - rank(A), all with the same absolute tolerance."""
+    m = ctx.A.shape[1]
+    in_k = np.zeros(m, dtype=bool)
+    total = 0
+    for cols in member_columns:
+        in_k[list(cols)] = True
+        total += _rank_abs(ctx.A[:, list(cols)], ctx.tol)
+    return total + _rank_abs(ctx.A[:, ~in_k], ctx.tol) - ctx.r
+
+
+def _joint(ctx: _Context, cols: tuple[int, ...]) -> JointVerdict:
+    defect = _rank_defect(ctx, [cols])
+    ratio_svd = _b_ratio(ctx, _B(ctx.A, ctx.N_svd, cols))
+    ratio_qr = _b_ratio(ctx, _B(ctx.A, ctx.N_qr, cols))
+    methods = {"rank": defect <= 0, "svd": ratio_svd <= 1.0, "qr": ratio_qr <= 1.0}
+    methods = {k: bool(v) for k, v in methods.items()}
+    return JointVerdict(
+        unique=methods["rank"],
+        methods=methods,
+        rank_defect=int(defect),
+        B_svd=_B(ctx.J, ctx.N_svd_raw, cols),
+        B_qr=_B(ctx.J, ctx.N_qr_raw, cols),
+        agree=len(set(methods.values())) == 1,
+        columns=cols,
+        rank_P=_rank_abs(ctx.A[:, list(cols)], ctx.tol),
+        b_ratio_svd=ratio_svd,
+        b_ratio_qr=ratio_qr,
+    )
+
+
+def joint_uniqueness(
+    J,
+    columns: Sequence[int],
+    *,
+    rtol: float | None = None,
+    b_rtol: float | None = None,
+    equilibrate: bool = True,
+) -> JointVerdict:
+    """Is the reaction ``f_P = J_P lam_P`` of the joint owning ``columns`` of ``J`` unique?
+
+    ``J`` (n, m) = ``Phi_q.T``; ``columns`` are 0-based column indices.  Runs the rank
+    comparison (B.10), SVD (B.11) and QR (B.12) tests with the tolerances of the module docstring.
+    ``unique`` follows the rank method; ``agree`` is False if any method disagrees.
+    """
+    ctx = _context(J, rtol, b_rtol, equilibrate)
+    return _joint(ctx, _check_columns(columns, ctx.J.shape[1]))
+
+
+# --------------------------------------------------------------------------- whole analysis
+
+
+@dataclass(frozen=True, eq=False)
+class Analysis:
+    """Result of ``analyse``.
+
+    n_coordinates  n (rows of J)          n_equations  m (columns of J)
+    rank           r = rank(J)            dof          n - r
+    redundant      m - r                  joints       name -> JointVerdict, in insertion order
+    singular_values  of the decision matrix (equilibrated J unless equilibrate=False), descending
+    rank_tol       absolute rank threshold on that matrix
+    b_rtol         threshold of the ``B_P == 0`` test (relative to its sigma_1)
+    """
+
+    n_coordinates: int
+    n_equations: int
+    rank: int
+    dof: int
+    redundant: int
+    joints: dict
+    singular_values: np.ndarray = field(repr=False)
+    rank_tol: float = 0.0
+    b_rtol: float = 0.0
+    _ctx: _Context = field(repr=False, default=None)
+    _groups: dict = field(repr=False, default_factory=dict)
+
+    @property
+    def agree(self) -> bool:
+        """True if every joint's three methods agree."""
+        return all(v.agree for v in self.joints.values())
+
+    def set_unique(self, names: Iterable[str]) -> SetVerdict:
+        """Are the reactions of all joints in ``names`` uniquely determined (Eq. 17)?
+
+        Rank form: ``sum_i rank(J_Pi) + rank(J_Y) - rank(J) == 0``, Y = columns of no member (same
+        absolute rank tolerance as everywhere).  SVD/QR form: every member's ``B_P == 0``.  They
+        are mathematically equivalent; ``agree`` flags a numerical split, in which case ``unique``
+        follows the rank form.  The empty set is trivially unique.
+        """
+        names = (names,) if isinstance(names, str) else tuple(names)
+        unknown = [nm for nm in names if nm not in self._groups]
+        if unknown:
+            raise KeyError(f"unknown joint name(s) {unknown}; known: {list(self._groups)}")
+        if len(set(names)) != len(names):
+            raise ValueError(f"duplicate joint names in {names}")
+        defect = _rank_defect(self._ctx, [self._groups[nm] for nm in names])
+        methods = {
+            "rank": bool(defect <= 0),
+            "svd": all(self.joints[nm].methods["svd"] for nm in names),
+            "qr": all(self.joints[nm].methods["qr"] for nm in names),
+        }
+        return SetVerdict(
+            unique=methods["rank"],
+            methods=methods,
+            rank_defect=int(defect),
+            agree=len(set(methods.values())) == 1,
+            names=names,
+        )
+
+
+def analyse(
+    J,
+    groups: Mapping[str, Sequence[int]],
+    *,
+    rtol: float | None = None,
+    b_rtol: float | None = None,
+    equilibrate: bool = True,
+) -> Analysis:
+    """Rank, DOF, redundancy and per-joint reaction uniqueness of ``J`` (n, m) = ``Phi_q.T``.
+
+    ``groups`` maps joint name -> its 0-based columns of J.  Groups must not overlap; columns in
+    no group (e.g. driving constraints) are part of every ``J_-P`` and of Y in ``set_unique``.
+    Tolerances and equilibration: see the module docstring.
+    """
+    ctx = _context(J, rtol, b_rtol, equilibrate)
+    n, m = ctx.J.shape
+    checked: dict[str, tuple[int, ...]] = {}
+    owner: dict[int, str] = {}
+    for name, cols in groups.items():
+        cols_t = _check_columns(cols, m, what=f"joint {name!r}")
+        for c in cols_t:
+            if c in owner:
+                raise ValueError(f"column {c} belongs to both {owner[c]!r} and {name!r}")
+            owner[c] = name
+        checked[name] = cols_t
+    return Analysis(
+        n_coordinates=n,
+        n_equations=m,
+        rank=ctx.r,
+        dof=n - ctx.r,
+        redundant=m - ctx.r,
+        joints={name: _joint(ctx, cols) for name, cols in checked.items()},
+        singular_values=ctx.sigma,
+        rank_tol=ctx.tol,
+        b_rtol=ctx.b_rtol,
+        _ctx=ctx,
+        _groups=checked,
+    )
+
+
+def to_json(analysis: Analysis) -> dict:
+    """JSON-ready dict (plain Python types) of an ``Analysis``."""
+    return {
+        "n_coordinates": int(analysis.n_coordinates),
+        "n_equations": int(analysis.n_equations),
+        "rank": int(analysis.rank),
+        "dof": int(analysis.dof),
+        "redundant": int(analysis.redundant),
+        "joints": [
+            {
+                "name": str(name),
+                "unique": bool(v.unique),
+                "methods": {k: bool(v.methods[k]) for k in _METHODS},
+                "rank_defect": int(v.rank_defect),
+                "agree": bool(v.agree),
+            }
+            for name, v in analysis.joints.items()
+        ],
+    }

@@ -1,0 +1,189 @@
+"""Direct dynamics with a chosen elimination and Coulomb joint friction (paper Eq. 11, 18, 23).
+
+With the retained equations R (the eliminated ones carry lam = 0), Eq. 18 reads
+
+    M h' + J_R lam_R = Q + Q_f(lam),    J_R^T h' = gamma_R - 2 a Phi_h h - a^2 Phi   (Baumgarte)
+
+M is diagonal and positive, so it is solved through the Schur complement
+``S = J_R^T M^-1 J_R`` (Cholesky, factored once per evaluation):
+``lam_R = S^-1 (J_R^T M^-1 (Q + Q_f) - gamma_R)``, ``h' = M^-1 (Q + Q_f - J_R lam_R)``.
+S is singular when the kept equations are dependent at this configuration (a singular position):
+that raises :class:`overcon.model.SingularConfiguration`.
+
+Friction: Q_f depends on lam only through the friction joints' multipliers, and enters the right
+hand side linearly, so ``lam_R = lam0 + S^-1 J_R^T M^-1 Q_f(lam)`` is a fixed point in the
+friction joints' multipliers ``x``. Solve: fixed-point iteration from the last converged lam
+(warm start); on non-convergence (iteration cap) or divergence (residual growth over 3
+iterations) fall back to Newton's method on ``x - G(x) = 0`` with a finite-difference Jacobian
+(x has at most a dozen entries) and a backtracking line search; if that fails too,
+:class:`FrictionSolveError` names the time, the joints and the residual. Convergence:
+``|x_new - x| <= tol (1 + |x|)`` (infinity norms, N).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+from .model import (Frames, Model, SingularConfiguration, applied_forces, constraints, frames,
+                    gamma, jacobian_h)
+
+
+class FrictionSolveError(ArithmeticError):
+    """The friction fixed point (Eq. 18) did not converge, even with the Newton fallback."""
+
+
+@dataclass
+class Evaluation:
+    """Result of one evaluation of Eq. 18 at (t, q, h)."""
+
+    hdot: np.ndarray
+    lam: np.ndarray  # (m,), zeros at eliminated equations
+    frames: Frames
+    iterations: int = 0
+    fallback: bool = False
+
+
+def _friction_generalized(model: Model, f: Frames, blocks, lam: np.ndarray) -> np.ndarray:
+    Qf = np.zeros((model.nb, model.nq_b))
+    for c, Ji in blocks:
+        fi = Ji.T @ lam[list(c.rows)]
+        Qi, Qj = c.module.friction(c, f, fi, c.law)
+        if c.bi >= 0:
+            Qf[c.bi] += Qi
+        if c.bj >= 0:
+            Qf[c.bj] += Qj
+    return Qf.reshape(-1)
+
+
+def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np.ndarray | None = None,
+             *, baumgarte: float | None = None, friction_tol: float | None = None,
+             friction_max_iter: int | None = None) -> Evaluation:
+    """Accelerations h' and multipliers lam at (t, q, h) (Eq. 18 with elimination)."""
+    solver = model.scene.solver
+    a = solver.baumgarte if baumgarte is None else baumgarte
+    tol = solver.friction_tol if friction_tol is None else friction_tol
+    max_iter = solver.friction_max_iter if friction_max_iter is None else friction_max_iter
+    f = frames(model, q, h)
+    Phi_h = jacobian_h(model, f)
+    R = model.retained
+    JR = Phi_h[R].T
+    g = gamma(model, f)[R]
+    if a > 0.0:
+        g = g - 2.0 * a * (Phi_h[R] @ h) - a * a * constraints(model, f)[R]
+    Q = applied_forces(model, f)
+    MinvJ = model.Minv[:, None] * JR
+    S = JR.T @ MinvJ
+    try:
+        factor = cho_factor(S)
+    except LinAlgError as exc:
+        raise SingularConfiguration(
+            f"t = {t:.9g} s: the kept constraint equations became dependent (singular position); "
+            "the Jacobian lost rank") from exc
+    lam_R = cho_solve(factor, MinvJ.T @ Q - g)
+    lam = np.zeros(model.m)
+    iterations, fallback = 0, False
+    if model.friction_joints:
+        blocks = [(model.joints[j], model.joints[j].module.jac_h(model.joints[j], f)[0]) for j in model.friction_joints]
+        lam0 = lam_R
+        pos = {row: k for k, row in enumerate(R)}
+        xrows = [pos[r] for j in model.friction_joints for r in model.joints[j].rows if r in pos]
+
+        def full(lr):
+            out = np.zeros(model.m)
+            out[R] = lr
+            return out
+
+        def G(lr):
+            Qf = _friction_generalized(model, f, blocks, full(lr))
+            return lam0 + cho_solve(factor, MinvJ.T @ Qf)
+
+        lr = lam0.copy() if lam_guess is None else lam_guess[R].copy()
+        lr, iterations, ok = _fixed_point(G, lr, xrows, tol, max_iter)
+        if not ok:
+            fallback = True
+            lr, more, ok = _newton(G, lr, xrows, tol, max_iter)
+            iterations += more
+        if not ok:
+            res = np.max(np.abs(G(lr)[xrows] - lr[xrows]))
+            names = ", ".join(model.joints[j].name for j in model.friction_joints)
+            raise FrictionSolveError(
+                f"t = {t:.9g} s: friction solve in joints {names} did not converge "
+                f"(residual {res:.3g} N after {iterations} iterations, fixed point then Newton)")
+        lam_R = lr
+        Q = Q + _friction_generalized(model, f, blocks, full(lr))
+    lam[R] = lam_R
+    hdot = model.Minv * (Q - JR @ lam_R)
+    return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback)
+
+
+def _converged(x_new, x, tol) -> bool:
+    return np.max(np.abs(x_new - x), initial=0.0) <= tol * (1.0 + np.max(np.abs(x), initial=0.0))
+
+
+def _fixed_point(G, lr, xrows, tol, max_iter):
+    """Plain fixed-point iteration (the paper's method) with divergence detection."""
+    prev_res, growth = np.inf, 0
+    for it in range(1, max_iter + 1):
+        new = G(lr)
+        res = np.max(np.abs(new[xrows] - lr[xrows]), initial=0.0)
+        done = _converged(new[xrows], lr[xrows], tol)
+        lr = new
+        if done:
+            return lr, it, True
+        if not np.isfinite(res):
+            return lr, it, False
+        growth = growth + 1 if res > prev_res else 0
+        if growth >= 3:
+            return lr, it, False
+        prev_res = res
+    return lr, max_iter, False
+
+
+def _newton(G, lr, xrows, tol, max_iter):
+    """Newton on F(x) = x - G(x)_x (friction multipliers x) with a finite-difference Jacobian
+    and backtracking line search."""
+    x = lr[xrows].copy()
+
+    def lift(xv):
+        out = lr.copy()
+        out[xrows] = xv
+        return out
+
+    def F(xv):
+        g = G(lift(xv))
+        return xv - g[xrows], g
+
+    Fx, g = F(x)
+    n = len(x)
+    for it in range(1, max_iter + 1):
+        if not np.all(np.isfinite(Fx)):
+            return lift(x), it, False
+        scale = 1.0 + np.max(np.abs(x), initial=0.0)
+        if np.max(np.abs(Fx), initial=0.0) <= tol * scale:
+            full = g.copy()
+            full[xrows] = x
+            return full, it, True
+        Jac = np.empty((n, n))
+        for k in range(n):
+            step = 1e-7 * max(1.0, abs(x[k]))
+            xp = x.copy()
+            xp[k] += step
+            Jac[:, k] = (F(xp)[0] - Fx) / step
+        try:
+            dx = np.linalg.solve(Jac, -Fx)
+        except np.linalg.LinAlgError:
+            return lift(x), it, False
+        norm0 = np.linalg.norm(Fx)
+        alpha = 1.0
+        while alpha > 1e-4:
+            Fn, gn = F(x + alpha * dx)
+            if np.linalg.norm(Fn) < (1.0 - 1e-4 * alpha) * norm0:
+                break
+            alpha *= 0.5
+        else:
+            return lift(x), it, False
+        x = x + alpha * dx
+        Fx, g = Fn, gn
+    return lift(x), max_iter, False

@@ -1,0 +1,51 @@
+"""Friction coefficient as a function of relative velocity, mu(v) (paper Fig. 1).
+
+- A ``coulomb``: mu sign(v). Discontinuous at v = 0: for analysis only, refused for integration.
+- B ``regularised`` (the paper's choice; a project decision, see README): mu clip(v / v_reg, -1, 1).
+- C ``stribeck``: B with a Stribeck peak, mu(v) = clip(v/v_reg, -1, 1) (mu + (mu_static - mu)
+  exp(-(v / v_stribeck)^2)).
+
+``v`` is the sliding velocity of body j relative to body i (m/s, or rad/s for the revolute
+joint's relative angular velocity); the law is odd in v, so friction on body i acts along v and
+never adds energy. The vector form used by spherical joints (A.14) is
+``F = mu_over_speed(|v|) |N| v`` with ``mu_over_speed(s) = mu(s)/s`` (finite at s = 0 for B, C).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .spec import FrictionSpec
+
+
+@dataclass(frozen=True)
+class Law:
+    name: str
+    mu_kinetic: float
+    v_reg: float
+    size: float
+    mu_static: float | None = None
+    v_stribeck: float | None = None
+
+    def _magnitude(self, speed: float) -> float:
+        if self.name == "stribeck":
+            return self.mu_kinetic + (self.mu_static - self.mu_kinetic) * math.exp(-(speed / self.v_stribeck) ** 2)
+        return self.mu_kinetic
+
+    def mu(self, v: float) -> float:
+        """Signed friction coefficient mu(v)."""
+        if self.name == "coulomb":
+            return math.copysign(self.mu_kinetic, v) if v != 0.0 else 0.0
+        return min(max(v / self.v_reg, -1.0), 1.0) * self._magnitude(abs(v))
+
+    def mu_over_speed(self, speed: float) -> float:
+        """mu(s)/s for s >= 0 (1/(m/s)); for law A it is infinite at s = 0 (raises)."""
+        if self.name == "coulomb":
+            if speed == 0.0:
+                raise ZeroDivisionError("Coulomb law (variant A) has no finite mu(v)/v at v = 0")
+            return self.mu_kinetic / speed
+        return self._magnitude(speed) / max(speed, self.v_reg)
+
+
+def make_law(spec: FrictionSpec) -> Law:
+    return Law(spec.law, spec.mu, spec.v_reg, spec.size, spec.mu_static, spec.v_stribeck)

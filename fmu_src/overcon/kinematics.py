@@ -1,0 +1,83 @@
+"""Rotation matrices and their derivatives (paper Eq. 35, 40, B.13, B.15).
+
+Planar: ``R(phi)`` (2x2) maps body-frame vectors to the global frame; ``OMEGA`` is the 90 degree
+rotation [[0, -1], [1, 0]], so ``dR/dphi = OMEGA @ R = R @ OMEGA``; the planar cross product
+``a x b = (OMEGA @ a) . b`` is :func:`cross2`.
+
+Spatial: z-x-z Euler angles ``(alpha, beta, gamma)``, ``R = Rz(alpha) Rx(beta) Rz(gamma)``
+(Eq. 40). Angular velocity ``omega`` is expressed in body axes and ``phi_dot = H(beta, gamma)
+omega`` (Eq. 4, B.15). ``H`` is singular at ``sin(beta) = 0``: :func:`euler_H` raises
+:class:`EulerSingularity` when ``|sin beta|`` falls below :data:`SIN_BETA_MIN`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+OMEGA = np.array([[0.0, -1.0], [1.0, 0.0]])
+OMEGA_X = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+OMEGA_Z = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+
+SIN_BETA_MIN = 1e-3
+"""Smallest |sin(beta)| integrated through (beta within 0.057 degrees of 0 or pi is refused):
+H(beta) grows as 1/sin(beta) and the z-x-z parametrisation is singular there."""
+
+
+class EulerSingularity(ArithmeticError):
+    """z-x-z Euler parametrisation singular (sin beta ~ 0)."""
+
+
+def rot2(phi: float) -> np.ndarray:
+    c, s = math.cos(phi), math.sin(phi)
+    return np.array([[c, -s], [s, c]])
+
+
+def cross2(a: np.ndarray, b: np.ndarray) -> float:
+    """Planar cross product a x b (scalar, counter-clockwise positive)."""
+    return a[0] * b[1] - a[1] * b[0]
+
+
+def rz(psi: float) -> np.ndarray:
+    c, s = math.cos(psi), math.sin(psi)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rx(psi: float) -> np.ndarray:
+    c, s = math.cos(psi), math.sin(psi)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def euler_R(angles) -> np.ndarray:
+    """Direction cosine matrix body -> global of z-x-z Euler angles (paper Eq. 40)."""
+    a, b, g = angles
+    return rz(a) @ rx(b) @ rz(g)
+
+
+def euler_dR(angles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Partial derivatives dR/dalpha, dR/dbeta, dR/dgamma (paper B.13)."""
+    a, b, g = angles
+    Ra, Rb, Rg = rz(a), rx(b), rz(g)
+    return OMEGA_Z @ Ra @ Rb @ Rg, Ra @ OMEGA_X @ Rb @ Rg, Ra @ Rb @ OMEGA_Z @ Rg
+
+
+def euler_H(angles, body: str = "") -> np.ndarray:
+    """H of paper B.15: Euler-angle rates = H @ omega (omega in body axes)."""
+    _, b, g = angles
+    sb, cb = math.sin(b), math.cos(b)
+    if abs(sb) < SIN_BETA_MIN:
+        raise EulerSingularity(
+            f"Euler angle singularity{' of body ' + repr(body) if body else ''}: "
+            f"beta = {b:.6g} rad, |sin(beta)| = {abs(sb):.3g} < {SIN_BETA_MIN:g}"
+        )
+    sg, cg = math.sin(g), math.cos(g)
+    return np.array([
+        [sg / sb, cg / sb, 0.0],
+        [cg, -sg, 0.0],
+        [-cb * sg / sb, -cb * cg / sb, 1.0],
+    ])
+
+
+def skew(v) -> np.ndarray:
+    """Skew-symmetric matrix with skew(a) @ b = a x b."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

@@ -1,0 +1,1038 @@
+"""Read and validate mechanism and scene files (TOML) into :mod:`overcon.spec` dataclasses.
+
+The file format is described in ``docs/scene-format.md``. A file is a *mechanism* if it has a
+``[mechanism]`` table and a *scene* if it has a ``[scene]`` table (never both). :func:`load`
+returns a :class:`~overcon.spec.MechanismSpec` or a :class:`~overcon.spec.SceneSpec`; a scene
+loads its mechanism (path relative to the scene file).
+
+Validation never stops at the first problem: every problem found is collected as a
+:class:`Problem` ``(file, field, message)`` and :func:`load` raises one :class:`SceneError`
+listing all of them. No other exception escapes :func:`load`, whatever the file contains.
+Problems in a scene's mechanism file are reported against the mechanism file. Field names look
+like ``bodies[2].mass``, ``joints[0].friction.mu``, ``scene.eliminate[1]``, ``solver.tolerance``;
+problems with the file as a whole (not found, not readable, not UTF-8, bad TOML syntax, neither or
+both of ``[mechanism]``/``[scene]``) use the field ``(file)``.
+
+What is validated
+-----------------
+* Everywhere: unknown keys at every level (with the allowed keys in the message), missing
+  required fields, types (a table where a table is expected, arrays where arrays are expected,
+  strings, integers); numbers must be finite (no nan/inf); integers are accepted where floats are
+  expected, booleans are never numbers; vector lengths (2 planar / 3 spatial for points, vectors
+  and gravity; 3 / 6 for ``q0`` and ``h0``).
+* Mechanism: ``name`` an identifier (letter, then letters/digits/_), ``kind`` in
+  ``spec.KINDS``; at least one body; body names identifiers, unique, not ``base``; mass > 0;
+  inertia > 0 (planar: one number, stored as a 1-tuple; spatial: 3 numbers); ``h0`` defaults to
+  zeros. Joints: names identifiers and unique; ``type`` in ``spec.JOINT_FIELDS`` and allowed for
+  the mechanism kind; ``body_i``/``body_j`` a body or ``base`` and different; the type's required
+  and optional fields (``spec.JOINT_FIELDS``) with their shapes; translational ``v`` non-zero.
+  Joint friction tables: ``law`` in ``spec.FRICTION_LAWS`` (default ``regularised``), ``mu`` >= 0,
+  ``v_reg`` > 0 (default 1e-3), the type's size key (``length`` for translational, ``radius`` for
+  revolute/spherical; stored as ``FrictionSpec.size``) > 0 and no other size key; ``stribeck``
+  needs ``mu_static`` >= ``mu`` and ``v_stribeck`` > 0, which other laws do not take. Loads:
+  ``type`` in ``spec.LOAD_FIELDS`` with its fields; force/torque act on a moving body; a spring
+  joins two different bodies (one may be ``base``), stiffness and free length >= 0, attachment
+  points default to the body origins (stored as zero vectors).
+* Scene: ``name`` an identifier; ``mechanism`` a readable mechanism file; ``friction`` a list of
+  distinct joints that have friction parameters (mechanism table or scene ``friction_params``);
+  ``friction_params.<joint>`` names a joint and is merged onto the mechanism's parameters (a joint
+  without a mechanism friction table needs ``mu`` and its size key there);
+  ``eliminate`` ``"auto"`` or distinct integers in 1..m (m = total number of constraint
+  equations); ``stop_time`` > ``start_time``; ``[outputs]`` ``positions`` are distinct
+  ``<body>.<coordinate>`` (``spec.COORDINATES``) or ``"all"``, ``reactions`` distinct joint names
+  or ``"all"`` (a missing ``[outputs]`` table or key means ``"all"``); ``[solver]``: ``method`` in
+  ``spec.METHODS``, 0 < ``tolerance`` < 1, ``step``, ``output_interval``, ``friction_tol``,
+  ``max_step`` > 0, ``baumgarte`` >= 0, ``friction_max_iter`` an integer >= 1.
+
+If the scene's mechanism file has problems, the scene's references to bodies, joints and equation
+numbers are not checked (only its own structure), to avoid follow-on noise.
+
+``SceneSpec.friction_params`` holds the effective (merged) parameters of exactly the joints listed
+in ``friction``.
+
+:func:`as_scene` turns a mechanism into a scene or overrides a scene's friction set, elimination,
+stop time and tolerance (command-line options, reported with fields ``--friction``,
+``--eliminate``, ``--stop-time``, ``--tolerance``); :func:`parse_joint_list` and
+:func:`parse_eliminate` parse those options' text.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from . import spec as S
+from .spec import (
+    BASE,
+    BodySpec,
+    FrictionSpec,
+    JointSpec,
+    LoadSpec,
+    MechanismSpec,
+    SceneSpec,
+    SolverSpec,
+)
+
+__all__ = ["Problem", "SceneError", "load", "as_scene", "parse_joint_list", "parse_eliminate"]
+
+CLI_SOURCE = "<command line>"
+FILE_FIELD = "(file)"
+
+_DIM = {"planar": 2, "spatial": 3}
+_MISSING = object()
+
+
+# ---------------------------------------------------------------------------------------------
+# Problems
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One validation problem: the file it is in, the field (``bodies[2].mass``) and a message."""
+
+    file: str
+    field: str
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.file}: {self.field}: {self.message}"
+
+
+class SceneError(Exception):
+    """Raised with every problem found; ``str()`` lists them one per line."""
+
+    def __init__(self, problems):
+        self.problems: list[Problem] = list(problems)
+        super().__init__("\n".join(str(p) for p in self.problems))
+
+    def __reduce__(self):
+        return (SceneError, (self.problems,))
+
+
+class _Ctx:
+    """Collects problems for one file."""
+
+    def __init__(self, file: str, problems: list[Problem]):
+        self.file = file
+        self.problems = problems
+
+    def add(self, field: str, message: str) -> None:
+        self.problems.append(Problem(self.file, field, message))
+
+
+# ---------------------------------------------------------------------------------------------
+# Small validators. Each reports into ctx and returns the converted value or None.
+
+
+def _join(prefix: str, key: str) -> str:
+    return f"{prefix}.{key}" if prefix else key
+
+
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _desc(value) -> str:
+    if isinstance(value, bool):
+        kind = "boolean"
+    elif isinstance(value, int):
+        kind = "integer"
+    elif isinstance(value, float):
+        kind = "float"
+    elif isinstance(value, str):
+        kind = "string"
+    elif isinstance(value, list):
+        return "an array"
+    elif isinstance(value, dict):
+        return "a table"
+    else:  # TOML date, time or date-time
+        iso = getattr(value, "isoformat", None)
+        return f"a date/time {iso() if iso else _short(value)}"
+    return f"{kind} {_short(value)}"
+
+
+def _is_identifier(s: str) -> bool:
+    return (
+        bool(s)
+        and s[0].isascii()
+        and s[0].isalpha()
+        and all(c.isascii() and (c.isalnum() or c == "_") for c in s)
+    )
+
+
+_POSITIVE = (lambda x: x > 0, "must be > 0")
+_NONNEG = (lambda x: x >= 0, "must be >= 0")
+
+
+def _num(ctx: _Ctx, value, field: str, check=None) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        ctx.add(field, f"expected a number, got {_desc(value)}")
+        return None
+    try:
+        x = float(value)
+    except OverflowError:
+        ctx.add(field, "number too large")
+        return None
+    if not math.isfinite(x):
+        ctx.add(field, f"must be finite, got {x!r}")
+        return None
+    if check is not None and not check[0](x):
+        ctx.add(field, f"{check[1]}, got {x!r}")
+        return None
+    return x
+
+
+def _int(ctx: _Ctx, value, field: str) -> int | None:
+    if isinstance(value, bool) or not isinstance(value, int):
+        ctx.add(field, f"expected an integer, got {_desc(value)}")
+        return None
+    return value
+
+
+def _vec(ctx: _Ctx, value, field: str, n: int | None, check=None) -> tuple[float, ...] | None:
+    what = f"{n} numbers" if n is not None else "numbers"
+    if not isinstance(value, list):
+        ctx.add(field, f"expected an array of {what}, got {_desc(value)}")
+        return None
+    ok = True
+    if n is not None and len(value) != n:
+        ctx.add(field, f"expected an array of {what}, got {len(value)} element(s)")
+        ok = False
+    out = []
+    for k, item in enumerate(value):
+        x = _num(ctx, item, f"{field}[{k}]", check)
+        ok = ok and x is not None
+        out.append(x)
+    return tuple(out) if ok else None
+
+
+def _str(ctx: _Ctx, value, field: str) -> str | None:
+    if not isinstance(value, str):
+        ctx.add(field, f"expected a string, got {_desc(value)}")
+        return None
+    return value
+
+
+def _ident(ctx: _Ctx, value, field: str) -> str | None:
+    s = _str(ctx, value, field)
+    if s is None:
+        return None
+    if not _is_identifier(s):
+        ctx.add(field, f"{_short(s)} is not an identifier (a letter, then letters, digits or _)")
+        return None
+    return s
+
+
+def _choice(ctx: _Ctx, value, field: str, choices) -> str | None:
+    s = _str(ctx, value, field)
+    if s is None:
+        return None
+    if s not in choices:
+        ctx.add(field, f"unknown value {_short(s)} (allowed: {', '.join(choices)})")
+        return None
+    return s
+
+
+def _table(ctx: _Ctx, value, field: str) -> dict | None:
+    if not isinstance(value, dict):
+        ctx.add(field, f"expected a table, got {_desc(value)}")
+        return None
+    return value
+
+
+def _unknown_keys(ctx: _Ctx, table: dict, prefix: str, allowed, hint: dict | None = None) -> None:
+    for key in table:
+        if key not in allowed:
+            extra = (hint or {}).get(key)
+            msg = f"unknown key (allowed: {', '.join(allowed)})" if extra is None else extra
+            ctx.add(_join(prefix, key), msg)
+
+
+def _get(ctx: _Ctx, table: dict, key: str, prefix: str, required: bool = True):
+    if key in table:
+        return table[key]
+    if required:
+        ctx.add(_join(prefix, key), "missing required field")
+    return _MISSING
+
+
+def _array_of_tables(ctx: _Ctx, doc: dict, key: str, required: bool):
+    """[(index, table)] for the array-of-tables ``key`` (non-table entries reported)."""
+    value = _get(ctx, doc, key, "", required)
+    if value is _MISSING:
+        return []
+    if not isinstance(value, list):
+        ctx.add(key, f"expected an array of tables ([[{key}]]), got {_desc(value)}")
+        return []
+    out = []
+    for k, item in enumerate(value):
+        if isinstance(item, dict):
+            out.append((k, item))
+        else:
+            ctx.add(f"{key}[{k}]", f"expected a table, got {_desc(item)}")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Friction tables (mechanism joints and scene overrides)
+
+_FRICTION_KEYS = ("law", "mu", "v_reg", "mu_static", "v_stribeck")
+
+
+def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
+              base: FrictionSpec | None, require: bool = True) -> FrictionSpec | None:
+    """Validate a friction table, merged onto ``base`` (None: mu and the size key required,
+    unless ``require`` is false: the mechanism could not be read, so its table is unknown).
+
+    ``jtype`` None (unknown joint type): either size key is accepted and none is required."""
+    if jtype is None:
+        size_keys = ("length", "radius")
+    else:
+        size_keys = (S.JOINT_FIELDS[jtype]["friction_size"][0],)
+    allowed = _FRICTION_KEYS + size_keys
+    hint = {}
+    if jtype is not None:
+        for other in ("length", "radius"):
+            if other not in size_keys:
+                hint[other] = (f"unknown key: the friction size of a {jtype} joint is "
+                               f"'{size_keys[0]}', not '{other}'")
+    _unknown_keys(ctx, table, prefix, allowed, hint)
+
+    ok = True
+    given: dict = {}
+
+    def take(key, conv):
+        nonlocal ok
+        if key in table:
+            val = conv(table[key], _join(prefix, key))
+            if val is None:
+                ok = False
+            else:
+                given[key] = val
+
+    take("law", lambda v, f: _choice(ctx, v, f, S.FRICTION_LAWS))
+    take("mu", lambda v, f: _num(ctx, v, f, _NONNEG))
+    take("v_reg", lambda v, f: _num(ctx, v, f, _POSITIVE))
+    take("mu_static", lambda v, f: _num(ctx, v, f, _NONNEG))
+    take("v_stribeck", lambda v, f: _num(ctx, v, f, _POSITIVE))
+    size = None
+    for key in size_keys:
+        if key in table:
+            val = _num(ctx, table[key], _join(prefix, key), _POSITIVE)
+            if val is None:
+                ok = False
+            else:
+                size = val
+    if base is None and require:
+        if "mu" not in table:
+            ctx.add(_join(prefix, "mu"), "missing required field")
+            ok = False
+        if jtype is not None and size_keys[0] not in table:
+            ctx.add(_join(prefix, size_keys[0]), "missing required field")
+            ok = False
+    if not ok:
+        return None
+    if size is not None:
+        given["size"] = size
+    if base is None:
+        if "size" not in given:  # unknown joint type: cannot build a spec
+            return None
+        result = FrictionSpec(**given)
+    else:
+        result = dataclasses.replace(base, **given)
+
+    if result.law == "stribeck":
+        for key in ("mu_static", "v_stribeck"):
+            if getattr(result, key) is None:
+                ctx.add(_join(prefix, key), "required by law 'stribeck'")
+                ok = False
+        if result.mu_static is not None and result.mu_static < result.mu:
+            ctx.add(_join(prefix, "mu_static"),
+                    f"must be >= mu ({result.mu!r}), got {result.mu_static!r}")
+            ok = False
+    else:
+        for key in ("mu_static", "v_stribeck"):
+            if key in table:
+                ctx.add(_join(prefix, key), f"only used by law 'stribeck' (law is '{result.law}')")
+                ok = False
+    return result if ok else None
+
+
+# ---------------------------------------------------------------------------------------------
+# Mechanism
+
+
+def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
+    n_problems = len(ctx.problems)
+    _unknown_keys(ctx, doc, "", ("mechanism", "bodies", "joints", "loads"))
+
+    name = kind = gravity = None
+    description = ""
+    mt = _get(ctx, doc, "mechanism", "")
+    if mt is not _MISSING and _table(ctx, mt, "mechanism") is not None:
+        _unknown_keys(ctx, mt, "mechanism", ("name", "kind", "gravity", "description"))
+        v = _get(ctx, mt, "name", "mechanism")
+        if v is not _MISSING:
+            name = _ident(ctx, v, "mechanism.name")
+        v = _get(ctx, mt, "kind", "mechanism")
+        if v is not _MISSING:
+            kind = _choice(ctx, v, "mechanism.kind", S.KINDS)
+        v = _get(ctx, mt, "description", "mechanism", required=False)
+        if v is not _MISSING:
+            description = _str(ctx, v, "mechanism.description") or ""
+        v = _get(ctx, mt, "gravity", "mechanism")
+        if v is not _MISSING:
+            gravity = _vec(ctx, v, "mechanism.gravity", _DIM.get(kind))
+    dim = _DIM.get(kind)
+    ncoord = len(S.COORDINATES[kind]) if kind else None
+
+    # --- bodies
+    bodies: list[BodySpec] = []
+    body_names: dict[str, str] = {}  # name -> field where first defined
+    body_entries = _array_of_tables(ctx, doc, "bodies", required=True)
+    if "bodies" in doc and isinstance(doc["bodies"], list) and not doc["bodies"]:
+        ctx.add("bodies", "at least one body is required")
+    for k, bt in body_entries:
+        p = f"bodies[{k}]"
+        _unknown_keys(ctx, bt, p, ("name", "mass", "inertia", "q0", "h0"))
+        bname = mass = inertia = q0 = None
+        h0 = tuple(0.0 for _ in range(ncoord)) if ncoord else None
+        v = _get(ctx, bt, "name", p)
+        if v is not _MISSING:
+            bname = _ident(ctx, v, f"{p}.name")
+            if bname == BASE:
+                ctx.add(f"{p}.name", f"'{BASE}' is reserved for the fixed ground")
+                bname = None
+            elif bname is not None and bname in body_names:
+                ctx.add(f"{p}.name", f"duplicate body name '{bname}' (also {body_names[bname]})")
+                bname = None
+            elif bname is not None:
+                body_names[bname] = p
+        v = _get(ctx, bt, "mass", p)
+        if v is not _MISSING:
+            mass = _num(ctx, v, f"{p}.mass", _POSITIVE)
+        v = _get(ctx, bt, "inertia", p)
+        if v is not _MISSING:
+            if kind == "planar":
+                if isinstance(v, list):
+                    ctx.add(f"{p}.inertia", "expected a number (planar moment of inertia J), "
+                                            "got an array")
+                else:
+                    j = _num(ctx, v, f"{p}.inertia", _POSITIVE)
+                    inertia = None if j is None else (j,)
+            elif kind == "spatial":
+                inertia = _vec(ctx, v, f"{p}.inertia", 3, _POSITIVE)
+        v = _get(ctx, bt, "q0", p)
+        if v is not _MISSING:
+            q0 = _vec(ctx, v, f"{p}.q0", ncoord)
+        v = _get(ctx, bt, "h0", p, required=False)
+        if v is not _MISSING:
+            h0 = _vec(ctx, v, f"{p}.h0", ncoord)
+        if None not in (bname, mass, inertia, q0, h0):
+            bodies.append(BodySpec(bname, mass, inertia, q0, h0))
+
+    def body_ref(value, field, allow_base=True):
+        s = _str(ctx, value, field)
+        if s is None:
+            return None
+        if s == BASE:
+            if allow_base:
+                return s
+            ctx.add(field, f"cannot act on '{BASE}' (the fixed ground)")
+            return None
+        if s not in body_names:
+            ctx.add(field, f"unknown body {_short(s)}")
+            return None
+        return s
+
+    # --- joints
+    joints: list[JointSpec] = []
+    joint_names: dict[str, str] = {}
+    common = ("name", "type", "body_i", "body_j", "friction")
+    all_joint_fields = tuple(dict.fromkeys(
+        f for d in S.JOINT_FIELDS.values() for f in (*d["required"], *d["optional"])))
+    for k, jt in _array_of_tables(ctx, doc, "joints", required=False):
+        p = f"joints[{k}]"
+        jname = jtype = bi = bj = None
+        ok = True
+        v = _get(ctx, jt, "type", p)
+        if v is not _MISSING:
+            jtype = _choice(ctx, v, f"{p}.type", tuple(S.JOINT_FIELDS))
+            if jtype is not None and kind is not None and S.JOINT_FIELDS[jtype]["kind"] != kind:
+                allowed = [t for t, d in S.JOINT_FIELDS.items() if d["kind"] == kind]
+                ctx.add(f"{p}.type", f"joint type '{jtype}' is not allowed in a {kind} mechanism "
+                                     f"(allowed: {', '.join(allowed)})")
+                ok = False
+        # a type not allowed for the kind is reported once; its fields are then not checked
+        fields = S.JOINT_FIELDS[jtype] if jtype and ok else None
+        if fields is not None:
+            _unknown_keys(ctx, jt, p, common + tuple(fields["required"]) + tuple(fields["optional"]))
+        else:
+            _unknown_keys(ctx, jt, p, common + all_joint_fields)
+        v = _get(ctx, jt, "name", p)
+        if v is not _MISSING:
+            jname = _ident(ctx, v, f"{p}.name")
+            if jname is not None and jname in joint_names:
+                ctx.add(f"{p}.name", f"duplicate joint name '{jname}' (also {joint_names[jname]})")
+                jname = None
+            elif jname is not None:
+                joint_names[jname] = p
+        v = _get(ctx, jt, "body_i", p)
+        if v is not _MISSING:
+            bi = body_ref(v, f"{p}.body_i")
+        v = _get(ctx, jt, "body_j", p)
+        if v is not _MISSING:
+            bj = body_ref(v, f"{p}.body_j")
+        if bi is not None and bi == bj:
+            ctx.add(f"{p}.body_j", f"body_j must differ from body_i ('{bi}')")
+            ok = False
+        params: dict = {}
+        if fields is not None and ok:
+            for fname, (shape, _doc) in fields["required"].items():
+                v = _get(ctx, jt, fname, p)
+                if v is _MISSING:
+                    ok = False
+                    continue
+                val = _shaped(ctx, v, f"{p}.{fname}", shape, kind)
+                if val is None:
+                    ok = False
+                    continue
+                if jtype == "translational" and fname == "v" and all(x == 0.0 for x in val):
+                    ctx.add(f"{p}.v", "must not be the zero vector")
+                    ok = False
+                    continue
+                params[fname] = val
+            for fname, (shape, _doc, default) in fields["optional"].items():
+                v = _get(ctx, jt, fname, p, required=False)
+                if v is _MISSING:
+                    params[fname] = default
+                    continue
+                val = _shaped(ctx, v, f"{p}.{fname}", shape, kind)
+                if val is None:
+                    ok = False
+                else:
+                    params[fname] = val
+        friction = None
+        v = _get(ctx, jt, "friction", p, required=False)
+        if v is not _MISSING and _table(ctx, v, f"{p}.friction") is not None:
+            friction = _friction(ctx, v, f"{p}.friction", jtype if fields else None, None)
+        if ok and None not in (jname, jtype, bi, bj):
+            joints.append(JointSpec(jname, jtype, bi, bj, params, friction))
+
+    # --- loads
+    loads: list[LoadSpec] = []
+    for k, lt in _array_of_tables(ctx, doc, "loads", required=False):
+        p = f"loads[{k}]"
+        ltype = None
+        v = _get(ctx, lt, "type", p)
+        if v is not _MISSING:
+            ltype = _choice(ctx, v, f"{p}.type", tuple(S.LOAD_FIELDS))
+        if ltype is None:
+            allowed = ("type",) + tuple(dict.fromkeys(
+                f for d in S.LOAD_FIELDS.values()
+                for f in (*d["required"], *d.get("optional", {}))))
+            _unknown_keys(ctx, lt, p, allowed)
+            continue
+        lf = S.LOAD_FIELDS[ltype]
+        optional = lf.get("optional", {})
+        _unknown_keys(ctx, lt, p, ("type",) + tuple(lf["required"]) + tuple(optional))
+        ok = True
+        params = {}
+        for fname, (shape, _doc) in lf["required"].items():
+            v = _get(ctx, lt, fname, p)
+            if v is _MISSING:
+                ok = False
+                continue
+            f = f"{p}.{fname}"
+            if shape == "body":
+                val = body_ref(v, f, allow_base=(ltype == "spring"))
+            elif shape == "scalar":
+                val = _num(ctx, v, f, _NONNEG if ltype == "spring" else None)
+            else:
+                val = _shaped(ctx, v, f, shape, kind)
+            if val is None:
+                ok = False
+            else:
+                params[fname] = val
+        for fname, (shape, _doc, _default) in optional.items():
+            v = _get(ctx, lt, fname, p, required=False)
+            if v is _MISSING:
+                if dim is not None and shape == "vec":
+                    params[fname] = tuple(0.0 for _ in range(dim))  # body origin
+                continue
+            val = _shaped(ctx, v, f"{p}.{fname}", shape, kind)
+            if val is None:
+                ok = False
+            else:
+                params[fname] = val
+        if ltype == "spring" and "body_i" in params and params.get("body_i") == params.get("body_j"):
+            ctx.add(f"{p}.body_j", f"body_j must differ from body_i ('{params['body_i']}')")
+            ok = False
+        if ok:
+            loads.append(LoadSpec(ltype, params))
+
+    if len(ctx.problems) > n_problems:
+        return None
+    return MechanismSpec(name=name, kind=kind, gravity=gravity, bodies=tuple(bodies),
+                         joints=tuple(joints), loads=tuple(loads), source=ctx.file,
+                         description=description)
+
+
+def _shaped(ctx: _Ctx, value, field: str, shape: str, kind: str | None):
+    """A value of shape code ``vec`` / ``rot`` / ``scalar`` (spec.JOINT_FIELDS)."""
+    if shape == "scalar":
+        return _num(ctx, value, field)
+    if shape == "vec":
+        return _vec(ctx, value, field, _DIM.get(kind))
+    if shape == "rot":
+        if kind == "planar":
+            return _num(ctx, value, field)
+        if kind == "spatial":
+            return _vec(ctx, value, field, 3)
+        # unknown kind (already reported): check the element types only
+        return _vec(ctx, value, field, None) if isinstance(value, list) else _num(ctx, value, field)
+    raise ValueError(f"unknown shape code {shape!r}")  # programming error in spec tables
+
+
+def _n_equations(mech: MechanismSpec) -> int:
+    return sum(S.JOINT_FIELDS[j.type]["n_equations"] for j in mech.joints)
+
+
+def _all_positions(mech: MechanismSpec) -> tuple[str, ...]:
+    return tuple(f"{b.name}.{c}" for b in mech.bodies for c in S.COORDINATES[mech.kind])
+
+
+# ---------------------------------------------------------------------------------------------
+# Scene
+
+_SCENE_KEYS = ("name", "mechanism", "group", "description", "friction", "eliminate",
+               "start_time", "stop_time", "friction_params")
+_SOLVER_CHECKS = {
+    "method": None,
+    "tolerance": (lambda x: 0 < x < 1, "must be in (0, 1)"),
+    "step": _POSITIVE,
+    "output_interval": _POSITIVE,
+    "baumgarte": _NONNEG,
+    "friction_tol": _POSITIVE,
+    "friction_max_iter": None,
+    "max_step": _POSITIVE,
+}
+
+
+def _check_eliminate(ctx: _Ctx, value, field: str, m: int | None, elem_field) -> tuple | str | None:
+    """``"auto"`` or distinct ints in 1..m. ``elem_field(k)`` names element k."""
+    if isinstance(value, str):
+        if value == "auto":
+            return "auto"
+        ctx.add(field, f"expected \"auto\" or an array of equation indices, got {_desc(value)}")
+        return None
+    if not isinstance(value, (list, tuple)):
+        ctx.add(field, f"expected \"auto\" or an array of equation indices, got {_desc(value)}")
+        return None
+    ok = True
+    seen = set()
+    out = []
+    for k, item in enumerate(value):
+        f = elem_field(k)
+        i = _int(ctx, item, f)
+        if i is None:
+            ok = False
+            continue
+        if m is not None and not 1 <= i <= m:
+            ctx.add(f, f"equation index {i} outside 1..{m}")
+            ok = False
+        elif i in seen:
+            ctx.add(f, f"equation {i} listed twice")
+            ok = False
+        seen.add(i)
+        out.append(i)
+    return tuple(out) if ok else None
+
+
+def _check_friction_list(ctx: _Ctx, value, field: str, mech: MechanismSpec | None,
+                         has_params, elem_field) -> tuple[str, ...] | None:
+    if not isinstance(value, (list, tuple)):
+        ctx.add(field, f"expected an array of joint names, got {_desc(value)}")
+        return None
+    ok = True
+    seen = set()
+    out = []
+    names = {j.name for j in mech.joints} if mech is not None else None
+    for k, item in enumerate(value):
+        f = elem_field(k)
+        s = _str(ctx, item, f)
+        if s is None:
+            ok = False
+            continue
+        if names is not None and s not in names:
+            ctx.add(f, f"unknown joint {_short(s)}")
+            ok = False
+        elif s in seen:
+            ctx.add(f, f"joint '{s}' listed twice")
+            ok = False
+        elif names is not None and not has_params(s):
+            ctx.add(f, f"joint '{s}' has no friction parameters (no [joints.friction] table in "
+                       f"the mechanism and no scene friction_params.{s})")
+            ok = False
+        seen.add(s)
+        out.append(s)
+    return tuple(out) if ok else None
+
+
+def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | None:
+    n_problems = len(problems)
+    _unknown_keys(ctx, doc, "", ("scene", "outputs", "solver"))
+    st = doc.get("scene")
+    if _table(ctx, st, "scene") is None:
+        return None
+    _unknown_keys(ctx, st, "scene", _SCENE_KEYS)
+
+    name = _MISSING
+    v = _get(ctx, st, "name", "scene")
+    if v is not _MISSING:
+        name = _ident(ctx, v, "scene.name")
+    group = description = ""
+    v = _get(ctx, st, "group", "scene", required=False)
+    if v is not _MISSING:
+        group = _str(ctx, v, "scene.group") or ""
+    v = _get(ctx, st, "description", "scene", required=False)
+    if v is not _MISSING:
+        description = _str(ctx, v, "scene.description") or ""
+
+    # --- the mechanism
+    mech = None
+    mech_ok = False
+    v = _get(ctx, st, "mechanism", "scene")
+    if v is not _MISSING:
+        rel = _str(ctx, v, "scene.mechanism")
+        if rel is not None:
+            if not rel:
+                ctx.add("scene.mechanism", "empty path")
+            else:
+                mpath = Path(ctx.file).parent / rel
+                mfile = str(mpath)
+                if not _is_file(mpath):
+                    ctx.add("scene.mechanism", f"mechanism file not found: {mfile}")
+                else:
+                    mctx = _Ctx(mfile, problems)
+                    mdoc = _read(mpath, mctx)
+                    if mdoc is not None:
+                        if isinstance(mdoc.get("scene"), dict) or "mechanism" not in mdoc:
+                            mctx.add(FILE_FIELD, "not a mechanism file (no [mechanism] table)")
+                        else:
+                            mech = _check_mechanism(mdoc, mctx)
+                            mech_ok = mech is not None
+
+    # --- friction parameters
+    friction_params: dict[str, FrictionSpec] = {}
+    fp_given: set[str] = set()
+    joints = {j.name: j for j in mech.joints} if mech is not None else {}
+    v = _get(ctx, st, "friction_params", "scene", required=False)
+    if v is not _MISSING and _table(ctx, v, "scene.friction_params") is not None:
+        for jn, tab in v.items():
+            f = f"scene.friction_params.{jn}"
+            if mech is not None and jn not in joints:
+                ctx.add(f, f"unknown joint {_short(jn)}")
+                continue
+            if _table(ctx, tab, f) is None:
+                continue
+            fp_given.add(jn)
+            joint = joints.get(jn)
+            fs = _friction(ctx, tab, f, joint.type if joint else None,
+                           joint.friction if joint else None, require=mech is not None)
+            if fs is not None:
+                friction_params[jn] = fs
+
+    def has_params(jn):
+        return jn in fp_given or joints[jn].friction is not None
+
+    friction = None
+    v = _get(ctx, st, "friction", "scene")
+    if v is not _MISSING:
+        friction = _check_friction_list(ctx, v, "scene.friction", mech, has_params,
+                                        lambda k: f"scene.friction[{k}]")
+
+    eliminate = None
+    v = _get(ctx, st, "eliminate", "scene")
+    if v is not _MISSING:
+        eliminate = _check_eliminate(ctx, v, "scene.eliminate",
+                                     _n_equations(mech) if mech is not None else None,
+                                     lambda k: f"scene.eliminate[{k}]")
+
+    start_time = 0.0
+    v = _get(ctx, st, "start_time", "scene", required=False)
+    if v is not _MISSING:
+        start_time = _num(ctx, v, "scene.start_time")
+    stop_time = None
+    v = _get(ctx, st, "stop_time", "scene")
+    if v is not _MISSING:
+        stop_time = _num(ctx, v, "scene.stop_time")
+        if stop_time is not None and start_time is not None and stop_time <= start_time:
+            ctx.add("scene.stop_time", f"must be > start_time ({start_time!r}), got {stop_time!r}")
+
+    # --- outputs
+    positions = reactions = "all"
+    ot = doc.get("outputs", _MISSING)
+    if ot is not _MISSING and _table(ctx, ot, "outputs") is not None:
+        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions"))
+        positions = ot.get("positions", "all")
+        reactions = ot.get("reactions", "all")
+    else:
+        ot = None
+    valid_pos = set(_all_positions(mech)) if mech is not None else None
+    positions = _check_outputs(ctx, positions, "outputs.positions", valid_pos,
+                               "'<body>.<coordinate>'", _pos_message(mech))
+    valid_reac = set(joints) if mech is not None else None
+    reactions = _check_outputs(ctx, reactions, "outputs.reactions", valid_reac, "joint name",
+                               lambda s: f"unknown joint {_short(s)}")
+
+    # --- solver
+    solver_kw = {}
+    sv = doc.get("solver", _MISSING)
+    if sv is not _MISSING and _table(ctx, sv, "solver") is not None:
+        _unknown_keys(ctx, sv, "solver", tuple(_SOLVER_CHECKS))
+        for key, check in _SOLVER_CHECKS.items():
+            if key not in sv:
+                continue
+            f = f"solver.{key}"
+            if key == "method":
+                val = _choice(ctx, sv[key], f, S.METHODS)
+            elif key == "friction_max_iter":
+                val = _int(ctx, sv[key], f)
+                if val is not None and val < 1:
+                    ctx.add(f, f"must be >= 1, got {val}")
+                    val = None
+            else:
+                val = _num(ctx, sv[key], f, check)
+            if val is not None:
+                solver_kw[key] = val
+
+    if len(problems) > n_problems or not mech_ok:
+        return None
+    if positions == "all":
+        positions = _all_positions(mech)
+    if reactions == "all":
+        reactions = tuple(j.name for j in mech.joints)
+    fparams = {}
+    for jn in friction:
+        fs = friction_params.get(jn, joints[jn].friction)
+        fparams[jn] = fs
+    return SceneSpec(name=name, mechanism=mech, friction=friction, friction_params=fparams,
+                     eliminate=eliminate, positions=positions, reactions=reactions,
+                     start_time=start_time, stop_time=stop_time,
+                     solver=SolverSpec(**solver_kw), group=group, description=description,
+                     source=ctx.file)
+
+
+def _pos_message(mech: MechanismSpec | None):
+    def message(s: str) -> str:
+        body, dot, coord = s.partition(".")
+        if not dot:
+            return f"{_short(s)} is not of the form '<body>.<coordinate>'"
+        if mech is not None and body not in {b.name for b in mech.bodies}:
+            return f"unknown body {_short(body)}"
+        coords = S.COORDINATES[mech.kind] if mech is not None else ()
+        return f"unknown coordinate {_short(coord)} (allowed: {', '.join(coords)})"
+    return message
+
+
+def _check_outputs(ctx: _Ctx, value, field: str, valid: set | None, what: str, bad_message):
+    if value == "all":
+        return "all"
+    if not isinstance(value, list):
+        ctx.add(field, f"expected \"all\" or an array of {what}s, got {_desc(value)}")
+        return None
+    ok = True
+    seen = set()
+    out = []
+    for k, item in enumerate(value):
+        f = f"{field}[{k}]"
+        s = _str(ctx, item, f)
+        if s is None:
+            ok = False
+            continue
+        if valid is not None and s not in valid:
+            ctx.add(f, bad_message(s))
+            ok = False
+        elif s in seen:
+            ctx.add(f, f"{_short(s)} listed twice")
+            ok = False
+        seen.add(s)
+        out.append(s)
+    return tuple(out) if ok else None
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading files
+
+
+def _is_file(path: Path) -> bool:
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def _read(path: Path, ctx: _Ctx) -> dict | None:
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        ctx.add(FILE_FIELD, "file not found")
+        return None
+    except IsADirectoryError:
+        ctx.add(FILE_FIELD, "is a directory, not a file")
+        return None
+    except (OSError, ValueError) as exc:
+        ctx.add(FILE_FIELD, f"cannot read file: {getattr(exc, 'strerror', None) or exc}")
+        return None
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        ctx.add(FILE_FIELD, f"not UTF-8 text (byte {exc.start})")
+        return None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        ctx.add(FILE_FIELD, f"invalid TOML: {exc}")
+    except (RecursionError, ValueError, OverflowError, MemoryError) as exc:
+        ctx.add(FILE_FIELD, f"invalid TOML: {type(exc).__name__}")
+    return None
+
+
+def load(path) -> MechanismSpec | SceneSpec:
+    """Read and validate a mechanism or scene file; raise :class:`SceneError` with every problem.
+
+    The ``file`` of each problem is the path as given (a scene's mechanism: the scene's directory
+    joined with the ``mechanism`` path)."""
+    problems: list[Problem] = []
+    ctx = _Ctx(str(path), problems)
+    doc = _read(Path(path), ctx)
+    result = None
+    if doc is not None:
+        is_mech = isinstance(doc.get("mechanism"), dict)
+        is_scene = isinstance(doc.get("scene"), dict)
+        if is_mech and is_scene:
+            ctx.add(FILE_FIELD, "has both a [mechanism] and a [scene] table")
+        elif is_scene:
+            result = _check_scene(doc, ctx, problems)
+        elif "mechanism" in doc:
+            result = _check_mechanism(doc, ctx)
+        elif "scene" in doc:
+            result = _check_scene(doc, ctx, problems)
+        else:
+            ctx.add(FILE_FIELD, "neither a [mechanism] nor a [scene] table: not a mechanism or "
+                                "scene file")
+    if problems or result is None:
+        if not problems:  # defensive: a None result always comes with a problem
+            ctx.add(FILE_FIELD, "invalid file")
+        raise SceneError(problems)
+    return result
+
+
+# ---------------------------------------------------------------------------------------------
+# Command-line style overrides
+
+
+def parse_joint_list(text: str) -> tuple[str, ...]:
+    """``"none"`` or ``""`` -> ``()``; ``"joint4,joint5"`` -> ``("joint4", "joint5")``."""
+    text = text.strip()
+    if text.lower() in ("", "none"):
+        return ()
+    return tuple(item.strip() for item in text.split(",") if item.strip())
+
+
+def parse_eliminate(text: str, *, source: str = CLI_SOURCE) -> tuple[int, ...] | str:
+    """``"auto"`` -> ``"auto"``; ``"4,6"`` -> ``(4, 6)``; ``""``/``"none"`` -> ``()``.
+
+    A non-integer item raises :class:`SceneError` with field ``--eliminate``."""
+    text = text.strip()
+    if text.lower() == "auto":
+        return "auto"
+    if text.lower() in ("", "none"):
+        return ()
+    out = []
+    bad = []
+    for item in text.split(","):
+        item = item.strip()
+        try:
+            out.append(int(item))
+        except ValueError:
+            bad.append(Problem(source, "--eliminate",
+                               f"{_short(item)} is not an integer equation index (or \"auto\")"))
+    if bad:
+        raise SceneError(bad)
+    return tuple(out)
+
+
+def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, stop_time=None,
+             tolerance=None, source: str = CLI_SOURCE) -> SceneSpec:
+    """A :class:`SceneSpec` from a mechanism (name = mechanism name, every position and every
+    reaction as outputs, no friction, eliminate ``"auto"``, stop time 1 s) or from a scene, with
+    the given overrides applied. ``friction``: joint names (or a text for
+    :func:`parse_joint_list`); ``eliminate``: ints or ``"auto"`` (or a text for
+    :func:`parse_eliminate`); ``stop_time`` > start time; 0 < ``tolerance`` < 1. Invalid overrides
+    raise :class:`SceneError` with ``source`` as the file and the option name as the field; the
+    scene keeps the source file of ``spec``. Friction parameters of newly enabled joints come from
+    the scene (if it had them) or the mechanism."""
+    if isinstance(spec, MechanismSpec):
+        mech = spec
+        scene = SceneSpec(name=mech.name, mechanism=mech, friction=(), friction_params={},
+                          eliminate="auto", positions=_all_positions(mech),
+                          reactions=tuple(j.name for j in mech.joints), start_time=0.0,
+                          stop_time=1.0, description=mech.description, source=mech.source)
+    elif isinstance(spec, SceneSpec):
+        scene = spec
+        mech = spec.mechanism
+    else:
+        raise TypeError(f"as_scene needs a MechanismSpec or SceneSpec, got {type(spec).__name__}")
+
+    problems: list[Problem] = []
+    ctx = _Ctx(source, problems)
+    changes: dict = {}
+    joints = {j.name: j for j in mech.joints}
+
+    if friction is not None:
+        if isinstance(friction, str):
+            friction = parse_joint_list(friction)
+
+        def has_params(jn):
+            return jn in scene.friction_params or joints[jn].friction is not None
+
+        names = _check_friction_list(ctx, friction, "--friction", mech, has_params,
+                                     lambda k: "--friction")
+        if names is not None:
+            changes["friction"] = names
+            changes["friction_params"] = {
+                jn: scene.friction_params.get(jn) or joints[jn].friction for jn in names}
+
+    if eliminate is not None:
+        if isinstance(eliminate, str):
+            try:
+                eliminate = parse_eliminate(eliminate, source=source)
+            except SceneError as exc:
+                problems.extend(exc.problems)
+                eliminate = None
+        if eliminate is not None:
+            val = _check_eliminate(ctx, eliminate, "--eliminate", _n_equations(mech),
+                                   lambda k: "--eliminate")
+            if val is not None:
+                changes["eliminate"] = val
+
+    if stop_time is not None:
+        val = _num(ctx, stop_time, "--stop-time")
+        if val is not None and val <= scene.start_time:
+            ctx.add("--stop-time", f"must be > start time ({scene.start_time!r}), got {val!r}")
+        elif val is not None:
+            changes["stop_time"] = val
+
+    if tolerance is not None:
+        val = _num(ctx, tolerance, "--tolerance", _SOLVER_CHECKS["tolerance"])
+        if val is not None:
+            changes["solver"] = dataclasses.replace(scene.solver, tolerance=val)
+
+    if problems:
+        raise SceneError(problems)
+    return dataclasses.replace(scene, **changes) if changes else scene

@@ -1,0 +1,206 @@
+"""Parsed, validated description of a mechanism and of a scene (frozen dataclasses).
+
+This is the output of :mod:`overcon.scene` (which reads TOML and reports every problem against
+its file and field) and the input of :func:`overcon.model.compile_model`. Nothing here does
+numerics. Units are SI throughout; angles in radians.
+
+Field tables
+------------
+``JOINT_FIELDS`` and ``LOAD_FIELDS`` state, per joint/load type, which fields the file must (or
+may) give and their shape, so that the loader validates every type the same way. A new joint type
+adds one entry here and one producer module in :mod:`overcon.joints`.
+
+Shape codes used in the tables: ``"vec"`` a vector of the mechanism's dimension (2 planar,
+3 spatial); ``"rot"`` a rotation quantity (planar: scalar, spatial: 3-vector); ``"scalar"``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+BASE = "base"
+"""Reserved body name of the fixed ground (body 0: origin at the global origin, no rotation)."""
+
+KINDS = ("planar", "spatial")
+
+# Coordinates per body, in the order they appear in q_i (paper Eq. 33 and 39).
+COORDINATES = {
+    "planar": ("x", "y", "phi"),
+    "spatial": ("x", "y", "z", "alpha", "beta", "gamma"),
+}
+COORDINATE_UNITS = {"x": "m", "y": "m", "z": "m", "phi": "rad", "alpha": "rad", "beta": "rad", "gamma": "rad"}
+
+# Joint types per mechanism kind, their number of constraint equations, required fields
+# (name -> shape code, description) and optional fields with defaults.
+JOINT_FIELDS: Mapping[str, Mapping] = {
+    "translational": {
+        "kind": "planar",
+        "n_equations": 2,
+        "required": {
+            "s_A": ("vec", "point A on body i, in body i frame (m)"),
+            "s_B": ("vec", "point B on body j, in body j frame (m)"),
+            "v": ("vec", "vector on body j perpendicular to the guide, in body j frame"),
+        },
+        "optional": {"psi": ("scalar", "constant angle phi_i - phi_j (rad)", 0.0)},
+        "friction_size": ("length", "slider length l between contact points A and B (m)"),
+        "reaction_components": ("Fx", "Fy", "T"),
+    },
+    "revolute": {
+        "kind": "planar",
+        "n_equations": 2,
+        "required": {
+            "s_i": ("vec", "joint point P on body i, in body i frame (m)"),
+            "s_j": ("vec", "joint point P on body j, in body j frame (m)"),
+        },
+        "optional": {},
+        "friction_size": ("radius", "shaft radius a (m)"),
+        "reaction_components": ("Fx", "Fy", "T"),
+    },
+    "spherical": {
+        "kind": "spatial",
+        "n_equations": 3,
+        "required": {
+            "s_i": ("vec", "ball centre P on body i, in body i frame (m)"),
+            "s_j": ("vec", "ball centre P on body j, in body j frame (m)"),
+        },
+        "optional": {},
+        "friction_size": ("radius", "ball radius rho (m)"),
+        "reaction_components": ("Fx", "Fy", "Fz"),
+    },
+}
+
+LOAD_FIELDS: Mapping[str, Mapping] = {
+    "force": {
+        "required": {
+            "body": ("body", "body the force acts on"),
+            "value": ("vec", "force in the global frame (N), applied at the body origin"),
+        },
+    },
+    "torque": {
+        "required": {
+            "body": ("body", "body the torque acts on"),
+            "value": ("rot", "torque in the global frame (N.m); planar: scalar, counter-clockwise +"),
+        },
+    },
+    "spring": {
+        "required": {
+            "body_i": ("body", "first body"),
+            "body_j": ("body", "second body (may be base)"),
+            "stiffness": ("scalar", "spring stiffness k (N/m), >= 0"),
+            "free_length": ("scalar", "free length L0 (m), >= 0"),
+        },
+        "optional": {
+            "s_i": ("vec", "attachment point on body i, body i frame (m)", None),
+            "s_j": ("vec", "attachment point on body j, body j frame (m)", None),
+        },
+    },
+}
+
+FRICTION_LAWS = ("coulomb", "regularised", "stribeck")
+"""Friction laws mu(v) of paper Fig. 1: A ``coulomb`` (sign; analysis only, refused for
+integration), B ``regularised`` (mu*clip(v/v_reg, -1, 1), the paper's choice), C ``stribeck``
+(B with a Stribeck peak)."""
+
+METHODS = ("dopri5", "rk4")
+"""Integrators offered (see :mod:`overcon.integrators`)."""
+
+
+@dataclass(frozen=True)
+class FrictionSpec:
+    """Friction parameters of one joint (paper App. A).
+
+    ``size`` is the joint's geometric friction size: translational slider length l, revolute shaft
+    radius a, spherical ball radius rho (all m). ``v_reg`` is the regularisation velocity of law B
+    (m/s for sliding, rad/s for the revolute relative angular velocity). ``mu_static`` and
+    ``v_stribeck`` are used by law C only.
+    """
+
+    mu: float
+    size: float
+    law: str = "regularised"
+    v_reg: float = 1e-3
+    mu_static: float | None = None
+    v_stribeck: float | None = None
+
+
+@dataclass(frozen=True)
+class BodySpec:
+    """A moving rigid body. ``inertia``: planar (J,) in kg.m^2; spatial principal moments
+    (Jx, Jy, Jz) about the body axes (kg.m^2). Origin at the centre of mass."""
+
+    name: str
+    mass: float
+    inertia: tuple[float, ...]
+    q0: tuple[float, ...]
+    h0: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """A joint between body i and body j (either may be ``base``). ``params`` holds the fields of
+    ``JOINT_FIELDS[type]`` as tuples/floats; ``friction`` the parameters used when a scene switches
+    friction on for this joint (None: the file gives none)."""
+
+    name: str
+    type: str
+    body_i: str
+    body_j: str
+    params: Mapping[str, object]
+    friction: FrictionSpec | None = None
+
+
+@dataclass(frozen=True)
+class LoadSpec:
+    type: str
+    params: Mapping[str, object]
+
+
+@dataclass(frozen=True)
+class MechanismSpec:
+    name: str
+    kind: str
+    gravity: tuple[float, ...]
+    bodies: tuple[BodySpec, ...]
+    joints: tuple[JointSpec, ...]
+    loads: tuple[LoadSpec, ...]
+    source: str = ""
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class SolverSpec:
+    """Integration settings. ``tolerance`` is the accuracy target (relative and absolute
+    tolerance of the adaptive method; for ``rk4`` it is unused). ``step`` is the fixed step of
+    ``rk4`` (s). ``baumgarte`` is the constraint-stabilisation frequency (1/s, 0 disables).
+    ``friction_tol``/``friction_max_iter`` control the friction solve."""
+
+    method: str = "dopri5"
+    tolerance: float = 1e-8
+    step: float = 1e-3
+    output_interval: float = 0.01
+    baumgarte: float = 10.0
+    friction_tol: float = 1e-12
+    friction_max_iter: int = 50
+    max_step: float = 0.05
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """A mechanism plus what to simulate. ``friction``: joint names with friction switched on;
+    ``friction_params`` the parameters per such joint (mechanism values overridden by the scene).
+    ``eliminate``: 1-based paper equation indices, or the string ``"auto"``. ``positions`` are
+    output names ``<body>.<coordinate>``; ``reactions`` joint names whose reactions are outputs."""
+
+    name: str
+    mechanism: MechanismSpec
+    friction: tuple[str, ...] = ()
+    friction_params: Mapping[str, FrictionSpec] = field(default_factory=dict)
+    eliminate: tuple[int, ...] | str = "auto"
+    positions: tuple[str, ...] = ()
+    reactions: tuple[str, ...] = ()
+    start_time: float = 0.0
+    stop_time: float = 1.0
+    solver: SolverSpec = field(default_factory=SolverSpec)
+    group: str = ""
+    description: str = ""
+    source: str = ""

@@ -108,8 +108,10 @@ def main(argv=None) -> int:
     handler = {"check": cmd_check, "simulate": cmd_simulate}[args.command]
     try:
         return handler(args)
-    except (SceneError, ModelError, InconsistentInitialState, ValueError, OSError) as exc:
+    except SceneError as exc:  # already names file and field
         return _input_error(exc)
+    except (ModelError, InconsistentInitialState, ValueError, OSError) as exc:
+        return _input_error(f"{getattr(args, 'file', '')}: {exc}")
 
 
 if __name__ == "__main__":

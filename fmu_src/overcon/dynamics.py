@@ -43,6 +43,7 @@ class Evaluation:
     frames: Frames
     iterations: int = 0
     fallback: bool = False
+    S: np.ndarray | None = None  # Schur complement J_R^T M^-1 J_R (for conditioning checks)
 
 
 def _friction_generalized(model: Model, f: Frames, blocks, lam: np.ndarray) -> np.ndarray:
@@ -115,7 +116,7 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
         Q = Q + _friction_generalized(model, f, blocks, full(lr))
     lam[R] = lam_R
     hdot = model.Minv * (Q - JR @ lam_R)
-    return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback)
+    return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S)
 
 
 def _converged(x_new, x, tol) -> bool:

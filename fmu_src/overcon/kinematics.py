@@ -78,6 +78,11 @@ def euler_H(angles, body: str = "") -> np.ndarray:
     ])
 
 
+def cross3(a, b) -> np.ndarray:
+    """a x b for two 3-vectors (np.cross carries a large per-call overhead for single vectors)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def skew(v) -> np.ndarray:
     """Skew-symmetric matrix with skew(a) @ b = a x b."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

@@ -34,7 +34,7 @@ import numpy as np
 from . import analysis
 from .friction_laws import Law, make_law
 from .joints import TYPES
-from .kinematics import cross2, euler_H, euler_R
+from .kinematics import cross2, cross3, euler_H, euler_R
 from .spec import BASE, COORDINATES, JOINT_FIELDS, MechanismSpec, SceneSpec
 
 
@@ -214,7 +214,7 @@ def generalized_force(model: Model, f: Frames, b: int, point: np.ndarray, F: np.
     arm = point - f.r[b]
     if model.kind == "planar":
         return np.array([F[0], F[1], cross2(arm, F)])
-    return np.concatenate([F, np.cross(f.R[b].T @ arm, f.R[b].T @ F)])
+    return np.concatenate([F, cross3(f.R[b].T @ arm, f.R[b].T @ F)])
 
 
 def applied_forces(model: Model, f: Frames) -> np.ndarray:

@@ -21,7 +21,59 @@ import numpy as np
 
 from .dynamics import evaluate
 from .integrators import METHODS
-from .model import Model, SingularConfiguration, constraints, coordinate_rates, frames, physical_reaction
+from .model import (Model, SingularConfiguration, constraints, coordinate_rates, frames, jacobian_h,
+                    physical_reaction)
+
+
+class SingularityMonitor:
+    """Detects the motion reaching or passing a singular position, where the kept equations'
+    Jacobian J_R = Phi_h[R] loses rank (e.g. the planar sliders at K = L = O).
+
+    After every accepted step: (1) sigma_min/sigma_max of J_R below ``ratio_tol`` (default 1e-6)
+    stops the run; (2) a *crossing* between two steps, which a finite step may jump over, is caught
+    by the sign of det([J_R; N^T]) with N the velocity null-space basis of the previous step
+    (nonzero while J_R keeps full rank, and it changes sign when J_R passes through rank loss).
+    The smallest ratio seen is reported as ``min_ratio``.
+    """
+
+    def __init__(self, model: Model, y: np.ndarray, ratio_tol: float = 1e-6):
+        self.model, self.ratio_tol = model, ratio_tol
+        self.min_ratio = np.inf
+        self.t_prev = model.scene.start_time
+        J = self._jac(y)
+        self.N, ratio = self._null(J, None)
+        self._check_ratio(self.t_prev, ratio)
+        self.sign = np.sign(np.linalg.det(np.vstack([J, self.N.T])))
+
+    def _jac(self, y):
+        m = self.model
+        return jacobian_h(m, frames(m, y[: m.n]))[m.retained]
+
+    def _null(self, J, N_prev):
+        _, sv, Vt = np.linalg.svd(J)
+        N = Vt[J.shape[0]:].T
+        if N_prev is not None and N.size:  # keep the basis orientation continuous (polar alignment)
+            U, _, Wt = np.linalg.svd(N.T @ N_prev)
+            N = N @ (U @ Wt)
+        return N, (sv[-1] / sv[0] if sv.size else 1.0)
+
+    def _check_ratio(self, t, ratio):
+        self.min_ratio = min(self.min_ratio, ratio)
+        if ratio < self.ratio_tol:
+            raise SingularConfiguration(
+                f"t = {t:.9g} s: singular position: the kept constraint Jacobian is rank deficient "
+                f"(sigma_min/sigma_max = {ratio:.3g} < {self.ratio_tol:g})")
+
+    def check(self, t: float, y: np.ndarray) -> None:
+        J = self._jac(y)
+        if self.N.size and np.sign(np.linalg.det(np.vstack([J, self.N.T]))) != self.sign:
+            raise SingularConfiguration(
+                f"the motion passed a singular position between t = {self.t_prev:.9g} s and "
+                f"t = {t:.9g} s (the kept constraint Jacobian lost rank on the way)")
+        self.N, ratio = self._null(J, self.N)
+        self._check_ratio(t, ratio)
+        self.sign = np.sign(np.linalg.det(np.vstack([J, self.N.T])))
+        self.t_prev = t
 
 
 class SimulationError(RuntimeError):
@@ -34,7 +86,6 @@ class InconsistentInitialState(ValueError):
 
 def check_initial_state(model: Model, tol: float = 1e-9) -> None:
     """Refuse q0/h0 off the constraint manifold (|Phi| or |Phi_h h| above tol, scaled)."""
-    from .model import jacobian_h
     f = frames(model, model.q0, model.h0)
     Phi = constraints(model, f)
     scale = max(1.0, float(np.max(np.abs(model.q0))))
@@ -69,6 +120,7 @@ class Simulation:
         t0 = model.scene.start_time if start_time is None else start_time
         y0 = np.concatenate([model.q0, model.h0])
         self._integrator = METHODS[self.method](self._rhs, t0, y0, **self.settings)
+        self.monitor = SingularityMonitor(model, y0)
 
     # -- right-hand side -------------------------------------------------------------------
     def _rhs(self, t: float, y: np.ndarray) -> np.ndarray:
@@ -95,6 +147,7 @@ class Simulation:
         try:
             while itg.t < t_target - eps:
                 itg.step()
+                self.monitor.check(itg.t, itg.y)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             raise SimulationError(f"integration stopped at t = {itg.t:.9g} s: {exc}") from exc
         if itg.t - t_target < -eps:
@@ -120,7 +173,8 @@ class Simulation:
         return {"integrator": self._integrator.get_state(),
                 "lam": None if self.lam is None else self.lam.copy(),
                 "friction_iterations": self.friction_iterations, "evaluations": self.evaluations,
-                "max_drift": self.max_drift}
+                "max_drift": self.max_drift,
+                "monitor": (self.monitor.N.copy(), self.monitor.sign, self.monitor.t_prev, self.monitor.min_ratio)}
 
     def set_state(self, state: dict) -> None:
         state = copy.deepcopy(state)
@@ -129,6 +183,8 @@ class Simulation:
         self.friction_iterations = state["friction_iterations"]
         self.evaluations = state["evaluations"]
         self.max_drift = state["max_drift"]
+        mon = self.monitor
+        mon.N, mon.sign, mon.t_prev, mon.min_ratio = state["monitor"]
 
 
 @dataclass

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import euler_dR, skew
+from ..kinematics import cross3, euler_dR, skew
 
 N_EQUATIONS = 3
 REACTION_COMPONENTS = ("Fx", "Fy", "Fz")
@@ -50,7 +50,7 @@ def jac_h(c, f):
 def gamma(c, f):
     wi, wj = f.w[c.bi], f.w[c.bj]
     si, sj = c.p["s_i"], c.p["s_j"]
-    return -f.R[c.bi] @ np.cross(wi, np.cross(wi, si)) + f.R[c.bj] @ np.cross(wj, np.cross(wj, sj))
+    return -f.R[c.bi] @ cross3(wi, cross3(wi, si)) + f.R[c.bj] @ cross3(wj, cross3(wj, sj))
 
 
 def reaction_transform(c, f):
@@ -73,7 +73,7 @@ def relative_speed(c, f, fi=None):
     norm = np.linalg.norm(F_aux)
     if norm == 0.0:
         return 0.0
-    return float(np.linalg.norm(np.cross(_relative_omega(c, f), -F_aux / norm)))
+    return float(np.linalg.norm(cross3(_relative_omega(c, f), -F_aux / norm)))
 
 
 def friction(c, f, fi, law):
@@ -84,11 +84,11 @@ def friction(c, f, fi, law):
         z = np.zeros(6)
         return z, z.copy()
     s_C = -law.size * F_aux / norm
-    v_slip = np.cross(_relative_omega(c, f), s_C)
+    v_slip = cross3(_relative_omega(c, f), s_C)
     F_fr = law.mu_over_speed(np.linalg.norm(v_slip)) * norm * v_slip
-    torque_i = np.cross(c.p["s_i"] + s_C, F_fr)
+    torque_i = cross3(c.p["s_i"] + s_C, F_fr)
     Qi = np.concatenate([Ri @ F_fr, torque_i])
     Rji = Rj.T @ Ri
-    torque_j = np.cross(c.p["s_j"], Rji @ F_fr) + Rji @ np.cross(s_C, F_fr)
+    torque_j = cross3(c.p["s_j"], Rji @ F_fr) + Rji @ cross3(s_C, F_fr)
     Qj = -np.concatenate([Ri @ F_fr, torque_j])
     return Qi, Qj

@@ -1,0 +1,128 @@
+"""`overcon check` / `overcon simulate`: JSON contract, exit codes, clear errors."""
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from overcon.cli import main
+
+MECH = Path(__file__).resolve().parent.parent / "mechanisms"
+
+
+def check_json(capsys, *args):
+    code = main(["check", *map(str, args), "--json"])
+    return code, json.loads(capsys.readouterr().out)
+
+
+def verdicts(report):
+    return {j["name"]: (j["unique"], j["methods"]["rank"], j["methods"]["svd"], j["methods"]["qr"])
+            for j in report["joints"]}
+
+
+def test_check_planar_json(capsys):
+    code, rep = check_json(capsys, MECH / "planar_sliders.toml")
+    assert code == 0
+    assert (rep["n_coordinates"], rep["n_equations"], rep["rank"], rep["dof"], rep["redundant"]) == (12, 12, 11, 1, 1)
+    v = verdicts(rep)
+    for j in ("joint4", "joint5", "joint6"):
+        assert v[j] == (True, True, True, True)
+    for j in ("joint1", "joint2", "joint3"):
+        assert v[j] == (False, False, False, False)
+    assert rep["friction_on_nonunique"] == []
+
+
+def test_check_spatial_json(capsys):
+    code, rep = check_json(capsys, MECH / "spatial_parallelogram.toml")
+    assert code == 0
+    assert (rep["n_coordinates"], rep["n_equations"], rep["rank"], rep["dof"], rep["redundant"]) == (42, 36, 35, 7, 1)
+    v = verdicts(rep)
+    for j in "KLMN":
+        assert v[j] == (True, True, True, True)
+    for j in "ABCDEFGH":
+        assert v[j] == (False, False, False, False)
+    assert rep["methods_agree"]
+
+
+def test_friction_on_joint1_exits_1_and_names_it(capsys):
+    code = main(["check", str(MECH / "planar_f1_wo4.toml")])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "joint1" in out and "NOT UNIQUE" in out and "friction on joint joint1" in out
+    code, rep = check_json(capsys, MECH / "planar_sliders.toml", "--friction", "joint1")
+    assert code == 1 and rep["friction_on_nonunique"] == ["joint1"]
+
+
+def test_friction_flag_override_unique(capsys):
+    code, rep = check_json(capsys, MECH / "spatial_parallelogram.toml", "--friction", "M,N", "--eliminate", "9")
+    assert code == 0 and rep["friction"] == ["M", "N"] and rep["motion_unique"] and rep["eliminated"] == [9]
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["check", "no/such/file.toml"], "file not found"),
+    (["check", str(MECH / "planar_sliders.toml"), "--friction", "joint9"], "--friction"),
+    (["check", str(MECH / "planar_sliders.toml"), "--eliminate", "x"], "--eliminate"),
+    (["check", str(MECH / "planar_sliders.toml"), "--eliminate", "13"], "--eliminate"),
+    (["check", str(MECH / "planar_sliders.toml"), "--eliminate", "7"], "independent equation"),
+    (["simulate", str(MECH / "planar_sliders.toml"), "--out", "x.csv", "--tolerance", "-1"], "--tolerance"),
+    (["simulate", str(MECH / "planar_sliders.toml"), "--out", "x.csv", "--stop-time", "-1"], "--stop-time"),
+    (["check"], "file"),
+])
+def test_bad_input_exit_2(capsys, args, needle):
+    with pytest.raises(SystemExit) if args == ["check"] else contextlib.nullcontext():
+        code = main(args)
+        assert code == 2
+    assert needle in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("mutation", [
+    ("mass = 3.0", "mass = nan"),
+    ("mass = 3.0", 'mass = "heavy"'),
+    ('body_j = "base"', 'body_j = "nowhere"'),
+    ("q0 = [2.0, 0.0, 0.0]", "q0 = [2.0, 0.0]"),
+    ("[[bodies]]", "[[bodiez]]"),
+    ('kind = "planar"', "kind = 3"),
+])
+def test_malformed_file_no_traceback(tmp_path, mutation):
+    text = (MECH / "planar_sliders.toml").read_text().replace(*mutation, 1)
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    proc = subprocess.run([sys.executable, "-m", "overcon.cli", "check", str(path)], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    assert str(path) in proc.stderr
+
+
+def test_simulate_writes_csv(tmp_path, capsys):
+    out = tmp_path / "wo4.csv"
+    code = main(["simulate", str(MECH / "planar_sliders.toml"), "--friction", "none", "--eliminate", "4",
+                 "--stop-time", "0.5", "--out", str(out)])
+    assert code == 0
+    assert "max constraint drift" in capsys.readouterr().out
+    rows = list(csv.reader(out.open()))
+    header = rows[0]
+    assert header[0] == "time" and "slider1.x" in header and "link4.phi" in header
+    assert {"joint1.Fx", "joint1.Fy", "joint1.T", "joint6.T"} <= set(header)
+    assert len(rows) == 52 and float(rows[-1][0]) == 0.5
+
+
+def test_simulate_spatial_scene_headers(tmp_path, capsys):
+    out = tmp_path / "s.csv"
+    assert main(["simulate", str(MECH / "spatial_MN_wo5.toml"), "--stop-time", "0.05", "--out", str(out)]) == 0
+    header = next(csv.reader(out.open()))
+    assert header[:4] == ["time", "platform.x", "platform.y", "platform.z"]
+    assert "G.Fy" in header and "N.Fz" in header and "G.Fy0" in header
+
+
+def test_simulation_failure_exit_3(tmp_path, capsys):
+    text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
+    path = tmp_path / "l0.toml"
+    path.write_text(text)
+    code = main(["simulate", str(path), "--eliminate", "4", "--stop-time", "2", "--out", str(tmp_path / "o.csv")])
+    assert code == 3
+    assert "singular position" in capsys.readouterr().err

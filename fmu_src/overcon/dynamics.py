@@ -13,11 +13,12 @@ that raises :class:`overcon.model.SingularConfiguration`.
 Friction: Q_f depends on lam only through the friction joints' multipliers, and enters the right
 hand side linearly, so ``lam_R = lam0 + S^-1 J_R^T M^-1 Q_f(lam)`` is a fixed point in the
 friction joints' multipliers ``x``. Solve: fixed-point iteration from the last converged lam
-(warm start); on non-convergence (iteration cap) or divergence (residual growth over 3
+(warm start), accelerated by Anderson mixing (depth 3); on non-convergence (iteration cap) or divergence (residual growth over 3
 iterations) fall back to Newton's method on ``x - G(x) = 0`` with a finite-difference Jacobian
 (x has at most a dozen entries) and a backtracking line search; if that fails too,
 :class:`FrictionSolveError` names the time, the joints and the residual. Convergence:
-``|x_new - x| <= tol (1 + |x|)`` (infinity norms, N).
+``|G(x) - x| <= tol (1 + |x|)`` (infinity norms, N). The returned lam is G(x) of the last
+iterate, so h' and lam are consistent to that residual.
 """
 from __future__ import annotations
 
@@ -119,27 +120,47 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S)
 
 
-def _converged(x_new, x, tol) -> bool:
-    return np.max(np.abs(x_new - x), initial=0.0) <= tol * (1.0 + np.max(np.abs(x), initial=0.0))
+ANDERSON_DEPTH = 3
+"""History length of the Anderson acceleration of the friction fixed point (0 = plain)."""
 
 
-def _fixed_point(G, lr, xrows, tol, max_iter):
-    """Plain fixed-point iteration (the paper's method) with divergence detection."""
+def _fixed_point(G, lr, xrows, tol, max_iter, depth=ANDERSON_DEPTH):
+    """Fixed-point iteration x <- G(x) on the friction multipliers (the paper's method), with
+    Anderson acceleration of the given depth (0: plain iteration) and divergence detection
+    (residual growing 3 times in a row, or non-finite). Returns (lam_R, iterations, converged)."""
+    x = lr[xrows].copy()
+    g_full = G(lr)
+    g = g_full[xrows]
+    dF, dG = [], []
+    f_prev = g_prev = None
     prev_res, growth = np.inf, 0
     for it in range(1, max_iter + 1):
-        new = G(lr)
-        res = np.max(np.abs(new[xrows] - lr[xrows]), initial=0.0)
-        done = _converged(new[xrows], lr[xrows], tol)
-        lr = new
-        if done:
-            return lr, it, True
+        f = g - x
+        res = np.max(np.abs(f), initial=0.0)
         if not np.isfinite(res):
-            return lr, it, False
+            return g_full, it, False
+        if res <= tol * (1.0 + np.max(np.abs(x), initial=0.0)):
+            return g_full, it, True
         growth = growth + 1 if res > prev_res else 0
         if growth >= 3:
-            return lr, it, False
+            return g_full, it, False
         prev_res = res
-    return lr, max_iter, False
+        if depth and f_prev is not None:
+            dF.append(f - f_prev)
+            dG.append(g - g_prev)
+            del dF[:-depth], dG[:-depth]
+        f_prev, g_prev = f, g
+        if depth and dF:
+            A = np.column_stack(dF)
+            coef = np.linalg.lstsq(A, f, rcond=1e-12)[0]
+            x = g - np.column_stack(dG) @ coef
+        else:
+            x = g
+        trial = lr.copy()
+        trial[xrows] = x
+        g_full = G(trial)
+        g = g_full[xrows]
+    return g_full, max_iter, False
 
 
 def _newton(G, lr, xrows, tol, max_iter):

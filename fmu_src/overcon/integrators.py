@@ -26,13 +26,27 @@ class StepSizeTooSmall(ArithmeticError):
     pass
 
 
+class StiffnessDetected(ArithmeticError):
+    """The explicit method's step is limited by stability, not accuracy (Hairer's test)."""
+
+
+STIFF_H_RHO = 3.25
+STIFF_STEPS = 15
+"""dopri5 stiffness test (Hairer & Wanner, DOPRI5): h * rho > 3.25 on 15 accepted steps (a run of
+six non-stiff steps resets the count),
+rho = |f(y_new) - f(y_6)| / |y_new - y_6| estimating the dominant eigenvalue. Stiff problems
+(e.g. a very small friction regularisation velocity) are reported, not crawled through."""
+
+
 class Dopri5:
     C, A, B, E, P = _RK45.C, _RK45.A, _RK45.B, _RK45.E, _RK45.P
     n_stages = 6
     error_order = 4
 
-    def __init__(self, fun, t0, y0, *, tolerance, max_step, first_step=None, **_):
+    def __init__(self, fun, t0, y0, *, tolerance, max_step, first_step=None, detect_stiffness=True, **_):
         self.fun = fun
+        self.detect_stiffness = detect_stiffness
+        self.n_stiff = self.n_nonstiff = 0
         self.rtol = self.atol = float(tolerance)
         self.max_step = float(max_step)
         self.t = float(t0)
@@ -56,7 +70,8 @@ class Dopri5:
             K[0] = f
             for s in range(1, self.n_stages):
                 dy = K[:s].T @ self.A[s, :s] * h
-                K[s] = self.fun(t + self.C[s] * h, y + dy)
+                y_stage = y + dy
+                K[s] = self.fun(t + self.C[s] * h, y_stage)
             y_new = y + h * (K[:-1].T @ self.B)
             f_new = self.fun(t + h, y_new)
             K[-1] = f_new
@@ -70,8 +85,23 @@ class Dopri5:
                 self.t, self.y, self.f = t + h, y_new, f_new
                 self.h = h * factor
                 self.nsteps += 1
+                self._stiffness_test(h, K[-1] - K[-2], y_new - y_stage)
                 return
             h *= max(MIN_FACTOR, SAFETY * err ** (-1 / (self.error_order + 1)))
+
+    def _stiffness_test(self, h, df, dy) -> None:
+        den = float(dy @ dy)
+        if den > 0.0 and h * np.sqrt(float(df @ df) / den) > STIFF_H_RHO:
+            self.n_stiff, self.n_nonstiff = self.n_stiff + 1, 0
+        else:
+            self.n_nonstiff += 1
+            if self.n_nonstiff >= 6:  # Hairer: six non-stiff steps in a row clear the count
+                self.n_stiff = 0
+        if self.n_stiff >= STIFF_STEPS and self.detect_stiffness:
+            raise StiffnessDetected(
+                f"t = {self.t:.9g} s: the problem is stiff for dopri5 (step {h:.3g} s limited by "
+                f"stability on {STIFF_STEPS} steps in a row); e.g. a small friction regularisation "
+                "velocity: increase v_reg or use a method for stiff problems")
 
     def dense(self, t: float) -> np.ndarray:
         if t == self.t:
@@ -83,13 +113,15 @@ class Dopri5:
     def get_state(self) -> dict:
         return {"t": self.t, "y": self.y.copy(), "f": self.f.copy(), "h": self.h,
                 "t_old": self.t_old, "y_old": self.y_old.copy(), "h_old": getattr(self, "h_old", 0.0),
-                "Q": None if self.Q is None else self.Q.copy(), "nfev": self.nfev, "nsteps": self.nsteps}
+                "Q": None if self.Q is None else self.Q.copy(), "nfev": self.nfev, "nsteps": self.nsteps,
+                "n_stiff": self.n_stiff, "n_nonstiff": self.n_nonstiff}
 
     def set_state(self, s: dict) -> None:
         self.t, self.y, self.f, self.h = s["t"], s["y"].copy(), s["f"].copy(), s["h"]
         self.t_old, self.y_old, self.h_old = s["t_old"], s["y_old"].copy(), s["h_old"]
         self.Q = None if s["Q"] is None else s["Q"].copy()
         self.nfev, self.nsteps = s["nfev"], s["nsteps"]
+        self.n_stiff, self.n_nonstiff = s["n_stiff"], s["n_nonstiff"]
 
 
 class RK4:

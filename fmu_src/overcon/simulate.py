@@ -21,7 +21,7 @@ import numpy as np
 
 from .dynamics import evaluate
 from .integrators import METHODS
-from .model import (Model, SingularConfiguration, constraints, coordinate_rates, frames, jacobian_h,
+from .model import (Model, ModelError, SingularConfiguration, constraints, coordinate_rates, frames, jacobian_h,
                     physical_reaction)
 
 
@@ -112,6 +112,11 @@ class Simulation:
         self.settings = dict(tolerance=tolerance or s.tolerance, step=step or s.step,
                              max_step=max_step or s.max_step)
         check_initial_state(model)
+        for c in model.joints:
+            if c.law is not None and c.law.name == "coulomb":
+                raise ModelError(
+                    f"joint {c.name}: friction law 'coulomb' (paper Fig. 1 variant A, mu sign(v)) is "
+                    "discontinuous at v = 0: for analysis only, not for integration; use 'regularised'")
         self.n = model.n
         self.lam = None  # last converged multipliers (friction warm start)
         self.friction_iterations = 0
@@ -149,7 +154,8 @@ class Simulation:
                 itg.step()
                 self.monitor.check(itg.t, itg.y)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
-            raise SimulationError(f"integration stopped at t = {itg.t:.9g} s: {exc}") from exc
+            where = "" if str(exc).startswith("t = ") else f"t = {itg.t:.9g} s: "
+            raise SimulationError(f"integration stopped: {where}{exc}") from exc
         if itg.t - t_target < -eps:
             raise SimulationError(f"could not reach t = {t_target}")
         return itg.dense(t_target) if abs(itg.t - t_target) > eps else itg.y.copy()

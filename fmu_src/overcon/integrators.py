@@ -34,8 +34,11 @@ STIFF_H_RHO = 3.25
 STIFF_STEPS = 15
 """dopri5 stiffness test (Hairer & Wanner, DOPRI5): h * rho > 3.25 on 15 accepted steps (a run of
 six non-stiff steps resets the count),
-rho = |f(y_new) - f(y_6)| / |y_new - y_6| estimating the dominant eigenvalue. Stiff problems
-(e.g. a very small friction regularisation velocity) are reported, not crawled through."""
+rho = |f(y_new) - f(y_6)| / |y_new - y_6| estimating the dominant eigenvalue. Stiff steps are
+counted (``stiff_steps``, reported); when stability also forces the step below
+STIFF_STEP_FRACTION * max_step (e.g. sticking inside a very small friction regularisation band)
+the run stops with StiffnessDetected instead of crawling."""
+STIFF_STEP_FRACTION = 0.01
 
 
 class Dopri5:
@@ -46,7 +49,7 @@ class Dopri5:
     def __init__(self, fun, t0, y0, *, tolerance, max_step, first_step=None, detect_stiffness=True, **_):
         self.fun = fun
         self.detect_stiffness = detect_stiffness
-        self.n_stiff = self.n_nonstiff = 0
+        self.n_stiff = self.n_nonstiff = self.stiff_steps = 0
         self.rtol = self.atol = float(tolerance)
         self.max_step = float(max_step)
         self.t = float(t0)
@@ -97,7 +100,9 @@ class Dopri5:
             self.n_nonstiff += 1
             if self.n_nonstiff >= 6:  # Hairer: six non-stiff steps in a row clear the count
                 self.n_stiff = 0
-        if self.n_stiff >= STIFF_STEPS and self.detect_stiffness:
+        if self.n_stiff >= STIFF_STEPS:
+            self.stiff_steps += 1
+        if self.n_stiff >= STIFF_STEPS and self.detect_stiffness and h < STIFF_STEP_FRACTION * self.max_step:
             raise StiffnessDetected(
                 f"t = {self.t:.9g} s: the problem is stiff for dopri5 (step {h:.3g} s limited by "
                 f"stability on {STIFF_STEPS} steps in a row); e.g. a small friction regularisation "
@@ -114,14 +119,15 @@ class Dopri5:
         return {"t": self.t, "y": self.y.copy(), "f": self.f.copy(), "h": self.h,
                 "t_old": self.t_old, "y_old": self.y_old.copy(), "h_old": getattr(self, "h_old", 0.0),
                 "Q": None if self.Q is None else self.Q.copy(), "nfev": self.nfev, "nsteps": self.nsteps,
-                "n_stiff": self.n_stiff, "n_nonstiff": self.n_nonstiff}
+                "n_stiff": self.n_stiff, "n_nonstiff": self.n_nonstiff,
+                "stiff_steps": self.stiff_steps}
 
     def set_state(self, s: dict) -> None:
         self.t, self.y, self.f, self.h = s["t"], s["y"].copy(), s["f"].copy(), s["h"]
         self.t_old, self.y_old, self.h_old = s["t_old"], s["y_old"].copy(), s["h_old"]
         self.Q = None if s["Q"] is None else s["Q"].copy()
         self.nfev, self.nsteps = s["nfev"], s["nsteps"]
-        self.n_stiff, self.n_nonstiff = s["n_stiff"], s["n_nonstiff"]
+        self.n_stiff, self.n_nonstiff, self.stiff_steps = s["n_stiff"], s["n_nonstiff"], s["stiff_steps"]
 
 
 class RK4:

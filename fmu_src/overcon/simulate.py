@@ -202,6 +202,7 @@ class Result:
     evaluations: int
     friction_iterations: int
     steps: int
+    stiff_steps: int = 0  # dopri5 steps whose size was limited by stability (Hairer's test)
 
     def column(self, name: str) -> np.ndarray:
         return self.values[:, self.names.index(name)]
@@ -226,8 +227,9 @@ def run(model: Model, *, stop_time: float | None = None, output_interval: float 
     for t in grid:
         y = sim.advance(t)
         rows.append(sim.outputs(t, y))
+    itg = sim._integrator
     return Result(model.output_names(), grid, np.array(rows), sim.max_drift, sim.evaluations,
-                  sim.friction_iterations, sim._integrator.nsteps)
+                  sim.friction_iterations, itg.nsteps, getattr(itg, "stiff_steps", 0))
 
 
 def write_csv(result: Result, path) -> None:

@@ -44,6 +44,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", choices=("dopri5", "rk4"), help="integrator")
     s.add_argument("--step", type=float, help="rk4 step (s)")
     s.add_argument("--output-interval", type=float, help="output grid interval (s)")
+    fg = sub.add_parser("figures", help="run the paper's scene groups in process and plot Figs. 3-5, 7-9 (PNG)")
+    fg.add_argument("--mechanisms", default="mechanisms", help="directory with the scene files (default: mechanisms)")
+    fg.add_argument("--out", default="figures", help="output directory for the PNG files (default: figures)")
+    fg.add_argument("--tolerance", type=float, metavar="TOL", help="override the scenes' solver tolerance")
+    from .fmu.build import add_arguments as _build_arguments
+
+    _build_arguments(sub.add_parser(
+        "build", help="build one FMI 2.0 co-simulation FMU per scene file (pre-check first; same as build_fmu.py)"))
     return parser
 
 
@@ -96,7 +104,32 @@ def cmd_simulate(args) -> int:
           f"eliminated {', '.join('Phi%d' % i for i in model.eliminated) or 'none'} ({model.elimination_mode}); "
           f"{res.steps} steps, {res.evaluations} evaluations, {res.friction_iterations} friction iterations; "
           f"max constraint drift {res.max_drift:.3g}; wall {wall:.2f} s")
+    if res.stiff_steps:
+        print(f"note: {res.stiff_steps} steps were limited by stability (stiff: friction sticking inside the "
+              "regularisation band); a larger v_reg or a looser tolerance is cheaper")
     return EXIT_OK
+
+
+def cmd_figures(args) -> int:
+    from pathlib import Path
+
+    from .paper import make_figures
+    from .simulate import SimulationError
+
+    start = time.perf_counter()
+    try:
+        make_figures(Path(args.mechanisms), Path(args.out), tolerance=args.tolerance)
+    except SimulationError as exc:
+        print(f"overcon: {exc}", file=sys.stderr)
+        return EXIT_RUNTIME
+    print(f"figures written to {args.out}/ in {time.perf_counter() - start:.1f} s")
+    return EXIT_OK
+
+
+def cmd_build(args) -> int:
+    from .fmu.build import run_args
+
+    return run_args(args)
 
 
 def main(argv=None) -> int:
@@ -105,7 +138,8 @@ def main(argv=None) -> int:
     from .simulate import InconsistentInitialState
 
     args = build_parser().parse_args(argv)
-    handler = {"check": cmd_check, "simulate": cmd_simulate}[args.command]
+    handler = {"check": cmd_check, "simulate": cmd_simulate, "figures": cmd_figures,
+               "build": cmd_build}[args.command]
     try:
         return handler(args)
     except SceneError as exc:  # already names file and field

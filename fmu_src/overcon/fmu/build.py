@@ -1,0 +1,405 @@
+"""Build one FMI 2.0 co-simulation FMU per scene file, with pythonfmu's runtime.
+
+:func:`build_all` is the library function behind ``python build_fmu.py`` and ``overcon build``.
+For each scene file (files with a ``[scene]`` table; mechanism files are skipped) it runs the
+pre-check and prints its verdict; a scene with friction on a joint whose reaction is not unique is
+refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each FMU
+``<out>/<scene name>.fmu`` is self-contained::
+
+    modelDescription.xml              overcon.fmu.description (validated with fmpy after writing)
+    binaries/<platform>/<scene>.so    pythonfmu's C wrapper (every platform pythonfmu ships)
+    resources/slavemodule.txt         name of the entry module, for the wrapper
+    resources/<scene>_<hash>.py       entry module: class <scene>(OverconSlave)
+    resources/overcon_<hash>/         copy of the overcon package source (relative imports)
+    resources/pythonfmu/              pythonfmu's Python files (Fmi2Slave), as pythonfmu's builder does
+    resources/scene/...               the scene file and its mechanism file
+    resources/overcon_fmu.json        GUID, scene path, pre-check verdicts
+
+At run time it needs only Python with numpy and scipy. ``<hash>`` (and the GUID) is a SHA-256
+over the scene file, the mechanism file, the overcon source and the pythonfmu version, so FMUs of
+different scenes (or of one scene from different sources) never share module names in one
+process, and rebuilding unchanged inputs gives the same GUID and the same bytes.
+
+Compatibility information (FMI cross-check convention) next to each FMU, unless ``refs=False``:
+``<scene>_ref.csv`` (time and every Real output, simulated through ``fmpy.simulate_fmu`` at the
+default experiment) and ``<scene>_ref.opt`` (StartTime, StopTime, StepSize, RelTol).
+
+Exit codes of :func:`main`: 0 all built, 1 some scene refused by the pre-check, 2 invalid input or
+a build that failed, 3 a reference simulation failed (worst wins: 2 > 3 > 1).
+"""
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import dataclasses
+import hashlib
+import json
+import os
+import posixpath
+import sys
+import time
+import tomllib
+import uuid
+import zipfile
+from pathlib import Path
+
+from .. import scene as scene_mod
+from ..model import ModelError, compile_model
+from ..precheck import precheck
+from ..spec import SceneSpec
+from . import description, variables
+
+EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
+PACKAGE_DIR = Path(__file__).resolve().parent.parent
+FORMAT_VERSION = "overcon-fmu-1"  # bump when the FMU layout changes (enters the GUID)
+_PKG_NAME = __name__.split(".")[0]  # "overcon"
+_DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip timestamps: reproducible FMU bytes
+
+
+@dataclasses.dataclass
+class BuildResult:
+    source: str
+    status: str  # "built", "refused", "skipped", "invalid", "failed"
+    name: str = ""
+    fmu: Path | None = None
+    guid: str = ""
+    motion_unique: bool | None = None
+    messages: list[str] = dataclasses.field(default_factory=list)
+    seconds: float = 0.0
+    ref_status: str = ""  # "", "written", "failed"
+
+
+# ---------------------------------------------------------------------------------------------
+# inputs
+
+def scene_files(paths) -> list[Path]:
+    """Files given, and the *.toml files of directories given (sorted, not recursive)."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        out.extend(sorted(p.glob("*.toml")) if p.is_dir() else [p])
+    return out
+
+
+def _is_scene_file(path: Path) -> bool | None:
+    """True scene, False mechanism (or neither), None unreadable (the loader reports why)."""
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return None
+    return isinstance(doc.get("scene"), dict)
+
+
+def _source_files() -> list[tuple[str, bytes]]:
+    """(relative posix path, bytes) of the overcon package's Python source, sorted."""
+    files = []
+    for f in sorted(PACKAGE_DIR.rglob("*.py")):
+        if "__pycache__" in f.parts:
+            continue
+        files.append((f.relative_to(PACKAGE_DIR).as_posix(), f.read_bytes()))
+    return files
+
+
+def _pythonfmu_files():
+    """pythonfmu's Python files (for resources/pythonfmu) and its binaries per platform."""
+    import pythonfmu
+
+    here = Path(pythonfmu.__file__).resolve().parent
+    py = [(f.name, f.read_bytes()) for f in sorted(here.glob("*.py"))]
+    binroot = here / "resources" / "binaries"
+    bins = []
+    for ext in ("so", "dll", "dylib"):
+        for f in sorted(binroot.rglob(f"*.{ext}")):
+            bins.append((f.relative_to(binroot).parent.as_posix(), ext, f.read_bytes()))
+    if not any(b[0] == "linux64" for b in bins):
+        raise RuntimeError(f"pythonfmu {pythonfmu.__version__} ships no linux64 binary under {binroot}")
+    return pythonfmu.__version__, py, bins
+
+
+def _overcon_version() -> str:
+    try:
+        from importlib.metadata import version  # noqa: PLC0415
+
+        return version("overcon")
+    except Exception:  # not installed as a distribution (e.g. run from a source tree)
+        return "0+unknown"
+
+
+def _scene_layout(scene_path: Path, mech_ref: str) -> tuple[str, str]:
+    """Zip paths of the scene and mechanism files under resources/, keeping the scene's relative
+    ``mechanism`` path valid (a path starting with ``..`` puts the scene in sub-folders)."""
+    if posixpath.isabs(mech_ref) or os.path.isabs(mech_ref):
+        raise ValueError(f"scene.mechanism {mech_ref!r} is an absolute path: the FMU could not carry "
+                         "it; give it relative to the scene file")
+    parts = posixpath.normpath(mech_ref.replace("\\", "/")).split("/")
+    up = 0
+    while up < len(parts) and parts[up] == "..":
+        up += 1
+    scene_dir = "/".join(["scene"] + ["d"] * up)
+    return f"{scene_dir}/{scene_path.name}", "/".join(["scene"] + parts[up:])
+
+
+# ---------------------------------------------------------------------------------------------
+# one FMU
+
+def _verdict(report: dict) -> str:
+    if not report["friction"]:
+        return "no friction: motion unique"
+    fr = ", ".join(report["friction"])
+    if report["motion_unique"]:
+        return f"friction in {fr}: reactions unique, motion UNIQUE"
+    bad = ", ".join(report["friction_on_nonunique"]) or fr
+    return f"friction in {fr}: friction on non-unique reaction(s) of {bad}, motion NOT UNIQUE"
+
+
+def _zip_write(zf: zipfile.ZipFile, name: str, data: bytes) -> None:
+    info = zipfile.ZipInfo(name, date_time=_DATE)
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = 0o644 << 16
+    zf.writestr(info, data)
+
+
+def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, validate: bool = True,
+                echo=print, sources=None, pythonfmu_files=None) -> BuildResult:
+    """Build the FMU of one scene file (see the module docstring); never raises for bad input."""
+    t0 = time.perf_counter()
+    res = BuildResult(source=str(path), status="invalid")
+
+    def done(status, *msgs):
+        res.status = status
+        res.messages.extend(msgs)
+        res.seconds = time.perf_counter() - t0
+        return res
+
+    kind = _is_scene_file(path)
+    if kind is False:
+        return done("skipped", f"{path}: mechanism file, skipped")
+    try:
+        spec = scene_mod.load(path)
+        if not isinstance(spec, SceneSpec):
+            return done("skipped", f"{path}: mechanism file, skipped")
+        model = compile_model(spec)
+    except scene_mod.SceneError as exc:
+        return done("invalid", *(str(p) for p in exc.problems))
+    except (ModelError, ValueError, OSError) as exc:
+        return done("invalid", f"{path}: {exc}")
+    res.name = spec.name
+    report = precheck(model, str(path))
+    res.motion_unique = bool(report["motion_unique"])
+    echo(f"{spec.name}: pre-check: {_verdict(report)}")
+    for problem in report["problems"]:
+        echo(f"{spec.name}:   {problem}")
+    if report["friction_on_nonunique"] and not allow_nonunique:
+        return done("refused", f"{path}: refused: friction on a joint whose reaction is not unique "
+                               f"({', '.join(report['friction_on_nonunique'])}); the simulated motion "
+                               "would depend on the eliminated equations (--allow-nonunique builds it "
+                               "anyway)")
+    try:
+        mech_ref = tomllib.loads(path.read_text(encoding="utf-8"))["scene"]["mechanism"]
+        scene_zip, mech_zip = _scene_layout(path, mech_ref)
+        mech_path = path.parent / mech_ref
+        scene_bytes, mech_bytes = path.read_bytes(), mech_path.read_bytes()
+        sources = _source_files() if sources is None else sources
+        pf_version, pf_py, pf_bins = _pythonfmu_files() if pythonfmu_files is None else pythonfmu_files
+
+        h = hashlib.sha256()
+        for part in (FORMAT_VERSION.encode(), f"pythonfmu {pf_version}".encode(), scene_zip.encode(),
+                     scene_bytes, mech_zip.encode(), mech_bytes):
+            h.update(len(part).to_bytes(8, "little") + part)
+        for rel, data in sources:
+            h.update(len(rel).to_bytes(8, "little") + rel.encode() + len(data).to_bytes(8, "little") + data)
+        digest = h.hexdigest()
+        guid = "{" + str(uuid.UUID(digest[:32])) + "}"
+        pkg = f"{_PKG_NAME}_{digest[:16]}"
+        entry = f"{spec.name}_{digest[:16]}"
+        reaction_unique = {j["name"]: bool(j["unique"]) for j in report["joints"]}
+        table = variables.table(model, reaction_unique, res.motion_unique)
+        overcon_version = _overcon_version()
+        xml = description.model_description(
+            model, table, guid=guid, version=overcon_version,
+            generation_tool=f"overcon {overcon_version} build_fmu (pythonfmu {pf_version} runtime)")
+        manifest = {"scene": scene_zip, "guid": guid, "package": pkg, "model_identifier": spec.name,
+                    "reaction_unique": reaction_unique, "motion_unique": res.motion_unique,
+                    "precheck_problems": report["problems"]}
+        entry_src = ENTRY_TEMPLATE.format(name=spec.name, pkg=pkg)
+
+        out_dir.mkdir(parents=True, exist_ok=True)
+        fmu = out_dir / f"{spec.name}.fmu"
+        tmp = fmu.with_suffix(".fmu.part")
+        with zipfile.ZipFile(tmp, "w") as zf:
+            _zip_write(zf, "modelDescription.xml", xml)
+            for platform, ext, data in pf_bins:
+                _zip_write(zf, f"binaries/{platform}/{spec.name}.{ext}", data)
+            _zip_write(zf, "resources/slavemodule.txt", entry.encode())
+            _zip_write(zf, f"resources/{entry}.py", entry_src.encode())
+            _zip_write(zf, "resources/overcon_fmu.json", json.dumps(manifest, indent=1).encode())
+            _zip_write(zf, f"resources/{scene_zip}", scene_bytes)
+            _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
+            for name, data in pf_py:
+                _zip_write(zf, f"resources/pythonfmu/{name}", data)
+            for rel, data in sources:
+                _zip_write(zf, f"resources/{pkg}/{rel}", data)
+        if validate:
+            from fmpy.validation import validate_fmu  # noqa: PLC0415
+
+            problems = validate_fmu(str(tmp))
+            if problems:
+                tmp.unlink()
+                return done("failed", *(f"{path}: modelDescription.xml: {p}" for p in problems))
+        os.replace(tmp, fmu)
+    except (OSError, ValueError, KeyError, RuntimeError) as exc:
+        return done("failed", f"{path}: build failed: {type(exc).__name__}: {exc}")
+    res.fmu, res.guid = fmu, guid
+    n_out = len(model.output_names())
+    n_par = sum(v.causality == "parameter" for v in table)
+    r = done("built")
+    echo(f"{spec.name}: built {fmu} ({n_out} outputs, {n_par} parameters, "
+         f"{fmu.stat().st_size // 1024} KiB) in {r.seconds:.2f} s")
+    return r
+
+
+ENTRY_TEMPLATE = '''"""FMU entry module of scene {name} (generated by overcon build_fmu; do not edit).
+
+pythonfmu's C wrapper imports the module named in slavemodule.txt, executes its source again and
+takes the class whose method resolution order has Fmi2Slave deepest: class {name}.
+"""
+from {pkg}.fmu.slave import OverconSlave, pin_entry_namespace
+
+pin_entry_namespace(globals())  # pythonfmu 0.7 bug, see {pkg}.fmu.slave.pin_entry_namespace
+
+
+class {name}(OverconSlave):
+    """FMI 2.0 co-simulation slave of scene {name} (all behaviour in {pkg}.fmu.slave)."""
+'''
+
+
+# ---------------------------------------------------------------------------------------------
+# compatibility information
+
+def write_reference(fmu: Path) -> tuple[Path, Path]:
+    """Simulate ``fmu`` with fmpy at its default experiment; write ``<id>_ref.csv`` (time and
+    every Real output, FMI cross-check CSV: quoted header, comma separated, full precision) and
+    ``<id>_ref.opt`` next to it."""
+    import fmpy  # noqa: PLC0415
+    from fmpy.util import write_csv  # noqa: PLC0415
+
+    md = fmpy.read_model_description(str(fmu))
+    ex = md.defaultExperiment
+    names = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+    result = fmpy.simulate_fmu(str(fmu), output=names, output_interval=float(ex.stepSize))
+    stem = md.coSimulation.modelIdentifier
+    csv_path, opt_path = fmu.parent / f"{stem}_ref.csv", fmu.parent / f"{stem}_ref.opt"
+    write_csv(str(csv_path), result)
+    opt_path.write_text(f"StartTime, {float(ex.startTime)!r}\nStopTime, {float(ex.stopTime)!r}\n"
+                        f"StepSize, {float(ex.stepSize)!r}\nRelTol, {float(ex.tolerance)!r}\n")
+    return csv_path, opt_path
+
+
+def _reference_job(fmu: str) -> tuple[str, str, float]:
+    t0 = time.perf_counter()
+    try:
+        write_reference(Path(fmu))
+    except Exception as exc:  # reported by the parent
+        return fmu, f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
+    return fmu, "", time.perf_counter() - t0
+
+
+# ---------------------------------------------------------------------------------------------
+# many FMUs
+
+def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = True,
+              validate: bool = True, jobs: int | None = None, echo=None, echo_err=None) -> tuple[int, list[BuildResult]]:
+    """Build every scene in ``paths`` (files or directories) into ``out_dir``; print progress with
+    ``echo`` (problems with ``echo_err``). Returns (exit code, results)."""
+    echo = echo or (lambda s: print(s, flush=True))
+    echo_err = echo_err or (lambda s: print(s, file=sys.stderr, flush=True))
+    t0 = time.perf_counter()
+    out_dir = Path(out_dir)
+    files = scene_files(paths)
+    results: list[BuildResult] = []
+    if not files:
+        echo_err("build: no scene files given")
+        return EXIT_INPUT, results
+    sources = _source_files()
+    pf = _pythonfmu_files()
+    names: dict[str, str] = {}
+    for f in files:
+        r = build_scene(f, out_dir, allow_nonunique=allow_nonunique, validate=validate, echo=echo,
+                        sources=sources, pythonfmu_files=pf)
+        if r.status == "built" and r.name in names:
+            r.status = "failed"
+            r.messages.append(f"{f}: scene name {r.name} already built from {names[r.name]} "
+                              f"(the FMU {r.fmu} was overwritten)")
+        if r.status == "built":
+            names[r.name] = str(f)
+        for m in r.messages:
+            (echo if r.status == "skipped" else echo_err)(m)
+        results.append(r)
+    t_build = time.perf_counter() - t0
+    built = [r for r in results if r.status == "built"]
+    t_ref = 0.0
+    if refs and built:
+        t1 = time.perf_counter()
+        n = max(1, min(jobs or os.cpu_count() or 1, len(built)))
+        echo(f"reference results (fmpy.simulate_fmu at the default experiment, {n} process(es)) ...")
+        by_fmu = {str(r.fmu): r for r in built}
+        if n == 1:
+            outcomes = map(_reference_job, by_fmu)
+        else:
+            import multiprocessing  # noqa: PLC0415
+
+            pool = concurrent.futures.ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"))
+            outcomes = pool.map(_reference_job, by_fmu)
+        for fmu, err, secs in outcomes:
+            r = by_fmu[fmu]
+            if err:
+                r.ref_status = "failed"
+                echo_err(f"{r.name}: reference simulation failed: {err}")
+            else:
+                r.ref_status = "written"
+                echo(f"{r.name}: wrote {r.name}_ref.csv and {r.name}_ref.opt ({secs:.1f} s)")
+        if n > 1:
+            pool.shutdown()
+        t_ref = time.perf_counter() - t1
+    counts = {s: sum(r.status == s for r in results) for s in ("built", "refused", "skipped", "invalid", "failed")}
+    summary = (f"build: {counts['built']} FMU(s) built, {counts['refused']} refused by the pre-check, "
+               f"{counts['invalid'] + counts['failed']} failed, {counts['skipped']} mechanism file(s) "
+               f"skipped; FMUs built in {t_build:.2f} s")
+    if refs and built:
+        summary += f", reference results in {t_ref:.1f} s"
+    echo(summary + f" (total {time.perf_counter() - t0:.1f} s)")
+    if counts["invalid"] or counts["failed"]:
+        code = EXIT_INPUT
+    elif any(r.ref_status == "failed" for r in results):
+        code = EXIT_RUNTIME
+    elif counts["refused"]:
+        code = EXIT_NONUNIQUE
+    else:
+        code = EXIT_OK
+    return code, results
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("paths", nargs="+", metavar="PATH",
+                   help="scene files or directories of them (mechanism files are skipped)")
+    p.add_argument("--out", default="dist/fmus", metavar="DIR", help="output directory (default dist/fmus)")
+    p.add_argument("--allow-nonunique", action="store_true",
+                   help="also build scenes with friction on a joint whose reaction is not unique")
+    p.add_argument("--no-ref", action="store_true",
+                   help="skip the compatibility files <Model>_ref.csv/.opt (they need a full simulation)")
+    p.add_argument("--no-validate", action="store_true", help="skip fmpy's validation of each FMU")
+    p.add_argument("--jobs", type=int, metavar="N",
+                   help="processes for the reference simulations (default: number of CPUs)")
+
+
+def run_args(args) -> int:
+    code, _ = build_all(args.paths, args.out, allow_nonunique=args.allow_nonunique,
+                        refs=not args.no_ref, validate=not args.no_validate, jobs=args.jobs)
+    return code
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(
+        prog="build_fmu.py",
+        description="Build one FMI 2.0 co-simulation FMU per scene file (pre-check first).")
+    add_arguments(p)
+    return run_args(p.parse_args(argv))

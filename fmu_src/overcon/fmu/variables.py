@@ -1,0 +1,172 @@
+"""The FMU's variables: one table, read by the modelDescription writer and by the slave.
+
+Value references are the positions in :func:`table` (0-based), in this order:
+
+1. outputs, exactly ``model.output_names()``: positions (m, rad) and reaction components
+   (N, N.m), causality output, variability continuous, initial calculated;
+2. pre-check verdicts (Booleans, causality output, variability constant, initial exact):
+   ``<joint>.reaction_unique`` per reaction joint of the scene, and ``motion_unique``;
+3. parameters (causality parameter, variability fixed, initial exact): per friction joint
+   ``<joint>.mu`` and ``<joint>.v_reg`` (law ``stribeck`` also ``<joint>.mu_static`` and
+   ``<joint>.v_stribeck``), then the solver settings ``solver.*`` of
+   :class:`overcon.spec.SolverSpec`.
+
+``UNITS`` gives every unit's SI base-unit exponents (FMI ``BaseUnit``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..spec import COORDINATE_UNITS, METHODS
+
+UNITS: dict[str, dict[str, int]] = {
+    "1": {},
+    "m": {"m": 1},
+    "rad": {"rad": 1},
+    "s": {"s": 1},
+    "1/s": {"s": -1},
+    "m/s": {"m": 1, "s": -1},
+    "rad/s": {"rad": 1, "s": -1},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+}
+"""Units used by the variables, with the exponents of the SI base units (and rad)."""
+
+COMPONENT_UNITS = {"T": "N.m"}  # every other reaction component is a force (N)
+
+COORDINATE_TEXT = {
+    "x": "x coordinate of the origin (centre of mass), global frame",
+    "y": "y coordinate of the origin (centre of mass), global frame",
+    "z": "z coordinate of the origin (centre of mass), global frame",
+    "phi": "rotation angle (counter-clockwise)",
+    "alpha": "z-x-z Euler angle alpha",
+    "beta": "z-x-z Euler angle beta",
+    "gamma": "z-x-z Euler angle gamma",
+}
+
+SLIDING_UNIT = {"translational": "m/s", "revolute": "rad/s", "spherical": "m/s"}
+"""Unit of a joint's friction regularisation velocity (sliding speed; revolute: relative angular
+velocity)."""
+
+
+@dataclass(frozen=True)
+class Var:
+    """One scalar variable. ``type`` Real/Integer/Boolean/String; ``unit`` for Real only;
+    ``start`` None where FMI forbids one (initial calculated); ``key`` what the slave reads or
+    writes: ``("output", k)``, ``("constant", value)``, ``("param", name)``."""
+
+    name: str
+    type: str
+    causality: str
+    variability: str
+    initial: str
+    description: str
+    unit: str | None = None
+    start: object = None
+    key: tuple = ()
+
+
+@dataclass(frozen=True)
+class ParamRule:
+    """Admissible values of a parameter; ``check(value)`` returns None or the reason."""
+
+    kind: str  # "positive", "nonneg", "unit_interval", "int_ge1", "method"
+
+    def check(self, value) -> str | None:
+        if self.kind == "method":
+            return None if value in METHODS else f"must be one of {', '.join(METHODS)}, got {value!r}"
+        if self.kind == "int_ge1":
+            return None if int(value) >= 1 else f"must be an integer >= 1, got {value!r}"
+        x = float(value)
+        if not math.isfinite(x):
+            return f"must be finite, got {x!r}"
+        if self.kind == "positive" and not x > 0:
+            return f"must be > 0, got {x!r}"
+        if self.kind == "nonneg" and not x >= 0:
+            return f"must be >= 0, got {x!r}"
+        if self.kind == "unit_interval" and not 0 < x < 1:
+            return f"must be in (0, 1), got {x!r}"
+        return None
+
+
+SOLVER_PARAMS = {
+    # name: (type, unit, rule, description)
+    "method": ("String", None, "method", "integrator: dopri5 (adaptive) or rk4 (fixed step)"),
+    "tolerance": ("Real", "1", "unit_interval",
+                  "accuracy target of dopri5 (rtol = atol); used unless fmi2SetupExperiment gives one "
+                  "and this parameter was not set"),
+    "step": ("Real", "s", "positive", "fixed step of rk4"),
+    "max_step": ("Real", "s", "positive", "largest internal step of dopri5"),
+    "baumgarte": ("Real", "1/s", "nonneg", "Baumgarte constraint stabilisation frequency (0 disables)"),
+    "friction_tol": ("Real", "1", "positive", "friction fixed-point tolerance (relative, on lambda)"),
+    "friction_max_iter": ("Integer", None, "int_ge1", "friction fixed-point iteration limit"),
+}
+
+FRICTION_PARAMS = {
+    "mu": ("nonneg", "friction coefficient (kinetic)"),
+    "v_reg": ("positive", "regularisation velocity of the friction law"),
+    "mu_static": ("nonneg", "static (peak) friction coefficient of the Stribeck law, >= mu"),
+    "v_stribeck": ("positive", "Stribeck velocity"),
+}
+
+
+def _friction_param_names(law) -> tuple[str, ...]:
+    return ("mu", "v_reg", "mu_static", "v_stribeck") if law.name == "stribeck" else ("mu", "v_reg")
+
+
+def table(model, reaction_unique: dict[str, bool], motion_unique: bool) -> list[Var]:
+    """All variables of the FMU of ``model`` (see the module docstring for the order).
+    ``reaction_unique``: pre-check verdict per joint name; ``motion_unique``: the scene's."""
+    out: list[Var] = []
+    body_of = {i: name for i, name in enumerate(model.body_names)}
+    k = 0
+    for name, _ in model.position_outputs:
+        body, coord = name.rsplit(".", 1)
+        out.append(Var(name, "Real", "output", "continuous", "calculated",
+                       f"{body}: {COORDINATE_TEXT[coord]}", unit=COORDINATE_UNITS[coord],
+                       key=("output", k)))
+        k += 1
+    for j in model.reaction_joints:
+        c = model.joints[j]
+        bi = body_of.get(c.bi, "base")
+        for comp in c.components:
+            frame = "global frame" if comp.endswith("0") else f"auxiliary frame of the {c.type} joint"
+            what = "moment" if comp == "T" else "force"
+            out.append(Var(f"{c.name}.{comp}", "Real", "output", "continuous", "calculated",
+                           f"reaction {what} of joint {c.name} on body {bi}, component {comp}, {frame}",
+                           unit=COMPONENT_UNITS.get(comp, "N"), key=("output", k)))
+            k += 1
+    for j in model.reaction_joints:
+        name = model.joints[j].name
+        val = bool(reaction_unique[name])
+        out.append(Var(f"{name}.reaction_unique", "Boolean", "output", "constant", "exact",
+                       f"pre-check: the reaction of joint {name} is unique (does not depend on the "
+                       "eliminated equations)", start=val, key=("constant", val)))
+    out.append(Var("motion_unique", "Boolean", "output", "constant", "exact",
+                   "pre-check: the motion is unique (no friction on a joint with a non-unique reaction)",
+                   start=bool(motion_unique), key=("constant", bool(motion_unique))))
+    for j in model.friction_joints:
+        c = model.joints[j]
+        for p in _friction_param_names(c.law):
+            value = c.law.mu_kinetic if p == "mu" else getattr(c.law, p)
+            unit = "1" if p.startswith("mu") else SLIDING_UNIT[c.type]
+            name = f"{c.name}.{p}"
+            out.append(Var(name, "Real", "parameter", "fixed", "exact",
+                           f"joint {c.name} ({c.law.name} law): {FRICTION_PARAMS[p][1]}", unit=unit,
+                           start=float(value), key=("param", name)))
+    solver = model.scene.solver
+    for p, (typ, unit, _rule, text) in SOLVER_PARAMS.items():
+        value = getattr(solver, p)
+        value = float(value) if typ == "Real" else value
+        out.append(Var(f"solver.{p}", typ, "parameter", "fixed", "exact", text, unit=unit,
+                       start=value, key=("param", f"solver.{p}")))
+    return out
+
+
+def rule(name: str) -> ParamRule:
+    """The admissible values of parameter ``name`` (``joint4.mu``, ``solver.tolerance``)."""
+    group, p = name.rsplit(".", 1)
+    if group == "solver" and p in SOLVER_PARAMS:
+        return ParamRule(SOLVER_PARAMS[p][2])
+    return ParamRule(FRICTION_PARAMS[p][0])

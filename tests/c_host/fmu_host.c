@@ -1,0 +1,229 @@
+/*
+ * Minimal FMI 2.0 co-simulation host in C (no FMI headers needed: the types it uses are declared
+ * below, as in the FMI 2.0 standard's fmi2FunctionTypes.h / fmi2TypesPlatform.h).
+ *
+ * It dlopen()s <unzipdir>/binaries/linux64/<model_identifier>.so, instantiates the FMU with the
+ * resource location file://<unzipdir>/resources, sets up the experiment, steps from START to
+ * STOP with communication step STEP (grid points START + k*STEP, the last one clamped to STOP, as
+ * fmpy.simulate_fmu does) and prints time and the requested Real variables as CSV (FMI
+ * cross-check style header, values with 17 significant digits).
+ *
+ *   fmu_host [-p LIBPYTHON] [-n] [-q] UNZIPDIR MODEL_ID GUID START STOP STEP TOL VR:NAME [VR:NAME ...]
+ *
+ *   -p LIBPYTHON  dlopen() this libpython with RTLD_GLOBAL first. An FMU built with pythonfmu
+ *                 embeds Python but its binary is not linked against libpython: the host process
+ *                 must provide the Python C API symbols globally (this option, or LD_PRELOAD).
+ *   -n            do not start the interpreter in the host (see below; reproduces the crash)
+ *   -q            debug logging off (pythonfmu then forwards no log messages at all)
+ *
+ * If the Python C API is present (-p or LD_PRELOAD), the host starts the interpreter itself
+ * (Py_InitializeEx(0), then releases the GIL) before loading the FMU and never finalizes it.
+ * Otherwise pythonfmu's binary starts it and calls Py_Finalize at process exit, which crashes
+ * (heap corruption, SIGSEGV/SIGABRT) once scipy's extension modules are loaded: a known
+ * scipy-with-Py_Finalize problem. pythonfmu skips both when Python is already initialized.
+ *   TOL <= 0      no tolerance passed to fmi2SetupExperiment
+ *
+ * Exit status: 0 ok, 1 usage, 2 loading, 3 an FMI call returned an error status.
+ * Build: cc -O2 -o fmu_host fmu_host.c -ldl -lm
+ */
+#define _GNU_SOURCE /* RTLD_DEFAULT */
+#include <dlfcn.h>
+#include <limits.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef void *fmi2Component;
+typedef void *fmi2ComponentEnvironment;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Boolean;
+typedef const char *fmi2String;
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+#define fmi2True 1
+#define fmi2False 0
+
+typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String,
+                                   fmi2String, ...);
+typedef void *(*fmi2CallbackAllocateMemory)(size_t, size_t);
+typedef void (*fmi2CallbackFreeMemory)(void *);
+typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment, fmi2Status);
+typedef struct {
+    const fmi2CallbackLogger logger;
+    const fmi2CallbackAllocateMemory allocateMemory;
+    const fmi2CallbackFreeMemory freeMemory;
+    const fmi2StepFinished stepFinished;
+    const fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+typedef fmi2Component (*fmi2InstantiateTYPE)(fmi2String, fmi2Type, fmi2String, fmi2String,
+                                             const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
+typedef void (*fmi2FreeInstanceTYPE)(fmi2Component);
+typedef fmi2Status (*fmi2SetupExperimentTYPE)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real,
+                                              fmi2Boolean, fmi2Real);
+typedef fmi2Status (*fmi2ComponentTYPE)(fmi2Component); /* enter/exit init, terminate */
+typedef fmi2Status (*fmi2GetRealTYPE)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
+typedef fmi2Status (*fmi2DoStepTYPE)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+
+static const char *status_name(fmi2Status s)
+{
+    static const char *names[] = {"ok", "warning", "discard", "error", "fatal", "pending"};
+    return (s >= 0 && s <= fmi2Pending) ? names[s] : "?";
+}
+
+static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
+                   fmi2String category, fmi2String message, ...)
+{
+    va_list ap;
+    (void)env;
+    fprintf(stderr, "[%s] %s %s: ", status_name(status), instance ? instance : "",
+            category ? category : "");
+    va_start(ap, message);
+    vfprintf(stderr, message, ap);
+    va_end(ap);
+    fputc('\n', stderr);
+}
+
+static void *sym(void *lib, const char *name)
+{
+    void *f = dlsym(lib, name);
+    if (!f) {
+        fprintf(stderr, "fmu_host: symbol %s not found: %s\n", name, dlerror());
+        exit(2);
+    }
+    return f;
+}
+
+static void check(fmi2Status s, const char *what)
+{
+    if (s > fmi2Warning) {
+        fprintf(stderr, "fmu_host: %s returned %s\n", what, status_name(s));
+        exit(3);
+    }
+}
+
+static int isclose(double a, double b) /* Python's math.isclose with its defaults */
+{
+    return fabs(a - b) <= 1e-9 * fmax(fabs(a), fabs(b));
+}
+
+int main(int argc, char **argv)
+{
+    const char *libpython = NULL;
+    int logging = fmi2True, host_init = 1, i = 1;
+    while (i < argc && argv[i][0] == '-') {
+        if (!strcmp(argv[i], "-p") && i + 1 < argc) {
+            libpython = argv[i + 1];
+            i += 2;
+        } else if (!strcmp(argv[i], "-n")) {
+            host_init = 0;
+            i += 1;
+        } else if (!strcmp(argv[i], "-q")) {
+            logging = fmi2False;
+            i += 1;
+        } else {
+            break;
+        }
+    }
+    if (argc - i < 8) {
+        fprintf(stderr, "usage: %s [-p LIBPYTHON] [-n] [-q] UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
+                        "VR:NAME [VR:NAME ...]\n", argv[0]);
+        return 1;
+    }
+    const char *dir = argv[i], *id = argv[i + 1], *guid = argv[i + 2];
+    double start = atof(argv[i + 3]), stop = atof(argv[i + 4]), step = atof(argv[i + 5]);
+    double tol = atof(argv[i + 6]);
+    int nvr = argc - (i + 7);
+    fmi2ValueReference *vr = calloc(nvr, sizeof *vr);
+    const char **names = calloc(nvr, sizeof *names);
+    fmi2Real *values = calloc(nvr, sizeof *values);
+    for (int k = 0; k < nvr; k++) {
+        char *arg = argv[i + 7 + k], *colon = strchr(arg, ':');
+        if (!colon) {
+            fprintf(stderr, "fmu_host: expected VR:NAME, got %s\n", arg);
+            return 1;
+        }
+        vr[k] = (fmi2ValueReference)strtoul(arg, NULL, 10);
+        names[k] = colon + 1;
+    }
+
+    if (libpython && !dlopen(libpython, RTLD_NOW | RTLD_GLOBAL)) {
+        fprintf(stderr, "fmu_host: cannot load %s: %s\n", libpython, dlerror());
+        return 2;
+    }
+    if (host_init) {
+        int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+        void (*initialize_ex)(int) = (void (*)(int))dlsym(RTLD_DEFAULT, "Py_InitializeEx");
+        void *(*save_thread)(void) = (void *(*)(void))dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
+        if (is_initialized && initialize_ex && save_thread && !is_initialized()) {
+            initialize_ex(0); /* 0: leave the host's signal handlers alone */
+            save_thread();    /* release the GIL: pythonfmu takes it per call */
+        }
+    }
+    char absdir[PATH_MAX], so[PATH_MAX + 256], uri[3 * PATH_MAX + 32];
+    if (!realpath(dir, absdir)) {
+        fprintf(stderr, "fmu_host: no such directory %s\n", dir);
+        return 2;
+    }
+    snprintf(so, sizeof so, "%s/binaries/linux64/%s.so", absdir, id);
+    void *lib = dlopen(so, RTLD_NOW | RTLD_LOCAL);
+    if (!lib) {
+        fprintf(stderr, "fmu_host: cannot load %s: %s\n", so, dlerror());
+        return 2;
+    }
+    /* file:// URI of the resources folder; spaces percent-encoded */
+    char *u = uri + sprintf(uri, "file://");
+    for (const char *c = absdir; *c; c++)
+        u += (*c == ' ') ? sprintf(u, "%%20") : sprintf(u, "%c", *c);
+    sprintf(u, "/resources");
+
+    fmi2InstantiateTYPE instantiate = (fmi2InstantiateTYPE)sym(lib, "fmi2Instantiate");
+    fmi2FreeInstanceTYPE free_instance = (fmi2FreeInstanceTYPE)sym(lib, "fmi2FreeInstance");
+    fmi2SetupExperimentTYPE setup = (fmi2SetupExperimentTYPE)sym(lib, "fmi2SetupExperiment");
+    fmi2ComponentTYPE enter_init = (fmi2ComponentTYPE)sym(lib, "fmi2EnterInitializationMode");
+    fmi2ComponentTYPE exit_init = (fmi2ComponentTYPE)sym(lib, "fmi2ExitInitializationMode");
+    fmi2ComponentTYPE terminate = (fmi2ComponentTYPE)sym(lib, "fmi2Terminate");
+    fmi2GetRealTYPE get_real = (fmi2GetRealTYPE)sym(lib, "fmi2GetReal");
+    fmi2DoStepTYPE do_step = (fmi2DoStepTYPE)sym(lib, "fmi2DoStep");
+
+    fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+    fmi2Component c = instantiate("c_host", fmi2CoSimulation, guid, uri, &callbacks, fmi2False, logging);
+    if (!c) {
+        fprintf(stderr, "fmu_host: fmi2Instantiate failed\n");
+        return 3;
+    }
+    check(setup(c, tol > 0 ? fmi2True : fmi2False, tol > 0 ? tol : 0.0, start, fmi2True, stop),
+          "fmi2SetupExperiment");
+    check(enter_init(c), "fmi2EnterInitializationMode");
+    check(exit_init(c), "fmi2ExitInitializationMode");
+
+    printf("\"time\"");
+    for (int k = 0; k < nvr; k++)
+        printf(",\"%s\"", names[k]);
+    printf("\n");
+    double time = start;
+    for (long n = 0;; n++) {
+        check(get_real(c, vr, nvr, values), "fmi2GetReal");
+        printf("%.17g", time);
+        for (int k = 0; k < nvr; k++)
+            printf(",%.17g", values[k]);
+        printf("\n");
+        if (time > stop || isclose(time, stop))
+            break;
+        double next = start + (n + 1) * step;
+        if (next > stop && !isclose(next, stop))
+            next = stop;
+        check(do_step(c, time, next - time, fmi2True), "fmi2DoStep");
+        time = next;
+    }
+    check(terminate(c), "fmi2Terminate");
+    free_instance(c);
+    dlclose(lib);
+    free(vr);
+    free(names);
+    free(values);
+    return 0;
+}

@@ -29,7 +29,8 @@ class SingularityMonitor:
     """Detects the motion reaching or passing a singular position, where the kept equations'
     Jacobian J_R = Phi_h[R] loses rank (e.g. the planar sliders at K = L = O).
 
-    After every accepted step: (1) sigma_min/sigma_max of J_R below ``ratio_tol`` (default 1e-6)
+    After every accepted step: (1) sigma_min/sigma_max of J_R (mass-weighted, rows normalised)
+    below ``ratio_tol`` (default 1e-6)
     stops the run; (2) a *crossing* between two steps, which a finite step may jump over, is caught
     by the sign of det([J_R; N^T]) with N the velocity null-space basis of the previous step
     (nonzero while J_R keeps full rank, and it changes sign when J_R passes through rank loss).
@@ -46,8 +47,11 @@ class SingularityMonitor:
         self.sign = np.sign(np.linalg.det(np.vstack([J, self.N.T])))
 
     def _jac(self, y):
+        """Kept Jacobian, mass-weighted (J M^-1/2) with unit-norm rows: invariant to the choice
+        of length unit and to the scaling of each equation."""
         m = self.model
-        return jacobian_h(m, frames(m, y[: m.n]))[m.retained]
+        J = jacobian_h(m, frames(m, y[: m.n]))[m.retained] * np.sqrt(m.Minv)[None, :]
+        return J / np.linalg.norm(J, axis=1, keepdims=True)
 
     def _null(self, J, N_prev):
         _, sv, Vt = np.linalg.svd(J)
@@ -124,8 +128,12 @@ class Simulation:
         self.max_drift = 0.0
         t0 = model.scene.start_time if start_time is None else start_time
         y0 = np.concatenate([model.q0, model.h0])
-        self._integrator = METHODS[self.method](self._rhs, t0, y0, **self.settings)
-        self.monitor = SingularityMonitor(model, y0)
+        try:
+            self._integrator = METHODS[self.method](self._rhs, t0, y0, **self.settings)
+            self.monitor = SingularityMonitor(model, y0)
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:
+            where = "" if str(exc).startswith("t = ") else f"t = {t0:.9g} s: "
+            raise SimulationError(f"cannot start: {where}{exc}") from exc
 
     # -- right-hand side -------------------------------------------------------------------
     def _rhs(self, t: float, y: np.ndarray) -> np.ndarray:

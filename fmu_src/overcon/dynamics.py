@@ -19,16 +19,31 @@ iterations) fall back to Newton's method on ``x - G(x) = 0`` with a finite-diffe
 :class:`FrictionSolveError` names the time, the joints and the residual. Convergence:
 ``|G(x) - x| <= tol (1 + |x|)`` (infinity norms, N). The returned lam is G(x) of the last
 iterate, so h' and lam are consistent to that residual.
+
+Hot path: the friction forces of all friction joints of a type come from one call of the joint
+module's ``batch_friction`` (per-evaluation constants from ``batch_friction_setup``, computed
+once before the iteration), and the Cholesky factor/solve call LAPACK's dpotrf/dpotrs directly
+(with scipy's finiteness checks and messages). The numbers are bitwise those of the per-joint
+reference :func:`_friction_generalized`.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import LinAlgError, cho_factor, cho_solve
+from scipy.linalg import LinAlgError
+from scipy.linalg.lapack import dpotrf, dpotrs
 
-from .model import (Frames, Model, SingularConfiguration, applied_forces, constraints, frames,
-                    gamma, jacobian_h)
+from .model import (AssemblyPlan, Frames, Model, SingularConfiguration, applied_forces, constraints,
+                    frames, gamma, jacobian_h, plan_of)
+
+try:  # numpy.linalg.lstsq without its Python-level wrapping: the same LAPACK call, the same bits
+    from numpy.linalg import _umath_linalg
+    from numpy.linalg._linalg import _raise_linalgerror_lstsq
+    _LSTSQ = _umath_linalg.lstsq
+except (ImportError, AttributeError):  # pragma: no cover - other numpy layouts
+    _LSTSQ = None
 
 
 class FrictionSolveError(ArithmeticError):
@@ -47,7 +62,77 @@ class Evaluation:
     S: np.ndarray | None = None  # Schur complement J_R^T M^-1 J_R (for conditioning checks)
 
 
+def _chkfinite(a: np.ndarray) -> np.ndarray:
+    """scipy's asarray_chkfinite for a float array (same error)."""
+    if not np.isfinite(a).all():
+        raise ValueError("array must not contain infs or NaNs")
+    return a
+
+
+def _cho_factor(S: np.ndarray):
+    """scipy.linalg.cho_factor(S) (upper, no clean-up), same errors, less call overhead."""
+    _chkfinite(S)
+    if S.ndim != 2 or S.shape[0] != S.shape[1] or S.size == 0:
+        from scipy.linalg import cho_factor
+        return cho_factor(S)
+    c, info = dpotrf(S, lower=0, overwrite_a=0, clean=0)
+    if info > 0:
+        raise LinAlgError(f"{info}-th leading minor of the array is not positive definite")
+    if info < 0:
+        raise ValueError(f'LAPACK reported an illegal value in {-info}-th argument on entry to "POTRF".')
+    return c, False
+
+
+def _cho_solve(factor, b: np.ndarray) -> np.ndarray:
+    """scipy.linalg.cho_solve(factor, b) for a 1-D b, same errors, less call overhead."""
+    c, lower = factor
+    _chkfinite(b)
+    if c.shape[1] != b.shape[0] or b.size == 0:
+        from scipy.linalg import cho_solve
+        return cho_solve(factor, b)
+    x, info = dpotrs(c, b, lower=lower, overwrite_b=0)
+    if info != 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal potrs")
+    return x
+
+
+def _lstsq(A: np.ndarray, b: np.ndarray, rcond: float) -> np.ndarray:
+    """``np.linalg.lstsq(A, b, rcond)[0]`` for 2-D float A (m >= 1) and 1-D b."""
+    if _LSTSQ is None or A.shape[0] == 0:
+        return np.linalg.lstsq(A, b, rcond=rcond)[0]
+    with np.errstate(call=_raise_linalgerror_lstsq, invalid="call", over="ignore", divide="ignore",
+                     under="ignore"):
+        x = _LSTSQ(A, b[:, None], rcond, signature="ddd->ddid")[0]
+    return x[:, 0].copy()
+
+
+def _friction_setup(plan: AssemblyPlan, f: Frames) -> list:
+    """Per-evaluation constants of every friction group (frames only)."""
+    return [g.module.batch_friction_setup(g.data, f) for g in plan.friction]
+
+
+def _friction_batched(model: Model, plan: AssemblyPlan, ctx: list, lr: np.ndarray) -> np.ndarray:
+    """Q_f (nh,) of the retained multipliers lam_R = lr: bitwise :func:`_friction_generalized`
+    (contributions summed per body in the same order: joint order, body i then body j)."""
+    src = np.concatenate((lr, (0.0,))) if plan.friction_pad else lr
+    k = model.nq_b
+    if len(plan.friction) == 1:  # one joint type: contributions already in joint order, i then j
+        g = plan.friction[0]
+        vals = np.concatenate(g.module.batch_friction(g.data, ctx[0], src[g.lam_index]), 1).reshape(-1, k)
+    else:
+        vals = np.empty((len(plan.friction_slots), k))
+        for g, cx in zip(plan.friction, ctx):
+            Qi, Qj = g.module.batch_friction(g.data, cx, src[g.lam_index])
+            vals[g.out_i] = Qi
+            vals[g.out_j] = Qj
+    Qf = np.zeros((model.nb + 1, k))
+    np.add.at(Qf, plan.friction_slots, vals)
+    return Qf[: model.nb].reshape(-1)
+
+
 def _friction_generalized(model: Model, f: Frames, blocks, lam: np.ndarray) -> np.ndarray:
+    """Reference of the friction forces Q_f (nh,): joint by joint with the joints' ``friction``
+    (blocks: (joint, (J_X)_i) pairs; lam: all m multipliers)."""
     Qf = np.zeros((model.nb, model.nq_b))
     for c, Ji in blocks:
         fi = Ji.T @ lam[list(c.rows)]
@@ -67,39 +152,36 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     a = solver.baumgarte if baumgarte is None else baumgarte
     tol = solver.friction_tol if friction_tol is None else friction_tol
     max_iter = solver.friction_max_iter if friction_max_iter is None else friction_max_iter
+    plan = plan_of(model)
     f = frames(model, q, h)
     Phi_h = jacobian_h(model, f)
     R = model.retained
-    JR = Phi_h[R].T
+    PR = Phi_h[R]
+    JR = PR.T
     g = gamma(model, f)[R]
     if a > 0.0:
-        g = g - 2.0 * a * (Phi_h[R] @ h) - a * a * constraints(model, f)[R]
+        g = g - 2.0 * a * (PR @ h) - a * a * constraints(model, f)[R]
     Q = applied_forces(model, f)
     MinvJ = model.Minv[:, None] * JR
     S = JR.T @ MinvJ
     try:
-        factor = cho_factor(S)
+        factor = _cho_factor(S)
     except LinAlgError as exc:
         raise SingularConfiguration(
             f"t = {t:.9g} s: the kept constraint equations became dependent (singular position); "
             "the Jacobian lost rank") from exc
-    lam_R = cho_solve(factor, MinvJ.T @ Q - g)
+    MinvJT = MinvJ.T
+    lam_R = _cho_solve(factor, MinvJT @ Q - g)
     lam = np.zeros(model.m)
     iterations, fallback = 0, False
     if model.friction_joints:
-        blocks = [(model.joints[j], model.joints[j].module.jac_h(model.joints[j], f)[0]) for j in model.friction_joints]
+        ctx = _friction_setup(plan, f)
         lam0 = lam_R
-        pos = {row: k for k, row in enumerate(R)}
-        xrows = [pos[r] for j in model.friction_joints for r in model.joints[j].rows if r in pos]
-
-        def full(lr):
-            out = np.zeros(model.m)
-            out[R] = lr
-            return out
+        xrows = plan.friction_xrows
 
         def G(lr):
-            Qf = _friction_generalized(model, f, blocks, full(lr))
-            return lam0 + cho_solve(factor, MinvJ.T @ Qf)
+            Qf = _friction_batched(model, plan, ctx, lr)
+            return lam0 + _cho_solve(factor, MinvJT @ Qf)
 
         lr = lam0.copy() if lam_guess is None else lam_guess[R].copy()
         lr, iterations, ok = _fixed_point(G, lr, xrows, tol, max_iter)
@@ -114,7 +196,7 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
                 f"t = {t:.9g} s: friction solve in joints {names} did not converge "
                 f"(residual {res:.3g} N after {iterations} iterations, fixed point then Newton)")
         lam_R = lr
-        Q = Q + _friction_generalized(model, f, blocks, full(lr))
+        Q = Q + _friction_batched(model, plan, ctx, lr)
     lam[R] = lam_R
     hdot = model.Minv * (Q - JR @ lam_R)
     return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S)
@@ -136,10 +218,10 @@ def _fixed_point(G, lr, xrows, tol, max_iter, depth=ANDERSON_DEPTH):
     prev_res, growth = np.inf, 0
     for it in range(1, max_iter + 1):
         f = g - x
-        res = np.max(np.abs(f), initial=0.0)
-        if not np.isfinite(res):
+        res = np.abs(f).max(initial=0.0)
+        if not math.isfinite(res):
             return g_full, it, False
-        if res <= tol * (1.0 + np.max(np.abs(x), initial=0.0)):
+        if res <= tol * (1.0 + np.abs(x).max(initial=0.0)):
             return g_full, it, True
         growth = growth + 1 if res > prev_res else 0
         if growth >= 3:
@@ -151,8 +233,8 @@ def _fixed_point(G, lr, xrows, tol, max_iter, depth=ANDERSON_DEPTH):
             del dF[:-depth], dG[:-depth]
         f_prev, g_prev = f, g
         if depth and dF:
-            A = np.column_stack(dF)
-            coef = np.linalg.lstsq(A, f, rcond=1e-12)[0]
+            A = np.array(dF).T  # = np.column_stack(dF); lstsq copies it to Fortran order anyway
+            coef = _lstsq(A, f, 1e-12)
             x = g - np.column_stack(dG) @ coef
         else:
             x = g

@@ -86,3 +86,83 @@ def cross3(a, b) -> np.ndarray:
 def skew(v) -> np.ndarray:
     """Skew-symmetric matrix with skew(a) @ b = a x b."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+# ----------------------------------------------------------------------------- batched forms
+# The batched helpers below reproduce the single-item functions above bit for bit: elementwise
+# arithmetic in the same order, math.sin/math.cos (not np.sin/np.cos, whose SIMD kernels may differ
+# in the last bit) and stacked np.matmul (which runs the same inner kernel per stacked item).
+
+_ROT1 = np.array([1, 2, 0])
+_ROT2 = np.array([2, 0, 1])
+
+
+def cross3_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b along the last axis of (..., 3) arrays; each row equals :func:`cross3` of the rows
+    (components a1 b2 - a2 b1, a2 b0 - a0 b2, a0 b1 - a1 b0)."""
+    return a.take(_ROT1, -1) * b.take(_ROT2, -1) - a.take(_ROT2, -1) * b.take(_ROT1, -1)
+
+
+if hasattr(np, "vecdot"):
+    def rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Row-wise a . b ((k, n) -> (k,)), bitwise equal to ``a[k] @ b[k]`` (same dot kernel)."""
+        return np.vecdot(a, b)
+else:  # numpy < 2: equal to round-off
+    def rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Row-wise a . b ((k, n) -> (k,))."""
+        return np.einsum("...i,...i->...", a, b)
+
+
+def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Stacked A[k] @ x[k] ((k, r, c) and (k, c) -> (k, r)), bitwise equal to the single products."""
+    return np.matmul(A, x[..., None])[..., 0]
+
+
+def _cos_sin(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    flat = values.ravel().tolist()
+    c = np.array([math.cos(x) for x in flat]).reshape(values.shape)
+    s = np.array([math.sin(x) for x in flat]).reshape(values.shape)
+    return c, s
+
+
+def euler_R_rows(angles: np.ndarray) -> np.ndarray:
+    """Stacked :func:`euler_R` of (n, 3) z-x-z Euler angles -> (n, 3, 3), bitwise equal."""
+    n = angles.shape[0]
+    c, s = _cos_sin(angles)
+    za = np.zeros((n, 3, 3))
+    xb = np.zeros((n, 3, 3))
+    zg = np.zeros((n, 3, 3))
+    za[:, 0, 0] = za[:, 1, 1] = c[:, 0]
+    za[:, 0, 1] = -s[:, 0]
+    za[:, 1, 0] = s[:, 0]
+    za[:, 2, 2] = 1.0
+    xb[:, 0, 0] = 1.0
+    xb[:, 1, 1] = xb[:, 2, 2] = c[:, 1]
+    xb[:, 1, 2] = -s[:, 1]
+    xb[:, 2, 1] = s[:, 1]
+    zg[:, 0, 0] = zg[:, 1, 1] = c[:, 2]
+    zg[:, 0, 1] = -s[:, 2]
+    zg[:, 1, 0] = s[:, 2]
+    zg[:, 2, 2] = 1.0
+    return np.matmul(np.matmul(za, xb), zg)
+
+
+def euler_H_rows(angles: np.ndarray, bodies=()) -> np.ndarray:
+    """Stacked :func:`euler_H` of (n, 3) Euler angles -> (n, 3, 3), bitwise equal; raises
+    :class:`EulerSingularity` for the first singular row (named from ``bodies`` as euler_H does)."""
+    n = angles.shape[0]
+    c, s = _cos_sin(angles[:, 1:])
+    cb, sb, cg, sg = c[:, 0], s[:, 0], c[:, 1], s[:, 1]
+    bad = np.abs(sb) < SIN_BETA_MIN
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        euler_H(angles[k], bodies[k] if k < len(bodies) else "")  # raises with the usual message
+    H = np.zeros((n, 3, 3))
+    H[:, 0, 0] = sg / sb
+    H[:, 0, 1] = cg / sb
+    H[:, 1, 0] = cg
+    H[:, 1, 1] = -sg
+    H[:, 2, 0] = -cb * sg / sb
+    H[:, 2, 1] = -cb * cg / sb
+    H[:, 2, 2] = 1.0
+    return H

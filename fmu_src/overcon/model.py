@@ -23,6 +23,14 @@ type (``Fx, Fy, T`` planar, ``Fx, Fy, Fz`` spherical); units N and N.m.
 
 The model is never mutated after :func:`compile_model`; everything that changes during a run
 lives in the integrator state (see :mod:`overcon.simulate`).
+
+Hot path: :func:`compile_model` also stores an :class:`AssemblyPlan` (``Model.plan``): per joint
+type the stacked constant arrays of the joint module's ``batch_*`` functions and flat scatter
+indices into Phi_h, and for the friction joints the multiplier gather and force scatter indices.
+:func:`constraints`, :func:`jacobian_h` and :func:`gamma` evaluate all joints of a type at once
+with it; the results are bitwise equal to the per-joint assembly (``*_per_joint``, kept as the
+reference). A model changed by ``dataclasses.replace`` (other joints or retained equations) gets
+a matching plan built on demand.
 """
 from __future__ import annotations
 
@@ -34,7 +42,8 @@ import numpy as np
 from . import analysis
 from .friction_laws import Law, make_law
 from .joints import TYPES
-from .kinematics import cross2, cross3, euler_H, euler_R
+from .kinematics import euler_H, euler_R  # noqa: F401  (re-exported, as before)
+from .kinematics import cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec
 from .spec import BASE, COORDINATES, JOINT_FIELDS, MechanismSpec, SceneSpec
 
 
@@ -103,6 +112,7 @@ class Model:
     friction_joints: tuple[int, ...]
     position_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into q)
     reaction_joints: tuple[int, ...] = field(default=())
+    plan: "AssemblyPlan | None" = field(default=None, repr=False, compare=False)  # filled by compile_model
 
     @property
     def n(self) -> int:
@@ -154,9 +164,7 @@ def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:
         return Frames(r=r, R=R, v=v, w=w, phi=phi)
     angles = np.zeros((nb + 1, 3))
     angles[:nb] = Q[:, 3:]
-    R = np.empty((nb + 1, 3, 3))
-    for b in range(nb + 1):
-        R[b] = euler_R(angles[b])
+    R = euler_R_rows(angles)
     w = np.zeros((nb + 1, 3))
     w[:nb] = H[:, 3:]
     return Frames(r=r, R=R, v=v, w=w, angles=angles)
@@ -173,7 +181,11 @@ def _place(model: Model, out: np.ndarray, rows, blocks) -> None:
 
 def constraints(model: Model, f: Frames) -> np.ndarray:
     """Phi (m,)."""
-    return np.concatenate([c.module.phi(c, f) for c in model.joints])
+    plan = plan_of(model)
+    out = np.empty(model.m)
+    for g in plan.groups:
+        out[g.rows] = g.module.batch_phi(g.data, f).reshape(-1)
+    return out
 
 
 def jacobian_q(model: Model, f: Frames) -> np.ndarray:
@@ -186,13 +198,40 @@ def jacobian_q(model: Model, f: Frames) -> np.ndarray:
 
 def jacobian_h(model: Model, f: Frames) -> np.ndarray:
     """Phi_h (m, nh): planar Phi_q, spatial the modified Jacobian of Eq. 7."""
+    plan = plan_of(model)
+    out = np.zeros((model.m, model.nh))
+    flat = out.reshape(-1)
+    for g in plan.groups:
+        Ji, Jj = g.module.batch_jac_h(g.data, f)
+        # += on zeros, in the order of _place (body i, then body j): the same numbers, -0.0 included
+        flat[g.flat_i] += Ji[g.sel_i].reshape(-1)
+        flat[g.flat_j] += Jj[g.sel_j].reshape(-1)
+    return out
+
+
+def gamma(model: Model, f: Frames) -> np.ndarray:
+    plan = plan_of(model)
+    out = np.empty(model.m)
+    for g in plan.groups:
+        out[g.rows] = g.module.batch_gamma(g.data, f).reshape(-1)
+    return out
+
+
+def constraints_per_joint(model: Model, f: Frames) -> np.ndarray:
+    """Reference of :func:`constraints`: joint by joint with the joints' ``phi``."""
+    return np.concatenate([c.module.phi(c, f) for c in model.joints])
+
+
+def jacobian_h_per_joint(model: Model, f: Frames) -> np.ndarray:
+    """Reference of :func:`jacobian_h`: joint by joint with the joints' ``jac_h``."""
     out = np.zeros((model.m, model.nh))
     for c in model.joints:
         _place(model, out, list(c.rows), (c.module.jac_h(c, f), c))
     return out
 
 
-def gamma(model: Model, f: Frames) -> np.ndarray:
+def gamma_per_joint(model: Model, f: Frames) -> np.ndarray:
+    """Reference of :func:`gamma`: joint by joint with the joints' ``gamma``."""
     return np.concatenate([c.module.gamma(c, f) for c in model.joints])
 
 
@@ -201,10 +240,10 @@ def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray) -> np.ndarray:
     EulerSingularity near sin(beta) = 0."""
     if model.kind == "planar":
         return h.copy()
+    nb = model.nb
     qd = h.copy()
-    for b in range(model.nb):
-        s = model.body_slice(b)
-        qd[s][3:] = euler_H(q[s][3:], model.body_names[b]) @ h[s][3:]
+    H = euler_H_rows(q.reshape(nb, 6)[:, 3:], model.body_names)
+    qd.reshape(nb, 6)[:, 3:] = matvec(H, h.reshape(nb, 6)[:, 3:])
     return qd
 
 
@@ -224,7 +263,7 @@ def applied_forces(model: Model, f: Frames) -> np.ndarray:
     Q[:, :d] = model.mass[:, None] * model.gravity[None, :]
     if model.kind == "spatial":
         Jw = model.inertia * f.w[:nb]
-        Q[:, 3:] -= np.cross(f.w[:nb], Jw)
+        Q[:, 3:] -= cross3_rows(f.w[:nb], Jw)
     for ld in model.loads:
         if ld.type == "force":
             Q[ld.bi, :d] += ld.value
@@ -259,6 +298,127 @@ def physical_reaction(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray
     local = c.module.reaction_transform(c, f) @ fi
     n_local = len(c.module.REACTION_COMPONENTS)
     return -np.concatenate([local[:n_local], fi[: model.dim]])
+
+
+# ----------------------------------------------------------------------------- assembly plan
+
+@dataclass(frozen=True, eq=False)
+class JointGroup:
+    """All joints of one type: the module's ``batch_prepare`` data and where their blocks go."""
+
+    type: str
+    data: Mapping[str, object]
+    joints: tuple[int, ...]  # joint indices, in model order
+    rows: np.ndarray  # (k * n_equations,) equation rows, joint by joint
+    sel_i: np.ndarray  # positions (in the group) of the joints whose body i is not the base
+    flat_i: np.ndarray  # flat indices into Phi_h (m, nh) of their (J_X)_i blocks, row-major
+    sel_j: np.ndarray
+    flat_j: np.ndarray
+
+    @property
+    def module(self):
+        return TYPES[self.type]
+
+
+@dataclass(frozen=True, eq=False)
+class FrictionGroup:
+    """The friction joints of one type: ``batch_prepare`` data (laws included), where their
+    multipliers are read from lam_R and where their forces go in the contribution list."""
+
+    type: str
+    data: Mapping[str, object]
+    joints: tuple[int, ...]
+    lam_index: np.ndarray  # (k, n_equations) into lam_R extended by one 0.0 (eliminated rows)
+    out_i: np.ndarray  # (k,) rows of Qi in the contribution list
+    out_j: np.ndarray
+
+    @property
+    def module(self):
+        return TYPES[self.type]
+
+
+@dataclass(frozen=True, eq=False)
+class AssemblyPlan:
+    """Compile-time index data of the batched hot path (built by :func:`build_plan`)."""
+
+    joints: tuple[CompiledJoint, ...]  # the model's joints and retained rows it was built for
+    retained: np.ndarray
+    nb: int
+    nq_b: int
+    groups: tuple[JointGroup, ...]
+    friction: tuple[FrictionGroup, ...]
+    friction_slots: np.ndarray  # (2 nf,) body slot per contribution (joint order; i then j; base -> nb)
+    friction_xrows: np.ndarray  # positions in lam_R of the retained friction rows (joint order)
+    friction_pad: bool  # some friction row is eliminated (read as 0.0)
+
+    def matches(self, model: "Model") -> bool:
+        return (self.joints is model.joints and self.retained is model.retained
+                and self.nb == model.nb and self.nq_b == model.nq_b)
+
+
+def build_plan(model: Model) -> AssemblyPlan:
+    k, nh = model.nq_b, model.nh
+    by_type: dict[str, list[int]] = {}
+    for c in model.joints:
+        by_type.setdefault(c.type, []).append(c.index)
+    groups = []
+    for jtype, idx in by_type.items():
+        js = [model.joints[i] for i in idx]
+        ne = len(js[0].rows)
+        blocks = {}
+        for side in ("i", "j"):
+            sel, flat = [], []
+            for pos, c in enumerate(js):
+                b = c.bi if side == "i" else c.bj
+                if b >= 0:
+                    sel.append(pos)
+                    rows = np.array(c.rows)[:, None]
+                    flat.append((rows * nh + b * k + np.arange(k)[None, :]).reshape(-1))
+            blocks[side] = (np.array(sel, np.intp),
+                            np.concatenate(flat).astype(np.intp) if flat else np.zeros(0, np.intp))
+        groups.append(JointGroup(
+            type=jtype, data=TYPES[jtype].batch_prepare(js), joints=tuple(idx),
+            rows=np.array([r for c in js for r in c.rows], np.intp),
+            sel_i=blocks["i"][0], flat_i=blocks["i"][1], sel_j=blocks["j"][0], flat_j=blocks["j"][1]))
+    retained = model.retained
+    pos = {int(row): p for p, row in enumerate(retained)}
+    pad = len(retained)  # index of the appended 0.0
+    fjoints = [model.joints[j] for j in model.friction_joints]
+    order = {c.index: n for n, c in enumerate(fjoints)}
+    fr_types: dict[str, list] = {}
+    for c in fjoints:
+        fr_types.setdefault(c.type, []).append(c)
+    friction = []
+    for jtype, js in fr_types.items():
+        friction.append(FrictionGroup(
+            type=jtype, data=TYPES[jtype].batch_prepare(js), joints=tuple(c.index for c in js),
+            lam_index=np.array([[pos.get(r, pad) for r in c.rows] for c in js], np.intp),
+            out_i=np.array([2 * order[c.index] for c in js], np.intp),
+            out_j=np.array([2 * order[c.index] + 1 for c in js], np.intp)))
+    slots = [b if b >= 0 else model.nb for c in fjoints for b in (c.bi, c.bj)]
+    xrows = [pos[r] for c in fjoints for r in c.rows if r in pos]
+    return AssemblyPlan(
+        joints=model.joints, retained=retained, nb=model.nb, nq_b=k, groups=tuple(groups),
+        friction=tuple(friction), friction_slots=np.array(slots, np.intp),
+        friction_xrows=np.array(xrows, np.intp),
+        friction_pad=any(r not in pos for c in fjoints for r in c.rows))
+
+
+_PLAN_CACHE: dict = {}
+
+
+def plan_of(model: Model) -> AssemblyPlan:
+    """The model's assembly plan; built (and cached) when the model has none that matches."""
+    plan = model.plan
+    if plan is not None and plan.matches(model):
+        return plan
+    key = (id(model.joints), id(model.retained), model.nb, model.nq_b)
+    plan = _PLAN_CACHE.get(key)
+    if plan is None or not plan.matches(model):
+        if len(_PLAN_CACHE) >= 16:
+            _PLAN_CACHE.clear()
+        plan = _PLAN_CACHE[key] = build_plan(model)  # holds joints/retained: ids stay valid
+    return plan
 
 
 # ----------------------------------------------------------------------------- compile
@@ -321,7 +481,8 @@ def compile_model(scene: SceneSpec) -> Model:
     )
     eliminated, mode = resolve_elimination(base, scene.eliminate)
     retained = np.array([i for i in range(row) if i + 1 not in set(eliminated)], int)
-    return replace(base, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
+    model = replace(base, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
+    return replace(model, plan=build_plan(model))
 
 
 def resolve_elimination(model: Model, eliminate) -> tuple[list[int], str]:

@@ -17,6 +17,20 @@ body slots, -1 = base; ``c.p`` the joint's constant parameters as arrays) and th
 - ``relative_speed(c, f)``: the sliding speed the friction law sees (for reports and tests).
 
 ``REACTION_COMPONENTS`` names the reported physical reaction components.
+
+Batched forms (the hot path of :func:`overcon.dynamics.evaluate`), for all joints of the type at
+once; ``d`` is the dict made once at compile time (``Model.plan``), k the number of joints:
+
+- ``batch_prepare(joints) -> d``: stacked constants (body slots, s_i, s_j, ..., friction laws);
+- ``batch_phi(d, f) -> (k, n_eq)``, ``batch_jac_h(d, f) -> (Ji, Jj)`` each (k, n_eq, n_coord),
+  ``batch_gamma(d, f) -> (k, n_eq)``;
+- ``batch_friction_setup(d, f) -> ctx``: what friction needs from the frames (once per
+  evaluation); ``batch_friction(d, ctx, lam) -> (Qi, Qj)`` each (k, n_coord), given the joints'
+  multipliers lam (k, n_eq) (once per friction iteration).
+
+They reproduce the single-joint functions bit for bit (the same floating-point operations in the
+same order; stacked ``np.matmul`` runs the same kernel per item), so a run gives the same numbers
+either way; tests/test_hot_path.py checks them against the single forms.
 """
 from . import revolute, spherical, translational
 

@@ -5,6 +5,10 @@ Phi = r_i + R_i s_i - r_j - R_j s_j (3 equations). Velocities h_k = [r_k' (globa
 Auxiliary frame: origin at the ball centre P, axes parallel to body i (A.10). Physical reaction
 p' = [Fx, Fy, Fz] in body i axes (the moment about P is zero).
 
+Batched forms (``batch_*``, all joints of this type in one call, for the hot path of
+:func:`overcon.dynamics.evaluate`) compute the same numbers as the single-joint functions, bit
+for bit (same operations in the same order, stacked matmul); tests/test_hot_path.py checks it.
+
 Friction (A.11-A.18): contact point s'_C = -rho F'/|F'| with F' taken from the left-hand-side
 generalized reaction (f_X)_i = (J_X)_i lam_X (a project decision, see README: the paper's figures cannot
 tell this side from the opposite one), sliding velocity v' = omega'_ij x s'_C with
@@ -15,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import cross3, euler_dR, skew
+from ..kinematics import cross3, cross3_rows, euler_dR, matvec, rowdot, skew
 
 N_EQUATIONS = 3
 REACTION_COMPONENTS = ("Fx", "Fy", "Fz")
@@ -91,4 +95,88 @@ def friction(c, f, fi, law):
     Rji = Rj.T @ Ri
     torque_j = cross3(c.p["s_j"], Rji @ F_fr) + Rji @ cross3(s_C, F_fr)
     Qj = -np.concatenate([Ri @ F_fr, torque_j])
+    return Qi, Qj
+
+
+# ----------------------------------------------------------------------------- batched forms
+
+_EYE = np.eye(3)
+_NEG_EYE = -np.eye(3)
+
+
+def batch_prepare(joints) -> dict:
+    """Constant stacked arrays of a list of compiled spherical joints (done once at compile)."""
+    s_i = np.array([c.p["s_i"] for c in joints], float).reshape(-1, 3)
+    s_j = np.array([c.p["s_j"] for c in joints], float).reshape(-1, 3)
+    laws = tuple(c.law for c in joints)
+    return {
+        "bi": np.array([c.bi for c in joints], np.intp), "bj": np.array([c.bj for c in joints], np.intp),
+        "s_i": s_i, "s_j": s_j,
+        "skew_i": np.array([skew(v) for v in s_i]).reshape(-1, 3, 3),
+        "skew_j": np.array([skew(v) for v in s_j]).reshape(-1, 3, 3),
+        "laws": laws,
+        "neg_size": np.array([-law.size if law is not None else np.nan for law in laws], float),
+    }
+
+
+def batch_phi(d, f):
+    """(k, 3): :func:`phi` of every joint."""
+    bi, bj = d["bi"], d["bj"]
+    return f.r[bi] + matvec(f.R[bi], d["s_i"]) - f.r[bj] - matvec(f.R[bj], d["s_j"])
+
+
+def batch_jac_h(d, f):
+    """(Ji, Jj), each (k, 3, 6): :func:`jac_h` of every joint."""
+    k = len(d["bi"])
+    Ji = np.empty((k, 3, 6))
+    Jj = np.empty((k, 3, 6))
+    Ji[:, :, :3] = _EYE
+    Jj[:, :, :3] = _NEG_EYE
+    Ji[:, :, 3:] = np.matmul(-f.R[d["bi"]], d["skew_i"])
+    Jj[:, :, 3:] = np.matmul(f.R[d["bj"]], d["skew_j"])
+    return Ji, Jj
+
+
+def batch_gamma(d, f):
+    """(k, 3): :func:`gamma` of every joint."""
+    bi, bj = d["bi"], d["bj"]
+    wi, wj = f.w[bi], f.w[bj]
+    return (matvec(-f.R[bi], cross3_rows(wi, cross3_rows(wi, d["s_i"])))
+            + matvec(f.R[bj], cross3_rows(wj, cross3_rows(wj, d["s_j"]))))
+
+
+def batch_friction_setup(d, f, Ji=None):
+    """Per-evaluation constants of :func:`batch_friction` (frames only, not the reaction)."""
+    Ri, Rj = f.R[d["bi"]], f.R[d["bj"]]
+    RiT = Ri.transpose(0, 2, 1)
+    omega = matvec(RiT, matvec(Rj, f.w[d["bj"]])) - f.w[d["bi"]]  # _relative_omega
+    return {"Ri": Ri, "RiT": RiT, "omega": omega, "Rji": np.matmul(Rj.transpose(0, 2, 1), Ri)}
+
+
+def batch_friction(d, ctx, lam):
+    """(Qi, Qj), each (k, 6): :func:`friction` of every joint, given the joints' multipliers lam
+    (k, 3). (J_X)_i = [I, -R_i skew(s_i)], so the force part of fi = (J_X)_i^T lam is lam itself."""
+    F_aux = matvec(ctx["RiT"], lam)
+    norm = np.sqrt(rowdot(F_aux, F_aux))
+    zero = 0.0 in norm.tolist()
+    if zero:  # those joints get zero forces, as in friction()
+        nonzero = norm != 0.0
+        norm = np.where(nonzero, norm, 1.0)
+    s_C = d["neg_size"][:, None] * F_aux / norm[:, None]
+    v_slip = cross3_rows(ctx["omega"], s_C)
+    speed = np.sqrt(rowdot(v_slip, v_slip))
+    if zero:
+        mos = [law.mu_over_speed(v) if nz else 0.0 for law, v, nz in zip(d["laws"], speed, nonzero)]
+    else:
+        mos = [law.mu_over_speed(v) for law, v in zip(d["laws"], speed)]
+    F_fr = (np.array(mos) * norm)[:, None] * v_slip
+    RiF = matvec(ctx["Ri"], F_fr)
+    Rji = ctx["Rji"]
+    Qi = np.concatenate((RiF, cross3_rows(d["s_i"] + s_C, F_fr)), 1)
+    Qj = np.concatenate(
+        (RiF, cross3_rows(d["s_j"], matvec(Rji, F_fr)) + matvec(Rji, cross3_rows(s_C, F_fr))), 1)
+    np.negative(Qj, out=Qj)
+    if zero:
+        Qi[~nonzero] = 0.0
+        Qj[~nonzero] = 0.0
     return Qi, Qj

@@ -8,12 +8,16 @@ gives x' = +x); B_i is that frame expressed in body i axes (rotated by -psi). Ph
 p' = [Fx (along the guide, zero without friction), Fy = N (normal), T (moment about A)].
 Friction (A.2): magnitude mu(v_ij) (|N - T/l| + |T/l|) along x', v_ij the sliding velocity of
 body j relative to body i along x', l the slider length.
+
+Batched forms (``batch_*``, all joints of this type in one call, for the hot path of
+:func:`overcon.dynamics.evaluate`) compute the same numbers as the single-joint functions, bit
+for bit (same operations in the same order, stacked matmul); tests/test_hot_path.py checks it.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import OMEGA, cross2, rot2
+from ..kinematics import OMEGA, cross2, matvec, rot2, rowdot
 
 N_EQUATIONS = 2
 REACTION_COMPONENTS = ("Fx", "Fy", "T")
@@ -99,4 +103,122 @@ def friction(c, f, fi, law):
     F = law.mu(relative_speed(c, f)) * magnitude * e
     Qi = np.array([F[0], F[1], cross2(point - f.r[c.bi], F)])
     Qj = -np.array([F[0], F[1], cross2(point - f.r[c.bj], F)])
+    return Qi, Qj
+
+
+# ----------------------------------------------------------------------------- batched forms
+
+def batch_prepare(joints) -> dict:
+    """Constant stacked arrays of a list of compiled translational joints (done once at compile)."""
+    laws = tuple(c.law for c in joints)
+    return {
+        "bi": np.array([c.bi for c in joints], np.intp), "bj": np.array([c.bj for c in joints], np.intp),
+        "s_A": np.array([c.p["s_A"] for c in joints], float).reshape(-1, 2),
+        "s_B": np.array([c.p["s_B"] for c in joints], float).reshape(-1, 2),
+        "v": np.array([c.p["v"] for c in joints], float).reshape(-1, 2),
+        "psi": np.array([c.p["psi"] for c in joints], float),
+        "B": np.array([c.p["B"] for c in joints], float).reshape(-1, 2, 2),
+        "laws": laws,
+        "size": np.array([law.size if law is not None else np.nan for law in laws], float),
+    }
+
+
+def _omega(x):
+    return matvec(OMEGA, x)
+
+
+def _batch_geometry(d, f):
+    Ri, Rj = f.R[d["bi"]], f.R[d["bj"]]
+    a_i = matvec(Ri, d["s_A"])
+    b_j = matvec(Rj, d["s_B"])
+    dd = f.r[d["bi"]] + a_i - f.r[d["bj"]] - b_j
+    u = matvec(Rj, d["v"])
+    return a_i, b_j, dd, u
+
+
+def batch_phi(d, f):
+    """(k, 2): :func:`phi` of every joint."""
+    _, _, dd, u = _batch_geometry(d, f)
+    out = np.empty((len(u), 2))
+    out[:, 0] = rowdot(dd, u)
+    out[:, 1] = f.phi[d["bi"]] - f.phi[d["bj"]] - d["psi"]
+    return out
+
+
+def batch_jac_q(d, f):
+    """(Ji, Jj), each (k, 2, 3): :func:`jac_q` of every joint."""
+    a_i, b_j, dd, u = _batch_geometry(d, f)
+    k = len(u)
+    Ji = np.zeros((k, 2, 3))
+    Jj = np.zeros((k, 2, 3))
+    Ji[:, 0, :2] = u
+    Ji[:, 0, 2] = rowdot(_omega(a_i), u)
+    Ji[:, 1, 2] = 1.0
+    Jj[:, 0, :2] = -u
+    Jj[:, 0, 2] = rowdot(-_omega(b_j), u) + rowdot(dd, _omega(u))
+    Jj[:, 1, 2] = -1.0
+    return Ji, Jj
+
+
+batch_jac_h = batch_jac_q
+
+
+def batch_gamma(d, f):
+    """(k, 2): :func:`gamma` of every joint."""
+    a_i, b_j, dd, u = _batch_geometry(d, f)
+    bi, bj = d["bi"], d["bj"]
+    wi, wj = f.w[bi], f.w[bj]
+    d_dot = f.v[bi] + _omega(a_i) * wi[:, None] - f.v[bj] - _omega(b_j) * wj[:, None]
+    u_dot = _omega(u) * wj[:, None]
+    wi2, wj2 = wi ** 2, wj ** 2
+    quad = (rowdot(-a_i * wi2[:, None] + b_j * wj2[:, None], u) + rowdot(2.0 * d_dot, u_dot)
+            - rowdot(dd, u) * wj2)
+    out = np.zeros((len(u), 2))
+    out[:, 0] = -quad
+    return out
+
+
+def batch_reaction_transform(d, f):
+    """(k, 3, 3): :func:`reaction_transform` of every joint."""
+    Ri = f.R[d["bi"]]
+    A = np.zeros((len(Ri), 3, 3))
+    A[:, :2, :2] = np.matmul(d["B"].transpose(0, 2, 1), Ri.transpose(0, 2, 1))
+    A[:, 2, :2] = -_omega(matvec(Ri, d["s_A"]))
+    A[:, 2, 2] = 1.0
+    return A
+
+
+def batch_friction_setup(d, f, Ji=None):
+    """Per-evaluation constants of :func:`batch_friction`: (J_X)_i, A_i, the contact point's arms
+    from both body origins, the guide direction e and mu(v_ij)."""
+    if Ji is None:
+        Ji = batch_jac_h(d, f)[0]
+    bi, bj = d["bi"], d["bj"]
+    Ri = f.R[bi]
+    point = f.r[bi] + matvec(Ri, d["s_A"])  # _contact
+    e = matvec(Ri, d["B"][:, :, 0])
+    vel_j = f.v[bj] + _omega(point - f.r[bj]) * f.w[bj][:, None]  # relative_speed
+    vel_i = f.v[bi] + _omega(point - f.r[bi]) * f.w[bi][:, None]
+    speed = rowdot(vel_j - vel_i, e)
+    return {"JiT": Ji.transpose(0, 2, 1), "A": batch_reaction_transform(d, f), "e": e,
+            "arm_i": point - f.r[bi], "arm_j": point - f.r[bj],
+            "mu": np.array([law.mu(v) for law, v in zip(d["laws"], speed)], float)}
+
+
+def batch_friction(d, ctx, lam):
+    """(Qi, Qj), each (k, 3): :func:`friction` of every joint, given the joints' multipliers lam
+    (k, 2) (fi = (J_X)_i^T lam)."""
+    p_aux = matvec(ctx["A"], matvec(ctx["JiT"], lam))
+    N, T, l = p_aux[:, 1], p_aux[:, 2], d["size"]
+    magnitude = np.abs(N - T / l) + np.abs(T / l)
+    F = (ctx["mu"] * magnitude)[:, None] * ctx["e"]
+    arm_i, arm_j = ctx["arm_i"], ctx["arm_j"]
+    k = len(F)
+    Qi = np.empty((k, 3))
+    Qj = np.empty((k, 3))
+    Qi[:, :2] = F
+    Qi[:, 2] = arm_i[:, 0] * F[:, 1] - arm_i[:, 1] * F[:, 0]
+    Qj[:, :2] = F
+    Qj[:, 2] = arm_j[:, 0] * F[:, 1] - arm_j[:, 1] * F[:, 0]
+    np.negative(Qj, out=Qj)
     return Qi, Qj

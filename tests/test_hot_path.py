@@ -1,0 +1,276 @@
+"""The batched hot path (joint modules' ``batch_*`` functions, Model.plan, vectorized frames and
+coordinate rates, direct LAPACK calls in dynamics) against the per-joint reference assembly, at
+random configurations of both paper mechanisms. The batched forms are written to reproduce the
+per-joint arithmetic exactly; the tolerance here is 1e-14 (relative to the array's scale)."""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from overcon import dynamics
+from overcon import scene as scene_mod
+from overcon.joints import TYPES
+from overcon.kinematics import cross3, cross3_rows, euler_H, euler_H_rows, euler_R, euler_R_rows
+from overcon.model import (applied_forces, build_plan, compile_model, constraints, constraints_per_joint,
+                           coordinate_rates, frames, gamma, gamma_per_joint, generalized_force,
+                           jacobian_h, jacobian_h_per_joint, plan_of)
+
+MECH = Path(__file__).resolve().parent.parent / "mechanisms"
+SCENES = ["planar_f145_wo4", "planar_f45_wo6", "spatial_GHMN_wo5", "spatial_MN_wo18"]
+TOL = 1e-14
+
+
+def close(a, b, tol=TOL):
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    assert a.shape == b.shape
+    scale = max(1.0, float(np.max(np.abs(b), initial=0.0)))
+    assert np.max(np.abs(a - b), initial=0.0) <= tol * scale
+
+
+def model_of(name, **scene_changes):
+    spec = scene_mod.as_scene(scene_mod.load(MECH / f"{name}.toml"))
+    if scene_changes:
+        spec = dataclasses.replace(spec, **scene_changes)
+    return compile_model(spec)
+
+
+def random_states(model, n=25, seed=0, scale=0.4):
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        q = model.q0 + scale * rng.standard_normal(model.n)
+        h = 2.0 * rng.standard_normal(model.nh)
+        yield q, h
+
+
+def applied_forces_reference(model, f):
+    """The per-body/per-load form of applied_forces (np.cross for the gyroscopic terms)."""
+    nb, d, k = model.nb, model.dim, model.nq_b
+    Q = np.zeros((nb, k))
+    Q[:, :d] = model.mass[:, None] * model.gravity[None, :]
+    if model.kind == "spatial":
+        Q[:, 3:] -= np.cross(f.w[:nb], model.inertia * f.w[:nb])
+    for ld in model.loads:
+        if ld.type == "force":
+            Q[ld.bi, :d] += ld.value
+        elif ld.type == "torque":
+            Q[ld.bi, d:] += ld.value if model.kind == "planar" else f.R[ld.bi].T @ ld.value
+        else:
+            pi = f.r[ld.bi] + f.R[ld.bi] @ ld.s_i
+            pj = f.r[ld.bj] + f.R[ld.bj] @ ld.s_j
+            dvec = pi - pj
+            length = float(np.linalg.norm(dvec))
+            F = -ld.stiffness * (length - ld.free_length) * dvec / length
+            for b, point, sign in ((ld.bi, pi, 1.0), (ld.bj, pj, -1.0)):
+                if b >= 0:
+                    Q[b] += generalized_force(model, f, b, point, sign * F)
+    return Q.reshape(-1)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_batched_assembly_equals_per_joint(name):
+    model = model_of(name)
+    for q, h in random_states(model):
+        f = frames(model, q, h)
+        close(constraints(model, f), constraints_per_joint(model, f))
+        close(jacobian_h(model, f), jacobian_h_per_joint(model, f))
+        close(gamma(model, f), gamma_per_joint(model, f))
+        close(applied_forces(model, f), applied_forces_reference(model, f))
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_batched_joint_functions_equal_single(name):
+    """Every batch_* producer against its single-joint form, joint by joint."""
+    model = model_of(name)
+    plan = plan_of(model)
+    for q, h in random_states(model, n=10, seed=1):
+        f = frames(model, q, h)
+        for g in plan.groups:
+            mod = g.module
+            js = [model.joints[j] for j in g.joints]
+            phi = mod.batch_phi(g.data, f)
+            Ji, Jj = mod.batch_jac_h(g.data, f)
+            gam = mod.batch_gamma(g.data, f)
+            for n, c in enumerate(js):
+                close(phi[n], mod.phi(c, f))
+                close(Ji[n], mod.jac_h(c, f)[0])
+                close(Jj[n], mod.jac_h(c, f)[1])
+                close(gam[n], mod.gamma(c, f))
+            if hasattr(mod, "batch_reaction_transform"):
+                A = mod.batch_reaction_transform(g.data, f)
+                for n, c in enumerate(js):
+                    close(A[n], mod.reaction_transform(c, f))
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_batched_friction_equals_per_joint(name):
+    model = model_of(name)
+    plan = plan_of(model)
+    R = model.retained
+    rng = np.random.default_rng(2)
+    for q, h in random_states(model, n=15, seed=3):
+        f = frames(model, q, h)
+        ctx = dynamics._friction_setup(plan, f)
+        blocks = [(model.joints[j], model.joints[j].module.jac_h(model.joints[j], f)[0])
+                  for j in model.friction_joints]
+        lr = 50.0 * rng.standard_normal(len(R))
+        lam = np.zeros(model.m)
+        lam[R] = lr
+        close(dynamics._friction_batched(model, plan, ctx, lr),
+              dynamics._friction_generalized(model, f, blocks, lam))
+        for g, cx in zip(plan.friction, ctx):  # joint by joint, with the joint's own fi
+            lam_rows = np.concatenate((lr, [0.0]))[g.lam_index]
+            Qi, Qj = g.module.batch_friction(g.data, cx, lam_rows)
+            for n, j in enumerate(g.joints):
+                c = model.joints[j]
+                Ji = c.module.jac_h(c, f)[0]
+                ref_i, ref_j = c.module.friction(c, f, Ji.T @ lam[list(c.rows)], c.law)
+                close(Qi[n], ref_i)
+                close(Qj[n], ref_j)
+
+
+def test_spherical_friction_zero_reaction_gives_zero_force():
+    model = model_of("spatial_GHMN_wo5")
+    plan = plan_of(model)
+    f = frames(model, model.q0 + 0.1, model.h0 + 1.0)
+    g = plan.friction[0]
+    cx = g.module.batch_friction_setup(g.data, f)
+    lam = np.ones((len(g.joints), 3))
+    lam[1] = 0.0
+    Qi, Qj = g.module.batch_friction(g.data, cx, lam)
+    assert np.all(Qi[1] == 0.0) and np.all(Qj[1] == 0.0)
+    c = model.joints[g.joints[0]]
+    ref = c.module.friction(c, f, c.module.jac_h(c, f)[0].T @ lam[0], c.law)
+    close(Qi[0], ref[0])
+    close(Qj[0], ref[1])
+
+
+@pytest.mark.parametrize("name", ["planar_f145_wo4", "spatial_GHMN_wo5"])
+def test_frames_and_coordinate_rates(name):
+    model = model_of(name)
+    for q, h in random_states(model, n=10, seed=4):
+        f = frames(model, q, h)
+        qd = coordinate_rates(model, q, h)
+        if model.kind == "spatial":
+            for b in range(model.nb + 1):
+                close(f.R[b], euler_R(f.angles[b]))
+            ref = h.copy()
+            for b in range(model.nb):
+                s = model.body_slice(b)
+                ref[s][3:] = euler_H(q[s][3:]) @ h[s][3:]
+            close(qd, ref)
+        else:
+            close(qd, h)
+
+
+def test_batched_kinematics_helpers():
+    rng = np.random.default_rng(5)
+    ang = rng.uniform(-4, 4, (200, 3))
+    ang[:, 1] = np.where(np.abs(np.sin(ang[:, 1])) < 1e-2, 1.0, ang[:, 1])
+    close(euler_R_rows(ang), np.array([euler_R(a) for a in ang]))
+    close(euler_H_rows(ang), np.array([euler_H(a) for a in ang]))
+    a, b = rng.standard_normal((200, 3)), rng.standard_normal((200, 3))
+    close(cross3_rows(a, b), np.array([cross3(x, y) for x, y in zip(a, b)]))
+
+
+def test_coordinate_rates_singularity_names_first_body():
+    model = model_of("spatial_MN_wo5")
+    q = model.q0.copy()
+    q[model.body_slice(2)][4] = 0.0  # beta of link3
+    q[model.body_slice(4)][4] = 0.0  # beta of link5
+    with pytest.raises(ArithmeticError, match="link3"):
+        coordinate_rates(model, q, model.h0)
+
+
+@pytest.mark.parametrize("name", ["planar_f145_wo6", "spatial_GHMN_wo9"])
+def test_evaluate_matches_reference_solve(name):
+    """evaluate() (batched forces, direct LAPACK) against the same solve written with the
+    per-joint reference functions and scipy's cho_factor/cho_solve: the friction fixed point is
+    shared, so results agree to round-off and the iteration counts are equal."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    model = model_of(name)
+    R = model.retained
+    solver = model.scene.solver
+    for q, h in random_states(model, n=6, seed=6, scale=0.02):
+        f = frames(model, q, h)
+        try:
+            ev = dynamics.evaluate(model, 0.0, q, h)
+        except dynamics.FrictionSolveError:
+            ev = None
+        Phi_h = jacobian_h_per_joint(model, f)
+        JR = Phi_h[R].T
+        a = solver.baumgarte
+        g = gamma_per_joint(model, f)[R] - 2.0 * a * (Phi_h[R] @ h) - a * a * constraints_per_joint(model, f)[R]
+        Q = applied_forces_reference(model, f)
+        MinvJ = model.Minv[:, None] * JR
+        factor = cho_factor(JR.T @ MinvJ)
+        lam0 = cho_solve(factor, MinvJ.T @ Q - g)
+        blocks = [(model.joints[j], model.joints[j].module.jac_h(model.joints[j], f)[0])
+                  for j in model.friction_joints]
+        pos = {row: k for k, row in enumerate(R)}
+        xrows = [pos[r] for j in model.friction_joints for r in model.joints[j].rows if r in pos]
+
+        def full(lr):
+            out = np.zeros(model.m)
+            out[R] = lr
+            return out
+
+        def G(lr):
+            return lam0 + cho_solve(factor, MinvJ.T @ dynamics._friction_generalized(model, f, blocks, full(lr)))
+
+        lr, its, ok = dynamics._fixed_point(G, lam0.copy(), xrows, solver.friction_tol, solver.friction_max_iter)
+        fallback = not ok
+        if fallback:
+            lr, more, ok = dynamics._newton(G, lr, xrows, solver.friction_tol, solver.friction_max_iter)
+            its += more
+        if ev is None:  # the solve failed: it fails the same way in the reference
+            assert not ok
+            continue
+        assert ok
+        assert (its, fallback) == (ev.iterations, ev.fallback)
+        Qf = dynamics._friction_generalized(model, f, blocks, full(lr))
+        close(ev.lam, full(lr), 1e-12)
+        close(ev.hdot, model.Minv * (Q + Qf - JR @ lr), 1e-12)
+
+
+def test_plan_follows_replaced_model():
+    """A model whose joints or retained equations were replaced gets a matching plan."""
+    model = model_of("planar_f45_wo4")
+    assert model.plan is not None and model.plan.matches(model)
+    other = dataclasses.replace(model, retained=np.array([i for i in range(model.m) if i != 5]))
+    assert not model.plan.matches(other)
+    plan = plan_of(other)
+    assert plan.matches(other) and plan is plan_of(other)
+    ref = build_plan(other)
+    assert np.array_equal(plan.friction_xrows, ref.friction_xrows)
+    same = dataclasses.replace(model, scene=model.scene)
+    assert plan_of(same) is model.plan
+
+
+def test_lapack_wrappers_keep_scipy_errors():
+    S = np.array([[1.0, 2.0], [2.0, 1.0]])
+    with pytest.raises(np.linalg.LinAlgError, match="leading minor"):
+        dynamics._cho_factor(S)
+    with pytest.raises(ValueError, match="infs or NaNs"):
+        dynamics._cho_factor(np.array([[np.nan, 0.0], [0.0, 1.0]]))
+    factor = dynamics._cho_factor(np.array([[4.0, 2.0], [2.0, 3.0]]))
+    with pytest.raises(ValueError, match="infs or NaNs"):
+        dynamics._cho_solve(factor, np.array([np.inf, 1.0]))
+    from scipy.linalg import cho_factor, cho_solve
+    b = np.array([1.0, -2.0])
+    ref = cho_solve(cho_factor(np.array([[4.0, 2.0], [2.0, 3.0]])), b)
+    assert np.array_equal(dynamics._cho_solve(factor, b), ref)
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 3):
+        A, f = rng.standard_normal((6, n)), rng.standard_normal(6)
+        assert np.array_equal(dynamics._lstsq(A, f, 1e-12), np.linalg.lstsq(A, f, rcond=1e-12)[0])
+
+
+def test_every_joint_type_has_batched_forms():
+    for name, mod in TYPES.items():
+        for fn in ("batch_prepare", "batch_phi", "batch_jac_h", "batch_gamma", "batch_friction_setup",
+                   "batch_friction"):
+            assert callable(getattr(mod, fn, None)), (name, fn)

@@ -150,7 +150,7 @@ def test_every_file_loads(path):
     assert spec.eliminate == (elim,)
     assert spec.group == f"{kind}_{fset}"
     assert FIGURES[spec.group] in spec.description
-    assert spec.solver.tolerance == 1e-8 and spec.solver.output_interval == 0.01
+    assert spec.solver.tolerance == 1e-9 and spec.solver.output_interval == 0.01
     assert spec.start_time == 0.0
     assert set(spec.friction_params) == set(spec.friction)
     if kind == "planar":

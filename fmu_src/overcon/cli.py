@@ -41,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     _scene_flags(s)
     s.add_argument("--out", required=True, metavar="OUT.csv", help="CSV file: time, then the outputs")
     s.add_argument("--tolerance", type=float, metavar="TOL", help="accuracy target (rtol = atol of dopri5)")
-    s.add_argument("--method", choices=("dopri5", "rk4"), help="integrator")
+    s.add_argument("--method", choices=("dopri5", "dop853", "rk4"), help="integrator")
     s.add_argument("--step", type=float, help="rk4 step (s)")
     s.add_argument("--output-interval", type=float, help="output grid interval (s)")
     fg = sub.add_parser("figures", help="run the paper's scene groups in process and plot Figs. 3-5, 7-9 (PNG)")
@@ -52,7 +52,66 @@ def build_parser() -> argparse.ArgumentParser:
 
     _build_arguments(sub.add_parser(
         "build", help="build one FMI 2.0 co-simulation FMU per scene file (pre-check first; same as build_fmu.py)"))
+    _tooling_parsers(sub)
     return parser
+
+
+def _positive(text: str) -> float:
+    try:
+        val = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (val > 0 and val < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
+    return val
+
+
+def _jobs(text: str) -> int:
+    try:
+        val = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if val < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
+    return val
+
+
+def _tooling_parsers(sub) -> None:
+    """``run``, ``compare``, ``reproduce``: fmpy drives the FMUs (overcon.tooling)."""
+    r = sub.add_parser("run", help="simulate FMUs with fmpy, one CSV per FMU")
+    r.add_argument("fmus", nargs="+", metavar="FMU", help="FMU files or directories of them")
+    r.add_argument("--stop-time", type=_positive, metavar="T", help="stop time (s; default: the FMU's DefaultExperiment)")
+    r.add_argument("--step", type=_positive, metavar="S",
+                   help="output interval = communication step (s; default: the FMU's DefaultExperiment stepSize)")
+    r.add_argument("--out", default="results", metavar="DIR", help="directory for <model>.csv (default: results)")
+    r.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
+    c = sub.add_parser("compare", help="run FMUs of a scene group (or one FMU and a reference CSV) and compare "
+                                       "them: uniqueness verdict next to the pre-check's prediction")
+    c.add_argument("fmus", nargs="+", metavar="FMU", help="FMU files or directories of them; grouped by their "
+                                                          "scene's group (FMUs of other tools: one group)")
+    c.add_argument("--group", metavar="NAME", help="compare only this group (e.g. planar_f45)")
+    c.add_argument("--one-group", action="store_true",
+                   help="compare all FMUs given as one group, whatever their scene groups")
+    c.add_argument("--ref", metavar="CSV", help="reference result (FMI cross-check CSV) to compare one FMU against")
+    c.add_argument("--tolerance", type=_positive, metavar="TOL",
+                   help="absolute tolerance for every output (default: derived per output from the FMUs' "
+                        "solver tolerance and the output's scale)")
+    c.add_argument("--stop-time", type=_positive, metavar="T", help="stop time (s; default: DefaultExperiment, "
+                                                                  "or the reference's last time)")
+    c.add_argument("--step", type=_positive, metavar="S", help="output interval (s; default: DefaultExperiment "
+                                                             "stepSize, or the reference's spacing)")
+    c.add_argument("--out", default="comparison", metavar="DIR",
+                   help="directory for the CSVs, report.md and PNGs (default: comparison)")
+    c.add_argument("--plot", default="worst", metavar="worst|all|NAME,...",
+                   help="outputs plotted per group (default: the deciding output with the largest difference)")
+    c.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
+    p = sub.add_parser("reproduce", help="the main job: build the paper's FMUs, pre-check, run with fmpy, compare "
+                                         "every group, write report.md with the verdicts and Figs. 3-5, 7-9")
+    p.add_argument("--out", default="reproduce", metavar="DIR", help="output directory (default: reproduce)")
+    p.add_argument("--mechanisms", default="mechanisms", metavar="DIR",
+                   help="directory with the scene files (default: mechanisms)")
+    p.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
+    p.add_argument("--stop-time", type=_positive, metavar="T", help="shorter runs (s; default: the scenes' stop times)")
 
 
 def _load(args):
@@ -132,6 +191,75 @@ def cmd_build(args) -> int:
     return run_args(args)
 
 
+def _tooling_call(fn):
+    """Exit 2 for bad input, 3 for a failed simulation (overcon.tooling errors name the file)."""
+    from .tooling import InputError, SimulationFailed
+
+    try:
+        return fn()
+    except InputError as exc:
+        print(f"overcon: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except SimulationFailed as exc:
+        print(f"overcon: simulation failed: {exc}", file=sys.stderr)
+        return EXIT_RUNTIME
+
+
+def cmd_run(args) -> int:
+    from .tooling.pipeline import run_paths
+
+    def go():
+        start = time.perf_counter()
+        res = run_paths(args.fmus, args.out, stop_time=args.stop_time, step=args.step, jobs=args.jobs)
+        print(f"{len(res)} FMU(s) run in {time.perf_counter() - start:.1f} s; CSVs in {args.out}/")
+        return EXIT_OK
+
+    return _tooling_call(go)
+
+
+def cmd_compare(args) -> int:
+    from .tooling.pipeline import compare_paths, compare_with_reference
+
+    plots = args.plot if args.plot in ("worst", "all") else [n for n in args.plot.split(",") if n]
+
+    def go():
+        start = time.perf_counter()
+        if args.ref is not None:
+            if len(args.fmus) != 1 or args.group:
+                print("overcon: --ref compares exactly one FMU file against the CSV (no --group)", file=sys.stderr)
+                return EXIT_INPUT
+            out = compare_with_reference(args.fmus[0], args.ref, args.out, tolerance=args.tolerance,
+                                         stop_time=args.stop_time, step=args.step, plots=plots)
+        else:
+            out = compare_paths(args.fmus, args.out, group=args.group, one_group=args.one_group,
+                                tolerance=args.tolerance,
+                                stop_time=args.stop_time, step=args.step, jobs=args.jobs, plots=plots)
+        bad = [c.group for c in out.comparisons if not c.matches]
+        print(f"report: {out.report} ({time.perf_counter() - start:.1f} s)")
+        if bad:
+            print(f"overcon: verdict differs from the prediction (or the reference) for: {', '.join(bad)}",
+                  file=sys.stderr)
+            return EXIT_NONUNIQUE
+        return EXIT_OK
+
+    return _tooling_call(go)
+
+
+def cmd_reproduce(args) -> int:
+    from .tooling.pipeline import reproduce
+
+    def go():
+        out = reproduce(args.out, mechanisms=args.mechanisms, jobs=args.jobs, stop_time=args.stop_time)
+        n_bad = sum(not c.matches for c in out.comparisons)
+        print(f"\n{len(out.comparisons)} groups compared, "
+              + ("every observed verdict equals its prediction" if not n_bad else f"{n_bad} MISMATCH(ES)")
+              + f"; total wall time {out.seconds['total']:.1f} s")
+        print(f"report: {out.report}  (figures: {', '.join(p.name for p in out.figures) or 'none'})")
+        return EXIT_OK if not n_bad else EXIT_NONUNIQUE
+
+    return _tooling_call(go)
+
+
 def main(argv=None) -> int:
     from .model import ModelError
     from .scene import SceneError
@@ -139,7 +267,8 @@ def main(argv=None) -> int:
 
     args = build_parser().parse_args(argv)
     handler = {"check": cmd_check, "simulate": cmd_simulate, "figures": cmd_figures,
-               "build": cmd_build}[args.command]
+               "build": cmd_build, "run": cmd_run, "compare": cmd_compare,
+               "reproduce": cmd_reproduce}[args.command]
     try:
         return handler(args)
     except SceneError as exc:  # already names file and field

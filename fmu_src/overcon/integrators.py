@@ -8,6 +8,8 @@ integrator state is a few arrays (``get_state``/``set_state`` give an exact roun
   output. The Butcher tableau (C, A, B, E, P) is taken from SciPy's ``RK45`` class (data only; the
   stepping loop is ours so that its state can be saved and restored bit for bit). Tolerances:
   ``rtol = atol = tolerance``; ``max_step`` caps the step.
+- ``dop853``: Dormand-Prince 8(5,3) (Hairer's DOP853) with 7th-order dense output; far more
+  accurate per step at tight tolerances.
 - ``rk4``: classical fixed-step Runge-Kutta 4 with step ``step`` (s); dense output by cubic Hermite
   interpolation between steps (4th order in y at the steps, 3rd order between them).
 
@@ -17,6 +19,7 @@ caller.
 from __future__ import annotations
 
 import numpy as np
+from scipy.integrate._ivp import dop853_coefficients as _D853
 from scipy.integrate._ivp.rk import RK45 as _RK45
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
@@ -30,9 +33,8 @@ class StiffnessDetected(ArithmeticError):
     """The explicit method's step is limited by stability, not accuracy (Hairer's test)."""
 
 
-STIFF_H_RHO = 3.25
 STIFF_STEPS = 15
-"""dopri5 stiffness test (Hairer & Wanner, DOPRI5): h * rho > 3.25 on 15 accepted steps (a run of
+"""Stiffness test of Hairer's DOPRI5/DOP853: h * rho > 3.25 (dopri5) or 6.1 (dop853) on 15 accepted steps (a run of
 six non-stiff steps resets the count),
 rho = |f(y_new) - f(y_6)| / |y_new - y_6| estimating the dominant eigenvalue. Stiff steps are
 counted (``stiff_steps``, reported); when stability also forces the step below
@@ -41,13 +43,20 @@ the run stops with StiffnessDetected instead of crawling."""
 STIFF_STEP_FRACTION = 0.01
 
 
-class Dopri5:
-    C, A, B, E, P = _RK45.C, _RK45.A, _RK45.B, _RK45.E, _RK45.P
-    n_stages = 6
-    error_order = 4
+class AdaptiveRK:
+    """Embedded explicit Runge-Kutta pair with step-size control (the loop of SciPy's
+    ``RungeKutta``, with plain-array state). Subclasses give the tableau, the error norm, the
+    stiffness threshold and the dense output."""
 
-    def __init__(self, fun, t0, y0, *, tolerance, max_step, first_step=None, detect_stiffness=True, **_):
+    n_stages: int
+    error_order: int
+    stiff_h_rho: float
+    name: str
+
+    def __init__(self, fun, t0, y0, *, tolerance, max_step, first_step=None, detect_stiffness=True,
+                 dense_fun=None, **_):
         self.fun = fun
+        self.dense_fun = dense_fun or fun  # evaluations for dense output only (must not alter state)
         self.detect_stiffness = detect_stiffness
         self.n_stiff = self.n_nonstiff = self.stiff_steps = 0
         self.rtol = self.atol = float(tolerance)
@@ -58,14 +67,16 @@ class Dopri5:
         self.h = min(self.max_step, first_step or 1e-4)
         self.nfev = 1
         self.nsteps = 0
-        # dense output of the last accepted step: (t_old, y_old, h, Q)
-        self.t_old, self.y_old, self.Q = self.t, self.y.copy(), None
+        # the last accepted step: t_old, y_old, h_old and its stages K
+        self.t_old, self.y_old, self.h_old, self.K = self.t, self.y.copy(), 0.0, None
+        self._dense_cache = None
 
     def step(self) -> None:
         t, y, f = self.t, self.y, self.f
         n = y.size
         min_step = 10.0 * np.abs(np.nextafter(t, np.inf) - t)
         h = min(self.h, self.max_step)
+        exponent = -1 / (self.error_order + 1)
         while True:
             if h < min_step:
                 raise StepSizeTooSmall(f"t = {t:.9g} s: step size {h:.3g} s below the minimum")
@@ -80,21 +91,21 @@ class Dopri5:
             K[-1] = f_new
             self.nfev += self.n_stages
             scale = self.atol + np.maximum(np.abs(y), np.abs(y_new)) * self.rtol
-            err = np.sqrt(np.mean(((K.T @ self.E) * h / scale) ** 2))
+            err = self._error_norm(K, h, scale)
             if err < 1.0:
-                factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR, SAFETY * err ** (-1 / (self.error_order + 1)))
-                self.t_old, self.y_old, self.h_old = t, y, h
-                self.Q = K.T @ self.P
+                factor = MAX_FACTOR if err == 0 else min(MAX_FACTOR, SAFETY * err ** exponent)
+                self.t_old, self.y_old, self.h_old, self.K = t, y, h, K
+                self._dense_cache = None
                 self.t, self.y, self.f = t + h, y_new, f_new
                 self.h = h * factor
                 self.nsteps += 1
                 self._stiffness_test(h, K[-1] - K[-2], y_new - y_stage)
                 return
-            h *= max(MIN_FACTOR, SAFETY * err ** (-1 / (self.error_order + 1)))
+            h *= max(MIN_FACTOR, SAFETY * err ** exponent)
 
     def _stiffness_test(self, h, df, dy) -> None:
         den = float(dy @ dy)
-        if den > 0.0 and h * np.sqrt(float(df @ df) / den) > STIFF_H_RHO:
+        if den > 0.0 and h * np.sqrt(float(df @ df) / den) > self.stiff_h_rho:
             self.n_stiff, self.n_nonstiff = self.n_stiff + 1, 0
         else:
             self.n_nonstiff += 1
@@ -104,30 +115,97 @@ class Dopri5:
             self.stiff_steps += 1
         if self.n_stiff >= STIFF_STEPS and self.detect_stiffness and h < STIFF_STEP_FRACTION * self.max_step:
             raise StiffnessDetected(
-                f"t = {self.t:.9g} s: the problem is stiff for dopri5 (step {h:.3g} s limited by "
+                f"t = {self.t:.9g} s: the problem is stiff for {self.name} (step {h:.3g} s limited by "
                 f"stability on {STIFF_STEPS} steps in a row); e.g. a small friction regularisation "
                 "velocity: increase v_reg or use a method for stiff problems")
 
     def dense(self, t: float) -> np.ndarray:
         if t == self.t:
             return self.y.copy()
-        x = (t - self.t_old) / self.h_old
-        p = np.cumprod(np.full(self.Q.shape[1], x))
-        return self.y_old + self.h_old * (self.Q @ p)
+        if self._dense_cache is None:
+            self._dense_cache = self._dense_setup()
+        return self._dense_eval(self._dense_cache, (t - self.t_old) / self.h_old)
 
     def get_state(self) -> dict:
         return {"t": self.t, "y": self.y.copy(), "f": self.f.copy(), "h": self.h,
-                "t_old": self.t_old, "y_old": self.y_old.copy(), "h_old": getattr(self, "h_old", 0.0),
-                "Q": None if self.Q is None else self.Q.copy(), "nfev": self.nfev, "nsteps": self.nsteps,
-                "n_stiff": self.n_stiff, "n_nonstiff": self.n_nonstiff,
-                "stiff_steps": self.stiff_steps}
+                "t_old": self.t_old, "y_old": self.y_old.copy(), "h_old": self.h_old,
+                "K": None if self.K is None else self.K.copy(), "nfev": self.nfev, "nsteps": self.nsteps,
+                "n_stiff": self.n_stiff, "n_nonstiff": self.n_nonstiff, "stiff_steps": self.stiff_steps}
 
     def set_state(self, s: dict) -> None:
         self.t, self.y, self.f, self.h = s["t"], s["y"].copy(), s["f"].copy(), s["h"]
         self.t_old, self.y_old, self.h_old = s["t_old"], s["y_old"].copy(), s["h_old"]
-        self.Q = None if s["Q"] is None else s["Q"].copy()
+        self.K = None if s["K"] is None else s["K"].copy()
+        self._dense_cache = None
         self.nfev, self.nsteps = s["nfev"], s["nsteps"]
         self.n_stiff, self.n_nonstiff, self.stiff_steps = s["n_stiff"], s["n_nonstiff"], s["stiff_steps"]
+
+
+class Dopri5(AdaptiveRK):
+    """Dormand-Prince 5(4), 4th-order dense output (tableau from SciPy's RK45)."""
+
+    C, A, B, E, P = _RK45.C, _RK45.A, _RK45.B, _RK45.E, _RK45.P
+    n_stages = 6
+    error_order = 4
+    stiff_h_rho = 3.25
+    name = "dopri5"
+
+    def _error_norm(self, K, h, scale):
+        return np.sqrt(np.mean(((K.T @ self.E) * h / scale) ** 2))
+
+    def _dense_setup(self):
+        return self.K.T @ self.P
+
+    def _dense_eval(self, Q, x):
+        p = np.cumprod(np.full(Q.shape[1], x))
+        return self.y_old + self.h_old * (Q @ p)
+
+
+class Dop853(AdaptiveRK):
+    """Dormand-Prince 8(5,3) (Hairer's DOP853) with its 7th-order dense output, which needs three
+    extra stages per step; they are evaluated only when an output falls inside the step, with
+    ``dense_fun`` (which must not change the integration's state, so outputs never alter the
+    trajectory). Coefficients from SciPy's ``dop853_coefficients``."""
+
+    n_stages = _D853.N_STAGES
+    A = _D853.A[:n_stages, :n_stages]
+    B = _D853.B
+    C = _D853.C[:n_stages]
+    E3, E5, D = _D853.E3, _D853.E5, _D853.D
+    A_EXTRA = _D853.A[n_stages + 1:]
+    C_EXTRA = _D853.C[n_stages + 1:]
+    error_order = 7
+    stiff_h_rho = 6.1
+    name = "dop853"
+
+    def _error_norm(self, K, h, scale):
+        err5 = (K.T @ self.E5) / scale
+        err3 = (K.T @ self.E3) / scale
+        e5, e3 = float(err5 @ err5), float(err3 @ err3)
+        if e5 == 0.0 and e3 == 0.0:
+            return 0.0
+        return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * len(scale))
+
+    def _dense_setup(self):
+        h, n = self.h_old, self.y.size
+        K = np.empty((_D853.N_STAGES_EXTENDED, n))
+        K[: self.n_stages + 1] = self.K
+        for s, (a, c) in enumerate(zip(self.A_EXTRA, self.C_EXTRA), start=self.n_stages + 1):
+            K[s] = self.dense_fun(self.t_old + c * h, self.y_old + (K[:s].T @ a[:s]) * h)
+        F = np.empty((_D853.INTERPOLATOR_POWER, n))
+        delta = self.y - self.y_old
+        F[0] = delta
+        F[1] = h * K[0] - delta
+        F[2] = 2 * delta - h * (self.f + K[0])
+        F[3:] = h * (self.D @ K)
+        return F
+
+    def _dense_eval(self, F, x):
+        y = np.zeros_like(self.y_old)
+        for i, f in enumerate(F[::-1]):
+            y += f
+            y *= x if i % 2 == 0 else 1 - x
+        return y + self.y_old
 
 
 class RK4:
@@ -177,4 +255,4 @@ class RK4:
         self.nfev, self.nsteps = s["nfev"], s["nsteps"]
 
 
-METHODS = {"dopri5": Dopri5, "rk4": RK4}
+METHODS = {"dopri5": Dopri5, "dop853": Dop853, "rk4": RK4}

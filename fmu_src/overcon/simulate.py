@@ -129,7 +129,7 @@ class Simulation:
         t0 = model.scene.start_time if start_time is None else start_time
         y0 = np.concatenate([model.q0, model.h0])
         try:
-            self._integrator = METHODS[self.method](self._rhs, t0, y0, **self.settings)
+            self._integrator = METHODS[self.method](self._rhs, t0, y0, dense_fun=self._rhs_dense, **self.settings)
             self.monitor = SingularityMonitor(model, y0)
         except (ArithmeticError, np.linalg.LinAlgError) as exc:
             where = "" if str(exc).startswith("t = ") else f"t = {t0:.9g} s: "
@@ -147,6 +147,13 @@ class Simulation:
         if not np.all(np.isfinite(out)):
             raise SimulationError(f"t = {t:.9g} s: non-finite derivative")
         return out
+
+    def _rhs_dense(self, t: float, y: np.ndarray) -> np.ndarray:
+        """Right-hand side for dense-output stages only: warm-started from the integrator's lam but
+        leaving it (and the counters) unchanged, so reading outputs never alters the trajectory."""
+        q, h = y[: self.n], y[self.n:]
+        ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy())
+        return np.concatenate([coordinate_rates(self.model, q, h), ev.hdot])
 
     # -- stepping --------------------------------------------------------------------------
     @property

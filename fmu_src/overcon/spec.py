@@ -101,7 +101,7 @@ FRICTION_LAWS = ("coulomb", "regularised", "stribeck")
 integration), B ``regularised`` (mu*clip(v/v_reg, -1, 1), the paper's choice), C ``stribeck``
 (B with a Stribeck peak)."""
 
-METHODS = ("dopri5", "rk4")
+METHODS = ("dopri5", "dop853", "rk4")
 """Integrators offered (see :mod:`overcon.integrators`)."""
 
 

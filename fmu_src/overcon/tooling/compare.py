@@ -1,0 +1,246 @@
+"""Compare results on one time grid: per output the largest difference, the first time it exceeds
+its tolerance, and a uniqueness verdict per group next to the pre-check's prediction.
+
+Rules (also stated in every report, :func:`rules_text`):
+
+* **Grid**: results are compared sample by sample; their time columns must be identical (to
+  1e-9 of the step). No interpolation: a mismatch is bad input (exit 2); run the FMUs with the
+  same ``--stop-time``/``--step`` instead.
+* **Differences** (group mode): every variant against the first one (paper order: without eq. 4
+  before without eq. 6; 5 < 9 < 18). ``max abs`` = max over variants and samples of
+  |y_k(t) − y_0(t)|; ``max rel`` = max abs / scale, where scale = max |y| over all variants and
+  samples of that output (not given for outputs that are zero, scale <= 1e-12).
+* **Tolerance** per output = :func:`overcon.paper.uniqueness_tolerance` (solver tolerance, scale),
+  the solver tolerance being the largest DefaultExperiment tolerance of the FMUs compared (the
+  tolerance they integrate at); ``--tolerance`` replaces it by one absolute value for every output.
+* **What decides the verdict** (group mode): the positions (outputs in m or rad) only. Joint
+  reactions are reported but never decide: the reactions of joints whose reaction is not unique
+  differ between eliminations even when the motion is unique (paper §2.1), and the reactions of
+  joints flagged unique carry the (tolerance-sized) position differences amplified through the
+  accelerations and the stiff regularised friction law: in spatial_MN (unique motion) positions
+  differ by 6e-7 m but the reactions of M, N by 8e-3 N, 1000 × a force tolerance derived like
+  the position one. They are reported per joint, with the pre-check's ``reaction_unique``. FMUs
+  with no position outputs (other tools' FMUs): every common output decides.
+* **Reference mode** (one FMU against a CSV): every common output decides.
+* **Prediction**: the FMUs' constant ``motion_unique`` outputs (the pre-check); all FMUs of a
+  group must agree. FMUs without it: the group is expected to be unique.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..paper import uniqueness_tolerance
+from . import InputError
+from .fmus import FmuInfo
+from .run import Series
+
+GRID_RTOL = 1e-9  # of the step: time columns equal to this are the same grid
+REL_FLOOR = 1e-12  # outputs with max |y| below this are zero: no relative difference
+
+
+@dataclass
+class OutputDiff:
+    name: str
+    unit: str | None
+    kind: str  # position, reaction, other
+    decides: bool
+    tolerance: float
+    scale: float
+    max_abs: float
+    max_rel: float | None  # None: the output is zero (scale <= REL_FLOOR)
+    first_exceed: float | None  # first time the difference exceeds the tolerance
+    reaction_unique: bool | None = None  # reactions: the pre-check's verdict for the joint
+
+    @property
+    def within(self) -> bool:
+        return self.max_abs <= self.tolerance
+
+
+@dataclass
+class Comparison:
+    group: str
+    labels: list[str]
+    infos: list[FmuInfo]
+    series: list[Series]
+    diffs: list[OutputDiff]
+    predicted: bool | None  # None: no prediction (reference mode, or FMUs of other tools)
+    solver_tolerance: float | None
+    tolerance_override: float | None
+    reference: Path | None = None
+    wall_seconds: list[float] = field(default_factory=list)
+
+    @property
+    def observed(self) -> bool:
+        """Unique (group mode) / within tolerance (reference mode)."""
+        return all(d.within for d in self.diffs if d.decides)
+
+    @property
+    def expected(self) -> bool:
+        return True if self.predicted is None else self.predicted
+
+    @property
+    def matches(self) -> bool:
+        return self.observed == self.expected
+
+    def worst(self, *, deciding: bool = True) -> OutputDiff | None:
+        """The deciding output with the largest difference relative to its tolerance."""
+        ds = [d for d in self.diffs if d.decides or not deciding]
+        return max(ds, key=lambda d: (d.max_abs / d.tolerance if d.tolerance > 0 else np.inf, d.max_abs),
+                   default=None)
+
+    def max_diff_by_unit(self, *, deciding: bool = True) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for d in self.diffs:
+            if d.decides or not deciding:
+                out[d.unit or ""] = max(out.get(d.unit or "", 0.0), d.max_abs)
+        return out
+
+    def verdict_text(self, value: bool | None = None) -> str:
+        v = self.observed if value is None else value
+        if self.reference is not None:
+            return "within tolerance" if v else "differs"
+        return "unique" if v else "not unique"
+
+
+def check_grids(series: list[Series], sources: list[str]) -> None:
+    """Identical time columns, or :class:`InputError` naming the files and their grids."""
+    t0 = series[0].time
+    step = float(np.min(np.diff(t0))) if len(t0) > 1 else 1.0
+    for s, src in zip(series[1:], sources[1:]):
+        same = len(s.time) == len(t0) and np.all(np.abs(s.time - t0) <= GRID_RTOL * step)
+        if not same:
+            raise InputError(
+                f"mismatched time grids: {sources[0]} has {_grid_text(t0)}, {src} has {_grid_text(s.time)}; "
+                "results are compared sample by sample (no interpolation): run them with the same "
+                "--stop-time and --step")
+
+
+def _grid_text(t: np.ndarray) -> str:
+    d = np.diff(t)
+    spacing = f"every {d[0]:g} s" if len(d) and np.allclose(d, d[0], rtol=1e-9, atol=0) else "non-uniform"
+    return f"{len(t)} points, t = {t[0]:g}..{t[-1]:g} s {spacing}"
+
+
+def common_outputs(infos_or_names: list[list[str]], sources: list[str]) -> list[str]:
+    first = infos_or_names[0]
+    common = [n for n in first if all(n in other for other in infos_or_names[1:])]
+    if not common:
+        raise InputError("no common outputs: " + "; ".join(
+            f"{src} has {', '.join(names[:4])}{', ...' if len(names) > 4 else ''}"
+            for src, names in zip(sources, infos_or_names)))
+    return common
+
+
+def _solver_tolerance(infos: list[FmuInfo], override: float | None) -> float | None:
+    tols = [i.tolerance for i in infos if i.tolerance is not None]
+    if override is None and not tols:
+        raise InputError(f"{infos[0].path}: no DefaultExperiment tolerance to derive the comparison "
+                         "tolerance from: give --tolerance")
+    return max(tols) if tols else None
+
+
+def _diff(name, unit, kind, decides, ref: np.ndarray, others: list[np.ndarray], time: np.ndarray,
+          solver_tol, override, reaction_unique=None) -> OutputDiff:
+    scale = float(max(np.max(np.abs(ref)), *(np.max(np.abs(o)) for o in others)))
+    dev = np.max(np.abs(np.stack([o - ref for o in others])), axis=0)
+    max_abs = float(np.max(dev))
+    tol = float(override) if override is not None else uniqueness_tolerance(solver_tol, scale)
+    over = np.nonzero(dev > tol)[0]
+    return OutputDiff(name, unit, kind, decides, tol, scale, max_abs, max_abs / scale if scale > REL_FLOOR else None,
+                      float(time[over[0]]) if len(over) else None, reaction_unique)
+
+
+def validate_group(group: str, infos: list[FmuInfo]) -> tuple[list[str], bool | None]:
+    """Before running: at least two FMUs, common outputs, one prediction. Returns (common output
+    names, prediction); :class:`InputError` otherwise."""
+    if len(infos) < 2:
+        raise InputError(f"group {group}: only {infos[0].path} — nothing to compare (give at least two "
+                         "FMUs, or --ref CSV)")
+    names = common_outputs([i.output_names for i in infos], [str(i.path) for i in infos])
+    preds = {i.motion_unique for i in infos}
+    if len(preds) > 1:
+        raise InputError(f"group {group}: the FMUs disagree on the pre-check's motion_unique ("
+                         + ", ".join(f"{i.path.name}: {i.motion_unique}" for i in infos)
+                         + "): they do not share a friction set; compare them in separate groups")
+    return names, preds.pop()
+
+
+def compare_group(group: str, infos: list[FmuInfo], series: list[Series], *,
+                  tolerance: float | None = None) -> Comparison:
+    """Variants of one group (same outputs, different eliminations) against the first one."""
+    names, predicted = validate_group(group, infos)
+    check_grids(series, [str(i.path) for i in infos])
+    solver_tol = _solver_tolerance(infos, tolerance)
+    meta = {o.name: o for o in infos[0].outputs}
+    has_positions = any(meta[n].kind == "position" for n in names)
+    diffs = []
+    for n in names:
+        o = meta[n]
+        decides = o.kind == "position" if has_positions else True
+        ru = None
+        if o.kind == "reaction":
+            vals = {i.reaction_unique.get(o.joint) for i in infos}
+            ru = vals.pop() if len(vals) == 1 else None
+        diffs.append(_diff(n, o.unit, o.kind, decides, series[0].values[n], [s.values[n] for s in series[1:]],
+                           series[0].time, solver_tol, tolerance, ru))
+    return Comparison(group, [i.label for i in infos], infos, series, diffs, predicted, solver_tol, tolerance)
+
+
+def compare_reference(info: FmuInfo, result: Series, ref: Series, ref_path: Path, *,
+                      tolerance: float | None = None) -> Comparison:
+    """One FMU run against a reference CSV: every common output decides."""
+    check_grids([ref, result], [str(ref_path), str(info.path)])
+    names = common_outputs([ref.names, result.names], [str(ref_path), str(info.path)])
+    solver_tol = _solver_tolerance([info], tolerance)
+    meta = {o.name: o for o in info.outputs}
+    diffs = []
+    for n in names:
+        o = meta.get(n)
+        diffs.append(_diff(n, o.unit if o else None, o.kind if o else "other", True, ref.values[n],
+                           [result.values[n]], ref.time, solver_tol, tolerance))
+    return Comparison(info.group, ["reference", info.label], [info], [ref, result], diffs, None,
+                      solver_tol, tolerance, reference=Path(ref_path))
+
+
+def group_fmus(infos: list[FmuInfo]) -> dict[str, list[FmuInfo]]:
+    """FMUs by scene group; groups in paper order (per mechanism: predicted unique first, then by
+    number of friction joints), the FMUs of a group by eliminated equations (4 < 6; 5 < 9 < 18)."""
+    groups: dict[str, list[FmuInfo]] = {}
+    for i in infos:
+        groups.setdefault(i.group, []).append(i)
+    return order_groups(groups)
+
+
+def order_groups(groups: dict[str, list[FmuInfo]]) -> dict[str, list[FmuInfo]]:
+    """Groups in paper order, FMUs of a group by eliminated equations (see :func:`group_fmus`)."""
+
+    def key(i: FmuInfo):
+        e = i.eliminate
+        return (0 if isinstance(e, tuple) else 1, e if isinstance(e, tuple) else (), i.model)
+
+    def group_key(item):  # paper order: per mechanism, predicted unique first, fewer friction joints first
+        g, v = item
+        return (v[0].mechanism, v[0].motion_unique is False, len(v[0].friction), g)
+
+    return {g: sorted(v, key=key) for g, v in sorted(groups.items(), key=group_key)}
+
+
+def rules_text(comparisons: list[Comparison]) -> str:
+    tols = sorted({c.solver_tolerance for c in comparisons if c.solver_tolerance is not None})
+    override = {c.tolerance_override for c in comparisons} - {None}
+    if override:
+        tol = f"absolute tolerance {', '.join(f'{t:g}' for t in sorted(override))} (--tolerance) for every output"
+    else:
+        from ..paper import UNIQUE_FACTOR
+
+        tol = (f"per output uniqueness_tolerance(solver tolerance, scale) = {UNIQUE_FACTOR:g} × solver "
+               f"tolerance × max(1, scale), scale = max |y| of the output; solver tolerance (the FMUs' "
+               f"DefaultExperiment tolerance) {', '.join(f'{t:g}' for t in tols)}")
+    return (f"Tolerance: {tol}. Results are compared sample by sample on identical time grids (no "
+            "interpolation); differences are taken against the first variant. The verdict of a group "
+            "comes from the positions (outputs in m or rad); reactions are reported but do not decide "
+            "(non-unique reactions differ legitimately when the motion is unique). Reference mode: "
+            "every common output decides. Prediction: the FMUs' constant output `motion_unique` (pre-check).")

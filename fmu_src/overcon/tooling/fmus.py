@@ -1,0 +1,186 @@
+"""What the tooling needs to know about an FMU before running it, read without loading its binary.
+
+From ``modelDescription.xml`` (fmpy's reader): model identifier, DefaultExperiment, the Real
+outputs with their units, and the constant Boolean outputs an overcon FMU carries
+(``motion_unique``, ``<joint>.reaction_unique``: the pre-check's predictions). From an overcon
+FMU's ``resources/`` (``overcon_fmu.json`` and the bundled scene file, loaded with
+:func:`overcon.scene.load`): group, friction set, eliminated equations and the paper-style label
+(:func:`overcon.paper.variant_label`). FMUs of other tools form one group, :data:`OTHER_GROUP`,
+are labelled with their model name and carry no prediction.
+"""
+from __future__ import annotations
+
+import json
+import posixpath
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from . import InputError
+
+POSITION_UNITS = ("m", "rad")
+OTHER_GROUP = "fmus"  # the group of FMUs without an overcon scene (other tools): compared together
+REACTION_UNITS = ("N", "N.m")
+
+
+@dataclass(frozen=True)
+class Output:
+    """A Real output. ``kind``: "position" (unit m or rad), "reaction" (N or N.m) or "other"."""
+
+    name: str
+    unit: str | None
+    kind: str
+
+    @property
+    def joint(self) -> str:
+        return self.name.rsplit(".", 1)[0]
+
+
+@dataclass(frozen=True)
+class FmuInfo:
+    path: Path
+    model: str  # co-simulation model identifier (= scene name for overcon FMUs)
+    start: float
+    stop: float
+    step: float | None  # DefaultExperiment stepSize (None: not given)
+    tolerance: float | None  # DefaultExperiment tolerance
+    outputs: tuple[Output, ...]
+    group: str
+    label: str  # legend label, e.g. "without eq. 4"
+    mechanism: str = ""
+    friction: tuple[str, ...] = ()
+    eliminate: tuple[int, ...] | str | None = None
+    motion_unique: bool | None = None  # pre-check prediction (None: not an overcon FMU)
+    reaction_unique: dict = field(default_factory=dict)  # joint -> bool
+
+    @property
+    def output_names(self) -> list[str]:
+        return [o.name for o in self.outputs]
+
+    def eliminate_text(self) -> str:
+        if self.eliminate is None:
+            return ""
+        if self.eliminate == "auto":
+            return "auto"
+        return ", ".join(f"Φ{k}" for k in self.eliminate) or "none"
+
+
+def fmu_paths(paths) -> list[Path]:
+    """FMU files given, and the ``*.fmu`` files of directories given (sorted, not recursive)."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(p.glob("*.fmu"))
+            if not found:
+                raise InputError(f"{p}: directory contains no .fmu files")
+            out.extend(found)
+        else:
+            out.append(p)
+    return out
+
+
+def _bool(text) -> bool | None:
+    if text is None:
+        return None
+    return str(text).strip().lower() in ("true", "1")
+
+
+def _scene_facts(path: Path, zf: zipfile.ZipFile) -> dict:
+    """Group, label, friction, eliminate, mechanism from the FMU's bundled scene (overcon FMUs)."""
+    try:
+        manifest = json.loads(zf.read("resources/overcon_fmu.json"))
+    except KeyError:
+        return {}
+    except (ValueError, zipfile.BadZipFile, OSError) as exc:
+        raise InputError(f"{path}: resources/overcon_fmu.json unreadable: {exc}") from exc
+    facts = {"motion_unique": manifest.get("motion_unique"),
+             "reaction_unique": dict(manifest.get("reaction_unique") or {})}
+    scene_rel = manifest.get("scene")
+    if not scene_rel:
+        return facts
+    from .. import scene as scene_mod
+    from ..paper import variant_label
+
+    with tempfile.TemporaryDirectory(prefix="overcon-scene-") as tmp:
+        for name in zf.namelist():
+            if name.startswith("resources/scene/") and not name.endswith("/"):
+                rel = posixpath.normpath(name[len("resources/"):])
+                if rel.startswith(".."):
+                    continue
+                dest = Path(tmp, *rel.split("/"))
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                dest.write_bytes(zf.read(name))
+        try:
+            spec = scene_mod.load(Path(tmp, *scene_rel.split("/")))
+        except (scene_mod.SceneError, OSError) as exc:
+            raise InputError(f"{path}: bundled scene file {scene_rel} invalid: {exc}") from exc
+    facts.update(group=spec.group or spec.name, label=variant_label(spec), friction=tuple(spec.friction),
+                 eliminate=spec.eliminate, mechanism=spec.mechanism.name)
+    return facts
+
+
+def inspect_fmu(path) -> FmuInfo:
+    """Read an FMU's description; :class:`InputError` naming the file if it is missing, not a zip
+    archive, has no readable modelDescription.xml, is not co-simulation or has no Real outputs."""
+    from fmpy import read_model_description
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such FMU file")
+    if not path.is_file():
+        raise InputError(f"{path}: not a file")
+    if not zipfile.is_zipfile(path):
+        raise InputError(f"{path}: not an FMU (not a zip archive; corrupt or truncated file?)")
+    try:
+        md = read_model_description(str(path), validate=False)
+    except Exception as exc:  # fmpy raises plain Exceptions, lxml errors, KeyError, BadZipFile
+        raise InputError(f"{path}: cannot read modelDescription.xml: {type(exc).__name__}: {exc}") from exc
+    if md.coSimulation is None:
+        raise InputError(f"{path}: not a co-simulation FMU (only FMI co-simulation FMUs are run)")
+    outputs, constants = [], {}
+    for v in md.modelVariables:
+        if v.causality != "output":
+            continue
+        if v.type == "Real" and v.variability != "constant":
+            unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+            kind = "position" if unit in POSITION_UNITS else "reaction" if unit in REACTION_UNITS else "other"
+            outputs.append(Output(v.name, unit, kind))
+        elif v.type == "Boolean" and v.variability == "constant":
+            constants[v.name] = _bool(v.start)
+    if not outputs:
+        raise InputError(f"{path}: the FMU has no Real outputs to record")
+    ex = md.defaultExperiment
+    start = float(ex.startTime) if ex is not None and ex.startTime is not None else 0.0
+    stop = float(ex.stopTime) if ex is not None and ex.stopTime is not None else start + 1.0
+    step = float(ex.stepSize) if ex is not None and ex.stepSize is not None else None
+    tol = float(ex.tolerance) if ex is not None and ex.tolerance is not None else None
+    try:
+        with zipfile.ZipFile(path) as zf:
+            facts = _scene_facts(path, zf)
+    except zipfile.BadZipFile as exc:
+        raise InputError(f"{path}: corrupt FMU archive: {exc}") from exc
+    model = md.coSimulation.modelIdentifier
+    reaction_unique = {name[: -len(".reaction_unique")]: val for name, val in constants.items()
+                       if name.endswith(".reaction_unique")} or facts.get("reaction_unique", {})
+    motion_unique = constants.get("motion_unique", facts.get("motion_unique"))
+    return FmuInfo(path=path, model=model, start=start, stop=stop, step=step, tolerance=tol,
+                   outputs=tuple(outputs), group=facts.get("group", OTHER_GROUP), label=facts.get("label", model),
+                   mechanism=facts.get("mechanism", ""), friction=facts.get("friction", ()),
+                   eliminate=facts.get("eliminate"), motion_unique=motion_unique,
+                   reaction_unique=reaction_unique)
+
+
+def inspect_all(paths) -> list[FmuInfo]:
+    """:func:`inspect_fmu` for every FMU of :func:`fmu_paths`; all problems in one InputError."""
+    infos, problems = [], []
+    for p in fmu_paths(paths):
+        try:
+            infos.append(inspect_fmu(p))
+        except InputError as exc:
+            problems.append(str(exc))
+    if problems:
+        raise InputError("\n".join(problems))
+    if not infos:
+        raise InputError("no FMU given")
+    return infos

@@ -1,0 +1,281 @@
+"""The commands as library functions: run FMUs, compare groups or against a reference, and the
+main job :func:`reproduce` (build every paper scene, pre-check, run, compare, report).
+
+Each returns data (results, comparisons); printing goes through ``echo``; bad input raises
+:class:`~overcon.tooling.InputError`, a failed simulation :class:`~overcon.tooling.SimulationFailed`.
+"""
+from __future__ import annotations
+
+import math
+import os
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import InputError
+from .compare import Comparison, compare_group, compare_reference, group_fmus, order_groups, validate_group
+from .fmus import FmuInfo, inspect_all, inspect_fmu
+from .report import console_table, markdown, plot_comparison, verdict_line
+from .run import Experiment, RunResult, experiment, read_series, run_fmus
+
+
+def _echo(s: str) -> None:
+    print(s, flush=True)
+
+
+def _same_experiment(a: Experiment, b: Experiment) -> bool:
+    return all(math.isclose(x, y, rel_tol=1e-12, abs_tol=1e-12) for x, y in
+               ((a.start, b.start), (a.stop, b.stop), (a.step, b.step)))
+
+
+def run_paths(paths, out_dir, *, stop_time=None, step=None, jobs: int = 2, echo=_echo) -> list[RunResult]:
+    """``overcon run``: every FMU (files, or the *.fmu of directories) to ``out_dir/<model>.csv``."""
+    infos = inspect_all(paths)
+    return run_fmus(infos, out_dir, stop_time=stop_time, step=step, jobs=jobs, echo=echo)
+
+
+@dataclass
+class CompareOutcome:
+    comparisons: list[Comparison]
+    report: Path
+    plots: dict = field(default_factory=dict)  # group -> [png]
+    skipped: list[str] = field(default_factory=list)  # groups with one FMU
+    results: dict = field(default_factory=dict)  # model -> RunResult
+
+
+def _select(infos: list[FmuInfo], group: str | None,
+            one_group: bool = False) -> tuple[dict[str, list[FmuInfo]], list[str]]:
+    """Groups to compare (those with two FMUs or more) and the names of single-FMU groups."""
+    groups = group_fmus(infos)
+    if group is not None:
+        if group not in groups:
+            raise InputError(f"--group {group}: no such group among the FMUs given (groups: "
+                             f"{', '.join(sorted(groups))})")
+        groups = {group: groups[group]}
+    if one_group:
+        pooled = [i for items in groups.values() for i in items]
+        groups = order_groups({"+".join(groups): pooled})
+    singles = [g for g, v in groups.items() if len(v) < 2]
+    runnable = {g: v for g, v in groups.items() if len(v) >= 2}
+    if not runnable:
+        only = "; ".join(f"group {g}: {v[0].path}" for g, v in groups.items())
+        raise InputError(f"nothing to compare: every group has a single FMU ({only}); give at least two "
+                         "FMUs of one group, or one FMU with --ref CSV")
+    return runnable, singles
+
+
+def _longest_first(infos: list[FmuInfo], exps: dict[str, Experiment]) -> list[FmuInfo]:
+    """Run order for the worker pool: longest runs first (simulated time, then friction joints),
+    so that no long run starts last on an otherwise idle pool."""
+    return sorted(infos, key=lambda i: (-(exps[i.model].stop - exps[i.model].start), -len(i.friction)))
+
+
+def _group_experiments(groups: dict[str, list[FmuInfo]], stop_time, step) -> dict[str, Experiment]:
+    exps = {}
+    for g, items in groups.items():
+        ex = {i.model: experiment(i, stop_time=stop_time, step=step) for i in items}
+        first = items[0]
+        for i in items[1:]:
+            if not _same_experiment(ex[first.model], ex[i.model]):
+                a, b = ex[first.model], ex[i.model]
+                raise InputError(
+                    f"mismatched time grids in group {g}: {first.path} runs t = {a.start:g}..{a.stop:g} s every "
+                    f"{a.step:g} s, {i.path} t = {b.start:g}..{b.stop:g} s every {b.step:g} s (their "
+                    "DefaultExperiments differ); results are compared sample by sample (no interpolation): "
+                    "give --stop-time and --step to run them on one grid")
+        exps.update(ex)
+    return exps
+
+
+def compare_paths(paths, out_dir, *, group: str | None = None, one_group: bool = False,
+                  tolerance: float | None = None, stop_time=None, step=None, jobs: int = 2, plots="worst",
+                  echo=_echo, title: str = "overcon compare") -> CompareOutcome:
+    """``overcon compare``: group the FMUs by scene group (``one_group``: all of them together),
+    run them, compare each group, write ``out_dir/report.md`` and the PNGs. FMUs of one group
+    share a DefaultExperiment (or ``--stop-time``/``--step`` put them on one grid)."""
+    if tolerance is not None and not (math.isfinite(tolerance) and tolerance > 0):
+        raise InputError(f"--tolerance {tolerance!r}: must be a positive finite number")
+    out_dir = Path(out_dir)
+    infos = _dedupe(inspect_all(paths))
+    groups, singles = _select(infos, group, one_group)
+    for g in singles:
+        echo(f"{g}: one FMU only, skipped (nothing to compare it with)")
+    for g, items in groups.items():  # before any run: outputs to compare, one prediction
+        validate_group(g, items)
+    exps = _group_experiments(groups, stop_time, step)
+    todo = _longest_first([i for items in groups.values() for i in items], exps)
+    results = {r.info.model: r for r in run_fmus(todo, out_dir, jobs=jobs, echo=echo, experiments=exps)}
+    comparisons, plot_files = [], {}
+    for g, items in groups.items():
+        series = [read_series(results[i.model].csv) for i in items]
+        c = compare_group(g, items, series, tolerance=tolerance)
+        c.wall_seconds = [results[i.model].sim_seconds for i in items]
+        comparisons.append(c)
+        plot_files[g] = plot_comparison(c, out_dir, plots)
+    report = out_dir / "report.md"
+    report.write_text(markdown(comparisons, out_dir, title=title, plots=plot_files), encoding="utf-8")
+    for c in comparisons:
+        echo("")
+        echo(console_table(c))
+        echo(verdict_line(c))
+    return CompareOutcome(comparisons, report, plot_files, singles, results)
+
+
+def _dedupe(infos: list[FmuInfo]) -> list[FmuInfo]:
+    seen, out = set(), []
+    for i in infos:
+        key = i.path.resolve()
+        if key not in seen:
+            seen.add(key)
+            out.append(i)
+    return out
+
+
+def _reference_grid(ref_time: np.ndarray, ref_path: Path) -> tuple[float, float]:
+    d = np.diff(ref_time)
+    if not np.allclose(d[:-1], d[0], rtol=1e-6, atol=0) or d[-1] > d[0] * (1 + 1e-6):
+        raise InputError(f"mismatched time grids: {ref_path} is not on a uniform time grid, which an FMU run "
+                         "cannot reproduce (no interpolation)")
+    return float(ref_time[-1]), float(d[0])
+
+
+def compare_with_reference(fmu, ref_csv, out_dir, *, tolerance: float | None = None, stop_time=None,
+                           step=None, plots="worst", echo=_echo) -> CompareOutcome:
+    """``overcon compare FMU --ref CSV``: run the FMU on the reference's grid (its last time and
+    spacing, unless ``--stop-time``/``--step`` are given) and compare every common output."""
+    if tolerance is not None and not (math.isfinite(tolerance) and tolerance > 0):
+        raise InputError(f"--tolerance {tolerance!r}: must be a positive finite number")
+    out_dir = Path(out_dir)
+    ref_csv = Path(ref_csv)
+    ref = read_series(ref_csv)
+    info = inspect_fmu(fmu)
+    common = [n for n in ref.names if n in info.output_names]
+    if not common:
+        raise InputError(f"no common outputs: {ref_csv} has {', '.join(ref.names[:4])}, {info.path} has "
+                         f"{', '.join(info.output_names[:4])}")
+    ref_stop, ref_step = _reference_grid(ref.time, ref_csv)
+    ex = experiment(info, stop_time=ref_stop if stop_time is None else stop_time,
+                    step=ref_step if step is None else step)
+    n = int(round((ex.stop - ex.start) / ex.step))
+    predicted = ex.start + ex.step * np.arange(n + 1)
+    if len(predicted) != len(ref.time) or not np.allclose(predicted, ref.time, rtol=0, atol=1e-9 * ex.step):
+        raise InputError(f"mismatched time grids: {ref_csv} has {len(ref.time)} points, t = {ref.time[0]:g}.."
+                         f"{ref.time[-1]:g} s every {ref_step:g} s; {info.path} would run t = {ex.start:g}.."
+                         f"{ex.stop:g} s every {ex.step:g} s (no interpolation)")
+    results = run_fmus([info], out_dir, jobs=1, echo=echo, experiments={info.model: ex})
+    res = read_series(results[0].csv)
+    c = compare_reference(info, res, ref, ref_csv, tolerance=tolerance)
+    c.wall_seconds = [results[0].sim_seconds]
+    plot_files = {c.group: plot_comparison(c, out_dir, plots)}
+    report = out_dir / "report.md"
+    report.write_text(markdown([c], out_dir, title="overcon compare (reference)", plots=plot_files), encoding="utf-8")
+    echo("")
+    echo(console_table(c))
+    echo(verdict_line(c))
+    return CompareOutcome([c], report, plot_files, [], {info.model: results[0]})
+
+
+# ---------------------------------------------------------------------------------------------
+# the main job
+
+@dataclass
+class ReproduceOutcome:
+    comparisons: list[Comparison]
+    report: Path
+    figures: list[Path]
+    seconds: dict  # phase -> wall seconds
+
+    @property
+    def all_match(self) -> bool:
+        return all(c.matches for c in self.comparisons)
+
+
+def _figures(comparisons: list[Comparison], out_dir: Path, echo) -> list[tuple[str, Path]]:
+    """The paper's Figs. 3-5, 7-9 (:data:`overcon.paper.FIGURES`) from the FMU results."""
+    from ..paper import FIGURES
+    from ..plots import plot_series
+
+    by_group = {c.group: c for c in comparisons}
+    out = []
+    for fig in FIGURES:
+        missing = [g for g in fig.groups if g not in by_group]
+        if missing:
+            echo(f"{fig.name}: skipped (group {', '.join(missing)} not in this set)")
+            continue
+        series, t = {}, None
+        for g in fig.groups:
+            c = by_group[g]
+            if fig.output not in c.series[0].values:
+                raise InputError(f"{fig.name}: group {g} has no output {fig.output}")
+            for lab, s in zip(c.labels, c.series):
+                prefix = "" if len(fig.groups) == 1 else ("without friction, " if g.endswith("none") else "with friction, ")
+                series[prefix + lab] = s.values[fig.output]
+                t = s.time
+        p = plot_series(out_dir / f"{fig.name}.png", t, series, title=fig.title, ylabel=fig.ylabel)
+        out.append((fig.title, p))
+    return out
+
+
+def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, stop_time=None) -> ReproduceOutcome:
+    """Build an FMU per scene of ``mechanisms`` (pre-check printed, non-unique scenes built too),
+    run them with fmpy (``jobs`` processes), compare every group, write ``out_dir/report.md`` with
+    the verdict table, the paper's figures and per-group details and plots."""
+    from ..fmu.build import EXIT_INPUT, build_all
+
+    t0 = time.perf_counter()
+    out_dir = Path(out_dir)
+    mech = Path(mechanisms)
+    if not mech.is_dir():
+        raise InputError(f"{mech}: no such directory (--mechanisms: the directory of the scene files)")
+    echo(f"== build: one FMU per scene of {mech} (pre-check first) -> {out_dir / 'fmus'}")
+    code, built = build_all([mech], out_dir / "fmus", allow_nonunique=True, refs=False, jobs=jobs, echo=echo)
+    if code == EXIT_INPUT:
+        raise InputError(f"{mech}: some scenes could not be built (see above)")
+    fmus = [r.fmu for r in built if r.status == "built"]
+    if not fmus:
+        raise InputError(f"{mech}: no scene files")
+    t_build = time.perf_counter() - t0
+    infos = [inspect_fmu(f) for f in fmus]
+    groups, singles = _select(infos, None)
+    for g in singles:
+        echo(f"{g}: one scene only, not compared")
+    exps = _group_experiments(groups, stop_time, None)
+    todo = _longest_first([i for items in groups.values() for i in items], exps)
+    echo(f"== run: {len(todo)} FMUs with fmpy.simulate_fmu, {jobs} process(es) -> {out_dir / 'results'}")
+    t1 = time.perf_counter()
+    results = {r.info.model: r for r in run_fmus(todo, out_dir / "results", jobs=jobs, echo=echo, experiments=exps)}
+    t_run = time.perf_counter() - t1
+    echo("== compare")
+    comparisons = []
+    for g, items in groups.items():
+        c = compare_group(g, items, [read_series(results[i.model].csv) for i in items])
+        c.wall_seconds = [results[i.model].sim_seconds for i in items]
+        comparisons.append(c)
+        echo(verdict_line(c))
+    t2 = time.perf_counter()
+    figures = _figures(comparisons, out_dir, echo)
+    plots = {c.group: plot_comparison(c, out_dir / "groups", "worst") for c in comparisons}
+    t_plot = time.perf_counter() - t2
+    total = time.perf_counter() - t0
+    seconds = {"build": t_build, "run": t_run, "plots": t_plot, "total": total,
+               "simulation_sum": sum(r.sim_seconds for r in results.values())}
+    intro = [
+        "Frączek & Wojtyra, *Mechanism and Machine Theory* 46 (2011) 312–334: every scene of "
+        f"`{mech}` built as an FMI 2.0 co-simulation FMU (`{out_dir / 'fmus'}`), pre-checked, simulated "
+        "with `fmpy.simulate_fmu` and compared across eliminations. *Predicted*: the pre-check "
+        "(reaction uniqueness of the friction joints, paper Eq. 17), carried by each FMU as the "
+        "constant output `motion_unique`. *Observed*: whether the simulated positions agree across "
+        "the eliminations within the tolerance below. Wall time: simulation seconds per variant "
+        "(inside `simulate_fmu`).",
+        "",
+        f"Total wall time {total:.1f} s on {os.cpu_count()} CPU(s), {jobs} worker process(es) "
+        f"(build {t_build:.1f} s, simulations {t_run:.1f} s wall / {seconds['simulation_sum']:.1f} s summed, "
+        f"plots {t_plot:.1f} s); {platform.python_implementation()} {platform.python_version()}.",
+    ]
+    report = out_dir / "report.md"
+    report.write_text(markdown(comparisons, out_dir, title="overcon reproduce: uniqueness of the simulated motion",
+                               intro=intro, figures=figures, plots=plots), encoding="utf-8")
+    return ReproduceOutcome(comparisons, report, [p for _, p in figures], seconds)

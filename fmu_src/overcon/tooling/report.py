@@ -1,0 +1,155 @@
+"""Console tables, Markdown reports and PNG plots of :class:`~overcon.tooling.compare.Comparison`s."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from .compare import Comparison, OutputDiff, rules_text
+
+
+def _g(x: float | None) -> str:
+    return "—" if x is None else f"{x:.3g}"
+
+
+def _unit(d: OutputDiff) -> str:
+    return d.unit or ""
+
+
+def verdict_line(c: Comparison) -> str:
+    """One line; a mismatch is LOUD."""
+    w = c.worst()
+    worst = f"; largest difference {w.max_abs:.3g} {_unit(w)} in {w.name} (tolerance {w.tolerance:.3g})" if w else ""
+    if c.reference is not None:
+        head = f"{c.group}: {c.infos[0].path.name} vs {c.reference}: {c.verdict_text().upper()}"
+        return head + worst + ("" if c.observed else "  <-- differs from the reference")
+    pred = "none (expected unique)" if c.predicted is None else c.verdict_text(c.predicted)
+    head = f"{c.group}: observed {c.verdict_text().upper()}, predicted {pred} (pre-check)"
+    if c.matches:
+        return head + worst + " -- OK"
+    return (f"!!! MISMATCH !!! {c.group}: observed {c.verdict_text().upper()} but the pre-check predicted "
+            f"{pred}{worst}")
+
+
+def console_table(c: Comparison) -> str:
+    """Every compared output: max abs/rel difference, tolerance, first time over it."""
+    lines = [f"{c.group}: " + (f"{c.infos[0].path.name} vs reference {c.reference}" if c.reference is not None
+                              else ", ".join(f"{i.model} ({lab})" for i, lab in zip(c.infos, c.labels)))]
+    lines.append(f"  {'output':<24} {'unit':<5} {'max abs':>10} {'max rel':>10} {'tolerance':>10} "
+                 f"{'first t>tol':>11}  decides")
+    for d in c.diffs:
+        first = "—" if d.first_exceed is None else f"{d.first_exceed:g} s"
+        note = "yes" if d.decides else "no"
+        if d.kind == "reaction" and d.reaction_unique is not None:
+            note += " (reaction " + ("unique" if d.reaction_unique else "NOT unique") + ")"
+        flag = " *" if d.decides and not d.within else ""
+        lines.append(f"  {d.name:<24} {_unit(d):<5} {d.max_abs:>10.3g} {_g(d.max_rel):>10} {d.tolerance:>10.3g} "
+                     f"{first:>11}  {note}{flag}")
+    return "\n".join(lines)
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", name)
+
+
+def plot_comparison(c: Comparison, out_dir: Path, outputs: str | list[str] = "worst") -> list[Path]:
+    """PNG per selected output (``"worst"``: the deciding output with the largest difference
+    relative to its tolerance; ``"all"``: every deciding output; or a list of names): one line per
+    variant, labelled like the paper, and a panel of differences to the first one."""
+    from ..plots import plot_series
+
+    by_name = {d.name: d for d in c.diffs}
+    if outputs == "worst":
+        w = c.worst()
+        names = [w.name] if w else []
+    elif outputs == "all":
+        names = [d.name for d in c.diffs if d.decides]
+    else:
+        names = [n for n in outputs if n in by_name]
+    paths = []
+    for n in names:
+        d = by_name[n]
+        series = {lab: s.values[n] for lab, s in zip(c.labels, c.series)}
+        kind = "reference comparison" if c.reference is not None else c.verdict_text()
+        paths.append(plot_series(Path(out_dir) / f"{_safe(c.group)}_{_safe(n)}.png", c.series[0].time, series,
+                                 title=f"{c.group}: {n} ({kind}; max difference {d.max_abs:.3g} {_unit(d)})",
+                                 ylabel=f"{n} ({_unit(d)})" if d.unit else n))
+    return paths
+
+
+def _rel(path: Path, base: Path) -> str:
+    try:
+        return Path(path).resolve().relative_to(Path(base).resolve()).as_posix()
+    except ValueError:
+        return Path(path).resolve().as_posix()
+
+
+def summary_rows(comparisons: list[Comparison]) -> list[str]:
+    """Markdown table: mechanism, group / friction set, eliminations, predicted, observed, max
+    difference, simulation wall time."""
+    rows = ["| mechanism | group (friction set) | eliminations | predicted | observed | max difference "
+            "(deciding output, tolerance) | wall time (s) |",
+            "|---|---|---|---|---|---|---|"]
+    for c in comparisons:
+        i0 = c.infos[0]
+        fr = ", ".join(i0.friction) if i0.friction else "none"
+        elim = "; ".join(i.eliminate_text() or i.model for i in c.infos)
+        pred = "—" if c.predicted is None else c.verdict_text(c.predicted)
+        obs = c.verdict_text() + ("" if c.matches else " **MISMATCH**")
+        w = c.worst()
+        md = f"{w.max_abs:.3g} {_unit(w)} ({w.name}, {w.tolerance:.2g})" if w else "—"
+        wall = " + ".join(f"{s:.1f}" for s in c.wall_seconds) if c.wall_seconds else "—"
+        rows.append(f"| {i0.mechanism or '—'} | {c.group} ({fr}) | {elim} | {pred} | {obs} | {md} | {wall} |")
+    return rows
+
+
+def group_section(c: Comparison, base: Path, plots: list[Path]) -> list[str]:
+    lines = [f"### {c.group}", ""]
+    if c.reference is not None:
+        lines.append(f"{c.infos[0].path.name} against reference `{c.reference}`: **{c.verdict_text()}**.")
+    else:
+        variants = ", ".join(f"`{i.model}` ({lab})" for i, lab in zip(c.infos, c.labels))
+        pred = "none (expected unique)" if c.predicted is None else c.verdict_text(c.predicted)
+        lines.append(f"Variants: {variants}. Predicted (pre-check): {pred}; observed: **{c.verdict_text()}**"
+                     + ("." if c.matches else " — **MISMATCH with the prediction**."))
+    lines += ["", "| output | unit | max abs | max rel | tolerance | first t > tol (s) | decides |",
+              "|---|---|---|---|---|---|---|"]
+    reactions: dict[str, list[OutputDiff]] = {}
+    for d in c.diffs:
+        if d.kind == "reaction" and not d.decides:
+            reactions.setdefault(d.name.rsplit(".", 1)[0], []).append(d)
+            continue
+        lines.append(f"| {d.name} | {_unit(d)} | {d.max_abs:.3g} | {_g(d.max_rel)} | {d.tolerance:.3g} | "
+                     f"{_g(d.first_exceed)} | {'yes' if d.decides else 'no'} |")
+    if reactions:
+        lines += ["", "Reactions (reported, not deciding): largest component difference per joint.", "",
+                  "| joint | reaction unique (pre-check) | component | max abs | max rel | first t > tol (s) |",
+                  "|---|---|---|---|---|---|"]
+        for joint, ds in reactions.items():
+            w = max(ds, key=lambda d: d.max_abs)
+            ru = {True: "yes", False: "no", None: "—"}[w.reaction_unique]
+            lines.append(f"| {joint} | {ru} | {w.name} | {w.max_abs:.3g} {_unit(w)} | {_g(w.max_rel)} | "
+                         f"{_g(w.first_exceed)} |")
+    for p in plots:
+        lines += ["", f"![{c.group}: {p.stem}]({_rel(p, base)})"]
+    lines.append("")
+    return lines
+
+
+def markdown(comparisons: list[Comparison], base: Path, *, title: str, intro: list[str] = (),
+             figures: list[tuple[str, Path]] = (), plots: dict | None = None, tail: list[str] = ()) -> str:
+    """The whole report; image links relative to ``base`` (the report's directory)."""
+    plots = plots or {}
+    n_bad = sum(not c.matches for c in comparisons)
+    lines = [f"# {title}", "", *intro]
+    lines += ["", ("**Every observed verdict equals its prediction.**" if not n_bad else
+                   f"**{n_bad} verdict(s) differ from the prediction (MISMATCH).**"), "",
+              "## Verdicts", "", *summary_rows(comparisons), "", rules_text(comparisons), ""]
+    if figures:
+        lines += ["## Figures of the paper", ""]
+        for caption, p in figures:
+            lines += [f"**{caption}**", "", f"![{caption}]({_rel(p, base)})", ""]
+    lines += ["## Groups", ""]
+    for c in comparisons:
+        lines += group_section(c, base, plots.get(c.group, []))
+    lines += list(tail)
+    return "\n".join(lines).rstrip() + "\n"

@@ -1,0 +1,264 @@
+"""Simulate FMUs with ``fmpy.simulate_fmu`` and exchange results as FMI cross-check CSV files.
+
+Each FMU runs in its own worker process (``python -m overcon.tooling.run``), at most ``jobs`` at a
+time. Reasons: the runs are independent and CPU bound (2 processes halve the wall time on 2
+cores), and pythonfmu 0.7's C wrapper has reference-counting bugs that can crash the *host*
+process when it exits after loading an FMU ("corrupted double-linked list", about 1 exit in 6
+here); a worker writes its CSV, reports on stdout and leaves with ``os._exit``, so such a crash
+never reaches the overcon process and never changes an exit code.
+
+Grid: the output interval of ``simulate_fmu`` is the step (default: the FMU's DefaultExperiment
+stepSize), the stop time defaults to the FMU's DefaultExperiment stopTime. Outputs are the FMU's
+Real outputs; the CSV (``<model>.csv``: quoted header ``"time"`` + output names, comma separated,
+shortest round-trip ``repr`` of every value, i.e. full double precision) is written with
+``fmpy.util.write_csv`` and read back with ``fmpy.util.read_csv``.
+
+A run that raises, or whose last output time is before the stop time (fmpy ends a co-simulation
+quietly when the FMU discards a step), is a :class:`SimulationFailed` carrying the FMU's logged
+reason.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import InputError, SimulationFailed
+from .fmus import FmuInfo
+
+RESULT_TAG = "OVERCON-RESULT "
+PROGRESS_EVERY = 1.0  # s between progress lines of one FMU
+
+
+@dataclass(frozen=True)
+class Experiment:
+    start: float
+    stop: float
+    step: float
+
+    def n_points(self) -> int:
+        return int(round((self.stop - self.start) / self.step)) + 1
+
+
+def experiment(info: FmuInfo, *, stop_time: float | None = None, step: float | None = None) -> Experiment:
+    """The run settings of ``info``: command-line values over the FMU's DefaultExperiment."""
+    stop = info.stop if stop_time is None else float(stop_time)
+    if not (math.isfinite(stop) and stop > info.start):
+        raise InputError(f"{info.path}: stop time {stop!r} must be finite and after the start time {info.start!r}")
+    h = step if step is not None else info.step
+    if h is None:
+        h = (stop - info.start) / 500.0
+    h = float(h)
+    if not (math.isfinite(h) and h > 0):
+        raise InputError(f"{info.path}: step {h!r} must be a positive finite number")
+    return Experiment(info.start, stop, h)
+
+
+@dataclass
+class Series:
+    """A result: ``time`` (k,) and ``values`` name -> (k,) arrays, in file/FMU order."""
+
+    time: np.ndarray
+    values: dict
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.values)
+
+
+@dataclass
+class RunResult:
+    info: FmuInfo
+    csv: Path
+    rows: int
+    sim_seconds: float  # inside simulate_fmu
+    wall_seconds: float  # the worker process, start to end
+    series: Series | None = None
+
+
+# ---------------------------------------------------------------------------------------------
+# in process (the worker's body)
+
+def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, step: float,
+             outputs: list[str], progress: bool = True, label: str = "") -> dict:
+    """One ``fmpy.simulate_fmu`` run; writes ``csv``. Returns {rows, sim_seconds, last_time}.
+    Progress lines (``label: 42% ...``) go to stderr at most every :data:`PROGRESS_EVERY` s."""
+    import fmpy
+    from fmpy.util import write_csv
+
+    label = label or Path(fmu).stem
+    messages: list[str] = []
+
+    def logger(_env, _instance, status, _category, message):
+        if status >= 1:  # warning, discard, error, fatal
+            text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
+            messages.append(["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][min(status, 5)] + ": " + text)
+
+    t0 = time.perf_counter()
+    last = [None]  # time of the last progress line (first: the first step, after instantiation)
+
+    def step_finished(t, _recorder):
+        now = time.perf_counter()
+        if last[0] is None:
+            last[0] = now
+        elif progress and now - last[0] >= PROGRESS_EVERY:
+            last[0] = now
+            pct = 100.0 * (t - start) / (stop - start)
+            print(f"  {label}: {pct:5.1f}% (t = {t:.4g} of {stop:g} s, {now - t0:.0f} s)", file=sys.stderr, flush=True)
+        return True
+
+    try:
+        result = fmpy.simulate_fmu(str(fmu), start_time=start, stop_time=stop, output_interval=step,
+                                   output=outputs, step_finished=step_finished, logger=logger,
+                                   debug_logging=True)
+    except Exception as exc:
+        why = "; ".join(messages[-3:])
+        raise SimulationFailed(f"{fmu}: fmpy.simulate_fmu failed: {type(exc).__name__}: {exc}"
+                               + (f" (FMU log: {why})" if why else "")) from exc
+    sim_seconds = time.perf_counter() - t0
+    last_time = float(result["time"][-1]) if len(result) else start
+    if last_time < stop - 1e-9 * max(1.0, abs(stop)):
+        why = "; ".join(messages[-3:]) or "no reason logged"
+        raise SimulationFailed(f"{fmu}: the simulation stopped at t = {last_time:g} s, before the stop "
+                               f"time {stop:g} s: {why}")
+    csv = Path(csv)
+    csv.parent.mkdir(parents=True, exist_ok=True)
+    part = csv.with_name(csv.name + ".part")
+    write_csv(str(part), result)
+    os.replace(part, csv)
+    return {"rows": len(result), "sim_seconds": sim_seconds, "last_time": last_time}
+
+
+def _worker(argv: list[str]) -> None:
+    """``python -m overcon.tooling.run JSON``: run one FMU, print one result line, ``os._exit``."""
+    job = json.loads(argv[0])
+    try:
+        out = simulate(job["fmu"], job["csv"], start=job["start"], stop=job["stop"], step=job["step"],
+                       outputs=job["outputs"], progress=job["progress"], label=job["label"])
+        out["error"] = ""
+    except SimulationFailed as exc:
+        out = {"error": str(exc)}
+    except Exception as exc:  # noqa: BLE001 -- reported by the parent
+        out = {"error": f"{job['fmu']}: {type(exc).__name__}: {exc}"}
+    sys.stdout.write(RESULT_TAG + json.dumps(out) + "\n")
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)  # skip interpreter teardown: pythonfmu's wrapper may crash it (module docstring)
+
+
+# ---------------------------------------------------------------------------------------------
+# many FMUs, in worker processes
+
+def _worker_env() -> dict:
+    """One BLAS/OpenMP thread per worker (unless set): ``jobs`` workers on as many cores do not
+    oversubscribe them."""
+    env = dict(os.environ)
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(var, "1")
+    return env
+
+
+def _run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: float | None) -> RunResult:
+    job = {"fmu": str(info.path), "csv": str(csv), "start": ex.start, "stop": ex.stop, "step": ex.step,
+           "outputs": info.output_names, "progress": progress, "label": info.model}
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run([sys.executable, "-m", "overcon.tooling.run", json.dumps(job)],
+                              stdout=subprocess.PIPE, stderr=None, text=True, timeout=timeout, env=_worker_env())
+    except subprocess.TimeoutExpired as exc:
+        raise SimulationFailed(f"{info.path}: no result within {timeout:g} s (killed)") from exc
+    wall = time.perf_counter() - t0
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith(RESULT_TAG)]
+    if not lines:
+        raise SimulationFailed(f"{info.path}: the worker process ended with code {proc.returncode} "
+                               "without a result (crashed while running the FMU?)")
+    out = json.loads(lines[-1][len(RESULT_TAG):])
+    if out["error"]:
+        raise SimulationFailed(out["error"])
+    return RunResult(info, csv, out["rows"], out["sim_seconds"], wall)
+
+
+def run_fmus(infos: list[FmuInfo], out_dir, *, stop_time: float | None = None, step: float | None = None,
+             jobs: int = 2, progress: bool = True, timeout: float | None = None, echo=None,
+             experiments: dict | None = None) -> list[RunResult]:
+    """Run every FMU (``jobs`` worker processes at a time) into ``out_dir/<model>.csv``; print one
+    line per finished FMU with ``echo``. ``experiments`` (model -> :class:`Experiment`) overrides
+    the per-FMU settings. Raises :class:`SimulationFailed` naming every failed FMU (after all
+    ran), :class:`InputError` for two FMUs with one model name."""
+    echo = echo or (lambda s: print(s, flush=True))
+    out_dir = Path(out_dir)
+    seen: dict[str, Path] = {}
+    for info in infos:
+        if info.model in seen:
+            raise InputError(f"{info.path}: model {info.model} also given as {seen[info.model]}: "
+                             f"both would write {out_dir / (info.model + '.csv')}")
+        seen[info.model] = info.path
+    exps = experiments or {i.model: experiment(i, stop_time=stop_time, step=step) for i in infos}
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results: dict[str, RunResult] = {}
+    failures: list[str] = []
+
+    def one(info):
+        ex = exps[info.model]
+        try:
+            r = _run_one(info, ex, out_dir / f"{info.model}.csv", progress, timeout)
+        except SimulationFailed as exc:
+            failures.append(str(exc))
+            echo(f"{info.model}: FAILED (reason below)")
+            return
+        results[info.model] = r
+        echo(f"{info.model}: {r.rows} points, t = {ex.start:g}..{ex.stop:g} s every {ex.step:g} s -> {r.csv}; "
+             f"wall {r.sim_seconds:.2f} s simulation, {r.wall_seconds:.2f} s process")
+
+    with ThreadPoolExecutor(max(1, min(jobs, len(infos)))) as pool:
+        list(pool.map(one, infos))
+    if failures:
+        raise SimulationFailed("\n".join(failures))
+    return [results[i.model] for i in infos]
+
+
+# ---------------------------------------------------------------------------------------------
+# CSV in
+
+def read_series(path) -> Series:
+    """Read a result CSV (FMI cross-check rules: header with ``time`` first, comma separated, one
+    row per time) with ``fmpy.util.read_csv``. :class:`InputError` naming the file when it is
+    missing or unreadable, has no ``time`` column first, a non-numeric or non-finite value, fewer
+    than 2 rows, or times that do not increase."""
+    from fmpy.util import read_csv
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such CSV file")
+    try:
+        data = read_csv(str(path))
+    except Exception as exc:  # noqa: BLE001 -- fmpy raises IndexError/ValueError/UnicodeError...
+        raise InputError(f"{path}: unreadable CSV (FMI cross-check format expected: header "
+                         f"\"time\",\"name\",..., then numbers): {type(exc).__name__}: {exc}") from exc
+    names = list(data.dtype.names or ())
+    if not names or names[0] != "time":
+        raise InputError(f"{path}: the first column must be \"time\", got {names[:1]}")
+    if len(data) < 2:
+        raise InputError(f"{path}: fewer than 2 rows")
+    t = np.asarray(data["time"], dtype=float)
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise InputError(f"{path}: the time column must be finite and strictly increasing")
+    values = {}
+    for n in names[1:]:
+        col = np.asarray(data[n], dtype=float)
+        if col.ndim != 1:
+            continue  # array columns (not written by overcon) are not compared
+        values[n] = col
+    return Series(t, values)
+
+
+if __name__ == "__main__":
+    _worker(sys.argv[1:])

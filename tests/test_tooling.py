@@ -1,0 +1,311 @@
+"""fmpy tooling: ``overcon run``, ``compare`` (groups and reference CSV), ``reproduce``; verdicts,
+tolerances, exit codes and messages for bad input. FMUs are built into tmp from (modified copies
+of) the scene files and run with short stop times."""
+from __future__ import annotations
+
+import re
+
+import csv
+import shutil
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from overcon.cli import main
+from overcon.fmu.build import build_all
+from overcon.paper import uniqueness_tolerance
+from overcon.tooling import InputError
+from overcon.tooling.compare import check_grids, compare_group
+from overcon.tooling.fmus import inspect_fmu
+from overcon.tooling.run import Series, read_series
+
+ROOT = Path(__file__).resolve().parent.parent
+MECH = ROOT / "mechanisms"
+QUIET = dict(echo=lambda s: None, echo_err=lambda s: None)
+
+
+def _build(scenes: list[Path], out: Path) -> dict[str, Path]:
+    code, res = build_all(scenes, out, allow_nonunique=True, refs=False, validate=False, **QUIET)
+    assert code == 0, [m for r in res for m in r.messages]
+    return {r.name: r.fmu for r in res if r.status == "built"}
+
+
+def _scene_copy(dst: Path, name: str, *, mech_text: str | None = None, **replace) -> Path:
+    """Copy of mechanisms/<name>.toml (and its mechanism file, possibly modified) into ``dst``."""
+    dst.mkdir(parents=True, exist_ok=True)
+    text = (MECH / f"{name}.toml").read_text()
+    for old, new in replace.values():
+        assert old in text
+        text = text.replace(old, new)
+    mech = "planar_sliders.toml" if name.startswith("planar") else "spatial_parallelogram.toml"
+    (dst / mech).write_text(mech_text if mech_text is not None else (MECH / mech).read_text())
+    out = dst / f"{name}.toml"
+    out.write_text(text)
+    return out
+
+
+@pytest.fixture(scope="module")
+def f45(tmp_path_factory) -> dict[str, Path]:
+    out = tmp_path_factory.mktemp("f45")
+    return _build([MECH / "planar_f45_wo4.toml", MECH / "planar_f45_wo6.toml"], out / "fmus")
+
+
+@pytest.fixture(scope="module")
+def run_csv(tmp_path_factory, f45) -> Path:
+    """``overcon run`` of planar_f45_wo4 to 1 s: the reference CSV of the reference-mode tests."""
+    out = tmp_path_factory.mktemp("run")
+    assert main(["run", str(f45["planar_f45_wo4"]), "--stop-time", "1", "--out", str(out)]) == 0
+    return out / "planar_f45_wo4.csv"
+
+
+def _shifted_csv(src: Path, dst: Path, column: str, delta: float) -> Path:
+    with src.open() as f:
+        rows = list(csv.reader(f))
+    k = rows[0].index(column)
+    for row in rows[1:]:
+        row[k] = repr(float(row[k]) + delta)
+    with dst.open("w", newline="") as f:
+        f.write(",".join(f'"{n}"' for n in rows[0]) + "\n")
+        for row in rows[1:]:
+            f.write(",".join(row) + "\n")
+    return dst
+
+
+# ------------------------------------------------------------------------------- run
+
+@pytest.mark.integration
+def test_run_writes_full_precision_csv(run_csv, capsys):
+    header = run_csv.read_text().splitlines()[0]
+    assert header.startswith('"time","slider1.x"') and '"joint6.Fy0"' in header
+    assert "motion_unique" not in header  # Real outputs only
+    s = read_series(run_csv)
+    assert len(s.time) == 101 and s.time[-1] == pytest.approx(1.0)
+    assert np.allclose(np.diff(s.time), 0.01)
+    # full precision: a value written with fewer than 15 significant digits would be rounded
+    digits = max(len(v.replace("-", "").replace(".", "").lstrip("0")) for v in
+                 run_csv.read_text().splitlines()[50].split(","))
+    assert digits >= 15
+
+
+@pytest.mark.integration
+def test_failed_simulation_exits_3_with_the_fmus_reason(tmp_path, capsys):
+    # spring free length 0: the sliders reach the singular position K = L = O at t ~ 0.6 s
+    mech = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
+    scene = _scene_copy(tmp_path / "s", "planar_none_wo4", mech_text=mech, s=("stop_time = 4.0", "stop_time = 2.0"))
+    fmus = _build([scene], tmp_path / "fmus")
+    assert main(["run", str(fmus["planar_none_wo4"]), "--out", str(tmp_path / "o")]) == 3
+    err = capsys.readouterr().err
+    assert re.search(r"the simulation stopped at t = 0\.(5[5-9]|6[0-5]) s, before the stop time 2 s", err)
+    assert "singular position" in err
+    assert not (tmp_path / "o" / "planar_none_wo4.csv").exists()
+
+
+# ------------------------------------------------------------------------------- compare: groups
+
+@pytest.mark.integration
+def test_compare_unique_group_exits_0(f45, tmp_path, capsys):
+    out = tmp_path / "cmp"
+    code = main(["compare", str(f45["planar_f45_wo4"].parent), "--group", "planar_f45", "--stop-time", "1",
+                 "--out", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "planar_f45: observed UNIQUE, predicted unique (pre-check)" in text and "-- OK" in text
+    report = (out / "report.md").read_text()
+    assert "| planar_sliders | planar_f45 (joint4, joint5) | Φ4; Φ6 | unique | unique |" in report
+    assert "without eq. 4" in report and "Tolerance:" in report
+    assert (out / "planar_f45_wo4.csv").is_file() and (out / "planar_f45_wo6.csv").is_file()
+    pngs = list(out.glob("planar_f45_*.png"))
+    assert pngs and pngs[0].stat().st_size > 10_000
+
+
+@pytest.mark.integration
+def test_group_differing_by_1e5_m_is_not_unique(tmp_path, capsys):
+    """Two no-friction variants (predicted unique) whose slider 1 mass differs by 5e-5 relative:
+    x1 differs by ~1e-5 m within 1 s -> observed not unique, MISMATCH, exit 1."""
+    base = (MECH / "planar_sliders.toml").read_text()
+    a = _scene_copy(tmp_path / "a", "planar_none_wo4")
+    b = _scene_copy(tmp_path / "b", "planar_none_wo6", mech_text=base.replace("mass = 3.0", "mass = 3.00015", 1))
+    fmus = _build([a, b], tmp_path / "fmus")
+    out = tmp_path / "cmp"
+    code = main(["compare", *map(str, fmus.values()), "--stop-time", "1", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert code == 1, text
+    assert "!!! MISMATCH !!! planar_none: observed NOT UNIQUE but the pre-check predicted unique" in text
+    series = [read_series(out / f"{n}.csv") for n in ("planar_none_wo4", "planar_none_wo6")]
+    diff = np.max(np.abs(series[0].values["slider1.x"] - series[1].values["slider1.x"]))
+    assert 5e-6 < diff < 3e-5
+    assert "MISMATCH" in (out / "report.md").read_text()
+
+
+# ------------------------------------------------------------------------------- compare: reference
+
+@pytest.mark.integration
+def test_reference_mode_same_result_passes_and_1e6_m_is_caught(f45, run_csv, tmp_path, capsys):
+    fmu = str(f45["planar_f45_wo4"])
+    assert main(["compare", fmu, "--ref", str(run_csv), "--out", str(tmp_path / "same")]) == 0
+    assert "WITHIN TOLERANCE" in capsys.readouterr().out
+    shifted = _shifted_csv(run_csv, tmp_path / "shifted.csv", "slider1.x", 1e-6)
+    code = main(["compare", fmu, "--ref", str(shifted), "--out", str(tmp_path / "shifted")])
+    text = capsys.readouterr().out
+    assert code == 1, text
+    assert "DIFFERS" in text and "slider1.x" in text
+    # the default tolerance at this scale is well below 1e-6 m
+    assert uniqueness_tolerance(inspect_fmu(fmu).tolerance, 2.0) < 0.5e-6
+
+
+def test_default_tolerance_catches_1e6_m_at_slider_scale():
+    """Every planar slider position stays within |y| <= 3 m; the spatial platform within 2.5 m."""
+    from overcon.paper import scene_groups
+
+    tolerances = {spec.solver.tolerance for items in scene_groups(MECH).values() for _, spec in items}
+    for tol in tolerances:
+        for scale in (1.0, 2.0, 3.0, 2.5):
+            assert uniqueness_tolerance(tol, scale) < 1e-6
+
+
+# ------------------------------------------------------------------------------- bad input: exit 2
+
+def test_missing_fmu_file_exits_2(tmp_path, capsys):
+    missing = tmp_path / "nope.fmu"
+    for cmd in (["compare", str(missing), str(missing)], ["run", str(missing)]):
+        assert main([*cmd, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert f"{missing}: no such FMU file" in err
+
+
+def test_corrupt_zip_exits_2(tmp_path, capsys, f45):
+    garbage = tmp_path / "garbage.fmu"
+    garbage.write_bytes(b"this is not a zip archive" * 10)
+    truncated = tmp_path / "truncated.fmu"
+    data = f45["planar_f45_wo4"].read_bytes()
+    truncated.write_bytes(data[: len(data) // 2])
+    for bad in (garbage, truncated):
+        assert main(["compare", str(bad), str(f45["planar_f45_wo6"]), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert str(bad) in err and "not an FMU (not a zip archive" in err
+    nomd = tmp_path / "nomd.fmu"
+    with zipfile.ZipFile(nomd, "w") as zf:
+        zf.writestr("resources/x.txt", "x")
+    assert main(["run", str(nomd), "--out", str(tmp_path / "o")]) == 2
+    assert f"{nomd}: cannot read modelDescription.xml" in capsys.readouterr().err
+
+
+def test_fmus_without_common_outputs_exit_2(tmp_path, capsys):
+    a = _scene_copy(tmp_path / "a", "planar_none_wo4",
+                    p=("positions = [", 'positions = ["slider1.x"]\n#'), r=('reactions = "all"', "reactions = []"))
+    b = _scene_copy(tmp_path / "b", "planar_none_wo6",
+                    p=("positions = [", 'positions = ["slider2.y"]\n#'), r=('reactions = "all"', "reactions = []"))
+    fmus = _build([a, b], tmp_path / "fmus")
+    assert main(["compare", *map(str, fmus.values()), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "no common outputs" in err and "planar_none_wo4.fmu has slider1.x" in err
+    assert not (tmp_path / "o" / "planar_none_wo4.csv").exists()  # refused before running
+
+
+def test_mismatched_time_grids_exit_2(tmp_path, capsys, f45, run_csv):
+    a = _scene_copy(tmp_path / "a", "planar_none_wo4")
+    b = _scene_copy(tmp_path / "b", "planar_none_wo6", s=("stop_time = 4.0", "stop_time = 3.0"))
+    fmus = _build([a, b], tmp_path / "fmus")
+    assert main(["compare", *map(str, fmus.values()), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "mismatched time grids in group planar_none" in err and "--stop-time and --step" in err
+    # reference on another grid than the one asked for
+    assert main(["compare", str(f45["planar_f45_wo4"]), "--ref", str(run_csv), "--step", "0.02",
+                 "--out", str(tmp_path / "o2")]) == 2
+    err = capsys.readouterr().err
+    assert "mismatched time grids" in err and str(run_csv) in err
+    # the library check: sample-by-sample, no interpolation
+    t = np.linspace(0, 1, 11)
+    with pytest.raises(InputError, match="mismatched time grids"):
+        check_grids([Series(t, {}), Series(np.linspace(0, 1, 21), {})], ["a.csv", "b.csv"])
+
+
+def test_unreadable_csv_exits_2(tmp_path, capsys, f45):
+    fmu = str(f45["planar_f45_wo4"])
+    bad = tmp_path / "bad.csv"
+    bad.write_text('"time","slider1.x"\n0.0,abc\n0.01,2.0\n')
+    missing = tmp_path / "missing.csv"
+    ragged = tmp_path / "ragged.csv"
+    ragged.write_text('"time","slider1.x"\n0.0,2.0\n0.01\n')
+    for path in (bad, missing, ragged):
+        assert main(["compare", fmu, "--ref", str(path), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert str(path) in err
+    other = tmp_path / "other.csv"
+    other.write_text('"time","foo"\n0.0,1.0\n0.01,1.0\n')
+    assert main(["compare", fmu, "--ref", str(other), "--out", str(tmp_path / "o")]) == 2
+    assert "no common outputs" in capsys.readouterr().err
+
+
+def test_single_fmu_without_reference_exits_2(f45, tmp_path, capsys):
+    assert main(["compare", str(f45["planar_f45_wo4"]), "--out", str(tmp_path / "o")]) == 2
+    assert "nothing to compare" in capsys.readouterr().err
+
+
+def test_unknown_group_exits_2(f45, tmp_path, capsys):
+    assert main(["compare", str(f45["planar_f45_wo4"].parent), "--group", "nope", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "--group nope: no such group" in err and "(groups: planar_f45)" in err
+
+
+# ------------------------------------------------------------------------------- verdict rules
+
+def test_reactions_do_not_decide_and_prediction_must_agree(f45):
+    infos = [inspect_fmu(f45["planar_f45_wo4"]), inspect_fmu(f45["planar_f45_wo6"])]
+    assert infos[0].label == "without eq. 4" and infos[0].group == "planar_f45" and infos[0].motion_unique
+    assert infos[0].reaction_unique["joint4"] and not infos[0].reaction_unique["joint1"]
+    t = np.linspace(0, 1, 11)
+
+    def series(shift_pos=0.0, shift_reaction=0.0):
+        vals = {o.name: np.full_like(t, 1.0) for o in infos[0].outputs}
+        vals["slider1.x"] = vals["slider1.x"] + shift_pos
+        vals["joint1.T"] = vals["joint1.T"] + shift_reaction
+        return Series(t, vals)
+
+    c = compare_group("planar_f45", infos, [series(), series(shift_reaction=50.0)])
+    assert c.observed and c.matches  # a non-unique reaction differing does not make the motion non-unique
+    d = {x.name: x for x in c.diffs}
+    assert not d["joint1.T"].decides and d["joint1.T"].max_abs == 50.0 and d["joint1.T"].first_exceed == 0.0
+    c = compare_group("planar_f45", infos, [series(), series(shift_pos=1e-6)])
+    assert not c.observed and not c.matches
+    assert {x.name: x for x in c.diffs}["slider1.x"].first_exceed == 0.0
+
+
+# ------------------------------------------------------------------------------- reproduce
+
+@pytest.mark.integration
+def test_reproduce_planar_set(tmp_path, capsys):
+    mech = tmp_path / "mech"
+    mech.mkdir()
+    for f in MECH.glob("planar_*.toml"):
+        shutil.copy(f, mech / f.name)
+    out = tmp_path / "repro"
+    code = main(["reproduce", "--mechanisms", str(mech), "--out", str(out), "--stop-time", "1"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "every observed verdict equals its prediction" in text and f"report: {out / 'report.md'}" in text
+    assert "pre-check: friction in joint1: friction on non-unique reaction(s) of joint1, motion NOT UNIQUE" in text
+    report = (out / "report.md").read_text()
+    for group, verdict in (("planar_none (none)", "unique | unique"), ("planar_f45 (joint4, joint5)", "unique | unique"),
+                           ("planar_f1 (joint1)", "not unique | not unique"),
+                           ("planar_f145 (joint1, joint4, joint5)", "not unique | not unique")):
+        assert f"| planar_sliders | {group} | Φ4; Φ6 | {verdict} |" in report
+    for fig in ("fig3", "fig4", "fig5"):
+        assert (out / f"{fig}.png").stat().st_size > 10_000 and f"]({fig}.png)" in report
+    assert not (out / "fig7.png").exists()  # spatial figures: not in this set
+    assert len(list((out / "groups").glob("*.png"))) == 4
+    assert len(list((out / "fmus").glob("*.fmu"))) == 8
+
+
+def test_one_group_needs_one_prediction(f45, tmp_path, capsys):
+    """--one-group pools FMUs of different groups; their predictions must agree (checked before
+    running)."""
+    f1 = _build([MECH / "planar_f1_wo4.toml"], tmp_path / "fmus")["planar_f1_wo4"]
+    assert main(["compare", str(f45["planar_f45_wo4"]), str(f1), "--out", str(tmp_path / "o")]) == 2
+    assert "nothing to compare" in capsys.readouterr().err  # two groups of one FMU each
+    assert main(["compare", str(f45["planar_f45_wo4"]), str(f1), "--one-group", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "disagree on the pre-check's motion_unique" in err and "planar_f1_wo4.fmu: False" in err
+    assert not (tmp_path / "o" / "planar_f1_wo4.csv").exists()

@@ -44,17 +44,9 @@ FIGURES = (
 
 
 def scene_files(directory: Path) -> list[Path]:
-    """Scene files (with a [scene] table) in a directory, sorted by name."""
-    import tomllib
-
-    out = []
-    for p in sorted(Path(directory).glob("*.toml")):
-        try:
-            if "scene" in tomllib.loads(p.read_text(encoding="utf-8")):
-                out.append(p)
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError):
-            out.append(p)  # let the loader report it against the file
-    return out
+    """Scene files (with a [scene] table) in a directory, sorted by name; unreadable files are
+    kept so that the loader reports them against the file."""
+    return [p for p in scene.toml_files([directory]) if scene.is_scene_file(p) is not False]
 
 
 def scene_groups(directory: Path) -> dict[str, list[tuple[Path, SceneSpec]]]:

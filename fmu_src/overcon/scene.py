@@ -1036,3 +1036,25 @@ def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, 
     if problems:
         raise SceneError(problems)
     return dataclasses.replace(scene, **changes) if changes else scene
+
+
+# ---------------------------------------------------------------------------------------------
+# Finding scene files
+
+
+def toml_files(paths) -> list[Path]:
+    """Files given, and the *.toml files of directories given (sorted, not recursive)."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        out.extend(sorted(p.glob("*.toml")) if p.is_dir() else [p])
+    return out
+
+
+def is_scene_file(path) -> bool | None:
+    """True: a scene file ([scene] table); False: a mechanism file (or neither); None: unreadable
+    (``load`` reports why)."""
+    try:
+        doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return None
+    return isinstance(doc.get("scene"), dict)

@@ -72,23 +72,6 @@ class BuildResult:
 # ---------------------------------------------------------------------------------------------
 # inputs
 
-def scene_files(paths) -> list[Path]:
-    """Files given, and the *.toml files of directories given (sorted, not recursive)."""
-    out: list[Path] = []
-    for p in map(Path, paths):
-        out.extend(sorted(p.glob("*.toml")) if p.is_dir() else [p])
-    return out
-
-
-def _is_scene_file(path: Path) -> bool | None:
-    """True scene, False mechanism (or neither), None unreadable (the loader reports why)."""
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
-        return None
-    return isinstance(doc.get("scene"), dict)
-
-
 def _source_files() -> list[tuple[str, bytes]]:
     """(relative posix path, bytes) of the overcon package's Python source, sorted."""
     files = []
@@ -170,7 +153,7 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         res.seconds = time.perf_counter() - t0
         return res
 
-    kind = _is_scene_file(path)
+    kind = scene_mod.is_scene_file(path)
     if kind is False:
         return done("skipped", f"{path}: mechanism file, skipped")
     try:
@@ -314,7 +297,7 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
     echo_err = echo_err or (lambda s: print(s, file=sys.stderr, flush=True))
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
-    files = scene_files(paths)
+    files = scene_mod.toml_files(paths)
     results: list[BuildResult] = []
     if not files:
         echo_err("build: no scene files given")

@@ -4,9 +4,7 @@ Phi = r_i + R_i s_i - r_j - R_j s_j. Auxiliary frame: origin at the joint point 
 to body i. Physical reaction p' = [Fx, Fy, T] (T = 0 for a revolute joint). Friction: a torque
 a mu(omega_ij) sqrt(Fx^2 + Fy^2) on body i (minus on body j), omega_ij = phi_j' - phi_i'.
 
-Batched forms (``batch_*``, all joints of this type in one call, for the hot path of
-:func:`overcon.dynamics.evaluate`) compute the same numbers as the single-joint functions, bit
-for bit (same operations in the same order, stacked matmul); tests/test_hot_path.py checks it.
+Batched forms ``batch_*``: see :mod:`overcon.joints`.
 """
 from __future__ import annotations
 

@@ -5,9 +5,7 @@ Phi = r_i + R_i s_i - r_j - R_j s_j (3 equations). Velocities h_k = [r_k' (globa
 Auxiliary frame: origin at the ball centre P, axes parallel to body i (A.10). Physical reaction
 p' = [Fx, Fy, Fz] in body i axes (the moment about P is zero).
 
-Batched forms (``batch_*``, all joints of this type in one call, for the hot path of
-:func:`overcon.dynamics.evaluate`) compute the same numbers as the single-joint functions, bit
-for bit (same operations in the same order, stacked matmul); tests/test_hot_path.py checks it.
+Batched forms ``batch_*``: see :mod:`overcon.joints`.
 
 Friction (A.11-A.18): contact point s'_C = -rho F'/|F'| with F' taken from the left-hand-side
 generalized reaction (f_X)_i = (J_X)_i lam_X (a project decision, see README: the paper's figures cannot

@@ -9,9 +9,7 @@ p' = [Fx (along the guide, zero without friction), Fy = N (normal), T (moment ab
 Friction (A.2): magnitude mu(v_ij) (|N - T/l| + |T/l|) along x', v_ij the sliding velocity of
 body j relative to body i along x', l the slider length.
 
-Batched forms (``batch_*``, all joints of this type in one call, for the hot path of
-:func:`overcon.dynamics.evaluate`) compute the same numbers as the single-joint functions, bit
-for bit (same operations in the same order, stacked matmul); tests/test_hot_path.py checks it.
+Batched forms ``batch_*``: see :mod:`overcon.joints`.
 """
 from __future__ import annotations
 

@@ -1,0 +1,917 @@
+#!/usr/bin/env python3
+"""Regression check of the scene FMUs against committed baselines.
+
+    python ci/regress.py [--scenes NAME|GLOB ...] [--out DIR] [--jobs N]      # the check (CI)
+    python ci/regress.py --regenerate [--scenes ...] [--stop-time T] [--step S]  # by hand only
+
+The check, for every scene file of ``mechanisms/`` (files with a ``[scene]`` table):
+
+1. finds its baseline ``ci/baselines/<scene>_ref.csv`` + ``<scene>_ref.opt`` (FMI cross-check
+   files: time and every Real output; StartTime, StopTime, StepSize, RelTol). A scene without one
+   fails (exit 2) with the command that creates it; a baseline without a scene fails too;
+2. builds the scene's FMU (``overcon.fmu.build.build_all``, non-unique scenes included) and
+   validates it with ``fmpy.validation.validate_fmu`` (zero problems, else a regression);
+3. runs it with fmpy (``overcon.tooling.run.run_fmus``: one worker process per FMU, ``--jobs`` at
+   a time, longest first) on the baseline's grid: the FMU's own DefaultExperiment (solver
+   tolerance 1e-9, stop 4 s planar / 10 s spatial), outputs every ``StepSize`` = 0.05 s;
+4. compares it with ``overcon.tooling.compare.compare_reference`` (the reference mode of
+   ``overcon compare --ref``), then replaces the library's one-size tolerance by the per-output
+   tolerance of ``ci/tolerances.toml`` (the ONE place tolerances are stated) and marks every
+   reaction output with its joint's ``reaction_unique`` constant: non-unique reactions are
+   compared like the others (deterministic for a fixed elimination) but reported as non-unique.
+
+The tolerance *tier* is chosen per scene: ``same_platform`` when this machine's numerical
+fingerprint (Python, numpy, scipy, their BLAS, CPU model and flags, libc, kernel-selecting
+environment variables; :func:`platform_fingerprint`) equals the one recorded with the baseline in
+``ci/baselines/provenance.json``: there the results are bit-identical and the tolerances are far
+below the acceptance floor; ``cross_platform`` otherwise (round-off of another BLAS, amplified by
+the friction solve; measured, see the file).
+
+Exit codes: 0 every scene matches; 1 a regression (each line names the scene, the output, the
+difference, where it is largest, and the tolerance with its source); 2 bad input (no baseline,
+a baseline without a scene, an invalid scene or tolerance file, a baseline file that is not on its
+.opt grid). Worst wins: 2 > 1. The report (``<out>/report.md``) has every output's table.
+
+``--regenerate`` builds, validates and runs the selected scenes (all by default) and writes their
+baselines (the old grid is kept unless ``--stop-time``/``--step`` are given; a new scene gets its
+FMU's DefaultExperiment stop time and a 0.05 s step) and their provenance, and prints how far each
+moved from the previous baseline. It is never run by CI or the tests (on the committed baselines):
+regenerating is the deliberate act of accepting new results; review the printed changes and the
+diff of ``ci/baselines/`` before committing.
+
+Baseline size: the grid is the FMU's full default experiment (what users run) sampled every
+0.05 s instead of the 0.01 s stepSize: 81 rows planar, 201 rows spatial, shortest round-trip
+``repr`` of every double (bit-exact), 1.7 MB for the 20 scenes. The trajectory does not depend on
+the output grid (the integrator takes its own steps and reads the solution by dense output; the
+0.05 s and 0.01 s runs agree to 2e-12 at common times), so nothing is lost but resolution, and
+the check costs the same as the full default experiment: 36 s on this 2-core machine (65 s
+when other jobs load it), of which building and validating the 20 FMUs take 2.5 s.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import fnmatch
+import hashlib
+import json
+import math
+import os
+import platform
+import shutil
+import sys
+import time
+import tomllib
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_MECHANISMS = ROOT / "mechanisms"
+DEFAULT_BASELINES = ROOT / "ci" / "baselines"
+DEFAULT_TOLERANCES = ROOT / "ci" / "tolerances.toml"
+DEFAULT_OUT = ROOT / "dist" / "regress"
+BASELINE_STEP = 0.05  # s: output interval of new baselines (see the module docstring)
+PROVENANCE = "provenance.json"
+TIERS = ("same_platform", "cross_platform")
+# environment variables that change the numerical kernels numpy/scipy/OpenBLAS/MKL pick
+KERNEL_ENV = ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES", "MKL_CBWR",
+              "MKL_ENABLE_INSTRUCTIONS", "MKL_DEBUG_CPU_TYPE")
+
+EXIT_OK, EXIT_REGRESSION, EXIT_INPUT = 0, 1, 2
+MAX_LINES_PER_CLASS = 2  # regression lines printed per scene and output class (all are in report.md)
+
+
+class BadInput(Exception):
+    """Exit 2: the message says what is wrong and how to fix it."""
+
+
+def _echo(s: str) -> None:
+    print(s, flush=True)
+
+
+def _rel(p: Path) -> str:
+    try:
+        return str(Path(p).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(p)
+
+
+# ---------------------------------------------------------------------------------------------
+# scenes and baselines
+
+def discover_scenes(mechanisms: Path) -> tuple[dict[str, Path], list[str]]:
+    """Scene name -> file for the *.toml files of ``mechanisms`` that have a [scene] table (the
+    name is the scene's ``name``, which names its FMU), and problems (unreadable or invalid scene
+    files, duplicate names)."""
+    from overcon import scene as scene_mod
+
+    mechanisms = Path(mechanisms)
+    if not mechanisms.is_dir():
+        raise BadInput(f"{mechanisms}: no such directory (--mechanisms: the directory of the scene files)")
+    scenes: dict[str, Path] = {}
+    problems: list[str] = []
+    for f in sorted(mechanisms.glob("*.toml")):
+        try:
+            doc = tomllib.loads(f.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            problems.append(f"{f}: unreadable TOML: {exc}")
+            continue
+        if not isinstance(doc.get("scene"), dict):
+            continue  # a mechanism file
+        try:
+            name = scene_mod.load(f).name
+        except scene_mod.SceneError as exc:
+            problems.append(f"{f}: invalid scene file:\n  " + str(exc).replace("\n", "\n  "))
+            continue
+        if name in scenes:
+            problems.append(f"{f}: scene name {name} also used by {scenes[name]} (names must be unique: "
+                            "they name the FMU and the baseline)")
+            continue
+        scenes[name] = f
+    return scenes, problems
+
+
+def select_scenes(scenes: dict[str, Path], patterns: list[str] | None) -> list[str]:
+    """Names matching any of ``patterns`` (names or shell globs); all when None."""
+    if not patterns:
+        return list(scenes)
+    out: list[str] = []
+    for pat in patterns:
+        hits = [n for n in scenes if fnmatch.fnmatchcase(n, pat)]
+        if not hits:
+            raise BadInput(f"--scenes {pat}: matches no scene ({len(scenes)} scenes: "
+                           f"{', '.join(sorted(scenes)) or 'none'})")
+        out.extend(h for h in hits if h not in out)
+    return out
+
+
+def baseline_files(baselines: Path, name: str) -> tuple[Path, Path]:
+    return Path(baselines) / f"{name}_ref.csv", Path(baselines) / f"{name}_ref.opt"
+
+
+def read_opt(path: Path) -> dict[str, float]:
+    """``<scene>_ref.opt`` (FMI cross-check: ``Key, value`` lines)."""
+    out: dict[str, float] = {}
+    for ln, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if not line.strip():
+            continue
+        key, sep, val = line.partition(",")
+        try:
+            out[key.strip()] = float(val)
+        except ValueError:
+            raise BadInput(f"{path}:{ln}: expected 'Key, number', got {line!r}") from None
+    missing = [k for k in ("StartTime", "StopTime", "StepSize") if k not in out]
+    if missing:
+        raise BadInput(f"{path}: missing {', '.join(missing)}")
+    return out
+
+
+def write_opt(path: Path, start: float, stop: float, step: float, rel_tol: float | None) -> None:
+    text = f"StartTime, {start!r}\nStopTime, {stop!r}\nStepSize, {step!r}\n"
+    if rel_tol is not None:
+        text += f"RelTol, {rel_tol!r}\n"
+    path.write_text(text, encoding="utf-8")
+
+
+def regenerate_command(names: list[str], mechanisms: Path, baselines: Path) -> str:
+    cmd = "python ci/regress.py --regenerate --scenes " + " ".join(names)
+    if Path(mechanisms).resolve() != DEFAULT_MECHANISMS.resolve():
+        cmd += f" --mechanisms {mechanisms}"
+    if Path(baselines).resolve() != DEFAULT_BASELINES.resolve():
+        cmd += f" --baselines {baselines}"
+    return cmd
+
+
+def load_provenance(baselines: Path) -> dict:
+    p = Path(baselines) / PROVENANCE
+    if not p.is_file():
+        return {"platforms": {}, "scenes": {}}
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except ValueError as exc:
+        raise BadInput(f"{p}: unreadable JSON: {exc}") from exc
+    doc.setdefault("platforms", {})
+    doc.setdefault("scenes", {})
+    return doc
+
+
+def save_provenance(baselines: Path, doc: dict) -> None:
+    used = {s.get("platform") for s in doc["scenes"].values()}
+    doc["platforms"] = {k: v for k, v in doc["platforms"].items() if k in used}
+    doc["note"] = ("written by python ci/regress.py --regenerate: per scene, the platform fingerprint "
+                   "(see ci/regress.py platform_fingerprint) and the FMU the baseline came from")
+    (Path(baselines) / PROVENANCE).write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n",
+                                              encoding="utf-8")
+
+
+# ---------------------------------------------------------------------------------------------
+# platform fingerprint
+
+def _blas(mod) -> str:
+    try:
+        cfg = mod.show_config(mode="dicts")
+        b = cfg["Build Dependencies"]["blas"]
+        return f"{b.get('name')} {b.get('version')}"
+    except Exception:  # noqa: BLE001 -- older numpy/scipy: no dict mode
+        return "unknown"
+
+
+def _cpu() -> tuple[str, str]:
+    """CPU identification (vendor, family, model: what OpenBLAS's DYNAMIC_ARCH picks its kernels
+    by) and a hash of the feature flags (what numpy's SIMD dispatch picks by)."""
+    ident: dict[str, str] = {}
+    flags = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, val = line.partition(":")
+            key = key.strip()
+            if key in ("vendor_id", "cpu family", "model", "model name", "CPU implementer", "CPU part") \
+                    and key not in ident:
+                ident[key] = val.strip()
+            elif key in ("flags", "Features") and not flags:
+                flags = " ".join(sorted(val.split()))
+    except OSError:
+        pass
+    model = " / ".join(f"{k}: {v}" for k, v in ident.items()) or platform.processor() or "unknown"
+    return model, hashlib.sha256(flags.encode()).hexdigest()[:16]
+
+
+def platform_fingerprint() -> dict:
+    """Everything known to change the rounding of the simulation: same fingerprint, same bits
+    (measured: reruns and 1 vs 2 BLAS threads are bit-identical). Thread counts are not part of
+    it (the matrices are too small for OpenBLAS to split)."""
+    import scipy
+
+    model, flags = _cpu()
+    libc = " ".join(platform.libc_ver()) or "unknown"
+    return {"machine": platform.machine(), "system": platform.system(), "libc": libc,
+            "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
+            "numpy_blas": _blas(np), "scipy_blas": _blas(scipy), "cpu": model, "cpu_flags_sha256": flags,
+            "env": {k: os.environ[k] for k in KERNEL_ENV if os.environ.get(k)}}
+
+
+def fingerprint_id(fp: dict) -> str:
+    return hashlib.sha256(json.dumps(fp, sort_keys=True).encode()).hexdigest()[:12]
+
+
+# ---------------------------------------------------------------------------------------------
+# tolerances
+
+@dataclass
+class Rule:
+    tier: str
+    index: int
+    tolerance: float
+    why: str
+    scenes: tuple[str, ...] = ("*",)
+    outputs: tuple[str, ...] = ("*",)
+    units: tuple[str, ...] | None = None
+
+    def matches(self, scene: str, output: str, unit: str | None) -> bool:
+        return (any(fnmatch.fnmatchcase(scene, p) for p in self.scenes)
+                and any(fnmatch.fnmatchcase(output, p) for p in self.outputs)
+                and (self.units is None or (unit or "") in self.units))
+
+
+@dataclass
+class ToleranceTable:
+    path: Path
+    by_unit: dict  # tier -> {unit: tolerance}
+    rules: dict  # tier -> [Rule]
+
+    def lookup(self, tier: str, scene: str, output: str, unit: str | None) -> tuple[float, str]:
+        """(absolute tolerance, where it is stated) for one output: the first matching rule of
+        the tier, else the tier's value for the output's unit (``default`` if given)."""
+        for r in self.rules[tier]:
+            if r.matches(scene, output, unit):
+                return r.tolerance, f"{self.path.name} [[{tier}.rule]] #{r.index + 1}"
+        u = unit or ""
+        table = self.by_unit[tier]
+        if u in table:
+            return table[u], f"{self.path.name} [{tier}] {u}"
+        if "default" in table:
+            return table["default"], f"{self.path.name} [{tier}] default"
+        raise BadInput(f"{self.path}: no tolerance for output {output} of scene {scene} (unit "
+                       f"{unit or 'none'!r}) in [{tier}]: add a key {u or 'default'!r} (or 'default') there")
+
+
+def _positive_float(v, where: str, path: Path) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+        raise BadInput(f"{path}: {where} must be a positive finite number, got {v!r}")
+    return float(v)
+
+
+def _str_list(v, where: str, path: Path) -> tuple[str, ...]:
+    if isinstance(v, str):
+        v = [v]
+    if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+        raise BadInput(f"{path}: {where} must be a string or a non-empty list of strings, got {v!r}")
+    return tuple(v)
+
+
+def load_tolerances(path: Path) -> ToleranceTable:
+    """Read and check ``ci/tolerances.toml`` (see the file for its layout)."""
+    path = Path(path)
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise BadInput(f"{path}: cannot read the tolerance table: {exc}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise BadInput(f"{path}: invalid TOML: {exc}") from exc
+    unknown = set(doc) - set(TIERS)
+    if unknown:
+        raise BadInput(f"{path}: unknown table(s) {', '.join(sorted(unknown))} (allowed: {', '.join(TIERS)})")
+    by_unit, rules = {}, {}
+    for tier in TIERS:
+        t = doc.get(tier)
+        if not isinstance(t, dict):
+            raise BadInput(f"{path}: missing table [{tier}]")
+        by_unit[tier], rules[tier] = {}, []
+        for key, val in t.items():
+            if key == "rule":
+                if not isinstance(val, list):
+                    raise BadInput(f"{path}: {tier}.rule must be an array of tables ([[{tier}.rule]])")
+                for i, r in enumerate(val):
+                    where = f"{tier}.rule[{i}]"
+                    extra = set(r) - {"scenes", "outputs", "units", "tolerance", "why"}
+                    if extra:
+                        raise BadInput(f"{path}: {where}: unknown key(s) {', '.join(sorted(extra))} (allowed: "
+                                       "scenes, outputs, units, tolerance, why)")
+                    if not isinstance(r.get("why"), str) or not r["why"].strip():
+                        raise BadInput(f"{path}: {where}: a rule needs 'why' (the measurement that justifies it)")
+                    rules[tier].append(Rule(
+                        tier, i, _positive_float(r.get("tolerance"), f"{where}.tolerance", path), r["why"].strip(),
+                        _str_list(r.get("scenes", "*"), f"{where}.scenes", path),
+                        _str_list(r.get("outputs", "*"), f"{where}.outputs", path),
+                        _str_list(r["units"], f"{where}.units", path) if "units" in r else None))
+            else:
+                by_unit[tier][key] = _positive_float(val, f"{tier}.{key}", path)
+    return ToleranceTable(path, by_unit, rules)
+
+
+# ---------------------------------------------------------------------------------------------
+# results
+
+@dataclass
+class Finding:
+    """One output over its tolerance."""
+    scene: str
+    output: str
+    unit: str | None
+    kind: str
+    reaction_unique: bool | None
+    max_abs: float
+    t_max: float
+    first_exceed: float | None
+    tolerance: float
+    source: str  # where the tolerance is stated
+    tier: str
+    cross_tolerance: float | None = None  # the cross-platform tolerance of the output (same tier only)
+
+    def output_class(self) -> int:
+        """0 position/angle/other, 1 unique reaction, 2 non-unique reaction (printing order)."""
+        if self.kind != "reaction":
+            return 0
+        return 1 if self.reaction_unique else 2
+
+    def describe(self) -> str:
+        u = f" {self.unit}" if self.unit else ""
+        what = self.kind
+        if self.kind == "reaction" and self.reaction_unique is not None:
+            what = ("reaction, unique" if self.reaction_unique else
+                    "reaction NOT unique: compared for this fixed elimination")
+        first = "" if self.first_exceed is None else f"; first over tolerance at t = {self.first_exceed:g} s"
+        text = (f"{self.scene}: {self.output} ({self.unit or 'no unit'}, {what}) differs from the baseline by "
+                f"{self.max_abs:.3g}{u} (largest at t = {self.t_max:g} s{first}); tolerance {self.tolerance:.3g}{u} "
+                f"[{self.source}]")
+        if self.cross_tolerance is not None and self.max_abs <= self.cross_tolerance:
+            text += (f" -- below the cross-platform tolerance {self.cross_tolerance:.3g}{u}: as large as a change "
+                     "of rounding alone; if the code change is intended, regenerate")
+        return text
+
+
+@dataclass
+class SceneCheck:
+    scene: str
+    status: str  # ok, regression, input
+    messages: list[str] = field(default_factory=list)
+    findings: list[Finding] = field(default_factory=list)
+    comparison: object = None  # overcon.tooling.compare.Comparison
+    tier: str = ""
+    seconds: float = 0.0
+    bit_identical: bool = False
+
+
+@dataclass
+class Outcome:
+    code: int
+    checks: dict  # scene -> SceneCheck
+    problems: list[str] = field(default_factory=list)  # bad input not tied to a run
+    report: Path | None = None
+    seconds: dict = field(default_factory=dict)
+
+    def messages(self) -> list[str]:
+        out = list(self.problems)
+        for c in self.checks.values():
+            out.extend(c.messages)
+        return out
+
+
+# ---------------------------------------------------------------------------------------------
+# build, validate, run
+
+def _build(names: list[str], scenes: dict[str, Path], fmu_dir: Path) -> tuple[dict[str, Path], dict[str, list[str]]]:
+    """FMU per scene (pre-check verdicts go to the build log only); problems per scene."""
+    from overcon.fmu.build import build_all
+
+    log: list[str] = []
+    fmu_dir.mkdir(parents=True, exist_ok=True)
+    _, results = build_all([scenes[n] for n in names], fmu_dir, allow_nonunique=True, refs=False,
+                           validate=False, echo=log.append, echo_err=log.append)
+    (fmu_dir / "build.log").write_text("\n".join(log) + "\n", encoding="utf-8")
+    by_file = {str(scenes[n]): n for n in names}
+    fmus, problems = {}, {}
+    for r in results:
+        n = by_file.get(r.source)
+        if n is None:
+            continue
+        if r.status == "built":
+            fmus[n] = r.fmu
+        else:
+            problems[n] = [f"{n}: build {r.status}: " + "; ".join(r.messages)]
+    return fmus, problems
+
+
+def _validate(fmu: Path) -> list[str]:
+    from fmpy.validation import validate_fmu
+
+    return [str(p) for p in validate_fmu(str(fmu))]
+
+
+def _run(jobs_list, out_dir: Path, jobs: int) -> dict:
+    """jobs_list: [(FmuInfo, Experiment)], longest first. Returns model -> (csv, seconds inside
+    simulate_fmu) or the error text.
+    One ``run_fmus`` call per FMU so that a failure stays with its scene."""
+    from overcon.tooling import InputError, SimulationFailed
+    from overcon.tooling.run import run_fmus
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    def one(item):
+        info, ex = item
+        csv = out_dir / f"{info.model}.csv"
+        csv.unlink(missing_ok=True)
+        try:
+            r = run_fmus([info], out_dir, jobs=1, progress=False, echo=lambda s: None,
+                         experiments={info.model: ex})
+            return info.model, (r[0].csv, r[0].sim_seconds)
+        except (SimulationFailed, InputError) as exc:
+            return info.model, str(exc)
+
+    with ThreadPoolExecutor(max(1, min(jobs, len(jobs_list) or 1))) as pool:
+        return dict(pool.map(one, jobs_list))
+
+
+def _experiment(start: float, stop: float, step: float):
+    from overcon.tooling.run import Experiment
+
+    return Experiment(float(start), float(stop), float(step))
+
+
+def _check_baseline_grid(ref, opt: dict, csv_path: Path) -> None:
+    start, stop, step = opt["StartTime"], opt["StopTime"], opt["StepSize"]
+    if not (math.isfinite(step) and step > 0 and stop > start):
+        raise BadInput(f"{csv_path.with_suffix('.opt')}: StartTime/StopTime/StepSize {start}/{stop}/{step} invalid")
+    n = int(round((stop - start) / step))
+    grid = start + step * np.arange(n + 1)
+    if len(ref.time) != len(grid) or not np.allclose(ref.time, grid, rtol=0, atol=1e-9 * step):
+        raise BadInput(f"{csv_path}: its time column ({len(ref.time)} points, t = {ref.time[0]:g}..{ref.time[-1]:g} s) "
+                       f"is not the grid of its .opt (t = {start:g}..{stop:g} s every {step:g} s): regenerate it")
+
+
+# ---------------------------------------------------------------------------------------------
+# comparison
+
+def compare_scene(scene: str, info, result, ref, ref_path: Path, table: ToleranceTable, tier: str) -> SceneCheck:
+    """``compare_reference`` (library reference mode: every common output decides), then the
+    per-output tolerances of ``table`` for ``tier`` and the reaction-uniqueness marks."""
+    from overcon.tooling.compare import compare_reference
+
+    c = compare_reference(info, result, ref, ref_path, tolerance=1.0)  # tolerances replaced below
+    ref_s, res_s = c.series
+    check = SceneCheck(scene, "ok", comparison=c, tier=tier)
+    meta = {o.name: o for o in info.outputs}
+    for d in c.diffs:
+        o = meta.get(d.name)
+        tol, source = table.lookup(tier, scene, d.name, d.unit)
+        dev = np.abs(res_s.values[d.name] - ref_s.values[d.name])
+        if not np.all(np.isfinite(res_s.values[d.name])):
+            dev = np.where(np.isfinite(dev), dev, np.inf)
+        d.max_abs = float(np.max(dev))
+        d.tolerance = tol
+        over = np.nonzero(dev > tol)[0]
+        d.first_exceed = float(ref_s.time[over[0]]) if len(over) else None
+        if d.kind == "reaction" and o is not None:
+            d.reaction_unique = info.reaction_unique.get(o.joint)
+        if not d.within:
+            cross = table.lookup("cross_platform", scene, d.name, d.unit)[0] if tier == "same_platform" else None
+            check.findings.append(Finding(scene, d.name, d.unit, d.kind, d.reaction_unique, d.max_abs,
+                                          float(ref_s.time[int(np.argmax(dev))]), d.first_exceed, tol, source,
+                                          tier, cross))
+    check.bit_identical = all(d.max_abs == 0.0 for d in c.diffs)
+    check.findings.sort(key=lambda f: (f.output_class(), -(f.max_abs / f.tolerance)))
+    return check
+
+
+def _ok_line(check: SceneCheck) -> str:
+    c = check.comparison
+    n_nonunique = sum(1 for d in c.diffs if d.kind == "reaction" and d.reaction_unique is False)
+    nu = f"; {n_nonunique} of them non-unique reactions, compared too" if n_nonunique else ""
+    if check.bit_identical:
+        how = "bit-identical"
+    else:
+        w = max(c.diffs, key=lambda d: d.max_abs / d.tolerance)
+        how = (f"largest difference {w.max_abs:.2g} {w.unit or ''} in {w.name} = "
+               f"{w.max_abs / w.tolerance:.2g} of its tolerance")
+    return (f"ok   {check.scene}: {len(c.diffs)} outputs within tolerance ({check.tier}{nu}), {how} "
+            f"[{check.seconds:.1f} s]")
+
+
+def _report(outcome: Outcome, out: Path, title: str) -> Path:
+    from overcon.tooling.report import console_table
+
+    lines = [f"# {title}", ""]
+    if outcome.problems:
+        lines += ["## Bad input", ""] + [f"- {p}" for p in outcome.problems] + [""]
+    lines += ["## Scenes", "", "| scene | result | tier | outputs | seconds |", "|---|---|---|---|---|"]
+    for c in outcome.checks.values():
+        n = len(c.comparison.diffs) if c.comparison is not None else 0
+        res = {"ok": "ok" + (" (bit-identical)" if c.bit_identical else ""), "regression": "**REGRESSION**",
+               "input": "**bad input**"}[c.status]
+        lines.append(f"| {c.scene} | {res} | {c.tier or '—'} | {n} | {c.seconds:.1f} |")
+    lines.append("")
+    for c in outcome.checks.values():
+        lines += [f"## {c.scene}", ""]
+        lines += [f"- {m}" for m in (c.messages if c.status != "ok" else [])]
+        if c.comparison is not None:
+            lines += ["", "```", console_table(c.comparison), "```", ""]
+    p = out / "report.md"
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return p
+
+
+# ---------------------------------------------------------------------------------------------
+# the check
+
+def regress(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS, baselines=DEFAULT_BASELINES,
+            tolerances=DEFAULT_TOLERANCES, out=DEFAULT_OUT, jobs: int | None = None, tier: str | None = None,
+            echo=_echo) -> Outcome:
+    """Build, validate, run and compare the selected scenes (all when None) against their
+    baselines; every message goes through ``echo``. ``tier`` forces a tolerance tier (default: per
+    scene from the platform fingerprint). Never raises for bad input: see ``Outcome.code``."""
+    from overcon.tooling import InputError
+    from overcon.tooling.fmus import inspect_fmu
+    from overcon.tooling.run import read_series
+
+    t0 = time.perf_counter()
+    mechanisms, baselines, out = Path(mechanisms), Path(baselines), Path(out)
+    jobs = jobs or os.cpu_count() or 2
+    outcome = Outcome(EXIT_OK, {})
+
+    def bad(msg: str) -> None:
+        outcome.problems.append(msg)
+        echo(f"BAD INPUT {msg}")
+
+    try:
+        table = load_tolerances(Path(tolerances))
+        all_scenes, problems = discover_scenes(mechanisms)
+        names = select_scenes(all_scenes, scenes)
+        provenance = load_provenance(baselines)
+    except BadInput as exc:
+        bad(str(exc))
+        outcome.code = EXIT_INPUT
+        return outcome
+    for p in problems:
+        bad(p)
+    if not all_scenes and not problems:
+        bad(f"{mechanisms}: no scene files (*.toml with a [scene] table)")
+    fp = platform_fingerprint()
+    here = fingerprint_id(fp)
+
+    # baselines present? (before any build: a missing one is reported at once)
+    ready: list[str] = []
+    missing = []
+    for n in names:
+        csv, opt = baseline_files(baselines, n)
+        lacking = [p.name for p in (csv, opt) if not p.is_file()]
+        if lacking:
+            missing.append(n)
+            check = SceneCheck(n, "input")
+            msg = (f"{n}: no baseline ({', '.join(_rel(baselines / x) for x in lacking)} missing): scene "
+                   f"{_rel(all_scenes[n])} has never been baselined; create it deliberately with\n"
+                   f"    {regenerate_command([n], mechanisms, baselines)}\n"
+                   f"  then review and commit {_rel(baselines)}/{n}_ref.csv, {n}_ref.opt and {PROVENANCE}")
+            check.messages.append(msg)
+            outcome.checks[n] = check
+            echo(f"MISSING BASELINE {msg}")
+        else:
+            ready.append(n)
+    if not scenes:  # the full set: every baseline must belong to a scene
+        for f in sorted(baselines.glob("*_ref.csv")):
+            n = f.name[: -len("_ref.csv")]
+            if n not in all_scenes:
+                bad(f"{_rel(f)}: baseline of scene {n}, which is not in {_rel(mechanisms)} (renamed or removed?): "
+                    f"delete {n}_ref.csv/{n}_ref.opt (git rm) or restore the scene")
+
+    # build and validate
+    t_build = time.perf_counter()
+    fmus, build_problems = _build(ready, all_scenes, out / "fmus") if ready else ({}, {})
+    todo = []
+    for n in ready:
+        check = outcome.checks.setdefault(n, SceneCheck(n, "ok"))
+        if n in build_problems:
+            check.status = "input"
+            check.messages += build_problems[n]
+            echo("BAD INPUT " + "\n  ".join(build_problems[n]))
+            continue
+        problems_v = _validate(fmus[n])
+        if problems_v:
+            check.status = "regression"
+            check.messages.append(f"{n}: fmpy validate found {len(problems_v)} problem(s) in {fmus[n].name}: "
+                                  + "; ".join(problems_v))
+            echo("REGRESSION " + check.messages[-1])
+            continue
+        csv, opt_path = baseline_files(baselines, n)
+        try:
+            opt = read_opt(opt_path)
+            ref = read_series(csv)
+            _check_baseline_grid(ref, opt, csv)
+            info = inspect_fmu(fmus[n])
+        except (BadInput, InputError) as exc:
+            check.status = "input"
+            check.messages.append(f"{n}: {exc}")
+            echo(f"BAD INPUT {check.messages[-1]}")
+            continue
+        new = [o for o in info.output_names if o not in ref.values]
+        gone = [o for o in ref.names if o not in info.output_names]
+        if new or gone:
+            check.status = "regression"
+            parts = ([f"outputs not in the baseline: {', '.join(new)}"] if new else []) + \
+                    ([f"baseline outputs the FMU no longer has: {', '.join(gone)}"] if gone else [])
+            check.messages.append(f"{n}: the FMU's outputs changed ({'; '.join(parts)}); if intended, "
+                                  f"regenerate: {regenerate_command([n], mechanisms, baselines)}")
+            echo("REGRESSION " + check.messages[-1])
+        if "RelTol" in opt and info.tolerance is not None and not math.isclose(opt["RelTol"], info.tolerance):
+            check.messages.append(f"{n}: note: the FMU's solver tolerance is {info.tolerance:g}, the baseline's "
+                                  f"RelTol {opt['RelTol']:g}")
+            echo(check.messages[-1])
+        prov = provenance["scenes"].get(n, {})
+        check.tier = tier or ("same_platform" if prov.get("platform") == here else "cross_platform")
+        todo.append((n, info, ref, csv, _experiment(opt["StartTime"], opt["StopTime"], opt["StepSize"])))
+    t_build = time.perf_counter() - t_build
+
+    # run (longest first) and compare
+    t_run = time.perf_counter()
+    todo.sort(key=lambda x: (-(x[4].stop - x[4].start), -len(x[1].friction)))
+    csvs = _run([(x[1], x[4]) for x in todo], out / "results", jobs) if todo else {}
+    t_run = time.perf_counter() - t_run
+    for n, info, ref, csv, ex in todo:
+        check = outcome.checks[n]
+        got = csvs[info.model]
+        if isinstance(got, str):
+            check.status = "regression"
+            check.messages.append(f"{n}: the simulation failed (the baseline ran to t = {ex.stop:g} s): {got}")
+            echo("REGRESSION " + check.messages[-1])
+            continue
+        got, check.seconds = got
+        try:
+            res = read_series(got)
+            cmp = compare_scene(n, info, res, ref, csv, table, check.tier)
+        except (BadInput, InputError) as exc:
+            check.status = "input"
+            check.messages.append(f"{n}: {exc}")
+            echo(f"BAD INPUT {check.messages[-1]}")
+            continue
+        check.comparison, check.findings, check.bit_identical = cmp.comparison, cmp.findings, cmp.bit_identical
+        if check.findings:
+            check.status = "regression"
+            shown = 0
+            per_class: dict[int, int] = {}
+            for f in check.findings:  # positions first, then unique, then non-unique reactions
+                check.messages.append(f.describe())
+                k = f.output_class()
+                per_class[k] = per_class.get(k, 0) + 1
+                if per_class[k] <= MAX_LINES_PER_CLASS:
+                    echo("REGRESSION " + check.messages[-1])
+                    shown += 1
+            if len(check.findings) > shown:
+                echo(f"REGRESSION {n}: ... and {len(check.findings) - shown} more output(s) over tolerance "
+                     f"(all in {_rel(out / 'report.md')})")
+        elif check.status == "ok":
+            echo(_ok_line(check))
+
+    statuses = [c.status for c in outcome.checks.values()]
+    if outcome.problems or "input" in statuses:
+        outcome.code = EXIT_INPUT
+    elif "regression" in statuses:
+        outcome.code = EXIT_REGRESSION
+    outcome.seconds = {"build_validate": t_build, "run_compare": t_run, "total": time.perf_counter() - t0}
+    outcome.report = _report(outcome, out, "overcon regression check")
+    n_ok = statuses.count("ok")
+    n_reg = statuses.count("regression")
+    n_bad = statuses.count("input") + len(outcome.problems)
+    tiers = sorted({c.tier for c in outcome.checks.values() if c.tier})
+    echo(f"regress: {n_ok} scene(s) match their baselines, {n_reg} regression(s), {n_bad} bad input(s) "
+         f"[tolerance tier: {', '.join(tiers) or '—'}; platform {here}]; build+validate "
+         f"{outcome.seconds['build_validate']:.1f} s, runs {outcome.seconds['run_compare']:.1f} s "
+         f"({jobs} process(es)), total {outcome.seconds['total']:.1f} s; report {_rel(outcome.report)}")
+    if outcome.code == EXIT_REGRESSION:
+        echo("regress: FAILED. If the change is intended, regenerate deliberately: "
+             + regenerate_command(sorted(n for n, c in outcome.checks.items() if c.status == "regression"),
+                                  mechanisms, baselines))
+    return outcome
+
+
+# ---------------------------------------------------------------------------------------------
+# regeneration (deliberate, by hand)
+
+def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS, baselines=DEFAULT_BASELINES,
+               out=DEFAULT_OUT, jobs: int | None = None, stop_time: float | None = None,
+               step: float | None = None, echo=_echo) -> Outcome:
+    """Write the baselines of the selected scenes (all when None); see the module docstring."""
+    from overcon.tooling import InputError
+    from overcon.tooling.fmus import inspect_fmu
+    from overcon.tooling.run import read_series
+
+    t0 = time.perf_counter()
+    mechanisms, baselines, out = Path(mechanisms), Path(baselines), Path(out)
+    jobs = jobs or os.cpu_count() or 2
+    outcome = Outcome(EXIT_OK, {})
+    for v, flag in ((stop_time, "--stop-time"), (step, "--step")):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            outcome.problems.append(f"{flag} {v!r}: must be a positive finite number")
+    try:
+        all_scenes, problems = discover_scenes(mechanisms)
+        names = select_scenes(all_scenes, scenes)
+        provenance = load_provenance(baselines)
+    except BadInput as exc:
+        outcome.problems.append(str(exc))
+        problems, names = [], []
+    outcome.problems += problems
+    if outcome.problems:
+        for p in outcome.problems:
+            echo(f"BAD INPUT {p}")
+        outcome.code = EXIT_INPUT
+        return outcome
+    fmus, build_problems = _build(names, all_scenes, out / "fmus")
+    todo = []
+    for n in names:
+        check = outcome.checks[n] = SceneCheck(n, "ok")
+        if n in build_problems:
+            check.status, check.messages = "input", build_problems[n]
+            continue
+        problems_v = _validate(fmus[n])
+        if problems_v:
+            check.status = "regression"
+            check.messages.append(f"{n}: fmpy validate found problems, baseline NOT written: " + "; ".join(problems_v))
+            continue
+        csv, opt_path = baseline_files(baselines, n)
+        try:
+            info = inspect_fmu(fmus[n])
+            old = read_opt(opt_path) if opt_path.is_file() else {}
+        except (BadInput, InputError) as exc:
+            check.status = "input"
+            check.messages.append(f"{n}: {exc}")
+            continue
+        start = info.start
+        stop = stop_time if stop_time is not None else old.get("StopTime", info.stop)
+        h = step if step is not None else old.get("StepSize", BASELINE_STEP)
+        if stop <= start:
+            check.status = "input"
+            check.messages.append(f"{n}: stop time {stop:g} s is not after the start time {start:g} s")
+            continue
+        todo.append((n, info, _experiment(start, stop, h)))
+    for c in outcome.checks.values():
+        for m in c.messages:
+            echo(("BAD INPUT " if c.status == "input" else "FAILED ") + m)
+    todo.sort(key=lambda x: (-(x[2].stop - x[2].start), -len(x[1].friction)))
+    csvs = _run([(x[1], x[2]) for x in todo], out / "results", jobs) if todo else {}
+    fp = platform_fingerprint()
+    fid = fingerprint_id(fp)
+    baselines.mkdir(parents=True, exist_ok=True)
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    for n, info, ex in todo:
+        check = outcome.checks[n]
+        got = csvs[info.model]
+        if isinstance(got, str):
+            check.status = "regression"
+            check.messages.append(f"{n}: the simulation failed, baseline NOT written: {got}")
+            echo("FAILED " + check.messages[-1])
+            continue
+        got = got[0]
+        csv, opt_path = baseline_files(baselines, n)
+        change = "new baseline"
+        if csv.is_file():
+            try:
+                old, new = read_series(csv), read_series(got)
+                if len(old.time) == len(new.time) and np.allclose(old.time, new.time, rtol=0, atol=1e-9 * ex.step):
+                    common = [x for x in new.names if x in old.values]
+                    diffs = {x: float(np.max(np.abs(new.values[x] - old.values[x]))) for x in common}
+                    units = {o.name: o.unit for o in info.outputs}
+                    if not diffs or max(diffs.values()) == 0.0:
+                        change = "unchanged (bit-identical)"
+                    else:
+                        w = max(diffs, key=diffs.get)
+                        change = f"changed: largest {diffs[w]:.3g} {units.get(w) or ''} in {w}"
+                        for u in ("m", "rad", "N", "N.m"):
+                            du = [d for x, d in diffs.items() if units.get(x) == u]
+                            if du:
+                                change += f"; max {max(du):.3g} {u}"
+                    added = [x for x in new.names if x not in old.values]
+                    if added:
+                        change += f"; new outputs {', '.join(added)}"
+                else:
+                    change = "replaced (different grid)"
+            except InputError:
+                change = "replaced (the old file was unreadable)"
+        shutil.copyfile(got, csv)
+        write_opt(opt_path, ex.start, ex.stop, ex.step, info.tolerance)
+        provenance["platforms"][fid] = fp
+        provenance["scenes"][n] = {"platform": fid, "generated": now, "fmu_guid": info.path and _guid(info.path),
+                                   "stop_time": ex.stop, "step": ex.step}
+        check.messages.append(f"{n}: wrote {_rel(csv)} ({csv.stat().st_size // 1024} KiB, t = {ex.start:g}..{ex.stop:g} s "
+                              f"every {ex.step:g} s): {change}")
+        echo(check.messages[-1])
+    save_provenance(baselines, provenance)
+    statuses = [c.status for c in outcome.checks.values()]
+    outcome.code = EXIT_INPUT if "input" in statuses else EXIT_REGRESSION if "regression" in statuses else EXIT_OK
+    outcome.seconds = {"total": time.perf_counter() - t0}
+    echo(f"regenerate: {statuses.count('ok')} baseline(s) written to {_rel(baselines)} in "
+         f"{outcome.seconds['total']:.1f} s (platform {fid}); review the changes above and `git diff "
+         f"--stat {_rel(baselines)}` before committing")
+    return outcome
+
+
+def _guid(fmu: Path) -> str:
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(fmu) as zf:
+            return json.loads(zf.read("resources/overcon_fmu.json")).get("guid", "")
+    except (KeyError, ValueError, OSError, zipfile.BadZipFile):
+        return ""
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="ci/regress.py", description=__doc__.split("\n\n")[0],
+                                epilog="Exit codes: 0 all match; 1 a regression; 2 bad input or a missing baseline.")
+    p.add_argument("--scenes", nargs="+", metavar="NAME", help="scene names or shell globs (default: every scene)")
+    p.add_argument("--mechanisms", default=str(DEFAULT_MECHANISMS), metavar="DIR",
+                   help="directory of the scene files (default: mechanisms/)")
+    p.add_argument("--baselines", default=str(DEFAULT_BASELINES), metavar="DIR",
+                   help="directory of the baselines (default: ci/baselines/)")
+    p.add_argument("--tolerances", default=str(DEFAULT_TOLERANCES), metavar="FILE",
+                   help="tolerance table (default: ci/tolerances.toml)")
+    p.add_argument("--out", default=str(DEFAULT_OUT), metavar="DIR",
+                   help="work directory: FMUs, result CSVs, report.md (default: dist/regress)")
+    p.add_argument("--jobs", type=int, metavar="N", help="FMUs run in parallel processes (default: CPU count)")
+    p.add_argument("--tier", choices=TIERS, help="force a tolerance tier (default: same_platform when the "
+                                                 "platform fingerprint equals the baseline's)")
+    p.add_argument("--regenerate", action="store_true",
+                   help="write the baselines instead of checking them (deliberately, by hand; never in CI)")
+    p.add_argument("--stop-time", type=float, metavar="T", help="--regenerate: stop time of the new baselines "
+                                                                "(default: the old one, else the FMU's)")
+    p.add_argument("--step", type=float, metavar="S", help=f"--regenerate: output interval (default: the old one, "
+                                                           f"else {BASELINE_STEP} s)")
+    p.add_argument("--fingerprint", action="store_true", help="print this platform's fingerprint and exit")
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.jobs is not None and args.jobs < 1:
+        print(f"ci/regress.py: --jobs {args.jobs}: must be >= 1", file=sys.stderr)
+        return EXIT_INPUT
+    if args.fingerprint:
+        fp = platform_fingerprint()
+        print(json.dumps({"id": fingerprint_id(fp), **fp}, indent=1))
+        return EXIT_OK
+    if args.regenerate:
+        return regenerate(args.scenes, mechanisms=args.mechanisms, baselines=args.baselines, out=args.out,
+                          jobs=args.jobs, stop_time=args.stop_time, step=args.step).code
+    if args.stop_time is not None or args.step is not None:
+        print("ci/regress.py: --stop-time/--step only with --regenerate (the check runs on each baseline's grid)",
+              file=sys.stderr)
+        return EXIT_INPUT
+    return regress(args.scenes, mechanisms=args.mechanisms, baselines=args.baselines, tolerances=args.tolerances,
+                   out=args.out, jobs=args.jobs, tier=args.tier).code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

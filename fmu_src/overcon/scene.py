@@ -226,6 +226,17 @@ def _ident(ctx: _Ctx, value, field: str) -> str | None:
     return s
 
 
+
+def _register_name(ctx: _Ctx, name, field: str, seen: dict, where: str, what: str):
+    """Record a body/joint name; a duplicate is a problem (and gives None)."""
+    if name is None:
+        return None
+    if name in seen:
+        ctx.add(field, f"duplicate {what} name '{name}' (also {seen[name]})")
+        return None
+    seen[name] = where
+    return name
+
 def _choice(ctx: _Ctx, value, field: str, choices) -> str | None:
     s = _str(ctx, value, field)
     if s is None:
@@ -406,11 +417,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
             if bname == BASE:
                 ctx.add(f"{p}.name", f"'{BASE}' is reserved for the fixed ground")
                 bname = None
-            elif bname is not None and bname in body_names:
-                ctx.add(f"{p}.name", f"duplicate body name '{bname}' (also {body_names[bname]})")
-                bname = None
-            elif bname is not None:
-                body_names[bname] = p
+            bname = _register_name(ctx, bname, f"{p}.name", body_names, p, "body")
         v = _get(ctx, bt, "mass", p)
         if v is not _MISSING:
             mass = _num(ctx, v, f"{p}.mass", _POSITIVE)
@@ -474,12 +481,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
             _unknown_keys(ctx, jt, p, common + all_joint_fields)
         v = _get(ctx, jt, "name", p)
         if v is not _MISSING:
-            jname = _ident(ctx, v, f"{p}.name")
-            if jname is not None and jname in joint_names:
-                ctx.add(f"{p}.name", f"duplicate joint name '{jname}' (also {joint_names[jname]})")
-                jname = None
-            elif jname is not None:
-                joint_names[jname] = p
+            jname = _register_name(ctx, _ident(ctx, v, f"{p}.name"), f"{p}.name", joint_names, p, "joint")
         v = _get(ctx, jt, "body_i", p)
         if v is not _MISSING:
             bi = body_ref(v, f"{p}.body_i")

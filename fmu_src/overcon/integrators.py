@@ -12,6 +12,11 @@ integrator state is a few arrays (``get_state``/``set_state`` give an exact roun
   accurate per step at tight tolerances.
 - ``rk4``: classical fixed-step Runge-Kutta 4 with step ``step`` (s); dense output by cubic Hermite
   interpolation between steps (4th order in y at the steps, 3rd order between them).
+- ``radau``: implicit Radau IIA of order 5 (3 stages, L-stable) for stiff problems, e.g. sticking
+  inside a tiny friction regularisation band; simplified Newton iterations with a finite-difference
+  Jacobian of the right-hand side, reused over steps; error control with the embedded 3rd-order
+  estimate and step-size control of Hairer & Wanner (Solving ODEs II, Sec. IV.8), following SciPy's
+  ``Radau`` (constants from there); dense output by the collocation polynomial (no evaluations).
 
 A right-hand side ``fun(t, y)`` may raise; the exception propagates with the time attached by the
 caller.
@@ -20,7 +25,9 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _D853
+from scipy.integrate._ivp import radau as _RADAU
 from scipy.integrate._ivp.rk import RK45 as _RK45
+from scipy.linalg import lu_factor, lu_solve
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 
@@ -41,6 +48,11 @@ counted (``stiff_steps``, reported); when stability also forces the step below
 STIFF_STEP_FRACTION * max_step (e.g. sticking inside a very small friction regularisation band)
 the run stops with StiffnessDetected instead of crawling."""
 STIFF_STEP_FRACTION = 0.01
+STABILITY_LIMITED = 0.6
+"""A step with h * rho above STABILITY_LIMITED * stiff_h_rho is taken as limited by stability for the
+stop criterion: with very small v_reg (1e-6) the step-size control settles just inside the
+stability boundary (dopri5: h * rho = 2.77, below Hairer's 3.25, measured on planar_f145_wo6 with
+mu = 1), and a run that met only Hairer's threshold would crawl on at 1e-7 s steps for hours."""
 
 
 class AdaptiveRK:
@@ -58,7 +70,7 @@ class AdaptiveRK:
         self.fun = fun
         self.dense_fun = dense_fun or fun  # evaluations for dense output only (must not alter state)
         self.detect_stiffness = detect_stiffness
-        self.n_stiff = self.n_nonstiff = self.stiff_steps = 0
+        self.n_stiff = self.n_nonstiff = self.stiff_steps = self.n_limited = 0
         self.rtol = self.atol = float(tolerance)
         self.max_step = float(max_step)
         self.t = float(t0)
@@ -105,7 +117,8 @@ class AdaptiveRK:
 
     def _stiffness_test(self, h, df, dy) -> None:
         den = float(dy @ dy)
-        if den > 0.0 and h * np.sqrt(float(df @ df) / den) > self.stiff_h_rho:
+        h_rho = h * np.sqrt(float(df @ df) / den) if den > 0.0 else 0.0
+        if h_rho > self.stiff_h_rho:
             self.n_stiff, self.n_nonstiff = self.n_stiff + 1, 0
         else:
             self.n_nonstiff += 1
@@ -113,11 +126,13 @@ class AdaptiveRK:
                 self.n_stiff = 0
         if self.n_stiff >= STIFF_STEPS:
             self.stiff_steps += 1
-        if self.n_stiff >= STIFF_STEPS and self.detect_stiffness and h < STIFF_STEP_FRACTION * self.max_step:
+        self.n_limited = self.n_limited + 1 if h_rho > STABILITY_LIMITED * self.stiff_h_rho else 0
+        limited = self.n_stiff >= STIFF_STEPS or self.n_limited >= 10 * STIFF_STEPS
+        if limited and self.detect_stiffness and h < STIFF_STEP_FRACTION * self.max_step:
             raise StiffnessDetected(
                 f"t = {self.t:.9g} s: the problem is stiff for {self.name} (step {h:.3g} s limited by "
-                f"stability on {STIFF_STEPS} steps in a row); e.g. a small friction regularisation "
-                "velocity: increase v_reg or use a method for stiff problems")
+                f"stability on {max(self.n_stiff, self.n_limited)} steps in a row); e.g. a small friction "
+                "regularisation velocity: increase v_reg or use the method for stiff problems, radau")
 
     def dense(self, t: float) -> np.ndarray:
         if t == self.t:
@@ -130,7 +145,8 @@ class AdaptiveRK:
         return {"t": self.t, "y": self.y.copy(), "f": self.f.copy(), "h": self.h,
                 "t_old": self.t_old, "y_old": self.y_old.copy(), "h_old": self.h_old,
                 "K": None if self.K is None else self.K.copy(), "nfev": self.nfev, "nsteps": self.nsteps,
-                "n_stiff": self.n_stiff, "n_nonstiff": self.n_nonstiff, "stiff_steps": self.stiff_steps}
+                "n_stiff": self.n_stiff, "n_nonstiff": self.n_nonstiff, "stiff_steps": self.stiff_steps,
+                "n_limited": self.n_limited}
 
     def set_state(self, s: dict) -> None:
         self.t, self.y, self.f, self.h = s["t"], s["y"].copy(), s["f"].copy(), s["h"]
@@ -139,6 +155,7 @@ class AdaptiveRK:
         self._dense_cache = None
         self.nfev, self.nsteps = s["nfev"], s["nsteps"]
         self.n_stiff, self.n_nonstiff, self.stiff_steps = s["n_stiff"], s["n_nonstiff"], s["stiff_steps"]
+        self.n_limited = s.get("n_limited", 0)
 
 
 class Dopri5(AdaptiveRK):
@@ -255,4 +272,211 @@ class RK4:
         self.nfev, self.nsteps = s["nfev"], s["nsteps"]
 
 
-METHODS = {"dopri5": Dopri5, "dop853": Dop853, "rk4": RK4}
+class Radau5:
+    """Radau IIA, order 5 (Hairer & Wanner's RADAU5 as in SciPy's ``Radau``), with plain-array state.
+
+    Each step solves the 3-stage collocation system by simplified Newton iterations with the
+    matrices ``mu/h I - J`` (one real, one complex LU, kept while h and J stay); J is a
+    forward-difference Jacobian of ``fun`` (n extra evaluations), recomputed only when Newton
+    converges slowly or fails. ``rtol = atol = tolerance``; ``max_step`` caps the step. A right-hand
+    side that fails at a Newton iterate (ArithmeticError, e.g. the friction solve) counts as a
+    failed Newton iteration (the step is retried smaller); the last such reason is kept for the
+    error message when the step size collapses.
+    """
+
+    name = "radau"
+    C, E, T, TI, P = _RADAU.C, _RADAU.E, _RADAU.T, _RADAU.TI, _RADAU.P
+    MU_REAL, MU_COMPLEX = _RADAU.MU_REAL, _RADAU.MU_COMPLEX
+    TI_REAL, TI_COMPLEX = _RADAU.TI_REAL, _RADAU.TI_COMPLEX
+    NEWTON_MAXITER = 6
+
+    def __init__(self, fun, t0, y0, *, tolerance, max_step, first_step=None, **_):
+        self.fun = fun
+        self.rtol = self.atol = float(tolerance)
+        self.max_step = float(max_step)
+        self.newton_tol = max(10 * np.finfo(float).eps / self.rtol, min(0.03, self.rtol ** 0.5))
+        self.t = float(t0)
+        self.y = np.array(y0, float)
+        self.f = fun(self.t, self.y)
+        self.nfev, self.njev, self.nlu, self.nsteps = 1, 0, 0, 0
+        self.h_abs = min(self.max_step, first_step or 1e-4)
+        self.h_abs_old = self.error_norm_old = None
+        self.J = self._jacobian(self.t, self.y, self.f)
+        self.current_jac = True
+        self.lu_h = None  # step size of the LU factors below (None: none)
+        self.LU_real = self.LU_complex = None
+        self.t_old, self.y_old, self.Z = self.t, self.y.copy(), None
+        self.last_failure = ""
+
+    # -- pieces ----------------------------------------------------------------------------
+    def _jacobian(self, t, y, f):
+        """Forward differences, step sqrt(eps) max(|y_k|, 1) (units of y: m, rad, m/s, rad/s)."""
+        n = y.size
+        J = np.empty((n, n))
+        delta = np.sqrt(np.finfo(float).eps) * np.maximum(np.abs(y), 1.0)
+        for k in range(n):
+            yk = y.copy()
+            yk[k] += delta[k]
+            J[:, k] = (self.fun(t, yk) - f) / (yk[k] - y[k])
+        self.nfev += n
+        self.njev += 1
+        return J
+
+    def _factor(self, h):
+        n = self.y.size
+        self.LU_real = lu_factor(self.MU_REAL / h * np.identity(n) - self.J)
+        self.LU_complex = lu_factor(self.MU_COMPLEX / h * np.identity(n) - self.J)
+        self.lu_h = h
+        self.nlu += 2
+
+    def _dense_poly(self, t):
+        x = (t - self.t_old) / (self.t - self.t_old)
+        return self.y_old + (self.Z.T @ self.P) @ np.cumprod(np.full(3, x))
+
+    @staticmethod
+    def _norm(x):
+        return float(np.linalg.norm(x) / x.size ** 0.5)
+
+    def _collocation(self, t, y, h, Z0, scale):
+        """Simplified Newton on the collocation system; returns (converged, iterations, Z, rate)."""
+        n = y.size
+        M_real, M_complex = self.MU_REAL / h, self.MU_COMPLEX / h
+        W = self.TI @ Z0
+        Z = Z0
+        F = np.empty((3, n))
+        dW = np.empty_like(W)
+        dW_norm_old = rate = None
+        for k in range(self.NEWTON_MAXITER):
+            try:
+                for i in range(3):
+                    F[i] = self.fun(t + self.C[i] * h, y + Z[i])
+            except (ArithmeticError, np.linalg.LinAlgError) as exc:
+                self.last_failure = str(exc)
+                return False, k + 1, Z, rate
+            finally:
+                self.nfev += i + 1
+            f_real = F.T @ self.TI_REAL - M_real * W[0]
+            f_complex = F.T @ self.TI_COMPLEX - M_complex * (W[1] + 1j * W[2])
+            dW_complex = lu_solve(self.LU_complex, f_complex)
+            dW[0] = lu_solve(self.LU_real, f_real)
+            dW[1], dW[2] = dW_complex.real, dW_complex.imag
+            dW_norm = self._norm(dW / scale)
+            if dW_norm_old is not None:
+                rate = dW_norm / dW_norm_old
+            if rate is not None and (rate >= 1 or rate ** (self.NEWTON_MAXITER - k) / (1 - rate) * dW_norm > self.newton_tol):
+                return False, k + 1, Z, rate
+            W = W + dW
+            Z = self.T @ W
+            if dW_norm == 0 or (rate is not None and rate / (1 - rate) * dW_norm < self.newton_tol):
+                return True, k + 1, Z, rate
+            dW_norm_old = dW_norm
+        return False, self.NEWTON_MAXITER, Z, rate
+
+    @staticmethod
+    def _predict_factor(h_abs, h_abs_old, error_norm, error_norm_old):
+        if error_norm_old is None or h_abs_old is None or error_norm == 0:
+            multiplier = 1.0
+        else:
+            multiplier = h_abs / h_abs_old * (error_norm_old / error_norm) ** 0.25
+        with np.errstate(divide="ignore"):
+            return min(1.0, multiplier) * error_norm ** -0.25
+
+    # -- one step --------------------------------------------------------------------------
+    def step(self) -> None:
+        t, y, f = self.t, self.y, self.f
+        min_step = 10.0 * np.abs(np.nextafter(t, np.inf) - t)
+        h_abs, h_abs_old, error_norm_old = self.h_abs, self.h_abs_old, self.error_norm_old
+        if h_abs > self.max_step:
+            h_abs, h_abs_old, error_norm_old = self.max_step, None, None
+        rejected = False
+        while True:
+            if h_abs < min_step:
+                why = f" (last failure: {self.last_failure})" if self.last_failure else ""
+                raise StepSizeTooSmall(f"t = {t:.9g} s: step size {h_abs:.3g} s below the minimum{why}")
+            h = h_abs
+            Z0 = np.zeros((3, y.size)) if self.Z is None else (
+                np.array([self._dense_poly(t + c * h) for c in self.C]) - y)
+            scale = self.atol + np.abs(y) * self.rtol
+            while True:
+                if self.lu_h != h:
+                    self._factor(h)
+                converged, n_iter, Z, rate = self._collocation(t, y, h, Z0, scale)
+                if converged or self.current_jac:
+                    break
+                self.J = self._jacobian(t, y, f)
+                self.current_jac = True
+                self.lu_h = None
+            if not converged:
+                h_abs *= 0.5
+                self.lu_h = None
+                continue
+            y_new = y + Z[-1]
+            ZE = Z.T @ self.E / h
+            error = lu_solve(self.LU_real, f + ZE)
+            scale = self.atol + np.maximum(np.abs(y), np.abs(y_new)) * self.rtol
+            error_norm = self._norm(error / scale)
+            safety = 0.9 * (2 * self.NEWTON_MAXITER + 1) / (2 * self.NEWTON_MAXITER + n_iter)
+            if rejected and error_norm > 1:
+                error = lu_solve(self.LU_real, self.fun(t, y + error) + ZE)
+                self.nfev += 1
+                error_norm = self._norm(error / scale)
+            if error_norm > 1:
+                factor = self._predict_factor(h_abs, h_abs_old, error_norm, error_norm_old)
+                h_abs *= max(MIN_FACTOR, safety * factor)
+                self.lu_h = None
+                rejected = True
+                continue
+            break
+        recompute_jac = n_iter > 2 and rate is not None and rate > 1e-3
+        factor = min(MAX_FACTOR, safety * self._predict_factor(h_abs, h_abs_old, error_norm, error_norm_old))
+        if not recompute_jac and factor < 1.2:
+            factor = 1.0
+        else:
+            self.lu_h = None
+        t_new = t + h
+        f_new = self.fun(t_new, y_new)  # last evaluation of the step: at the accepted state
+        self.nfev += 1
+        if recompute_jac:
+            self.J = self._jacobian(t_new, y_new, f_new)
+            self.current_jac = True
+        else:
+            self.current_jac = False
+        self.h_abs_old, self.error_norm_old = h_abs, error_norm
+        self.h_abs = h_abs * factor
+        self.t_old, self.y_old, self.Z = t, y, Z
+        self.t, self.y, self.f = t_new, y_new, f_new
+        self.nsteps += 1
+        self.last_failure = ""
+
+    def dense(self, t: float) -> np.ndarray:
+        if t == self.t or self.Z is None:
+            return self.y.copy()
+        return self._dense_poly(t)
+
+    # -- state -----------------------------------------------------------------------------
+    _ARRAYS = ("y", "f", "J", "y_old", "Z")
+    _SCALARS = ("t", "h_abs", "h_abs_old", "error_norm_old", "current_jac", "lu_h", "t_old", "nfev",
+                "njev", "nlu", "nsteps", "last_failure")
+
+    def get_state(self) -> dict:
+        s = {k: getattr(self, k) for k in self._SCALARS}
+        s.update({k: None if getattr(self, k) is None else getattr(self, k).copy() for k in self._ARRAYS})
+        if self.lu_h is not None:  # the factors themselves (complex as float pairs): exact restore
+            s["lu_real"], s["piv_real"] = self.LU_real[0].copy(), self.LU_real[1].copy()
+            s["lu_complex"], s["piv_complex"] = np.ascontiguousarray(self.LU_complex[0]).view(float).copy(), self.LU_complex[1].copy()
+        return s
+
+    def set_state(self, s: dict) -> None:
+        for k in self._SCALARS:
+            setattr(self, k, s[k])
+        for k in self._ARRAYS:
+            setattr(self, k, None if s[k] is None else np.array(s[k], float))
+        if self.lu_h is not None:
+            self.LU_real = (np.array(s["lu_real"], float), np.array(s["piv_real"]))
+            self.LU_complex = (np.ascontiguousarray(s["lu_complex"], float).view(complex).copy(),
+                               np.array(s["piv_complex"]))
+        else:
+            self.LU_real = self.LU_complex = None
+
+
+METHODS = {"dopri5": Dopri5, "dop853": Dop853, "rk4": RK4, "radau": Radau5}

@@ -181,12 +181,14 @@ class Simulation:
         model = self.model
         q, h = y[: self.n], y[self.n:]
         vals = [q[i] for _, i in model.position_outputs]
-        f = frames(model, q, h)
-        self.max_drift = max(self.max_drift, float(np.max(np.abs(constraints(model, f)), initial=0.0)))
-        if model.reaction_joints:
+        if model.reaction_joints:  # one evaluation; its frames also give the drift
             ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy())
+            f = ev.frames
             for j in model.reaction_joints:
-                vals.extend(physical_reaction(model, model.joints[j], ev.frames, ev.lam))
+                vals.extend(physical_reaction(model, model.joints[j], f, ev.lam))
+        else:  # positions only: no evaluation of Eq. 18 at all
+            f = frames(model, q, h)
+        self.max_drift = max(self.max_drift, float(np.max(np.abs(constraints(model, f)), initial=0.0)))
         return np.array(vals, float)
 
     # -- state -----------------------------------------------------------------------------

@@ -101,8 +101,9 @@ FRICTION_LAWS = ("coulomb", "regularised", "stribeck")
 integration), B ``regularised`` (mu*clip(v/v_reg, -1, 1), the paper's choice), C ``stribeck``
 (B with a Stribeck peak)."""
 
-METHODS = ("dopri5", "dop853", "rk4")
-"""Integrators offered (see :mod:`overcon.integrators`)."""
+METHODS = ("dopri5", "dop853", "rk4", "radau")
+"""Integrators offered (see :mod:`overcon.integrators`): adaptive explicit ``dopri5`` and
+``dop853``, fixed-step ``rk4``, implicit (stiff) ``radau``."""
 
 
 @dataclass(frozen=True)
@@ -170,7 +171,7 @@ class MechanismSpec:
 @dataclass(frozen=True)
 class SolverSpec:
     """Integration settings. ``tolerance`` is the accuracy target (relative and absolute
-    tolerance of the adaptive method; for ``rk4`` it is unused). ``step`` is the fixed step of
+    tolerance of the adaptive methods dopri5, dop853, radau; for ``rk4`` it is unused). ``step`` is the fixed step of
     ``rk4`` (s). ``baumgarte`` is the constraint-stabilisation frequency (1/s, 0 disables).
     ``friction_tol``/``friction_max_iter`` control the friction solve."""
 

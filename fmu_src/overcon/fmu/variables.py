@@ -92,12 +92,12 @@ class ParamRule:
 
 SOLVER_PARAMS = {
     # name: (type, unit, rule, description)
-    "method": ("String", None, "method", "integrator: dopri5 (adaptive) or rk4 (fixed step)"),
+    "method": ("String", None, "method", "integrator: dopri5 or dop853 (adaptive explicit), rk4 (fixed step) or radau (implicit, for stiff friction)"),
     "tolerance": ("Real", "1", "unit_interval",
-                  "accuracy target of dopri5 (rtol = atol); used unless fmi2SetupExperiment gives one "
+                  "accuracy target of dopri5, dop853 and radau (rtol = atol); used unless fmi2SetupExperiment gives one "
                   "and this parameter was not set"),
     "step": ("Real", "s", "positive", "fixed step of rk4"),
-    "max_step": ("Real", "s", "positive", "largest internal step of dopri5"),
+    "max_step": ("Real", "s", "positive", "largest internal step of the adaptive methods"),
     "baumgarte": ("Real", "1/s", "nonneg", "Baumgarte constraint stabilisation frequency (0 disables)"),
     "friction_tol": ("Real", "1", "positive", "friction fixed-point tolerance (relative, on lambda)"),
     "friction_max_iter": ("Integer", None, "int_ge1", "friction fixed-point iteration limit"),

@@ -1,0 +1,679 @@
+"""Speed against accuracy, measured through fmpy as a user runs the FMUs (issue 6).
+
+    python benchmarks/bench.py                 # ~6-9 min on the 2-core reference machine
+    python benchmarks/bench.py --quick         # 1 repetition, short ladders (a smoke test, ~1.5 min)
+
+Prints Markdown tables and writes ``docs/benchmarks.md`` and ``docs/pareto.png`` (``--out DIR``
+elsewhere). Figures are printed, never asserted.
+
+What is measured
+----------------
+* Scenes (built once with :func:`overcon.fmu.build.build_all` into a temporary directory): the
+  paper scenes ``planar_none_wo4`` (0-4 s), ``planar_f45_wo4`` (friction in joints 4, 5; 0-4 s)
+  and ``spatial_MN_wo5`` (friction in M, N; 0-10 s) as shipped, and ``*_pos`` variants that
+  declare the same positions and no reactions (what a user who needs only the motion builds).
+* Each run is ``fmpy.simulate_fmu`` with a 1 ms output interval, the solver chosen by the FMU
+  parameters ``solver.method`` / ``solver.tolerance`` / ``solver.step`` (start values); wall time is
+  the median of ``--repeat`` runs of the whole call (instantiation to termination).
+* RHS evaluations, friction iterations and the constraint drift max |Phi| (over the output points)
+  are read from the FMU's own :class:`Simulation` (the benchmark imports the FMU's private copy of
+  the package before fmpy loads it and records the instance; nothing is changed in the FMU).
+  Evaluations count the integration only; a scene with reaction outputs adds one evaluation of
+  Eq. 18 per output point.
+* Error: max over the output points and the length coordinates (``.x .y .z``, m) of the difference
+  to a reference computed in process with dop853 at rtol = atol = 1e-13 on the same grid, checked
+  against dop853 at 1e-11 (the difference, printed, bounds the reference's own error).
+* FMI overhead per communication point: our FMU (planar_none_wo4_pos) and a trivial pythonfmu
+  FMU with as many Real outputs, each run with 4000 and 400 points; overhead = the slope of
+  (wall time - time inside Simulation.advance/outputs) over the number of points.
+* Peer: if Exudyn is installed, the frictionless planar mechanism (planar_none_wo4: Phi4 removed,
+  i.e. joint 2 without its rotation constraint) with Exudyn's default solver (generalized-alpha,
+  fixed step), sensors recording the body positions every 1 ms, in the same process.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib
+import io
+import json
+import os
+import platform
+import re
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+MECH = ROOT / "mechanisms"
+INTERVAL = 1e-3
+
+SCENES = {  # name: (source scene, stop time, positions only)
+    "planar_none_wo4": ("planar_none_wo4", 4.0, False),
+    "planar_none_wo4_pos": ("planar_none_wo4", 4.0, True),
+    "planar_f45_wo4": ("planar_f45_wo4", 4.0, False),
+    "planar_f45_wo4_pos": ("planar_f45_wo4", 4.0, True),
+    "spatial_MN_wo5": ("spatial_MN_wo5", 10.0, False),
+    "spatial_MN_wo5_pos": ("spatial_MN_wo5", 10.0, True),
+    "planar_f145_wo6_pos": ("planar_f145_wo6", 4.0, True),
+}
+STIFF = "planar_f145_wo6_pos"  # mu = 1 in joints 1, 4, 5: sticking inside the regularisation band
+STIFF_RUNS = [("dopri5", 1e-8), ("dop853", 1e-8), ("radau", 1e-6), ("radau", 1e-8)]
+
+# ladders: (method, tolerance or rk4 step)
+LADDERS = {
+    "planar_none_wo4_pos": [("dopri5", 1e-6), ("dopri5", 1e-8), ("dopri5", 1e-10),
+                            ("dop853", 1e-6), ("dop853", 1e-8), ("dop853", 1e-10),
+                            ("rk4", 4e-3), ("rk4", 2e-3), ("rk4", 1e-3),
+                            ("radau", 1e-6), ("radau", 1e-8)],
+    "planar_f45_wo4_pos": [("dopri5", 1e-6), ("dopri5", 1e-7), ("dopri5", 1e-8), ("dopri5", 1e-9),
+                           ("dop853", 1e-6), ("dop853", 1e-7), ("dop853", 1e-8), ("dop853", 1e-9),
+                           ("rk4", 4e-3), ("rk4", 2e-3), ("rk4", 1e-3),
+                           ("radau", 1e-6), ("radau", 1e-7), ("radau", 1e-8)],
+    "spatial_MN_wo5_pos": [("dopri5", 1e-6), ("dopri5", 1e-7), ("dopri5", 1e-8), ("dopri5", 1e-9),
+                           ("dop853", 1e-6), ("dop853", 1e-7), ("dop853", 1e-8),
+                           ("rk4", 1e-2), ("rk4", 5e-3),
+                           ("radau", 1e-6)],
+}
+QUICK = {
+    "planar_none_wo4_pos": [("dopri5", 1e-8), ("dop853", 1e-8), ("rk4", 2e-3), ("radau", 1e-8)],
+    "planar_f45_wo4_pos": [("dopri5", 1e-9), ("dop853", 1e-7), ("rk4", 2e-3), ("radau", 1e-7)],
+    "spatial_MN_wo5_pos": [("dopri5", 1e-9), ("dop853", 1e-7)],
+}
+WHAT_IT_DECLARES = [("planar_none_wo4_pos", "frictionless, positions only"),
+                    ("planar_none_wo4", "frictionless, positions + all reactions"),
+                    ("planar_f45_wo4_pos", "friction 4, 5, positions only"),
+                    ("planar_f45_wo4", "friction 4, 5, positions + all reactions"),
+                    ("spatial_MN_wo5_pos", "friction M, N, positions only"),
+                    ("spatial_MN_wo5", "friction M, N, positions + reactions G, H, M, N")]
+DECLARE_SETTING = {"planar": ("dop853", 1e-7), "spatial": ("dop853", 1e-7)}
+EXUDYN_STEPS = (1e-3, 5e-4, 2.5e-4, 1.25e-4)
+TARGETS = {"planar_f45_wo4_pos": 1.0, "spatial_MN_wo5_pos": 5.0}  # s, to 1e-6 m
+
+
+def log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+# ------------------------------------------------------------------------------------ scenes
+
+def make_scenes(tmp: Path) -> dict[str, Path]:
+    """Scene files (as shipped, and _pos variants with ``reactions = []``) next to copies of the
+    mechanism files."""
+    for m in ("planar_sliders.toml", "spatial_parallelogram.toml"):
+        shutil.copy(MECH / m, tmp / m)
+    out = {}
+    for name, (src, _stop, pos_only) in SCENES.items():
+        text = (MECH / f"{src}.toml").read_text()
+        if pos_only:
+            text = re.sub(r'(?m)^name = "[^"]*"', f'name = "{name}"', text, count=1)
+            text = re.sub(r"(?m)^reactions = .*$", "reactions = []", text)
+        (tmp / f"{name}.toml").write_text(text)
+        out[name] = tmp / f"{name}.toml"
+    return out
+
+
+# ------------------------------------------------------------------------------------ FMU runs
+
+@dataclass
+class FMU:
+    name: str
+    unz: Path
+    md: object
+    stop: float
+    sim_cls: type  # the FMU's private Simulation class (instances recorded in .instances)
+    outputs: list[str] = field(default_factory=list)
+
+
+def load_fmu(path: Path, stop: float, tmp: Path) -> FMU:
+    import fmpy
+
+    unz = Path(fmpy.extract(str(path), str(tmp / f"unz_{path.stem}")))
+    manifest = json.loads((unz / "resources" / "overcon_fmu.json").read_text())
+    sys.path.insert(0, str(unz / "resources"))
+    mod = importlib.import_module(f"{manifest['package']}.simulate")
+    cls = mod.Simulation
+    cls.instances = []
+    init = cls.__init__
+
+    def recording_init(self, *a, **k):
+        init(self, *a, **k)
+        cls.instances.append(self)
+
+    cls.__init__ = recording_init
+    md = fmpy.read_model_description(str(unz))
+    outs = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+    return FMU(path.stem, unz, md, stop, cls, outs)
+
+
+@contextlib.contextmanager
+def engine_timer(fmu: FMU):
+    """Accumulate the time spent in Simulation.advance and Simulation.outputs of ``fmu``."""
+    cls, acc = fmu.sim_cls, [0.0]
+    orig = {k: getattr(cls, k) for k in ("advance", "outputs")}
+
+    def wrap(f):
+        def timed(*a, **k):
+            t0 = time.perf_counter()
+            try:
+                return f(*a, **k)
+            finally:
+                acc[0] += time.perf_counter() - t0
+        return timed
+
+    for k, f in orig.items():
+        setattr(cls, k, wrap(f))
+    try:
+        yield acc
+    finally:
+        for k, f in orig.items():
+            setattr(cls, k, f)
+
+
+def start_values(method: str, setting: float) -> dict:
+    sv = {"solver.method": method}
+    sv["solver.step" if method == "rk4" else "solver.tolerance"] = setting
+    return sv
+
+
+def fmu_run(fmu: FMU, sv: dict, interval: float = INTERVAL):
+    import fmpy
+
+    fmu.sim_cls.instances.clear()
+    t0 = time.perf_counter()
+    res = fmpy.simulate_fmu(str(fmu.unz), stop_time=fmu.stop, output_interval=interval, start_values=sv,
+                            model_description=fmu.md)
+    wall = time.perf_counter() - t0
+    return wall, res, fmu.sim_cls.instances[-1]
+
+
+def length_columns(names) -> list[str]:
+    return [n for n in names if n.rsplit(".", 1)[1] in ("x", "y", "z")]
+
+
+@dataclass
+class Row:
+    scene: str
+    method: str
+    setting: float
+    wall: float
+    walls: list
+    evaluations: int
+    steps: int
+    fit_per_eval: float
+    error: float
+    drift: float
+    note: str = ""
+
+    @property
+    def label(self) -> str:
+        return f"h = {self.setting:g} s" if self.method == "rk4" else f"tol = {self.setting:g}"
+
+
+def measure(fmu: FMU, method: str, setting: float, ref: np.ndarray | None, repeat: int) -> Row:
+    walls, res, sim = [], None, None
+    for _ in range(repeat):
+        wall, res, sim = fmu_run(fmu, start_values(method, setting))
+        walls.append(wall)
+    err = np.nan
+    if ref is not None:
+        cols = length_columns(fmu.outputs)
+        got = np.column_stack([res[c] for c in cols])
+        assert got.shape == ref.shape, (got.shape, ref.shape)
+        err = float(np.max(np.abs(got - ref)))
+    ev = sim.evaluations
+    return Row(fmu.name, method, setting, statistics.median(walls), walls, ev, sim._integrator.nsteps,
+               sim.friction_iterations / ev if ev else 0.0, err, sim.max_drift)
+
+
+# ------------------------------------------------------------------------------------ references
+
+def reference(scene_path: Path, stop: float):
+    """Positions (length columns) on the 1 ms grid: dop853 at 1e-13, and its check at 1e-11."""
+    from overcon import scene as scene_mod
+    from overcon.model import compile_model
+    from overcon.simulate import run
+
+    model = compile_model(scene_mod.load(scene_path))
+    out = []
+    for tol in (1e-13, 1e-11):
+        r = run(model, stop_time=stop, output_interval=INTERVAL, method="dop853", tolerance=tol)
+        out.append(np.column_stack([r.column(c) for c in length_columns(r.names)]))
+    return out[0], float(np.max(np.abs(out[0] - out[1])))
+
+
+# ------------------------------------------------------------------------------------ overhead
+
+TRIVIAL_SRC = '''from pythonfmu import Fmi2Causality, Fmi2Slave, Real
+class Trivial(Fmi2Slave):
+    def __init__(self, **kw):
+        super().__init__(**kw)
+        for i in range({n}):
+            setattr(self, f"y{{i}}", 0.0); self.register_variable(Real(f"y{{i}}", causality=Fmi2Causality.output))
+    def do_step(self, t, dt): return True
+'''
+
+
+def build_trivial(tmp: Path, n_out: int) -> Path:
+    from pythonfmu.builder import FmuBuilder
+
+    src = tmp / "trivial" / "Trivial.py"
+    src.parent.mkdir()
+    src.write_text(TRIVIAL_SRC.format(n=n_out))
+    with contextlib.redirect_stdout(io.StringIO()):
+        return Path(FmuBuilder.build_FMU(src, dest=tmp / "trivial"))
+
+
+def overhead(fmu: FMU, trivial: Path, repeat: int, tmp: Path) -> dict:
+    """Per-communication-point cost outside the engine: our FMU vs the trivial one (slopes between
+    4000 and 400 points, medians of ``repeat`` runs)."""
+    import fmpy
+
+    unz_t = fmpy.extract(str(trivial), str(tmp / "unz_trivial"))
+    md_t = fmpy.read_model_description(unz_t)
+    n_hi, n_lo = round(fmu.stop / INTERVAL), round(fmu.stop / (10 * INTERVAL))
+    ours, triv = {}, {}
+    sv = start_values(*DECLARE_SETTING["planar"])
+    for n, interval in ((n_hi, INTERVAL), (n_lo, 10 * INTERVAL)):
+        o, t = [], []
+        for _ in range(repeat):
+            with engine_timer(fmu) as acc:
+                wall, _, _ = fmu_run(fmu, sv, interval)
+            o.append(wall - acc[0])
+            t0 = time.perf_counter()
+            fmpy.simulate_fmu(unz_t, stop_time=fmu.stop, output_interval=interval, model_description=md_t)
+            t.append(time.perf_counter() - t0)
+        ours[n], triv[n] = statistics.median(o), statistics.median(t)
+    per = lambda d: (d[n_hi] - d[n_lo]) / (n_hi - n_lo)  # noqa: E731
+    return {"ours_us": 1e6 * per(ours), "trivial_us": 1e6 * per(triv), "n_outputs": len(fmu.outputs),
+            "ours_fixed_s": ours[n_lo] - n_lo * per(ours), "trivial_fixed_s": triv[n_lo] - n_lo * per(triv)}
+
+
+# ------------------------------------------------------------------------------------ stiff case
+
+def stiff_rows(fmu: FMU, scene_path: Path, repeat: int) -> list[tuple[float, Row]]:
+    """planar_f145_wo6 with mu = 1 in joints 1, 4, 5 and v_reg 1e-3 or 1e-6 (FMU parameters): the
+    explicit methods end with fmi2Discard (stiffness, the time is read from the FMU's engine);
+    radau against an in-process radau reference at 1e-11."""
+    import dataclasses
+
+    import fmpy
+    from overcon import scene as scene_mod
+    from overcon.model import compile_model
+    from overcon.simulate import run
+
+    rows = []
+    for v_reg in (1e-3, 1e-6):
+        params = {f"joint{j}.{p}": val for j in (1, 4, 5) for p, val in (("mu", 1.0), ("v_reg", v_reg))}
+        sc = scene_mod.load(scene_path)
+        sc = dataclasses.replace(sc, friction_params={k: dataclasses.replace(v, mu=1.0, v_reg=v_reg)
+                                                      for k, v in sc.friction_params.items()})
+        r = run(compile_model(sc), stop_time=fmu.stop, output_interval=INTERVAL, method="radau", tolerance=1e-11)
+        ref = np.column_stack([r.column(c) for c in length_columns(r.names)])
+        for method, tol in STIFF_RUNS:
+            sv = {**start_values(method, tol), **params}
+            if method != "radau":
+                msgs = []
+                fmu.sim_cls.instances.clear()
+                t0 = time.perf_counter()
+                try:
+                    res = fmpy.simulate_fmu(str(fmu.unz), stop_time=fmu.stop, output_interval=INTERVAL,
+                                            start_values=sv, model_description=fmu.md, debug_logging=True,
+                                            logger=lambda *a: msgs.append(a[-1].decode(errors="replace")))
+                    t_end = float(res["time"][-1])
+                except Exception:  # fmpy may raise on fmi2Discard instead of returning early
+                    t_end = fmu.sim_cls.instances[-1].t
+                if t_end < fmu.stop - 1e-9:
+                    reason = next((m for m in msgs if "stiff" in m), msgs[-1] if msgs else "")
+                    reason = reason.split("integration stopped: ")[-1].split(";")[0].split("(step")[0].strip()
+                    note = f"fmi2Discard: {reason}"
+                else:
+                    note = "completed 0-4 s"
+                wall = time.perf_counter() - t0
+                sim = fmu.sim_cls.instances[-1]
+                rows.append((v_reg, Row(fmu.name, method, tol, wall, [wall], sim.evaluations, sim._integrator.nsteps,
+                                        sim.friction_iterations / max(1, sim.evaluations), np.nan, sim.max_drift,
+                                        note=note)))
+            else:
+                walls, res, sim = [], None, None
+                for _ in range(repeat):
+                    wall, res, sim = fmu_run(fmu, sv)
+                    walls.append(wall)
+                got = np.column_stack([res[c] for c in length_columns(fmu.outputs)])
+                rows.append((v_reg, Row(fmu.name, method, tol, statistics.median(walls), walls, sim.evaluations,
+                                        sim._integrator.nsteps, sim.friction_iterations / sim.evaluations,
+                                        float(np.max(np.abs(got - ref))), sim.max_drift, note="completed 0-4 s")))
+            log(f"stiff v_reg {v_reg:g} {method} {tol:g}: {rows[-1][1].wall:.3f} s {rows[-1][1].note}")
+    return rows
+
+
+# ------------------------------------------------------------------------------------ Exudyn peer
+
+def exudyn_planar(h: float, stop: float = 4.0):
+    """planar_none_wo4 in Exudyn (2D rigid bodies, default generalized-alpha solver, fixed step h);
+    returns (wall time of SolveDynamic, positions x, y of slider1, slider2, link3, link4 per 1 ms)."""
+    import exudyn as exu
+    from exudyn.itemInterface import (LoadMassProportional, LoadTorqueVector, MarkerBodyMass, MarkerBodyRigid,
+                                      NodeRigidBody2D, ObjectConnectorSpringDamper, ObjectGround,
+                                      ObjectJointPrismatic2D, ObjectJointRevolute2D, ObjectRigidBody2D, SensorBody)
+
+    SC = exu.SystemContainer()
+    mbs = SC.AddSystem()
+    mG = mbs.AddMarker(MarkerBodyRigid(bodyNumber=mbs.AddObject(ObjectGround()), localPosition=[0, 0, 0]))
+    bodies = {}
+    for name, q0 in (("slider1", (2, 0, 0)), ("slider2", (0, 2, 0)), ("link3", (2, 1, 0)), ("link4", (1, 2, 0))):
+        node = mbs.AddNode(NodeRigidBody2D(referenceCoordinates=list(q0), initialVelocities=[0, 0, 0]))
+        b = mbs.AddObject(ObjectRigidBody2D(nodeNumber=node, physicsMass=3.0, physicsInertia=1.0))
+        mbs.AddLoad(LoadMassProportional(markerNumber=mbs.AddMarker(MarkerBodyMass(bodyNumber=b)),
+                                         loadVector=[0, -9.81, 0]))
+        bodies[name] = b
+
+    def mk(b, p):
+        return mbs.AddMarker(MarkerBodyRigid(bodyNumber=bodies[b], localPosition=[p[0], p[1], 0]))
+
+    s1, s2 = mk("slider1", (0, 0)), mk("slider2", (0, 0))
+    r = 2 ** -0.5
+    mbs.AddObject(ObjectJointPrismatic2D(markerNumbers=[mG, s1], axisMarker0=[1, 0, 0], normalMarker1=[0, 1, 0],
+                                         constrainRotation=True))  # joint1: Phi1, Phi2
+    mbs.AddObject(ObjectJointPrismatic2D(markerNumbers=[mG, s2], axisMarker0=[0, 1, 0], normalMarker1=[1, 0, 0],
+                                         constrainRotation=False))  # joint2 without Phi4
+    mbs.AddObject(ObjectJointPrismatic2D(markerNumbers=[s2, s1], axisMarker0=[r, -r, 0], normalMarker1=[r, r, 0],
+                                         constrainRotation=True))  # joint3
+    mbs.AddObject(ObjectJointRevolute2D(markerNumbers=[s1, mk("link3", (0, -1))]))  # joint4
+    mbs.AddObject(ObjectJointRevolute2D(markerNumbers=[s2, mk("link4", (-1, 0))]))  # joint5
+    mbs.AddObject(ObjectJointRevolute2D(markerNumbers=[mk("link3", (0, 1)), mk("link4", (1, 0))]))  # joint6
+    mbs.AddLoad(LoadTorqueVector(markerNumber=s1, loadVector=[0, 0, 10.0]))
+    mbs.AddLoad(LoadTorqueVector(markerNumber=s2, loadVector=[0, 0, 30.0]))
+    mbs.AddObject(ObjectConnectorSpringDamper(markerNumbers=[mG, s2], stiffness=30.0, damping=0.0, referenceLength=3.0))
+    sensors = [mbs.AddSensor(SensorBody(bodyNumber=bodies[n], storeInternal=True, writeToFile=False,
+                                        outputVariableType=exu.OutputVariableType.Position))
+               for n in ("slider1", "slider2", "link3", "link4")]
+    mbs.Assemble()
+    ss = exu.SimulationSettings()
+    ss.timeIntegration.numberOfSteps = int(round(stop / h))
+    ss.timeIntegration.endTime = stop
+    ss.timeIntegration.verboseMode = 0
+    ss.solutionSettings.writeSolutionToFile = False
+    ss.solutionSettings.sensorsWritePeriod = INTERVAL
+    ss.displayComputationTime = False
+    ss.displayStatistics = False
+    t0 = time.perf_counter()
+    mbs.SolveDynamic(ss)
+    wall = time.perf_counter() - t0
+    pos = np.column_stack([mbs.GetSensorStoredData(s)[:, 1:3] for s in sensors])
+    return wall, pos
+
+
+def exudyn_rows(ref: np.ndarray, repeat: int):
+    try:
+        import exudyn
+    except ImportError:
+        return None, "Exudyn is not installed (pip install exudyn): no peer rows"
+    rows = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        for h in EXUDYN_STEPS:
+            walls, pos = [], None
+            for _ in range(repeat):
+                wall, pos = exudyn_planar(h)
+                walls.append(wall)
+            err = float(np.max(np.abs(pos - ref))) if pos.shape == ref.shape else np.nan
+            rows.append(Row("exudyn planar_none_wo4", f"Exudyn {exudyn.__version__} gen.-alpha", h,
+                            statistics.median(walls), walls, int(round(4.0 / h)), int(round(4.0 / h)), 0.0, err,
+                            np.nan, note="steps; wall of SolveDynamic only (no FMI)"))
+    return rows, ""
+
+
+# ------------------------------------------------------------------------------------ report
+
+def fmt(x, spec=".2e"):
+    return "-" if x is None or (isinstance(x, float) and not np.isfinite(x)) else format(x, spec)
+
+
+def table(rows: list[Row], with_scene=False) -> str:
+    head = ("| " + ("scene | " if with_scene else "") + "method | setting | wall (s), median | RHS evals | steps | "
+            "friction it./eval | max pos. error (m) | max abs(Phi) |")
+    sep = "|" + ("---|" if with_scene else "") + "---|---|---:|---:|---:|---:|---:|---:|"
+    lines = [head, sep]
+    for r in rows:
+        lines.append("| " + (f"{r.scene} | " if with_scene else "") + f"{r.method} | {r.label} | {r.wall:.3f} | "
+                     f"{r.evaluations} | {r.steps} | {r.fit_per_eval:.2f} | {fmt(r.error)} | {fmt(r.drift, '.1e')} |")
+    return "\n".join(lines)
+
+
+def fastest(rows, bound):
+    ok = [r for r in rows if np.isfinite(r.error) and r.error <= bound]
+    return min(ok, key=lambda r: r.wall) if ok else None
+
+
+def pareto_plot(ladders: dict, exu: list | None, path: Path) -> None:
+    import matplotlib
+    import matplotlib.ticker
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    titles = {"planar_none_wo4_pos": "planar, frictionless, 0-4 s",
+              "planar_f45_wo4_pos": "planar, friction in 4, 5, 0-4 s",
+              "spatial_MN_wo5_pos": "spatial, friction in M, N, 0-10 s"}
+    marks = {"dopri5": "o", "dop853": "s", "rk4": "^", "radau": "D"}
+    fig, axes = plt.subplots(1, len(ladders), figsize=(5.2 * len(ladders), 4.4))
+    for ax, (scene, rows) in zip(np.atleast_1d(axes), ladders.items()):
+        for m, mk in marks.items():
+            rs = sorted([r for r in rows if r.method == m and np.isfinite(r.error)], key=lambda r: r.wall)
+            if rs:
+                ax.loglog([r.wall for r in rs], [r.error for r in rs], mk + "-", label=m, alpha=0.85)
+        pts = sorted([r for r in rows if np.isfinite(r.error)], key=lambda r: r.wall)
+        front, best = [], np.inf
+        for r in pts:
+            if r.error < best:
+                front.append(r)
+                best = r.error
+        ax.loglog([r.wall for r in front], [r.error for r in front], "k:", lw=2, label="Pareto front")
+        if scene == "planar_none_wo4_pos" and exu:
+            rs = [r for r in exu if np.isfinite(r.error)]
+            ax.loglog([r.wall for r in rs], [r.error for r in rs], "x--", color="grey", label="Exudyn (no FMI)")
+        ax.axhline(1e-6, color="r", lw=0.8)
+        if scene in TARGETS:
+            ax.axvline(TARGETS[scene], color="r", lw=0.8, ls="--")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        lo, hi = ax.get_xlim()
+        ticks = [x for x in (0.1, 0.2, 0.5, 1, 2, 5, 10, 20) if lo <= x <= hi]
+        ax.set_xticks(ticks, [f"{x:g}" for x in ticks])
+        ax.set_title(titles[scene], fontsize=10)
+        ax.set_xlabel("wall time through fmpy, 1 ms output (s)")
+        ax.set_ylabel("max position error (m)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def machine() -> str:
+    cpu = ""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    import fmpy
+    import numpy
+    import scipy
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return (f"{cpu or platform.processor()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
+            f"numpy {numpy.__version__}, scipy {scipy.__version__}, fmpy {fmpy.__version__}; "
+            f"load average at the end {load:.1f}")
+
+
+# ------------------------------------------------------------------------------------ main
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeat", type=int, default=3, help="runs per setting (median wall time), default 3")
+    ap.add_argument("--quick", action="store_true", help="1 repetition and short ladders (smoke test)")
+    ap.add_argument("--out", default=str(ROOT / "docs"), help="where benchmarks.md and pareto.png go")
+    ap.add_argument("--no-exudyn", action="store_true")
+    args = ap.parse_args(argv)
+    repeat = 1 if args.quick else max(1, args.repeat)
+    ladders_def = QUICK if args.quick else LADDERS
+    t_start = time.perf_counter()
+    from overcon.fmu.build import build_all
+
+    tmp = Path(tempfile.mkdtemp(prefix="overcon_bench_"))
+    try:
+        paths = make_scenes(tmp)
+        with contextlib.redirect_stdout(io.StringIO()):
+            code, results = build_all([str(p) for p in paths.values()], tmp / "fmus", refs=False,
+                                      allow_nonunique=True, echo=lambda s: None, echo_err=log)
+        if code not in (0, 1):  # 1: the stiff example's motion is not unique (built anyway)
+            log("build failed")
+            return 2
+        fmus = {n: load_fmu(tmp / "fmus" / f"{n}.fmu", SCENES[n][1], tmp) for n in SCENES}
+        log(f"built {len(fmus)} FMUs in {time.perf_counter() - t_start:.1f} s")
+
+        refs, ref_checks = {}, {}
+        for n in ("planar_none_wo4_pos", "planar_f45_wo4_pos", "spatial_MN_wo5_pos"):
+            t0 = time.perf_counter()
+            refs[n], ref_checks[n] = reference(paths[n], SCENES[n][1])
+            refs[n.removesuffix("_pos")] = refs[n]
+            log(f"reference {n}: |dop853(1e-13) - dop853(1e-11)| = {ref_checks[n]:.1e} m "
+                f"({time.perf_counter() - t0:.1f} s)")
+
+        ladders: dict[str, list[Row]] = {}
+        for n, settings in ladders_def.items():
+            ladders[n] = []
+            for method, setting in settings:
+                r = measure(fmus[n], method, setting, refs[n], repeat)
+                ladders[n].append(r)
+                log(f"{n} {method} {setting:g}: {r.wall:.3f} s, {r.evaluations} evals, error {r.error:.2e}")
+
+        declared = []
+        for n, what in WHAT_IT_DECLARES:
+            kind = "planar" if n.startswith("planar") else "spatial"
+            method, setting = DECLARE_SETTING[kind]
+            hit = [r for r in ladders.get(n, []) if (r.method, r.setting) == (method, setting)]
+            r = hit[0] if hit else measure(fmus[n], method, setting, refs[n], repeat)
+            declared.append((what, len(fmus[n].outputs), r))
+            log(f"{n}: {r.wall:.3f} s")
+
+        stiff = [] if args.quick else stiff_rows(fmus[STIFF], paths[STIFF], repeat)
+
+        ovh = overhead(fmus["planar_none_wo4_pos"], build_trivial(tmp, len(fmus["planar_none_wo4_pos"].outputs)),
+                       repeat, tmp)
+        log(f"FMI overhead per point: ours {ovh['ours_us']:.1f} us, trivial {ovh['trivial_us']:.1f} us")
+
+        exu, exu_note = (None, "not run (--no-exudyn)") if args.no_exudyn else exudyn_rows(refs["planar_none_wo4_pos"], repeat)
+        if exu:
+            for r in exu:
+                log(f"Exudyn h = {r.setting:g}: {r.wall:.3f} s, error {r.error:.2e}")
+
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        pareto_plot(ladders, exu, out / "pareto.png")
+        md = report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, args,
+                    time.perf_counter() - t_start)
+        (out / "benchmarks.md").write_text(md)
+        print(md)
+        log(f"wrote {out / 'benchmarks.md'} and {out / 'pareto.png'} ({time.perf_counter() - t_start:.0f} s)")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, args, total) -> str:
+    cmd = "python benchmarks/bench.py" + (" --quick" if args.quick else "") + (
+        f" --repeat {args.repeat}" if args.repeat != 3 and not args.quick else "")
+    L = ["# Benchmarks: speed against accuracy", "",
+         f"Generated by `{cmd}` ({total:.0f} s). Machine: {machine()}.", "",
+         "Every run is `fmpy.simulate_fmu` on the scene's FMU with a 1 ms output interval and the "
+         "solver chosen by FMU parameters (`solver.method`, `solver.tolerance` or `solver.step`); "
+         f"wall time is the median of {repeat} run(s) of the whole call. RHS evaluations count the "
+         "integration (a scene with reaction outputs adds one evaluation of Eq. 18 per output point). "
+         "Error: max over the output points of the length coordinates (m) against dop853 at 1e-13 "
+         "in process. `_pos` scenes declare positions only. See `benchmarks/bench.py` for details.", ""]
+    titles = {"planar_f45_wo4_pos": "Planar friction (joints 4, 5), 0-4 s, positions only",
+              "spatial_MN_wo5_pos": "Spatial friction (M, N), 0-10 s, positions only",
+              "planar_none_wo4_pos": "Planar frictionless, 0-4 s, positions only"}
+    for n in ("planar_f45_wo4_pos", "spatial_MN_wo5_pos", "planar_none_wo4_pos"):
+        if n not in ladders:
+            continue
+        L += [f"## {titles[n]}", "", f"Reference check: |dop853(1e-13) - dop853(1e-11)| = {ref_checks[n]:.1e} m.", "",
+              table(ladders[n]), ""]
+        if n == "planar_none_wo4_pos":
+            if exu:
+                L += ["Peer, same mechanism in Exudyn (default generalized-alpha solver, fixed step h, sensors "
+                      "every 1 ms; wall time of `SolveDynamic` only, no FMI), same run:", "",
+                      "| solver | step h (s) | wall (s), median | steps | max pos. error (m) |", "|---|---:|---:|---:|---:|"]
+                for r in exu:
+                    L.append(f"| {r.method} | {r.setting:g} | {r.wall:.3f} | {r.steps} | {fmt(r.error)} |")
+                L += ["", "Matched accuracy (our fastest FMU run at least as accurate as each Exudyn run):", "",
+                      "| Exudyn h | Exudyn error | Exudyn wall | overcon FMU (fastest as accurate) | wall | ratio overcon/Exudyn |",
+                      "|---:|---:|---:|---|---:|---:|"]
+                for r in exu:
+                    f = fastest(ladders[n], r.error) if np.isfinite(r.error) else None
+                    if f:
+                        L.append(f"| {r.setting:g} | {r.error:.1e} | {r.wall:.3f} | {f.method} {f.label} ({f.error:.1e}) | "
+                                 f"{f.wall:.3f} | {f.wall / r.wall:.2f} |")
+                    else:
+                        L.append(f"| {r.setting:g} | {fmt(r.error, '.1e')} | {r.wall:.3f} | none as accurate | - | - |")
+                L.append("")
+            else:
+                L += [f"Peer: {exu_note}.", ""]
+    L += ["## What the scene declares: cost per scene", "",
+          f"Same solver for all rows ({DECLARE_SETTING['planar'][0]}, tol {DECLARE_SETTING['planar'][1]:g}); "
+          "fmpy records every output.", "",
+          "| scene | Real outputs | wall (s), median | RHS evals (integration) | max pos. error (m) |",
+          "|---|---:|---:|---:|---:|"]
+    for what, n_out, r in declared:
+        L.append(f"| {r.scene}: {what} | {n_out} | {r.wall:.3f} | {r.evaluations} | {fmt(r.error)} |")
+    if stiff:
+        L += ["", "## Stiff case: sticking inside the regularisation band", "",
+              "planar_f145_wo6 (positions only) with mu = 1 in joints 1, 4, 5 (FMU parameters `joint*.mu`, `joint*.v_reg`), 0-4 s. "
+              "The pre-check calls this motion non-unique (friction on joint 1): it serves "
+              "here only as the stiff example (slider 1 sticks; stiffness about mu N / (m v_reg)). Error against "
+              "radau at 1e-11 in process; explicit runs: wall time until the fmi2Discard, median not taken.", "",
+              "| v_reg | method | setting | wall (s) | RHS evals | steps | max pos. error (m) | outcome |",
+              "|---:|---|---|---:|---:|---:|---:|---|"]
+        for v_reg, r in stiff:
+            L.append(f"| {v_reg:g} | {r.method} | {r.label} | {r.wall:.3f} | {r.evaluations} | {r.steps} | "
+                     f"{fmt(r.error)} | {r.note} |")
+    L += ["", "## FMI overhead per communication point", "",
+          f"Slope of (wall time - time in `Simulation.advance/outputs`) between 4000 and 400 points, median of "
+          f"{repeat}; trivial = a pythonfmu `Fmi2Slave` with {ovh['n_outputs']} Real outputs and an empty "
+          "`do_step`.", "",
+          "| FMU | per point (us) | fixed cost per run (s) |", "|---|---:|---:|",
+          f"| overcon planar_none_wo4_pos ({ovh['n_outputs']} Real outputs) | {ovh['ours_us']:.1f} | {ovh['ours_fixed_s']:.3f} |",
+          f"| trivial pythonfmu | {ovh['trivial_us']:.1f} | {ovh['trivial_fixed_s']:.3f} |",
+          f"| ratio | {ovh['ours_us'] / ovh['trivial_us']:.2f} | |", "",
+          "## Targets (issue 6)", ""]
+    for n, limit in TARGETS.items():
+        f = fastest(ladders.get(n, []), 1e-6)
+        L.append(f"- {titles[n]} to 1e-6 m under {limit:g} s: " + (
+            f"fastest {f.method} {f.label}: {f.wall:.2f} s, error {f.error:.1e} m -> "
+            f"{'met' if f.wall < limit else 'NOT met'}" if f else "no run reached 1e-6 m"))
+    for what, _n, r in declared:
+        limit = TARGETS.get(r.scene + "_pos")
+        if limit and "reactions" in what:
+            L.append(f"- The same as shipped ({r.scene}: {what}), {r.method} {r.label}: {r.wall:.2f} s -> "
+                     f"{'met' if r.wall < limit else 'NOT met'} (one Eq. 18 solve per output point for the reactions)")
+    if exu:
+        f = fastest(ladders.get("planar_none_wo4_pos", []), 1e-6)
+        e = fastest(exu, 1e-6)
+        if f and e:
+            L.append(f"- Planar frictionless to 1e-6 m: overcon FMU {f.wall:.3f} s ({f.method} {f.label}) vs "
+                     f"Exudyn {e.wall:.3f} s (h = {e.setting:g}): ratio {f.wall / e.wall:.2f} -> "
+                     f"{'met' if f.wall < e.wall else 'NOT met'}")
+    L.append(f"- FMI overhead per point: {ovh['ours_us']:.1f} us vs trivial {ovh['trivial_us']:.1f} us: ratio "
+             f"{ovh['ours_us'] / ovh['trivial_us']:.2f} -> {'met' if ovh['ours_us'] <= 2 * ovh['trivial_us'] else 'NOT met'}")
+    L += ["", "![error vs wall time](pareto.png)", ""]
+    return "\n".join(L)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,5 +1,5 @@
-"""Command line: ``overcon check`` and ``overcon simulate`` (argument parsing only; the work is
-done by the library).
+"""Command line: ``overcon check | simulate | figures | build | run | compare | reproduce``
+(argument parsing only; the work is done by the library).
 
 Exit codes: 0 success (``check``: no friction on a non-unique reaction); 1 ``check`` found
 friction on a joint whose reaction is not unique (or the three tests disagree); 2 invalid input
@@ -11,6 +11,8 @@ import argparse
 import json
 import sys
 import time
+
+from .spec import METHODS
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
 
@@ -41,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     _scene_flags(s)
     s.add_argument("--out", required=True, metavar="OUT.csv", help="CSV file: time, then the outputs")
     s.add_argument("--tolerance", type=float, metavar="TOL", help="accuracy target (rtol = atol of dopri5)")
-    s.add_argument("--method", choices=("dopri5", "dop853", "rk4"), help="integrator")
+    s.add_argument("--method", choices=METHODS, help="integrator")
     s.add_argument("--step", type=float, help="rk4 step (s)")
     s.add_argument("--output-interval", type=float, help="output grid interval (s)")
     fg = sub.add_parser("figures", help="run the paper's scene groups in process and plot Figs. 3-5, 7-9 (PNG)")

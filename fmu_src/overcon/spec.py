@@ -173,10 +173,12 @@ class SolverSpec:
     """Integration settings. ``tolerance`` is the accuracy target (relative and absolute
     tolerance of the adaptive methods dopri5, dop853, radau; for ``rk4`` it is unused). ``step`` is the fixed step of
     ``rk4`` (s). ``baumgarte`` is the constraint-stabilisation frequency (1/s, 0 disables).
-    ``friction_tol``/``friction_max_iter`` control the friction solve."""
+    ``friction_tol``/``friction_max_iter`` control the friction solve. Defaults from the
+    measurements in docs/benchmarks.md: dopri5 at 1e-9 reaches about 1e-7 m with friction (at 1e-8
+    only about 2e-6 m: the kink of the regularised friction law spoils the error estimate)."""
 
     method: str = "dopri5"
-    tolerance: float = 1e-8
+    tolerance: float = 1e-9
     step: float = 1e-3
     output_interval: float = 0.01
     baumgarte: float = 10.0

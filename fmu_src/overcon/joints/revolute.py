@@ -13,17 +13,10 @@ import math
 import numpy as np
 
 from ..kinematics import OMEGA, matvec
+from .point import batch_phi, phi, prepare  # noqa: F401  (point coincidence, Eq. 36/41)
 
 N_EQUATIONS = 2
 REACTION_COMPONENTS = ("Fx", "Fy", "T")
-
-
-def prepare(params) -> dict:
-    return {"s_i": np.asarray(params["s_i"], float), "s_j": np.asarray(params["s_j"], float)}
-
-
-def phi(c, f):
-    return f.r[c.bi] + f.R[c.bi] @ c.p["s_i"] - f.r[c.bj] - f.R[c.bj] @ c.p["s_j"]
 
 
 def jac_q(c, f):
@@ -74,12 +67,6 @@ def batch_prepare(joints) -> dict:
         "s_j": np.array([c.p["s_j"] for c in joints], float).reshape(-1, 2),
         "laws": laws,
     }
-
-
-def batch_phi(d, f):
-    """(k, 2): :func:`phi` of every joint."""
-    bi, bj = d["bi"], d["bj"]
-    return f.r[bi] + matvec(f.R[bi], d["s_i"]) - f.r[bj] - matvec(f.R[bj], d["s_j"])
 
 
 def batch_jac_q(d, f):

@@ -18,17 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..kinematics import cross3, cross3_rows, euler_dR, matvec, rowdot, skew
+from .point import batch_phi, phi, prepare  # noqa: F401  (point coincidence, Eq. 36/41)
 
 N_EQUATIONS = 3
 REACTION_COMPONENTS = ("Fx", "Fy", "Fz")
-
-
-def prepare(params) -> dict:
-    return {"s_i": np.asarray(params["s_i"], float), "s_j": np.asarray(params["s_j"], float)}
-
-
-def phi(c, f):
-    return f.r[c.bi] + f.R[c.bi] @ c.p["s_i"] - f.r[c.bj] - f.R[c.bj] @ c.p["s_j"]
 
 
 def _dpoint_dangles(angles, s):
@@ -115,12 +108,6 @@ def batch_prepare(joints) -> dict:
         "laws": laws,
         "neg_size": np.array([-law.size if law is not None else np.nan for law in laws], float),
     }
-
-
-def batch_phi(d, f):
-    """(k, 3): :func:`phi` of every joint."""
-    bi, bj = d["bi"], d["bj"]
-    return f.r[bi] + matvec(f.R[bi], d["s_i"]) - f.r[bj] - matvec(f.R[bj], d["s_j"])
 
 
 def batch_jac_h(d, f):

@@ -179,13 +179,17 @@ def _place(model: Model, out: np.ndarray, rows, blocks) -> None:
             out[np.ix_(rows, range(b * model.nq_b, (b + 1) * model.nq_b))] += block
 
 
+def _stack_rows(model: Model, f: Frames, batch: str) -> np.ndarray:
+    """(m,) vector from every joint type's ``batch_<name>`` rows, in equation order."""
+    out = np.empty(model.m)
+    for g in plan_of(model).groups:
+        out[g.rows] = getattr(g.module, batch)(g.data, f).reshape(-1)
+    return out
+
+
 def constraints(model: Model, f: Frames) -> np.ndarray:
     """Phi (m,)."""
-    plan = plan_of(model)
-    out = np.empty(model.m)
-    for g in plan.groups:
-        out[g.rows] = g.module.batch_phi(g.data, f).reshape(-1)
-    return out
+    return _stack_rows(model, f, "batch_phi")
 
 
 def jacobian_q(model: Model, f: Frames) -> np.ndarray:
@@ -210,11 +214,8 @@ def jacobian_h(model: Model, f: Frames) -> np.ndarray:
 
 
 def gamma(model: Model, f: Frames) -> np.ndarray:
-    plan = plan_of(model)
-    out = np.empty(model.m)
-    for g in plan.groups:
-        out[g.rows] = g.module.batch_gamma(g.data, f).reshape(-1)
-    return out
+    """gamma (m,): Phi_h h' = gamma (Eq. 11)."""
+    return _stack_rows(model, f, "batch_gamma")
 
 
 def constraints_per_joint(model: Model, f: Frames) -> np.ndarray:

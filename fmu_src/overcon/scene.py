@@ -634,23 +634,29 @@ def _check_eliminate(ctx: _Ctx, value, field: str, m: int | None, elem_field) ->
     if not isinstance(value, (list, tuple)):
         ctx.add(field, f"expected \"auto\" or an array of equation indices, got {_desc(value)}")
         return None
-    ok = True
-    seen = set()
-    out = []
+    return _distinct_items(
+        ctx, value, elem_field, _int,
+        invalid=lambda i: f"equation index {i} outside 1..{m}" if m is not None and not 1 <= i <= m else None,
+        duplicate=lambda i: f"equation {i} listed twice")
+
+
+def _distinct_items(ctx: _Ctx, value, elem_field, parse, *, invalid, duplicate, late=lambda x: None):
+    """Parse every element (``parse(ctx, item, field)`` -> value or None), report an invalid one
+    (``invalid(x)`` -> message or None), a repeated one (``duplicate(x)`` -> message) and, for
+    the others, ``late(x)``; the tuple of values, or None when anything was reported."""
+    ok, seen, out = True, set(), []
     for k, item in enumerate(value):
         f = elem_field(k)
-        i = _int(ctx, item, f)
-        if i is None:
+        x = parse(ctx, item, f)
+        if x is None:
             ok = False
             continue
-        if m is not None and not 1 <= i <= m:
-            ctx.add(f, f"equation index {i} outside 1..{m}")
+        msg = invalid(x) or (duplicate(x) if x in seen else None) or late(x)
+        if msg:
+            ctx.add(f, msg)
             ok = False
-        elif i in seen:
-            ctx.add(f, f"equation {i} listed twice")
-            ok = False
-        seen.add(i)
-        out.append(i)
+        seen.add(x)
+        out.append(x)
     return tuple(out) if ok else None
 
 
@@ -659,29 +665,14 @@ def _check_friction_list(ctx: _Ctx, value, field: str, mech: MechanismSpec | Non
     if not isinstance(value, (list, tuple)):
         ctx.add(field, f"expected an array of joint names, got {_desc(value)}")
         return None
-    ok = True
-    seen = set()
-    out = []
     names = {j.name for j in mech.joints} if mech is not None else None
-    for k, item in enumerate(value):
-        f = elem_field(k)
-        s = _str(ctx, item, f)
-        if s is None:
-            ok = False
-            continue
-        if names is not None and s not in names:
-            ctx.add(f, f"unknown joint {_short(s)}")
-            ok = False
-        elif s in seen:
-            ctx.add(f, f"joint '{s}' listed twice")
-            ok = False
-        elif names is not None and not has_params(s):
-            ctx.add(f, f"joint '{s}' has no friction parameters (no [joints.friction] table in "
-                       f"the mechanism and no scene friction_params.{s})")
-            ok = False
-        seen.add(s)
-        out.append(s)
-    return tuple(out) if ok else None
+    return _distinct_items(
+        ctx, value, elem_field, _str,
+        invalid=lambda s: f"unknown joint {_short(s)}" if names is not None and s not in names else None,
+        duplicate=lambda s: f"joint '{s}' listed twice",
+        late=lambda s: (f"joint '{s}' has no friction parameters (no [joints.friction] table in "
+                        f"the mechanism and no scene friction_params.{s})")
+        if names is not None and not has_params(s) else None)
 
 
 def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | None:
@@ -847,24 +838,10 @@ def _check_outputs(ctx: _Ctx, value, field: str, valid: set | None, what: str, b
     if not isinstance(value, list):
         ctx.add(field, f"expected \"all\" or an array of {what}s, got {_desc(value)}")
         return None
-    ok = True
-    seen = set()
-    out = []
-    for k, item in enumerate(value):
-        f = f"{field}[{k}]"
-        s = _str(ctx, item, f)
-        if s is None:
-            ok = False
-            continue
-        if valid is not None and s not in valid:
-            ctx.add(f, bad_message(s))
-            ok = False
-        elif s in seen:
-            ctx.add(f, f"{_short(s)} listed twice")
-            ok = False
-        seen.add(s)
-        out.append(s)
-    return tuple(out) if ok else None
+    return _distinct_items(
+        ctx, value, lambda k: f"{field}[{k}]", _str,
+        invalid=lambda s: bad_message(s) if valid is not None and s not in valid else None,
+        duplicate=lambda s: f"{_short(s)} listed twice")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ import pytest
 
 from overcon.cli import main
 from overcon.fmu.build import build_all
-from overcon.paper import uniqueness_tolerance
+from overcon.verdict import lockstep_tolerance, uniqueness_tolerance
 from overcon.tooling import InputError
 from overcon.tooling.compare import check_grids, compare_group
 from overcon.tooling.fmus import inspect_fmu
@@ -112,6 +112,8 @@ def test_compare_unique_group_exits_0(f45, tmp_path, capsys):
     text = capsys.readouterr().out
     assert code == 0, text
     assert "planar_f45: observed UNIQUE, predicted unique (pre-check)" in text and "-- OK" in text
+    assert "largest difference (lockstep)" in text and "adaptive runs differ by" in text
+    assert (out / "lockstep" / "planar_f45_wo4.csv").is_file()
     report = (out / "report.md").read_text()
     assert "| planar_sliders | planar_f45 (joint4, joint5) | Φ4; Φ6 | unique | unique |" in report
     assert "without eq. 4" in report and "Tolerance:" in report
@@ -139,6 +141,45 @@ def test_group_differing_by_1e5_m_is_not_unique(tmp_path, capsys):
     assert "MISMATCH" in (out / "report.md").read_text()
 
 
+@pytest.mark.parametrize("value", ["-1", "nan", "2", "1e-9"])
+def test_lockstep_step_out_of_range_exits_2(f45, tmp_path, capsys, value):
+    code = main(["compare", str(f45["planar_f45_wo4"].parent), f"--lockstep-step={value}", "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert "--lockstep-step" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.integration
+def test_lockstep_off_decides_on_the_adaptive_runs(f45, tmp_path, capsys):
+    out = tmp_path / "cmp"
+    assert main(["compare", str(f45["planar_f45_wo4"].parent), "--group", "planar_f45", "--stop-time", "0.5",
+                 "--lockstep-step", "0", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "largest difference (adaptive)" in text and "adaptive runs differ by" not in text
+    assert not (out / "lockstep").exists()
+
+
+@pytest.mark.integration
+def test_compare_reports_every_group_when_one_run_fails(f45, tmp_path, capsys):
+    """A group whose run fails (joint 4 with mu = 1e6 jams at once) is reported as FAILED with the
+    reason; the healthy group keeps its verdict, report.md is written, and the exit code is 3."""
+    mech = (MECH / "planar_sliders.toml").read_text().replace("mu = 0.1", "mu = 1e6", 1)
+    broken = [_scene_copy(tmp_path / "b", f"planar_f45_wo{k}", mech_text=mech,
+                          g=('group = "planar_f45"', 'group = "broken"'),
+                          n=(f'name = "planar_f45_wo{k}"', f'name = "broken_wo{k}"')) for k in (4, 6)]
+    fmus = _build(broken, tmp_path / "fmus")
+    out = tmp_path / "cmp"
+    code = main(["compare", *map(str, fmus.values()), *map(str, f45.values()), "--stop-time", "0.5",
+                 "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 3, captured.out
+    assert "planar_f45: observed UNIQUE, predicted unique (pre-check)" in captured.out
+    assert "!!! FAILED !!! broken: no verdict, a run failed" in captured.out
+    assert "no verdict for: broken" in captured.err
+    report = (out / "report.md").read_text()
+    assert "**FAILED** (no verdict)" in report and "| planar_f45 (joint4, joint5) |" in report
+
+
 # ------------------------------------------------------------------------------- compare: reference
 
 @pytest.mark.integration
@@ -156,12 +197,14 @@ def test_reference_mode_same_result_passes_and_1e6_m_is_caught(f45, run_csv, tmp
 
 
 def test_default_tolerance_catches_1e6_m_at_slider_scale():
-    """Every planar slider position stays within |y| <= 3 m; the spatial platform within 2.5 m."""
+    """Every planar slider position stays within |y| <= 3 m; the spatial platform within 2.5 m.
+    Both the lockstep verdict and the adaptive fallback catch a 1e-6 m change there."""
     from overcon.paper import scene_groups
 
     tolerances = {spec.solver.tolerance for items in scene_groups(MECH).values() for _, spec in items}
-    for tol in tolerances:
-        for scale in (1.0, 2.0, 3.0, 2.5):
+    for scale in (1.0, 2.0, 3.0, 2.5):
+        assert lockstep_tolerance(scale) < 1e-6
+        for tol in tolerances:
             assert uniqueness_tolerance(tol, scale) < 1e-6
 
 

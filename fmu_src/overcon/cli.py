@@ -13,6 +13,7 @@ import sys
 import time
 
 from .spec import METHODS
+from .verdict import LOCKSTEP_STEP
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
 
@@ -107,6 +108,7 @@ def _tooling_parsers(sub) -> None:
     c.add_argument("--plot", default="worst", metavar="worst|all|NAME,...",
                    help="outputs plotted per group (default: the deciding output with the largest difference)")
     c.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
+    c.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H", help=LOCKSTEP_HELP)
     p = sub.add_parser("reproduce", help="the main job: build the paper's FMUs, pre-check, run with fmpy, compare "
                                          "every group, write report.md with the verdicts and Figs. 3-5, 7-9")
     p.add_argument("--out", default="reproduce", metavar="DIR", help="output directory (default: reproduce)")
@@ -114,6 +116,15 @@ def _tooling_parsers(sub) -> None:
                    help="directory with the scene files (default: mechanisms)")
     p.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
     p.add_argument("--stop-time", type=_positive, metavar="T", help="shorter runs (s; default: the scenes' stop times)")
+    p.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H", help=LOCKSTEP_HELP)
+
+
+LOCKSTEP_HELP = ("fixed step (s) of the lockstep runs that decide the verdict: every elimination of a group is also "
+                 "run with rk4 on this grid (default 0.005; 0: no lockstep runs, verdict from the adaptive runs)")
+
+
+def _lockstep(args):
+    return None if args.lockstep_step == 0 else args.lockstep_step
 
 
 def _load(args):
@@ -234,10 +245,15 @@ def cmd_compare(args) -> int:
                                          stop_time=args.stop_time, step=args.step, plots=plots)
         else:
             out = compare_paths(args.fmus, args.out, group=args.group, one_group=args.one_group,
-                                tolerance=args.tolerance,
+                                tolerance=args.tolerance, lockstep_step=_lockstep(args),
                                 stop_time=args.stop_time, step=args.step, jobs=args.jobs, plots=plots)
-        bad = [c.group for c in out.comparisons if not c.matches]
+        failed = [c for c in out.comparisons if c.failure is not None]
+        bad = [c.group for c in out.comparisons if not c.matches and c.failure is None]
         print(f"report: {out.report} ({time.perf_counter() - start:.1f} s)")
+        if failed:
+            print("overcon: simulation failed, no verdict for: "
+                  + "; ".join(f"{c.group} ({c.failure})" for c in failed), file=sys.stderr)
+            return EXIT_RUNTIME
         if bad:
             print(f"overcon: verdict differs from the prediction (or the reference) for: {', '.join(bad)}",
                   file=sys.stderr)
@@ -251,12 +267,18 @@ def cmd_reproduce(args) -> int:
     from .tooling.pipeline import reproduce
 
     def go():
-        out = reproduce(args.out, mechanisms=args.mechanisms, jobs=args.jobs, stop_time=args.stop_time)
-        n_bad = sum(not c.matches for c in out.comparisons)
+        out = reproduce(args.out, mechanisms=args.mechanisms, jobs=args.jobs, stop_time=args.stop_time,
+                        lockstep_step=_lockstep(args))
+        failed = out.failed
+        n_bad = sum(not c.matches for c in out.comparisons) - len(failed)
         print(f"\n{len(out.comparisons)} groups compared, "
               + ("every observed verdict equals its prediction" if not n_bad else f"{n_bad} MISMATCH(ES)")
+              + (f", {len(failed)} FAILED (no verdict)" if failed else "")
               + f"; total wall time {out.seconds['total']:.1f} s")
         print(f"report: {out.report}  (figures: {', '.join(p.name for p in out.figures) or 'none'})")
+        if failed:
+            print("overcon: simulation failed, no verdict for: " + ", ".join(c.group for c in failed), file=sys.stderr)
+            return EXIT_RUNTIME
         return EXIT_OK if not n_bad else EXIT_NONUNIQUE
 
     return _tooling_call(go)

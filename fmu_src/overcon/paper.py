@@ -1,12 +1,14 @@
 """The paper's scene groups and figures (Figs. 3, 4, 5, 7, 8, 9), run in process.
 
 A *group* is the set of scene files with the same ``group`` field: one friction set under
-different eliminations. Its motion is unique when every output agrees across the group within a
-tolerance derived from the solver tolerance; the pre-check predicts that from the Jacobian alone.
+different eliminations. Its motion is unique when the positions of lockstep runs (every variant
+on one fixed grid) agree across the group (:mod:`overcon.verdict`); the pre-check predicts that
+from the Jacobian alone.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +18,7 @@ from .model import compile_model
 from .precheck import precheck
 from .simulate import Result, run
 from .spec import SceneSpec
+from .verdict import LOCKSTEP_METHOD, LOCKSTEP_STEP, lockstep_tolerance, variant_label
 
 
 @dataclass(frozen=True)
@@ -59,58 +62,62 @@ def scene_groups(directory: Path) -> dict[str, list[tuple[Path, SceneSpec]]]:
     return groups
 
 
-UNIQUE_FACTOR = 100.0
+def _positions(names) -> tuple[str, ...]:
+    return tuple(n for n in names if "." in n and n.split(".")[1] in ("x", "y", "z", "phi"))
 
 
-def uniqueness_tolerance(solver_tolerance: float, scale: float) -> float:
-    """Largest difference between eliminations still called "unique": 100 x the integration
-    tolerance x the output's magnitude (at least 1).
-
-    Why 100: dopri5 controls the local error per step; its global error over a paper run,
-    measured against a 1e-12 reference, is 20-100 x tolerance x scale (planar_f45: 2.0e-6 m at
-    1e-8, 4.0e-9 m at 1e-10; spatial_MN: 1.5e-6 m at 1e-8, 1.0e-8 m at 1e-10), and two variants whose
-    adaptive step sequences diverge differ by up to that much although the motion is unique (with
-    fixed steps, rk4, the same variants agree to 5e-14 m). At the scenes' tolerance 1e-9 the bound is
-    2e-7 m for slider 1 (|x1| <= 2 m) and 2.4e-7 m for the platform: a 1e-6 m change is caught;
-    unique groups differ by <= 4e-8 m there, non-unique ones by 0.3-0.6 m."""
-    return UNIQUE_FACTOR * solver_tolerance * max(1.0, scale)
-
-
-def variant_label(spec: SceneSpec) -> str:
-    """Legend label as in the paper: "without eq. 4"."""
-    if spec.eliminate == "auto":
-        return "auto elimination"
-    return "without eq. " + ", ".join(str(k) for k in spec.eliminate) if spec.eliminate else "no elimination"
+def _max_diffs(results: list[Result], names) -> dict[str, float]:
+    """Per output: max over variants and samples of |y_k(t) - y_0(t)|."""
+    return {n: max((float(np.max(np.abs(r.column(n) - results[0].column(n)))) for r in results[1:]), default=0.0)
+            for n in names}
 
 
 @dataclass
 class GroupRun:
+    """One group run in process. ``max_diff`` (the verdict) comes from the lockstep runs (every
+    variant on the same fixed grid, :mod:`overcon.verdict`); ``adaptive_diff`` from the adaptive
+    runs at the scenes' own settings (``results``, used for the figures), reported only."""
+
     group: str
     labels: list[str]
-    results: list[Result]
+    results: list[Result]  # adaptive runs (empty when not asked for)
     predicted_unique: bool
-    max_diff: dict[str, float]  # per position output: max |difference| to the first variant
-    tolerance: float  # the integration tolerance the group ran at
-    scale: dict[str, float]  # per output: max |value|
+    max_diff: dict[str, float]  # per position output: lockstep max |difference| to the first variant
+    adaptive_diff: dict[str, float]  # the same for the adaptive runs (second figure, never decides)
+    lockstep_step: float
+    scale: dict[str, float]  # per output: max |value| (lockstep runs)
+    lockstep: list[Result] = field(default_factory=list)  # the lockstep runs (positions only)
 
     def observed_unique(self) -> bool:
-        return all(d <= uniqueness_tolerance(self.tolerance, self.scale[n]) for n, d in self.max_diff.items())
+        return all(d <= lockstep_tolerance(self.scale[n]) for n, d in self.max_diff.items())
+
+
+def _with_solver(spec: SceneSpec, **changes) -> SceneSpec:
+    return dataclasses.replace(spec, solver=dataclasses.replace(spec.solver, **changes))
 
 
 def run_group(items: list[tuple[Path, SceneSpec]], *, tolerance: float | None = None,
-              outputs: tuple[str, ...] | None = None) -> GroupRun:
-    labels, results, predicted = [], [], []
+              outputs: tuple[str, ...] | None = None, adaptive: bool = True,
+              lockstep_step: float = LOCKSTEP_STEP, stop_time: float | None = None) -> GroupRun:
+    """Run every variant of a group twice: in lockstep (positions only, :data:`LOCKSTEP_METHOD`
+    with ``lockstep_step``: the verdict) and, if ``adaptive``, with the scene's own solver at
+    ``tolerance`` (default: the scene's) with every output (figures, second figure)."""
+    labels, results, lock, predicted = [], [], [], []
     for path, spec in items:
-        model = compile_model(scene.as_scene(spec, tolerance=tolerance))
-        predicted.append(precheck(model, str(path))["motion_unique"])
-        labels.append(variant_label(spec))
-        results.append(run(model))
-    names = outputs or tuple(n for n in results[0].names if "." in n and n.split(".")[1] in ("x", "y", "z", "phi"))
-    diff = {n: max((float(np.max(np.abs(r.column(n) - results[0].column(n)))) for r in results[1:]), default=0.0)
-            for n in names}
-    scale = {n: max(float(np.max(np.abs(r.column(n)))) for r in results) for n in names}
-    tol = tolerance or items[0][1].solver.tolerance
-    return GroupRun(items[0][1].group or items[0][1].name, labels, results, all(predicted), diff, tol, scale)
+        if stop_time is not None:
+            spec = dataclasses.replace(spec, stop_time=stop_time)
+        predicted.append(precheck(compile_model(scene.as_scene(spec)), str(path))["motion_unique"])
+        labels.append(variant_label(spec.eliminate))
+        lock_spec = dataclasses.replace(_with_solver(spec, method=LOCKSTEP_METHOD, step=lockstep_step),
+                                        reactions=(), positions=outputs or spec.positions)
+        lock.append(run(compile_model(scene.as_scene(lock_spec))))
+        if adaptive:
+            results.append(run(compile_model(scene.as_scene(spec, tolerance=tolerance))))
+    names = _positions(outputs or lock[0].names)
+    scale = {n: max(float(np.max(np.abs(r.column(n)))) for r in lock) for n in names}
+    adaptive_diff = _max_diffs(results, names) if results else {}
+    return GroupRun(items[0][1].group or items[0][1].name, labels, results, all(predicted),
+                    _max_diffs(lock, names), adaptive_diff, lockstep_step, scale, lock)
 
 
 def make_figures(directory: Path, out: Path, *, tolerance: float | None = None, log=print) -> list[Path]:
@@ -129,7 +136,8 @@ def make_figures(directory: Path, out: Path, *, tolerance: float | None = None, 
             if g not in cache:
                 cache[g] = run_group(groups[g], tolerance=tolerance)
                 log(f"{g}: predicted {'unique' if cache[g].predicted_unique else 'not unique'}; "
-                    f"max position difference between eliminations {max(cache[g].max_diff.values()):.3g}")
+                    f"max position difference between eliminations {max(cache[g].max_diff.values()):.3g} "
+                    f"(lockstep), {max(cache[g].adaptive_diff.values()):.3g} (adaptive)")
             gr = cache[g]
             for label, res in zip(gr.labels, gr.results):
                 prefix = "" if len(fig.groups) == 1 else ("without friction, " if g.endswith("none") else "with friction, ")

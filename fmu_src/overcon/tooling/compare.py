@@ -10,9 +10,17 @@ Rules (also stated in every report, :func:`rules_text`):
   before without eq. 6; 5 < 9 < 18). ``max abs`` = max over variants and samples of
   |y_k(t) − y_0(t)|; ``max rel`` = max abs / scale, where scale = max |y| over all variants and
   samples of that output (not given for outputs that are zero, scale <= 1e-12).
-* **Tolerance** per output = :func:`overcon.paper.uniqueness_tolerance` (solver tolerance, scale),
-  the solver tolerance being the largest DefaultExperiment tolerance of the FMUs compared (the
-  tolerance they integrate at); ``--tolerance`` replaces it by one absolute value for every output.
+* **Lockstep verdict** (group mode, overcon FMUs): every variant is also run on one fixed grid
+  (:mod:`overcon.verdict`: ``solver.method = rk4``, ``solver.step`` = the lockstep step, 5 ms by
+  default), so the variants take identical steps and differ only by round-off unless the motion
+  is not unique. The verdict comes from these runs, tolerance per output
+  :func:`overcon.verdict.lockstep_tolerance` (1e-8 x max(1, scale)). The adaptive runs (the FMUs'
+  own settings) are compared too; their largest difference is reported beside the verdict
+  (``adaptive_diff``) and never decides.
+* **Adaptive fallback** (FMUs without ``solver.method``/``solver.step``, e.g. other tools'):
+  tolerance per output = :func:`overcon.verdict.uniqueness_tolerance` (solver tolerance, scale),
+  the solver tolerance being the largest DefaultExperiment tolerance of the FMUs compared.
+* ``--tolerance`` replaces either by one absolute value for every output.
 * **What decides the verdict** (group mode): the positions (outputs in m or rad) only. Joint
   reactions are reported but never decide: the reactions of joints whose reaction is not unique
   differ between eliminations even when the motion is unique (paper §2.1), and the reactions of
@@ -32,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..paper import uniqueness_tolerance
+from ..verdict import LOCKSTEP_FACTOR, UNIQUE_FACTOR, lockstep_tolerance, uniqueness_tolerance
 from . import InputError
 from .fmus import FmuInfo
 from .run import Series
@@ -71,11 +79,15 @@ class Comparison:
     tolerance_override: float | None
     reference: Path | None = None
     wall_seconds: list[float] = field(default_factory=list)
+    mode: str = "adaptive"  # what decided: "lockstep" runs, or the "adaptive" runs (fallback, reference)
+    lockstep_step: float | None = None  # s
+    adaptive_diff: dict = field(default_factory=dict)  # deciding output -> max abs difference, adaptive runs
+    failure: str | None = None  # a run of the group failed: no verdict (the reason)
 
     @property
     def observed(self) -> bool:
-        """Unique (group mode) / within tolerance (reference mode)."""
-        return all(d.within for d in self.diffs if d.decides)
+        """Unique (group mode) / within tolerance (reference mode); False when a run failed."""
+        return self.failure is None and all(d.within for d in self.diffs if d.decides)
 
     @property
     def expected(self) -> bool:
@@ -83,7 +95,7 @@ class Comparison:
 
     @property
     def matches(self) -> bool:
-        return self.observed == self.expected
+        return self.failure is None and self.observed == self.expected
 
     def worst(self, *, deciding: bool = True) -> OutputDiff | None:
         """The deciding output with the largest difference relative to its tolerance."""
@@ -98,7 +110,12 @@ class Comparison:
                 out[d.unit or ""] = max(out.get(d.unit or "", 0.0), d.max_abs)
         return out
 
+    def adaptive_max(self) -> float | None:
+        return max(self.adaptive_diff.values()) if self.adaptive_diff else None
+
     def verdict_text(self, value: bool | None = None) -> str:
+        if value is None and self.failure is not None:
+            return "failed"
         v = self.observed if value is None else value
         if self.reference is not None:
             return "within tolerance" if v else "differs"
@@ -143,11 +160,16 @@ def _solver_tolerance(infos: list[FmuInfo], override: float | None) -> float | N
 
 
 def _diff(name, unit, kind, decides, ref: np.ndarray, others: list[np.ndarray], time: np.ndarray,
-          solver_tol, override, reaction_unique=None) -> OutputDiff:
+          solver_tol, override, reaction_unique=None, lockstep: bool = False) -> OutputDiff:
     scale = float(max(np.max(np.abs(ref)), *(np.max(np.abs(o)) for o in others)))
     dev = np.max(np.abs(np.stack([o - ref for o in others])), axis=0)
     max_abs = float(np.max(dev))
-    tol = float(override) if override is not None else uniqueness_tolerance(solver_tol, scale)
+    if override is not None:
+        tol = float(override)
+    elif lockstep:
+        tol = lockstep_tolerance(scale)
+    else:
+        tol = uniqueness_tolerance(solver_tol, scale)
     over = np.nonzero(dev > tol)[0]
     return OutputDiff(name, unit, kind, decides, tol, scale, max_abs, max_abs / scale if scale > REL_FLOOR else None,
                       float(time[over[0]]) if len(over) else None, reaction_unique)
@@ -169,24 +191,43 @@ def validate_group(group: str, infos: list[FmuInfo]) -> tuple[list[str], bool | 
 
 
 def compare_group(group: str, infos: list[FmuInfo], series: list[Series], *,
-                  tolerance: float | None = None) -> Comparison:
-    """Variants of one group (same outputs, different eliminations) against the first one."""
+                  tolerance: float | None = None, lockstep: list[Series] | None = None,
+                  lockstep_step: float | None = None) -> Comparison:
+    """Variants of one group (same outputs, different eliminations) against the first one.
+    ``series``: the adaptive runs; ``lockstep``: the same FMUs run on one fixed grid of step
+    ``lockstep_step`` (s), which then decide (module docstring)."""
     names, predicted = validate_group(group, infos)
-    check_grids(series, [str(i.path) for i in infos])
-    solver_tol = _solver_tolerance(infos, tolerance)
+    sources = [str(i.path) for i in infos]
+    check_grids(series, sources)
+    solver_tol = _solver_tolerance(infos, tolerance) if lockstep is None else None
     meta = {o.name: o for o in infos[0].outputs}
     has_positions = any(meta[n].kind == "position" for n in names)
+    deciding = [n for n in names if (meta[n].kind == "position" if has_positions else True)]
+    decisive = series
+    if lockstep is not None:
+        check_grids(lockstep, [s + " (lockstep run)" for s in sources])
+        decisive = lockstep
     diffs = []
     for n in names:
         o = meta[n]
-        decides = o.kind == "position" if has_positions else True
         ru = None
         if o.kind == "reaction":
             vals = {i.reaction_unique.get(o.joint) for i in infos}
             ru = vals.pop() if len(vals) == 1 else None
-        diffs.append(_diff(n, o.unit, o.kind, decides, series[0].values[n], [s.values[n] for s in series[1:]],
-                           series[0].time, solver_tol, tolerance, ru))
-    return Comparison(group, [i.label for i in infos], infos, series, diffs, predicted, solver_tol, tolerance)
+        diffs.append(_diff(n, o.unit, o.kind, n in deciding, decisive[0].values[n],
+                           [s.values[n] for s in decisive[1:]], decisive[0].time, solver_tol, tolerance, ru,
+                           lockstep=lockstep is not None))
+    adaptive = {n: float(np.max(np.abs(np.stack([s.values[n] - series[0].values[n] for s in series[1:]]))))
+                for n in deciding}
+    return Comparison(group, [i.label for i in infos], infos, series, diffs, predicted, solver_tol, tolerance,
+                      mode="lockstep" if lockstep is not None else "adaptive", lockstep_step=lockstep_step,
+                      adaptive_diff=adaptive)
+
+
+def failed_group(group: str, infos: list[FmuInfo], reason: str) -> Comparison:
+    """A group one of whose runs failed: no verdict, the reason is reported."""
+    _, predicted = validate_group(group, infos)
+    return Comparison(group, [i.label for i in infos], infos, [], [], predicted, None, None, failure=reason)
 
 
 def compare_reference(info: FmuInfo, result: Series, ref: Series, ref_path: Path, *,
@@ -230,17 +271,29 @@ def order_groups(groups: dict[str, list[FmuInfo]]) -> dict[str, list[FmuInfo]]:
 
 def rules_text(comparisons: list[Comparison]) -> str:
     tols = sorted({c.solver_tolerance for c in comparisons if c.solver_tolerance is not None})
+    steps = sorted({c.lockstep_step for c in comparisons if c.mode == "lockstep" and c.lockstep_step})
     override = {c.tolerance_override for c in comparisons} - {None}
+    parts = []
+    if steps:
+        parts.append("Lockstep verdict: every variant of a group is run a second time on one fixed grid "
+                     f"(rk4, step {', '.join(f'{h:g}' for h in steps)} s), so the variants take identical steps "
+                     "and differ by round-off only unless their motion differs; the verdict comes from these runs. "
+                     "The adaptive runs (the FMUs' own solver settings; figures and plots) are compared too: their "
+                     "largest difference is reported as a second figure and does not decide.")
     if override:
-        tol = f"absolute tolerance {', '.join(f'{t:g}' for t in sorted(override))} (--tolerance) for every output"
+        parts.append(f"Tolerance: absolute {', '.join(f'{t:g}' for t in sorted(override))} (--tolerance) for "
+                     "every output.")
     else:
-        from ..paper import UNIQUE_FACTOR
-
-        tol = (f"per output uniqueness_tolerance(solver tolerance, scale) = {UNIQUE_FACTOR:g} × solver "
-               f"tolerance × max(1, scale), scale = max |y| of the output; solver tolerance (the FMUs' "
-               f"DefaultExperiment tolerance) {', '.join(f'{t:g}' for t in tols)}")
-    return (f"Tolerance: {tol}. Results are compared sample by sample on identical time grids (no "
+        if steps:
+            parts.append(f"Tolerance: {LOCKSTEP_FACTOR:g} × max(1, scale) per output for the lockstep runs, "
+                         "scale = max |y| of the output.")
+        if tols:
+            parts.append(f"Tolerance for the adaptive runs of FMUs that cannot run in lockstep: {UNIQUE_FACTOR:g} × solver "
+                         f"tolerance × max(1, scale), scale = max |y| of the output; solver tolerance (the FMUs' "
+                         f"DefaultExperiment tolerance) {', '.join(f'{t:g}' for t in tols)}.")
+    return (" ".join(parts) + " Results are compared sample by sample on identical time grids (no "
             "interpolation); differences are taken against the first variant. The verdict of a group "
             "comes from the positions (outputs in m or rad); reactions are reported but do not decide "
             "(non-unique reactions differ legitimately when the motion is unique). Reference mode: "
-            "every common output decides. Prediction: the FMUs' constant output `motion_unique` (pre-check).")
+            "every common output decides. Prediction: the FMUs' constant output `motion_unique` (pre-check). "
+            "A group one of whose runs failed has no verdict (FAILED, with the reason).")

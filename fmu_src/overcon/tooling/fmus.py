@@ -5,7 +5,7 @@ outputs with their units, and the constant Boolean outputs an overcon FMU carrie
 (``motion_unique``, ``<joint>.reaction_unique``: the pre-check's predictions). From an overcon
 FMU's ``resources/`` (``overcon_fmu.json`` and the bundled scene file, loaded with
 :func:`overcon.scene.load`): group, friction set, eliminated equations and the paper-style label
-(:func:`overcon.paper.variant_label`). FMUs of other tools form one group, :data:`OTHER_GROUP`,
+(:func:`overcon.verdict.variant_label`). FMUs of other tools form one group, :data:`OTHER_GROUP`,
 are labelled with their model name and carry no prediction.
 """
 from __future__ import annotations
@@ -53,6 +53,7 @@ class FmuInfo:
     eliminate: tuple[int, ...] | str | None = None
     motion_unique: bool | None = None  # pre-check prediction (None: not an overcon FMU)
     reaction_unique: dict = field(default_factory=dict)  # joint -> bool
+    lockstep: bool = False  # parameters solver.method and solver.step: can run on the lockstep grid
 
     @property
     def output_names(self) -> list[str]:
@@ -100,7 +101,7 @@ def _scene_facts(path: Path, zf: zipfile.ZipFile) -> dict:
     if not scene_rel:
         return facts
     from .. import scene as scene_mod
-    from ..paper import variant_label
+    from ..verdict import variant_label
 
     with tempfile.TemporaryDirectory(prefix="overcon-scene-") as tmp:
         for name in zf.namelist():
@@ -115,7 +116,7 @@ def _scene_facts(path: Path, zf: zipfile.ZipFile) -> dict:
             spec = scene_mod.load(Path(tmp, *scene_rel.split("/")))
         except (scene_mod.SceneError, OSError) as exc:
             raise InputError(f"{path}: bundled scene file {scene_rel} invalid: {exc}") from exc
-    facts.update(group=spec.group or spec.name, label=variant_label(spec), friction=tuple(spec.friction),
+    facts.update(group=spec.group or spec.name, label=variant_label(spec.eliminate), friction=tuple(spec.friction),
                  eliminate=spec.eliminate, mechanism=spec.mechanism.name)
     return facts
 
@@ -138,8 +139,10 @@ def inspect_fmu(path) -> FmuInfo:
         raise InputError(f"{path}: cannot read modelDescription.xml: {type(exc).__name__}: {exc}") from exc
     if md.coSimulation is None:
         raise InputError(f"{path}: not a co-simulation FMU (only FMI co-simulation FMUs are run)")
-    outputs, constants = [], {}
+    outputs, constants, params = [], {}, {}
     for v in md.modelVariables:
+        if v.causality == "parameter":
+            params[v.name] = v.type
         if v.causality != "output":
             continue
         if v.type == "Real" and v.variability != "constant":
@@ -168,7 +171,8 @@ def inspect_fmu(path) -> FmuInfo:
                    outputs=tuple(outputs), group=facts.get("group", OTHER_GROUP), label=facts.get("label", model),
                    mechanism=facts.get("mechanism", ""), friction=facts.get("friction", ()),
                    eliminate=facts.get("eliminate"), motion_unique=motion_unique,
-                   reaction_unique=reaction_unique)
+                   reaction_unique=reaction_unique,
+                   lockstep=params.get("solver.method") == "String" and params.get("solver.step") == "Real")
 
 
 def inspect_all(paths) -> list[FmuInfo]:

@@ -6,6 +6,7 @@ Each returns data (results, comparisons); printing goes through ``echo``; bad in
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import platform
@@ -16,10 +17,12 @@ from pathlib import Path
 import numpy as np
 
 from . import InputError
-from .compare import Comparison, compare_group, compare_reference, group_fmus, order_groups, validate_group
+from ..verdict import LOCKSTEP_STEP, lockstep_start_values
+from .compare import (Comparison, compare_group, compare_reference, failed_group, group_fmus, order_groups,
+                      validate_group)
 from .fmus import FmuInfo, inspect_all, inspect_fmu
 from .report import console_table, markdown, plot_comparison, verdict_line
-from .run import Experiment, RunResult, experiment, read_series, run_fmus
+from .run import Experiment, Job, RunResult, check_unique_models, experiment, read_series, run_fmus, run_jobs
 
 
 def _echo(s: str) -> None:
@@ -43,7 +46,11 @@ class CompareOutcome:
     report: Path
     plots: dict = field(default_factory=dict)  # group -> [png]
     skipped: list[str] = field(default_factory=list)  # groups with one FMU
-    results: dict = field(default_factory=dict)  # model -> RunResult
+    results: dict = field(default_factory=dict)  # run key (model, lockstep/<model>) -> RunResult
+
+    @property
+    def failed(self) -> list[Comparison]:
+        return [c for c in self.comparisons if c.failure is not None]
 
 
 def _select(infos: list[FmuInfo], group: str | None,
@@ -67,10 +74,57 @@ def _select(infos: list[FmuInfo], group: str | None,
     return runnable, singles
 
 
-def _longest_first(infos: list[FmuInfo], exps: dict[str, Experiment]) -> list[FmuInfo]:
-    """Run order for the worker pool: longest runs first (simulated time, then friction joints),
-    so that no long run starts last on an otherwise idle pool."""
-    return sorted(infos, key=lambda i: (-(exps[i.model].stop - exps[i.model].start), -len(i.friction)))
+def _longest_first(jobs: list[Job]) -> list[Job]:
+    """Run order for the worker pool: longest runs first (simulated time, then lockstep runs, then
+    friction joints), so that no long run starts last on an otherwise idle pool."""
+    return sorted(jobs, key=lambda j: (-(j.experiment.stop - j.experiment.start), not j.key.startswith("lockstep/"),
+                                       -len(j.info.friction)))
+
+
+def _check_lockstep_step(h: float | None) -> float | None:
+    if h is not None and not (math.isfinite(h) and 1e-6 <= h <= 1.0):
+        raise InputError(f"--lockstep-step {h!r}: must be a step in s between 1e-6 and 1")
+    return h
+
+
+def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experiment], out_dir: Path, *,
+                     jobs: int, lockstep_step: float | None, tolerance: float | None,
+                     echo) -> tuple[list[Comparison], dict[str, RunResult]]:
+    """Run every FMU of every group (adaptive, into ``out_dir/<model>.csv``) and, for groups whose
+    FMUs all take the lockstep parameters and unless ``lockstep_step`` is None, once more on the
+    lockstep grid (``out_dir/lockstep/<model>.csv``); compare each group. A failed run makes its
+    group a failed comparison (with the reason); the other groups are still compared."""
+    check_unique_models([i for items in groups.values() for i in items], out_dir)
+    todo, lock_groups = [], set()
+    for g, items in groups.items():
+        use_lock = lockstep_step is not None and all(i.lockstep for i in items)
+        if use_lock:
+            lock_groups.add(g)
+        elif lockstep_step is not None:
+            echo(f"{g}: not every FMU has the parameters solver.method and solver.step: verdict from the "
+                 "adaptive runs (not lockstep)")
+        for i in items:
+            ex = exps[i.model]
+            todo.append(Job(i.model, i, ex, out_dir / f"{i.model}.csv"))
+            if use_lock:
+                lex = dataclasses.replace(ex, start_values=tuple(lockstep_start_values(lockstep_step).items()))
+                todo.append(Job(f"lockstep/{i.model}", i, lex, out_dir / "lockstep" / f"{i.model}.csv"))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results, failures = run_jobs(_longest_first(todo), workers=jobs, echo=echo)
+    comparisons = []
+    for g, items in groups.items():
+        keys = [i.model for i in items] + ([f"lockstep/{i.model}" for i in items] if g in lock_groups else [])
+        failed = [failures[k] for k in keys if k in failures]
+        if failed:
+            comparisons.append(failed_group(g, items, "\n".join(failed)))
+            continue
+        series = [read_series(results[i.model].csv) for i in items]
+        lock = [read_series(results[f"lockstep/{i.model}"].csv) for i in items] if g in lock_groups else None
+        c = compare_group(g, items, series, tolerance=tolerance, lockstep=lock,
+                          lockstep_step=lockstep_step if lock is not None else None)
+        c.wall_seconds = [results[i.model].sim_seconds for i in items]
+        comparisons.append(c)
+    return comparisons, results
 
 
 def _group_experiments(groups: dict[str, list[FmuInfo]], stop_time, step) -> dict[str, Experiment]:
@@ -92,12 +146,16 @@ def _group_experiments(groups: dict[str, list[FmuInfo]], stop_time, step) -> dic
 
 def compare_paths(paths, out_dir, *, group: str | None = None, one_group: bool = False,
                   tolerance: float | None = None, stop_time=None, step=None, jobs: int = 2, plots="worst",
-                  echo=_echo, title: str = "overcon compare") -> CompareOutcome:
+                  echo=_echo, title: str = "overcon compare",
+                  lockstep_step: float | None = LOCKSTEP_STEP) -> CompareOutcome:
     """``overcon compare``: group the FMUs by scene group (``one_group``: all of them together),
-    run them, compare each group, write ``out_dir/report.md`` and the PNGs. FMUs of one group
-    share a DefaultExperiment (or ``--stop-time``/``--step`` put them on one grid)."""
+    run them (adaptive, and in lockstep for the verdict unless ``lockstep_step`` is None), compare
+    each group, write ``out_dir/report.md`` and the PNGs. FMUs of one group share a
+    DefaultExperiment (or ``--stop-time``/``--step`` put them on one grid). A failed run does not
+    stop the others: its group is reported as FAILED (``CompareOutcome.failed``)."""
     if tolerance is not None and not (math.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"--tolerance {tolerance!r}: must be a positive finite number")
+    _check_lockstep_step(lockstep_step)
     out_dir = Path(out_dir)
     infos = _dedupe(inspect_all(paths))
     groups, singles = _select(infos, group, one_group)
@@ -106,15 +164,9 @@ def compare_paths(paths, out_dir, *, group: str | None = None, one_group: bool =
     for g, items in groups.items():  # before any run: outputs to compare, one prediction
         validate_group(g, items)
     exps = _group_experiments(groups, stop_time, step)
-    todo = _longest_first([i for items in groups.values() for i in items], exps)
-    results = {r.info.model: r for r in run_fmus(todo, out_dir, jobs=jobs, echo=echo, experiments=exps)}
-    comparisons, plot_files = [], {}
-    for g, items in groups.items():
-        series = [read_series(results[i.model].csv) for i in items]
-        c = compare_group(g, items, series, tolerance=tolerance)
-        c.wall_seconds = [results[i.model].sim_seconds for i in items]
-        comparisons.append(c)
-        plot_files[g] = plot_comparison(c, out_dir, plots)
+    comparisons, results = _run_and_compare(groups, exps, out_dir, jobs=jobs, lockstep_step=lockstep_step,
+                                            tolerance=tolerance, echo=echo)
+    plot_files = {c.group: plot_comparison(c, out_dir, plots) for c in comparisons}
     report = out_dir / "report.md"
     report.write_text(markdown(comparisons, out_dir, title=title, plots=plot_files), encoding="utf-8")
     for c in comparisons:
@@ -192,18 +244,22 @@ class ReproduceOutcome:
     def all_match(self) -> bool:
         return all(c.matches for c in self.comparisons)
 
+    @property
+    def failed(self) -> list[Comparison]:
+        return [c for c in self.comparisons if c.failure is not None]
+
 
 def _figures(comparisons: list[Comparison], out_dir: Path, echo) -> list[tuple[str, Path]]:
     """The paper's Figs. 3-5, 7-9 (:data:`overcon.paper.FIGURES`) from the FMU results."""
     from ..paper import FIGURES
     from ..plots import plot_series
 
-    by_group = {c.group: c for c in comparisons}
+    by_group = {c.group: c for c in comparisons if c.failure is None}
     out = []
     for fig in FIGURES:
         missing = [g for g in fig.groups if g not in by_group]
         if missing:
-            echo(f"{fig.name}: skipped (group {', '.join(missing)} not in this set)")
+            echo(f"{fig.name}: skipped (group {', '.join(missing)} not in this set, or its runs failed)")
             continue
         series, t = {}, None
         for g in fig.groups:
@@ -219,13 +275,15 @@ def _figures(comparisons: list[Comparison], out_dir: Path, echo) -> list[tuple[s
     return out
 
 
-def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, stop_time=None) -> ReproduceOutcome:
+def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, stop_time=None,
+              lockstep_step: float | None = LOCKSTEP_STEP) -> ReproduceOutcome:
     """Build an FMU per scene of ``mechanisms`` (pre-check printed, non-unique scenes built too),
     run them with fmpy (``jobs`` processes), compare every group, write ``out_dir/report.md`` with
     the verdict table, the paper's figures and per-group details and plots."""
     from ..fmu.build import EXIT_INPUT, build_all
 
     t0 = time.perf_counter()
+    _check_lockstep_step(lockstep_step)
     out_dir = Path(out_dir)
     mech = Path(mechanisms)
     if not mech.is_dir():
@@ -243,17 +301,16 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
     for g in singles:
         echo(f"{g}: one scene only, not compared")
     exps = _group_experiments(groups, stop_time, None)
-    todo = _longest_first([i for items in groups.values() for i in items], exps)
-    echo(f"== run: {len(todo)} FMUs with fmpy.simulate_fmu, {jobs} process(es) -> {out_dir / 'results'}")
+    n = sum(len(v) for v in groups.values())
+    echo(f"== run: {n} FMUs with fmpy.simulate_fmu, adaptive"
+         + (f" and in lockstep (rk4, {lockstep_step:g} s)" if lockstep_step is not None else "")
+         + f", {jobs} process(es) -> {out_dir / 'results'}")
     t1 = time.perf_counter()
-    results = {r.info.model: r for r in run_fmus(todo, out_dir / "results", jobs=jobs, echo=echo, experiments=exps)}
+    comparisons, results = _run_and_compare(groups, exps, out_dir / "results", jobs=jobs,
+                                            lockstep_step=lockstep_step, tolerance=None, echo=echo)
     t_run = time.perf_counter() - t1
     echo("== compare")
-    comparisons = []
-    for g, items in groups.items():
-        c = compare_group(g, items, [read_series(results[i.model].csv) for i in items])
-        c.wall_seconds = [results[i.model].sim_seconds for i in items]
-        comparisons.append(c)
+    for c in comparisons:
         echo(verdict_line(c))
     t2 = time.perf_counter()
     figures = _figures(comparisons, out_dir, echo)
@@ -267,9 +324,10 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
         f"`{mech}` built as an FMI 2.0 co-simulation FMU (`{out_dir / 'fmus'}`), pre-checked, simulated "
         "with `fmpy.simulate_fmu` and compared across eliminations. *Predicted*: the pre-check "
         "(reaction uniqueness of the friction joints, paper Eq. 17), carried by each FMU as the "
-        "constant output `motion_unique`. *Observed*: whether the simulated positions agree across "
-        "the eliminations within the tolerance below. Wall time: simulation seconds per variant "
-        "(inside `simulate_fmu`).",
+        "constant output `motion_unique`. *Observed*: whether the simulated positions of the lockstep "
+        "runs (every elimination on one fixed grid) agree across the eliminations within the tolerance "
+        "below; the adaptive runs' largest difference is given beside it. Wall time: simulation seconds "
+        "per variant, adaptive run (inside `simulate_fmu`).",
         "",
         f"Total wall time {total:.1f} s on {os.cpu_count()} CPU(s), {jobs} worker process(es) "
         f"(build {t_build:.1f} s, simulations {t_run:.1f} s wall / {seconds['simulation_sum']:.1f} s summed, "

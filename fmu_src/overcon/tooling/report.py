@@ -15,10 +15,21 @@ def _unit(d: OutputDiff) -> str:
     return d.unit or ""
 
 
+def _second_figure(c: Comparison) -> str:
+    a = c.adaptive_max()
+    if c.mode != "lockstep" or a is None:
+        return ""
+    return f"; adaptive runs differ by {a:.3g}"
+
+
 def verdict_line(c: Comparison) -> str:
-    """One line; a mismatch is LOUD."""
+    """One line; a mismatch or a failed run is LOUD."""
+    if c.failure is not None:
+        return f"!!! FAILED !!! {c.group}: no verdict, a run failed: {c.failure}"
     w = c.worst()
-    worst = f"; largest difference {w.max_abs:.3g} {_unit(w)} in {w.name} (tolerance {w.tolerance:.3g})" if w else ""
+    how = f" ({c.mode})" if c.reference is None else ""
+    worst = (f"; largest difference{how} {w.max_abs:.3g} {_unit(w)} in {w.name} (tolerance {w.tolerance:.3g})"
+             f"{_second_figure(c)}" if w else "")
     if c.reference is not None:
         head = f"{c.group}: {c.infos[0].path.name} vs {c.reference}: {c.verdict_text().upper()}"
         return head + worst + ("" if c.observed else "  <-- differs from the reference")
@@ -32,8 +43,13 @@ def verdict_line(c: Comparison) -> str:
 
 def console_table(c: Comparison) -> str:
     """Every compared output: max abs/rel difference, tolerance, first time over it."""
+    if c.failure is not None:
+        return f"{c.group}: " + ", ".join(i.model for i in c.infos) + f"\n  FAILED: {c.failure}"
     lines = [f"{c.group}: " + (f"{c.infos[0].path.name} vs reference {c.reference}" if c.reference is not None
                               else ", ".join(f"{i.model} ({lab})" for i, lab in zip(c.infos, c.labels)))]
+    if c.mode == "lockstep":
+        lines.append(f"  verdict from lockstep runs (rk4, step {c.lockstep_step:g} s); adaptive runs: largest "
+                     f"position difference {c.adaptive_max():.3g} (reported, not deciding)")
     lines.append(f"  {'output':<24} {'unit':<5} {'max abs':>10} {'max rel':>10} {'tolerance':>10} "
                  f"{'first t>tol':>11}  decides")
     for d in c.diffs:
@@ -58,6 +74,8 @@ def plot_comparison(c: Comparison, out_dir: Path, outputs: str | list[str] = "wo
     from ..plots import plot_series
 
     by_name = {d.name: d for d in c.diffs}
+    if c.failure is not None:
+        return []
     if outputs == "worst":
         w = c.worst()
         names = [w.name] if w else []
@@ -87,23 +105,31 @@ def summary_rows(comparisons: list[Comparison]) -> list[str]:
     """Markdown table: mechanism, group / friction set, eliminations, predicted, observed, max
     difference, simulation wall time."""
     rows = ["| mechanism | group (friction set) | eliminations | predicted | observed | max difference "
-            "(deciding output, tolerance) | wall time (s) |",
-            "|---|---|---|---|---|---|---|"]
+            "(deciding output, tolerance) | adaptive runs' max difference | wall time (s) |",
+            "|---|---|---|---|---|---|---|---|"]
     for c in comparisons:
         i0 = c.infos[0]
         fr = ", ".join(i0.friction) if i0.friction else "none"
         elim = "; ".join(i.eliminate_text() or i.model for i in c.infos)
         pred = "—" if c.predicted is None else c.verdict_text(c.predicted)
-        obs = c.verdict_text() + ("" if c.matches else " **MISMATCH**")
+        if c.failure is not None:
+            obs = "**FAILED** (no verdict)"
+        else:
+            obs = c.verdict_text() + ("" if c.matches else " **MISMATCH**")
         w = c.worst()
-        md = f"{w.max_abs:.3g} {_unit(w)} ({w.name}, {w.tolerance:.2g})" if w else "—"
+        md = f"{w.max_abs:.3g} {_unit(w)} ({w.name}, {w.tolerance:.2g}, {c.mode})" if w else "—"
+        second = f"{c.adaptive_max():.3g}" if c.mode == "lockstep" and c.adaptive_max() is not None else "—"
         wall = " + ".join(f"{s:.1f}" for s in c.wall_seconds) if c.wall_seconds else "—"
-        rows.append(f"| {i0.mechanism or '—'} | {c.group} ({fr}) | {elim} | {pred} | {obs} | {md} | {wall} |")
+        rows.append(f"| {i0.mechanism or '—'} | {c.group} ({fr}) | {elim} | {pred} | {obs} | {md} | {second} | {wall} |")
     return rows
 
 
 def group_section(c: Comparison, base: Path, plots: list[Path]) -> list[str]:
     lines = [f"### {c.group}", ""]
+    if c.failure is not None:
+        variants = ", ".join(f"`{i.model}` ({lab})" for i, lab in zip(c.infos, c.labels))
+        return lines + [f"Variants: {variants}. **FAILED**, no verdict: a run did not reach its stop time.", "",
+                        "```", c.failure, "```", ""]
     if c.reference is not None:
         lines.append(f"{c.infos[0].path.name} against reference `{c.reference}`: **{c.verdict_text()}**.")
     else:
@@ -111,6 +137,10 @@ def group_section(c: Comparison, base: Path, plots: list[Path]) -> list[str]:
         pred = "none (expected unique)" if c.predicted is None else c.verdict_text(c.predicted)
         lines.append(f"Variants: {variants}. Predicted (pre-check): {pred}; observed: **{c.verdict_text()}**"
                      + ("." if c.matches else " — **MISMATCH with the prediction**."))
+    if c.mode == "lockstep":
+        lines += ["", f"Differences below are from the lockstep runs (rk4, step {c.lockstep_step:g} s, identical steps "
+                  f"for every variant); the adaptive runs' largest position difference is {c.adaptive_max():.3g} "
+                  "(reported, not deciding)."]
     lines += ["", "| output | unit | max abs | max rel | tolerance | first t > tol (s) | decides |",
               "|---|---|---|---|---|---|---|"]
     reactions: dict[str, list[OutputDiff]] = {}
@@ -139,10 +169,14 @@ def markdown(comparisons: list[Comparison], base: Path, *, title: str, intro: li
              figures: list[tuple[str, Path]] = (), plots: dict | None = None, tail: list[str] = ()) -> str:
     """The whole report; image links relative to ``base`` (the report's directory)."""
     plots = plots or {}
-    n_bad = sum(not c.matches for c in comparisons)
+    n_failed = sum(c.failure is not None for c in comparisons)
+    n_bad = sum(not c.matches for c in comparisons) - n_failed
+    head = ("**Every observed verdict equals its prediction.**" if not n_bad else
+            f"**{n_bad} verdict(s) differ from the prediction (MISMATCH).**")
+    if n_failed:
+        head += f" **{n_failed} group(s) FAILED (a run did not finish; no verdict).**"
     lines = [f"# {title}", "", *intro]
-    lines += ["", ("**Every observed verdict equals its prediction.**" if not n_bad else
-                   f"**{n_bad} verdict(s) differ from the prediction (MISMATCH).**"), "",
+    lines += ["", head, "",
               "## Verdicts", "", *summary_rows(comparisons), "", rules_text(comparisons), ""]
     if figures:
         lines += ["## Figures of the paper", ""]

@@ -40,9 +40,13 @@ PROGRESS_EVERY = 1.0  # s between progress lines of one FMU
 
 @dataclass(frozen=True)
 class Experiment:
+    """Run settings: times (s), the output interval ``step`` (s) and FMU parameters to set
+    (``start_values``: name/value pairs, e.g. the lockstep grid of :mod:`overcon.verdict`)."""
+
     start: float
     stop: float
     step: float
+    start_values: tuple = ()
 
     def n_points(self) -> int:
         return int(round((self.stop - self.start) / self.step)) + 1
@@ -88,7 +92,7 @@ class RunResult:
 # in process (the worker's body)
 
 def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, step: float,
-             outputs: list[str], progress: bool = True, label: str = "") -> dict:
+             outputs: list[str], progress: bool = True, label: str = "", start_values: dict | None = None) -> dict:
     """One ``fmpy.simulate_fmu`` run; writes ``csv``. Returns {rows, sim_seconds, last_time}.
     Progress lines (``label: 42% ...``) go to stderr at most every :data:`PROGRESS_EVERY` s."""
     import fmpy
@@ -118,6 +122,7 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
     try:
         result = fmpy.simulate_fmu(str(fmu), start_time=start, stop_time=stop, output_interval=step,
                                    output=outputs, step_finished=step_finished, logger=logger,
+                                   start_values=dict(start_values or {}),
                                    debug_logging=True)
     except Exception as exc:
         why = "; ".join(messages[-3:])
@@ -142,7 +147,8 @@ def _worker(argv: list[str]) -> None:
     job = json.loads(argv[0])
     try:
         out = simulate(job["fmu"], job["csv"], start=job["start"], stop=job["stop"], step=job["step"],
-                       outputs=job["outputs"], progress=job["progress"], label=job["label"])
+                       outputs=job["outputs"], progress=job["progress"], label=job["label"],
+                       start_values=job.get("start_values"))
         out["error"] = ""
     except SimulationFailed as exc:
         out = {"error": str(exc)}
@@ -166,9 +172,11 @@ def _worker_env() -> dict:
     return env
 
 
-def _run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: float | None) -> RunResult:
+def _run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: float | None,
+             label: str = "") -> RunResult:
     job = {"fmu": str(info.path), "csv": str(csv), "start": ex.start, "stop": ex.stop, "step": ex.step,
-           "outputs": info.output_names, "progress": progress, "label": info.model}
+           "outputs": info.output_names, "progress": progress, "label": label or info.model,
+           "start_values": dict(ex.start_values)}
     t0 = time.perf_counter()
     try:
         proc = subprocess.run([sys.executable, "-m", "overcon.tooling.run", json.dumps(job)],
@@ -186,6 +194,52 @@ def _run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: 
     return RunResult(info, csv, out["rows"], out["sim_seconds"], wall)
 
 
+@dataclass(frozen=True)
+class Job:
+    """One FMU run: ``key`` names it in the results (e.g. the model, or ``lockstep/<model>``)."""
+
+    key: str
+    info: FmuInfo
+    experiment: Experiment
+    csv: Path
+
+
+def run_jobs(jobs: list[Job], *, workers: int = 2, progress: bool = True, timeout: float | None = None,
+             echo=None) -> tuple[dict[str, RunResult], dict[str, str]]:
+    """Run every job (``workers`` processes at a time, in the order given) and return
+    (results by key, failure reasons by key): a failed run never stops the others."""
+    echo = echo or (lambda s: print(s, flush=True))
+    results: dict[str, RunResult] = {}
+    failures: dict[str, str] = {}
+
+    def one(job: Job):
+        ex = job.experiment
+        try:
+            r = _run_one(job.info, ex, job.csv, progress, timeout, label=job.key)
+        except SimulationFailed as exc:
+            failures[job.key] = str(exc)
+            echo(f"{job.key}: FAILED (reason below)")
+            return
+        results[job.key] = r
+        echo(f"{job.key}: {r.rows} points, t = {ex.start:g}..{ex.stop:g} s every {ex.step:g} s -> {r.csv}; "
+             f"wall {r.sim_seconds:.2f} s simulation, {r.wall_seconds:.2f} s process")
+
+    if jobs:
+        with ThreadPoolExecutor(max(1, min(workers, len(jobs)))) as pool:
+            list(pool.map(one, jobs))
+    return results, failures
+
+
+def check_unique_models(infos: list[FmuInfo], out_dir: Path) -> None:
+    """:class:`InputError` for two FMUs with one model name (they would write one CSV)."""
+    seen: dict[str, Path] = {}
+    for info in infos:
+        if info.model in seen:
+            raise InputError(f"{info.path}: model {info.model} also given as {seen[info.model]}: "
+                             f"both would write {Path(out_dir) / (info.model + '.csv')}")
+        seen[info.model] = info.path
+
+
 def run_fmus(infos: list[FmuInfo], out_dir, *, stop_time: float | None = None, step: float | None = None,
              jobs: int = 2, progress: bool = True, timeout: float | None = None, echo=None,
              experiments: dict | None = None) -> list[RunResult]:
@@ -193,35 +247,14 @@ def run_fmus(infos: list[FmuInfo], out_dir, *, stop_time: float | None = None, s
     line per finished FMU with ``echo``. ``experiments`` (model -> :class:`Experiment`) overrides
     the per-FMU settings. Raises :class:`SimulationFailed` naming every failed FMU (after all
     ran), :class:`InputError` for two FMUs with one model name."""
-    echo = echo or (lambda s: print(s, flush=True))
     out_dir = Path(out_dir)
-    seen: dict[str, Path] = {}
-    for info in infos:
-        if info.model in seen:
-            raise InputError(f"{info.path}: model {info.model} also given as {seen[info.model]}: "
-                             f"both would write {out_dir / (info.model + '.csv')}")
-        seen[info.model] = info.path
+    check_unique_models(infos, out_dir)
     exps = experiments or {i.model: experiment(i, stop_time=stop_time, step=step) for i in infos}
     out_dir.mkdir(parents=True, exist_ok=True)
-    results: dict[str, RunResult] = {}
-    failures: list[str] = []
-
-    def one(info):
-        ex = exps[info.model]
-        try:
-            r = _run_one(info, ex, out_dir / f"{info.model}.csv", progress, timeout)
-        except SimulationFailed as exc:
-            failures.append(str(exc))
-            echo(f"{info.model}: FAILED (reason below)")
-            return
-        results[info.model] = r
-        echo(f"{info.model}: {r.rows} points, t = {ex.start:g}..{ex.stop:g} s every {ex.step:g} s -> {r.csv}; "
-             f"wall {r.sim_seconds:.2f} s simulation, {r.wall_seconds:.2f} s process")
-
-    with ThreadPoolExecutor(max(1, min(jobs, len(infos)))) as pool:
-        list(pool.map(one, infos))
+    results, failures = run_jobs([Job(i.model, i, exps[i.model], out_dir / f"{i.model}.csv") for i in infos],
+                                 workers=jobs, progress=progress, timeout=timeout, echo=echo)
     if failures:
-        raise SimulationFailed("\n".join(failures))
+        raise SimulationFailed("\n".join(failures[i.model] for i in infos if i.model in failures))
     return [results[i.model] for i in infos]
 
 

@@ -1,4 +1,4 @@
-"""Command line: ``overcon check | simulate | figures | build | run | compare | reproduce``
+"""Command line: ``overcon check | simulate | figures | build | run | compare | reproduce | sweep``
 (argument parsing only; the work is done by the library).
 
 Exit codes: 0 success (``check``: no friction on a non-unique reaction); 1 ``check`` found
@@ -117,6 +117,30 @@ def _tooling_parsers(sub) -> None:
     p.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
     p.add_argument("--stop-time", type=_positive, metavar="T", help="shorter runs (s; default: the scenes' stop times)")
     p.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H", help=LOCKSTEP_HELP)
+    _sweep_parser(sub)
+
+
+def _sweep_parser(sub) -> None:
+    """``sweep``: parameter grids of FMUs on Dask (overcon.tooling.sweep)."""
+    w = sub.add_parser("sweep", help="run a grid (or random samples) of FMU parameters on Dask and measure how much "
+                                     "the eliminations of each scene group disagree (sweep.csv, sweep.png)")
+    w.add_argument("inputs", nargs="*", metavar="SCENE_OR_FMU",
+                   help="scene files (*.toml, built to FMUs first), FMU files or directories of FMUs")
+    w.add_argument("--param", action="append", default=[], metavar="NAME=V1,V2,...|NAME=lo:hi:n",
+                   help="an FMU parameter and its values (repeatable; full-factorial grid), e.g. joint1.mu=0:0.02:5")
+    w.add_argument("--samples", type=_jobs, metavar="N",
+                   help="N random parameter sets instead of the full grid (ranges given as lo:hi, uniform)")
+    w.add_argument("--seed", type=int, metavar="S", help="random seed of --samples (default 0)")
+    w.add_argument("--scheduler", metavar="ADDRESS",
+                   help="a running Dask scheduler, e.g. tcp://host:8786 (default: a local cluster)")
+    w.add_argument("--workers", type=_jobs, default=2, metavar="N",
+                   help="worker processes of the local cluster (default 2; ignored with --scheduler)")
+    w.add_argument("--stop-time", type=_positive, metavar="T", help="stop time (s; default: the FMUs' DefaultExperiment)")
+    w.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H",
+                   help="rk4 step (s) of the runs, identical for every elimination (default 0.005); 0: the FMUs' "
+                        "own solver settings (then solver.tolerance can be swept; no verdict)")
+    w.add_argument("--out", metavar="DIR", help="directory for sweep.csv, sweep.json, sweep.png (and fmus/)")
+    w.add_argument("--resume", metavar="DIR", help="continue the sweep in DIR (runs only the missing rows)")
 
 
 LOCKSTEP_HELP = ("fixed step (s) of the lockstep runs that decide the verdict: every elimination of a group is also "
@@ -284,6 +308,35 @@ def cmd_reproduce(args) -> int:
     return _tooling_call(go)
 
 
+def cmd_sweep(args) -> int:
+    from .tooling import sweep
+
+    def go():
+        if (args.out is None) == (args.resume is None):
+            print("overcon: sweep needs exactly one of --out DIR (a new sweep) and --resume DIR", file=sys.stderr)
+            return EXIT_INPUT
+        if args.resume is not None:
+            if args.lockstep_step != LOCKSTEP_STEP:
+                print("overcon: --resume continues the sweep as defined in DIR/sweep.json: no --lockstep-step",
+                      file=sys.stderr)
+                return EXIT_INPUT
+            sw = sweep.prepare(args.resume, resume=True, inputs=args.inputs, params=args.param,
+                               samples=args.samples, seed=args.seed, stop_time=args.stop_time)
+        else:
+            sw = sweep.prepare(args.out, inputs=args.inputs, params=args.param, samples=args.samples,
+                               seed=args.seed, stop_time=args.stop_time, lockstep_step=args.lockstep_step)
+        out = sweep.run(sw, scheduler=args.scheduler, workers=args.workers)
+        print(f"{out.rows} row(s) in {out.csv} ({out.written} new, {out.failed} not ok) in {out.seconds:.1f} s"
+              + (f"; plot {out.png}" if out.png else "") + (f"; {out.parquet}" if out.parquet else ""))
+        if out.interrupted:
+            print(f"overcon: interrupted; the rows above are kept: continue with overcon sweep --resume {sw.out_dir}",
+                  file=sys.stderr)
+            return sweep.EXIT_INTERRUPTED
+        return EXIT_OK
+
+    return _tooling_call(go)
+
+
 def main(argv=None) -> int:
     from .model import ModelError
     from .scene import SceneError
@@ -292,7 +345,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     handler = {"check": cmd_check, "simulate": cmd_simulate, "figures": cmd_figures,
                "build": cmd_build, "run": cmd_run, "compare": cmd_compare,
-               "reproduce": cmd_reproduce}[args.command]
+               "reproduce": cmd_reproduce, "sweep": cmd_sweep}[args.command]
     try:
         return handler(args)
     except SceneError as exc:  # already names file and field

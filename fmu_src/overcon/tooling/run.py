@@ -172,8 +172,11 @@ def _worker_env() -> dict:
     return env
 
 
-def _run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: float | None,
-             label: str = "") -> RunResult:
+def run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: float | None,
+            label: str = "") -> RunResult:
+    """Run ``info.path`` (an FMU file or its unzipped directory) in one worker process into
+    ``csv``; :class:`SimulationFailed` with the FMU's logged reason. Used by :func:`run_jobs` and,
+    one run per Dask task, by :mod:`overcon.tooling.sweep`."""
     job = {"fmu": str(info.path), "csv": str(csv), "start": ex.start, "stop": ex.stop, "step": ex.step,
            "outputs": info.output_names, "progress": progress, "label": label or info.model,
            "start_values": dict(ex.start_values)}
@@ -215,7 +218,7 @@ def run_jobs(jobs: list[Job], *, workers: int = 2, progress: bool = True, timeou
     def one(job: Job):
         ex = job.experiment
         try:
-            r = _run_one(job.info, ex, job.csv, progress, timeout, label=job.key)
+            r = run_one(job.info, ex, job.csv, progress, timeout, label=job.key)
         except SimulationFailed as exc:
             failures[job.key] = str(exc)
             echo(f"{job.key}: FAILED (reason below)")

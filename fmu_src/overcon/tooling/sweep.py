@@ -764,14 +764,13 @@ def plot(sw: Sweep, rows: list[dict]) -> Path:
                        label=f"lockstep verdict threshold {LOCKSTEP_FACTOR:g} m (outputs up to 1 m)")
         ax.set_yscale("log")
         ax.set_xlabel(name or "")
-        ax.set_ylabel("largest position difference between eliminations (m)")
+        ax.set_ylabel("max position difference between eliminations (m)")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     mode = (f"lockstep runs, rk4 {sw.lockstep_step:g} s" if sw.lockstep_step is not None
             else "the FMUs' own solver settings")
-    title = f"overcon sweep: non-uniqueness of the motion ({mode})"
-    if missing:
-        title += f"; {missing} set(s) without a measure (a run failed)"
+    title = f"overcon sweep: non-uniqueness of the motion\n({mode}"
+    title += f"; {missing} parameter set(s) without a measure: a run failed)" if missing else ")"
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     out = sw.out_dir / PNG_NAME

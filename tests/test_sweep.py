@@ -1,0 +1,259 @@
+"""``overcon sweep``: parameter grids on Dask. Local clusters of 2 worker processes, the planar
+friction-1 group (friction on joint 1, whose reaction is not unique), short stop times.
+
+Covered: the grid syntax; the acceptance sweep (8 rows, 6 ok, 2 refused for mu < 0, measure ~0 at
+mu = 0 and growing with mu, plot, Parquet); a value the FMU itself refuses (reason recorded); a
+worker killed mid-sweep (every row once, all ok); an interrupted sweep continued with --resume; a
+separately started ``dask scheduler`` + ``dask worker`` giving the same rows.
+"""
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("distributed")
+
+from overcon.cli import main  # noqa: E402
+from overcon.fmu.build import build_all  # noqa: E402
+from overcon.tooling import InputError  # noqa: E402
+from overcon.tooling import sweep  # noqa: E402
+from overcon.verdict import lockstep_start_values  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = [ROOT / "mechanisms" / "planar_f1_wo4.toml", ROOT / "mechanisms" / "planar_f1_wo6.toml"]
+QUIET = dict(echo=lambda s: None)
+NOT_COMPARED = ("wall [s]",)  # differs from run to run; every other column must be identical
+
+
+def _rows(path: Path) -> list[dict]:
+    with open(path, newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory) -> list[Path]:
+    out = tmp_path_factory.mktemp("sweep_fmus")
+    code, res = build_all(SCENES, out, allow_nonunique=True, refs=False, validate=False, echo=lambda s: None,
+                          echo_err=lambda s: None)
+    assert code == 0, [m for r in res for m in r.messages]
+    return [r.fmu for r in res]
+
+
+@pytest.fixture(scope="module")
+def accepted(tmp_path_factory):
+    """The issue's acceptance command, through the command line (local cluster, 2 workers)."""
+    out = tmp_path_factory.mktemp("sweep_accept") / "D"
+    code = main(["sweep", *map(str, SCENES), "--param", "joint1.mu=0,0.005,0.01,-1", "--stop-time", "2",
+                 "--workers", "2", "--out", str(out)])
+    return code, out
+
+
+# ---------------------------------------------------------------------------------------------
+# grid (no cluster)
+
+def test_grid_full_factorial_ranges_and_samples():
+    specs = [sweep.parse_param("joint1.mu=0:0.02:5"), sweep.parse_param("joint1.v_reg=1e-3,1e-4")]
+    sets = sweep.grid(specs, {"joint1.mu": "Real", "joint1.v_reg": "Real"})
+    assert len(sets) == 10
+    assert [s["joint1.mu"] for s in sets[::2]] == [0.0, 0.005, 0.01, 0.015, 0.02]
+    assert sets[1] == {"joint1.mu": 0.0, "joint1.v_reg": 1e-4}
+    sampled = [sweep.parse_param("joint1.mu=0:0.02"), sweep.parse_param("solver.friction_max_iter=50,100")]
+    types = {"joint1.mu": "Real", "solver.friction_max_iter": "Integer"}
+    a = sweep.grid(sampled, types, samples=20, seed=3)
+    assert a == sweep.grid(sampled, types, samples=20, seed=3)  # reproducible from the seed
+    assert a != sweep.grid(sampled, types, samples=20, seed=4)
+    assert all(0.0 <= s["joint1.mu"] <= 0.02 for s in a)
+    assert {s["solver.friction_max_iter"] for s in a} == {50, 100}
+
+
+@pytest.mark.parametrize("text, types, samples, message", [
+    ("joint1.mu", {}, None, "NAME=V1"),
+    ("joint1.mu=0:x:3", {}, None, "range bounds must be numbers"),
+    ("joint1.mu=0.02:0:3", {}, None, "lo <= hi"),
+    ("joint1.mu=0:1", {"joint1.mu": "Real"}, None, "give lo:hi:n"),
+    ("joint1.mu=0:1:3", {"joint1.mu": "Real"}, 4, "n has no meaning"),
+    ("joint1.mu=0,abc", {"joint1.mu": "Real"}, None, "'abc' is not a valid Real value for joint1.mu"),
+    ("solver.friction_max_iter=1:9:3", {"solver.friction_max_iter": "Integer"}, None, "needs a Real parameter"),
+])
+def test_bad_param_syntax_names_the_param(text, types, samples, message):
+    with pytest.raises(InputError, match=message) as err:
+        sweep.grid([sweep.parse_param(text)], types, samples=samples)
+    assert text in str(err.value)
+
+
+def test_unknown_or_lockstep_parameter_exits_2(fmus, tmp_path, capsys):
+    assert main(["sweep", *map(str, fmus), "--param", "joint9.mu=0,1", "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    assert "joint9.mu is not a parameter of" in err and "joint1.mu" in err
+    assert main(["sweep", *map(str, fmus), "--param", "solver.tolerance=1e-6,1e-8", "--out", str(tmp_path / "b")]) == 2
+    assert "--lockstep-step 0" in capsys.readouterr().err
+    assert main(["sweep", *map(str, fmus), "--param", "joint1.mu=0", "--resume", str(tmp_path / "a"),
+                 "--out", str(tmp_path / "c")]) == 2
+
+
+# ---------------------------------------------------------------------------------------------
+# the acceptance sweep
+
+def test_acceptance_rows_measure_and_plot(accepted):
+    code, out = accepted
+    assert code == 0
+    rows = _rows(out / "sweep.csv")
+    assert len(rows) == 8
+    assert len({r["key"] for r in rows}) == 8
+    ok = [r for r in rows if r["status"] == "ok"]
+    bad = [r for r in rows if r["status"] != "ok"]
+    assert len(ok) == 6 and len(bad) == 2
+    for r in bad:
+        assert float(r["joint1.mu"]) == -1.0
+        assert "joint1.mu" in r["status"] and "must be >= 0" in r["status"]
+        assert r["max_diff [m]"] == "" and r["final slider1.x [m]"] == ""
+    measure = {}
+    for r in ok:
+        assert float(r["wall [s]"]) > 0
+        assert r["final slider1.x [m]"] != ""
+        measure.setdefault(float(r["joint1.mu"]), set()).add(float(r["max_diff [m]"]))
+    assert all(len(v) == 1 for v in measure.values())  # one measure per group and set
+    m = {mu: v.pop() for mu, v in measure.items()}
+    assert m[0.0] < 1e-12  # frictionless: the eliminations agree to round-off
+    assert 1e-3 < m[0.005] < m[0.01]  # grows with mu
+    verdicts = {float(r["joint1.mu"]): r["verdict"] for r in ok}
+    assert verdicts == {0.0: "unique", 0.005: "not unique", 0.01: "not unique"}
+    # final positions come from the lockstep run: with friction the two eliminations end apart
+    finals = {(r["scene"], float(r["joint1.mu"])): float(r["final slider1.x [m]"]) for r in ok}
+    assert abs(finals["planar_f1_wo4", 0.01] - finals["planar_f1_wo6", 0.01]) > 0.1
+    png = out / "sweep.png"
+    assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        assert not (out / "sweep.parquet").exists()
+    else:
+        table = pq.read_table(out / "sweep.parquet")
+        assert table.num_rows == 8 and "max_diff [m]" in table.column_names
+
+
+def test_value_the_fmu_refuses_is_recorded_with_its_reason(fmus):
+    """Without the pre-run rule check, the FMU refuses mu = -1 itself; the row gets its logged reason."""
+    f = sweep._load_fmu(fmus[0])
+    sw_ex = sweep.Experiment(0.0, 0.1, 0.01, tuple({**lockstep_start_values(5e-3), "joint1.mu": -1.0}.items()))
+    res = sweep.run_task(f.data, f.sha, f.info, sw_ex)
+    assert res["status"] != "ok"
+    assert "joint1.mu" in res["status"] and "must be >= 0" in res["status"]  # the FMU's own log message
+    assert str(fmus[0]) in res["status"]  # names the FMU, not the worker's unpacked copy
+    assert "\n" not in res["status"]
+
+
+# ---------------------------------------------------------------------------------------------
+# faults
+
+@pytest.fixture(scope="module")
+def cluster_client():
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    client = Client(cluster)
+    yield client
+    client.close()
+    cluster.close()
+
+
+def test_killed_worker_loses_and_duplicates_no_row(fmus, cluster_client, tmp_path):
+    client = cluster_client
+    sw = sweep.prepare(tmp_path / "kill", inputs=list(map(str, fmus)), params=["joint1.mu=0,0.002,0.004,0.006"],
+                       stop_time=1.0, **QUIET)
+    killed = {}
+
+    def kill_busy_worker(rows, client):
+        if killed:
+            return
+        deadline = time.monotonic() + 10
+        busy = {}
+        while not busy and time.monotonic() < deadline:  # the next tasks are being handed out
+            busy = {w: keys for w, keys in client.processing().items() if keys}
+            time.sleep(0.05)
+        assert busy, "no task running after the first set finished: nothing to kill"
+        worker, keys = next(iter(busy.items()))
+        pid = client.run(os.getpid, workers=[worker])[worker]
+        os.kill(pid, signal.SIGKILL)
+        killed.update(pid=pid, keys=set(keys))
+
+    out = sweep.run(sw, client=client, progress=False, on_rows=kill_busy_worker, **QUIET)
+    assert killed, "no worker was killed"
+    rows = _rows(out.csv)
+    keys = [r["key"] for r in rows]
+    expected = {sweep.row_key(f.info.model, s) for f in sw.fmus for s in sw.sets}
+    assert sorted(keys) == sorted(expected)  # every row, each once
+    assert all(r["status"] == "ok" for r in rows), [r["status"] for r in rows]
+    assert killed["pid"] not in client.run(os.getpid).values()  # that process is gone; Dask reran its task
+
+
+def test_interrupted_sweep_keeps_rows_and_resume_completes_it(fmus, cluster_client, tmp_path):
+    out_dir = tmp_path / "resume"
+    sw = sweep.prepare(out_dir, inputs=list(map(str, fmus)), params=["joint1.mu=0,0.003,0.006"], stop_time=0.5,
+                       **QUIET)
+
+    def interrupt(rows, client):
+        raise KeyboardInterrupt  # what Ctrl-C raises in the client's loop
+
+    first = sweep.run(sw, client=cluster_client, progress=False, on_rows=interrupt, **QUIET)
+    assert first.interrupted
+    kept = _rows(out_dir / "sweep.csv")
+    assert len(kept) == 2 and all(r["status"] == "ok" for r in kept)  # one whole set (both eliminations)
+    with pytest.raises(InputError, match="already holds a sweep"):
+        sweep.prepare(out_dir, inputs=list(map(str, fmus)), params=["joint1.mu=0"], **QUIET)
+    again = sweep.prepare(out_dir, resume=True, **QUIET)
+    second = sweep.run(again, client=cluster_client, progress=False, **QUIET)
+    assert not second.interrupted and second.written == 4
+    rows = _rows(out_dir / "sweep.csv")
+    assert len(rows) == 6 and len({r["key"] for r in rows}) == 6
+    assert rows[:2] == kept  # the rows of the first call are untouched
+
+
+# ---------------------------------------------------------------------------------------------
+# an existing cluster
+
+def test_external_scheduler_gives_the_same_rows(accepted, tmp_path):
+    code, accept_out = accepted
+    assert code == 0
+    dask_exe = Path(sys.executable).with_name("dask")
+    sched_file = tmp_path / "scheduler.json"
+    procs = []
+    try:
+        procs.append(subprocess.Popen([str(dask_exe), "scheduler", "--scheduler-file", str(sched_file), "--port", "0",
+                                       "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        procs.append(subprocess.Popen([str(dask_exe), "worker", "--scheduler-file", str(sched_file), "--nworkers", "2",
+                                       "--nthreads", "1", "--no-dashboard"],
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path))
+        from distributed import Client
+
+        deadline = time.monotonic() + 60
+        while not sched_file.is_file() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        with Client(scheduler_file=str(sched_file), timeout="30s") as c:
+            c.wait_for_workers(2, timeout=60)
+            address = c.scheduler.address
+        out = tmp_path / "ext"
+        assert main(["sweep", *map(str, SCENES), "--param", "joint1.mu=0,0.01,-1", "--stop-time", "2",
+                     "--scheduler", address, "--out", str(out)]) == 0
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+    local = {r["key"]: r for r in _rows(accept_out / "sweep.csv")}
+    remote = _rows(out / "sweep.csv")
+    assert len(remote) == 6
+    for r in remote:
+        ref = local[r["key"]]
+        assert {k: v for k, v in r.items() if k not in NOT_COMPARED} == \
+               {k: v for k, v in ref.items() if k not in NOT_COMPARED}

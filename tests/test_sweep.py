@@ -73,6 +73,20 @@ def test_grid_full_factorial_ranges_and_samples():
     assert {s["solver.friction_max_iter"] for s in a} == {50, 100}
 
 
+def test_samples_drawn_twice_are_two_rows_and_refused_values_need_no_cluster(fmus, tmp_path):
+    """Every value refused by the FMU's rule: rows written without starting a cluster; a sample
+    drawn twice keeps both of its rows (the sample number is part of the key)."""
+    sw = sweep.prepare(tmp_path / "s", inputs=list(map(str, fmus)), params=["joint1.mu=-1,-2"], samples=3,
+                       seed=1, **QUIET)
+    out = sweep.run(sw, scheduler="tcp://127.0.0.1:1", progress=False, **QUIET)  # never contacted
+    rows = _rows(out.csv)
+    assert len(rows) == 6 and len({r["key"] for r in rows}) == 6
+    assert sorted({r["sample"] for r in rows}) == ["1", "2", "3"]
+    assert len({r["joint1.mu"] for r in rows}) < 3  # 3 draws from 2 values: a value was drawn twice
+    assert all("must be >= 0" in r["status"] for r in rows)
+    assert out.png.is_file()
+
+
 @pytest.mark.parametrize("text, types, samples, message", [
     ("joint1.mu", {}, None, "NAME=V1"),
     ("joint1.mu=0:x:3", {}, None, "range bounds must be numbers"),
@@ -166,8 +180,8 @@ def cluster_client():
 
 def test_killed_worker_loses_and_duplicates_no_row(fmus, cluster_client, tmp_path):
     client = cluster_client
-    sw = sweep.prepare(tmp_path / "kill", inputs=list(map(str, fmus)), params=["joint1.mu=0,0.002,0.004,0.006"],
-                       stop_time=1.0, **QUIET)
+    sw = sweep.prepare(tmp_path / "kill", inputs=list(map(str, fmus)), params=["joint1.mu=0,0.003,0.006"],
+                       stop_time=0.5, **QUIET)
     killed = {}
 
     def kill_busy_worker(rows, client):
@@ -188,32 +202,46 @@ def test_killed_worker_loses_and_duplicates_no_row(fmus, cluster_client, tmp_pat
     assert killed, "no worker was killed"
     rows = _rows(out.csv)
     keys = [r["key"] for r in rows]
-    expected = {sweep.row_key(f.info.model, s) for f in sw.fmus for s in sw.sets}
+    expected = {sweep.row_key(f.info.model, sid) for f in sw.fmus for sid, _ in sw.sets}
     assert sorted(keys) == sorted(expected)  # every row, each once
     assert all(r["status"] == "ok" for r in rows), [r["status"] for r in rows]
     assert killed["pid"] not in client.run(os.getpid).values()  # that process is gone; Dask reran its task
 
 
-def test_interrupted_sweep_keeps_rows_and_resume_completes_it(fmus, cluster_client, tmp_path):
-    out_dir = tmp_path / "resume"
-    sw = sweep.prepare(out_dir, inputs=list(map(str, fmus)), params=["joint1.mu=0,0.003,0.006"], stop_time=0.5,
-                       **QUIET)
-
-    def interrupt(rows, client):
-        raise KeyboardInterrupt  # what Ctrl-C raises in the client's loop
-
-    first = sweep.run(sw, client=cluster_client, progress=False, on_rows=interrupt, **QUIET)
-    assert first.interrupted
-    kept = _rows(out_dir / "sweep.csv")
-    assert len(kept) == 2 and all(r["status"] == "ok" for r in kept)  # one whole set (both eliminations)
+def test_ctrl_c_keeps_finished_rows_and_resume_completes_the_sweep(fmus, cluster_client, tmp_path):
+    """SIGINT to the whole process group (what Ctrl-C in a terminal sends): exit 130, the rows
+    written so far are kept and all ok (no run killed by the signal is recorded as failed);
+    ``--resume`` runs only the missing sets and leaves the kept rows untouched."""
+    out = tmp_path / "intr"
+    proc = subprocess.Popen([sys.executable, "-m", "overcon.cli", "sweep", *map(str, fmus), "--param",
+                             "joint1.mu=0,0.003,0.006", "--stop-time", "0.5", "--workers", "2", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (out / "sweep.csv").is_file() and len(_rows(out / "sweep.csv")) >= 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the sweep ended before it could be interrupted"
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert f"--resume {out}" in err
+    kept = _rows(out / "sweep.csv")
+    assert 2 <= len(kept) < 6 and len({r["key"] for r in kept}) == len(kept)
+    assert all(r["status"] == "ok" for r in kept), [r["status"] for r in kept]
     with pytest.raises(InputError, match="already holds a sweep"):
-        sweep.prepare(out_dir, inputs=list(map(str, fmus)), params=["joint1.mu=0"], **QUIET)
-    again = sweep.prepare(out_dir, resume=True, **QUIET)
-    second = sweep.run(again, client=cluster_client, progress=False, **QUIET)
-    assert not second.interrupted and second.written == 4
-    rows = _rows(out_dir / "sweep.csv")
+        sweep.prepare(out, inputs=list(map(str, fmus)), params=["joint1.mu=0"], **QUIET)
+    again = sweep.prepare(out, resume=True, **QUIET)
+    done = sweep.run(again, client=cluster_client, progress=False, **QUIET)
+    assert not done.interrupted and done.written == 6 - len(kept)
+    rows = _rows(out / "sweep.csv")
     assert len(rows) == 6 and len({r["key"] for r in rows}) == 6
-    assert rows[:2] == kept  # the rows of the first call are untouched
+    assert rows[:len(kept)] == kept  # the rows written before the interruption are untouched
+    assert all(r["status"] == "ok" for r in rows)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -240,7 +268,7 @@ def test_external_scheduler_gives_the_same_rows(accepted, tmp_path):
             c.wait_for_workers(2, timeout=60)
             address = c.scheduler.address
         out = tmp_path / "ext"
-        assert main(["sweep", *map(str, SCENES), "--param", "joint1.mu=0,0.01,-1", "--stop-time", "2",
+        assert main(["sweep", *map(str, SCENES), "--param", "joint1.mu=0.01,-1", "--stop-time", "2",
                      "--scheduler", address, "--out", str(out)]) == 0
     finally:
         for p in reversed(procs):
@@ -252,7 +280,7 @@ def test_external_scheduler_gives_the_same_rows(accepted, tmp_path):
                 p.kill()
     local = {r["key"]: r for r in _rows(accept_out / "sweep.csv")}
     remote = _rows(out / "sweep.csv")
-    assert len(remote) == 6
+    assert len(remote) == 4
     for r in remote:
         ref = local[r["key"]]
         assert {k: v for k, v in r.items() if k not in NOT_COMPARED} == \

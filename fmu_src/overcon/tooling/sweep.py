@@ -217,9 +217,16 @@ def params_key(values: dict) -> str:
     return json.dumps(dict(sorted(values.items())), separators=(",", ":"))
 
 
-def row_key(model: str, values: dict) -> str:
-    """The row's identity in ``sweep.csv``: scene (model identifier) and parameter set."""
-    return f"{model} {params_key(values)}"
+def set_ids(sets: list[dict], sampled: bool) -> list[str]:
+    """The identity of each parameter set: its :func:`params_key`; for ``--samples`` prefixed by
+    the sample number (``#3 {...}``), so that a set drawn twice is two samples (two rows per FMU),
+    as a Monte-Carlo spread needs, never one row silently standing for both."""
+    return [f"#{i} {params_key(v)}" if sampled else params_key(v) for i, v in enumerate(sets, start=1)]
+
+
+def row_key(model: str, set_id: str) -> str:
+    """The row's identity in ``sweep.csv``: scene (model identifier) and parameter set id."""
+    return f"{model} {set_id}"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -371,7 +378,7 @@ class Sweep:
     definition: dict
     fmus: list[SweepFmu]
     groups: dict  # group -> [SweepFmu] (paper order)
-    sets: list[dict]  # parameter sets
+    sets: list[tuple[str, dict]]  # (set id, parameter values), see set_ids
     experiments: dict  # model -> Experiment
     columns: list[str]
     lockstep_step: float | None
@@ -388,7 +395,7 @@ def _columns(param_names: list[str], fmus: list[SweepFmu]) -> list[str]:
             col = f"final {o.name} [{o.unit or '1'}]"
             if col not in finals:
                 finals.append(col)
-    return (["key", "scene", "group", "elimination", *param_names, "status", "wall [s]", "max_diff [m]",
+    return (["key", "scene", "group", "elimination", "sample", *param_names, "status", "wall [s]", "max_diff [m]",
              "max_diff [rad]", "max_diff_output", "verdict"] + finals)
 
 
@@ -406,7 +413,7 @@ def read_rows(path: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
-def _set_rows(sw: Sweep, group: str, values: dict, results: dict) -> list[dict]:
+def _set_rows(sw: Sweep, group: str, set_id: str, values: dict, results: dict) -> list[dict]:
     """The rows of one group at one parameter set; ``results``: model -> task result."""
     members = sw.groups[group]
     ok = [f for f in members if results[f.info.model]["status"] == "ok"]
@@ -425,7 +432,8 @@ def _set_rows(sw: Sweep, group: str, values: dict, results: dict) -> list[dict]:
     rows = []
     for f in members:
         res = results[f.info.model]
-        row = {"key": row_key(f.info.model, values), "scene": f.info.model, "group": group,
+        row = {"key": row_key(f.info.model, set_id), "scene": f.info.model, "group": group,
+               "sample": set_id[1:].split(" ", 1)[0] if set_id.startswith("#") else None,
                "elimination": f.info.label, **values, "status": res["status"], "wall [s]": res.get("wall"),
                "max_diff [m]": diff_m, "max_diff [rad]": diff_rad, "max_diff_output": worst, "verdict": verdict}
         if res["status"] == "ok":
@@ -517,7 +525,8 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
     fmus = [_load_fmu(p) for p in paths]
     check_unique_models([f.info for f in fmus], out_dir)
     types = _check_params(specs, fmus, lstep is not None)
-    sets = grid(specs, types, samples=definition["samples"], seed=definition["seed"])
+    values = grid(specs, types, samples=definition["samples"], seed=definition["seed"])
+    sets = list(zip(set_ids(values, definition["samples"] is not None), values))
     guids = {f.info.model: f.guid for f in fmus}
     if resume:
         changed = [m for m, g in definition.get("guids", {}).items() if guids.get(m) != g]
@@ -599,7 +608,8 @@ def _progress_thread(futures, client):
 
     def bar():
         try:
-            TextProgressBar(futures, scheduler=client.scheduler.address, complete=True)
+            # complete=False: the runs only, not the FMU bytes scattered before them
+            TextProgressBar(futures, scheduler=client.scheduler.address, complete=False)
         except Exception:  # noqa: BLE001 -- the bar is cosmetic; the rows do not depend on it
             pass
 
@@ -620,15 +630,13 @@ def run(sw: Sweep, *, client=None, scheduler: str | None = None, workers: int = 
     writer = RowWriter(sw.csv, sw.columns)
     written = 0
     pending: dict[tuple[str, str], dict] = {}  # (group, params key) -> model -> result
-    values_of: dict[str, dict] = {}
-    todo: list[tuple[str, SweepFmu, dict]] = []
+    values_of = dict(sw.sets)
+    todo: list[tuple[str, SweepFmu, str]] = []  # (group, FMU, set id)
     before = len(writer.keys)
     try:
-        for values in sw.sets:
-            pk = params_key(values)
-            values_of[pk] = values
+        for pk, values in sw.sets:
             for g, members in sw.groups.items():
-                if all(row_key(f.info.model, values) in writer.keys for f in members):
+                if all(row_key(f.info.model, pk) in writer.keys for f in members):
                     continue
                 results = pending.setdefault((g, pk), {})
                 for f in members:
@@ -636,9 +644,9 @@ def run(sw: Sweep, *, client=None, scheduler: str | None = None, workers: int = 
                     if why:
                         results[f.info.model] = {"status": f"{why} (checked before running, by the FMU's parameter rule)"}
                     else:
-                        todo.append((g, f, values))
+                        todo.append((g, f, pk))
                 if len(results) == len(members):
-                    written += writer.write(_set_rows(sw, g, values, pending.pop((g, pk))))
+                    written += writer.write(_set_rows(sw, g, pk, values, pending.pop((g, pk))))
         echo(f"== sweep: {len(sw.sets)} parameter set(s) x {sum(len(v) for v in sw.groups.values())} FMU(s); "
              f"{before} row(s) already in {sw.csv}, {len(writer.keys) - before} refused before running, "
              f"{len(todo)} run(s) to do; "
@@ -658,12 +666,13 @@ def run(sw: Sweep, *, client=None, scheduler: str | None = None, workers: int = 
                 blobs = {f.info.model: client.scatter(f.data, broadcast=True, hash=True) for f in sw.fmus
                          if any(t[1] is f for t in todo)}
                 meta = {}
-                for g, f, values in todo:
+                for g, f, pk in todo:
+                    values = values_of[pk]
                     key = "overcon-sweep-" + hashlib.sha256(
-                        (f.sha + " " + row_key(f.info.model, values)).encode()).hexdigest()[:24]
+                        (f.sha + " " + row_key(f.info.model, pk)).encode()).hexdigest()[:24]
                     fut = client.submit(run_task, blobs[f.info.model], f.sha, f.info, _experiment(sw, f, values),
                                         key=key, pure=False)
-                    meta[fut.key] = (g, f.info.model, params_key(values))
+                    meta[fut.key] = (g, f.info.model, pk)
                     futures.append(fut)
                 bar = _progress_thread(futures, client) if progress else None
                 for fut in as_completed(futures):
@@ -675,7 +684,7 @@ def run(sw: Sweep, *, client=None, scheduler: str | None = None, workers: int = 
                     results = pending[(g, pk)]
                     results[model] = res
                     if len(results) == len(sw.groups[g]):
-                        rows = _set_rows(sw, g, values_of[pk], pending.pop((g, pk)))
+                        rows = _set_rows(sw, g, pk, values_of[pk], pending.pop((g, pk)))
                         written += writer.write(rows)
                         if on_rows is not None:
                             on_rows(rows, client)

@@ -86,7 +86,7 @@ import numpy as np
 
 from ..verdict import LOCKSTEP_FACTOR, LOCKSTEP_STEP, lockstep_start_values
 from . import InputError, SimulationFailed
-from .compare import compare_group, group_fmus
+from .compare import compare_group, group_fmus, validate_group
 from .fmus import FmuInfo, fmu_paths, inspect_fmu
 from .run import Experiment, Series, check_unique_models, read_series, run_one
 
@@ -538,6 +538,9 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
         definition["guids"] = guids
     by_model = {f.info.model: f for f in fmus}
     groups = {g: [by_model[i.model] for i in items] for g, items in group_fmus([f.info for f in fmus]).items()}
+    for g, members in groups.items():  # before any run: common outputs, one prediction per group
+        if len(members) >= 2:
+            validate_group(g, [f.info for f in members])
     exps = _group_experiments({g: [f.info for f in v] for g, v in groups.items()}, definition["stop_time"], None)
     columns = _columns([s.name for s in specs], fmus)
     if not resume:
@@ -745,6 +748,7 @@ def plot(sw: Sweep, rows: list[dict]) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     names = [n for n in (parse_param(t).name for t in sw.definition["params"])
              if any(_number(r[n]) is not None for r in rows)]
@@ -772,6 +776,7 @@ def plot(sw: Sweep, rows: list[dict]) -> Path:
             ax.axhline(LOCKSTEP_FACTOR, color="0.4", ls="--", lw=1,
                        label=f"lockstep verdict threshold {LOCKSTEP_FACTOR:g} m (outputs up to 1 m)")
         ax.set_yscale("log")
+        ax.xaxis.set_major_locator(MaxNLocator(6))
         ax.set_xlabel(name or "")
         ax.set_ylabel("max position difference between eliminations (m)")
         ax.grid(alpha=0.3, which="both")

@@ -388,15 +388,21 @@ class Sweep:
         return self.out_dir / CSV_NAME
 
 
+FIXED_COLUMNS = ("key", "scene", "group", "elimination", "sample", "status", "wall [s]", "max_diff [m]",
+                 "max_diff [rad]", "max_diff_output", "verdict")
+
+
 def _columns(param_names: list[str], fmus: list[SweepFmu]) -> list[str]:
+    clash = [n for n in param_names if n in FIXED_COLUMNS or n.startswith("final ")]
+    if clash:
+        raise InputError(f"--param {clash[0]}: the name is also a column of sweep.csv; such a parameter cannot be swept")
     finals = []
     for f in fmus:
         for o in f.info.outputs:
             col = f"final {o.name} [{o.unit or '1'}]"
             if col not in finals:
                 finals.append(col)
-    return (["key", "scene", "group", "elimination", "sample", *param_names, "status", "wall [s]", "max_diff [m]",
-             "max_diff [rad]", "max_diff_output", "verdict"] + finals)
+    return [*FIXED_COLUMNS[:5], *param_names, *FIXED_COLUMNS[5:], *finals]
 
 
 def _fmt(x) -> str:

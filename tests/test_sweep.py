@@ -49,10 +49,15 @@ def fmus(tmp_path_factory) -> list[Path]:
 @pytest.fixture(scope="module")
 def accepted(tmp_path_factory):
     """The issue's acceptance command, through the command line (local cluster, 2 workers)."""
+    import contextlib
+    import io
+
     out = tmp_path_factory.mktemp("sweep_accept") / "D"
-    code = main(["sweep", *map(str, SCENES), "--param", "joint1.mu=0,0.005,0.01,-1", "--stop-time", "2",
-                 "--workers", "2", "--out", str(out)])
-    return code, out
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = main(["sweep", *map(str, SCENES), "--param", "joint1.mu=0,0.005,0.01,-1", "--stop-time", "2",
+                     "--workers", "2", "--out", str(out)])
+    return code, out, printed.getvalue()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -116,8 +121,10 @@ def test_unknown_or_lockstep_parameter_exits_2(fmus, tmp_path, capsys):
 # the acceptance sweep
 
 def test_acceptance_rows_measure_and_plot(accepted):
-    code, out = accepted
+    code, out, printed = accepted
     assert code == 0
+    assert "planar_f1: 4 parameter set(s): 1 unique, 2 not unique, 1 without a measure" in printed
+    assert "not unique from joint1.mu = 0.005" in printed
     rows = _rows(out / "sweep.csv")
     assert len(rows) == 8
     assert len({r["key"] for r in rows}) == 8
@@ -207,6 +214,16 @@ def test_killed_worker_loses_and_duplicates_no_row(fmus, cluster_client, tmp_pat
     assert all(r["status"] == "ok" for r in rows), [r["status"] for r in rows]
     assert killed["pid"] not in client.run(os.getpid).values()  # that process is gone; Dask reran its task
 
+    def unpacked(dask_worker):  # client.run passes the worker object by this name
+        d = Path(dask_worker.local_directory) / "overcon-fmus"
+        return sorted(p.name for p in d.iterdir()) if d.is_dir() else []
+
+    shas = {f.sha for f in sw.fmus}
+    listed = list(client.run(unpacked).values())
+    assert any(listed)  # the FMUs were unpacked in the workers' directories
+    for names in listed:  # one directory per FMU and worker, no half-written one
+        assert set(names) <= shas and len(names) == len(set(names))
+
 
 def test_ctrl_c_keeps_finished_rows_and_resume_completes_the_sweep(fmus, cluster_client, tmp_path):
     """SIGINT to the whole process group (what Ctrl-C in a terminal sends): exit 130, the rows
@@ -248,7 +265,7 @@ def test_ctrl_c_keeps_finished_rows_and_resume_completes_the_sweep(fmus, cluster
 # an existing cluster
 
 def test_external_scheduler_gives_the_same_rows(accepted, tmp_path):
-    code, accept_out = accepted
+    code, accept_out, _ = accepted
     assert code == 0
     dask_exe = Path(sys.executable).with_name("dask")
     sched_file = tmp_path / "scheduler.json"

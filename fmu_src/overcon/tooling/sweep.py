@@ -73,6 +73,7 @@ import itertools
 import json
 import math
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -343,7 +344,12 @@ def _unpacked(data: bytes, sha: str) -> Path:
             part.mkdir(parents=True, exist_ok=True)
             with zipfile.ZipFile(io.BytesIO(data)) as zf:
                 zf.extractall(part)
-            os.replace(part, target)
+            try:
+                os.replace(part, target)
+            except OSError:  # another process (outside a Dask worker: shared temp dir) was faster
+                if not (target / "modelDescription.xml").is_file():
+                    raise
+                shutil.rmtree(part, ignore_errors=True)
     return target
 
 
@@ -717,6 +723,8 @@ def run(sw: Sweep, *, client=None, scheduler: str | None = None, workers: int = 
     failed = sum(r["status"] != "ok" for r in rows)
     out = SweepOutcome(sw.csv, len(rows), written, failed, interrupted, seconds=time.perf_counter() - t0)
     if rows:
+        for line in summary(sw, rows):
+            echo(line)
         out.png = plot(sw, rows)
         out.parquet = write_parquet(sw.csv)
     return out
@@ -724,6 +732,39 @@ def run(sw: Sweep, *, client=None, scheduler: str | None = None, workers: int = 
 
 # ---------------------------------------------------------------------------------------------
 # outputs
+
+def summary(sw: Sweep, rows: list[dict]) -> list[str]:
+    """One line per group: sets unique / not unique / without a measure, the range of
+    ``max_diff [m]``; for a sweep of one numeric parameter also the largest value still unique and
+    the smallest not unique (the question "above which value does the non-uniqueness matter?")."""
+    names = [parse_param(t).name for t in sw.definition["params"]]
+    lines = []
+    for g in sw.groups:
+        sets: dict[str, dict] = {}
+        for r in rows:
+            if r["group"] == g:
+                sets.setdefault(r["key"].split(" ", 1)[1], r)
+        if not sets:
+            continue
+        verdicts = [r["verdict"] for r in sets.values()]
+        measured = [_number(r["max_diff [m]"]) for r in sets.values()]
+        diffs = [d for d in measured if d is not None]
+        text = (f"{g}: {len(sets)} parameter set(s): {verdicts.count('unique')} unique, "
+                f"{verdicts.count('not unique')} not unique, {len(measured) - len(diffs)} without a measure "
+                "(a run failed, or the group has one FMU)")
+        if diffs:
+            text += f"; max_diff {min(diffs):.2g} to {max(diffs):.2g} m"
+        if len(names) == 1 and all(_number(r[names[0]]) is not None for r in sets.values()):
+            x = names[0]
+            uniq = [_number(r[x]) for r in sets.values() if r["verdict"] == "unique"]
+            nonu = [_number(r[x]) for r in sets.values() if r["verdict"] == "not unique"]
+            if uniq:
+                text += f"; unique up to {x} = {max(uniq):g}"
+            if nonu:
+                text += f"; not unique from {x} = {min(nonu):g}"
+        lines.append(text)
+    return lines
+
 
 def write_parquet(csv_path: Path) -> Path | None:
     """``sweep.parquet`` next to ``csv_path`` when pyarrow is installed (else None)."""

@@ -117,6 +117,43 @@ def test_unknown_or_lockstep_parameter_exits_2(fmus, tmp_path, capsys):
                  "--out", str(tmp_path / "c")]) == 2
 
 
+def test_measure_is_the_largest_position_difference_between_eliminations(fmus, tmp_path):
+    """The group comparison on given results (no runs): a 1e-6 m shift of one output in one
+    elimination is the measure; lockstep mode calls it not unique, adaptive mode gives no verdict."""
+    import numpy as np
+
+    for step, verdict in ((5e-3, "not unique"), (0, "")):
+        sw = sweep.prepare(tmp_path / f"m{step}", inputs=list(map(str, fmus)), params=["joint1.mu=0.01"],
+                           stop_time=0.1, lockstep_step=step, **QUIET)
+        set_id, values = sw.sets[0]
+        t = np.linspace(0.0, 0.1, 11)
+        results = {}
+        for k, f in enumerate(sw.groups["planar_f1"]):
+            vals = {o.name: np.full_like(t, 0.5) for o in f.info.outputs}
+            vals["link3.x"] = vals["link3.x"] + (1e-6 if k else 0.0)
+            vals["link3.phi"] = vals["link3.phi"] + (3e-7 if k else 0.0)
+            results[f.info.model] = {"status": "ok", "wall": 1.0, "time": t, "values": vals}
+        rows = sweep._set_rows(sw, "planar_f1", set_id, values, results)
+        assert len(rows) == 2
+        for r in rows:
+            assert float(r["max_diff [m]"]) == pytest.approx(1e-6, rel=1e-9)
+            assert float(r["max_diff [rad]"]) == pytest.approx(3e-7, rel=1e-9)
+            assert r["max_diff_output"] == "link3.x" and r["verdict"] == verdict
+        sv = dict(sweep._experiment(sw, sw.groups["planar_f1"][0], values).start_values)
+        assert sv == ({"solver.method": "rk4", "solver.step": 5e-3, "joint1.mu": 0.01} if step else {"joint1.mu": 0.01})
+
+
+def test_adaptive_mode_accepts_solver_tolerance_and_seed_needs_samples(fmus, tmp_path, capsys):
+    sw = sweep.prepare(tmp_path / "a", inputs=list(map(str, fmus)), params=["solver.tolerance=1e-6,1e-8"],
+                       lockstep_step=0, **QUIET)
+    assert [v for _, v in sw.sets] == [{"solver.tolerance": 1e-6}, {"solver.tolerance": 1e-8}]
+    assert main(["sweep", *map(str, fmus), "--param", "joint1.mu=0", "--seed", "3", "--out", str(tmp_path / "b")]) == 2
+    assert "--seed 3" in capsys.readouterr().err
+    assert main(["sweep", *map(str, fmus), "--param", "joint1.mu=0", "--scheduler", "tcp://127.0.0.1:1",
+                 "--workers", "2", "--out", str(tmp_path / "c")]) == 2
+    assert "--workers" in capsys.readouterr().err
+
+
 # ---------------------------------------------------------------------------------------------
 # the acceptance sweep
 

@@ -133,8 +133,8 @@ def _sweep_parser(sub) -> None:
     w.add_argument("--seed", type=int, metavar="S", help="random seed of --samples (default 0)")
     w.add_argument("--scheduler", metavar="ADDRESS",
                    help="a running Dask scheduler, e.g. tcp://host:8786 (default: a local cluster)")
-    w.add_argument("--workers", type=_jobs, default=2, metavar="N",
-                   help="worker processes of the local cluster (default 2; ignored with --scheduler)")
+    w.add_argument("--workers", type=_jobs, metavar="N",
+                   help="worker processes of the local cluster (default 2; not with --scheduler)")
     w.add_argument("--stop-time", type=_positive, metavar="T", help="stop time (s; default: the FMUs' DefaultExperiment)")
     w.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H",
                    help="rk4 step (s) of the runs, identical for every elimination (default 0.005); 0: the FMUs' "
@@ -315,6 +315,10 @@ def cmd_sweep(args) -> int:
         if (args.out is None) == (args.resume is None):
             print("overcon: sweep needs exactly one of --out DIR (a new sweep) and --resume DIR", file=sys.stderr)
             return EXIT_INPUT
+        if args.scheduler is not None and args.workers is not None:
+            print("overcon: --workers sizes the local cluster; with --scheduler the cluster's own workers run the "
+                  "tasks (start more with dask worker)", file=sys.stderr)
+            return EXIT_INPUT
         if args.resume is not None:
             if args.lockstep_step != LOCKSTEP_STEP:
                 print("overcon: --resume continues the sweep as defined in DIR/sweep.json: no --lockstep-step",
@@ -325,7 +329,7 @@ def cmd_sweep(args) -> int:
         else:
             sw = sweep.prepare(args.out, inputs=args.inputs, params=args.param, samples=args.samples,
                                seed=args.seed, stop_time=args.stop_time, lockstep_step=args.lockstep_step)
-        out = sweep.run(sw, scheduler=args.scheduler, workers=args.workers)
+        out = sweep.run(sw, scheduler=args.scheduler, workers=args.workers or 2)
         print(f"{out.rows} row(s) in {out.csv} ({out.written} new, {out.failed} not ok) in {out.seconds:.1f} s"
               + (f"; plot {out.png}" if out.png else "") + (f"; {out.parquet}" if out.parquet else ""))
         if out.interrupted:

@@ -528,6 +528,8 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
             raise InputError("no scene file or FMU given")
         if not params:
             raise InputError("no --param given: nothing to sweep")
+        if seed is not None and samples is None:
+            raise InputError(f"--seed {seed}: seeds the random parameter sets of --samples, which is not given")
         definition = {"inputs": [str(Path(p).resolve()) for p in inputs], "params": list(params),
                       "samples": samples, "seed": (0 if seed is None else seed) if samples is not None else None,
                       "stop_time": stop_time, "lockstep_step": _lockstep_step(lockstep_step)}

@@ -6,7 +6,8 @@ group, label and predict.
 
 Modules: :mod:`.fmus` (inspect an FMU: experiment, outputs, scene, predictions),
 :mod:`.run` (simulate FMUs in worker processes, CSV in and out), :mod:`.compare` (differences,
-tolerances, verdicts), :mod:`.report` (Markdown and PNG), :mod:`.reproduce` (the main job).
+tolerances, verdicts), :mod:`.report` (Markdown and PNG), :mod:`.reproduce` (the main job),
+:mod:`.sweep` (parameter sweeps on Dask).
 
 Errors: :class:`InputError` (bad input: exit 2), :class:`SimulationFailed` (exit 3).
 """

@@ -304,6 +304,7 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     :class:`ReferenceRunFailed` naming the model, the time reached and the FMU's logged reason,
     and leaves no (stale) reference files."""
     import fmpy  # noqa: PLC0415
+    from fmpy.fmi2 import FMU2Slave  # noqa: PLC0415
     from fmpy.util import write_csv  # noqa: PLC0415
 
     md = fmpy.read_model_description(str(fmu))
@@ -314,19 +315,24 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     csv_path, opt_path = fmu.parent / f"{stem}_ref.csv", fmu.parent / f"{stem}_ref.opt"
     for stale in (csv_path, opt_path):
         stale.unlink(missing_ok=True)
-    messages: list[str] = []
-
-    def logger(component, instance, status, category, message):
-        if status >= 2:  # discard, error, fatal: the reason of a stopped run
-            messages.append(message.decode("utf-8", "replace"))
-
+    messages = _reference_messages()
+    messages.clear()
+    unzipdir = tempfile.mkdtemp(prefix=f"{stem}_ref_")
     reached, failure = start, ""
     try:
-        result = fmpy.simulate_fmu(str(fmu), output=names, output_interval=step, logger=logger)
-        reached = float(result["time"][-1]) if len(result) else start
+        fmpy.extract(str(fmu), unzipdir)
+        instance = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=stem, instanceName=stem)
+        instance.instantiate(callbacks=_reference_callbacks(), loggingOn=False)
+        try:
+            result = fmpy.simulate_fmu(unzipdir, output=names, output_interval=step, fmu_instance=instance)
+            reached = float(result["time"][-1]) if len(result) else start
+        finally:
+            instance.freeInstance()
     except Exception as exc:  # fmpy raises on fmi2Error
         failure = f"{type(exc).__name__}: {exc}"
         reached = None
+    finally:
+        shutil.rmtree(unzipdir, ignore_errors=True)
     if failure or reached < stop - 1e-9 * max(1.0, abs(stop)):
         reason = "; ".join(messages) or failure or "no reason logged by the FMU"
         at = "" if reached is None else f" at t = {reached!r} s"
@@ -336,6 +342,36 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     opt_path.write_text(f"StartTime, {start!r}\nStopTime, {stop!r}\n"
                         f"StepSize, {step!r}\nRelTol, {float(ex.tolerance)!r}\n")
     return csv_path, opt_path
+
+
+_REFERENCE_LOG: list[str] = []
+_REFERENCE_CALLBACKS = []
+
+
+def _reference_messages() -> list[str]:
+    return _REFERENCE_LOG
+
+
+def _reference_callbacks():
+    """fmi2CallbackFunctions collecting discard/error/fatal messages into :data:`_REFERENCE_LOG`,
+    made once and kept for the life of the process. (``fmpy.simulate_fmu(logger=...)`` is not
+    used: fmpy's logging proxy keeps that logger in a global after the run, and the next FMU that
+    logs through fmpy's default callbacks calls the freed function: a segmentation fault.)"""
+    if not _REFERENCE_CALLBACKS:
+        import fmpy  # noqa: PLC0415
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,  # noqa: PLC0415
+                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+        def logger(env, instance, status, category, message):
+            if status >= 2:  # the message is a printf format without arguments
+                _REFERENCE_LOG.append((message or b"").decode("utf-8", "replace").replace("%%", "%"))
+
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(logger)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
+        _REFERENCE_CALLBACKS.extend([cb, logger])
+    return _REFERENCE_CALLBACKS[0]
 
 
 def _reference_job(fmu: str) -> tuple[str, str, float]:

@@ -336,7 +336,7 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     if failure or reached < stop - 1e-9 * max(1.0, abs(stop)):
         reason = "; ".join(messages) or failure or "no reason logged by the FMU"
         at = "" if reached is None else f" at t = {reached!r} s"
-        raise ReferenceRunFailed(f"{stem}: the reference run (default experiment {start!r} to {stop!r} s) "
+        raise ReferenceRunFailed(f"the reference run of {stem} (default experiment {start!r} to {stop!r} s) "
                                  f"stopped{at}: {reason}")
     write_csv(str(csv_path), result)
     opt_path.write_text(f"StartTime, {start!r}\nStopTime, {stop!r}\n"
@@ -378,7 +378,9 @@ def _reference_job(fmu: str) -> tuple[str, str, float]:
     t0 = time.perf_counter()
     try:
         write_reference(Path(fmu))
-    except Exception as exc:  # reported by the parent
+    except ReferenceRunFailed as exc:  # reported by the parent
+        return fmu, str(exc), time.perf_counter() - t0
+    except Exception as exc:
         return fmu, f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
     return fmu, "", time.perf_counter() - t0
 

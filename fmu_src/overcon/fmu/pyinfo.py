@@ -1,8 +1,8 @@
 """What the FMU binary needs to start a Python interpreter: its shared libpython, its home
 (``sys.base_prefix``) and the site-packages that hold numpy and scipy.
 
-Standard library only. :func:`text` gives ``key=value`` lines (``python``, ``libpython``, ``home``,
-``site`` repeated); the builder writes them for the building interpreter into the FMU's
+Standard library only. :func:`text` gives ``key=value`` lines (``python``, ``version`` (major.minor),
+``libpython``, ``home``, ``site`` repeated); the builder writes them for the building interpreter into the FMU's
 ``resources/overcon_python.txt``, and the FMU binary runs this file as a script with the
 interpreter named by ``OVERCON_PYTHON`` (``python -I pyinfo.py``) to get the same lines for it.
 """
@@ -46,9 +46,20 @@ def site_dirs() -> list[str]:
     return [d for d in dirs if os.path.isdir(d)]
 
 
+def parse(text: str) -> dict[str, list[str]]:
+    """The lines of :func:`text` as {key: [values]}."""
+    out: dict[str, list[str]] = {}
+    for line in text.splitlines():
+        key, sep, value = line.partition("=")
+        if sep and not line.startswith("#"):
+            out.setdefault(key, []).append(value)
+    return out
+
+
 def text() -> str:
     lib, _ = libpython()
-    lines = [f"python={sys.executable}", f"libpython={lib}", f"home={sys.base_prefix}"]
+    lines = [f"python={sys.executable}", "version={}.{}".format(*sys.version_info[:2]), f"libpython={lib}",
+             f"home={sys.base_prefix}"]
     lines += [f"site={d}" for d in site_dirs()]
     return "\n".join(lines) + "\n"
 

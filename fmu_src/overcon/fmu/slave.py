@@ -418,8 +418,8 @@ class OverconSlave:
             what = str(exc) if isinstance(exc, CallRefused) else f"{type(exc).__name__}: {exc}"
             self._failed = f"{call}: {what}"
             self._mode = Mode.ERROR
-            self.log(f"{self._failed}; the outputs keep their values at t = {self._t!r} s (fmi2SetFMUstate "
-                     "or fmi2Reset to continue)", Status.ERROR)
+            self.log(f"{self._failed}; the run stopped at t = {self._t!r} s (the outputs keep their values "
+                     "there; fmi2SetFMUstate or fmi2Reset to continue)", Status.ERROR)
             return Status.ERROR
         self._outputs, self._t, self._have_outputs = out, t_new, True
         return Status.OK

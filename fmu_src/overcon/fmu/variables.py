@@ -106,9 +106,9 @@ SOLVER_PARAMS = {
 
 BUDGET_PARAMS = {
     # name: (type, unit, rule, default, description); FMU parameters only (not scene settings)
-    "max_internal_steps": ("Integer", None, "int_ge1", 100000,
+    "max_internal_steps": ("Integer", None, "int_ge1", 10000,
                            "work budget of one fmi2DoStep: integrator steps (exceeded: fmi2Error)"),
-    "max_wall_time": ("Real", "s", "positive", 60.0,
+    "max_wall_time": ("Real", "s", "positive", 30.0,
                       "work budget of one fmi2DoStep: wall-clock seconds (exceeded: fmi2Error)"),
 }
 

@@ -6,6 +6,7 @@ names that are Python keywords, reference runs that end early, friction on a joi
 equations are all eliminated."""
 from __future__ import annotations
 
+import ctypes
 import subprocess
 import sys
 from pathlib import Path
@@ -129,6 +130,20 @@ def test_value_references_and_writes_to_outputs(unz):
     ref = run(compile_model(scene_mod.load(MECH / "planar_f45_wo4.toml")), stop_time=0.01)
     assert s.fmu.getReal([x]) == [ref.values[-1][0]]
     s.free()
+
+
+def test_instantiate_refuses_a_wrong_guid_or_model_exchange(unz):
+    d = unz("planar_none_wo4")
+    md = fmpy.read_model_description(str(d))
+    for guid, kind, expected in [("{00000000-0000-0000-0000-000000000000}", 1, "does not match this FMU's"),
+                                 (md.guid, 0, "supports co-simulation only")]:
+        logs = Logs()
+        fmu = FMU2Slave(guid=guid, unzipDirectory=str(d), modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName="bad")
+        component = fmu.fmi2Instantiate(b"bad", kind, guid.encode(), (d / "resources").as_uri().encode(),
+                                        ctypes.byref(logs.callbacks), 0, 0)
+        assert not component
+        assert any(st >= 3 and expected in m for st, _, m in logs.records), logs.records
 
 
 def test_get_status(unz):

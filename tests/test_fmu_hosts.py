@@ -20,6 +20,7 @@ import pytest
 
 fmpy = pytest.importorskip("fmpy")
 
+from overcon.fmu import pyinfo  # noqa: E402
 from overcon.fmu.build import build_all  # noqa: E402
 
 pytestmark = pytest.mark.integration
@@ -61,6 +62,9 @@ def host(tmp_path_factory):
     cc = shutil.which("cc")
     if cc is None:
         pytest.skip("needs a C compiler (cc) for the test host")
+    lib, found = pyinfo.libpython()
+    if not found:
+        pytest.skip(f"this Python has no shared libpython ({lib}): a host without Python cannot start it")
     exe = tmp_path_factory.mktemp("c_host") / "fmu_host"
     subprocess.run([cc, "-O2", "-Wall", "-o", str(exe), str(ROOT / "tests" / "c_host" / "fmu_host.c"), "-ldl", "-lm"],
                    check=True, capture_output=True)

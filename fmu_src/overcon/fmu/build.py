@@ -407,6 +407,11 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
     except BuildError as exc:
         echo_err(f"build: {exc}")
         return EXIT_INPUT, results
+    lib, found = pyinfo.libpython()
+    if not found:
+        echo_err(f"build: WARNING: this Python ({sys.executable}) has no shared libpython ({lib} not found): "
+                 "the FMUs run only in hosts that already contain Python (fmpy, libcosimpy) or with "
+                 "OVERCON_PYTHON set to a Python built with --enable-shared")
     names: dict[str, str] = {}
     for f in files:
         r = build_scene(f, out_dir, allow_nonunique=allow_nonunique, validate=validate, echo=echo,

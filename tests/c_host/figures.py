@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Figures quoted in the README (FMUs): wall time of one fmi2DoStep(0, 1e6) under the default work
-budget, and of the C host (fmu_host.c) per process from an empty environment.
+budget, of the C host (fmu_host.c) per process from an empty environment, and the FMI overhead per
+communication point through fmpy (20000 points of 1e-5 s, minus the same in-process run).
 
     python tests/c_host/figures.py [--runs N] [SCENE ...]     (default: planar_none_wo4 planar_f45_wo4)
 
@@ -42,6 +43,38 @@ def huge_step(unz: str) -> str:
     return f"{md.coSimulation.modelIdentifier}: fmi2DoStep(0, 1e6) {outcome} after {time.perf_counter() - t0:.1f} s"
 
 
+def overhead(unz: str, scene: str, n: int = 20000, h: float = 1e-5) -> str:
+    from overcon import scene as scene_mod
+    from overcon.model import compile_model
+    from overcon.simulate import Simulation
+
+    md = fmpy.read_model_description(unz)
+    outs = [v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+    s = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
+                  instanceName="overhead")
+    s.instantiate(loggingOn=False)
+    s.setupExperiment(startTime=0.0)
+    s.enterInitializationMode()
+    s.exitInitializationMode()
+    t0, t = time.perf_counter(), 0.0
+    for k in range(n):
+        t_next = (k + 1) * h
+        s.doStep(t, t_next - t)
+        s.getReal(outs)
+        t = t_next
+    fmu = time.perf_counter() - t0
+    s.terminate()
+    s.freeInstance()
+    sim = Simulation(compile_model(scene_mod.load(ROOT / "mechanisms" / f"{scene}.toml")))
+    t0 = time.perf_counter()
+    for k in range(n):
+        t_next = (k + 1) * h
+        sim.outputs(t_next, sim.advance(t_next))
+    engine = time.perf_counter() - t0
+    return (f"{scene}: {len(outs)} outputs, {fmu / n * 1e6:.1f} us per communication point through fmpy, "
+            f"{engine / n * 1e6:.1f} us in process: FMI overhead {(fmu - engine) / n * 1e6:.1f} us")
+
+
 def host_runs(host: Path, unz: str, runs: int) -> str:
     md = fmpy.read_model_description(unz)
     outs = [f"{v.valueReference}:{v.name}" for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
@@ -70,6 +103,7 @@ def main() -> int:
             unz = fmpy.extract(str(tmp / f"{s}.fmu"), str(tmp / f"unz_{s}"))
             print(host_runs(host, unz, a.runs), flush=True)
             print(huge_step(unz), flush=True)
+            print(overhead(unz, s), flush=True)
     return 0
 
 

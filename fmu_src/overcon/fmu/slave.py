@@ -175,6 +175,7 @@ class OverconSlave:
         self._states: dict[int, dict] = {}
         self._next_state = 1
         self._strings: list[bytes] = []  # fmi2GetString's results, valid until the next call
+        self._ref_cache: dict[tuple[str, bytes], list] = {}
         self._init_fields()
         for name in self._manifest.get("precheck_warnings") or [
                 f"joint {j}: friction is switched on but every constraint equation of the joint is "
@@ -203,18 +204,25 @@ class OverconSlave:
 
     # -- variables ---------------------------------------------------------------------------
     def _refs(self, vr_address: int, n: int, typ: str):
-        """The (value reference, Var) pairs of a C array, all of type ``typ``, or CallRefused."""
+        """The (value reference, Var) pairs of a C array, all of type ``typ``, or CallRefused.
+        Checked lists are cached by their bytes (hosts ask for the same references every step)."""
         if n and not vr_address:
             raise CallRefused(f"vr is NULL but nvr = {n}")
-        refs = (ctypes.c_uint * n).from_address(vr_address) if n else ()
+        raw = ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint)) if n else b""
+        key = (typ, raw)
+        cached = self._ref_cache.get(key)
+        if cached is not None:
+            return cached
         out = []
-        for r in refs:
+        for r in (ctypes.c_uint * n).from_buffer_copy(raw) if n else ():
             if r >= len(self._vars):
                 raise CallRefused(f"value reference {r} does not exist (this FMU has 0 to {len(self._vars) - 1})")
             v = self._vars[r]
             if v.type != typ:
                 raise CallRefused(f"value reference {r} ({v.name}) is a {v.type} variable, not {typ}")
             out.append((r, v))
+        if len(self._ref_cache) < 256:
+            self._ref_cache[key] = out
         return out
 
     def _value(self, v: variables.Var):
@@ -231,6 +239,12 @@ class OverconSlave:
         refs = self._refs(vr_address, n, typ)
         if n and not values_address:
             raise CallRefused(f"value is NULL but nvr = {n}")
+        if typ == "Real" and refs and all(v.key[0] == "output" for _, v in refs):
+            if not self._have_outputs:
+                self._ensure_sim()
+            idx = [v.key[1] for _, v in refs]
+            np.ctypeslib.as_array((ctypes.c_double * n).from_address(values_address))[:] = self._outputs[idx]
+            return
         vals = [self._value(v) for _, v in refs]
         out = (_C_TYPES[typ] * n).from_address(values_address) if n else ()
         if typ == "String":

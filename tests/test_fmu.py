@@ -1,6 +1,7 @@
 """FMU integration tests: build (build_fmu.py), fmpy validation, fmpy results against the
 in-process run, several FMUs and instances in one process, FMU state, refused parameters, reset,
-failed steps, reference files, and a C host (tests/c_host/fmu_host.c) against fmpy.
+failed steps, reference files. The plain C host and libcosim are in test_fmu_hosts.py, the FMI
+call-by-call behaviour in test_fmi_calls.py.
 
 The FMUs are built once per session (all scenes, --no-ref) into a temporary directory; runs use
 short stop times except where a test needs the full horizon.
@@ -10,11 +11,8 @@ from __future__ import annotations
 import csv
 import dataclasses
 import hashlib
-import os
-import shutil
 import subprocess
 import sys
-import sysconfig
 import tomllib
 from pathlib import Path
 
@@ -22,7 +20,6 @@ import numpy as np
 import pytest
 
 fmpy = pytest.importorskip("fmpy")
-pytest.importorskip("pythonfmu")
 
 from fmpy.fmi1 import FMICallException  # noqa: E402
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,  # noqa: E402
@@ -317,10 +314,20 @@ def test_state_get_set_and_serialize_bit_for_bit(unzip):
 
 
 def test_reset(unzip):
-    inst = Instance(unzip("planar_f45_wo4")).init()
-    first = inst.steps(20)
-    inst.fmu.reset()
+    inst = Instance(unzip("planar_f45_wo4"))
+    inst.fmu.setupExperiment(startTime=0.0)
+    inst.fmu.enterInitializationMode()
+    inst.fmu.setReal([inst.vr["joint4.mu"]], [0.2])
+    inst.fmu.exitInitializationMode()
+    inst.t0 = inst.t = 0.0
+    inst.k = 0
+    changed = inst.steps(20)
+    inst.fmu.reset()  # back to instantiated: parameters at their start values
+    inst.init()
     assert inst.fmu.getReal([inst.vr["joint4.mu"]]) == [0.1]
+    first = inst.steps(20)
+    assert not np.array_equal(first, changed)
+    inst.fmu.reset()
     inst.init()
     assert np.array_equal(first, inst.steps(20))
     inst.free()
@@ -334,14 +341,18 @@ def test_reset(unzip):
 def test_bad_parameter_values_refused_and_host_survives(unzip, var, value):
     logs = Logs()
     inst = Instance(unzip("planar_f45_wo4"), logs=logs)
+    inst.fmu.setupExperiment(startTime=0.0)
+    inst.fmu.enterInitializationMode()
     before = inst.fmu.getReal([inst.vr[var]])
-    for _ in range(3):  # repeated refusals must not corrupt the instance (pythonfmu 0.7 bug)
+    for _ in range(3):  # repeated refusals leave the instance usable
         with pytest.raises(FMICallException) as exc:
             inst.fmu.setReal([inst.vr[var]], [value])
-        assert "status 3" in str(exc.value) or "status 4" in str(exc.value)  # error (fatal in pythonfmu)
-    assert f"parameter {var} = {value!r} refused" in logs.text()
+        assert "status 3" in str(exc.value)  # fmi2Error, never fmi2Fatal
+    assert f"fmi2SetReal: parameter {var} = {value!r} refused" in logs.text()
     assert inst.fmu.getReal([inst.vr[var]]) == before
-    inst.init()
+    inst.fmu.exitInitializationMode()
+    inst.t0 = inst.t = 0.0
+    inst.k = 0
     out = inst.steps(10)
     assert np.all(np.isfinite(out))
     with pytest.raises(FMICallException):  # fixed parameters cannot change after initialization
@@ -350,7 +361,7 @@ def test_bad_parameter_values_refused_and_host_survives(unzip, var, value):
     inst.free()
 
 
-def test_failed_step_returns_discard_and_keeps_finite_outputs(tmp_path, unzip):
+def test_failed_step_returns_error_and_keeps_finite_outputs(tmp_path, unzip):
     # the planar mechanism with spring free length 0 reaches the singular position K = L = O
     mech = (MECH / "planar_sliders.toml").read_text()
     assert "free_length = 3.0" in mech
@@ -373,8 +384,9 @@ def test_failed_step_returns_discard_and_keeps_finite_outputs(tmp_path, unzip):
         except FMICallException as exc:
             status = str(exc)
             break
-    assert status is not None and "status 2" in status  # fmi2Discard
-    assert "do_step(" in logs.text() and "singular" in logs.text()
+    assert status is not None and "status 3" in status  # fmi2Error: the run cannot continue
+    assert "fmi2DoStep(" in logs.text() and "singular" in logs.text()
+    assert any(s == 3 for s, _, m in logs.records if "singular" in m)
     out = inst.fmu.getReal(inst.out_vrs)
     assert np.all(np.isfinite(out)) and out == last  # last good values, never NaN
     with pytest.raises(FMICallException):  # later steps are refused until the state is set back
@@ -382,13 +394,13 @@ def test_failed_step_returns_discard_and_keeps_finite_outputs(tmp_path, unzip):
     inst.free()
 
 
-def test_wrong_communication_point_is_discarded(unzip):
+def test_wrong_communication_point_is_an_error(unzip):
     logs = Logs()
     inst = Instance(unzip("planar_none_wo4"), logs=logs).init()
     inst.steps(3)
     with pytest.raises(FMICallException) as exc:
         inst.fmu.doStep(currentCommunicationPoint=1.0, communicationStepSize=0.01)
-    assert "status 2" in str(exc.value) and "is not the end of the previous step" in logs.text()
+    assert "status 3" in str(exc.value) and "is not the end of the previous step" in logs.text()
     inst.free()
 
 
@@ -403,45 +415,3 @@ def test_variable_step_sizes(unzip):
     inst.free()
     ref = run(model_of("planar_f45_wo4"), stop_time=t, output_interval=t)
     assert np.max(np.abs(out - ref.values[-1])) <= 1e-9
-
-
-# ------------------------------------------------------------------------------- C host
-
-def _libpython() -> str | None:
-    libdir, name = sysconfig.get_config_var("LIBDIR"), sysconfig.get_config_var("INSTSONAME")
-    if not libdir or not name or not (Path(libdir) / name).exists():
-        return None
-    return str(Path(libdir) / name)
-
-
-def test_c_host_matches_fmpy(tmp_path, unzip):
-    cc = shutil.which("cc")
-    libpython = _libpython()
-    if cc is None or libpython is None:
-        pytest.skip("needs a C compiler and a shared libpython")
-    host = tmp_path / "fmu_host"
-    subprocess.run([cc, "-O2", "-o", str(host), str(ROOT / "tests" / "c_host" / "fmu_host.c"), "-ldl", "-lm"],
-                   check=True, capture_output=True)
-    name, stop = "planar_f45_wo4", 0.5
-    unz = unzip(name)
-    md = fmpy.read_model_description(str(unz))
-    outs = [v for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
-    ex = md.defaultExperiment
-    import numpy
-    import scipy
-
-    paths = dict.fromkeys(str(Path(m.__file__).resolve().parents[1]) for m in (numpy, scipy))
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(paths))
-    proc = subprocess.run(
-        [str(host), "-q", "-p", libpython, str(unz), md.coSimulation.modelIdentifier, md.guid,
-         repr(float(ex.startTime)), repr(stop), repr(float(ex.stepSize)), repr(float(ex.tolerance)),
-         *(f"{v.valueReference}:{v.name}" for v in outs)],
-        capture_output=True, text=True, timeout=300, env=env)
-    assert proc.returncode == 0, proc.stderr
-    lines = proc.stdout.splitlines()
-    assert lines[0] == ",".join(f'"{n}"' for n in ["time", *(v.name for v in outs)])
-    c_values = np.array([[float(x) for x in line.split(",")] for line in lines[1:]])
-    res = fmpy.simulate_fmu(str(unz), stop_time=stop)
-    py_values = np.column_stack([res["time"], fmpy_matrix(res, [v.name for v in outs])])
-    assert c_values.shape == py_values.shape
-    assert np.max(np.abs(c_values - py_values)) <= 1e-12

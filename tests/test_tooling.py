@@ -97,7 +97,8 @@ def test_failed_simulation_exits_3_with_the_fmus_reason(tmp_path, capsys):
     fmus = _build([scene], tmp_path / "fmus")
     assert main(["run", str(fmus["planar_none_wo4"]), "--out", str(tmp_path / "o")]) == 3
     err = capsys.readouterr().err
-    assert re.search(r"the simulation stopped at t = 0\.(5[5-9]|6[0-5]) s, before the stop time 2 s", err)
+    # the FMU ends the run with fmi2Error and names the time (fmpy raises: no truncated result)
+    assert re.search(r"stopped at t = 0\.(5[5-9]|6[0-5])\d* s", err), err
     assert "singular position" in err
     assert not (tmp_path / "o" / "planar_none_wo4.csv").exists()
 

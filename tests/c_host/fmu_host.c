@@ -1,32 +1,24 @@
 /*
- * Minimal FMI 2.0 co-simulation host in C (no FMI headers needed: the types it uses are declared
- * below, as in the FMI 2.0 standard's fmi2FunctionTypes.h / fmi2TypesPlatform.h).
+ * Minimal FMI 2.0 co-simulation host in C, knowing nothing about Python (no FMI headers needed:
+ * the types it uses are declared below, as in the FMI 2.0 standard's fmi2FunctionTypes.h /
+ * fmi2TypesPlatform.h).
  *
- * It dlopen()s <unzipdir>/binaries/linux64/<model_identifier>.so, instantiates the FMU with the
- * resource location file://<unzipdir>/resources, sets up the experiment, steps from START to
- * STOP with communication step STEP (grid points START + k*STEP, the last one clamped to STOP, as
- * fmpy.simulate_fmu does) and prints time and the requested Real variables as CSV (FMI
+ * It dlopen()s <unzipdir>/binaries/linux64/<model_identifier>.so with RTLD_LOCAL, instantiates the
+ * FMU with the resource location file://<unzipdir>/resources, sets up the experiment, steps from
+ * START to STOP with communication step STEP (grid points START + k*STEP, the last one clamped to
+ * STOP, as fmpy.simulate_fmu does) and prints time and the requested Real variables as CSV (FMI
  * cross-check style header, values with 17 significant digits).
  *
- *   fmu_host [-p LIBPYTHON] [-n] [-q] UNZIPDIR MODEL_ID GUID START STOP STEP TOL VR:NAME [VR:NAME ...]
+ *   fmu_host [-q] [-x] [-s NAME=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL VR:NAME [VR:NAME ...]
  *
- *   -p LIBPYTHON  dlopen() this libpython with RTLD_GLOBAL first. An FMU built with pythonfmu
- *                 embeds Python but its binary is not linked against libpython: the host process
- *                 must provide the Python C API symbols globally (this option, or LD_PRELOAD).
- *   -n            do not start the interpreter in the host (see below; reproduces the crash)
- *   -q            debug logging off (pythonfmu then forwards no log messages at all)
- *
- * If the Python C API is present (-p or LD_PRELOAD), the host starts the interpreter itself
- * (Py_InitializeEx(0), then releases the GIL) before loading the FMU and never finalizes it.
- * Otherwise pythonfmu's binary starts it and calls Py_Finalize at process exit, which crashes
- * (heap corruption, SIGSEGV/SIGABRT) once scipy's extension modules are loaded: a known
- * scipy-with-Py_Finalize problem. pythonfmu skips both when Python is already initialized.
+ *   -q            debug logging off (the FMU still logs warnings and errors)
+ *   -x            exit right after the last step: no fmi2Terminate, fmi2FreeInstance or dlclose
+ *   -s VR=VALUE   fmi2SetReal of value reference VR before initialization (repeatable)
  *   TOL <= 0      no tolerance passed to fmi2SetupExperiment
  *
  * Exit status: 0 ok, 1 usage, 2 loading, 3 an FMI call returned an error status.
  * Build: cc -O2 -o fmu_host fmu_host.c -ldl -lm
  */
-#define _GNU_SOURCE /* RTLD_DEFAULT */
 #include <dlfcn.h>
 #include <limits.h>
 #include <math.h>
@@ -66,6 +58,7 @@ typedef fmi2Status (*fmi2SetupExperimentTYPE)(fmi2Component, fmi2Boolean, fmi2Re
                                               fmi2Boolean, fmi2Real);
 typedef fmi2Status (*fmi2ComponentTYPE)(fmi2Component); /* enter/exit init, terminate */
 typedef fmi2Status (*fmi2GetRealTYPE)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
+typedef fmi2Status (*fmi2SetRealTYPE)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
 typedef fmi2Status (*fmi2DoStepTYPE)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
 
 static const char *status_name(fmi2Status s)
@@ -110,26 +103,30 @@ static int isclose(double a, double b) /* Python's math.isclose with its default
     return fabs(a - b) <= 1e-9 * fmax(fabs(a), fabs(b));
 }
 
+#define MAX_SETS 64
+
 int main(int argc, char **argv)
 {
-    const char *libpython = NULL;
-    int logging = fmi2True, host_init = 1, i = 1;
+    int logging = fmi2True, quick_exit = 0, nset = 0, i = 1;
+    fmi2ValueReference set_vr[MAX_SETS];
+    fmi2Real set_value[MAX_SETS];
     while (i < argc && argv[i][0] == '-') {
-        if (!strcmp(argv[i], "-p") && i + 1 < argc) {
-            libpython = argv[i + 1];
-            i += 2;
-        } else if (!strcmp(argv[i], "-n")) {
-            host_init = 0;
-            i += 1;
-        } else if (!strcmp(argv[i], "-q")) {
+        if (!strcmp(argv[i], "-q")) {
             logging = fmi2False;
             i += 1;
+        } else if (!strcmp(argv[i], "-x")) {
+            quick_exit = 1;
+            i += 1;
+        } else if (!strcmp(argv[i], "-s") && i + 1 < argc && nset < MAX_SETS && strchr(argv[i + 1], '=')) {
+            set_vr[nset] = (fmi2ValueReference)strtoul(argv[i + 1], NULL, 10);
+            set_value[nset++] = atof(strchr(argv[i + 1], '=') + 1);
+            i += 2;
         } else {
             break;
         }
     }
     if (argc - i < 8) {
-        fprintf(stderr, "usage: %s [-p LIBPYTHON] [-n] [-q] UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
+        fprintf(stderr, "usage: %s [-q] [-x] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
                         "VR:NAME [VR:NAME ...]\n", argv[0]);
         return 1;
     }
@@ -150,19 +147,6 @@ int main(int argc, char **argv)
         names[k] = colon + 1;
     }
 
-    if (libpython && !dlopen(libpython, RTLD_NOW | RTLD_GLOBAL)) {
-        fprintf(stderr, "fmu_host: cannot load %s: %s\n", libpython, dlerror());
-        return 2;
-    }
-    if (host_init) {
-        int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
-        void (*initialize_ex)(int) = (void (*)(int))dlsym(RTLD_DEFAULT, "Py_InitializeEx");
-        void *(*save_thread)(void) = (void *(*)(void))dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
-        if (is_initialized && initialize_ex && save_thread && !is_initialized()) {
-            initialize_ex(0); /* 0: leave the host's signal handlers alone */
-            save_thread();    /* release the GIL: pythonfmu takes it per call */
-        }
-    }
     char absdir[PATH_MAX], so[PATH_MAX + 256], uri[3 * PATH_MAX + 32];
     if (!realpath(dir, absdir)) {
         fprintf(stderr, "fmu_host: no such directory %s\n", dir);
@@ -187,6 +171,7 @@ int main(int argc, char **argv)
     fmi2ComponentTYPE exit_init = (fmi2ComponentTYPE)sym(lib, "fmi2ExitInitializationMode");
     fmi2ComponentTYPE terminate = (fmi2ComponentTYPE)sym(lib, "fmi2Terminate");
     fmi2GetRealTYPE get_real = (fmi2GetRealTYPE)sym(lib, "fmi2GetReal");
+    fmi2SetRealTYPE set_real = (fmi2SetRealTYPE)sym(lib, "fmi2SetReal");
     fmi2DoStepTYPE do_step = (fmi2DoStepTYPE)sym(lib, "fmi2DoStep");
 
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
@@ -197,6 +182,8 @@ int main(int argc, char **argv)
     }
     check(setup(c, tol > 0 ? fmi2True : fmi2False, tol > 0 ? tol : 0.0, start, fmi2True, stop),
           "fmi2SetupExperiment");
+    for (int k = 0; k < nset; k++)
+        check(set_real(c, &set_vr[k], 1, &set_value[k]), "fmi2SetReal");
     check(enter_init(c), "fmi2EnterInitializationMode");
     check(exit_init(c), "fmi2ExitInitializationMode");
 
@@ -219,6 +206,9 @@ int main(int argc, char **argv)
         check(do_step(c, time, next - time, fmi2True), "fmi2DoStep");
         time = next;
     }
+    fflush(stdout);
+    if (quick_exit)
+        return 0; /* the FMU must survive a host that just exits */
     check(terminate(c), "fmi2Terminate");
     free_instance(c);
     dlclose(lib);

@@ -1,4 +1,4 @@
-"""Build one FMI 2.0 co-simulation FMU per scene file, with pythonfmu's runtime.
+"""Build one FMI 2.0 co-simulation FMU per scene file, with overcon's own C binary.
 
 :func:`build_all` is the library function behind ``python build_fmu.py`` and ``overcon build``.
 For each scene file (files with a ``[scene]`` table; mechanism files are skipped) it runs the
@@ -7,22 +7,27 @@ refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each F
 ``<out>/<scene name>.fmu`` is self-contained::
 
     modelDescription.xml              overcon.fmu.description (validated with fmpy after writing)
-    binaries/<platform>/<scene>.so    pythonfmu's C wrapper (every platform pythonfmu ships)
-    resources/slavemodule.txt         name of the entry module, for the wrapper
-    resources/<scene>_<hash>.py       entry module: class <scene>(OverconSlave)
+    binaries/<platform>/<scene>.so    native/overcon_fmi2.c compiled here (C compiler: $CC or cc)
+    resources/overcon_package.txt     name of the package copy below, for the binary
+    resources/overcon_python.txt      the building Python (libpython, home, site-packages),
+                                      written by overcon.fmu.pyinfo, read by the binary
     resources/overcon_<hash>/         copy of the overcon package source (relative imports)
-    resources/pythonfmu/              pythonfmu's Python files (Fmi2Slave), as pythonfmu's builder does
     resources/scene/...               the scene file and its mechanism file
-    resources/overcon_fmu.json        GUID, scene path, pre-check verdicts
+    resources/overcon_fmu.json        GUID, scene path, pre-check verdicts and warnings, binary facts
 
-At run time it needs only Python with numpy and scipy. ``<hash>`` (and the GUID) is a SHA-256
-over the scene file, the mechanism file, the overcon source and the pythonfmu version, so FMUs of
-different scenes (or of one scene from different sources) never share module names in one
-process, and rebuilding unchanged inputs gives the same GUID and the same bytes.
+At run time it needs only a Python with numpy and scipy (the binary finds one: see
+``native/overcon_fmi2.c`` and the README). ``<hash>`` (and the GUID) is a SHA-256 over the scene
+file, the mechanism file, the overcon source (Python and C), so FMUs of different scenes (or of
+one scene from different sources) never share module names in one process, and rebuilding
+unchanged inputs gives the same GUID and, with the same compiler and Python, the same bytes. The
+binary is compiled once per source and compiler (:func:`native_binary`); without a C compiler the
+build fails (exit 2) naming the missing compiler: there is no fallback binary.
 
 Compatibility information (FMI cross-check convention) next to each FMU, unless ``refs=False``:
 ``<scene>_ref.csv`` (time and every Real output, simulated through ``fmpy.simulate_fmu`` at the
-default experiment) and ``<scene>_ref.opt`` (StartTime, StopTime, StepSize, RelTol).
+default experiment) and ``<scene>_ref.opt`` (StartTime, StopTime, StepSize, RelTol). A reference
+run that fails or ends before the stop time writes neither (and removes stale ones) and names
+the scene, the time reached and the FMU's logged reason.
 
 Exit codes of :func:`main`: 0 all built, 1 some scene refused by the pre-check, 2 invalid input or
 a build that failed, 3 a reference simulation failed (worst wins: 2 > 3 > 1).
@@ -35,8 +40,13 @@ import dataclasses
 import hashlib
 import json
 import os
+import platform
 import posixpath
+import shlex
+import shutil
+import subprocess
 import sys
+import tempfile
 import time
 import tomllib
 import uuid
@@ -47,11 +57,14 @@ from .. import scene as scene_mod
 from ..model import ModelError, compile_model
 from ..precheck import precheck
 from ..spec import SceneSpec
-from . import description, variables
+from . import description, pyinfo, variables
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
-FORMAT_VERSION = "overcon-fmu-1"  # bump when the FMU layout changes (enters the GUID)
+NATIVE_SOURCE = Path(__file__).resolve().parent / "native" / "overcon_fmi2.c"
+CFLAGS = ["-shared", "-fPIC", "-O2", "-s", "-fvisibility=hidden", "-Wall", "-Wextra"]
+LIBS = ["-ldl", "-lpthread"]
+FORMAT_VERSION = "overcon-fmu-2"  # bump when the FMU layout changes (enters the GUID)
 _PKG_NAME = __name__.split(".")[0]  # "overcon"
 _DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip timestamps: reproducible FMU bytes
 
@@ -82,20 +95,56 @@ def _source_files() -> list[tuple[str, bytes]]:
     return files
 
 
-def _pythonfmu_files():
-    """pythonfmu's Python files (for resources/pythonfmu) and its binaries per platform."""
-    import pythonfmu
+class BuildError(RuntimeError):
+    """The FMU binary cannot be made here (no C compiler, a compile error, an unknown platform)."""
 
-    here = Path(pythonfmu.__file__).resolve().parent
-    py = [(f.name, f.read_bytes()) for f in sorted(here.glob("*.py"))]
-    binroot = here / "resources" / "binaries"
-    bins = []
-    for ext in ("so", "dll", "dylib"):
-        for f in sorted(binroot.rglob(f"*.{ext}")):
-            bins.append((f.relative_to(binroot).parent.as_posix(), ext, f.read_bytes()))
-    if not any(b[0] == "linux64" for b in bins):
-        raise RuntimeError(f"pythonfmu {pythonfmu.__version__} ships no linux64 binary under {binroot}")
-    return pythonfmu.__version__, py, bins
+
+@dataclasses.dataclass(frozen=True)
+class NativeBinary:
+    platform: str  # FMI platform folder: linux64, darwin64
+    ext: str
+    data: bytes
+    compiler: str  # command and version line
+
+
+def _fmi_platform() -> tuple[str, str]:
+    bits = "64" if sys.maxsize > 2**32 else "32"
+    if sys.platform.startswith("linux"):
+        return f"linux{bits}", "so"
+    if sys.platform == "darwin":
+        return f"darwin{bits}", "dylib"
+    raise BuildError(f"the FMU binary (dlopen, POSIX) is built on Linux and macOS only, not on {sys.platform}")
+
+
+_NATIVE_CACHE: dict[tuple, NativeBinary] = {}
+
+
+def native_binary() -> NativeBinary:
+    """The FMU binary compiled from ``native/overcon_fmi2.c`` with ``$CC`` (default ``cc``);
+    compiled once per process, source and compiler. Raises :class:`BuildError`."""
+    cc = shlex.split(os.environ.get("CC") or "cc")
+    if not cc or shutil.which(cc[0]) is None:
+        raise BuildError(f"no C compiler: {' '.join(cc) or 'cc'} not found (set CC or install one, e.g. gcc): "
+                         "the FMU binary is compiled at build time")
+    source = NATIVE_SOURCE.read_bytes()
+    key = (tuple(cc), hashlib.sha256(source).hexdigest())
+    if key in _NATIVE_CACHE:
+        return _NATIVE_CACHE[key]
+    plat, ext = _fmi_platform()
+    version = subprocess.run([*cc, "--version"], capture_output=True, text=True).stdout.splitlines()
+    with tempfile.TemporaryDirectory() as tmp:
+        shutil.copyfile(NATIVE_SOURCE, Path(tmp) / NATIVE_SOURCE.name)
+        out = f"overcon_fmi2.{ext}"
+        cmd = [*cc, *CFLAGS, "-o", out, NATIVE_SOURCE.name, *LIBS]
+        proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise BuildError(f"compiling {NATIVE_SOURCE.name} failed ({' '.join(cmd)}):\n{proc.stderr.strip()}")
+        if proc.stderr.strip():
+            raise BuildError(f"compiling {NATIVE_SOURCE.name} gave warnings ({' '.join(cmd)}):\n{proc.stderr.strip()}")
+        data = (Path(tmp) / out).read_bytes()
+    nb = NativeBinary(plat, ext, data, f"{' '.join(cc)} ({version[0] if version else 'version unknown'})")
+    _NATIVE_CACHE[key] = nb
+    return nb
 
 
 def _overcon_version() -> str:
@@ -134,15 +183,15 @@ def _verdict(report: dict) -> str:
     return f"friction in {fr}: friction on non-unique reaction(s) of {bad}, motion NOT UNIQUE"
 
 
-def _zip_write(zf: zipfile.ZipFile, name: str, data: bytes) -> None:
+def _zip_write(zf: zipfile.ZipFile, name: str, data: bytes, mode: int = 0o644) -> None:
     info = zipfile.ZipInfo(name, date_time=_DATE)
     info.compress_type = zipfile.ZIP_DEFLATED
-    info.external_attr = 0o644 << 16
+    info.external_attr = mode << 16
     zf.writestr(info, data)
 
 
 def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, validate: bool = True,
-                echo=print, sources=None, pythonfmu_files=None) -> BuildResult:
+                echo=print, sources=None, binary: NativeBinary | None = None) -> BuildResult:
     """Build the FMU of one scene file (see the module docstring); never raises for bad input."""
     t0 = time.perf_counter()
     res = BuildResult(source=str(path), status="invalid")
@@ -182,10 +231,10 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         mech_path = path.parent / mech_ref
         scene_bytes, mech_bytes = path.read_bytes(), mech_path.read_bytes()
         sources = _source_files() if sources is None else sources
-        pf_version, pf_py, pf_bins = _pythonfmu_files() if pythonfmu_files is None else pythonfmu_files
+        binary = native_binary() if binary is None else binary
 
         h = hashlib.sha256()
-        for part in (FORMAT_VERSION.encode(), f"pythonfmu {pf_version}".encode(), scene_zip.encode(),
+        for part in (FORMAT_VERSION.encode(), NATIVE_SOURCE.read_bytes(), scene_zip.encode(),
                      scene_bytes, mech_zip.encode(), mech_bytes):
             h.update(len(part).to_bytes(8, "little") + part)
         for rel, data in sources:
@@ -193,32 +242,31 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         digest = h.hexdigest()
         guid = "{" + str(uuid.UUID(digest[:32])) + "}"
         pkg = f"{_PKG_NAME}_{digest[:16]}"
-        entry = f"{spec.name}_{digest[:16]}"
         reaction_unique = {j["name"]: bool(j["unique"]) for j in report["joints"]}
         table = variables.table(model, reaction_unique, res.motion_unique)
         overcon_version = _overcon_version()
         xml = description.model_description(
             model, table, guid=guid, version=overcon_version,
-            generation_tool=f"overcon {overcon_version} build_fmu (pythonfmu {pf_version} runtime)")
+            generation_tool=f"overcon {overcon_version} build_fmu (native binary, Python "
+                            f"{platform.python_version()})")
         manifest = {"scene": scene_zip, "guid": guid, "package": pkg, "model_identifier": spec.name,
                     "reaction_unique": reaction_unique, "motion_unique": res.motion_unique,
-                    "precheck_problems": report["problems"]}
-        entry_src = ENTRY_TEMPLATE.format(name=spec.name, pkg=pkg)
+                    "precheck_problems": report["problems"],
+                    "precheck_warnings": list(report.get("warnings", [])),
+                    "binary": {"platform": binary.platform, "compiler": binary.compiler,
+                               "source": NATIVE_SOURCE.name}}
 
         out_dir.mkdir(parents=True, exist_ok=True)
         fmu = out_dir / f"{spec.name}.fmu"
         tmp = fmu.with_suffix(".fmu.part")
         with zipfile.ZipFile(tmp, "w") as zf:
             _zip_write(zf, "modelDescription.xml", xml)
-            for platform, ext, data in pf_bins:
-                _zip_write(zf, f"binaries/{platform}/{spec.name}.{ext}", data)
-            _zip_write(zf, "resources/slavemodule.txt", entry.encode())
-            _zip_write(zf, f"resources/{entry}.py", entry_src.encode())
+            _zip_write(zf, f"binaries/{binary.platform}/{spec.name}.{binary.ext}", binary.data, 0o755)
+            _zip_write(zf, "resources/overcon_package.txt", f"{pkg}\n".encode())
+            _zip_write(zf, "resources/overcon_python.txt", pyinfo.text().encode())
             _zip_write(zf, "resources/overcon_fmu.json", json.dumps(manifest, indent=1).encode())
             _zip_write(zf, f"resources/{scene_zip}", scene_bytes)
             _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
-            for name, data in pf_py:
-                _zip_write(zf, f"resources/pythonfmu/{name}", data)
             for rel, data in sources:
                 _zip_write(zf, f"resources/{pkg}/{rel}", data)
         if validate:
@@ -229,6 +277,8 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
                 tmp.unlink()
                 return done("failed", *(f"{path}: modelDescription.xml: {p}" for p in problems))
         os.replace(tmp, fmu)
+    except BuildError as exc:
+        return done("failed", f"{path}: build failed: {exc}")
     except (OSError, ValueError, KeyError, RuntimeError) as exc:
         return done("failed", f"{path}: build failed: {type(exc).__name__}: {exc}")
     res.fmu, res.guid = fmu, guid
@@ -240,48 +290,97 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
     return r
 
 
-ENTRY_TEMPLATE = '''"""FMU entry module of scene {name} (generated by overcon build_fmu; do not edit).
-
-pythonfmu's C wrapper imports the module named in slavemodule.txt, executes its source again and
-takes the class whose method resolution order has Fmi2Slave deepest: class {name}.
-"""
-from {pkg}.fmu.slave import OverconSlave, pin_entry_namespace
-
-pin_entry_namespace(globals())  # pythonfmu 0.7 bug, see {pkg}.fmu.slave.pin_entry_namespace
-
-
-class {name}(OverconSlave):
-    """FMI 2.0 co-simulation slave of scene {name} (all behaviour in {pkg}.fmu.slave)."""
-'''
-
-
 # ---------------------------------------------------------------------------------------------
 # compatibility information
+
+class ReferenceRunFailed(RuntimeError):
+    """The reference simulation stopped before the default experiment's stop time."""
+
 
 def write_reference(fmu: Path) -> tuple[Path, Path]:
     """Simulate ``fmu`` with fmpy at its default experiment; write ``<id>_ref.csv`` (time and
     every Real output, FMI cross-check CSV: quoted header, comma separated, full precision) and
-    ``<id>_ref.opt`` next to it."""
+    ``<id>_ref.opt`` next to it. A run that fails or ends before the stop time raises
+    :class:`ReferenceRunFailed` naming the model, the time reached and the FMU's logged reason,
+    and leaves no (stale) reference files."""
     import fmpy  # noqa: PLC0415
+    from fmpy.fmi2 import FMU2Slave  # noqa: PLC0415
     from fmpy.util import write_csv  # noqa: PLC0415
 
     md = fmpy.read_model_description(str(fmu))
     ex = md.defaultExperiment
+    start, stop, step = float(ex.startTime), float(ex.stopTime), float(ex.stepSize)
     names = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
-    result = fmpy.simulate_fmu(str(fmu), output=names, output_interval=float(ex.stepSize))
     stem = md.coSimulation.modelIdentifier
     csv_path, opt_path = fmu.parent / f"{stem}_ref.csv", fmu.parent / f"{stem}_ref.opt"
+    for stale in (csv_path, opt_path):
+        stale.unlink(missing_ok=True)
+    messages = _reference_messages()
+    messages.clear()
+    unzipdir = tempfile.mkdtemp(prefix=f"{stem}_ref_")
+    reached, failure = start, ""
+    try:
+        fmpy.extract(str(fmu), unzipdir)
+        instance = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=stem, instanceName=stem)
+        instance.instantiate(callbacks=_reference_callbacks(), loggingOn=False)
+        try:
+            result = fmpy.simulate_fmu(unzipdir, output=names, output_interval=step, fmu_instance=instance)
+            reached = float(result["time"][-1]) if len(result) else start
+        finally:
+            instance.freeInstance()
+    except Exception as exc:  # fmpy raises on fmi2Error
+        failure = f"{type(exc).__name__}: {exc}"
+        reached = None
+    finally:
+        shutil.rmtree(unzipdir, ignore_errors=True)
+    if failure or reached < stop - 1e-9 * max(1.0, abs(stop)):
+        reason = "; ".join(messages) or failure or "no reason logged by the FMU"
+        at = "" if reached is None else f" at t = {reached!r} s"
+        raise ReferenceRunFailed(f"the reference run of {stem} (default experiment {start!r} to {stop!r} s) "
+                                 f"stopped{at}: {reason}")
     write_csv(str(csv_path), result)
-    opt_path.write_text(f"StartTime, {float(ex.startTime)!r}\nStopTime, {float(ex.stopTime)!r}\n"
-                        f"StepSize, {float(ex.stepSize)!r}\nRelTol, {float(ex.tolerance)!r}\n")
+    opt_path.write_text(f"StartTime, {start!r}\nStopTime, {stop!r}\n"
+                        f"StepSize, {step!r}\nRelTol, {float(ex.tolerance)!r}\n")
     return csv_path, opt_path
+
+
+_REFERENCE_LOG: list[str] = []
+_REFERENCE_CALLBACKS = []
+
+
+def _reference_messages() -> list[str]:
+    return _REFERENCE_LOG
+
+
+def _reference_callbacks():
+    """fmi2CallbackFunctions collecting discard/error/fatal messages into :data:`_REFERENCE_LOG`,
+    made once and kept for the life of the process. (``fmpy.simulate_fmu(logger=...)`` is not
+    used: fmpy's logging proxy keeps that logger in a global after the run, and the next FMU that
+    logs through fmpy's default callbacks calls the freed function: a segmentation fault.)"""
+    if not _REFERENCE_CALLBACKS:
+        import fmpy  # noqa: PLC0415
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,  # noqa: PLC0415
+                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+        def logger(env, instance, status, category, message):
+            if status >= 2:  # the message is a printf format without arguments
+                _REFERENCE_LOG.append((message or b"").decode("utf-8", "replace").replace("%%", "%"))
+
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(logger)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
+        _REFERENCE_CALLBACKS.extend([cb, logger])
+    return _REFERENCE_CALLBACKS[0]
 
 
 def _reference_job(fmu: str) -> tuple[str, str, float]:
     t0 = time.perf_counter()
     try:
         write_reference(Path(fmu))
-    except Exception as exc:  # reported by the parent
+    except ReferenceRunFailed as exc:  # reported by the parent
+        return fmu, str(exc), time.perf_counter() - t0
+    except Exception as exc:
         return fmu, f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
     return fmu, "", time.perf_counter() - t0
 
@@ -303,11 +402,20 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
         echo_err("build: no scene files given")
         return EXIT_INPUT, results
     sources = _source_files()
-    pf = _pythonfmu_files()
+    try:
+        binary = native_binary()
+    except BuildError as exc:
+        echo_err(f"build: {exc}")
+        return EXIT_INPUT, results
+    lib, found = pyinfo.libpython()
+    if not found:
+        echo_err(f"build: WARNING: this Python ({sys.executable}) has no shared libpython ({lib} not found): "
+                 "the FMUs run only in hosts that already contain Python (fmpy, libcosimpy) or with "
+                 "OVERCON_PYTHON set to a Python built with --enable-shared")
     names: dict[str, str] = {}
     for f in files:
         r = build_scene(f, out_dir, allow_nonunique=allow_nonunique, validate=validate, echo=echo,
-                        sources=sources, pythonfmu_files=pf)
+                        sources=sources, binary=binary)
         if r.status == "built" and r.name in names:
             r.status = "failed"
             r.messages.append(f"{f}: scene name {r.name} already built from {names[r.name]} "

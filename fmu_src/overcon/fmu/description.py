@@ -5,7 +5,7 @@ Written directly rather than by pythonfmu's ``Fmi2Slave.to_xml``, whose output f
 ``fmpy validate`` (no units, no InitialUnknowns, start values on calculated outputs, a random
 GUID per build). What is written: CoSimulation capabilities (variable communication step, FMU
 state get/set and serialization), UnitDefinitions with SI base-unit exponents, the log categories
-pythonfmu's wrapper uses, DefaultExperiment from the scene (stepSize = solver.output_interval,
+of the binary, DefaultExperiment from the scene (stepSize = solver.output_interval,
 tolerance = solver.tolerance), the variables, and ModelStructure (Outputs: every output, the
 constant pre-check Booleans with no dependencies; InitialUnknowns: the calculated outputs,
 depending on the parameters).
@@ -17,12 +17,16 @@ from xml.etree import ElementTree as ET
 from .variables import UNITS, Var
 
 LOG_CATEGORIES = {
-    "logStatusWarning": "Log messages with fmi2Warning status.",
-    "logStatusDiscard": "Log messages with fmi2Discard status (a step that failed).",
-    "logStatusError": "Log messages with fmi2Error status (refused values, failed initialization).",
-    "logStatusFatal": "Log messages with fmi2Fatal status.",
-    "logAll": "Log all messages.",
+    "logEvents": "Information (fmi2OK): initialization, tolerance used. Only with debug logging on.",
+    "logStatusWarning": "Warnings (fmi2Warning): an ignored fmi2SetupExperiment tolerance, friction on a "
+                        "joint without equations. Also with debug logging off, unless switched off.",
+    "logStatusError": "Errors (fmi2Error): wrong-state calls, bad value references, refused values, a "
+                      "step that cannot continue (with its reason). Always logged.",
+    "logStatusFatal": "Fatal errors (fmi2Fatal): Python cannot be started. Always logged.",
+    "logAll": "All of the above.",
 }
+"""The categories of native/overcon_fmi2.c (category_names, plus logAll); fmi2SetDebugLogging
+switches them."""
 
 
 def _num(x) -> str:

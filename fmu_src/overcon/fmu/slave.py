@@ -1,48 +1,60 @@
-"""The FMI 2.0 co-simulation facade (a pythonfmu ``Fmi2Slave``): variables and FMI calls mapped
-onto :class:`overcon.simulate.Simulation`; no physics here.
+"""The FMI 2.0 co-simulation slave: every FMI call of the FMU binary (``native/overcon_fmi2.c``)
+mapped onto :class:`overcon.simulate.Simulation`; no physics here.
 
 Runs inside an FMU built by :mod:`overcon.fmu.build`, as a renamed copy of the package
 (``overcon_<hash>``), with the scene and mechanism files and ``overcon_fmu.json`` (the build-time
-facts: scene path, GUID, pre-check verdicts) in the FMU's ``resources/``.
+facts: scene path, GUID, pre-check verdicts) in the FMU's ``resources/``. The binary calls the
+methods below with C values (pointers as integers); each returns an ``fmi2Status`` and never
+raises.
 
 Behaviour
 ---------
-* pythonfmu 0.7's wrapper passes only the start time of ``fmi2SetupExperiment`` to Python (its
-  tolerance and stop time are dropped), so the integrator tolerance is the parameter
-  ``solver.tolerance`` (default: the scene's); a tolerance given to :meth:`setup_experiment` by
-  another caller is used unless ``solver.tolerance`` was set.
-* Parameters (``variables.table``) can be set until ``fmi2ExitInitializationMode``. A value that is
-  non-finite or out of range is refused: the reason is logged and the call fails. pythonfmu 0.7's C
-  wrapper turns every Python exception into ``fmi2Fatal`` (there is no way to return
-  ``fmi2Error`` from Python); the instance keeps its previous value and stays usable (see
-  :func:`_fmi_call`), though FMI says a host should free an instance after ``fmi2Fatal``. Setting
-  a parameter after initialization is refused the same way (variability fixed).
+* States (FMI 2.0 co-simulation): instantiated -> initialization mode -> slave initialized
+  (stepping) -> terminated; ``error`` after a call that returned fmi2Error during stepping. A call
+  not allowed in the current state returns fmi2Error with a message naming the call and the
+  state (e.g. fmi2DoStep before fmi2ExitInitializationMode or after fmi2Terminate). In ``error``
+  the outputs can still be read, and fmi2SetFMUstate, fmi2Reset, fmi2Terminate and
+  fmi2FreeInstance are allowed.
+* Variables: an unknown value reference, a value reference of another type, or a write to an
+  output or constant returns fmi2Error with a message; nothing is set then.
+* Parameters (``variables.table``) can be set until ``fmi2ExitInitializationMode`` (the work
+  budget ``solver.max_internal_steps``/``solver.max_wall_time`` is tunable: also while stepping).
+  A value that is non-finite or out of range is refused with fmi2Error and the reason; the
+  instance keeps its previous value.
+* Tolerance: the integrator uses the parameter ``solver.tolerance`` (the scene's value unless the
+  host sets the parameter). A tolerance given to ``fmi2SetupExperiment`` is ignored: it is reported
+  as a warning when it differs from ``solver.tolerance`` (an info message when equal), so the
+  scene's accuracy never changes silently.
 * The model and the :class:`Simulation` are (re)built from the scene with the current parameters
   when first needed (outputs read in initialization mode, or ``fmi2ExitInitializationMode``). The
   start time comes from ``fmi2SetupExperiment``.
-* ``do_step(t, h)`` integrates to ``t + h`` (the integrator keeps its own steps; any ``h > 0``)
-  and stores the outputs there. Any engine exception, a non-finite output, a communication point
-  that is not the previous end time, or a non-finite/negative step makes it return False
-  (``fmi2Discard``) with the reason logged; outputs keep their last good values (never NaN), and
-  later steps are refused until the state is set back (``fmi2SetFMUstate``) or the FMU is reset.
+* ``do_step(t, h)`` integrates to ``t + h`` (the integrator keeps its own steps; any ``h >= 0``)
+  and stores the outputs there. A run that cannot continue (engine failure, non-finite output,
+  a communication point that is not the previous end time, a non-finite or negative step, the
+  work budget exhausted) returns **fmi2Error** with the reason logged (error messages reach the
+  host with debug logging off too); the instance enters ``error``, the outputs keep their last
+  good values (never NaN), and later steps are refused until the state is set back
+  (``fmi2SetFMUstate``) or the FMU is reset.
+* Work budget of one ``fmi2DoStep``: at most ``solver.max_internal_steps`` integrator steps and
+  ``solver.max_wall_time`` seconds. A long step is integrated in pieces of ``solver.max_step``
+  (rk4: ``solver.step``) and the budget is checked after each piece; the trajectory does not
+  depend on the pieces (outputs are read by dense output).
 * FMU state: the full :meth:`Simulation.get_state` (integrator arrays, lam, counters, singularity
   monitor) plus the parameters, time, outputs and mode; set/get/serialize are exact (bit for bit).
-  ``fmi2Reset`` is done by pythonfmu's wrapper by instantiating this class again.
 """
 from __future__ import annotations
 
 import copy
 import ctypes
 import dataclasses
+import enum
 import functools
 import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
-from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variability
-from pythonfmu.fmi2slave import Fmi2Slave
-from pythonfmu.variables import Boolean, Integer, Real, String
 
 from .. import scene as scene_mod
 from ..model import compile_model
@@ -52,121 +64,234 @@ from . import statecodec, variables
 MANIFEST = "overcon_fmu.json"
 """Build-time facts in the FMU's resources/: scene path, guid, reaction_unique, motion_unique."""
 
-_TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
-_FRICTION_FIELDS = {"mu": "mu", "v_reg": "v_reg", "mu_static": "mu_static", "v_stribeck": "v_stribeck"}
+_FRICTION_FIELDS = ("mu", "v_reg", "mu_static", "v_stribeck")
+_LOG_FUNCTION = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int, ctypes.c_char_p)
+_C_TYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int,
+            "String": ctypes.c_char_p}
 
 
-class ParameterRefused(ValueError):
+class Status(enum.IntEnum):
+    """fmi2Status."""
+    OK = 0
+    WARNING = 1
+    DISCARD = 2
+    ERROR = 3
+    FATAL = 4
+
+
+class Mode(str, enum.Enum):
+    INSTANTIATED = "instantiated"
+    INITIALIZATION = "initialization mode"
+    STEPPING = "slave initialized"
+    ERROR = "error"
+    TERMINATED = "terminated"
+
+
+ANY_MODE = frozenset(Mode)
+READABLE = frozenset({Mode.INITIALIZATION, Mode.STEPPING, Mode.ERROR, Mode.TERMINATED})
+WRITABLE = frozenset({Mode.INSTANTIATED, Mode.INITIALIZATION, Mode.STEPPING})
+
+
+class CallRefused(Exception):
+    """The call cannot be done: it returns fmi2Error and the message is logged."""
+
+
+class ParameterRefused(CallRefused, ValueError):
     """A parameter value outside its admissible range, or set when it may no longer change."""
 
 
-def pin_entry_namespace(namespace: dict) -> None:
-    """Called at the top of the FMU's entry module, on each execution of its source.
-
-    pythonfmu 0.7 bug worked around here: for every fmi2Instantiate the C wrapper's
-    ``findClass`` imports the entry module, executes its source again in the module's namespace
-    (``PyModule_GetDict``, a borrowed reference) and then ``Py_DECREF``s that dict. Each
-    instantiation thus drops one reference to the module's namespace; after a few instantiations
-    in one process it is freed (observed: "module has no attribute ..." on the third fmpy
-    simulation of one FMU, then segmentation faults). Each execution of the entry module takes
-    one reference back, so the namespace stays alive (the first, ordinary import leaves one extra
-    reference: module namespaces live until the process ends anyway)."""
-    ctypes.pythonapi.Py_IncRef(ctypes.py_object(namespace))
+class BudgetExhausted(ArithmeticError):
+    """fmi2DoStep used up its work budget (solver.max_internal_steps or solver.max_wall_time)."""
 
 
-def _fmi_call(method):
-    """Wrap a method that pythonfmu's C wrapper calls: an exception escaping it is logged (with
-    fmi2Error status, unless already logged) and re-raised (the wrapper returns fmi2Fatal).
+def fmi_call(name: str, modes=ANY_MODE):
+    """Wrap a method the binary calls as FMI function ``name``: refused outside ``modes``; a
+    :class:`CallRefused` or any other exception becomes fmi2Error with its message logged; the
+    method's own return value (a Status) or OK otherwise."""
 
-    pythonfmu 0.7 bug worked around here: on a Python exception the wrapper's
-    ``handle_py_exception`` calls ``cleanPyObject()``, which ``Py_XDECREF``s its references to the
-    slave class, the instance and the instance's log queue without clearing them, and the
-    destructor releases them again. Two or three refused ``fmi2SetReal`` calls then free the live
-    instance and the host crashes (observed: segmentation fault in fmpy). Before letting an
-    exception escape, the slave therefore takes one extra reference to each of those three objects
-    (only when the C wrapper created it: it passes the ``logger`` keyword), so the spurious release
-    is balanced and the instance stays valid."""
+    def wrap(method):
+        @functools.wraps(method)
+        def call(self, *args):
+            if self._mode not in modes:
+                allowed = ", ".join(sorted(m.value for m in modes))
+                self.log(f"{name}: not allowed in state '{self._mode.value}' (allowed in: {allowed})",
+                         Status.ERROR)
+                return Status.ERROR
+            try:
+                status = method(self, *args)
+            except CallRefused as exc:
+                self.log(f"{name}: {exc}", Status.ERROR)
+                return Status.ERROR
+            except Exception as exc:  # a bug or an unexpected engine failure: never a crash
+                self.log(f"{name}: {type(exc).__name__}: {exc}", Status.ERROR)
+                return Status.ERROR
+            return Status.OK if status is None else Status(status)
 
-    @functools.wraps(method)
-    def call(self, *args, **kwargs):
-        try:
-            return method(self, *args, **kwargs)
-        except Exception as exc:
-            if not getattr(exc, "logged", False):
-                self.log(f"{method.__name__}: {type(exc).__name__}: {exc}", Fmi2Status.error)
-            if self._under_c_wrapper:
-                for obj in (self, self.log_queue, type(self)):
-                    ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
-            raise
+        return call
 
-    return call
+    return wrap
 
 
-class OverconSlave(Fmi2Slave):
-    """One FMU instance. The generated entry module subclasses this (model identifier = scene
-    name); everything scene specific is read from ``resources``."""
+def friction_without_equations(model) -> list[str]:
+    """Friction joints all of whose constraint equations are eliminated: they carry no reaction,
+    so their friction is silently zero."""
+    eliminated = set(model.eliminated)
+    return [model.joints[j].name for j in model.friction_joints
+            if model.joints[j].rows and all(r + 1 in eliminated for r in model.joints[j].rows)]
 
-    _under_c_wrapper = False
 
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self._under_c_wrapper = isinstance(kwargs.get("logger"), int)
-        res = Path(self.resources)
+def instantiate(instance_name: str, guid: str, resources: str, log_address: int, component: int,
+                logging_on: bool) -> "OverconSlave":
+    """fmi2Instantiate (through :func:`overcon.fmu.boot.instantiate`): the slave, logging through
+    the binary's log function at ``log_address`` for ``component``."""
+    log_function = _LOG_FUNCTION(log_address)
+
+    def log(status: int, message: str) -> None:
+        log_function(component, int(status), message.encode("utf-8", "replace"))
+
+    return OverconSlave(resources, guid=guid, instance_name=instance_name, log=log)
+
+
+class OverconSlave:
+    """One FMU instance; everything scene specific is read from ``resources``. Without ``log``
+    (in-process use) messages are kept in ``self.messages``."""
+
+    def __init__(self, resources, *, guid: str | None = None, instance_name: str = "overcon", log=None):
+        res = Path(resources)
         self._manifest = json.loads((res / MANIFEST).read_text(encoding="utf-8"))
+        if guid is not None and guid != self._manifest["guid"]:
+            raise CallRefused(f"fmi2Instantiate: GUID {guid} does not match this FMU's "
+                              f"{self._manifest['guid']} (modelDescription.xml of another build?)")
+        self.instance_name = instance_name
+        self.messages: list[tuple[int, str]] = []
+        self._log_sink = log
         spec = scene_mod.load(res / self._manifest["scene"])
         self._scene = spec
         self._model0 = compile_model(spec)
-        self.modelName = spec.name
-        self.description = spec.description or None
         self._vars = variables.table(self._model0, self._manifest["reaction_unique"],
                                      self._manifest["motion_unique"])
         self._defaults = {v.key[1]: v.start for v in self._vars if v.key[0] == "param"}
+        self._tunable = {v.key[1] for v in self._vars if v.key[0] == "param" and v.variability == "tunable"}
+        self._states: dict[int, dict] = {}
+        self._next_state = 1
+        self._strings: list[bytes] = []  # fmi2GetString's results, valid until the next call
+        self._ref_cache: dict[tuple[str, bytes], list] = {}
+        self._init_fields()
+        for name in self._manifest.get("precheck_warnings") or [
+                f"joint {j}: friction is switched on but every constraint equation of the joint is "
+                "eliminated, so its reaction and hence its friction force are zero"
+                for j in friction_without_equations(self._model0)]:
+            self.log(name, Status.WARNING)
+
+    def _init_fields(self) -> None:
+        """The state after fmi2Instantiate (and fmi2Reset)."""
         self._params = dict(self._defaults)
         self._explicit: set[str] = set()
-        self._start_time = spec.start_time
-        self._setup_tolerance: float | None = None
-        self._mode = "instantiated"  # -> "initialization" -> "stepping"
+        self._start_time = self._scene.start_time
+        self._mode = Mode.INSTANTIATED
         self._sim: Simulation | None = None
         self._sim_key = None  # parameters the current Simulation was built with
-        self._t = spec.start_time
+        self._t = self._scene.start_time
         self._outputs = np.zeros(len(self._model0.output_names()))
         self._have_outputs = False
         self._failed: str | None = None
-        for v in self._vars:
-            self.register_variable(self._make_var(v), nested=False)
 
-    def log(self, msg: str, status=Fmi2Status.ok, category=None, debug=None):
-        """pythonfmu's wrapper passes the message to the host's fmi2CallbackLogger as its printf
-        format string, so a literal % is doubled. pythonfmu 0.7 forwards messages (of every
-        status) only while debug logging is on (fmi2Instantiate loggingOn, fmi2SetDebugLogging)."""
-        super().log(str(msg).replace("%", "%%"), status, category)
+    def log(self, message: str, status=Status.OK) -> None:
+        if self._log_sink is None:
+            self.messages.append((int(status), str(message)))
+        else:
+            self._log_sink(int(status), str(message))
 
     # -- variables ---------------------------------------------------------------------------
-    def _make_var(self, v: variables.Var):
+    def _refs(self, vr_address: int, n: int, typ: str):
+        """The (value reference, Var) pairs of a C array, all of type ``typ``, or CallRefused.
+        Checked lists are cached by their bytes (hosts ask for the same references every step)."""
+        if n and not vr_address:
+            raise CallRefused(f"vr is NULL but nvr = {n}")
+        raw = ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint)) if n else b""
+        key = (typ, raw)
+        cached = self._ref_cache.get(key)
+        if cached is not None:
+            return cached
+        out = []
+        for r in (ctypes.c_uint * n).from_buffer_copy(raw) if n else ():
+            if r >= len(self._vars):
+                raise CallRefused(f"value reference {r} does not exist (this FMU has 0 to {len(self._vars) - 1})")
+            v = self._vars[r]
+            if v.type != typ:
+                raise CallRefused(f"value reference {r} ({v.name}) is a {v.type} variable, not {typ}")
+            out.append((r, v))
+        if len(self._ref_cache) < 256:
+            self._ref_cache[key] = out
+        return out
+
+    def _value(self, v: variables.Var):
         kind, arg = v.key
         if kind == "output":
-            getter, setter = (lambda k=arg: self._output(k)), None
-        elif kind == "constant":
-            getter, setter = (lambda val=arg: val), None
-        else:
-            getter = lambda name=arg: self._params[name]  # noqa: E731
-            setter = lambda value, name=arg: self._set_param(name, value)  # noqa: E731
-        return _TYPES[v.type](
-            v.name, causality=Fmi2Causality[v.causality], variability=Fmi2Variability[v.variability],
-            initial=Fmi2Initial[v.initial], description=v.description, getter=getter, setter=setter)
-
-    def _output(self, k: int) -> float:
-        if not self._have_outputs and self._failed is None:
-            try:
+            if not self._have_outputs:
                 self._ensure_sim()
-            except Exception as exc:  # reported once; the value stays 0.0 (never NaN)
-                self._fail(f"cannot compute the initial outputs: {exc}", Fmi2Status.error)
-        return float(self._outputs[k])
+            return float(self._outputs[arg])
+        if kind == "constant":
+            return arg
+        return self._params[arg]
+
+    def _get(self, typ: str, vr_address: int, n: int, values_address: int) -> None:
+        refs = self._refs(vr_address, n, typ)
+        if n and not values_address:
+            raise CallRefused(f"value is NULL but nvr = {n}")
+        if typ == "Real" and refs and all(v.key[0] == "output" for _, v in refs):
+            if not self._have_outputs:
+                self._ensure_sim()
+            idx = [v.key[1] for _, v in refs]
+            np.ctypeslib.as_array((ctypes.c_double * n).from_address(values_address))[:] = self._outputs[idx]
+            return
+        vals = [self._value(v) for _, v in refs]
+        out = (_C_TYPES[typ] * n).from_address(values_address) if n else ()
+        if typ == "String":
+            self._strings = [str(x).encode("utf-8") for x in vals]
+            for i, b in enumerate(self._strings):
+                out[i] = b
+        else:
+            for i, x in enumerate(vals):
+                out[i] = int(bool(x)) if typ == "Boolean" else x
+
+    def _set(self, typ: str, vr_address: int, n: int, values_address: int) -> None:
+        refs = self._refs(vr_address, n, typ)
+        if n and not values_address:
+            raise CallRefused(f"value is NULL but nvr = {n}")
+        raw = list((_C_TYPES[typ] * n).from_address(values_address)) if n else []
+        for (r, v), x in zip(refs, raw):
+            if v.key[0] != "param":
+                raise CallRefused(f"value reference {r} ({v.name}) is {v.causality} ({v.variability}): "
+                                  "it cannot be set")
+        for (r, v), x in zip(refs, raw):
+            if typ == "String":
+                x = None if x is None else x.decode("utf-8", "replace")
+            elif typ == "Boolean":
+                x = bool(x)
+            self._set_param(v.key[1], x)
+
+    def _accessor(function, modes, impl, typ):  # noqa: N805 (used in the class body below)
+        return fmi_call(function, modes)(
+            lambda self, vr_address, n, values_address: impl(self, typ, vr_address, n, values_address))
+
+    get_real = _accessor("fmi2GetReal", READABLE, _get, "Real")
+    get_integer = _accessor("fmi2GetInteger", READABLE, _get, "Integer")
+    get_boolean = _accessor("fmi2GetBoolean", READABLE, _get, "Boolean")
+    get_string = _accessor("fmi2GetString", READABLE, _get, "String")
+    set_real = _accessor("fmi2SetReal", WRITABLE, _set, "Real")
+    set_integer = _accessor("fmi2SetInteger", WRITABLE, _set, "Integer")
+    set_boolean = _accessor("fmi2SetBoolean", WRITABLE, _set, "Boolean")
+    set_string = _accessor("fmi2SetString", WRITABLE, _set, "String")
+    del _accessor
 
     def _set_param(self, name: str, value) -> None:
-        if self._mode == "stepping":
+        tunable = name in self._tunable
+        if self._mode == Mode.STEPPING and not tunable:
             self._refuse(name, value, "variability fixed: it cannot change after initialization "
                                       "(fmi2Reset first)")
+        if value is None:
+            self._refuse(name, value, "a value is required")
         reason = variables.rule(name).check(value)
         if reason is None and name.endswith(".mu_static"):
             mu = self._params[name[: -len("_static")]]
@@ -176,33 +301,27 @@ class OverconSlave(Fmi2Slave):
             self._refuse(name, value, reason)
         self._params[name] = value if isinstance(value, str) else type(self._defaults[name])(value)
         self._explicit.add(name)
-        self._drop_sim()
+        if not tunable:
+            self._drop_sim()
 
-    def _refuse(self, name, value, reason) -> None:
-        msg = f"parameter {name} = {value!r} refused: {reason}"
-        self.log(msg, Fmi2Status.error)
-        exc = ParameterRefused(msg)
-        exc.logged = True
-        raise exc
+    @staticmethod
+    def _refuse(name, value, reason) -> None:
+        raise ParameterRefused(f"parameter {name} = {value!r} refused: {reason}")
 
     # -- model and simulation ----------------------------------------------------------------
     def _drop_sim(self) -> None:
         """Forget the Simulation (parameters or start time changed before initialization)."""
         self._sim = self._sim_key = None
         self._have_outputs = False
-        self._failed = None
 
     def _key(self):
-        tol = self._params["solver.tolerance"]
-        if "solver.tolerance" not in self._explicit and self._setup_tolerance is not None:
-            tol = self._setup_tolerance
-        return (self._start_time, tol, tuple(sorted(self._params.items())))
+        return (self._start_time, tuple(sorted((k, v) for k, v in self._params.items() if k not in self._tunable)))
 
     def _build_model(self, key):
-        start, tol, _ = key
+        start, _ = key
         spec, p = self._scene, self._params
         solver = dataclasses.replace(
-            spec.solver, method=p["solver.method"], tolerance=tol, step=p["solver.step"],
+            spec.solver, method=p["solver.method"], tolerance=p["solver.tolerance"], step=p["solver.step"],
             max_step=p["solver.max_step"], baumgarte=p["solver.baumgarte"],
             friction_tol=p["solver.friction_tol"], friction_max_iter=int(p["solver.friction_max_iter"]))
         fparams = dict(spec.friction_params)
@@ -235,124 +354,215 @@ class OverconSlave(Fmi2Slave):
             self._outputs, self._have_outputs = out, True
         return self._sim
 
-    # -- FMI calls (every method the C wrapper calls is wrapped by _fmi_call) ------------------
-    get_real = _fmi_call(Fmi2Slave.get_real)
-    get_integer = _fmi_call(Fmi2Slave.get_integer)
-    get_boolean = _fmi_call(Fmi2Slave.get_boolean)
-    get_string = _fmi_call(Fmi2Slave.get_string)
-    set_real = _fmi_call(Fmi2Slave.set_real)
-    set_integer = _fmi_call(Fmi2Slave.set_integer)
-    set_boolean = _fmi_call(Fmi2Slave.set_boolean)
-    set_string = _fmi_call(Fmi2Slave.set_string)
-    terminate = _fmi_call(Fmi2Slave.terminate)
+    def _advance(self, sim: Simulation, t_new: float) -> np.ndarray:
+        """sim.advance(t_new) within the work budget (see the module docstring)."""
+        p = self._params
+        max_steps, max_wall = int(p["solver.max_internal_steps"]), float(p["solver.max_wall_time"])
+        piece = max(p["solver.max_step"], p["solver.step"]) if p["solver.method"] != "rk4" else p["solver.step"]
+        n0, w0 = _steps_taken(sim), time.monotonic()
+        while t_new - sim.t > piece:
+            sim.advance(sim.t + piece)
+            steps, wall = _steps_taken(sim) - n0, time.monotonic() - w0
+            if steps > max_steps:
+                raise BudgetExhausted(
+                    f"work budget exhausted at t = {sim.t:.9g} s of the step to {t_new!r} s: {steps} internal "
+                    f"steps > solver.max_internal_steps = {max_steps} (raise it or use shorter "
+                    "communication steps)")
+            if wall > max_wall:
+                raise BudgetExhausted(
+                    f"work budget exhausted at t = {sim.t:.9g} s of the step to {t_new!r} s: {wall:.3g} s "
+                    f"wall time > solver.max_wall_time = {max_wall!r} s (raise it or use shorter "
+                    "communication steps)")
+        return sim.advance(t_new)
 
-    @_fmi_call
-    def setup_experiment(self, start_time: float = 0.0, stop_time=None, tolerance=None):
-        start = 0.0 if start_time is None else float(start_time)
+    # -- FMI calls ---------------------------------------------------------------------------
+    @fmi_call("fmi2SetupExperiment", {Mode.INSTANTIATED})
+    def setup_experiment(self, tolerance_defined: int, tolerance: float, start_time: float,
+                         stop_time_defined: float = 0.0, stop_time: float = 0.0):
+        start = float(start_time)
         if not math.isfinite(start):
-            self.log(f"fmi2SetupExperiment: start time {start!r} refused (not finite)", Fmi2Status.error)
-            raise ParameterRefused(f"start time {start!r} is not finite")
+            raise CallRefused(f"start time {start!r} refused (not finite)")
+        if stop_time_defined and not stop_time >= start:
+            raise CallRefused(f"stop time {stop_time!r} is before the start time {start!r}")
         self._start_time = start
-        if tolerance is not None:
-            tol = float(tolerance)
-            if 0.0 < tol < 1.0:
-                self._setup_tolerance = tol
-            else:
-                self.log(f"fmi2SetupExperiment: tolerance {tol!r} ignored (must be in (0, 1)); "
-                         f"using solver.tolerance = {self._params['solver.tolerance']!r}",
-                         Fmi2Status.warning)
         self._drop_sim()
+        if tolerance_defined:
+            used = self._params["solver.tolerance"]
+            if tolerance == used:
+                self.log(f"fmi2SetupExperiment: tolerance {tolerance!r} = solver.tolerance", Status.OK)
+            else:
+                self.log(f"fmi2SetupExperiment: tolerance {tolerance!r} ignored: the integrator uses the "
+                         f"parameter solver.tolerance = {used!r} (set that parameter to change it)",
+                         Status.WARNING)
+                return Status.WARNING
+        return Status.OK
 
-    @_fmi_call
+    @fmi_call("fmi2EnterInitializationMode", {Mode.INSTANTIATED})
     def enter_initialization_mode(self):
-        self._mode = "initialization"
+        self._mode = Mode.INITIALIZATION
 
-    @_fmi_call
+    @fmi_call("fmi2ExitInitializationMode", {Mode.INITIALIZATION})
     def exit_initialization_mode(self):
         try:
             self._ensure_sim()
         except Exception as exc:
-            self.log(f"initialization failed: {type(exc).__name__}: {exc}", Fmi2Status.error)
-            exc.logged = True
-            raise
-        self._mode = "stepping"
+            self._mode = Mode.ERROR
+            raise CallRefused(f"initialization failed: {type(exc).__name__}: {exc}") from exc
+        self._mode = Mode.STEPPING
+        self.log(f"initialized at t = {self._t!r} s: method {self._params['solver.method']}, tolerance "
+                 f"{self._params['solver.tolerance']!r}", Status.OK)
 
-    @_fmi_call
-    def do_step(self, current_time: float, step_size: float, no_set_fmu_state_prior=None) -> bool:
-        if self._failed is not None:
-            self.log(f"do_step refused: an earlier step failed ({self._failed}); set an earlier FMU "
-                     "state or reset", Fmi2Status.discard)
-            return False
+    @fmi_call("fmi2DoStep", {Mode.STEPPING})
+    def do_step(self, current_time: float, step_size: float, no_set_fmu_state_prior: int = 0):
+        call = f"fmi2DoStep({current_time!r}, {step_size!r})"
         try:
             if not (math.isfinite(current_time) and math.isfinite(step_size) and step_size >= 0):
-                self.log(f"do_step({current_time!r}, {step_size!r}) refused: the step must be finite "
-                         "and >= 0", Fmi2Status.discard)
-                return False
-            sim = self._ensure_sim()
+                raise CallRefused("the communication step must be finite and >= 0")
             if abs(current_time - self._t) > 1e-9 * max(1.0, abs(self._t)):
-                self.log(f"do_step refused: communication point {current_time!r} s is not the end "
-                         f"of the previous step ({self._t!r} s)", Fmi2Status.discard)
-                return False
+                raise CallRefused(f"communication point {current_time!r} s is not the end of the previous "
+                                  f"step ({self._t!r} s)")
+            sim = self._ensure_sim()
             t_new = current_time + step_size
-            y = sim.advance(t_new)
+            y = self._advance(sim, t_new)
             out = sim.outputs(t_new, y)
             if not np.all(np.isfinite(out)):
                 bad = [n for n, v in zip(self._model0.output_names(), out) if not math.isfinite(v)]
                 raise ArithmeticError(f"t = {t_new:.9g} s: non-finite outputs {', '.join(bad)}")
-        except Exception as exc:  # any engine failure: fmi2Discard, never NaN, never a crash
-            return self._fail(f"do_step({current_time!r}, {step_size!r}): "
-                              f"{type(exc).__name__}: {exc}", Fmi2Status.discard)
+        except Exception as exc:  # the run cannot continue: fmi2Error, never NaN, never a crash
+            what = str(exc) if isinstance(exc, CallRefused) else f"{type(exc).__name__}: {exc}"
+            self._failed = f"{call}: {what}"
+            self._mode = Mode.ERROR
+            self.log(f"{self._failed}; the run stopped at t = {self._t!r} s (the outputs keep their values "
+                     "there; fmi2SetFMUstate or fmi2Reset to continue)", Status.ERROR)
+            return Status.ERROR
         self._outputs, self._t, self._have_outputs = out, t_new, True
-        return True
+        return Status.OK
 
-    def _fail(self, reason: str, status) -> bool:
-        self._failed = reason
-        self.log(reason, status)
-        return False
+    @fmi_call("fmi2Terminate", {Mode.STEPPING, Mode.ERROR})
+    def terminate(self):
+        self._mode = Mode.TERMINATED
+
+    @fmi_call("fmi2Reset")
+    def reset(self):
+        self._init_fields()
+
+    def free_instance(self) -> int:
+        self._states.clear()
+        self._sim = None
+        self._log_sink = None
+        return Status.OK
+
+    @fmi_call("fmi2GetStatus")
+    def get_status(self, function: str, kind: int, value_address: int):
+        """fmi2Get*Status: fmi2LastSuccessfulTime (Real) and fmi2Terminated (Boolean) are known;
+        this FMU never returns fmi2Pending, so the asynchronous kinds are not available."""
+        if not value_address:
+            raise CallRefused(f"{function}: value is NULL")
+        if function == "fmi2GetRealStatus" and kind == 2:
+            ctypes.c_double.from_address(value_address).value = self._t
+            return Status.OK
+        if function == "fmi2GetBooleanStatus" and kind == 3:
+            ctypes.c_int.from_address(value_address).value = int(self._mode == Mode.ERROR)
+            return Status.OK
+        kinds = {0: "fmi2DoStepStatus", 1: "fmi2PendingStatus", 2: "fmi2LastSuccessfulTime", 3: "fmi2Terminated"}
+        raise CallRefused(f"{function}({kinds.get(kind, kind)}): not available (this FMU never returns "
+                          "fmi2Pending; known: fmi2GetRealStatus(fmi2LastSuccessfulTime), "
+                          "fmi2GetBooleanStatus(fmi2Terminated))")
+
+    @fmi_call("unsupported")
+    def unsupported(self, function: str):
+        raise CallRefused(f"{function} is not supported by this FMU (no inputs, no derivatives, "
+                          "no asynchronous steps)")
 
     # -- FMU state ---------------------------------------------------------------------------
-    @_fmi_call
-    def _get_fmu_state(self):
+    def _snapshot(self) -> dict:
         return {
             "guid": self._manifest["guid"],
             "params": dict(self._params), "explicit": sorted(self._explicit),
-            "start_time": self._start_time, "setup_tolerance": self._setup_tolerance,
-            "mode": self._mode, "t": self._t, "outputs": self._outputs.copy(),
-            "have_outputs": self._have_outputs, "failed": self._failed,
+            "start_time": self._start_time, "mode": self._mode.value, "t": self._t,
+            "outputs": self._outputs.copy(), "have_outputs": self._have_outputs, "failed": self._failed,
             "sim": None if self._sim is None else copy.deepcopy(self._sim.get_state()),
         }
 
-    @_fmi_call
-    def _set_fmu_state(self, state):
-        if isinstance(state, dict) and "invalid" in state:
-            raise ValueError(f"fmi2SetFMUstate: {state['invalid']}")
+    def _restore(self, state: dict) -> None:
         if not isinstance(state, dict) or state.get("guid") != self._manifest["guid"]:
-            raise ValueError("fmi2SetFMUstate: the state does not belong to this FMU (GUID differs)")
+            raise CallRefused("the state does not belong to this FMU (GUID differs)")
         self._params = dict(state["params"])
         self._explicit = set(state["explicit"])
         self._start_time = state["start_time"]
-        self._setup_tolerance = state["setup_tolerance"]
         if state["sim"] is None:
             self._drop_sim()
         else:
             self._ensure_sim(compute_outputs=False).set_state(state["sim"])
-        self._mode, self._t = state["mode"], state["t"]
+        self._mode, self._t = Mode(state["mode"]), state["t"]
         self._outputs = np.array(state["outputs"], float)
         self._have_outputs, self._failed = state["have_outputs"], state["failed"]
 
-    # Called on the class (no instance to log to or to protect, see _fmi_call): they never raise.
-    # A state that cannot be (de)serialized becomes {"invalid": reason}, refused by
-    # fmi2SetFMUstate with that reason.
-    @staticmethod
-    def _fmu_state_to_bytes(state) -> bytes:
-        try:
-            return statecodec.dumps(state)
-        except Exception as exc:
-            return statecodec.dumps({"invalid": f"the FMU state could not be serialized: {exc}"})
+    def _handle(self, address: int) -> int:
+        if not address:
+            raise CallRefused("FMUstate is NULL")
+        return ctypes.c_void_p.from_address(address).value or 0
 
-    @staticmethod
-    def _fmu_state_from_bytes(data: bytes):
+    def _state(self, handle: int) -> dict:
+        if handle not in self._states:
+            raise CallRefused(f"FMUstate {handle:#x} is not a state of this instance (freed or never got)")
+        return self._states[handle]
+
+    def _store(self, address: int, entry: dict) -> None:
+        handle = self._handle(address)
+        if handle not in self._states:  # NULL or foreign: a new state; else overwrite it (FMI 2.0)
+            handle, self._next_state = self._next_state, self._next_state + 1
+        self._states[handle] = entry
+        ctypes.c_void_p.from_address(address).value = handle
+
+    @fmi_call("fmi2GetFMUstate")
+    def get_fmu_state(self, address: int):
+        self._store(address, {"state": self._snapshot()})
+
+    @fmi_call("fmi2SetFMUstate")
+    def set_fmu_state(self, handle: int):
+        self._restore(self._state(handle)["state"])
+
+    @fmi_call("fmi2FreeFMUstate")
+    def free_fmu_state(self, address: int):
+        handle = self._handle(address)
+        if handle:
+            self._state(handle)
+            del self._states[handle]
+            ctypes.c_void_p.from_address(address).value = None
+
+    def _serialized(self, handle: int) -> bytes:
+        entry = self._state(handle)
+        if "bytes" not in entry:
+            entry["bytes"] = statecodec.dumps(entry["state"])
+        return entry["bytes"]
+
+    @fmi_call("fmi2SerializedFMUstateSize")
+    def serialized_fmu_state_size(self, handle: int, size_address: int):
+        if not size_address:
+            raise CallRefused("size is NULL")
+        ctypes.c_size_t.from_address(size_address).value = len(self._serialized(handle))
+
+    @fmi_call("fmi2SerializeFMUstate")
+    def serialize_fmu_state(self, handle: int, buffer: int, size: int):
+        data = self._serialized(handle)
+        if size < len(data) or not buffer:
+            raise CallRefused(f"the buffer holds {size} bytes, the state needs {len(data)} "
+                              "(fmi2SerializedFMUstateSize)")
+        ctypes.memmove(buffer, data, len(data))
+
+    @fmi_call("fmi2DeSerializeFMUstate")
+    def deserialize_fmu_state(self, buffer: int, size: int, address: int):
+        if size and not buffer:
+            raise CallRefused(f"serializedState is NULL but size = {size}")
         try:
-            return statecodec.loads(data)
-        except Exception as exc:
-            return {"invalid": f"the bytes given to fmi2DeSerializeFMUstate are not an FMU state: {exc}"}
+            state = statecodec.loads(ctypes.string_at(buffer, size) if size else b"")
+        except ValueError as exc:
+            raise CallRefused(f"the bytes are not an FMU state of this FMU: {exc}") from None
+        if not isinstance(state, dict) or state.get("guid") != self._manifest["guid"]:
+            raise CallRefused("the state does not belong to this FMU (GUID differs)")
+        self._store(address, {"state": state})
+
+
+def _steps_taken(sim: Simulation) -> int:
+    return int(sim.get_state()["integrator"]["nsteps"])

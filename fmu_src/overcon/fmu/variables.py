@@ -9,7 +9,8 @@ Value references are the positions in :func:`table` (0-based), in this order:
 3. parameters (causality parameter, variability fixed, initial exact): per friction joint
    ``<joint>.mu`` and ``<joint>.v_reg`` (law ``stribeck`` also ``<joint>.mu_static`` and
    ``<joint>.v_stribeck``), then the solver settings ``solver.*`` of
-   :class:`overcon.spec.SolverSpec`.
+   :class:`overcon.spec.SolverSpec`, then the work budget of one ``fmi2DoStep`` (``BUDGET_PARAMS``,
+   FMU only, variability tunable).
 
 ``UNITS`` gives every unit's SI base-unit exponents (FMI ``BaseUnit``).
 """
@@ -94,13 +95,21 @@ SOLVER_PARAMS = {
     # name: (type, unit, rule, description)
     "method": ("String", None, "method", "integrator: dopri5 or dop853 (adaptive explicit), rk4 (fixed step) or radau (implicit, for stiff friction)"),
     "tolerance": ("Real", "1", "unit_interval",
-                  "accuracy target of dopri5, dop853 and radau (rtol = atol); used unless fmi2SetupExperiment gives one "
-                  "and this parameter was not set"),
+                  "accuracy target of dopri5, dop853 and radau (rtol = atol); a tolerance given to "
+                  "fmi2SetupExperiment is ignored (reported as a warning when it differs)"),
     "step": ("Real", "s", "positive", "fixed step of rk4"),
     "max_step": ("Real", "s", "positive", "largest internal step of the adaptive methods"),
     "baumgarte": ("Real", "1/s", "nonneg", "Baumgarte constraint stabilisation frequency (0 disables)"),
     "friction_tol": ("Real", "1", "positive", "friction fixed-point tolerance (relative, on lambda)"),
     "friction_max_iter": ("Integer", None, "int_ge1", "friction fixed-point iteration limit"),
+}
+
+BUDGET_PARAMS = {
+    # name: (type, unit, rule, default, description); FMU parameters only (not scene settings)
+    "max_internal_steps": ("Integer", None, "int_ge1", 10000,
+                           "work budget of one fmi2DoStep: integrator steps (exceeded: fmi2Error)"),
+    "max_wall_time": ("Real", "s", "positive", 30.0,
+                      "work budget of one fmi2DoStep: wall-clock seconds (exceeded: fmi2Error)"),
 }
 
 FRICTION_PARAMS = {
@@ -161,6 +170,9 @@ def table(model, reaction_unique: dict[str, bool], motion_unique: bool) -> list[
         value = float(value) if typ == "Real" else value
         out.append(Var(f"solver.{p}", typ, "parameter", "fixed", "exact", text, unit=unit,
                        start=value, key=("param", f"solver.{p}")))
+    for p, (typ, unit, _rule, value, text) in BUDGET_PARAMS.items():
+        out.append(Var(f"solver.{p}", typ, "parameter", "tunable", "exact", text, unit=unit,
+                       start=value, key=("param", f"solver.{p}")))
     return out
 
 
@@ -169,4 +181,6 @@ def rule(name: str) -> ParamRule:
     group, p = name.rsplit(".", 1)
     if group == "solver" and p in SOLVER_PARAMS:
         return ParamRule(SOLVER_PARAMS[p][2])
+    if group == "solver" and p in BUDGET_PARAMS:
+        return ParamRule(BUDGET_PARAMS[p][2])
     return ParamRule(FRICTION_PARAMS[p][0])

@@ -1,0 +1,60 @@
+"""Entry point of the FMU binary (``native/overcon_fmi2.c``) into Python: imported by
+``fmi2Instantiate`` with ``resources/`` on ``sys.path``. Standard library only at import time,
+because in an interpreter the binary started itself numpy and scipy become importable only after
+:func:`add_site_dirs`."""
+from __future__ import annotations
+
+import importlib.util
+import site
+import sys
+from pathlib import Path
+
+from . import pyinfo
+
+
+def add_site_dirs(dirs: list[str]) -> None:
+    """Add the recorded interpreter's site-packages (``.pth`` files processed) in front of
+    ``sys.path``, as in that interpreter (a virtual environment's packages before the base
+    installation's)."""
+    before = list(sys.path)
+    for d in dirs:
+        site.addsitedir(d)
+    added = [p for p in sys.path if p not in before]
+    sys.path[:] = added + before
+
+
+def _missing() -> list[str]:
+    return [m for m in pyinfo.NEEDED if importlib.util.find_spec(m) is None]
+
+
+def _borrow_recorded_site_dirs(resources: str) -> None:
+    """A host interpreter (fmpy, libcosimpy, ...) without numpy or scipy: append the recorded
+    interpreter's site-packages to sys.path (after the host's own entries), if that interpreter
+    has the same Python version (compiled extension modules are version specific)."""
+    path = Path(resources) / "overcon_python.txt"
+    facts = pyinfo.parse(path.read_text(encoding="utf-8")) if path.is_file() else {}
+    here = "{}.{}".format(*sys.version_info[:2])
+    if facts.get("version") == [here]:
+        for d in facts.get("site", []):
+            if d not in sys.path:
+                site.addsitedir(d)
+
+
+def instantiate(instance_name: str, guid: str, resources: str, log_address: int, component: int,
+                logging_on: int, site_dirs: str):
+    """Called by fmi2Instantiate; returns the slave (an exception is logged by the binary and
+    fmi2Instantiate returns NULL). ``site_dirs``: newline-separated folders, given only when the
+    binary initialised the interpreter."""
+    if site_dirs:
+        add_site_dirs([d for d in site_dirs.split("\n") if d])
+    elif _missing():
+        _borrow_recorded_site_dirs(resources)
+    if not getattr(sys, "argv", None):
+        sys.argv = [""]  # an embedded interpreter has none; some libraries read sys.argv[0]
+    try:
+        from .slave import instantiate as make
+    except ImportError as exc:
+        raise ImportError(f"{exc}: the FMU needs numpy and scipy in the interpreter it runs in "
+                          f"({sys.version.split()[0]}, sys.path = {sys.path}); set OVERCON_PYTHON to "
+                          "a Python executable that has them") from exc
+    return make(instance_name, guid, resources, log_address, component, bool(logging_on))

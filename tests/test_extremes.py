@@ -104,18 +104,22 @@ def test_inconsistent_q0_refused_naming_equations():
     sc = load("planar_sliders.toml", eliminate=[4])
     bodies = list(sc.mechanism.bodies)
     bodies[2] = dataclasses.replace(bodies[2], q0=(2.0, 1.01, 0.0))  # link3 moved 1 cm off joint 4/6
-    model = compile_model(dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies))))
+    bad = dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies)))
     with pytest.raises(InconsistentInitialState, match=r"Phi8.*Phi12|Phi8"):
-        Simulation(model)
+        compile_model(bad)  # refused when compiled (check, simulate and build alike) ...
+    with pytest.raises(InconsistentInitialState, match=r"Phi8.*Phi12|Phi8"):
+        Simulation(compile_model(bad, check_initial=False))  # ... and by the Simulation itself
 
 
 def test_inconsistent_h0_refused():
     sc = load("planar_sliders.toml", eliminate=[4])
     bodies = list(sc.mechanism.bodies)
     bodies[0] = dataclasses.replace(bodies[0], h0=(0.0, 0.5, 0.0))  # slider1 moving off its guide
-    model = compile_model(dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies))))
+    bad = dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies)))
     with pytest.raises(InconsistentInitialState, match="velocit"):
-        Simulation(model)
+        compile_model(bad)
+    with pytest.raises(InconsistentInitialState, match="velocit"):
+        Simulation(compile_model(bad, check_initial=False))
 
 
 # ------------------------------------------------------------------------------ singular positions

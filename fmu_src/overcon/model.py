@@ -117,6 +117,7 @@ class Model:
     friction_joints: tuple[int, ...]
     position_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into q)
     reaction_joints: tuple[int, ...] = field(default=())
+    friction_outputs: tuple[int, ...] = field(default=())  # joints with a <joint>.friction output
     plan: "AssemblyPlan | None" = field(default=None, repr=False, compare=False)  # filled by compile_model
 
     @property
@@ -135,6 +136,7 @@ class Model:
         for j in self.reaction_joints:
             c = self.joints[j]
             names += [f"{c.name}.{comp}" for comp in c.components]
+        names += [f"{self.joints[j].name}.friction" for j in self.friction_outputs]
         return names
 
 
@@ -304,6 +306,15 @@ def physical_reaction(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray
     local = c.module.reaction_transform(c, f) @ fi
     n_local = len(c.module.REACTION_COMPONENTS)
     return -np.concatenate([local[:n_local], fi[: model.dim]])
+
+
+def friction_output(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> float:
+    """The friction output ``<joint>.friction`` of friction joint c (unit ``FRICTION_UNIT`` of
+    the joint type): the joint module's ``friction_force`` at the multipliers lam. Sign
+    convention (README "Conventions"): the friction on body i of the joint; translational:
+    force along the guide x' (N), revolute: torque (N.m, counter-clockwise positive), both
+    positive the way body j moves relative to body i; spherical: magnitude (N, >= 0)."""
+    return float(c.module.friction_force(c, f, reaction_on_body_i(model, c, f, lam), c.law))
 
 
 # ----------------------------------------------------------------------------- assembly plan
@@ -488,6 +499,8 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
         friction_joints=tuple(c.index for c in joints if c.law is not None),
         position_outputs=tuple((p, coord_index[p]) for p in scene.positions),
         reaction_joints=tuple(joint_index[j] for j in scene.reactions),
+        friction_outputs=tuple(joint_index[j] for j in
+                               (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
     )
     if check_initial:
         check_initial_state(base)

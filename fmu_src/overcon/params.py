@@ -190,7 +190,7 @@ def check_relations(solver, start: float, stop: float) -> list[tuple[str, str]]:
         what = "rk4 step" if solver.method == "rk4" else "largest adaptive step"
         h = solver.step if solver.method == "rk4" else solver.max_step
         out.append((name, f"{what} {h!r} s needs at least {n_steps:.3g} steps over {span:g} s (stop - start); "
-                          f"at most {MAX_MIN_STEPS:.0e} (1-3 ms each: about an hour): use a larger step or "
+                          f"at most {MAX_MIN_STEPS:.0e} (1-3 ms each: 0.3-1 h): use a larger step or "
                           "a shorter run"))
     return out
 

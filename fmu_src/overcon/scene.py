@@ -302,8 +302,8 @@ def _array_of_tables(ctx: _Ctx, doc: dict, key: str, required: bool, limit: int)
         ctx.add(key, f"expected an array of tables ([[{key}]]), got {_desc(value)}")
         return []
     if len(value) > limit:
-        ctx.add(key, f"{len(value)} entries; at most {limit} (bounded work of the pre-check, see "
-                     "overcon.scene.MAX_BODIES)")
+        ctx.add(key, f"{len(value)} entries; at most {limit} (bounded work: the pre-check's cost grows "
+                     f"like joints x coordinates^3; overcon.scene.MAX_{key.upper()})")
         return []
     out = []
     for k, item in enumerate(value):
@@ -782,10 +782,11 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
             ctx.add("scene.stop_time", f"must be > start_time ({start_time!r}), got {stop_time!r}")
 
     # --- outputs
-    positions = reactions = "all"
+    positions = reactions = friction_out = "all"
     ot = doc.get("outputs", _MISSING)
     if ot is not _MISSING and _table(ctx, ot, "outputs") is not None:
-        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions"))
+        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions", "friction"))
+        friction_out = ot.get("friction", "all")
         positions = ot.get("positions", "all")
         reactions = ot.get("reactions", "all")
     else:
@@ -796,6 +797,10 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     valid_reac = set(joints) if mech is not None else None
     reactions = _check_outputs(ctx, reactions, "outputs.reactions", valid_reac, "joint name",
                                lambda s: f"unknown joint {_short(s)}")
+    friction_out = _check_outputs(ctx, friction_out, "outputs.friction",
+                                  set(friction) if friction is not None else None, "friction joint name",
+                                  lambda s: f"{_short(s)} is not in scene.friction (friction outputs are "
+                                            "the friction forces of friction joints)")
 
     # --- solver
     solver_kw = {}
@@ -829,6 +834,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
         fparams[jn] = fs
     return SceneSpec(name=name, mechanism=mech, friction=friction, friction_params=fparams,
                      eliminate=eliminate, positions=positions, reactions=reactions,
+                     friction_outputs=friction_out,
                      start_time=start_time, stop_time=stop_time,
                      solver=SolverSpec(**solver_kw), group=group, description=description,
                      source=ctx.file)
@@ -1035,7 +1041,12 @@ def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, 
 
         names = _check_friction_list(ctx, friction, "--friction", mech, has_params,
                                      lambda k: "--friction")
-        if names is not None:
+        listed = () if scene.friction_outputs == "all" else scene.friction_outputs
+        dropped = [jn for jn in listed if names is not None and jn not in names]
+        if dropped:
+            ctx.add("--friction", f"the scene's outputs.friction lists {', '.join(dropped)}, which would "
+                                  "have no friction: keep them in the friction set")
+        elif names is not None:
             changes["friction"] = names
             changes["friction_params"] = {
                 jn: scene.friction_params.get(jn) or joints[jn].friction for jn in names}

@@ -24,7 +24,8 @@ import numpy as np
 from .dynamics import evaluate
 from .integrators import METHODS
 from .model import (InconsistentInitialState, Model, ModelError, SingularConfiguration,  # noqa: F401
-                    check_initial_state, constraints, coordinate_rates, frames, jacobian_h, physical_reaction)
+                    check_initial_state, constraints, coordinate_rates, frames, friction_output, jacobian_h,
+                    physical_reaction)
 
 
 class SingularityMonitor:
@@ -206,15 +207,17 @@ class Simulation:
                 "looser tolerance")
 
     def outputs(self, t: float, y: np.ndarray) -> np.ndarray:
-        """Output vector (model.output_names() order) at (t, y); reactions need one evaluation of
-        Eq. 18, warm-started from the integrator's lam but without changing it."""
+        """Output vector (model.output_names() order) at (t, y): positions, reactions, friction
+        forces (:func:`overcon.model.friction_output`); reactions and friction need one evaluation
+        of Eq. 18, warm-started from the integrator's lam but without changing it."""
         model = self.model
         q, h = y[: self.n], y[self.n:]
         vals = [q[i] for _, i in model.position_outputs]
-        if model.reaction_joints:  # one evaluation of Eq. 18; positions only: none at all
+        if model.reaction_joints or model.friction_outputs:  # one evaluation of Eq. 18; positions only: none
             ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy())
             for j in model.reaction_joints:
                 vals.extend(physical_reaction(model, model.joints[j], ev.frames, ev.lam))
+            vals.extend(friction_output(model, model.joints[j], ev.frames, ev.lam) for j in model.friction_outputs)
         return np.array(vals, float)
 
     # -- state -----------------------------------------------------------------------------

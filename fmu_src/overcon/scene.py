@@ -722,7 +722,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
             else:
                 mpath = Path(ctx.file).parent / rel
                 mfile = str(mpath)
-                if not _is_file(mpath):
+                if not _exists(mpath):
                     ctx.add("scene.mechanism", f"mechanism file not found: {mfile}")
                 else:
                     mctx = _Ctx(mfile, problems)
@@ -868,9 +868,10 @@ def _check_outputs(ctx: _Ctx, value, field: str, valid: set | None, what: str, b
 # Reading files
 
 
-def _is_file(path: Path) -> bool:
+def _exists(path: Path) -> bool:
+    """Something is there (what it is and whether it can be read: :func:`_read_bytes`)."""
     try:
-        return path.is_file()
+        return path.exists()
     except (OSError, ValueError):
         return False
 

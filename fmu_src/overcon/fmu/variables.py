@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..joints import TYPES
-from ..params import check_param
+from ..params import check_param, rule_of
 from ..spec import COORDINATE_UNITS
 
 UNITS: dict[str, dict[str, int]] = {
@@ -86,6 +86,9 @@ class ParamRule:
 
     def check(self, value) -> str | None:
         return check_param(self.name, value)
+
+    def range_text(self) -> str:
+        return rule_of(self.name).range_text()
 
 
 SOLVER_PARAMS = {
@@ -174,7 +177,5 @@ def table(model, reaction_unique: dict[str, bool], motion_unique: bool) -> list[
 def rule(name: str) -> ParamRule:
     """The admissible values of parameter ``name`` (``joint4.mu``, ``solver.tolerance``): the
     rule of :data:`overcon.params.RULES`. KeyError for a name that is no parameter."""
-    from ..params import rule_of
-
     rule_of(name)  # KeyError now, not at check time
     return ParamRule(name)

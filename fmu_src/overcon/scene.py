@@ -26,10 +26,11 @@ What is validated
   zeros. Joints: names identifiers and unique; ``type`` in ``spec.JOINT_FIELDS`` and allowed for
   the mechanism kind; ``body_i``/``body_j`` a body or ``base`` and different; the type's required
   and optional fields (``spec.JOINT_FIELDS``) with their shapes; translational ``v`` non-zero.
-  Joint friction tables: ``law`` in ``spec.FRICTION_LAWS`` (default ``regularised``), ``mu`` >= 0,
-  ``v_reg`` > 0 (default 1e-3), the type's size key (``length`` for translational, ``radius`` for
+  Joint friction tables: ``law`` in ``spec.FRICTION_LAWS`` (default ``regularised``), ``mu``,
+  ``v_reg`` (default 1e-3), ``mu_static``, ``v_stribeck`` by :mod:`overcon.params`, the type's size key (``length`` for translational, ``radius`` for
   revolute/spherical; stored as ``FrictionSpec.size``) > 0 and no other size key; ``stribeck``
-  needs ``mu_static`` >= ``mu`` and ``v_stribeck`` > 0, which other laws do not take. Loads:
+  needs ``mu_static`` (>= ``mu``, :func:`overcon.params.check_mu_static`) and ``v_stribeck``,
+  which other laws do not take. Loads:
   ``type`` in ``spec.LOAD_FIELDS`` with its fields; force/torque act on a moving body; a spring
   joins two different bodies (one may be ``base``), stiffness and free length >= 0, attachment
   points default to the body origins (stored as zero vectors).
@@ -40,9 +41,15 @@ What is validated
   ``eliminate`` ``"auto"`` or distinct integers in 1..m (m = total number of constraint
   equations); ``stop_time`` > ``start_time``; ``[outputs]`` ``positions`` are distinct
   ``<body>.<coordinate>`` (``spec.COORDINATES``) or ``"all"``, ``reactions`` distinct joint names
-  or ``"all"`` (a missing ``[outputs]`` table or key means ``"all"``); ``[solver]``: ``method`` in
-  ``spec.METHODS``, 0 < ``tolerance`` < 1, ``step``, ``output_interval``, ``friction_tol``,
-  ``max_step`` > 0, ``baumgarte`` >= 0, ``friction_max_iter`` an integer >= 1.
+  or ``"all"`` (a missing ``[outputs]`` table or key means ``"all"``), ``friction`` distinct
+  joints of ``scene.friction`` or ``"all"`` (the default: a ``<joint>.friction`` output for every
+  friction joint); ``[solver]``: every field against its envelope in the one rules table
+  :mod:`overcon.params` (with the types above), and the bounded-work relations of
+  :func:`overcon.params.check_relations` (output points, fewest internal steps), reported against
+  the solver field, or ``scene.stop_time`` when the file does not give that field.
+* Files (bounded work): only regular files are read (a FIFO would block, ``/dev/zero`` never
+  ends: both are refused without opening them), at most :data:`MAX_FILE_BYTES` (1 MiB); at most
+  :data:`MAX_BODIES` bodies, :data:`MAX_JOINTS` joints, :data:`MAX_LOADS` loads (why: there).
 
 If the scene's mechanism file has problems, the scene's references to bodies, joints and equation
 numbers are not checked (only its own structure), to avoid follow-on noise.

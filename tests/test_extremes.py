@@ -11,6 +11,7 @@ import pytest
 from overcon import scene
 from overcon.model import compile_model
 from overcon.precheck import precheck
+from overcon.joints import TYPES
 from overcon.simulate import InconsistentInitialState, Simulation, SimulationError, run
 from overcon.spec import BodySpec, FrictionSpec, JointSpec, LoadSpec, MechanismSpec, SceneSpec
 
@@ -81,7 +82,7 @@ def to_millimetres(sc: SceneSpec) -> SceneSpec:
 @pytest.mark.parametrize("name, stop", [("planar_f45_wo4.toml", 1.0), ("planar_f1_wo6.toml", 1.0),
                                         ("spatial_MN_wo9.toml", 0.5)])
 def test_unit_rescaling_same_verdicts_scaled_results(name, stop):
-    sc = with_solver(load(name, stop_time=stop), tolerance=1e-10)
+    sc = dataclasses.replace(with_solver(load(name, stop_time=stop), tolerance=1e-10), friction_outputs="all")
     m_si, m_mm = compile_model(sc), compile_model(to_millimetres(sc))
     r_si, r_mm = precheck(m_si), precheck(m_mm)
     for key in ("rank", "dof", "redundant", "friction_on_nonunique", "motion_unique"):
@@ -91,6 +92,8 @@ def test_unit_rescaling_same_verdicts_scaled_results(name, stop):
     for k, n in enumerate(a.names):
         comp = n.split(".")[1]
         factor = {"x": LENGTH, "y": LENGTH, "z": LENGTH, "T": LENGTH**2}.get(comp, LENGTH if comp.startswith("F") else 1.0)
+        if comp == "friction":  # a force (N -> kg mm/s^2) or, revolute, a torque
+            factor = LENGTH**2 if TYPES[m_si.joints[[c.name for c in m_si.joints].index(n.split(".")[0])].type].FRICTION_UNIT == "N.m" else LENGTH
         scale = max(1.0, float(np.max(np.abs(a.values[:, k]))))
         # positions to 1e-6 relative; reactions to 1e-4 relative (friction reactions inside the
         # regularisation band amplify the integration error: gain mu |F| / v_reg)

@@ -388,7 +388,8 @@ def test_bug10_friction_output_translational(tmp_path):
     friction output is mu (|N - T/l| + |T/l|) with N = Fy, T the reported moment, signed with
     the relative sliding velocity."""
     out = tmp_path / "f1.csv"
-    code, _, err = cli("simulate", MECH / "planar_f1_wo4.toml", "--stop-time", "0.5", "--out", out)
+    code, _, err = cli("simulate", MECH / "planar_f1_wo4.toml", "--stop-time", "0.5", "--out", out,
+                       "--friction-outputs", "all")
     assert code == 0, err
     rows = list(csv.DictReader(out.open()))
     assert list(rows[0])[-1] == "joint1.friction"
@@ -402,7 +403,7 @@ def test_bug10_friction_output_translational(tmp_path):
 
 
 def test_friction_outputs_every_friction_joint_after_the_reactions(tmp_path):
-    model = compile_model(scene.load(MECH / "spatial_GHMN_wo5.toml"))
+    model = compile_model(scene.as_scene(scene.load(MECH / "spatial_GHMN_wo5.toml"), friction_outputs="all"))
     names = model.output_names()
     assert names[-4:] == ["G.friction", "H.friction", "M.friction", "N.friction"]
     res = run(model, stop_time=0.2)
@@ -412,21 +413,55 @@ def test_friction_outputs_every_friction_joint_after_the_reactions(tmp_path):
     outs = [v for v in table if v.causality == "output" and v.type == "Real"]
     assert [v.name for v in outs] == names  # the FMU's outputs are Simulation.outputs, in order
     assert {v.unit for v in outs if v.name.endswith(".friction")} == {"N"}
-    planar = compile_model(scene.load(MECH / "planar_f45_wo4.toml"))
+    planar = compile_model(scene.as_scene(scene.load(MECH / "planar_f45_wo4.toml"), friction_outputs="joint4,joint5"))
     fr = [v for v in variables.table(planar, {f"joint{k}": True for k in range(1, 7)}, True)
           if v.name.endswith(".friction")]
     assert [(v.name, v.unit) for v in fr] == [("joint4.friction", "N.m"), ("joint5.friction", "N.m")]
 
 
-def test_friction_outputs_selectable_and_existing_columns_unchanged(tmp_path):
-    """outputs.friction = [] drops them; the other columns are bit-identical either way."""
-    path = scene_copy(tmp_path, edit=lambda t: t.replace("[outputs]\n", "[outputs]\nfriction = []\n", 1))
-    model_none = compile_model(scene.load(path))
-    model_all = compile_model(scene.load(MECH / "planar_f45_wo4.toml"))
-    assert not any(n.endswith(".friction") for n in model_none.output_names())
-    a, b = run(model_all, stop_time=0.3), run(model_none, stop_time=0.3)
-    assert np.array_equal(a.values[:, : len(b.names)], b.values) and a.names[: len(b.names)] == b.names
-    bad = scene_copy(tmp_path / "x" if (tmp_path / "x").mkdir() is None else tmp_path,
-                     edit=lambda t: t.replace("[outputs]\n", '[outputs]\nfriction = ["joint1"]\n', 1))
+def test_friction_outputs_opt_in_for_scenes_listing_outputs_and_columns_unchanged(tmp_path):
+    """A scene with an [outputs] table keeps exactly its outputs (the paper scenes: their FMUs'
+    baselines); outputs.friction = "all" adds the friction forces after them, the other columns
+    bit-identical. A bare mechanism run with friction has them by default."""
+    plain = compile_model(scene.load(MECH / "planar_f45_wo4.toml"))
+    assert not any(n.endswith(".friction") for n in plain.output_names())
+    path = scene_copy(tmp_path, edit=lambda t: t.replace("[outputs]\n", '[outputs]\nfriction = "all"\n', 1))
+    with_fr = compile_model(scene.load(path))
+    assert with_fr.output_names() == plain.output_names() + ["joint4.friction", "joint5.friction"]
+    a, b = run(with_fr, stop_time=0.3), run(plain, stop_time=0.3)
+    assert np.array_equal(a.values[:, : len(b.names)], b.values)
+    mech = compile_model(scene.as_scene(scene.load(MECH / "planar_sliders.toml"), friction="joint4"))
+    assert mech.output_names()[-1] == "joint4.friction"
+    (tmp_path / "x").mkdir()
+    bad = scene_copy(tmp_path / "x", edit=lambda t: t.replace("[outputs]\n", '[outputs]\nfriction = ["joint1"]\n', 1))
     with pytest.raises(scene.SceneError, match="outputs.friction.*not in scene.friction"):
         scene.load(bad)
+    code, _, err = cli("simulate", MECH / "planar_f45_wo4.toml", "--out", tmp_path / "o.csv",
+                       "--friction-outputs", "joint1")
+    assert code == 2 and "--friction-outputs[0]: 'joint1' has no friction" in err
+
+
+def test_ctrl_c_ends_a_run_cleanly(tmp_path):
+    """The issue's runs could not be cancelled cleanly: SIGINT (Ctrl-C) ends simulate with exit
+    130 and one line, no traceback."""
+    proc = subprocess.Popen([sys.executable, "-m", "overcon.cli", "simulate", str(MECH / "planar_f45_wo4.toml"),
+                             "--stop-time", "200", "--out", str(tmp_path / "o.csv")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        proc.wait(timeout=4)  # importing and starting; the run itself takes minutes
+    except subprocess.TimeoutExpired:
+        pass
+    assert proc.poll() is None, proc.communicate()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=LIMIT)
+    assert proc.returncode == 130 and "overcon: interrupted" in err and "Traceback" not in err
+
+
+def test_library_arguments_obey_the_same_rules():
+    model = compile_model(scene.load(MECH / "planar_none_wo4.toml"))
+    with pytest.raises(ValueError, match=r"Simulation\(tolerance=1e-300\): must be in \[1e-14, 0.01\]"):
+        Simulation(model, tolerance=1e-300)
+    with pytest.raises(ValueError, match=r"Simulation\(tolerance=0\)"):
+        Simulation(model, tolerance=0)  # not silently the scene's value
+    with pytest.raises(ValueError, match=r"run\(output_interval=1e-12\)"):
+        run(model, output_interval=1e-12)

@@ -57,6 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"largest step of the adaptive methods ({_range('solver.max_step')})")
     s.add_argument("--output-interval", type=_number, metavar="DT",
                    help=f"output grid interval ({_range('solver.output_interval')})")
+    s.add_argument("--friction-outputs", metavar="all|none|J1,J2",
+                   help="friction force outputs <joint>.friction (overrides the scene's outputs.friction)")
     s.add_argument("--max-steps", type=_jobs, metavar="N",
                    help=f"work budget: internal steps (default {MAX_STEPS:.0e})")
     s.add_argument("--max-wall-time", type=_positive, metavar="S",
@@ -155,7 +157,8 @@ def _load(args):
     overrides = dict(
         friction=None if args.friction is None else scene_mod.parse_joint_list(args.friction),
         eliminate=None if args.eliminate is None else scene_mod.parse_eliminate(args.eliminate),
-        stop_time=args.stop_time, solver=solver, source=args.file)
+        stop_time=args.stop_time, solver=solver, friction_outputs=getattr(args, "friction_outputs", None),
+        source=args.file)
     spec = scene_mod.as_scene(spec, **overrides)
     return compile_model(spec)
 

@@ -42,8 +42,9 @@ What is validated
   equations); ``stop_time`` > ``start_time``; ``[outputs]`` ``positions`` are distinct
   ``<body>.<coordinate>`` (``spec.COORDINATES``) or ``"all"``, ``reactions`` distinct joint names
   or ``"all"`` (a missing ``[outputs]`` table or key means ``"all"``), ``friction`` distinct
-  joints of ``scene.friction`` or ``"all"`` (the default: a ``<joint>.friction`` output for every
-  friction joint); ``[solver]``: every field against its envelope in the one rules table
+  joints of ``scene.friction`` or ``"all"`` (a ``<joint>.friction`` output for each; a missing
+  ``[outputs]`` table means ``"all"``, a missing ``friction`` key in an ``[outputs]`` table means
+  none, so a scene that lists its outputs keeps exactly those); ``[solver]``: every field against its envelope in the one rules table
   :mod:`overcon.params` (with the types above), and the bounded-work relations of
   :func:`overcon.params.check_relations` (output points, fewest internal steps), reported against
   the solver field, or ``scene.stop_time`` when the file does not give that field.
@@ -793,7 +794,9 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     ot = doc.get("outputs", _MISSING)
     if ot is not _MISSING and _table(ctx, ot, "outputs") is not None:
         _unknown_keys(ctx, ot, "outputs", ("positions", "reactions", "friction"))
-        friction_out = ot.get("friction", "all")
+        # an [outputs] table is the scene's output set: friction outputs only if it lists them
+        # (existing scenes keep their outputs, which their FMUs' regression baselines fix)
+        friction_out = ot.get("friction", [])
         positions = ot.get("positions", "all")
         reactions = ot.get("reactions", "all")
     else:
@@ -1011,13 +1014,16 @@ def parse_eliminate(text: str, *, source: str = CLI_SOURCE) -> tuple[int, ...] |
 
 
 def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, stop_time=None,
-             tolerance=None, solver: dict | None = None, source: str = CLI_SOURCE) -> SceneSpec:
+             tolerance=None, solver: dict | None = None, friction_outputs=None,
+             source: str = CLI_SOURCE) -> SceneSpec:
     """A :class:`SceneSpec` from a mechanism (name = mechanism name, every position and every
     reaction as outputs, no friction, eliminate ``"auto"``, stop time 1 s) or from a scene, with
     the given overrides applied. ``friction``: joint names (or a text for
     :func:`parse_joint_list`); ``eliminate``: ints or ``"auto"`` (or a text for
     :func:`parse_eliminate`); ``stop_time`` > start time; ``solver``: ``{field: value}`` of
-    :class:`~overcon.spec.SolverSpec` (``tolerance`` is a shorthand for ``solver={"tolerance": ..}``),
+    :class:`~overcon.spec.SolverSpec` (``tolerance`` is a shorthand for ``solver={"tolerance": ..}``);
+    ``friction_outputs``: ``"all"``, joint names or a text for :func:`parse_joint_list`, each a
+    friction joint (after ``friction``),
     each checked by :mod:`overcon.params` (its envelope, and the bounded-work relations with the
     new stop time), reported with the flag ``--<field>``. Invalid overrides
     raise :class:`SceneError` with ``source`` as the file and the option name as the field; the
@@ -1049,7 +1055,7 @@ def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, 
 
         names = _check_friction_list(ctx, friction, "--friction", mech, has_params,
                                      lambda k: "--friction")
-        listed = () if scene.friction_outputs == "all" else scene.friction_outputs
+        listed = () if scene.friction_outputs == "all" or friction_outputs is not None else scene.friction_outputs
         dropped = [jn for jn in listed if names is not None and jn not in names]
         if dropped:
             ctx.add("--friction", f"the scene's outputs.friction lists {', '.join(dropped)}, which would "
@@ -1078,6 +1084,17 @@ def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, 
             ctx.add("--stop-time", f"must be > start time ({scene.start_time!r}), got {val!r}")
         elif val is not None:
             changes["stop_time"] = val
+
+    if friction_outputs is not None:
+        if isinstance(friction_outputs, str) and friction_outputs != "all":
+            friction_outputs = parse_joint_list(friction_outputs)
+        if isinstance(friction_outputs, tuple):
+            friction_outputs = list(friction_outputs)
+        on = changes.get("friction", scene.friction)
+        val = _check_outputs(ctx, friction_outputs, "--friction-outputs", set(on), "friction joint name",
+                             lambda s: f"{_short(s)} has no friction (friction joints: {', '.join(on) or 'none'})")
+        if val is not None:
+            changes["friction_outputs"] = val
 
     solver = dict(solver or {})
     if tolerance is not None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import csv
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ import numpy as np
 
 from .dynamics import evaluate
 from .integrators import METHODS
+from .params import MAX_OUTPUT_POINTS, check_param, output_points
 from .model import (InconsistentInitialState, Model, ModelError, SingularConfiguration,  # noqa: F401
                     check_initial_state, constraints, coordinate_rates, frames, friction_output, jacobian_h,
                     physical_reaction)
@@ -118,9 +120,14 @@ class Simulation:
         self.max_steps, self.max_wall_time = max_steps, max_wall_time
         self.wall_time = 0.0  # s spent in advance()
         s = model.scene.solver
-        self.method = method or s.method
-        self.settings = dict(tolerance=tolerance or s.tolerance, step=step or s.step,
-                             max_step=max_step or s.max_step)
+        given = {"method": method, "tolerance": tolerance, "step": step, "max_step": max_step}
+        for name, value in given.items():  # arguments over the scene's (validated) solver: same rules
+            reason = None if value is None else check_param(f"solver.{name}", value)
+            if reason is not None:
+                raise ValueError(f"Simulation({name}={value!r}): {reason}")
+        eff = {k: getattr(s, k) if v is None else v for k, v in given.items()}
+        self.method = eff.pop("method")
+        self.settings = eff
         check_initial_state(model)
         for c in model.joints:
             if c.law is not None and c.law.name == "coulomb":
@@ -267,8 +274,16 @@ def output_grid(start: float, stop: float, interval: float) -> np.ndarray:
 
 def run(model: Model, *, stop_time: float | None = None, output_interval: float | None = None, **settings) -> Result:
     scene = model.scene
+    stop = scene.stop_time if stop_time is None else stop_time
+    interval = scene.solver.output_interval if output_interval is None else output_interval
+    reason = check_param("solver.output_interval", interval)
+    if reason is None and not output_points(dataclasses.replace(scene.solver, output_interval=interval),
+                                           scene.start_time, stop) <= MAX_OUTPUT_POINTS:
+        reason = f"more than {MAX_OUTPUT_POINTS:.0e} output points from {scene.start_time:g} to {stop:g} s"
+    if reason is not None:
+        raise ValueError(f"run(output_interval={interval!r}): {reason}")
     sim = Simulation(model, **settings)
-    grid = output_grid(scene.start_time, stop_time or scene.stop_time, output_interval or scene.solver.output_interval)
+    grid = output_grid(scene.start_time, stop, interval)
     rows = []
     for t in grid:
         y = sim.advance(t)

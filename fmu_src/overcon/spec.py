@@ -194,7 +194,8 @@ class SceneSpec:
     ``eliminate``: 1-based paper equation indices, or the string ``"auto"``. ``positions`` are
     output names ``<body>.<coordinate>``; ``reactions`` joint names whose reactions are outputs;
     ``friction_outputs`` the friction joints whose friction force ``<joint>.friction`` is an
-    output (``"all"``: every joint in ``friction``, the default)."""
+    output (``"all"``: every joint in ``friction``, the default; a scene file's ``[outputs]``
+    table without a ``friction`` key gives ``()``)."""
 
     name: str
     mechanism: MechanismSpec

@@ -465,3 +465,23 @@ def test_library_arguments_obey_the_same_rules():
         Simulation(model, tolerance=0)  # not silently the scene's value
     with pytest.raises(ValueError, match=r"run\(output_interval=1e-12\)"):
         run(model, output_interval=1e-12)
+
+
+def test_friction_output_through_the_fmu(tmp_path):
+    """A scene with outputs.friction = "all" built as an FMU: fmpy reads <joint>.friction (unit
+    N.m for the revolute joints 4, 5) with the in-process values."""
+    import fmpy
+
+    from overcon.fmu.build import build_scene
+
+    path = scene_copy(tmp_path, edit=lambda t: t.replace("[outputs]\n", '[outputs]\nfriction = "all"\n', 1))
+    res = build_scene(path, tmp_path / "fmus", echo=lambda s: None, validate=False)
+    assert res.status == "built", res.messages
+    md = fmpy.read_model_description(str(res.fmu))
+    units = {v.name: v.unit for v in md.modelVariables if v.causality == "output" and v.type == "Real"}
+    assert units["joint4.friction"] == units["joint5.friction"] == "N.m"
+    out = fmpy.simulate_fmu(str(res.fmu), stop_time=0.2, output_interval=0.01)
+    ref = run(compile_model(scene.load(path)), stop_time=0.2)
+    for name in ("joint4.friction", "joint5.friction"):
+        assert np.max(np.abs(out[name] - ref.column(name))) <= 1e-9
+        assert np.max(np.abs(ref.column(name))) > 0

@@ -11,6 +11,7 @@ import pytest
 from overcon import scene
 from overcon.model import compile_model
 from overcon.precheck import precheck
+from overcon.joints import TYPES
 from overcon.simulate import InconsistentInitialState, Simulation, SimulationError, run
 from overcon.spec import BodySpec, FrictionSpec, JointSpec, LoadSpec, MechanismSpec, SceneSpec
 
@@ -81,7 +82,7 @@ def to_millimetres(sc: SceneSpec) -> SceneSpec:
 @pytest.mark.parametrize("name, stop", [("planar_f45_wo4.toml", 1.0), ("planar_f1_wo6.toml", 1.0),
                                         ("spatial_MN_wo9.toml", 0.5)])
 def test_unit_rescaling_same_verdicts_scaled_results(name, stop):
-    sc = with_solver(load(name, stop_time=stop), tolerance=1e-10)
+    sc = dataclasses.replace(with_solver(load(name, stop_time=stop), tolerance=1e-10), friction_outputs="all")
     m_si, m_mm = compile_model(sc), compile_model(to_millimetres(sc))
     r_si, r_mm = precheck(m_si), precheck(m_mm)
     for key in ("rank", "dof", "redundant", "friction_on_nonunique", "motion_unique"):
@@ -91,6 +92,8 @@ def test_unit_rescaling_same_verdicts_scaled_results(name, stop):
     for k, n in enumerate(a.names):
         comp = n.split(".")[1]
         factor = {"x": LENGTH, "y": LENGTH, "z": LENGTH, "T": LENGTH**2}.get(comp, LENGTH if comp.startswith("F") else 1.0)
+        if comp == "friction":  # a force (N -> kg mm/s^2) or, revolute, a torque
+            factor = LENGTH**2 if TYPES[m_si.joints[[c.name for c in m_si.joints].index(n.split(".")[0])].type].FRICTION_UNIT == "N.m" else LENGTH
         scale = max(1.0, float(np.max(np.abs(a.values[:, k]))))
         # positions to 1e-6 relative; reactions to 1e-4 relative (friction reactions inside the
         # regularisation band amplify the integration error: gain mu |F| / v_reg)
@@ -104,18 +107,22 @@ def test_inconsistent_q0_refused_naming_equations():
     sc = load("planar_sliders.toml", eliminate=[4])
     bodies = list(sc.mechanism.bodies)
     bodies[2] = dataclasses.replace(bodies[2], q0=(2.0, 1.01, 0.0))  # link3 moved 1 cm off joint 4/6
-    model = compile_model(dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies))))
+    bad = dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies)))
     with pytest.raises(InconsistentInitialState, match=r"Phi8.*Phi12|Phi8"):
-        Simulation(model)
+        compile_model(bad)  # refused when compiled (check, simulate and build alike) ...
+    with pytest.raises(InconsistentInitialState, match=r"Phi8.*Phi12|Phi8"):
+        Simulation(compile_model(bad, check_initial=False))  # ... and by the Simulation itself
 
 
 def test_inconsistent_h0_refused():
     sc = load("planar_sliders.toml", eliminate=[4])
     bodies = list(sc.mechanism.bodies)
     bodies[0] = dataclasses.replace(bodies[0], h0=(0.0, 0.5, 0.0))  # slider1 moving off its guide
-    model = compile_model(dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies))))
+    bad = dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies)))
     with pytest.raises(InconsistentInitialState, match="velocit"):
-        Simulation(model)
+        compile_model(bad)
+    with pytest.raises(InconsistentInitialState, match="velocit"):
+        Simulation(compile_model(bad, check_initial=False))
 
 
 # ------------------------------------------------------------------------------ singular positions

@@ -3,7 +3,12 @@
 
 Exit codes: 0 success (``check``: no friction on a non-unique reaction); 1 ``check`` found
 friction on a joint whose reaction is not unique (or the three tests disagree); 2 invalid input
-(file, field or flag at fault is named); 3 the simulation failed (time and cause are named).
+(file, field or flag at fault is named); 3 the simulation failed (time and cause are named, also
+when the work budget ``--max-steps``/``--max-wall-time`` ran out); 130 interrupted (Ctrl-C).
+
+Solver flags of ``simulate`` (``--tolerance``, ``--step``, ``--max-step``, ``--output-interval``,
+``--method``) override the scene's [solver] table and are checked by the one rules table
+:mod:`overcon.params` (envelope and bounded-work relations), reported with the flag's name.
 """
 from __future__ import annotations
 
@@ -12,10 +17,12 @@ import json
 import sys
 import time
 
+from .simulate import MAX_STEPS, MAX_WALL_TIME
 from .spec import METHODS
 from .verdict import LOCKSTEP_STEP
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
+EXIT_INTERRUPTED = 130  # Ctrl-C (SIGINT), as a shell reports it
 
 
 class _Parser(argparse.ArgumentParser):
@@ -43,10 +50,20 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="integrate a scene (or a bare mechanism) in process, write CSV")
     _scene_flags(s)
     s.add_argument("--out", required=True, metavar="OUT.csv", help="CSV file: time, then the outputs")
-    s.add_argument("--tolerance", type=float, metavar="TOL", help="accuracy target (rtol = atol of dopri5)")
+    s.add_argument("--tolerance", type=_number, metavar="TOL",
+                   help=f"accuracy target, rtol = atol of the adaptive methods ({_range('solver.tolerance')})")
     s.add_argument("--method", choices=METHODS, help="integrator")
-    s.add_argument("--step", type=float, help="rk4 step (s)")
-    s.add_argument("--output-interval", type=float, help="output grid interval (s)")
+    s.add_argument("--step", type=_number, metavar="H", help=f"rk4 step ({_range('solver.step')})")
+    s.add_argument("--max-step", type=_number, metavar="H",
+                   help=f"largest step of the adaptive methods ({_range('solver.max_step')})")
+    s.add_argument("--output-interval", type=_number, metavar="DT",
+                   help=f"output grid interval ({_range('solver.output_interval')})")
+    s.add_argument("--friction-outputs", metavar="all|none|J1,J2",
+                   help="friction force outputs <joint>.friction (overrides the scene's outputs.friction)")
+    s.add_argument("--max-steps", type=_jobs, metavar="N",
+                   help=f"work budget: internal steps (default {MAX_STEPS:.0e})")
+    s.add_argument("--max-wall-time", type=_positive, metavar="S",
+                   help=f"work budget: wall time in seconds (default {MAX_WALL_TIME:g})")
     fg = sub.add_parser("figures", help="run the paper's scene groups in process and plot Figs. 3-5, 7-9 (PNG)")
     fg.add_argument("--mechanisms", default="mechanisms", help="directory with the scene files (default: mechanisms)")
     fg.add_argument("--out", default="figures", help="output directory for the PNG files (default: figures)")
@@ -57,6 +74,20 @@ def build_parser() -> argparse.ArgumentParser:
         "build", help="build one FMI 2.0 co-simulation FMU per scene file (pre-check first; same as build_fmu.py)"))
     _tooling_parsers(sub)
     return parser
+
+
+def _number(text: str) -> float:
+    """Any float (its range is checked by overcon.params, naming the flag)."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+
+
+def _range(name: str) -> str:
+    from .params import rule_of
+
+    return rule_of(name).range_text()
 
 
 def _positive(text: str) -> float:
@@ -157,12 +188,18 @@ def _load(args):
     from .model import compile_model
 
     spec = scene_mod.load(args.file)
+    solver = {key: getattr(args, key) for key in SOLVER_FLAGS if getattr(args, key, None) is not None}
     overrides = dict(
         friction=None if args.friction is None else scene_mod.parse_joint_list(args.friction),
         eliminate=None if args.eliminate is None else scene_mod.parse_eliminate(args.eliminate),
-        stop_time=args.stop_time, tolerance=getattr(args, "tolerance", None), source=args.file)
+        stop_time=args.stop_time, solver=solver, friction_outputs=getattr(args, "friction_outputs", None),
+        source=args.file)
     spec = scene_mod.as_scene(spec, **overrides)
     return compile_model(spec)
+
+
+SOLVER_FLAGS = ("method", "tolerance", "step", "max_step", "output_interval")
+"""``simulate`` flags that override the scene's [solver] table (checked by overcon.params)."""
 
 
 def _input_error(exc) -> int:
@@ -173,7 +210,7 @@ def _input_error(exc) -> int:
 def cmd_check(args) -> int:
     from .precheck import format_table, precheck
 
-    model = _load(args)
+    model = _load(args)  # refuses an inconsistent q0/h0 (exit 2), as simulate and build do
     report = precheck(model, args.file)
     print(json.dumps(report, indent=2) if args.json else format_table(report))
     return EXIT_NONUNIQUE if report["friction_on_nonunique"] or not report["methods_agree"] else EXIT_OK
@@ -182,15 +219,14 @@ def cmd_check(args) -> int:
 def cmd_simulate(args) -> int:
     from .simulate import SimulationError, run, write_csv
 
-    for flag in ("tolerance", "step", "output_interval"):
-        val = getattr(args, flag)
-        if val is not None and not (val > 0 and val < float("inf")):
-            raise ValueError(f"--{flag.replace('_', '-')}: must be a positive finite number, got {val}")
+    from .precheck import friction_warnings
+
     model = _load(args)
+    for w in friction_warnings(model):
+        print(f"overcon: warning: {w}", file=sys.stderr)
     start = time.perf_counter()
     try:
-        res = run(model, output_interval=args.output_interval, method=args.method, step=args.step,
-                  tolerance=args.tolerance)
+        res = run(model, max_steps=args.max_steps or MAX_STEPS, max_wall_time=args.max_wall_time or MAX_WALL_TIME)
     except SimulationError as exc:
         print(f"overcon: {args.file}: {exc}", file=sys.stderr)
         return EXIT_RUNTIME
@@ -352,6 +388,9 @@ def main(argv=None) -> int:
                "reproduce": cmd_reproduce, "sweep": cmd_sweep}[args.command]
     try:
         return handler(args)
+    except KeyboardInterrupt:
+        print("overcon: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except SceneError as exc:  # already names file and field
         return _input_error(exc)
     except (ModelError, InconsistentInitialState, ValueError, OSError) as exc:

@@ -90,7 +90,7 @@ class AdaptiveRK:
         h = min(self.h, self.max_step)
         exponent = -1 / (self.error_order + 1)
         while True:
-            if h < min_step:
+            if not h >= min_step:  # also a NaN step: never loops
                 raise StepSizeTooSmall(f"t = {t:.9g} s: step size {h:.3g} s below the minimum")
             K = np.empty((self.n_stages + 1, n))
             K[0] = f
@@ -374,12 +374,17 @@ class Radau5:
 
     @staticmethod
     def _predict_factor(h_abs, h_abs_old, error_norm, error_norm_old):
-        if error_norm_old is None or h_abs_old is None or error_norm == 0:
+        """Step-size factor of Hairer & Wanner's predictive controller. An error estimate of
+        exactly 0 (e.g. a motion the collocation polynomial reproduces exactly: constant force,
+        no friction) gives an infinite factor, which the caller caps at MAX_FACTOR, as in SciPy
+        (there ``error_norm`` is a NumPy float; a Python float 0.0 ** -0.25 raises)."""
+        if error_norm == 0:
+            return np.inf
+        if error_norm_old is None or h_abs_old is None or error_norm_old == 0:
             multiplier = 1.0
         else:
             multiplier = h_abs / h_abs_old * (error_norm_old / error_norm) ** 0.25
-        with np.errstate(divide="ignore"):
-            return min(1.0, multiplier) * error_norm ** -0.25
+        return min(1.0, multiplier) * error_norm ** -0.25
 
     # -- one step --------------------------------------------------------------------------
     def step(self) -> None:
@@ -390,7 +395,7 @@ class Radau5:
             h_abs, h_abs_old, error_norm_old = self.max_step, None, None
         rejected = False
         while True:
-            if h_abs < min_step:
+            if not h_abs >= min_step:  # also a NaN step: never loops
                 why = f" (last failure: {self.last_failure})" if self.last_failure else ""
                 raise StepSizeTooSmall(f"t = {t:.9g} s: step size {h_abs:.3g} s below the minimum{why}")
             h = h_abs
@@ -420,6 +425,12 @@ class Radau5:
                 error = lu_solve(self.LU_real, self.fun(t, y + error) + ZE)
                 self.nfev += 1
                 error_norm = self._norm(error / scale)
+            if not np.isfinite(error_norm):  # never accept a non-finite estimate: halve, as on failure
+                self.last_failure = "non-finite error estimate"
+                h_abs *= 0.5
+                self.lu_h = None
+                rejected = True
+                continue
             if error_norm > 1:
                 factor = self._predict_factor(h_abs, h_abs_old, error_norm, error_norm_old)
                 h_abs *= max(MIN_FACTOR, safety * factor)

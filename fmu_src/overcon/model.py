@@ -55,6 +55,11 @@ class ModelError(ValueError):
     """A scene that parses but cannot be simulated as asked (e.g. a bad elimination)."""
 
 
+class InconsistentInitialState(ModelError):
+    """q0 or h0 off the constraint manifold (refused by :func:`compile_model`, so ``check``,
+    ``simulate`` and ``build`` all refuse it with the same message)."""
+
+
 class SingularConfiguration(ArithmeticError):
     """The retained constraint Jacobian lost rank (singular position), or a spring has zero length."""
 
@@ -112,6 +117,7 @@ class Model:
     friction_joints: tuple[int, ...]
     position_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into q)
     reaction_joints: tuple[int, ...] = field(default=())
+    friction_outputs: tuple[int, ...] = field(default=())  # joints with a <joint>.friction output
     plan: "AssemblyPlan | None" = field(default=None, repr=False, compare=False)  # filled by compile_model
 
     @property
@@ -130,6 +136,7 @@ class Model:
         for j in self.reaction_joints:
             c = self.joints[j]
             names += [f"{c.name}.{comp}" for comp in c.components]
+        names += [f"{self.joints[j].name}.friction" for j in self.friction_outputs]
         return names
 
 
@@ -301,6 +308,15 @@ def physical_reaction(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray
     return -np.concatenate([local[:n_local], fi[: model.dim]])
 
 
+def friction_output(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> float:
+    """The friction output ``<joint>.friction`` of friction joint c (unit ``FRICTION_UNIT`` of
+    the joint type): the joint module's ``friction_force`` at the multipliers lam. Sign
+    convention (README "Conventions"): the friction on body i of the joint; translational:
+    force along the guide x' (N), revolute: torque (N.m, counter-clockwise positive), both
+    positive the way body j moves relative to body i; spherical: magnitude (N, >= 0)."""
+    return float(c.module.friction_force(c, f, reaction_on_body_i(model, c, f, lam), c.law))
+
+
 # ----------------------------------------------------------------------------- assembly plan
 
 @dataclass(frozen=True, eq=False)
@@ -424,9 +440,13 @@ def plan_of(model: Model) -> AssemblyPlan:
 
 # ----------------------------------------------------------------------------- compile
 
-def compile_model(scene: SceneSpec) -> Model:
+def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
     """Compile a validated scene. Raises ModelError for an elimination the mechanism does not
-    admit (removing an independent equation, or leaving dependent ones), naming the equations."""
+    admit (removing an independent equation, or leaving dependent ones), naming the equations,
+    and :class:`InconsistentInitialState` for q0/h0 off the constraints (before the elimination
+    is checked: a rank at an inconsistent q0 means nothing). ``check_initial=False`` skips that
+    check: only for evaluating kinematics at arbitrary configurations (tests); a Simulation
+    checks again."""
     mech: MechanismSpec = scene.mechanism
     kind = mech.kind
     dim = 2 if kind == "planar" else 3
@@ -479,11 +499,39 @@ def compile_model(scene: SceneSpec) -> Model:
         friction_joints=tuple(c.index for c in joints if c.law is not None),
         position_outputs=tuple((p, coord_index[p]) for p in scene.positions),
         reaction_joints=tuple(joint_index[j] for j in scene.reactions),
+        friction_outputs=tuple(joint_index[j] for j in
+                               (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
     )
+    if check_initial:
+        check_initial_state(base)
     eliminated, mode = resolve_elimination(base, scene.eliminate)
     retained = np.array([i for i in range(row) if i + 1 not in set(eliminated)], int)
     model = replace(base, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
     return replace(model, plan=build_plan(model))
+
+
+def check_initial_state(model: Model, tol: float = 1e-9) -> None:
+    """Refuse q0/h0 off the constraint manifold: |Phi| or |Phi_h h0| above tol (m or rad; m/s
+    or rad/s), scaled by max(1, max |q0|) (max(1, max |h0|)); a non-finite value is refused too.
+    Raises :class:`InconsistentInitialState` naming the violated equations."""
+    f = frames(model, model.q0, model.h0)
+    with np.errstate(all="ignore"):
+        Phi = constraints(model, f)
+        scale = max(1.0, float(np.max(np.abs(model.q0))))
+        bad = [i + 1 for i in np.flatnonzero(~(np.abs(Phi) <= tol * scale))]
+        if bad:
+            absphi = np.where(np.isfinite(Phi), np.abs(Phi), np.inf)
+            worst = int(np.argmax(absphi))
+            raise InconsistentInitialState(
+                "initial coordinates q0 violate the constraints "
+                + ", ".join(f"Phi{i}" for i in bad)
+                + f" (largest |Phi{worst + 1}| = {abs(Phi[worst]):.3g})")
+        vel = jacobian_h(model, f) @ model.h0
+        hscale = max(1.0, float(np.max(np.abs(model.h0))))
+        bad = [i + 1 for i in np.flatnonzero(~(np.abs(vel) <= tol * hscale))]
+    if bad:
+        raise InconsistentInitialState(
+            "initial velocities h0 violate the velocity constraints " + ", ".join(f"Phi{i}" for i in bad))
 
 
 def resolve_elimination(model: Model, eliminate) -> tuple[list[int], str]:

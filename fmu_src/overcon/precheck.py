@@ -22,11 +22,30 @@ def analyse_model(model: Model):
     return analysis.analyse(J, joint_groups(model))
 
 
+def friction_warnings(model: Model) -> list[str]:
+    """Warnings (not errors) about the friction set: a friction joint whose constraint equations
+    are all eliminated carries lam = 0, so its friction force is exactly zero. That is one
+    legitimate outcome of a joint with a non-unique reaction (another elimination gives it a
+    reaction and a friction force), so it is not refused, only said (``check``, ``simulate``,
+    and the pre-check report's ``warnings`` for the FMU)."""
+    out = []
+    eliminated = set(model.eliminated)
+    for j in model.friction_joints:
+        c = model.joints[j]
+        eqs = [r + 1 for r in c.rows]
+        if eliminated.issuperset(eqs):
+            out.append(f"friction on joint {c.name}, whose equations {', '.join('Phi%d' % i for i in eqs)} are all "
+                       "eliminated: its multipliers are 0, so its friction force is 0 throughout (one outcome "
+                       "of a non-unique reaction; keep one of its equations to give it a reaction)")
+    return out
+
+
 def precheck(model: Model, source: str = "") -> dict:
     """JSON-ready report. Keys: file, scene, kind, n_coordinates, n_equations, rank, dof,
     redundant, joints (name, type, unique, methods {rank, svd, qr}, rank_defect, agree),
     methods_agree, friction, friction_on_nonunique, friction_set_unique, motion_unique,
-    eliminated, elimination_mode, problems (human-readable reasons)."""
+    eliminated, elimination_mode, problems (human-readable reasons), warnings (human-readable,
+    not affecting the verdict: :func:`friction_warnings`)."""
     res = analyse_model(model)
     report = analysis.to_json(res)
     types = {c.name: c.type for c in model.joints}
@@ -53,7 +72,7 @@ def precheck(model: Model, source: str = "") -> dict:
         "methods_agree": not disagree, "friction": friction, "friction_on_nonunique": nonunique,
         "friction_set_unique": set_unique, "motion_unique": not nonunique and set_unique,
         "eliminated": list(model.eliminated), "elimination_mode": model.elimination_mode,
-        "problems": problems,
+        "problems": problems, "warnings": friction_warnings(model),
     })
     return report
 
@@ -65,14 +84,15 @@ def format_table(report: dict) -> str:
         f"DOF {report['dof']}, {report['redundant']} redundant",
         f"eliminated: {', '.join('Phi%d' % i for i in report['eliminated']) or 'none'} ({report['elimination_mode']})",
         "",
-        f"{'joint':<10} {'type':<14} {'unique':<7} {'rank':<6} {'svd':<6} {'qr':<6} friction",
     ]
+    w = max([10, *(len(j["name"]) for j in report["joints"])])  # 10, or the longest name
+    lines.append(f"{'joint':<{w}} {'type':<14} {'unique':<7} {'rank':<6} {'svd':<6} {'qr':<6} friction")
     yn = {True: "yes", False: "no"}
     for j in report["joints"]:
         m = j["methods"]
         fr = "ON" if j["name"] in report["friction"] else ""
         flag = "  <-- friction on a non-unique reaction" if j["name"] in report["friction_on_nonunique"] else ""
-        lines.append(f"{j['name']:<10} {j['type']:<14} {yn[j['unique']]:<7} {yn[m['rank']]:<6} "
+        lines.append(f"{j['name']:<{w}} {j['type']:<14} {yn[j['unique']]:<7} {yn[m['rank']]:<6} "
                      f"{yn[m['svd']]:<6} {yn[m['qr']]:<6} {fr}{flag}")
     lines.append("")
     if report["friction"]:
@@ -81,4 +101,5 @@ def format_table(report: dict) -> str:
     else:
         lines.append("no friction: motion unique (reactions of non-unique joints depend on the elimination)")
     lines += [f"problem: {p}" for p in report["problems"]]
+    lines += [f"warning: {p}" for p in report.get("warnings", [])]
     return "\n".join(lines)

@@ -26,10 +26,11 @@ What is validated
   zeros. Joints: names identifiers and unique; ``type`` in ``spec.JOINT_FIELDS`` and allowed for
   the mechanism kind; ``body_i``/``body_j`` a body or ``base`` and different; the type's required
   and optional fields (``spec.JOINT_FIELDS``) with their shapes; translational ``v`` non-zero.
-  Joint friction tables: ``law`` in ``spec.FRICTION_LAWS`` (default ``regularised``), ``mu`` >= 0,
-  ``v_reg`` > 0 (default 1e-3), the type's size key (``length`` for translational, ``radius`` for
+  Joint friction tables: ``law`` in ``spec.FRICTION_LAWS`` (default ``regularised``), ``mu``,
+  ``v_reg`` (default 1e-3), ``mu_static``, ``v_stribeck`` by :mod:`overcon.params`, the type's size key (``length`` for translational, ``radius`` for
   revolute/spherical; stored as ``FrictionSpec.size``) > 0 and no other size key; ``stribeck``
-  needs ``mu_static`` >= ``mu`` and ``v_stribeck`` > 0, which other laws do not take. Loads:
+  needs ``mu_static`` (>= ``mu``, :func:`overcon.params.check_mu_static`) and ``v_stribeck``,
+  which other laws do not take. Loads:
   ``type`` in ``spec.LOAD_FIELDS`` with its fields; force/torque act on a moving body; a spring
   joins two different bodies (one may be ``base``), stiffness and free length >= 0, attachment
   points default to the body origins (stored as zero vectors).
@@ -40,9 +41,16 @@ What is validated
   ``eliminate`` ``"auto"`` or distinct integers in 1..m (m = total number of constraint
   equations); ``stop_time`` > ``start_time``; ``[outputs]`` ``positions`` are distinct
   ``<body>.<coordinate>`` (``spec.COORDINATES``) or ``"all"``, ``reactions`` distinct joint names
-  or ``"all"`` (a missing ``[outputs]`` table or key means ``"all"``); ``[solver]``: ``method`` in
-  ``spec.METHODS``, 0 < ``tolerance`` < 1, ``step``, ``output_interval``, ``friction_tol``,
-  ``max_step`` > 0, ``baumgarte`` >= 0, ``friction_max_iter`` an integer >= 1.
+  or ``"all"`` (a missing ``[outputs]`` table or key means ``"all"``), ``friction`` distinct
+  joints of ``scene.friction`` or ``"all"`` (a ``<joint>.friction`` output for each; a missing
+  ``[outputs]`` table means ``"all"``, a missing ``friction`` key in an ``[outputs]`` table means
+  none, so a scene that lists its outputs keeps exactly those); ``[solver]``: every field against its envelope in the one rules table
+  :mod:`overcon.params` (with the types above), and the bounded-work relations of
+  :func:`overcon.params.check_relations` (output points, fewest internal steps), reported against
+  the solver field, or ``scene.stop_time`` when the file does not give that field.
+* Files (bounded work): only regular files are read (a FIFO would block, ``/dev/zero`` never
+  ends: both are refused without opening them), at most :data:`MAX_FILE_BYTES` (1 MiB); at most
+  :data:`MAX_BODIES` bodies, :data:`MAX_JOINTS` joints, :data:`MAX_LOADS` loads (why: there).
 
 If the scene's mechanism file has problems, the scene's references to bodies, joints and equation
 numbers are not checked (only its own structure), to avoid follow-on noise.
@@ -59,10 +67,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import stat
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import params
 from . import spec as S
 from .spec import (
     BASE,
@@ -185,6 +196,25 @@ def _num(ctx: _Ctx, value, field: str, check=None) -> float | None:
     return x
 
 
+def _param(ctx: _Ctx, value, field: str, name: str):
+    """A solver or friction parameter (``params.RULES[name]``): type first (the loader's
+    messages), then the one rule of :mod:`overcon.params`."""
+    rule = params.rule_of(name)
+    if rule.kind == "choice":
+        val = _choice(ctx, value, field, rule.choices)
+    elif rule.kind == "int":
+        val = _int(ctx, value, field)
+    else:
+        val = _num(ctx, value, field)
+    if val is None:
+        return None
+    reason = rule.check(val)
+    if reason is not None:
+        ctx.add(field, reason)
+        return None
+    return val
+
+
 def _int(ctx: _Ctx, value, field: str) -> int | None:
     if isinstance(value, bool) or not isinstance(value, int):
         ctx.add(field, f"expected an integer, got {_desc(value)}")
@@ -270,13 +300,18 @@ def _get(ctx: _Ctx, table: dict, key: str, prefix: str, required: bool = True):
     return _MISSING
 
 
-def _array_of_tables(ctx: _Ctx, doc: dict, key: str, required: bool):
-    """[(index, table)] for the array-of-tables ``key`` (non-table entries reported)."""
+def _array_of_tables(ctx: _Ctx, doc: dict, key: str, required: bool, limit: int):
+    """[(index, table)] for the array-of-tables ``key`` (non-table entries reported); more than
+    ``limit`` entries is a problem and none of them is read (bounded work)."""
     value = _get(ctx, doc, key, "", required)
     if value is _MISSING:
         return []
     if not isinstance(value, list):
         ctx.add(key, f"expected an array of tables ([[{key}]]), got {_desc(value)}")
+        return []
+    if len(value) > limit:
+        ctx.add(key, f"{len(value)} entries; at most {limit} (bounded work: the pre-check's cost grows "
+                     f"like joints x coordinates^3; overcon.scene.MAX_{key.upper()})")
         return []
     out = []
     for k, item in enumerate(value):
@@ -325,10 +360,8 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
                 given[key] = val
 
     take("law", lambda v, f: _choice(ctx, v, f, S.FRICTION_LAWS))
-    take("mu", lambda v, f: _num(ctx, v, f, _NONNEG))
-    take("v_reg", lambda v, f: _num(ctx, v, f, _POSITIVE))
-    take("mu_static", lambda v, f: _num(ctx, v, f, _NONNEG))
-    take("v_stribeck", lambda v, f: _num(ctx, v, f, _POSITIVE))
+    for key in params.FRICTION_FIELDS:
+        take(key, lambda v, f, key=key: _param(ctx, v, f, key))
     size = None
     for key in size_keys:
         if key in table:
@@ -360,9 +393,9 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
             if getattr(result, key) is None:
                 ctx.add(_join(prefix, key), "required by law 'stribeck'")
                 ok = False
-        if result.mu_static is not None and result.mu_static < result.mu:
-            ctx.add(_join(prefix, "mu_static"),
-                    f"must be >= mu ({result.mu!r}), got {result.mu_static!r}")
+        reason = params.check_mu_static(result.mu, result.mu_static)
+        if reason is not None:
+            ctx.add(_join(prefix, "mu_static"), reason)
             ok = False
     else:
         for key in ("mu_static", "v_stribeck"):
@@ -403,7 +436,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
     # --- bodies
     bodies: list[BodySpec] = []
     body_names: dict[str, str] = {}  # name -> field where first defined
-    body_entries = _array_of_tables(ctx, doc, "bodies", required=True)
+    body_entries = _array_of_tables(ctx, doc, "bodies", required=True, limit=MAX_BODIES)
     if "bodies" in doc and isinstance(doc["bodies"], list) and not doc["bodies"]:
         ctx.add("bodies", "at least one body is required")
     for k, bt in body_entries:
@@ -461,7 +494,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
     common = ("name", "type", "body_i", "body_j", "friction")
     all_joint_fields = tuple(dict.fromkeys(
         f for d in S.JOINT_FIELDS.values() for f in (*d["required"], *d["optional"])))
-    for k, jt in _array_of_tables(ctx, doc, "joints", required=False):
+    for k, jt in _array_of_tables(ctx, doc, "joints", required=False, limit=MAX_JOINTS):
         p = f"joints[{k}]"
         jname = jtype = bi = bj = None
         ok = True
@@ -526,7 +559,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
 
     # --- loads
     loads: list[LoadSpec] = []
-    for k, lt in _array_of_tables(ctx, doc, "loads", required=False):
+    for k, lt in _array_of_tables(ctx, doc, "loads", required=False, limit=MAX_LOADS):
         p = f"loads[{k}]"
         ltype = None
         v = _get(ctx, lt, "type", p)
@@ -612,16 +645,6 @@ def _all_positions(mech: MechanismSpec) -> tuple[str, ...]:
 
 _SCENE_KEYS = ("name", "mechanism", "group", "description", "friction", "eliminate",
                "start_time", "stop_time", "friction_params")
-_SOLVER_CHECKS = {
-    "method": None,
-    "tolerance": (lambda x: 0 < x < 1, "must be in (0, 1)"),
-    "step": _POSITIVE,
-    "output_interval": _POSITIVE,
-    "baumgarte": _NONNEG,
-    "friction_tol": _POSITIVE,
-    "friction_max_iter": None,
-    "max_step": _POSITIVE,
-}
 
 
 def _check_eliminate(ctx: _Ctx, value, field: str, m: int | None, elem_field) -> tuple | str | None:
@@ -707,7 +730,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
             else:
                 mpath = Path(ctx.file).parent / rel
                 mfile = str(mpath)
-                if not _is_file(mpath):
+                if not _exists(mpath):
                     ctx.add("scene.mechanism", f"mechanism file not found: {mfile}")
                 else:
                     mctx = _Ctx(mfile, problems)
@@ -767,10 +790,13 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
             ctx.add("scene.stop_time", f"must be > start_time ({start_time!r}), got {stop_time!r}")
 
     # --- outputs
-    positions = reactions = "all"
+    positions = reactions = friction_out = "all"
     ot = doc.get("outputs", _MISSING)
     if ot is not _MISSING and _table(ctx, ot, "outputs") is not None:
-        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions"))
+        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions", "friction"))
+        # an [outputs] table is the scene's output set: friction outputs only if it lists them
+        # (existing scenes keep their outputs, which their FMUs' regression baselines fix)
+        friction_out = ot.get("friction", [])
         positions = ot.get("positions", "all")
         reactions = ot.get("reactions", "all")
     else:
@@ -781,27 +807,30 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     valid_reac = set(joints) if mech is not None else None
     reactions = _check_outputs(ctx, reactions, "outputs.reactions", valid_reac, "joint name",
                                lambda s: f"unknown joint {_short(s)}")
+    friction_out = _check_outputs(ctx, friction_out, "outputs.friction",
+                                  set(friction) if friction is not None else None, "friction joint name",
+                                  lambda s: f"{_short(s)} is not in scene.friction (friction outputs are "
+                                            "the friction forces of friction joints)")
 
     # --- solver
     solver_kw = {}
+    n_before_solver = len(problems)
     sv = doc.get("solver", _MISSING)
     if sv is not _MISSING and _table(ctx, sv, "solver") is not None:
-        _unknown_keys(ctx, sv, "solver", tuple(_SOLVER_CHECKS))
-        for key, check in _SOLVER_CHECKS.items():
+        _unknown_keys(ctx, sv, "solver", params.SOLVER_FIELDS)
+        for key in params.SOLVER_FIELDS:
             if key not in sv:
                 continue
-            f = f"solver.{key}"
-            if key == "method":
-                val = _choice(ctx, sv[key], f, S.METHODS)
-            elif key == "friction_max_iter":
-                val = _int(ctx, sv[key], f)
-                if val is not None and val < 1:
-                    ctx.add(f, f"must be >= 1, got {val}")
-                    val = None
-            else:
-                val = _num(ctx, sv[key], f, check)
+            val = _param(ctx, sv[key], f"solver.{key}", f"solver.{key}")
             if val is not None:
                 solver_kw[key] = val
+
+    if len(problems) == n_before_solver and start_time is not None and stop_time is not None \
+            and stop_time > start_time:
+        # bounded work: reported against the solver field if the file gives it, else the stop time
+        for name, msg in params.check_relations(SolverSpec(**solver_kw), start_time, stop_time):
+            key = name.split(".", 1)[1]
+            ctx.add(name if isinstance(sv, dict) and key in sv else "scene.stop_time", msg)
 
     if len(problems) > n_problems or not mech_ok:
         return None
@@ -815,6 +844,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
         fparams[jn] = fs
     return SceneSpec(name=name, mechanism=mech, friction=friction, friction_params=fparams,
                      eliminate=eliminate, positions=positions, reactions=reactions,
+                     friction_outputs=friction_out,
                      start_time=start_time, stop_time=stop_time,
                      solver=SolverSpec(**solver_kw), group=group, description=description,
                      source=ctx.file)
@@ -848,24 +878,61 @@ def _check_outputs(ctx: _Ctx, value, field: str, valid: set | None, what: str, b
 # Reading files
 
 
-def _is_file(path: Path) -> bool:
+def _exists(path: Path) -> bool:
+    """Something is there (what it is and whether it can be read: :func:`_read_bytes`)."""
     try:
-        return path.is_file()
+        return path.exists()
     except (OSError, ValueError):
         return False
 
 
-def _read(path: Path, ctx: _Ctx) -> dict | None:
+MAX_FILE_BYTES = 1 << 20
+"""Largest mechanism or scene file (1 MiB). The paper's files are 1.5-6 KB; a mechanism at the
+body and joint limits below is ~40 KB."""
+MAX_BODIES = 200
+MAX_JOINTS = 200
+MAX_LOADS = 1000
+"""Largest numbers of bodies, joints and loads of a mechanism (bounded work). The pre-check
+(:mod:`overcon.analysis`) takes SVDs of the whole constraint Jacobian once per joint, so its
+cost grows like joints x coordinates^3. Measured here (``overcon check`` of a chain of revolute
+(planar) or spherical (spatial) joints, 2 cores): planar 100 bodies 4.3 s, 200 bodies 23 s,
+1000 bodies > 10 min; spatial 100 bodies 7.7 s, 200 bodies 18 s. 200 keeps the check under half
+a minute; the paper's mechanisms have 4 and 7 bodies. Loads cost one short loop each per
+evaluation, hence the larger limit."""
+
+_FILE_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+               (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+               (stat.S_ISSOCK, "a socket"))
+
+
+def _read_bytes(path: Path) -> tuple[bytes | None, str]:
+    """(content, "") of a regular file of at most MAX_FILE_BYTES, else (None, why). Never opens
+    anything but a regular file (a FIFO would block, /dev/zero never ends)."""
     try:
-        data = path.read_bytes()
+        st = os.stat(path)
     except FileNotFoundError:
-        ctx.add(FILE_FIELD, "file not found")
-        return None
-    except IsADirectoryError:
-        ctx.add(FILE_FIELD, "is a directory, not a file")
-        return None
+        return None, "file not found"
     except (OSError, ValueError) as exc:
-        ctx.add(FILE_FIELD, f"cannot read file: {getattr(exc, 'strerror', None) or exc}")
+        return None, f"cannot read file: {getattr(exc, 'strerror', None) or exc}"
+    if not stat.S_ISREG(st.st_mode):
+        kind = next((what for test, what in _FILE_KINDS if test(st.st_mode)), "not a regular file")
+        return None, f"is {kind}, not a regular file"
+    if st.st_size > MAX_FILE_BYTES:
+        return None, f"file too large: {st.st_size} bytes (at most {MAX_FILE_BYTES} bytes = 1 MiB)"
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
+    except (OSError, ValueError) as exc:
+        return None, f"cannot read file: {getattr(exc, 'strerror', None) or exc}"
+    if len(data) > MAX_FILE_BYTES:  # grew since stat
+        return None, f"file too large: more than {MAX_FILE_BYTES} bytes (1 MiB)"
+    return data, ""
+
+
+def _read(path: Path, ctx: _Ctx) -> dict | None:
+    data, why = _read_bytes(path)
+    if data is None:
+        ctx.add(FILE_FIELD, why)
         return None
     try:
         text = data.decode("utf-8-sig")
@@ -947,12 +1014,18 @@ def parse_eliminate(text: str, *, source: str = CLI_SOURCE) -> tuple[int, ...] |
 
 
 def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, stop_time=None,
-             tolerance=None, source: str = CLI_SOURCE) -> SceneSpec:
+             tolerance=None, solver: dict | None = None, friction_outputs=None,
+             source: str = CLI_SOURCE) -> SceneSpec:
     """A :class:`SceneSpec` from a mechanism (name = mechanism name, every position and every
     reaction as outputs, no friction, eliminate ``"auto"``, stop time 1 s) or from a scene, with
     the given overrides applied. ``friction``: joint names (or a text for
     :func:`parse_joint_list`); ``eliminate``: ints or ``"auto"`` (or a text for
-    :func:`parse_eliminate`); ``stop_time`` > start time; 0 < ``tolerance`` < 1. Invalid overrides
+    :func:`parse_eliminate`); ``stop_time`` > start time; ``solver``: ``{field: value}`` of
+    :class:`~overcon.spec.SolverSpec` (``tolerance`` is a shorthand for ``solver={"tolerance": ..}``);
+    ``friction_outputs``: ``"all"``, joint names or a text for :func:`parse_joint_list`, each a
+    friction joint (after ``friction``),
+    each checked by :mod:`overcon.params` (its envelope, and the bounded-work relations with the
+    new stop time), reported with the flag ``--<field>``. Invalid overrides
     raise :class:`SceneError` with ``source`` as the file and the option name as the field; the
     scene keeps the source file of ``spec``. Friction parameters of newly enabled joints come from
     the scene (if it had them) or the mechanism."""
@@ -982,7 +1055,12 @@ def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, 
 
         names = _check_friction_list(ctx, friction, "--friction", mech, has_params,
                                      lambda k: "--friction")
-        if names is not None:
+        listed = () if scene.friction_outputs == "all" or friction_outputs is not None else scene.friction_outputs
+        dropped = [jn for jn in listed if names is not None and jn not in names]
+        if dropped:
+            ctx.add("--friction", f"the scene's outputs.friction lists {', '.join(dropped)}, which would "
+                                  "have no friction: keep them in the friction set")
+        elif names is not None:
             changes["friction"] = names
             changes["friction_params"] = {
                 jn: scene.friction_params.get(jn) or joints[jn].friction for jn in names}
@@ -1007,14 +1085,38 @@ def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, 
         elif val is not None:
             changes["stop_time"] = val
 
-    if tolerance is not None:
-        val = _num(ctx, tolerance, "--tolerance", _SOLVER_CHECKS["tolerance"])
+    if friction_outputs is not None:
+        if isinstance(friction_outputs, str) and friction_outputs != "all":
+            friction_outputs = parse_joint_list(friction_outputs)
+        if isinstance(friction_outputs, tuple):
+            friction_outputs = list(friction_outputs)
+        on = changes.get("friction", scene.friction)
+        val = _check_outputs(ctx, friction_outputs, "--friction-outputs", set(on), "friction joint name",
+                             lambda s: f"{_short(s)} has no friction (friction joints: {', '.join(on) or 'none'})")
         if val is not None:
-            changes["solver"] = dataclasses.replace(scene.solver, tolerance=val)
+            changes["friction_outputs"] = val
+
+    solver = dict(solver or {})
+    if tolerance is not None:
+        solver["tolerance"] = tolerance
+    if solver or "stop_time" in changes:
+        timed = dataclasses.replace(scene, stop_time=changes.get("stop_time", scene.stop_time))
+        new, found = params.apply_overrides(timed, {f"solver.{k}": v for k, v in solver.items()})
+        for name, msg in found:
+            key = name.split(".", 1)[-1]
+            flag = "--stop-time" if key not in solver and "stop_time" in changes else _flag(key)
+            ctx.add(flag, msg)
+        if new is not None and solver:
+            changes["solver"] = new.solver
 
     if problems:
         raise SceneError(problems)
     return dataclasses.replace(scene, **changes) if changes else scene
+
+
+def _flag(solver_field: str) -> str:
+    """Command-line flag of a solver field: ``output_interval`` -> ``--output-interval``."""
+    return "--" + solver_field.replace("_", "-")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1032,8 +1134,12 @@ def toml_files(paths) -> list[Path]:
 def is_scene_file(path) -> bool | None:
     """True: a scene file ([scene] table); False: a mechanism file (or neither); None: unreadable
     (``load`` reports why)."""
+    data, _ = _read_bytes(Path(path))
+    if data is None:
+        return None
     try:
-        doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        doc = tomllib.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError, ValueError,
+            OverflowError, MemoryError):
         return None
     return isinstance(doc.get("scene"), dict)

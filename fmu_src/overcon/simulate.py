@@ -15,14 +15,18 @@ from __future__ import annotations
 
 import copy
 import csv
+import dataclasses
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from .dynamics import evaluate
 from .integrators import METHODS
-from .model import (Model, ModelError, SingularConfiguration, constraints, coordinate_rates, frames, jacobian_h,
+from .params import MAX_OUTPUT_POINTS, check_param, output_points
+from .model import (InconsistentInitialState, Model, ModelError, SingularConfiguration,  # noqa: F401
+                    check_initial_state, constraints, coordinate_rates, frames, friction_output, jacobian_h,
                     physical_reaction)
 
 
@@ -85,37 +89,45 @@ class SimulationError(RuntimeError):
     """Integration stopped: names the time and the cause."""
 
 
-class InconsistentInitialState(ValueError):
-    pass
+MAX_STEPS = 1_000_000
+"""Default work budget of a :class:`Simulation`: accepted internal steps over its life (the
+integrator's step count, part of the saved state). The paper scenes take 80-5000; 1e6 steps cost
+0.3-1 h here (1-3 ms each with friction)."""
+MAX_WALL_TIME = 3600.0
+"""Default wall-time budget (s) of a :class:`Simulation`: time spent inside :meth:`Simulation.advance`
+over its life (not part of the saved state)."""
 
 
-def check_initial_state(model: Model, tol: float = 1e-9) -> None:
-    """Refuse q0/h0 off the constraint manifold (|Phi| or |Phi_h h| above tol, scaled)."""
-    f = frames(model, model.q0, model.h0)
-    Phi = constraints(model, f)
-    scale = max(1.0, float(np.max(np.abs(model.q0))))
-    bad = [i + 1 for i in np.flatnonzero(np.abs(Phi) > tol * scale)]
-    if bad:
-        worst = int(np.argmax(np.abs(Phi)))
-        raise InconsistentInitialState(
-            "initial coordinates q0 violate the constraints "
-            + ", ".join(f"Phi{i}" for i in bad)
-            + f" (largest |Phi{worst + 1}| = {abs(Phi[worst]):.3g})")
-    vel = jacobian_h(model, f) @ model.h0
-    bad = [i + 1 for i in np.flatnonzero(np.abs(vel) > tol * max(1.0, float(np.max(np.abs(model.h0)))))]
-    if bad:
-        raise InconsistentInitialState(
-            "initial velocities h0 violate the velocity constraints " + ", ".join(f"Phi{i}" for i in bad))
+class BudgetExceeded(SimulationError):
+    """The work budget (steps or wall time) of a Simulation ran out."""
 
 
 class Simulation:
+    """A run of ``model`` (see the module docstring).
+
+    Work budget (bounded work): ``max_steps`` accepted internal steps (default :data:`MAX_STEPS`)
+    and ``max_wall_time`` seconds spent in :meth:`advance` (default :data:`MAX_WALL_TIME`), both
+    over the Simulation's life; ``None`` means no limit. When one runs out, :meth:`advance` raises
+    :class:`BudgetExceeded` (a :class:`SimulationError`) naming the budget, the time reached and
+    how to raise it. Together with the envelopes of :mod:`overcon.params` and the input limits of
+    :mod:`overcon.scene`, no run can go on without end.
+    """
+
     def __init__(self, model: Model, *, method: str | None = None, tolerance: float | None = None,
-                 step: float | None = None, max_step: float | None = None, start_time: float | None = None):
+                 step: float | None = None, max_step: float | None = None, start_time: float | None = None,
+                 max_steps: int | None = MAX_STEPS, max_wall_time: float | None = MAX_WALL_TIME):
         self.model = model
+        self.max_steps, self.max_wall_time = max_steps, max_wall_time
+        self.wall_time = 0.0  # s spent in advance()
         s = model.scene.solver
-        self.method = method or s.method
-        self.settings = dict(tolerance=tolerance or s.tolerance, step=step or s.step,
-                             max_step=max_step or s.max_step)
+        given = {"method": method, "tolerance": tolerance, "step": step, "max_step": max_step}
+        for name, value in given.items():  # arguments over the scene's (validated) solver: same rules
+            reason = None if value is None else check_param(f"solver.{name}", value)
+            if reason is not None:
+                raise ValueError(f"Simulation({name}={value!r}): {reason}")
+        eff = {k: getattr(s, k) if v is None else v for k, v in given.items()}
+        self.method = eff.pop("method")
+        self.settings = eff
         check_initial_state(model)
         for c in model.joints:
             if c.law is not None and c.law.name == "coulomb":
@@ -165,29 +177,54 @@ class Simulation:
         """Integrate until the internal time reaches t_target; return y(t_target) by dense output."""
         itg = self._integrator
         eps = 1e-12 * max(1.0, abs(t_target))
+        started = time.perf_counter()
         try:
             while itg.t < t_target - eps:
+                t_before = itg.t
                 itg.step()
+                if not itg.t > t_before:
+                    raise SimulationError(
+                        f"t = {t_before:.9g} s: time does not advance (step below the resolution of t)")
                 self.monitor.check(itg.t, itg.y)
                 f = frames(self.model, itg.y[: self.n])
                 self.max_drift = max(self.max_drift, float(np.max(np.abs(constraints(self.model, f)), initial=0.0)))
+                self._check_budget(itg, started)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             where = "" if str(exc).startswith("t = ") else f"t = {itg.t:.9g} s: "
             raise SimulationError(f"integration stopped: {where}{exc}") from exc
+        finally:
+            self.wall_time += time.perf_counter() - started
         if itg.t - t_target < -eps:
             raise SimulationError(f"could not reach t = {t_target}")
         return itg.dense(t_target) if abs(itg.t - t_target) > eps else itg.y.copy()
 
+    def _check_budget(self, itg, started: float) -> None:
+        """Raise BudgetExceeded when the step count or the wall time is used up."""
+        if self.max_steps is not None and itg.nsteps >= self.max_steps:
+            raise BudgetExceeded(
+                f"work budget exhausted: {itg.nsteps} internal steps (max_steps = {self.max_steps}) reached "
+                f"t = {itg.t:.9g} s of {self.model.scene.stop_time:g} s; raise it with --max-steps "
+                "(Simulation(max_steps=...)) or use a larger step / looser tolerance")
+        spent = self.wall_time + time.perf_counter() - started
+        if self.max_wall_time is not None and spent > self.max_wall_time:
+            raise BudgetExceeded(
+                f"work budget exhausted: wall time {spent:.1f} s (max_wall_time = {self.max_wall_time:g} s) "
+                f"reached t = {itg.t:.9g} s of {self.model.scene.stop_time:g} s after {itg.nsteps} steps; "
+                "raise it with --max-wall-time (Simulation(max_wall_time=...)) or use a larger step / "
+                "looser tolerance")
+
     def outputs(self, t: float, y: np.ndarray) -> np.ndarray:
-        """Output vector (model.output_names() order) at (t, y); reactions need one evaluation of
-        Eq. 18, warm-started from the integrator's lam but without changing it."""
+        """Output vector (model.output_names() order) at (t, y): positions, reactions, friction
+        forces (:func:`overcon.model.friction_output`); reactions and friction need one evaluation
+        of Eq. 18, warm-started from the integrator's lam but without changing it."""
         model = self.model
         q, h = y[: self.n], y[self.n:]
         vals = [q[i] for _, i in model.position_outputs]
-        if model.reaction_joints:  # one evaluation of Eq. 18; positions only: none at all
+        if model.reaction_joints or model.friction_outputs:  # one evaluation of Eq. 18; positions only: none
             ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy())
             for j in model.reaction_joints:
                 vals.extend(physical_reaction(model, model.joints[j], ev.frames, ev.lam))
+            vals.extend(friction_output(model, model.joints[j], ev.frames, ev.lam) for j in model.friction_outputs)
         return np.array(vals, float)
 
     # -- state -----------------------------------------------------------------------------
@@ -237,8 +274,16 @@ def output_grid(start: float, stop: float, interval: float) -> np.ndarray:
 
 def run(model: Model, *, stop_time: float | None = None, output_interval: float | None = None, **settings) -> Result:
     scene = model.scene
+    stop = scene.stop_time if stop_time is None else stop_time
+    interval = scene.solver.output_interval if output_interval is None else output_interval
+    reason = check_param("solver.output_interval", interval)
+    if reason is None and not output_points(dataclasses.replace(scene.solver, output_interval=interval),
+                                           scene.start_time, stop) <= MAX_OUTPUT_POINTS:
+        reason = f"more than {MAX_OUTPUT_POINTS:.0e} output points from {scene.start_time:g} to {stop:g} s"
+    if reason is not None:
+        raise ValueError(f"run(output_interval={interval!r}): {reason}")
     sim = Simulation(model, **settings)
-    grid = output_grid(scene.start_time, stop_time or scene.stop_time, output_interval or scene.solver.output_interval)
+    grid = output_grid(scene.start_time, stop, interval)
     rows = []
     for t in grid:
         y = sim.advance(t)

@@ -192,7 +192,10 @@ class SceneSpec:
     """A mechanism plus what to simulate. ``friction``: joint names with friction switched on;
     ``friction_params`` the parameters per such joint (mechanism values overridden by the scene).
     ``eliminate``: 1-based paper equation indices, or the string ``"auto"``. ``positions`` are
-    output names ``<body>.<coordinate>``; ``reactions`` joint names whose reactions are outputs."""
+    output names ``<body>.<coordinate>``; ``reactions`` joint names whose reactions are outputs;
+    ``friction_outputs`` the friction joints whose friction force ``<joint>.friction`` is an
+    output (``"all"``: every joint in ``friction``, the default; a scene file's ``[outputs]``
+    table without a ``friction`` key gives ``()``)."""
 
     name: str
     mechanism: MechanismSpec
@@ -201,6 +204,7 @@ class SceneSpec:
     eliminate: tuple[int, ...] | str = "auto"
     positions: tuple[str, ...] = ()
     reactions: tuple[str, ...] = ()
+    friction_outputs: tuple[str, ...] | str = "all"
     start_time: float = 0.0
     stop_time: float = 1.0
     solver: SolverSpec = field(default_factory=SolverSpec)

@@ -58,6 +58,8 @@ import numpy as np
 
 from .. import scene as scene_mod
 from ..model import compile_model
+from ..params import check_mu_static
+from ..precheck import friction_warnings
 from ..simulate import Simulation
 from . import statecodec, variables
 
@@ -132,14 +134,6 @@ def fmi_call(name: str, modes=ANY_MODE):
     return wrap
 
 
-def friction_without_equations(model) -> list[str]:
-    """Friction joints all of whose constraint equations are eliminated: they carry no reaction,
-    so their friction is silently zero."""
-    eliminated = set(model.eliminated)
-    return [model.joints[j].name for j in model.friction_joints
-            if model.joints[j].rows and all(r + 1 in eliminated for r in model.joints[j].rows)]
-
-
 def instantiate(instance_name: str, guid: str, resources: str, log_address: int, component: int,
                 logging_on: bool) -> "OverconSlave":
     """fmi2Instantiate (through :func:`overcon.fmu.boot.instantiate`): the slave, logging through
@@ -177,11 +171,8 @@ class OverconSlave:
         self._strings: list[bytes] = []  # fmi2GetString's results, valid until the next call
         self._ref_cache: dict[tuple[str, bytes], list] = {}
         self._init_fields()
-        for name in self._manifest.get("precheck_warnings") or [
-                f"joint {j}: friction is switched on but every constraint equation of the joint is "
-                "eliminated, so its reaction and hence its friction force are zero"
-                for j in friction_without_equations(self._model0)]:
-            self.log(name, Status.WARNING)
+        for text in friction_warnings(self._model0):  # the pre-check's warnings (also in the manifest)
+            self.log(text, Status.WARNING)
 
     def _init_fields(self) -> None:
         """The state after fmi2Instantiate (and fmi2Reset)."""
@@ -294,9 +285,8 @@ class OverconSlave:
             self._refuse(name, value, "a value is required")
         reason = variables.rule(name).check(value)
         if reason is None and name.endswith(".mu_static"):
-            mu = self._params[name[: -len("_static")]]
-            if value < mu:
-                reason = f"must be >= {name[: -len('_static')]} ({mu!r}), got {value!r}"
+            mu_name = name[: -len("_static")]
+            reason = check_mu_static(self._params[mu_name], value, mu_name)
         if reason is not None:
             self._refuse(name, value, reason)
         self._params[name] = value if isinstance(value, str) else type(self._defaults[name])(value)
@@ -328,9 +318,9 @@ class OverconSlave:
         for jname, fspec in spec.friction_params.items():
             changes = {f: p[f"{jname}.{f}"] for f in _FRICTION_FIELDS if f"{jname}.{f}" in p}
             fparams[jname] = dataclasses.replace(fspec, **changes)
-            if fparams[jname].mu_static is not None and fparams[jname].mu_static < fparams[jname].mu:
-                raise ParameterRefused(f"{jname}.mu_static ({fparams[jname].mu_static!r}) must be >= "
-                                       f"{jname}.mu ({fparams[jname].mu!r})")
+            reason = check_mu_static(fparams[jname].mu, fparams[jname].mu_static, f"{jname}.mu")
+            if reason is not None:
+                raise ParameterRefused(f"parameter {jname}.mu_static refused: {reason}")
         stop = spec.stop_time if spec.stop_time > start else start + 1.0  # unused by Simulation
         new = dataclasses.replace(spec, solver=solver, friction_params=fparams, start_time=start,
                                   stop_time=stop)

@@ -2,8 +2,10 @@
 
 Value references are the positions in :func:`table` (0-based), in this order:
 
-1. outputs, exactly ``model.output_names()``: positions (m, rad) and reaction components
-   (N, N.m), causality output, variability continuous, initial calculated;
+1. outputs, exactly ``model.output_names()``: positions (m, rad), reaction components
+   (N, N.m) and the friction forces ``<joint>.friction`` of the scene's friction joints (N, or
+   N.m for revolute joints; :func:`overcon.model.friction_output`), causality output,
+   variability continuous, initial calculated;
 2. pre-check verdicts (Booleans, causality output, variability constant, initial exact):
    ``<joint>.reaction_unique`` per reaction joint of the scene, and ``motion_unique``;
 3. parameters (causality parameter, variability fixed, initial exact): per friction joint
@@ -16,10 +18,11 @@ Value references are the positions in :func:`table` (0-based), in this order:
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-from ..spec import COORDINATE_UNITS, METHODS
+from ..joints import TYPES
+from ..params import check_param, rule_of
+from ..spec import COORDINATE_UNITS
 
 UNITS: dict[str, dict[str, int]] = {
     "1": {},
@@ -46,6 +49,13 @@ COORDINATE_TEXT = {
     "gamma": "z-x-z Euler angle gamma",
 }
 
+FRICTION_TEXT = {
+    "translational": "force along the guide x' (positive along +x', the way body j slides relative to body i)",
+    "revolute": "torque (counter-clockwise positive, the way body j turns relative to body i)",
+    "spherical": "force magnitude at the contact point (>= 0)",
+}
+"""What the output ``<joint>.friction`` is, per joint type (convention: overcon.model.friction_output)."""
+
 SLIDING_UNIT = {"translational": "m/s", "revolute": "rad/s", "spherical": "m/s"}
 """Unit of a joint's friction regularisation velocity (sliding speed; revolute: relative angular
 velocity)."""
@@ -70,53 +80,45 @@ class Var:
 
 @dataclass(frozen=True)
 class ParamRule:
-    """Admissible values of a parameter; ``check(value)`` returns None or the reason."""
+    """Admissible values of parameter ``name``: ``check(value)`` returns None or the reason,
+    from the one rules table :data:`overcon.params.RULES` (envelopes documented there)."""
 
-    kind: str  # "positive", "nonneg", "unit_interval", "int_ge1", "method"
+    name: str
 
     def check(self, value) -> str | None:
-        if self.kind == "method":
-            return None if value in METHODS else f"must be one of {', '.join(METHODS)}, got {value!r}"
-        if self.kind == "int_ge1":
-            return None if int(value) >= 1 else f"must be an integer >= 1, got {value!r}"
-        x = float(value)
-        if not math.isfinite(x):
-            return f"must be finite, got {x!r}"
-        if self.kind == "positive" and not x > 0:
-            return f"must be > 0, got {x!r}"
-        if self.kind == "nonneg" and not x >= 0:
-            return f"must be >= 0, got {x!r}"
-        if self.kind == "unit_interval" and not 0 < x < 1:
-            return f"must be in (0, 1), got {x!r}"
-        return None
+        return check_param(self.name, value)
+
+    def range_text(self) -> str:
+        return rule_of(self.name).range_text()
 
 
 SOLVER_PARAMS = {
-    # name: (type, unit, rule, description)
-    "method": ("String", None, "method", "integrator: dopri5 or dop853 (adaptive explicit), rk4 (fixed step) or radau (implicit, for stiff friction)"),
-    "tolerance": ("Real", "1", "unit_interval",
+    # name: (type, unit, description); admissible values: overcon.params.RULES["solver.<name>"]
+    "method": ("String", None, "integrator: dopri5 or dop853 (adaptive explicit), rk4 (fixed step) or radau (implicit, for stiff friction)"),
+    "tolerance": ("Real", "1",
                   "accuracy target of dopri5, dop853 and radau (rtol = atol); a tolerance given to "
                   "fmi2SetupExperiment is ignored (reported as a warning when it differs)"),
-    "step": ("Real", "s", "positive", "fixed step of rk4"),
-    "max_step": ("Real", "s", "positive", "largest internal step of the adaptive methods"),
-    "baumgarte": ("Real", "1/s", "nonneg", "Baumgarte constraint stabilisation frequency (0 disables)"),
-    "friction_tol": ("Real", "1", "positive", "friction fixed-point tolerance (relative, on lambda)"),
-    "friction_max_iter": ("Integer", None, "int_ge1", "friction fixed-point iteration limit"),
+    "step": ("Real", "s", "fixed step of rk4"),
+    "max_step": ("Real", "s", "largest internal step of the adaptive methods"),
+    "baumgarte": ("Real", "1/s", "Baumgarte constraint stabilisation frequency (0 disables)"),
+    "friction_tol": ("Real", "1", "friction fixed-point tolerance (relative, on lambda)"),
+    "friction_max_iter": ("Integer", None, "friction fixed-point iteration limit"),
 }
 
 BUDGET_PARAMS = {
-    # name: (type, unit, rule, default, description); FMU parameters only (not scene settings)
-    "max_internal_steps": ("Integer", None, "int_ge1", 10000,
+    # name: (type, unit, default, description); FMU parameters only (not scene settings);
+    # admissible values: overcon.params.RULES["solver.<name>"]
+    "max_internal_steps": ("Integer", None, 10000,
                            "work budget of one fmi2DoStep: integrator steps (exceeded: fmi2Error)"),
-    "max_wall_time": ("Real", "s", "positive", 30.0,
+    "max_wall_time": ("Real", "s", 30.0,
                       "work budget of one fmi2DoStep: wall-clock seconds (exceeded: fmi2Error)"),
 }
 
 FRICTION_PARAMS = {
-    "mu": ("nonneg", "friction coefficient (kinetic)"),
-    "v_reg": ("positive", "regularisation velocity of the friction law"),
-    "mu_static": ("nonneg", "static (peak) friction coefficient of the Stribeck law, >= mu"),
-    "v_stribeck": ("positive", "Stribeck velocity"),
+    "mu": "friction coefficient (kinetic)",
+    "v_reg": "regularisation velocity of the friction law",
+    "mu_static": "static (peak) friction coefficient of the Stribeck law, >= mu",
+    "v_stribeck": "Stribeck velocity",
 }
 
 
@@ -146,6 +148,13 @@ def table(model, reaction_unique: dict[str, bool], motion_unique: bool) -> list[
                            f"reaction {what} of joint {c.name} on body {bi}, component {comp}, {frame}",
                            unit=COMPONENT_UNITS.get(comp, "N"), key=("output", k)))
             k += 1
+    for j in model.friction_outputs:
+        c = model.joints[j]
+        unit = TYPES[c.type].FRICTION_UNIT
+        out.append(Var(f"{c.name}.friction", "Real", "output", "continuous", "calculated",
+                       f"friction {FRICTION_TEXT[c.type]} of joint {c.name} on body {body_of.get(c.bi, 'base')} "
+                       f"({c.law.name} law)", unit=unit, key=("output", k)))
+        k += 1
     for j in model.reaction_joints:
         name = model.joints[j].name
         val = bool(reaction_unique[name])
@@ -162,25 +171,25 @@ def table(model, reaction_unique: dict[str, bool], motion_unique: bool) -> list[
             unit = "1" if p.startswith("mu") else SLIDING_UNIT[c.type]
             name = f"{c.name}.{p}"
             out.append(Var(name, "Real", "parameter", "fixed", "exact",
-                           f"joint {c.name} ({c.law.name} law): {FRICTION_PARAMS[p][1]}", unit=unit,
+                           f"joint {c.name} ({c.law.name} law): {FRICTION_PARAMS[p]} "
+                           f"({rule(name).range_text()})", unit=unit,
                            start=float(value), key=("param", name)))
     solver = model.scene.solver
-    for p, (typ, unit, _rule, text) in SOLVER_PARAMS.items():
+    for p, (typ, unit, text) in SOLVER_PARAMS.items():
         value = getattr(solver, p)
         value = float(value) if typ == "Real" else value
-        out.append(Var(f"solver.{p}", typ, "parameter", "fixed", "exact", text, unit=unit,
+        rng = rule(f"solver.{p}").range_text()
+        out.append(Var(f"solver.{p}", typ, "parameter", "fixed", "exact", f"{text} ({rng})" if rng else text, unit=unit,
                        start=value, key=("param", f"solver.{p}")))
-    for p, (typ, unit, _rule, value, text) in BUDGET_PARAMS.items():
-        out.append(Var(f"solver.{p}", typ, "parameter", "tunable", "exact", text, unit=unit,
+    for p, (typ, unit, value, text) in BUDGET_PARAMS.items():
+        rng = rule(f"solver.{p}").range_text()
+        out.append(Var(f"solver.{p}", typ, "parameter", "tunable", "exact", f"{text} ({rng})", unit=unit,
                        start=value, key=("param", f"solver.{p}")))
     return out
 
 
 def rule(name: str) -> ParamRule:
-    """The admissible values of parameter ``name`` (``joint4.mu``, ``solver.tolerance``)."""
-    group, p = name.rsplit(".", 1)
-    if group == "solver" and p in SOLVER_PARAMS:
-        return ParamRule(SOLVER_PARAMS[p][2])
-    if group == "solver" and p in BUDGET_PARAMS:
-        return ParamRule(BUDGET_PARAMS[p][2])
-    return ParamRule(FRICTION_PARAMS[p][0])
+    """The admissible values of parameter ``name`` (``joint4.mu``, ``solver.tolerance``): the
+    rule of :data:`overcon.params.RULES`. KeyError for a name that is no parameter."""
+    rule_of(name)  # KeyError now, not at check time
+    return ParamRule(name)

@@ -17,6 +17,7 @@ from .point import batch_phi, phi, prepare  # noqa: F401  (point coincidence, Eq
 
 N_EQUATIONS = 2
 REACTION_COMPONENTS = ("Fx", "Fy", "T")
+FRICTION_UNIT = "N.m"  # friction_force: torque
 
 
 def jac_q(c, f):
@@ -49,10 +50,16 @@ def relative_speed(c, f):
     return f.w[c.bj] - f.w[c.bi]
 
 
+def friction_force(c, f, fi, law) -> float:
+    """Friction torque on body i (N.m), counter-clockwise positive (A.6): a mu(omega_ij)
+    sqrt(Fx^2 + Fy^2); it turns body i the way body j turns relative to it."""
+    p_aux = reaction_transform(c, f) @ fi
+    return law.size * law.mu(relative_speed(c, f)) * math.hypot(p_aux[0], p_aux[1])
+
+
 def friction(c, f, fi, law):
     """Friction torque (A.6-A.8): C_i = C_j = I."""
-    p_aux = reaction_transform(c, f) @ fi
-    torque = law.size * law.mu(relative_speed(c, f)) * math.hypot(p_aux[0], p_aux[1])
+    torque = friction_force(c, f, fi, law)
     return np.array([0.0, 0.0, torque]), np.array([0.0, 0.0, -torque])
 
 

@@ -22,6 +22,7 @@ from .point import batch_phi, phi, prepare  # noqa: F401  (point coincidence, Eq
 
 N_EQUATIONS = 3
 REACTION_COMPONENTS = ("Fx", "Fy", "Fz")
+FRICTION_UNIT = "N"  # friction_force: magnitude of the force at the contact point
 
 
 def _dpoint_dangles(angles, s):
@@ -71,16 +72,32 @@ def relative_speed(c, f, fi=None):
     return float(np.linalg.norm(cross3(_relative_omega(c, f), -F_aux / norm)))
 
 
-def friction(c, f, fi, law):
-    Ri, Rj = f.R[c.bi], f.R[c.bj]
-    F_aux = Ri.T @ fi[:3]
+def _friction_vector(c, f, fi, law):
+    """(F'_fr, s'_C) in body i axes (A.11-A.14), or None when the reaction is zero."""
+    F_aux = f.R[c.bi].T @ fi[:3]
     norm = np.linalg.norm(F_aux)
     if norm == 0.0:
-        z = np.zeros(6)
-        return z, z.copy()
+        return None
     s_C = -law.size * F_aux / norm
     v_slip = cross3(_relative_omega(c, f), s_C)
-    F_fr = law.mu_over_speed(np.linalg.norm(v_slip)) * norm * v_slip
+    return law.mu_over_speed(np.linalg.norm(v_slip)) * norm * v_slip, s_C
+
+
+def friction_force(c, f, fi, law) -> float:
+    """Magnitude |F'_fr| of the friction force at the contact point C (N, >= 0): its direction is
+    the sliding velocity of body j relative to body i at C, which has no fixed axis to sign it
+    against."""
+    fv = _friction_vector(c, f, fi, law)
+    return 0.0 if fv is None else float(np.linalg.norm(fv[0]))
+
+
+def friction(c, f, fi, law):
+    Ri, Rj = f.R[c.bi], f.R[c.bj]
+    fv = _friction_vector(c, f, fi, law)
+    if fv is None:
+        z = np.zeros(6)
+        return z, z.copy()
+    F_fr, s_C = fv
     torque_i = cross3(c.p["s_i"] + s_C, F_fr)
     Qi = np.concatenate([Ri @ F_fr, torque_i])
     Rji = Rj.T @ Ri

@@ -19,6 +19,7 @@ from ..kinematics import OMEGA, cross2, matvec, rot2, rowdot
 
 N_EQUATIONS = 2
 REACTION_COMPONENTS = ("Fx", "Fy", "T")
+FRICTION_UNIT = "N"  # friction_force: force along the guide
 
 
 def prepare(params) -> dict:
@@ -90,15 +91,21 @@ def relative_speed(c, f):
     return (vel_j - vel_i) @ e
 
 
-def friction(c, f, fi, law):
-    """Generalized friction forces (A.2-A.4): t_i = [mu(v) (|N - T/l| + |T/l|), 0, 0] in the
-    auxiliary frame, applied at A; Q_i = C_i t_i, Q_j = -C_j t_i."""
+def friction_force(c, f, fi, law) -> float:
+    """Friction force on body i along the guide x' (N), signed: positive along +x' (A.2),
+    mu(v_ij) (|N - T/l| + |T/l|); it points the way body j slides relative to body i."""
     p_aux = reaction_transform(c, f) @ fi
     N, T = p_aux[1], p_aux[2]
     l = law.size
     magnitude = abs(N - T / l) + abs(T / l)
+    return law.mu(relative_speed(c, f)) * magnitude
+
+
+def friction(c, f, fi, law):
+    """Generalized friction forces (A.2-A.4): t_i = [mu(v) (|N - T/l| + |T/l|), 0, 0] in the
+    auxiliary frame, applied at A; Q_i = C_i t_i, Q_j = -C_j t_i."""
     point, e = _contact(c, f)
-    F = law.mu(relative_speed(c, f)) * magnitude * e
+    F = friction_force(c, f, fi, law) * e
     Qi = np.array([F[0], F[1], cross2(point - f.r[c.bi], F)])
     Qj = -np.array([F[0], F[1], cross2(point - f.r[c.bj], F)])
     return Qi, Qj

@@ -2,10 +2,11 @@
 
 Each FMU runs in its own worker process (``python -m overcon.tooling.run``), at most ``jobs`` at a
 time. Reasons: the runs are independent and CPU bound (2 processes halve the wall time on 2
-cores), and pythonfmu 0.7's C wrapper has reference-counting bugs that can crash the *host*
-process when it exits after loading an FMU ("corrupted double-linked list", about 1 exit in 6
-here); a worker writes its CSV, reports on stdout and leaves with ``os._exit``, so such a crash
-never reaches the overcon process and never changes an exit code.
+cores), and an FMU is foreign native code: FMUs of other tools may crash the process that loads
+them (pythonfmu 0.7's wrapper, for one, corrupts the heap at exit about 1 exit in 6), and fmpy
+keeps a pointer to the last ``logger`` callback after ``simulate_fmu`` returns. A worker writes
+its CSV, reports on stdout and leaves with ``os._exit``, so no such crash reaches the overcon
+process or changes an exit code.
 
 Grid: the output interval of ``simulate_fmu`` is the step (default: the FMU's DefaultExperiment
 stepSize), the stop time defaults to the FMU's DefaultExperiment stopTime. Outputs are the FMU's
@@ -157,7 +158,7 @@ def _worker(argv: list[str]) -> None:
     sys.stdout.write(RESULT_TAG + json.dumps(out) + "\n")
     sys.stdout.flush()
     sys.stderr.flush()
-    os._exit(0)  # skip interpreter teardown: pythonfmu's wrapper may crash it (module docstring)
+    os._exit(0)  # skip interpreter teardown: a foreign FMU may crash it (module docstring)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -16,8 +16,8 @@ One run = one task
 A task runs one FMU with one parameter set: the FMU is unpacked once per worker (into the
 worker's local directory, under the SHA-256 of its bytes), then
 :func:`overcon.tooling.run.run_one` runs ``fmpy.simulate_fmu`` on the unpacked directory in a
-child process (pythonfmu 0.7's wrapper can crash the hosting process at exit; a child process
-keeps such a crash away from the Dask worker) and the task returns the position outputs (outputs in
+child process (an FMU is foreign native code that may crash the process loading it, see
+:mod:`overcon.tooling.run`; a child process keeps such a crash away from the Dask worker) and the task returns the position outputs (outputs in
 m or rad; FMUs without such outputs: every Real output) on the FMU's output grid.
 
 What is compared (the non-uniqueness measure)

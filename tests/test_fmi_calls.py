@@ -241,7 +241,7 @@ def test_budget_is_tunable_and_long_steps_are_exact(unz):
     s.error(s.fmu.doStep, 0.0, 1.0)
     s.fmu.setFMUstate(state)  # back before the failed step
     s.fmu.setInteger([s.vr("solver.max_internal_steps")], [10000])  # tunable while stepping
-    s.fmu.doStep(0.0, 1.0)  # integrated in pieces of solver.max_step, budget checked between them
+    s.fmu.doStep(0.0, 1.0)  # one long step, budget checked after every internal step
     out = np.array(s.fmu.getReal(s.outputs))
     s.fmu.freeFMUstate(state)
     s.free()

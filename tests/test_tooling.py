@@ -176,9 +176,73 @@ def test_compare_reports_every_group_when_one_run_fails(f45, tmp_path, capsys):
     assert code == 3, captured.out
     assert "planar_f45: observed UNIQUE, predicted unique (pre-check)" in captured.out
     assert "!!! FAILED !!! broken: no verdict, a run failed" in captured.out
-    assert "no verdict for: broken" in captured.err
+    assert "simulation failed for: broken" in captured.err
     report = (out / "report.md").read_text()
     assert "**FAILED** (no verdict)" in report and "| planar_f45 (joint4, joint5) |" in report
+
+
+@pytest.mark.integration
+def test_group_without_one_friction_set_is_not_compared_and_the_others_are(f45, tmp_path, capsys):
+    """Two scenes in one group with different friction sets are a user's mistake, not a pre-check
+    failure: that group is reported as not compared (exit 2), the healthy group keeps its verdict."""
+    a = _scene_copy(tmp_path / "a", "planar_f45_wo4", g=('group = "planar_f45"', 'group = "mixed"'),
+                    n=('name = "planar_f45_wo4"', 'name = "mixed_wo4"'))
+    b = _scene_copy(tmp_path / "b", "planar_none_wo6", g=('group = "planar_none"', 'group = "mixed"'),
+                    n=('name = "planar_none_wo6"', 'name = "mixed_wo6"'))
+    fmus = _build([a, b], tmp_path / "fmus")
+    out = tmp_path / "cmp"
+    code = main(["compare", *map(str, fmus.values()), *map(str, f45.values()), "--stop-time", "0.2",
+                 "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 2, captured.out
+    assert "!!! NOT COMPARED !!! mixed: group mixed: the FMUs do not share one friction set" in captured.out
+    assert "planar_f45: observed UNIQUE, predicted unique (pre-check)" in captured.out
+    assert not (out / "mixed_wo4.csv").exists()
+    assert "**not compared** (invalid group)" in (out / "report.md").read_text()
+
+
+@pytest.mark.integration
+def test_failed_adaptive_runs_keep_the_lockstep_verdict(f45, tmp_path, capsys):
+    """A budget of 2 internal steps per communication step is too small for dopri5 at tolerance
+    1e-14 but enough for the lockstep grid (2 rk4 steps per 10 ms): the verdict stands, the failed
+    adaptive runs are reported loudly, exit 3."""
+    out = tmp_path / "cmp"
+    code = main(["compare", *map(str, f45.values()), "--stop-time", "0.2", "--out", str(out),
+                 "--set", "solver.tolerance=1e-14", "--set", "solver.max_internal_steps=2"])
+    captured = capsys.readouterr()
+    assert code == 3, captured.out
+    assert "planar_f45: observed UNIQUE, predicted unique (pre-check)" in captured.out
+    assert "ADAPTIVE RUN FAILED (verdict from the lockstep runs)" in captured.out
+    assert "max_internal_steps" in captured.out
+    assert "adaptive runs FAILED" in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize("setting, message", [
+    ("joint4.muu=0.2", "--set joint4.muu: no such parameter"),
+    ("joint4.mu=abc", "--set joint4.mu=abc: not a valid Real value"),
+    ("joint4.mu", "expected NAME=VALUE"),
+])
+def test_bad_set_exits_2_before_running(f45, tmp_path, capsys, setting, message):
+    assert main(["compare", *map(str, f45.values()), "--set", setting, "--out", str(tmp_path / "o")]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "o" / "planar_f45_wo4.csv").exists()
+
+
+@pytest.mark.parametrize("args", [["--step", "1e-9", "--stop-time", "0.1"], ["--stop-time", "1e9"]])
+def test_run_refuses_unbounded_output_grids(f45, tmp_path, capsys, args):
+    assert main(["run", str(f45["planar_f45_wo4"]), *args, "--out", str(tmp_path / "o")]) == 2
+    assert "output points; at most 1e+06" in capsys.readouterr().err
+
+
+@pytest.mark.integration
+def test_set_reaches_the_fmu(f45, tmp_path, capsys):
+    """--set joint4.mu=0.3 changes the motion of a run (against the default 0.1)."""
+    base, changed = tmp_path / "base", tmp_path / "changed"
+    fmu = str(f45["planar_f45_wo4"])
+    assert main(["run", fmu, "--stop-time", "0.5", "--out", str(base)]) == 0
+    assert main(["run", fmu, "--stop-time", "0.5", "--out", str(changed), "--set", "joint4.mu=0.3"]) == 0
+    a, b = (read_series(d / "planar_f45_wo4.csv").values["slider1.x"] for d in (base, changed))
+    assert np.max(np.abs(a - b)) > 1e-6
 
 
 # ------------------------------------------------------------------------------- compare: reference
@@ -344,12 +408,12 @@ def test_reproduce_planar_set(tmp_path, capsys):
 
 
 def test_one_group_needs_one_prediction(f45, tmp_path, capsys):
-    """--one-group pools FMUs of different groups; their predictions must agree (checked before
-    running)."""
+    """--one-group pools FMUs of different groups; they must share one friction set (and so one
+    prediction), checked before running."""
     f1 = _build([MECH / "planar_f1_wo4.toml"], tmp_path / "fmus")["planar_f1_wo4"]
     assert main(["compare", str(f45["planar_f45_wo4"]), str(f1), "--out", str(tmp_path / "o")]) == 2
     assert "nothing to compare" in capsys.readouterr().err  # two groups of one FMU each
     assert main(["compare", str(f45["planar_f45_wo4"]), str(f1), "--one-group", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert "disagree on the pre-check's motion_unique" in err and "planar_f1_wo4.fmu: False" in err
+    assert "do not share one friction set" in err and "planar_f1_wo4.fmu: joint1" in err
     assert not (tmp_path / "o" / "planar_f1_wo4.csv").exists()

@@ -119,6 +119,7 @@ def _tooling_parsers(sub) -> None:
                    help="output interval = communication step (s; default: the FMU's DefaultExperiment stepSize)")
     r.add_argument("--out", default="results", metavar="DIR", help="directory for <model>.csv (default: results)")
     r.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
+    r.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
     c = sub.add_parser("compare", help="run FMUs of a scene group (or one FMU and a reference CSV) and compare "
                                        "them: uniqueness verdict next to the pre-check's prediction")
     c.add_argument("fmus", nargs="+", metavar="FMU", help="FMU files or directories of them; grouped by their "
@@ -140,6 +141,7 @@ def _tooling_parsers(sub) -> None:
                    help="outputs plotted per group (default: the deciding output with the largest difference)")
     c.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
     c.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H", help=LOCKSTEP_HELP)
+    c.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
     p = sub.add_parser("reproduce", help="the main job: build the paper's FMUs, pre-check, run with fmpy, compare "
                                          "every group, write report.md with the verdicts and Figs. 3-5, 7-9")
     p.add_argument("--out", default="reproduce", metavar="DIR", help="output directory (default: reproduce)")
@@ -174,6 +176,8 @@ def _sweep_parser(sub) -> None:
     w.add_argument("--resume", metavar="DIR", help="continue the sweep in DIR (runs only the missing rows)")
 
 
+SET_HELP = ("set an FMU parameter in every run (repeatable), e.g. --set solver.method=radau --set joint4.mu=0.2; "
+            "the lockstep runs keep their own solver.method and solver.step")
 LOCKSTEP_HELP = ("fixed step (s) of the lockstep runs that decide the verdict: every elimination of a group is also "
                  "run with rk4 on this grid (default 0.005; 0: no lockstep runs, verdict from the adaptive runs)")
 
@@ -280,10 +284,12 @@ def _tooling_call(fn):
 
 def cmd_run(args) -> int:
     from .tooling.pipeline import run_paths
+    from .tooling.run import parse_settings
 
     def go():
         start = time.perf_counter()
-        res = run_paths(args.fmus, args.out, stop_time=args.stop_time, step=args.step, jobs=args.jobs)
+        res = run_paths(args.fmus, args.out, stop_time=args.stop_time, step=args.step, jobs=args.jobs,
+                        settings=parse_settings(args.set))
         print(f"{len(res)} FMU(s) run in {time.perf_counter() - start:.1f} s; CSVs in {args.out}/")
         return EXIT_OK
 
@@ -292,6 +298,7 @@ def cmd_run(args) -> int:
 
 def cmd_compare(args) -> int:
     from .tooling.pipeline import compare_paths, compare_with_reference
+    from .tooling.run import parse_settings
 
     plots = args.plot if args.plot in ("worst", "all") else [n for n in args.plot.split(",") if n]
 
@@ -301,26 +308,38 @@ def cmd_compare(args) -> int:
             if len(args.fmus) != 1 or args.group:
                 print("overcon: --ref compares exactly one FMU file against the CSV (no --group)", file=sys.stderr)
                 return EXIT_INPUT
+            if args.set:
+                print("overcon: --set is for group comparisons; a reference comparison runs the FMU as it is",
+                      file=sys.stderr)
+                return EXIT_INPUT
             out = compare_with_reference(args.fmus[0], args.ref, args.out, tolerance=args.tolerance,
                                          stop_time=args.stop_time, step=args.step, plots=plots)
         else:
             out = compare_paths(args.fmus, args.out, group=args.group, one_group=args.one_group,
                                 tolerance=args.tolerance, lockstep_step=_lockstep(args),
-                                stop_time=args.stop_time, step=args.step, jobs=args.jobs, plots=plots)
-        failed = [c for c in out.comparisons if c.failure is not None]
-        bad = [c.group for c in out.comparisons if not c.matches and c.failure is None]
+                                stop_time=args.stop_time, step=args.step, jobs=args.jobs, plots=plots,
+                                settings=parse_settings(args.set))
         print(f"report: {out.report} ({time.perf_counter() - start:.1f} s)")
-        if failed:
-            print("overcon: simulation failed, no verdict for: "
-                  + "; ".join(f"{c.group} ({c.failure})" for c in failed), file=sys.stderr)
-            return EXIT_RUNTIME
-        if bad:
-            print(f"overcon: verdict differs from the prediction (or the reference) for: {', '.join(bad)}",
-                  file=sys.stderr)
-            return EXIT_NONUNIQUE
-        return EXIT_OK
+        return _verdict_exit(out.comparisons)
 
     return _tooling_call(go)
+
+
+def _verdict_exit(comparisons) -> int:
+    """compare/reproduce: 3 a simulation failed, 2 a group was not compared (invalid), 1 a verdict
+    differs from its prediction (or the reference), 0 otherwise; the reasons on stderr."""
+    failed = [c for c in comparisons if c.run_failed]
+    invalid = [c for c in comparisons if c.invalid]
+    bad = [c.group for c in comparisons if not c.matches and c.failure is None]
+    if failed:
+        print("overcon: simulation failed for: " + "; ".join(
+            f"{c.group} ({c.failure or 'adaptive runs: ' + c.adaptive_failure})" for c in failed), file=sys.stderr)
+    if invalid:
+        print("overcon: not compared (invalid group): " + "; ".join(c.failure for c in invalid), file=sys.stderr)
+    if bad:
+        print(f"overcon: verdict differs from the prediction (or the reference) for: {', '.join(bad)}",
+              file=sys.stderr)
+    return EXIT_RUNTIME if failed else EXIT_INPUT if invalid else EXIT_NONUNIQUE if bad else EXIT_OK
 
 
 def cmd_reproduce(args) -> int:
@@ -329,17 +348,14 @@ def cmd_reproduce(args) -> int:
     def go():
         out = reproduce(args.out, mechanisms=args.mechanisms, jobs=args.jobs, stop_time=args.stop_time,
                         lockstep_step=_lockstep(args))
-        failed = out.failed
+        failed = [c for c in out.comparisons if c.failure is not None]
         n_bad = sum(not c.matches for c in out.comparisons) - len(failed)
         print(f"\n{len(out.comparisons)} groups compared, "
               + ("every observed verdict equals its prediction" if not n_bad else f"{n_bad} MISMATCH(ES)")
               + (f", {len(failed)} FAILED (no verdict)" if failed else "")
               + f"; total wall time {out.seconds['total']:.1f} s")
         print(f"report: {out.report}  (figures: {', '.join(p.name for p in out.figures) or 'none'})")
-        if failed:
-            print("overcon: simulation failed, no verdict for: " + ", ".join(c.group for c in failed), file=sys.stderr)
-            return EXIT_RUNTIME
-        return EXIT_OK if not n_bad else EXIT_NONUNIQUE
+        return _verdict_exit(out.comparisons)
 
     return _tooling_call(go)
 

@@ -173,11 +173,15 @@ class Simulation:
     def t(self) -> float:
         return self._integrator.t
 
-    def advance(self, t_target: float) -> np.ndarray:
-        """Integrate until the internal time reaches t_target; return y(t_target) by dense output."""
+    def advance(self, t_target: float, *, max_steps: int | None = None,
+                max_wall_time: float | None = None) -> np.ndarray:
+        """Integrate until the internal time reaches t_target; return y(t_target) by dense output.
+        ``max_steps``/``max_wall_time``: the budget of this call (internal steps, seconds; e.g. one
+        FMU doStep), checked after every step like the Simulation's own life budget."""
         itg = self._integrator
         eps = 1e-12 * max(1.0, abs(t_target))
         started = time.perf_counter()
+        call = (itg.nsteps, max_steps, max_wall_time)
         try:
             while itg.t < t_target - eps:
                 t_before = itg.t
@@ -188,7 +192,7 @@ class Simulation:
                 self.monitor.check(itg.t, itg.y)
                 f = frames(self.model, itg.y[: self.n])
                 self.max_drift = max(self.max_drift, float(np.max(np.abs(constraints(self.model, f)), initial=0.0)))
-                self._check_budget(itg, started)
+                self._check_budget(itg, started, call)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             where = "" if str(exc).startswith("t = ") else f"t = {itg.t:.9g} s: "
             raise SimulationError(f"integration stopped: {where}{exc}") from exc
@@ -198,8 +202,17 @@ class Simulation:
             raise SimulationError(f"could not reach t = {t_target}")
         return itg.dense(t_target) if abs(itg.t - t_target) > eps else itg.y.copy()
 
-    def _check_budget(self, itg, started: float) -> None:
-        """Raise BudgetExceeded when the step count or the wall time is used up."""
+    def _check_budget(self, itg, started: float, call=(0, None, None)) -> None:
+        """Raise BudgetExceeded when the step count or the wall time is used up: the Simulation's
+        (over its life) or this :meth:`advance` call's (``call`` = steps at its start, its
+        max_steps, its max_wall_time)."""
+        n0, call_steps, call_wall = call
+        if call_steps is not None and itg.nsteps - n0 > call_steps:
+            raise BudgetExceeded(f"{itg.nsteps - n0} internal steps > {call_steps} allowed for this step, "
+                                 f"at t = {itg.t:.9g} s")
+        if call_wall is not None and time.perf_counter() - started > call_wall:
+            raise BudgetExceeded(f"{time.perf_counter() - started:.3g} s wall time > {call_wall:g} s allowed for "
+                                 f"this step, at t = {itg.t:.9g} s")
         if self.max_steps is not None and itg.nsteps >= self.max_steps:
             raise BudgetExceeded(
                 f"work budget exhausted: {itg.nsteps} internal steps (max_steps = {self.max_steps}) reached "

@@ -36,9 +36,8 @@ Behaviour
   good values (never NaN), and later steps are refused until the state is set back
   (``fmi2SetFMUstate``) or the FMU is reset.
 * Work budget of one ``fmi2DoStep``: at most ``solver.max_internal_steps`` integrator steps and
-  ``solver.max_wall_time`` seconds. A long step is integrated in pieces of ``solver.max_step``
-  (rk4: ``solver.step``) and the budget is checked after each piece; the trajectory does not
-  depend on the pieces (outputs are read by dense output).
+  ``solver.max_wall_time`` seconds, checked after every internal step
+  (:meth:`overcon.simulate.Simulation.advance`); the trajectory does not depend on the budget.
 * FMU state: the full :meth:`Simulation.get_state` (integrator arrays, lam, counters, singularity
   monitor) plus the parameters, time, outputs and mode; set/get/serialize are exact (bit for bit).
 """
@@ -60,7 +59,7 @@ from .. import scene as scene_mod
 from ..model import compile_model
 from ..params import check_mu_static
 from ..precheck import friction_warnings
-from ..simulate import Simulation
+from ..simulate import BudgetExceeded, Simulation
 from . import statecodec, variables
 
 MANIFEST = "overcon_fmu.json"
@@ -345,25 +344,16 @@ class OverconSlave:
         return self._sim
 
     def _advance(self, sim: Simulation, t_new: float) -> np.ndarray:
-        """sim.advance(t_new) within the work budget (see the module docstring)."""
+        """sim.advance(t_new) within the doStep work budget (see the module docstring)."""
         p = self._params
         max_steps, max_wall = int(p["solver.max_internal_steps"]), float(p["solver.max_wall_time"])
-        piece = max(p["solver.max_step"], p["solver.step"]) if p["solver.method"] != "rk4" else p["solver.step"]
-        n0, w0 = _steps_taken(sim), time.monotonic()
-        while t_new - sim.t > piece:
-            sim.advance(sim.t + piece)
-            steps, wall = _steps_taken(sim) - n0, time.monotonic() - w0
-            if steps > max_steps:
-                raise BudgetExhausted(
-                    f"work budget exhausted at t = {sim.t:.9g} s of the step to {t_new!r} s: {steps} internal "
-                    f"steps > solver.max_internal_steps = {max_steps} (raise it or use shorter "
-                    "communication steps)")
-            if wall > max_wall:
-                raise BudgetExhausted(
-                    f"work budget exhausted at t = {sim.t:.9g} s of the step to {t_new!r} s: {wall:.3g} s "
-                    f"wall time > solver.max_wall_time = {max_wall!r} s (raise it or use shorter "
-                    "communication steps)")
-        return sim.advance(t_new)
+        try:
+            return sim.advance(t_new, max_steps=max_steps, max_wall_time=max_wall)
+        except BudgetExceeded as exc:
+            raise BudgetExhausted(
+                f"work budget exhausted in this doStep (solver.max_internal_steps = {max_steps}, "
+                f"solver.max_wall_time = {max_wall!r} s): {str(exc).removeprefix('integration stopped: ')}; "
+                "raise them or use shorter communication steps") from None
 
     # -- FMI calls ---------------------------------------------------------------------------
     @fmi_call("fmi2SetupExperiment", {Mode.INSTANTIATED})
@@ -552,7 +542,3 @@ class OverconSlave:
         if not isinstance(state, dict) or state.get("guid") != self._manifest["guid"]:
             raise CallRefused("the state does not belong to this FMU (GUID differs)")
         self._store(address, {"state": state})
-
-
-def _steps_taken(sim: Simulation) -> int:
-    return int(sim.get_state()["integrator"]["nsteps"])

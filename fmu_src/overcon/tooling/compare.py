@@ -82,7 +82,9 @@ class Comparison:
     mode: str = "adaptive"  # what decided: "lockstep" runs, or the "adaptive" runs (fallback, reference)
     lockstep_step: float | None = None  # s
     adaptive_diff: dict = field(default_factory=dict)  # deciding output -> max abs difference, adaptive runs
-    failure: str | None = None  # a run of the group failed: no verdict (the reason)
+    failure: str | None = None  # a run of the group failed, or the group is invalid: no verdict (the reason)
+    invalid: bool = False  # the group was not run: its FMUs do not form a group (``failure`` says why)
+    adaptive_failure: str | None = None  # the adaptive runs failed, the lockstep runs gave the verdict
 
     @property
     def observed(self) -> bool:
@@ -96,6 +98,11 @@ class Comparison:
     @property
     def matches(self) -> bool:
         return self.failure is None and self.observed == self.expected
+
+    @property
+    def run_failed(self) -> bool:
+        """A simulation of the group failed (adaptive or lockstep)."""
+        return (self.failure is not None and not self.invalid) or self.adaptive_failure is not None
 
     def worst(self, *, deciding: bool = True) -> OutputDiff | None:
         """The deciding output with the largest difference relative to its tolerance."""
@@ -182,6 +189,13 @@ def validate_group(group: str, infos: list[FmuInfo]) -> tuple[list[str], bool | 
         raise InputError(f"group {group}: only {infos[0].path} — nothing to compare (give at least two "
                          "FMUs, or --ref CSV)")
     names = common_outputs([i.output_names for i in infos], [str(i.path) for i in infos])
+    for what, key in (("mechanism", lambda i: i.mechanism or "none"),
+                      ("friction set", lambda i: ", ".join(sorted(i.friction)) or "none")):
+        if len({key(i) for i in infos}) > 1:
+            raise InputError(f"group {group}: the FMUs do not share one {what} ("
+                             + "; ".join(f"{i.path.name}: {key(i)}" for i in infos)
+                             + "): a group is one friction set of one mechanism under different eliminations; "
+                             "give the scenes separate group names")
     preds = {i.motion_unique for i in infos}
     if len(preds) > 1:
         raise InputError(f"group {group}: the FMUs disagree on the pre-check's motion_unique ("
@@ -190,15 +204,21 @@ def validate_group(group: str, infos: list[FmuInfo]) -> tuple[list[str], bool | 
     return names, preds.pop()
 
 
-def compare_group(group: str, infos: list[FmuInfo], series: list[Series], *,
+def compare_group(group: str, infos: list[FmuInfo], series: list[Series] | None, *,
                   tolerance: float | None = None, lockstep: list[Series] | None = None,
-                  lockstep_step: float | None = None) -> Comparison:
+                  lockstep_step: float | None = None, adaptive_failure: str | None = None) -> Comparison:
     """Variants of one group (same outputs, different eliminations) against the first one.
-    ``series``: the adaptive runs; ``lockstep``: the same FMUs run on one fixed grid of step
-    ``lockstep_step`` (s), which then decide (module docstring)."""
+    ``series``: the adaptive runs (None when they failed, ``adaptive_failure`` saying why: the
+    lockstep runs still decide and are plotted); ``lockstep``: the same FMUs run on one fixed grid
+    of step ``lockstep_step`` (s), which then decide (module docstring)."""
     names, predicted = validate_group(group, infos)
     sources = [str(i.path) for i in infos]
-    check_grids(series, sources)
+    if series is None:
+        if lockstep is None:
+            raise ValueError("compare_group needs the adaptive or the lockstep runs")
+        series = lockstep
+    else:
+        check_grids(series, sources)
     solver_tol = _solver_tolerance(infos, tolerance) if lockstep is None else None
     meta = {o.name: o for o in infos[0].outputs}
     has_positions = any(meta[n].kind == "position" for n in names)
@@ -217,17 +237,22 @@ def compare_group(group: str, infos: list[FmuInfo], series: list[Series], *,
         diffs.append(_diff(n, o.unit, o.kind, n in deciding, decisive[0].values[n],
                            [s.values[n] for s in decisive[1:]], decisive[0].time, solver_tol, tolerance, ru,
                            lockstep=lockstep is not None))
-    adaptive = {n: float(np.max(np.abs(np.stack([s.values[n] - series[0].values[n] for s in series[1:]]))))
-                for n in deciding}
+    adaptive = {} if adaptive_failure is not None else {
+        n: float(np.max(np.abs(np.stack([s.values[n] - series[0].values[n] for s in series[1:]])))) for n in deciding}
     return Comparison(group, [i.label for i in infos], infos, series, diffs, predicted, solver_tol, tolerance,
                       mode="lockstep" if lockstep is not None else "adaptive", lockstep_step=lockstep_step,
-                      adaptive_diff=adaptive)
+                      adaptive_diff=adaptive, adaptive_failure=adaptive_failure)
 
 
 def failed_group(group: str, infos: list[FmuInfo], reason: str) -> Comparison:
-    """A group one of whose runs failed: no verdict, the reason is reported."""
+    """A group one of whose deciding runs failed: no verdict, the reason is reported."""
     _, predicted = validate_group(group, infos)
     return Comparison(group, [i.label for i in infos], infos, [], [], predicted, None, None, failure=reason)
+
+
+def invalid_group(group: str, infos: list[FmuInfo], reason: str) -> Comparison:
+    """A group whose FMUs do not form a group (:func:`validate_group`): not run, reported."""
+    return Comparison(group, [i.label for i in infos], infos, [], [], None, None, None, failure=reason, invalid=True)
 
 
 def compare_reference(info: FmuInfo, result: Series, ref: Series, ref_path: Path, *,

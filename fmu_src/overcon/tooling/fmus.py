@@ -54,6 +54,7 @@ class FmuInfo:
     motion_unique: bool | None = None  # pre-check prediction (None: not an overcon FMU)
     reaction_unique: dict = field(default_factory=dict)  # joint -> bool
     lockstep: bool = False  # parameters solver.method and solver.step: can run on the lockstep grid
+    parameters: dict = field(default_factory=dict)  # causality parameter: name -> FMI type (Real, Integer, ...)
 
     @property
     def output_names(self) -> list[str]:
@@ -172,7 +173,8 @@ def inspect_fmu(path) -> FmuInfo:
                    mechanism=facts.get("mechanism", ""), friction=facts.get("friction", ()),
                    eliminate=facts.get("eliminate"), motion_unique=motion_unique,
                    reaction_unique=reaction_unique,
-                   lockstep=params.get("solver.method") == "String" and params.get("solver.step") == "Real")
+                   lockstep=params.get("solver.method") == "String" and params.get("solver.step") == "Real",
+                   parameters=params)
 
 
 def inspect_all(paths) -> list[FmuInfo]:

@@ -18,11 +18,12 @@ import numpy as np
 
 from . import InputError
 from ..verdict import LOCKSTEP_STEP, lockstep_start_values
-from .compare import (Comparison, compare_group, compare_reference, failed_group, group_fmus, order_groups,
-                      validate_group)
+from .compare import (Comparison, compare_group, compare_reference, failed_group, group_fmus, invalid_group,
+                      order_groups, validate_group)
 from .fmus import FmuInfo, inspect_all, inspect_fmu
 from .report import console_table, markdown, plot_comparison, verdict_line
-from .run import Experiment, Job, RunResult, check_unique_models, experiment, read_series, run_fmus, run_jobs
+from .run import (Experiment, Job, RunResult, check_unique_models, experiment, read_series, run_fmus, run_jobs,
+                  start_values_for)
 
 
 def _echo(s: str) -> None:
@@ -34,10 +35,15 @@ def _same_experiment(a: Experiment, b: Experiment) -> bool:
                ((a.start, b.start), (a.stop, b.stop), (a.step, b.step)))
 
 
-def run_paths(paths, out_dir, *, stop_time=None, step=None, jobs: int = 2, echo=_echo) -> list[RunResult]:
-    """``overcon run``: every FMU (files, or the *.fmu of directories) to ``out_dir/<model>.csv``."""
+def run_paths(paths, out_dir, *, stop_time=None, step=None, jobs: int = 2, echo=_echo,
+              settings: dict | None = None) -> list[RunResult]:
+    """``overcon run``: every FMU (files, or the *.fmu of directories) to ``out_dir/<model>.csv``;
+    ``settings`` (``--set``): FMU parameters set in every run."""
     infos = inspect_all(paths)
-    return run_fmus(infos, out_dir, stop_time=stop_time, step=step, jobs=jobs, echo=echo)
+    exps = {i.model: dataclasses.replace(experiment(i, stop_time=stop_time, step=step),
+                                         start_values=tuple(start_values_for(i, settings or {}).items()))
+            for i in infos}
+    return run_fmus(infos, out_dir, jobs=jobs, echo=echo, experiments=exps)
 
 
 @dataclass
@@ -50,7 +56,12 @@ class CompareOutcome:
 
     @property
     def failed(self) -> list[Comparison]:
-        return [c for c in self.comparisons if c.failure is not None]
+        """Groups with a failed simulation (no verdict, or a verdict without the adaptive runs)."""
+        return [c for c in self.comparisons if c.run_failed]
+
+    @property
+    def invalid(self) -> list[Comparison]:
+        return [c for c in self.comparisons if c.invalid]
 
 
 def _select(infos: list[FmuInfo], group: str | None,
@@ -89,11 +100,16 @@ def _check_lockstep_step(h: float | None) -> float | None:
 
 def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experiment], out_dir: Path, *,
                      jobs: int, lockstep_step: float | None, tolerance: float | None,
-                     echo) -> tuple[list[Comparison], dict[str, RunResult]]:
+                     echo, settings: dict | None = None) -> tuple[list[Comparison], dict[str, RunResult]]:
     """Run every FMU of every group (adaptive, into ``out_dir/<model>.csv``) and, for groups whose
     FMUs all take the lockstep parameters and unless ``lockstep_step`` is None, once more on the
-    lockstep grid (``out_dir/lockstep/<model>.csv``); compare each group. A failed run makes its
-    group a failed comparison (with the reason); the other groups are still compared."""
+    lockstep grid (``out_dir/lockstep/<model>.csv``); compare each group. ``settings``: FMU
+    parameters set in every run (``--set``; the lockstep runs' ``solver.method``/``solver.step`` win).
+
+    Failures: a failed deciding run (lockstep; adaptive without lockstep) makes its group a failed
+    comparison with the reason; a failed adaptive run beside successful lockstep runs keeps the
+    verdict and is reported (``Comparison.adaptive_failure``). The other groups are still compared."""
+    user = {i.model: start_values_for(i, settings or {}) for items in groups.values() for i in items}
     check_unique_models([i for items in groups.values() for i in items], out_dir)
     todo, lock_groups = [], set()
     for g, items in groups.items():
@@ -104,27 +120,46 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
             echo(f"{g}: not every FMU has the parameters solver.method and solver.step: verdict from the "
                  "adaptive runs (not lockstep)")
         for i in items:
-            ex = exps[i.model]
+            ex = dataclasses.replace(exps[i.model], start_values=tuple(user[i.model].items()))
             todo.append(Job(i.model, i, ex, out_dir / f"{i.model}.csv"))
             if use_lock:
-                lex = dataclasses.replace(ex, start_values=tuple(lockstep_start_values(lockstep_step).items()))
+                lock_values = {**user[i.model], **lockstep_start_values(lockstep_step)}
+                lex = dataclasses.replace(ex, start_values=tuple(lock_values.items()))
                 todo.append(Job(f"lockstep/{i.model}", i, lex, out_dir / "lockstep" / f"{i.model}.csv"))
     out_dir.mkdir(parents=True, exist_ok=True)
     results, failures = run_jobs(_longest_first(todo), workers=jobs, echo=echo)
     comparisons = []
     for g, items in groups.items():
-        keys = [i.model for i in items] + ([f"lockstep/{i.model}" for i in items] if g in lock_groups else [])
-        failed = [failures[k] for k in keys if k in failures]
-        if failed:
-            comparisons.append(failed_group(g, items, "\n".join(failed)))
+        adaptive_failed = [failures[i.model] for i in items if i.model in failures]
+        lock_failed = [failures[k] for k in (f"lockstep/{i.model}" for i in items) if k in failures]
+        if lock_failed or (adaptive_failed and g not in lock_groups):
+            comparisons.append(failed_group(g, items, "\n".join(lock_failed + adaptive_failed)))
             continue
-        series = [read_series(results[i.model].csv) for i in items]
+        series = None if adaptive_failed else [read_series(results[i.model].csv) for i in items]
         lock = [read_series(results[f"lockstep/{i.model}"].csv) for i in items] if g in lock_groups else None
         c = compare_group(g, items, series, tolerance=tolerance, lockstep=lock,
-                          lockstep_step=lockstep_step if lock is not None else None)
-        c.wall_seconds = [results[i.model].sim_seconds for i in items]
+                          lockstep_step=lockstep_step if lock is not None else None,
+                          adaptive_failure="\n".join(adaptive_failed) or None)
+        c.wall_seconds = [] if adaptive_failed else [results[i.model].sim_seconds for i in items]
         comparisons.append(c)
     return comparisons, results
+
+
+def _valid_groups(groups: dict[str, list[FmuInfo]], echo) -> tuple[dict[str, list[FmuInfo]], list[Comparison]]:
+    """(groups that can be compared, invalid groups as not-run comparisons); before any run.
+    :class:`InputError` when no group is valid."""
+    valid, invalid = {}, []
+    for g, items in groups.items():
+        try:
+            validate_group(g, items)
+        except InputError as exc:
+            invalid.append(invalid_group(g, items, str(exc)))
+            echo(f"{g}: not compared: {exc}")
+            continue
+        valid[g] = items
+    if not valid:
+        raise InputError("\n".join(c.failure for c in invalid))
+    return valid, invalid
 
 
 def _group_experiments(groups: dict[str, list[FmuInfo]], stop_time, step) -> dict[str, Experiment]:
@@ -147,7 +182,7 @@ def _group_experiments(groups: dict[str, list[FmuInfo]], stop_time, step) -> dic
 def compare_paths(paths, out_dir, *, group: str | None = None, one_group: bool = False,
                   tolerance: float | None = None, stop_time=None, step=None, jobs: int = 2, plots="worst",
                   echo=_echo, title: str = "overcon compare",
-                  lockstep_step: float | None = LOCKSTEP_STEP) -> CompareOutcome:
+                  lockstep_step: float | None = LOCKSTEP_STEP, settings: dict | None = None) -> CompareOutcome:
     """``overcon compare``: group the FMUs by scene group (``one_group``: all of them together),
     run them (adaptive, and in lockstep for the verdict unless ``lockstep_step`` is None), compare
     each group, write ``out_dir/report.md`` and the PNGs. FMUs of one group share a
@@ -161,11 +196,11 @@ def compare_paths(paths, out_dir, *, group: str | None = None, one_group: bool =
     groups, singles = _select(infos, group, one_group)
     for g in singles:
         echo(f"{g}: one FMU only, skipped (nothing to compare it with)")
-    for g, items in groups.items():  # before any run: outputs to compare, one prediction
-        validate_group(g, items)
+    groups, invalid = _valid_groups(groups, echo)  # before any run: outputs, one friction set, one prediction
     exps = _group_experiments(groups, stop_time, step)
     comparisons, results = _run_and_compare(groups, exps, out_dir, jobs=jobs, lockstep_step=lockstep_step,
-                                            tolerance=tolerance, echo=echo)
+                                            tolerance=tolerance, echo=echo, settings=settings)
+    comparisons += invalid
     plot_files = {c.group: plot_comparison(c, out_dir, plots) for c in comparisons}
     report = out_dir / "report.md"
     report.write_text(markdown(comparisons, out_dir, title=title, plots=plot_files), encoding="utf-8")
@@ -246,7 +281,12 @@ class ReproduceOutcome:
 
     @property
     def failed(self) -> list[Comparison]:
-        return [c for c in self.comparisons if c.failure is not None]
+        """Groups with a failed simulation (no verdict, or a verdict without the adaptive runs)."""
+        return [c for c in self.comparisons if c.run_failed]
+
+    @property
+    def invalid(self) -> list[Comparison]:
+        return [c for c in self.comparisons if c.invalid]
 
 
 def _figures(comparisons: list[Comparison], out_dir: Path, echo) -> list[tuple[str, Path]]:
@@ -300,6 +340,7 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
     groups, singles = _select(infos, None)
     for g in singles:
         echo(f"{g}: one scene only, not compared")
+    groups, invalid = _valid_groups(groups, echo)
     exps = _group_experiments(groups, stop_time, None)
     n = sum(len(v) for v in groups.values())
     echo(f"== run: {n} FMUs with fmpy.simulate_fmu, adaptive"
@@ -308,6 +349,7 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
     t1 = time.perf_counter()
     comparisons, results = _run_and_compare(groups, exps, out_dir / "results", jobs=jobs,
                                             lockstep_step=lockstep_step, tolerance=None, echo=echo)
+    comparisons += invalid
     t_run = time.perf_counter() - t1
     echo("== compare")
     for c in comparisons:

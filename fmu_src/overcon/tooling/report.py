@@ -16,6 +16,8 @@ def _unit(d: OutputDiff) -> str:
 
 
 def _second_figure(c: Comparison) -> str:
+    if c.adaptive_failure is not None:
+        return f"; ADAPTIVE RUN FAILED (verdict from the lockstep runs): {c.adaptive_failure}"
     a = c.adaptive_max()
     if c.mode != "lockstep" or a is None:
         return ""
@@ -24,6 +26,8 @@ def _second_figure(c: Comparison) -> str:
 
 def verdict_line(c: Comparison) -> str:
     """One line; a mismatch or a failed run is LOUD."""
+    if c.invalid:
+        return f"!!! NOT COMPARED !!! {c.group}: {c.failure}"
     if c.failure is not None:
         return f"!!! FAILED !!! {c.group}: no verdict, a run failed: {c.failure}"
     w = c.worst()
@@ -44,12 +48,14 @@ def verdict_line(c: Comparison) -> str:
 def console_table(c: Comparison) -> str:
     """Every compared output: max abs/rel difference, tolerance, first time over it."""
     if c.failure is not None:
-        return f"{c.group}: " + ", ".join(i.model for i in c.infos) + f"\n  FAILED: {c.failure}"
+        head = "NOT COMPARED" if c.invalid else "FAILED"
+        return f"{c.group}: " + ", ".join(i.model for i in c.infos) + f"\n  {head}: {c.failure}"
     lines = [f"{c.group}: " + (f"{c.infos[0].path.name} vs reference {c.reference}" if c.reference is not None
                               else ", ".join(f"{i.model} ({lab})" for i, lab in zip(c.infos, c.labels)))]
     if c.mode == "lockstep":
-        lines.append(f"  verdict from lockstep runs (rk4, step {c.lockstep_step:g} s); adaptive runs: largest "
-                     f"position difference {c.adaptive_max():.3g} (reported, not deciding)")
+        second = (f"FAILED: {c.adaptive_failure}" if c.adaptive_failure is not None else
+                  f"largest position difference {c.adaptive_max():.3g} (reported, not deciding)")
+        lines.append(f"  verdict from lockstep runs (rk4, step {c.lockstep_step:g} s); adaptive runs: {second}")
     lines.append(f"  {'output':<24} {'unit':<5} {'max abs':>10} {'max rel':>10} {'tolerance':>10} "
                  f"{'first t>tol':>11}  decides")
     for d in c.diffs:
@@ -112,13 +118,16 @@ def summary_rows(comparisons: list[Comparison]) -> list[str]:
         fr = ", ".join(i0.friction) if i0.friction else "none"
         elim = "; ".join(i.eliminate_text() or i.model for i in c.infos)
         pred = "—" if c.predicted is None else c.verdict_text(c.predicted)
-        if c.failure is not None:
+        if c.invalid:
+            obs = "**not compared** (invalid group)"
+        elif c.failure is not None:
             obs = "**FAILED** (no verdict)"
         else:
             obs = c.verdict_text() + ("" if c.matches else " **MISMATCH**")
         w = c.worst()
         md = f"{w.max_abs:.3g} {_unit(w)} ({w.name}, {w.tolerance:.2g}, {c.mode})" if w else "—"
-        second = f"{c.adaptive_max():.3g}" if c.mode == "lockstep" and c.adaptive_max() is not None else "—"
+        second = ("**FAILED**" if c.adaptive_failure is not None else
+                  f"{c.adaptive_max():.3g}" if c.mode == "lockstep" and c.adaptive_max() is not None else "—")
         wall = " + ".join(f"{s:.1f}" for s in c.wall_seconds) if c.wall_seconds else "—"
         rows.append(f"| {i0.mechanism or '—'} | {c.group} ({fr}) | {elim} | {pred} | {obs} | {md} | {second} | {wall} |")
     return rows
@@ -128,8 +137,9 @@ def group_section(c: Comparison, base: Path, plots: list[Path]) -> list[str]:
     lines = [f"### {c.group}", ""]
     if c.failure is not None:
         variants = ", ".join(f"`{i.model}` ({lab})" for i, lab in zip(c.infos, c.labels))
-        return lines + [f"Variants: {variants}. **FAILED**, no verdict: a run did not reach its stop time.", "",
-                        "```", c.failure, "```", ""]
+        why = ("**not compared**: the FMUs do not form a group." if c.invalid else
+               "**FAILED**, no verdict: a run did not reach its stop time.")
+        return lines + [f"Variants: {variants}. {why}", "", "```", c.failure, "```", ""]
     if c.reference is not None:
         lines.append(f"{c.infos[0].path.name} against reference `{c.reference}`: **{c.verdict_text()}**.")
     else:
@@ -137,7 +147,11 @@ def group_section(c: Comparison, base: Path, plots: list[Path]) -> list[str]:
         pred = "none (expected unique)" if c.predicted is None else c.verdict_text(c.predicted)
         lines.append(f"Variants: {variants}. Predicted (pre-check): {pred}; observed: **{c.verdict_text()}**"
                      + ("." if c.matches else " — **MISMATCH with the prediction**."))
-    if c.mode == "lockstep":
+    if c.adaptive_failure is not None:
+        lines += ["", f"Differences below are from the lockstep runs (rk4, step {c.lockstep_step:g} s, identical steps "
+                  "for every variant). The adaptive runs FAILED (no second figure, no plot of them):", "",
+                  "```", c.adaptive_failure, "```"]
+    elif c.mode == "lockstep":
         lines += ["", f"Differences below are from the lockstep runs (rk4, step {c.lockstep_step:g} s, identical steps "
                   f"for every variant); the adaptive runs' largest position difference is {c.adaptive_max():.3g} "
                   "(reported, not deciding)."]
@@ -171,10 +185,17 @@ def markdown(comparisons: list[Comparison], base: Path, *, title: str, intro: li
     plots = plots or {}
     n_failed = sum(c.failure is not None for c in comparisons)
     n_bad = sum(not c.matches for c in comparisons) - n_failed
+    n_invalid = sum(c.invalid for c in comparisons)
+    n_failed -= n_invalid
     head = ("**Every observed verdict equals its prediction.**" if not n_bad else
             f"**{n_bad} verdict(s) differ from the prediction (MISMATCH).**")
     if n_failed:
         head += f" **{n_failed} group(s) FAILED (a run did not finish; no verdict).**"
+    if n_invalid:
+        head += f" **{n_invalid} group(s) not compared (invalid group).**"
+    n_adaptive = sum(c.adaptive_failure is not None for c in comparisons)
+    if n_adaptive:
+        head += f" **{n_adaptive} group(s): adaptive runs FAILED (verdict from the lockstep runs).**"
     lines = [f"# {title}", "", *intro]
     lines += ["", head, "",
               "## Verdicts", "", *summary_rows(comparisons), "", rules_text(comparisons), ""]

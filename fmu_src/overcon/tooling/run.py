@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..params import MAX_OUTPUT_POINTS
 from . import InputError, SimulationFailed
 from .fmus import FmuInfo
 
@@ -64,7 +65,49 @@ def experiment(info: FmuInfo, *, stop_time: float | None = None, step: float | N
     h = float(h)
     if not (math.isfinite(h) and h > 0):
         raise InputError(f"{info.path}: step {h!r} must be a positive finite number")
+    n = (stop - info.start) / h + 1
+    if not n <= MAX_OUTPUT_POINTS:
+        raise InputError(f"{info.path}: step {h:g} s from {info.start:g} to {stop:g} s gives {n:.3g} output points; "
+                         f"at most {MAX_OUTPUT_POINTS:.0e} (each is one fmi2DoStep and one CSV row): use a larger "
+                         "--step or a shorter --stop-time")
     return Experiment(info.start, stop, h)
+
+
+def parse_settings(texts) -> dict[str, str]:
+    """``["solver.method=radau", "joint4.mu=0.2"]`` (``--set``) -> {name: text}; :class:`InputError`
+    naming the bad item."""
+    out: dict[str, str] = {}
+    for text in texts or ():
+        name, sep, value = str(text).partition("=")
+        name, value = name.strip(), value.strip()
+        if not sep or not name or not value:
+            raise InputError(f"--set {text!r}: expected NAME=VALUE, e.g. --set solver.method=radau")
+        if name in out:
+            raise InputError(f"--set {name}: given twice")
+        out[name] = value
+    return out
+
+
+_CONVERT = {"Real": float, "Integer": int, "String": str,
+            "Boolean": lambda v: {"true": True, "1": True, "false": False, "0": False}[v.lower()]}
+
+
+def start_values_for(info: FmuInfo, settings: dict[str, str]) -> dict:
+    """The ``--set`` values typed for ``info``'s parameters; :class:`InputError` naming the FMU and
+    the parameter when it has no such parameter or the value does not fit its type (the FMU
+    itself then checks the range, and a refused value fails the run with the FMU's reason)."""
+    out = {}
+    for name, text in settings.items():
+        typ = info.parameters.get(name)
+        if typ not in _CONVERT:
+            known = ", ".join(sorted(info.parameters)[:12]) or "none"
+            raise InputError(f"{info.path}: --set {name}: no such parameter (parameters: {known}"
+                             f"{', ...' if len(info.parameters) > 12 else ''})")
+        try:
+            out[name] = _CONVERT[typ](text)
+        except (ValueError, KeyError) as exc:
+            raise InputError(f"{info.path}: --set {name}={text}: not a valid {typ} value") from exc
+    return out
 
 
 @dataclass

@@ -117,3 +117,39 @@ def test_radau_failure_is_reported_with_time():
     model = model_of("planar_f45_wo4", mu=1.0, friction_max_iter=1)
     with pytest.raises(SimulationError, match=r"t = "):
         run(model, method="radau")
+
+
+def _decay(t, y):
+    return -y
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_unknown_option_is_an_error(method):
+    """Strict contract: a misspelled option is refused by the class and by ``create`` (it used to
+    be swallowed by ``**_``)."""
+    cls = integrators.METHODS[method]
+    options = {"tolerance": 1e-8, "max_step": 0.1, "step": 1e-2}
+    good = {k: v for k, v in options.items() if k in cls.OPTIONS}
+    cls(_decay, 0.0, np.ones(2), **good)  # the declared options are accepted
+    with pytest.raises(TypeError):
+        cls(_decay, 0.0, np.ones(2), **good, tolerence=1e-8)
+    with pytest.raises(TypeError, match="tolerence"):
+        integrators.create(method, _decay, 0.0, np.ones(2), **options, tolerence=1e-8)
+    itg = integrators.create(method, _decay, 0.0, np.ones(2), **options)  # others' options: passed over
+    itg.step()
+    assert itg.t > 0.0 and itg.nsteps == 1
+
+
+def test_tableaux_equal_scipy_private_constants():
+    """The constants read through SciPy's public classes (or written out for Radau) are bitwise
+    SciPy's private ones the integrators used before."""
+    from scipy.integrate._ivp import dop853_coefficients as D
+    from scipy.integrate._ivp import radau as R
+    c, n = integrators.Dop853, D.N_STAGES
+    for ours, theirs in ((c.A, D.A[:n, :n]), (c.B, D.B), (c.C, D.C[:n]), (c.E3, D.E3), (c.E5, D.E5),
+                         (c.D, D.D), (c.A_EXTRA, D.A[n + 1:]), (c.C_EXTRA, D.C[n + 1:])):
+        assert np.array_equal(ours, theirs)
+    assert (c.n_stages, c.N_STAGES_EXTENDED, c.INTERPOLATOR_POWER) == (n, D.N_STAGES_EXTENDED, D.INTERPOLATOR_POWER)
+    r = integrators.Radau5
+    for name in ("C", "E", "T", "TI", "P", "TI_REAL", "TI_COMPLEX", "MU_REAL", "MU_COMPLEX"):
+        assert np.array_equal(getattr(r, name), getattr(R, name)), name

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dynamics import evaluate
-from .integrators import METHODS
+from . import integrators
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
 from .model import (InconsistentInitialState, Model, ModelError, SingularConfiguration,  # noqa: F401
                     check_initial_state, constraints, coordinate_rates, frames, friction_output, jacobian_h,
@@ -142,7 +142,8 @@ class Simulation:
         t0 = model.scene.start_time if start_time is None else start_time
         y0 = np.concatenate([model.q0, model.h0])
         try:
-            self._integrator = METHODS[self.method](self._rhs, t0, y0, dense_fun=self._rhs_dense, **self.settings)
+            self._integrator = integrators.create(self.method, self._rhs, t0, y0, dense_fun=self._rhs_dense,
+                                                  **self.settings)
             self.monitor = SingularityMonitor(model, y0)
         except (ArithmeticError, np.linalg.LinAlgError) as exc:
             where = "" if str(exc).startswith("t = ") else f"t = {t0:.9g} s: "

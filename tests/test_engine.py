@@ -165,3 +165,21 @@ def test_singular_position_detected(tmp_path):
     path.write_text(text)
     with pytest.raises(SimulationError, match="singular position"):
         run_scene(scene.as_scene(scene.load(path), eliminate=[4], stop_time=2.0))
+
+
+def test_model_carries_no_solver_options():
+    """Solver options are a separate frozen record: the Model has none, and two Simulations of one
+    Model may use different ones."""
+    import dataclasses
+
+    from overcon.simulate import Simulation
+
+    sc = scene_of("planar_sliders.toml", eliminate=[4], stop_time=0.1)
+    m = compile_model(sc)
+    assert m.scene.solver is None
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        sc.solver.tolerance = 1e-6
+    a = Simulation(m, sc.solver)
+    b = Simulation(m, dataclasses.replace(sc.solver, tolerance=1e-6, method="dop853"))
+    assert a.model is b.model and (a.method, a.settings["tolerance"]) == (sc.solver.method, sc.solver.tolerance)
+    assert (b.method, b.settings["tolerance"]) == ("dop853", 1e-6)

@@ -94,6 +94,9 @@ class CompiledLoad:
 
 @dataclass(frozen=True)
 class Model:
+    """A compiled scene (read-only arrays, see the module docstring). ``scene`` is the compiled
+    scene with ``solver=None``: solver options go to :class:`overcon.simulate.Simulation`."""
+
     scene: SceneSpec
     kind: str
     dim: int  # 2 planar, 3 spatial

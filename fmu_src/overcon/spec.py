@@ -156,7 +156,9 @@ class SceneSpec:
     output names ``<body>.<coordinate>``; ``reactions`` joint names whose reactions are outputs;
     ``friction_outputs`` the friction joints whose friction force ``<joint>.friction`` is an
     output (``"all"``: every joint in ``friction``, the default; a scene file's ``[outputs]``
-    table without a ``friction`` key gives ``()``)."""
+    table without a ``friction`` key gives ``()``). ``solver``: the solver options, a separate
+    frozen record (None in the scene a compiled :class:`overcon.model.Model` keeps: a Model has
+    no solver options)."""
 
     name: str
     mechanism: MechanismSpec
@@ -168,7 +170,7 @@ class SceneSpec:
     friction_outputs: tuple[str, ...] | str = "all"
     start_time: float = 0.0
     stop_time: float = 1.0
-    solver: SolverSpec = field(default_factory=SolverSpec)
+    solver: SolverSpec | None = field(default_factory=SolverSpec)
     group: str = ""
     description: str = ""
     source: str = ""

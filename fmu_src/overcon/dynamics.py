@@ -8,7 +8,7 @@ M is diagonal and positive, so it is solved through the Schur complement
 ``S = J_R^T M^-1 J_R`` (Cholesky, factored once per evaluation):
 ``lam_R = S^-1 (J_R^T M^-1 (Q + Q_f) - gamma_R)``, ``h' = M^-1 (Q + Q_f - J_R lam_R)``.
 S is singular when the kept equations are dependent at this configuration (a singular position):
-that raises :class:`overcon.model.SingularConfiguration`.
+that raises :class:`overcon.evaluation.SingularConfiguration`.
 
 Friction: Q_f depends on lam only through the friction joints' multipliers, and enters the right
 hand side linearly, so ``lam_R = lam0 + S^-1 J_R^T M^-1 Q_f(lam)`` is a fixed point in the

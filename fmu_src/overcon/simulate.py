@@ -221,7 +221,7 @@ class Simulation:
 
     def outputs(self, t: float, y: np.ndarray) -> np.ndarray:
         """Output vector (model.output_names() order) at (t, y): positions, reactions, friction
-        forces (:func:`overcon.model.friction_output`); reactions and friction need one evaluation
+        forces (:func:`overcon.evaluation.friction_output`); reactions and friction need one evaluation
         of Eq. 18, warm-started from the integrator's lam but without changing it."""
         model = self.model
         q, h = y[: self.n], y[self.n:]

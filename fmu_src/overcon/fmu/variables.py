@@ -4,7 +4,7 @@ Value references are the positions in :func:`table` (0-based), in this order:
 
 1. outputs, exactly ``model.output_names()``: positions (m, rad), reaction components
    (N, N.m) and the friction forces ``<joint>.friction`` of the scene's friction joints (N, or
-   N.m for revolute joints; :func:`overcon.model.friction_output`), causality output,
+   N.m for revolute joints; :func:`overcon.evaluation.friction_output`), causality output,
    variability continuous, initial calculated;
 2. pre-check verdicts (Booleans, causality output, variability constant, initial exact):
    ``<joint>.reaction_unique`` per reaction joint of the scene, and ``motion_unique``;

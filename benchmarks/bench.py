@@ -241,10 +241,11 @@ def reference(scene_path: Path, stop: float):
     from overcon.model import compile_model
     from overcon.simulate import run
 
-    model = compile_model(scene_mod.load(scene_path))
+    spec = scene_mod.load(scene_path)
+    model = compile_model(spec)
     out = []
     for tol in (1e-13, 1e-11):
-        r = run(model, stop_time=stop, output_interval=INTERVAL, method="dop853", tolerance=tol)
+        r = run(model, spec.solver, stop_time=stop, output_interval=INTERVAL, method="dop853", tolerance=tol)
         out.append(np.column_stack([r.column(c) for c in length_columns(r.names)]))
     return out[0], float(np.max(np.abs(out[0] - out[1])))
 
@@ -315,7 +316,7 @@ def stiff_rows(fmu: FMU, scene_path: Path, repeat: int) -> list[tuple[float, Row
         sc = scene_mod.load(scene_path)
         sc = dataclasses.replace(sc, friction_params={k: dataclasses.replace(v, mu=1.0, v_reg=v_reg)
                                                       for k, v in sc.friction_params.items()})
-        r = run(compile_model(sc), stop_time=fmu.stop, output_interval=INTERVAL, method="radau", tolerance=1e-11)
+        r = run(compile_model(sc), sc.solver, stop_time=fmu.stop, output_interval=INTERVAL, method="radau", tolerance=1e-11)
         ref = np.column_stack([r.column(c) for c in length_columns(r.names)])
         for method, tol in STIFF_RUNS:
             sv = {**start_values(method, tol), **params}

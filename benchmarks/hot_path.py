@@ -59,7 +59,7 @@ def bench(path: Path, stop: float, repeat: int):
     for _ in range(repeat):
         with _RhsTimer() as timer:
             t0 = time.perf_counter()
-            res = run(model, stop_time=stop)
+            res = run(model, spec.solver, stop_time=stop)
             walls.append(time.perf_counter() - t0)
         rhs.append(timer.total)
     return statistics.median(walls), statistics.median(rhs), res

@@ -126,3 +126,20 @@ def test_simulation_failure_exit_3(tmp_path, capsys):
     code = main(["simulate", str(path), "--eliminate", "4", "--stop-time", "2", "--out", str(tmp_path / "o.csv")])
     assert code == 3
     assert "singular position" in capsys.readouterr().err
+
+
+def test_check_json_is_the_typed_precheck_result_in_its_key_order(capsys):
+    """``check --json`` is PrecheckResult.to_json(): the keys (and their order) users' scripts
+    read, unchanged by the typed result."""
+    from overcon import scene
+    from overcon.model import compile_model
+    from overcon.precheck import PrecheckResult, precheck
+
+    code, rep = check_json(capsys, MECH / "planar_f45_wo4.toml")
+    assert list(rep) == ["n_coordinates", "n_equations", "rank", "dof", "redundant", "joints", "file", "scene",
+                         "kind", "methods_agree", "friction", "friction_on_nonunique", "friction_set_unique",
+                         "motion_unique", "eliminated", "elimination_mode", "problems", "warnings"]
+    assert list(rep["joints"][0]) == ["name", "unique", "methods", "rank_defect", "agree", "type"]
+    result = precheck(compile_model(scene.load(MECH / "planar_f45_wo4.toml")), str(MECH / "planar_f45_wo4.toml"))
+    assert isinstance(result, PrecheckResult) and result.to_json() == rep
+    assert result.motion_unique is rep["motion_unique"] and result.reaction_unique["joint4"] is True

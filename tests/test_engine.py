@@ -9,26 +9,32 @@ import pytest
 
 from overcon import scene
 from overcon.dynamics import evaluate
-from overcon.model import ModelError, applied_forces, compile_model, frames, jacobian_h, physical_reaction
+from overcon.evaluation import applied_forces, constraints, frames, jacobian_h, physical_reaction
+from overcon.model import ModelError, compile_model
+from overcon.spec import SolverSpec
 from overcon.precheck import analyse_model
-from overcon.simulate import SimulationError, run
+from overcon.simulate import SimulationError, run_scene
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
 
 
+def scene_of(name, **overrides):
+    return scene.as_scene(scene.load(MECH / name), **overrides)
+
+
 def model_of(name, **overrides):
-    return compile_model(scene.as_scene(scene.load(MECH / name), **overrides))
+    return compile_model(scene_of(name, **overrides))
 
 
 @pytest.fixture(scope="module")
 def planar_runs():
-    return {k: run(model_of("planar_sliders.toml", friction=[], eliminate=[k], stop_time=4.0, tolerance=1e-10))
+    return {k: run_scene(scene_of("planar_sliders.toml", friction=[], eliminate=[k], stop_time=4.0, tolerance=1e-10))
             for k in (4, 6)}
 
 
 @pytest.fixture(scope="module")
 def spatial_runs():
-    return {k: run(model_of("spatial_parallelogram.toml", friction=[], eliminate=[k], stop_time=10.0, tolerance=1e-10))
+    return {k: run_scene(scene_of("spatial_parallelogram.toml", friction=[], eliminate=[k], stop_time=10.0, tolerance=1e-10))
             for k in (5, 9, 18)}
 
 
@@ -104,7 +110,6 @@ def test_spatial_joint_G_y_reaction_differs(spatial_runs):
 
 def test_spatial_constraints_hold_at_q0():
     m = model_of("spatial_parallelogram.toml")
-    from overcon.model import constraints
     assert np.max(np.abs(constraints(m, frames(m, m.q0)))) < 1e-14
 
 
@@ -130,9 +135,10 @@ def test_bad_elimination_refused(elim, message):
 
 
 def test_auto_elimination_reports_choice_and_gives_same_motion(planar_runs):
-    m = model_of("planar_sliders.toml", friction=[], eliminate="auto", stop_time=4.0, tolerance=1e-10)
+    sc = scene_of("planar_sliders.toml", friction=[], eliminate="auto", stop_time=4.0, tolerance=1e-10)
+    m = compile_model(sc)
     assert m.elimination_mode == "auto" and len(m.eliminated) == 1
-    r = run(m)
+    r = run_scene(sc)
     assert max_diff(r, planar_runs[4], "slider1.x") <= 1e-9
 
 
@@ -142,7 +148,7 @@ def test_reactions_satisfy_equations_of_motion():
     f = frames(m, m.q0)
     Jh = jacobian_h(m, f)
     h = 0.7 * np.linalg.svd(Jh)[2][-1]
-    ev = evaluate(m, 0.0, m.q0, h, baumgarte=0.0)
+    ev = evaluate(m, 0.0, m.q0, h, solver=SolverSpec(baumgarte=0.0))
     f = frames(m, m.q0, h)
     np.testing.assert_allclose(m.M * ev.hdot, applied_forces(m, f) - Jh.T @ ev.lam, atol=1e-10)
     # physical reaction of joint4 on slider1 (global force part) is -J_X lam_X restricted to body i
@@ -157,6 +163,23 @@ def test_singular_position_detected(tmp_path):
     text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
     path = tmp_path / "planar_l0.toml"
     path.write_text(text)
-    m = compile_model(scene.as_scene(scene.load(path), eliminate=[4], stop_time=2.0))
     with pytest.raises(SimulationError, match="singular position"):
-        run(m)
+        run_scene(scene.as_scene(scene.load(path), eliminate=[4], stop_time=2.0))
+
+
+def test_model_carries_no_solver_options():
+    """Solver options are a separate frozen record: the Model has none, and two Simulations of one
+    Model may use different ones."""
+    import dataclasses
+
+    from overcon.simulate import Simulation
+
+    sc = scene_of("planar_sliders.toml", eliminate=[4], stop_time=0.1)
+    m = compile_model(sc)
+    assert m.scene.solver is None
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        sc.solver.tolerance = 1e-6
+    a = Simulation(m, sc.solver)
+    b = Simulation(m, dataclasses.replace(sc.solver, tolerance=1e-6, method="dop853"))
+    assert a.model is b.model and (a.method, a.settings["tolerance"]) == (sc.solver.method, sc.solver.tolerance)
+    assert (b.method, b.settings["tolerance"]) == ("dop853", 1e-6)

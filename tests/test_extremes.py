@@ -12,7 +12,7 @@ from overcon import scene
 from overcon.model import compile_model
 from overcon.precheck import precheck
 from overcon.joints import TYPES
-from overcon.simulate import InconsistentInitialState, Simulation, SimulationError, run
+from overcon.simulate import InconsistentInitialState, Simulation, SimulationError, run_scene
 from overcon.spec import BodySpec, FrictionSpec, JointSpec, LoadSpec, MechanismSpec, SceneSpec
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
@@ -86,14 +86,14 @@ def test_unit_rescaling_same_verdicts_scaled_results(name, stop):
     m_si, m_mm = compile_model(sc), compile_model(to_millimetres(sc))
     r_si, r_mm = precheck(m_si), precheck(m_mm)
     for key in ("rank", "dof", "redundant", "friction_on_nonunique", "motion_unique"):
-        assert r_si[key] == r_mm[key]
-    assert [j["unique"] for j in r_si["joints"]] == [j["unique"] for j in r_mm["joints"]]
-    a, b = run(m_si), run(m_mm)
+        assert getattr(r_si, key) == getattr(r_mm, key)
+    assert [j.unique for j in r_si.joints] == [j.unique for j in r_mm.joints]
+    a, b = run_scene(sc), run_scene(to_millimetres(sc))
     for k, n in enumerate(a.names):
         comp = n.split(".")[1]
         factor = {"x": LENGTH, "y": LENGTH, "z": LENGTH, "T": LENGTH**2}.get(comp, LENGTH if comp.startswith("F") else 1.0)
         if comp == "friction":  # a force (N -> kg mm/s^2) or, revolute, a torque
-            factor = LENGTH**2 if TYPES[m_si.joints[[c.name for c in m_si.joints].index(n.split(".")[0])].type].FRICTION_UNIT == "N.m" else LENGTH
+            factor = LENGTH**2 if TYPES[m_si.joints[[c.name for c in m_si.joints].index(n.split(".")[0])].type].friction_unit == "N.m" else LENGTH
         scale = max(1.0, float(np.max(np.abs(a.values[:, k]))))
         # positions to 1e-6 relative; reactions to 1e-4 relative (friction reactions inside the
         # regularisation band amplify the integration error: gain mu |F| / v_reg)
@@ -111,7 +111,7 @@ def test_inconsistent_q0_refused_naming_equations():
     with pytest.raises(InconsistentInitialState, match=r"Phi8.*Phi12|Phi8"):
         compile_model(bad)  # refused when compiled (check, simulate and build alike) ...
     with pytest.raises(InconsistentInitialState, match=r"Phi8.*Phi12|Phi8"):
-        Simulation(compile_model(bad, check_initial=False))  # ... and by the Simulation itself
+        Simulation(compile_model(bad, check_initial=False), bad.solver)  # ... and by the Simulation itself
 
 
 def test_inconsistent_h0_refused():
@@ -122,7 +122,7 @@ def test_inconsistent_h0_refused():
     with pytest.raises(InconsistentInitialState, match="velocit"):
         compile_model(bad)
     with pytest.raises(InconsistentInitialState, match="velocit"):
-        Simulation(compile_model(bad, check_initial=False))
+        Simulation(compile_model(bad, check_initial=False), bad.solver)
 
 
 # ------------------------------------------------------------------------------ singular positions
@@ -143,8 +143,8 @@ def pendulum(beta0: float) -> SceneSpec:
 
 def test_euler_singularity_detected_not_integrated_through():
     with pytest.raises(SimulationError, match="Euler angle singularity of body 'rod'"):
-        run(compile_model(pendulum(1e-4)))
-    res = run(compile_model(pendulum(0.8)), stop_time=0.2)  # far from beta = 0: fine
+        run_scene(pendulum(1e-4))
+    res = run_scene(pendulum(0.8), stop_time=0.2)  # far from beta = 0: fine
     assert np.all(np.isfinite(res.values))
 
 
@@ -152,9 +152,8 @@ def test_planar_sliders_near_origin_detected(tmp_path):
     """Spring free length 2 m also drives the sliders into K = L = O (rank 10) within 1 s."""
     text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 2.0")
     (tmp_path / "p.toml").write_text(text)
-    model = compile_model(scene.as_scene(scene.load(tmp_path / "p.toml"), eliminate=[6], stop_time=2.0))
     with pytest.raises(SimulationError, match="singular position"):
-        run(model)
+        run_scene(scene.as_scene(scene.load(tmp_path / "p.toml"), eliminate=[6], stop_time=2.0))
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -164,7 +163,7 @@ def test_regularisation_velocity_range(v_reg):
     """From 1e-1 down to 1e-7 m/s: finite, constraints held, and converging to the v_reg -> 0
     limit (here the 1e-6 run): within 1e-5 m below 1e-5 m/s, 1e-4 m at 1e-3 m/s."""
     def x1(v):
-        res = run(compile_model(with_friction(load("planar_f45_wo4.toml", stop_time=1.0), v_reg=v)))
+        res = run_scene(with_friction(load("planar_f45_wo4.toml", stop_time=1.0), v_reg=v))
         assert np.all(np.isfinite(res.values)) and res.max_drift < 1e-7
         return res.column("slider1.x")
     diff = np.max(np.abs(x1(v_reg) - x1(1e-6)))
@@ -176,9 +175,8 @@ def test_regularisation_velocity_range(v_reg):
 
 @pytest.mark.parametrize("mu", [0.0, 0.5, 2.0])
 def test_spatial_friction_coefficient_range(mu):
-    model = compile_model(with_friction(load("spatial_GHMN_wo5.toml", stop_time=1.0), mu=mu))
     try:
-        res = run(model)
+        res = run_scene(with_friction(load("spatial_GHMN_wo5.toml", stop_time=1.0), mu=mu))
     except SimulationError as exc:
         assert "t = " in str(exc)
     else:
@@ -190,7 +188,7 @@ def test_spatial_friction_coefficient_range(mu):
 def test_100_second_horizon_drift_bounded():
     """Baumgarte keeps the constraint drift bounded over 100 s (stated bound: 1e-7 m/rad at the
     scenes' tolerance 1e-8) and the motion stays in the paper's range."""
-    res = run(compile_model(load("planar_f45_wo6.toml", stop_time=100.0)), output_interval=0.1)
+    res = run_scene(load("planar_f45_wo6.toml", stop_time=100.0), output_interval=0.1)
     assert res.max_drift < 1e-7
     x1 = res.column("slider1.x")
     assert np.all(np.isfinite(res.values)) and 0.3 < x1.min() and x1.max() <= 2.0 + 1e-9

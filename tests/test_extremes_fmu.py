@@ -80,7 +80,7 @@ def in_process(name: str, times, method=None, mu=None):
     if mu is not None:
         sc = dataclasses.replace(sc, friction_params={k: dataclasses.replace(v, mu=mu)
                                                       for k, v in sc.friction_params.items()})
-    sim = Simulation(compile_model(sc), method=method)
+    sim = Simulation(compile_model(sc), sc.solver, method=method)
     return np.array([sim.outputs(t, sim.advance(t)) for t in times])
 
 
@@ -121,7 +121,7 @@ def tight_reference():
     if not _TIGHT:
         sc = scene_mod.load(MECH / "planar_f45_wo4.toml")
         sc = dataclasses.replace(sc, solver=dataclasses.replace(sc.solver, tolerance=1e-11))
-        sim = Simulation(compile_model(sc), method="dop853")
+        sim = Simulation(compile_model(sc), sc.solver, method="dop853")
         _TIGHT.append(np.array([sim.outputs(t, sim.advance(t)) for t in 0.5 * np.arange(1, 9)]))
     return _TIGHT[0]
 

@@ -24,7 +24,7 @@ from overcon.fmu import build as fmu_build  # noqa: E402
 from overcon.fmu.description import LOG_CATEGORIES  # noqa: E402
 from overcon.precheck import friction_warnings  # noqa: E402
 from overcon.model import compile_model  # noqa: E402
-from overcon.simulate import run  # noqa: E402
+from overcon.simulate import run_scene  # noqa: E402
 
 from test_fmu import Logs  # noqa: E402
 
@@ -127,7 +127,7 @@ def test_value_references_and_writes_to_outputs(unz):
     for _ in range(3):
         assert "cannot be set" in s.error(s.fmu.setReal, [x], [1.0])
     s.fmu.doStep(0.0, 0.01)
-    ref = run(compile_model(scene_mod.load(MECH / "planar_f45_wo4.toml")), stop_time=0.01)
+    ref = run_scene(scene_mod.load(MECH / "planar_f45_wo4.toml"), stop_time=0.01)
     assert s.fmu.getReal([x]) == [ref.values[-1][0]]
     s.free()
 
@@ -245,7 +245,7 @@ def test_budget_is_tunable_and_long_steps_are_exact(unz):
     out = np.array(s.fmu.getReal(s.outputs))
     s.fmu.freeFMUstate(state)
     s.free()
-    ref = run(compile_model(scene_mod.load(MECH / "planar_f45_wo4.toml")), stop_time=1.0, output_interval=1.0)
+    ref = run_scene(scene_mod.load(MECH / "planar_f45_wo4.toml"), stop_time=1.0, output_interval=1.0)
     assert np.array_equal(out, ref.values[-1])
 
 
@@ -291,7 +291,7 @@ def test_scene_names_that_are_keywords_or_the_package(tmp_path, name):
     res = fmu_build.build_scene(tmp_path / f"{name}.toml", tmp_path / "out", echo=lambda s: None)
     assert res.status == "built", res.messages
     got = fmpy.simulate_fmu(str(res.fmu), stop_time=0.2)
-    ref = run(compile_model(scene_mod.load(MECH / "planar_none_wo4.toml")), stop_time=0.2)
+    ref = run_scene(scene_mod.load(MECH / "planar_none_wo4.toml"), stop_time=0.2)
     assert np.array_equal(got["slider1.x"], ref.column("slider1.x"))
 
 
@@ -335,3 +335,56 @@ def test_friction_on_a_joint_whose_equations_are_all_eliminated_is_reported(tmp_
     assert any(st == 1 and "friction on joint joint7, whose equations Phi13, Phi14 are all eliminated" in m
                for st, _, m in s.logs.records)
     s.free()
+
+
+def test_setting_solver_tolerance_runs_no_rank_analysis(unz, monkeypatch):
+    """Solver options are not part of the Model: after fmi2Instantiate, fmi2SetReal of
+    solver.tolerance and entering/exiting initialisation build a new Simulation with the new
+    tolerance but neither compile the model nor run any rank analysis (pre-check or
+    elimination). Setting a friction parameter, by contrast, does recompile (the counter works)."""
+    import ctypes
+
+    from overcon import analysis
+    from overcon.fmu import slave as slave_mod
+    from overcon.fmu.slave import OverconSlave, Status
+
+    calls = []
+
+    def counted(module, name):
+        original = getattr(module, name)
+
+        def wrapper(*args, **kwargs):
+            calls.append(name)
+            return original(*args, **kwargs)
+        monkeypatch.setattr(module, name, wrapper)
+
+    for name in ("analyse", "numerical_rank", "auto_eliminate"):
+        counted(analysis, name)
+    counted(slave_mod, "compile_model")
+
+    def set_real(inst, name, value):
+        vr = next(k for k, v in enumerate(inst._vars) if v.name == name)
+        refs, vals = (ctypes.c_uint * 1)(vr), (ctypes.c_double * 1)(value)
+        return inst.set_real(ctypes.addressof(refs), 1, ctypes.addressof(vals))
+
+    def initialise(inst, **params):
+        assert inst.setup_experiment(0, 0.0, 0.0) == Status.OK
+        for name, value in params.items():
+            assert set_real(inst, name, value) == Status.OK
+        assert inst.enter_initialization_mode() == Status.OK
+        assert inst.exit_initialization_mode() == Status.OK, inst.messages
+        assert inst.do_step(0.0, 0.01) == Status.OK, inst.messages
+
+    resources = unz("planar_f45_wo4") / "resources"
+    inst = OverconSlave(resources)
+    assert calls  # instantiating compiles the scene once (its rank analysis included)
+    calls.clear()
+    initialise(inst, **{"solver.tolerance": 1e-7})
+    assert calls == []
+    assert inst._sim.solver.tolerance == 1e-7 and inst._sim.settings["tolerance"] == 1e-7
+    assert inst._sim.model is inst._model0  # the instantiated model, not a recompiled one
+
+    other = OverconSlave(resources)
+    calls.clear()
+    initialise(other, **{"joint4.mu": 0.2})
+    assert "compile_model" in calls and "numerical_rank" in calls

@@ -29,7 +29,7 @@ from fmpy.validation import validate_fmu  # noqa: E402
 from overcon import scene as scene_mod  # noqa: E402
 from overcon.fmu import build as fmu_build  # noqa: E402
 from overcon.model import compile_model  # noqa: E402
-from overcon.simulate import run  # noqa: E402
+from overcon.simulate import run_scene  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
@@ -72,11 +72,15 @@ def unzip(fmus, tmp_path_factory):
     return get
 
 
-def model_of(name: str, **changes):
+def scene_of(name: str, **changes):
     spec = scene_mod.load(MECH / f"{name}.toml")
     if changes:
         spec = dataclasses.replace(spec, **changes)
-    return compile_model(spec)
+    return spec
+
+
+def model_of(name: str, **changes):
+    return compile_model(scene_of(name, **changes))
 
 
 def fmpy_matrix(result, names):
@@ -234,7 +238,7 @@ def test_model_description(fmus):
 @pytest.mark.parametrize("name, stop", [("planar_none_wo4", 1.0), ("planar_f45_wo6", 1.0), ("spatial_MN_wo9", 1.0)])
 def test_fmpy_result_equals_in_process_run(fmus, name, stop):
     res = fmpy.simulate_fmu(str(fmus / f"{name}.fmu"), stop_time=stop)
-    ref = run(model_of(name), stop_time=stop)
+    ref = run_scene(scene_of(name), stop_time=stop)
     assert np.max(np.abs(res["time"] - ref.time)) <= 1e-12
     assert np.max(np.abs(fmpy_matrix(res, ref.names) - ref.values)) <= 1e-9
 
@@ -245,7 +249,7 @@ def test_full_horizon_reference_files(tmp_path):
     assert code == 0 and results[0].ref_status == "written"
     opt = (tmp_path / "planar_f45_wo4_ref.opt").read_text().splitlines()
     assert opt == ["StartTime, 0.0", "StopTime, 4.0", "StepSize, 0.01", "RelTol, 1e-09"]
-    ref = run(model_of("planar_f45_wo4"))
+    ref = run_scene(scene_of("planar_f45_wo4"))
     with open(tmp_path / "planar_f45_wo4_ref.csv", newline="") as fh:
         header = fh.readline().rstrip("\n")
         rows = np.array([[float(x) for x in r] for r in csv.reader(fh)])
@@ -262,11 +266,10 @@ def test_parameters_reach_the_engine(fmus):
     fp = dict(spec.friction_params)
     fp["joint4"] = dataclasses.replace(fp["joint4"], mu=0.3)
     fp["joint5"] = dataclasses.replace(fp["joint5"], v_reg=2e-3)
-    model = compile_model(dataclasses.replace(spec, friction_params=fp,
-                                              solver=dataclasses.replace(spec.solver, baumgarte=5.0)))
-    ref = run(model, stop_time=0.5)
+    ref = run_scene(dataclasses.replace(spec, friction_params=fp,
+                                        solver=dataclasses.replace(spec.solver, baumgarte=5.0)), stop_time=0.5)
     assert np.max(np.abs(fmpy_matrix(res, ref.names) - ref.values)) <= 1e-9
-    default = run(model_of("planar_f45_wo4"), stop_time=0.5)
+    default = run_scene(scene_of("planar_f45_wo4"), stop_time=0.5)
     assert np.max(np.abs(ref.values - default.values)) > 1e-6  # the parameters did change the motion
 
 
@@ -281,8 +284,8 @@ def test_two_fmus_and_two_instances_in_one_process(unzip):
         ra2.append(a2.step())
     for inst in (a1, a2, b):
         inst.free()
-    ref_a = run(model_of("planar_f45_wo4"), stop_time=0.5)
-    ref_b = run(model_of("spatial_none_wo5"), stop_time=0.5)
+    ref_a = run_scene(scene_of("planar_f45_wo4"), stop_time=0.5)
+    ref_b = run_scene(scene_of("spatial_none_wo5"), stop_time=0.5)
     assert np.array_equal(np.array(ra1), np.array(ra2))
     assert np.max(np.abs(np.array(ra1) - ref_a.values[1:])) <= 1e-9
     assert np.max(np.abs(np.array(rb) - ref_b.values[1:])) <= 1e-9
@@ -372,7 +375,7 @@ def test_failed_step_returns_error_and_keeps_finite_outputs(tmp_path, unzip):
     res = fmu_build.build_scene(tmp_path / "planar_singular.toml", tmp_path / "out", echo=lambda s: None)
     assert res.status == "built", res.messages
     with pytest.raises(Exception):
-        run(compile_model(scene_mod.load(tmp_path / "planar_singular.toml")))  # the engine stops too
+        run_scene(scene_mod.load(tmp_path / "planar_singular.toml"))  # the engine stops too
     logs = Logs()
     unz = Path(fmpy.extract(str(res.fmu), str(tmp_path / "unz")))
     inst = Instance(unz, logs=logs).init()
@@ -413,5 +416,5 @@ def test_variable_step_sizes(unzip):
         t += h
     out = np.array(inst.fmu.getReal(inst.out_vrs))
     inst.free()
-    ref = run(model_of("planar_f45_wo4"), stop_time=t, output_interval=t)
+    ref = run_scene(scene_of("planar_f45_wo4"), stop_time=t, output_interval=t)
     assert np.max(np.abs(out - ref.values[-1])) <= 1e-9

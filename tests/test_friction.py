@@ -11,8 +11,9 @@ import pytest
 from overcon import scene
 from overcon.dynamics import FrictionSolveError, evaluate
 from overcon.friction_laws import make_law
-from overcon.model import ModelError, compile_model, frames, jacobian_h
-from overcon.simulate import Simulation, SimulationError, run
+from overcon.evaluation import frames, jacobian_h
+from overcon.model import ModelError, compile_model
+from overcon.simulate import Simulation, SimulationError, run_scene
 from overcon.spec import FrictionSpec
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
@@ -27,10 +28,10 @@ def law(name="regularised", mu=0.3, **kw):
 
 def test_regularised_values():
     b = law()
-    assert b.mu(0.0) == 0.0
-    assert b.mu(EPS) == pytest.approx(0.3) and b.mu(-EPS) == pytest.approx(-0.3)
-    assert b.mu(EPS / 2) == pytest.approx(0.15)
-    assert b.mu(10.0) == 0.3 and b.mu(-10.0) == -0.3
+    assert b.coefficient(0.0) == 0.0
+    assert b.coefficient(EPS) == pytest.approx(0.3) and b.coefficient(-EPS) == pytest.approx(-0.3)
+    assert b.coefficient(EPS / 2) == pytest.approx(0.15)
+    assert b.coefficient(10.0) == 0.3 and b.coefficient(-10.0) == -0.3
     assert b.mu_over_speed(0.0) == pytest.approx(0.3 / EPS)
     assert b.mu_over_speed(2.0) == pytest.approx(0.15)
 
@@ -38,32 +39,32 @@ def test_regularised_values():
 def test_regularised_continuous_and_odd():
     b = law()
     v = np.linspace(-3 * EPS, 3 * EPS, 6001)
-    mu = np.array([b.mu(x) for x in v])
+    mu = np.array([b.coefficient(x) for x in v])
     assert np.max(np.abs(np.diff(mu))) <= 0.3 / EPS * (v[1] - v[0]) * (1 + 1e-9)  # Lipschitz: no jump
     np.testing.assert_allclose(mu, -mu[::-1], atol=1e-15)
     for x in (EPS * (1 - 1e-12), EPS, EPS * (1 + 1e-12)):  # both sides of the boundary agree
-        assert b.mu(x) == pytest.approx(0.3, rel=1e-11)
+        assert b.coefficient(x) == pytest.approx(0.3, rel=1e-11)
 
 
 def test_stribeck_values():
     c = law("stribeck", mu=0.2, mu_static=0.3, v_stribeck=0.01)
-    assert c.mu(0.0) == 0.0
-    assert c.mu(EPS) == pytest.approx(0.2 + 0.1 * math.exp(-(0.1) ** 2))
-    assert c.mu(1.0) == pytest.approx(0.2, abs=1e-12)  # far from the peak: kinetic value
-    assert c.mu(-EPS) == -c.mu(EPS)
-    assert c.mu(EPS) > c.mu(0.05) > 0.2  # falls from the Stribeck peak
+    assert c.coefficient(0.0) == 0.0
+    assert c.coefficient(EPS) == pytest.approx(0.2 + 0.1 * math.exp(-(0.1) ** 2))
+    assert c.coefficient(1.0) == pytest.approx(0.2, abs=1e-12)  # far from the peak: kinetic value
+    assert c.coefficient(-EPS) == -c.coefficient(EPS)
+    assert c.coefficient(EPS) > c.coefficient(0.05) > 0.2  # falls from the Stribeck peak
 
 
 def test_coulomb_values_and_refused_for_integration():
     a = law("coulomb")
-    assert a.mu(1e-12) == 0.3 and a.mu(-1e-12) == -0.3 and a.mu(0.0) == 0.0
+    assert a.coefficient(1e-12) == 0.3 and a.coefficient(-1e-12) == -0.3 and a.coefficient(0.0) == 0.0
     with pytest.raises(ZeroDivisionError):
         a.mu_over_speed(0.0)
     sc = scene.load(MECH / "planar_f45_wo4.toml")
     fp = {k: dataclasses.replace(v, law="coulomb") for k, v in sc.friction_params.items()}
     model = compile_model(dataclasses.replace(sc, friction_params=fp))
     with pytest.raises(ModelError, match="analysis only"):
-        Simulation(model)
+        Simulation(model, sc.solver)
 
 
 # ------------------------------------------------------------------------------ helpers
@@ -86,7 +87,7 @@ def scene_with(name, *, mu=None, v_reg=None, tolerance=1e-8, stop_time=None, tex
         changes["v_reg"] = v_reg
     fp = {k: dataclasses.replace(v, **changes) for k, v in sc.friction_params.items()}
     sc = dataclasses.replace(sc, friction_params=fp)
-    return compile_model(scene.as_scene(sc, tolerance=tolerance, stop_time=stop_time))
+    return scene.as_scene(sc, tolerance=tolerance, stop_time=stop_time)
 
 
 def mechanical_energy(model, y):
@@ -112,9 +113,10 @@ NO_DRIVE = [("value = 10.0", "value = 0.0"), ("value = 30.0", "value = 0.0")]
 def test_friction_never_adds_energy(tmp_path, scene_name):
     """Without the drive torques the mechanism is conservative: with friction its mechanical
     energy never increases (beyond the integration error) and ends below the frictionless one."""
-    model = scene_with(f"{scene_name}.toml", tolerance=1e-10, stop_time=4.0, text_edit=NO_DRIVE, tmp_path=tmp_path)
-    free = compile_model(dataclasses.replace(model.scene, friction=(), friction_params={}))
-    sim, sim_free = Simulation(model), Simulation(free)
+    sc = scene_with(f"{scene_name}.toml", tolerance=1e-10, stop_time=4.0, text_edit=NO_DRIVE, tmp_path=tmp_path)
+    model = compile_model(sc)
+    free = compile_model(dataclasses.replace(sc, friction=(), friction_params={}))
+    sim, sim_free = Simulation(model, sc.solver), Simulation(free, sc.solver)
     e0 = mechanical_energy(model, sim.advance(0.0))
     energies, free_energies = [], []
     for t in np.linspace(0.02, 4.0, 200):
@@ -127,12 +129,12 @@ def test_friction_never_adds_energy(tmp_path, scene_name):
 
 
 def test_mu_zero_is_exactly_frictionless():
-    with_zero = run(scene_with("planar_f145_wo4.toml", mu=0.0, stop_time=2.0))
-    none = run(scene_with("planar_none_wo4.toml", stop_time=2.0))
+    with_zero = run_scene(scene_with("planar_f145_wo4.toml", mu=0.0, stop_time=2.0))
+    none = run_scene(scene_with("planar_none_wo4.toml", stop_time=2.0))
     for name in none.names:
         np.testing.assert_array_equal(with_zero.column(name), none.column(name))
-    sp0 = run(scene_with("spatial_GHMN_wo9.toml", mu=0.0, stop_time=0.5))
-    sp = run(scene_with("spatial_none_wo9.toml", stop_time=0.5))
+    sp0 = run_scene(scene_with("spatial_GHMN_wo9.toml", mu=0.0, stop_time=0.5))
+    sp = run_scene(scene_with("spatial_none_wo9.toml", stop_time=0.5))
     for name in sp.names:
         np.testing.assert_array_equal(sp0.column(name), sp.column(name))
 
@@ -140,9 +142,9 @@ def test_mu_zero_is_exactly_frictionless():
 @pytest.mark.parametrize("name", ["planar_f45_wo4", "planar_f1_wo4", "planar_f145_wo6"])
 @pytest.mark.parametrize("mu", [1.0, 5.0])
 def test_large_mu_converges_or_fails_clearly(name, mu):
-    model = scene_with(f"{name}.toml", mu=mu, stop_time=1.0)
+    sc = scene_with(f"{name}.toml", mu=mu, stop_time=1.0)
     try:
-        res = run(model)
+        res = run_scene(sc)
     except SimulationError as exc:
         msg = str(exc)
         assert "t = " in msg
@@ -158,24 +160,23 @@ def test_large_mu_converges_or_fails_clearly(name, mu):
 def test_tiny_regularisation_velocity_is_accurate_not_garbage():
     """v_reg = 1e-6 m/s: the result converges to the v_reg -> 0 limit (compared with 1e-5), finite,
     constraints held; stiffness, if it arose, would be reported (dopri5 stiffness test)."""
-    a = run(scene_with("planar_f45_wo4.toml", v_reg=1e-6, stop_time=4.0))
-    b = run(scene_with("planar_f45_wo4.toml", v_reg=1e-5, stop_time=4.0))
+    a = run_scene(scene_with("planar_f45_wo4.toml", v_reg=1e-6, stop_time=4.0))
+    b = run_scene(scene_with("planar_f45_wo4.toml", v_reg=1e-5, stop_time=4.0))
     assert np.all(np.isfinite(a.values)) and a.max_drift < 1e-7
     assert np.max(np.abs(a.column("slider1.x") - b.column("slider1.x"))) < 1e-5
 
 
 def test_friction_solve_failure_names_time_joints_residual():
-    model = scene_with("planar_f45_wo4.toml", mu=1.0)
-    model = dataclasses.replace(model, scene=dataclasses.replace(
-        model.scene, solver=dataclasses.replace(model.scene.solver, friction_max_iter=1)))
+    sc = scene_with("planar_f45_wo4.toml", mu=1.0)
+    model = compile_model(sc)
     h = 0.5 * np.linalg.svd(jacobian_h(model, frames(model, model.q0)))[2][-1]  # a consistent velocity
     with pytest.raises(FrictionSolveError) as info:
-        evaluate(model, 1.25, model.q0, h)
+        evaluate(model, 1.25, model.q0, h, solver=dataclasses.replace(sc.solver, friction_max_iter=1))
     msg = str(info.value)
     assert "t = 1.25 s" in msg and "joint4, joint5" in msg and "residual" in msg
 
 
 def test_iteration_counts_reported():
-    res = run(scene_with("planar_f45_wo4.toml", stop_time=0.5))
+    res = run_scene(scene_with("planar_f45_wo4.toml", stop_time=0.5))
     assert res.friction_iterations >= res.evaluations  # at least one iteration per evaluation
     assert res.friction_iterations < 30 * res.evaluations

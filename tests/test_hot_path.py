@@ -1,7 +1,8 @@
-"""The batched hot path (joint modules' ``batch_*`` functions, Model.plan, vectorized frames and
-coordinate rates, direct LAPACK calls in dynamics) against the per-joint reference assembly, at
-random configurations of both paper mechanisms. The batched forms are written to reproduce the
-per-joint arithmetic exactly; the tolerance here is 1e-14 (relative to the array's scale)."""
+"""The batched joint modules (the only production form), Model.plan, vectorized frames and
+coordinate rates and the direct LAPACK calls in dynamics against the plain per-joint reference
+(tests/reference_joints), at random configurations of both paper mechanisms. The batched forms
+reproduce the per-joint arithmetic exactly; the tolerance here is 1e-14 (relative to the array's
+scale), and the reported outputs (reactions, friction forces) are checked bit for bit."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,13 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import reference_joints as ref
 from overcon import dynamics
 from overcon import scene as scene_mod
+from overcon.evaluation import (applied_forces, constraints, coordinate_rates, frames, friction_output, gamma,
+                                generalized_force, jacobian_h, physical_reaction)
 from overcon.joints import TYPES
 from overcon.kinematics import cross3, cross3_rows, euler_H, euler_H_rows, euler_R, euler_R_rows
-from overcon.model import (applied_forces, build_plan, compile_model, constraints, constraints_per_joint,
-                           coordinate_rates, frames, gamma, gamma_per_joint, generalized_force,
-                           jacobian_h, jacobian_h_per_joint, plan_of)
+from overcon.model import build_plan, compile_model
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
 SCENES = ["planar_f145_wo4", "planar_f45_wo6", "spatial_GHMN_wo5", "spatial_MN_wo18"]
@@ -74,77 +76,89 @@ def test_batched_assembly_equals_per_joint(name):
     model = model_of(name)
     for q, h in random_states(model):
         f = frames(model, q, h)
-        close(constraints(model, f), constraints_per_joint(model, f))
-        close(jacobian_h(model, f), jacobian_h_per_joint(model, f))
-        close(gamma(model, f), gamma_per_joint(model, f))
+        close(constraints(model, f), ref.constraints(model, f))
+        close(jacobian_h(model, f), ref.jacobian(model, f))
+        close(gamma(model, f), ref.gamma(model, f))
         close(applied_forces(model, f), applied_forces_reference(model, f))
 
 
 @pytest.mark.parametrize("name", SCENES)
 def test_batched_joint_functions_equal_single(name):
-    """Every batch_* producer against its single-joint form, joint by joint."""
+    """Every joint module's batch against the per-joint reference, joint by joint."""
     model = model_of(name)
-    plan = plan_of(model)
+    plan = model.plan
     for q, h in random_states(model, n=10, seed=1):
         f = frames(model, q, h)
         for g in plan.groups:
             mod = g.module
             js = [model.joints[j] for j in g.joints]
-            phi = mod.batch_phi(g.data, f)
-            Ji, Jj = mod.batch_jac_h(g.data, f)
-            gam = mod.batch_gamma(g.data, f)
+            phi = mod.phi(g.data, f)
+            Ji, Jj = mod.jac_h(g.data, f)
+            gam = mod.gamma(g.data, f)
+            A = mod.reaction_transform(g.data, f)
             for n, c in enumerate(js):
-                close(phi[n], mod.phi(c, f))
-                close(Ji[n], mod.jac_h(c, f)[0])
-                close(Jj[n], mod.jac_h(c, f)[1])
-                close(gam[n], mod.gamma(c, f))
-            if hasattr(mod, "batch_reaction_transform"):
-                A = mod.batch_reaction_transform(g.data, f)
-                for n, c in enumerate(js):
-                    close(A[n], mod.reaction_transform(c, f))
+                close(phi[n], ref.ref(c).phi(c, f))
+                close(Ji[n], ref.ref(c).jac_h(c, f)[0])
+                close(Jj[n], ref.ref(c).jac_h(c, f)[1])
+                close(gam[n], ref.ref(c).gamma(c, f))
+                close(A[n], ref.ref(c).reaction_transform(c, f))
+
+
+@pytest.mark.parametrize("name", SCENES + ["planar_f45_wo4", "spatial_GHMN_wo9"])
+def test_reported_outputs_bitwise_equal_per_joint(name):
+    """The reported reactions and friction forces (a joint as a batch of one) are bit for bit the
+    per-joint reference's: what ci/baselines recorded before the single forms were removed."""
+    model = model_of(name, friction_outputs="all")
+    rng = np.random.default_rng(8)
+    for q, h in random_states(model, n=10, seed=9):
+        f = frames(model, q, h)
+        lam = 50.0 * rng.standard_normal(model.m)
+        lam[rng.integers(0, model.m)] = 0.0
+        for c in model.joints:
+            assert np.array_equal(physical_reaction(model, c, f, lam), ref.physical_reaction(model, c, f, lam))
+        for j in model.friction_joints:
+            c = model.joints[j]
+            assert friction_output(model, c, f, lam) == ref.friction_output(model, c, f, lam)
 
 
 @pytest.mark.parametrize("name", SCENES)
 def test_batched_friction_equals_per_joint(name):
     model = model_of(name)
-    plan = plan_of(model)
+    plan = model.plan
     R = model.retained
     rng = np.random.default_rng(2)
     for q, h in random_states(model, n=15, seed=3):
         f = frames(model, q, h)
         ctx = dynamics._friction_setup(plan, f)
-        blocks = [(model.joints[j], model.joints[j].module.jac_h(model.joints[j], f)[0])
-                  for j in model.friction_joints]
         lr = 50.0 * rng.standard_normal(len(R))
         lam = np.zeros(model.m)
         lam[R] = lr
-        close(dynamics._friction_batched(model, plan, ctx, lr),
-              dynamics._friction_generalized(model, f, blocks, lam))
+        close(dynamics._friction_batched(model, plan, ctx, lr), ref.friction_generalized(model, f, lam))
         for g, cx in zip(plan.friction, ctx):  # joint by joint, with the joint's own fi
             lam_rows = np.concatenate((lr, [0.0]))[g.lam_index]
-            Qi, Qj = g.module.batch_friction(g.data, cx, lam_rows)
+            Qi, Qj = g.module.friction(g.data, cx, lam_rows)
             for n, j in enumerate(g.joints):
                 c = model.joints[j]
-                Ji = c.module.jac_h(c, f)[0]
-                ref_i, ref_j = c.module.friction(c, f, Ji.T @ lam[list(c.rows)], c.law)
+                ref_i, ref_j = ref.ref(c).friction(c, f, ref.reaction_on_body_i(model, c, f, lam), c.law)
                 close(Qi[n], ref_i)
                 close(Qj[n], ref_j)
 
 
 def test_spherical_friction_zero_reaction_gives_zero_force():
     model = model_of("spatial_GHMN_wo5")
-    plan = plan_of(model)
     f = frames(model, model.q0 + 0.1, model.h0 + 1.0)
-    g = plan.friction[0]
-    cx = g.module.batch_friction_setup(g.data, f)
+    g = model.plan.friction[0]
+    cx = g.module.friction_setup(g.data, f)
     lam = np.ones((len(g.joints), 3))
     lam[1] = 0.0
-    Qi, Qj = g.module.batch_friction(g.data, cx, lam)
+    Qi, Qj = g.module.friction(g.data, cx, lam)
     assert np.all(Qi[1] == 0.0) and np.all(Qj[1] == 0.0)
+    force = g.module.friction_force(g.data, cx, lam)
+    assert force[1] == 0.0 and force[0] > 0.0
     c = model.joints[g.joints[0]]
-    ref = c.module.friction(c, f, c.module.jac_h(c, f)[0].T @ lam[0], c.law)
-    close(Qi[0], ref[0])
-    close(Qj[0], ref[1])
+    expected = ref.ref(c).friction(c, f, ref.ref(c).jac_h(c, f)[0].T @ lam[0], c.law)
+    close(Qi[0], expected[0])
+    close(Qj[0], expected[1])
 
 
 @pytest.mark.parametrize("name", ["planar_f145_wo4", "spatial_GHMN_wo5"])
@@ -193,23 +207,21 @@ def test_evaluate_matches_reference_solve(name):
 
     model = model_of(name)
     R = model.retained
-    solver = model.scene.solver
+    solver = scene_mod.as_scene(scene_mod.load(MECH / f"{name}.toml")).solver
     for q, h in random_states(model, n=6, seed=6, scale=0.02):
         f = frames(model, q, h)
         try:
-            ev = dynamics.evaluate(model, 0.0, q, h)
+            ev = dynamics.evaluate(model, 0.0, q, h, solver=solver)
         except dynamics.FrictionSolveError:
             ev = None
-        Phi_h = jacobian_h_per_joint(model, f)
+        Phi_h = ref.jacobian(model, f)
         JR = Phi_h[R].T
         a = solver.baumgarte
-        g = gamma_per_joint(model, f)[R] - 2.0 * a * (Phi_h[R] @ h) - a * a * constraints_per_joint(model, f)[R]
+        g = ref.gamma(model, f)[R] - 2.0 * a * (Phi_h[R] @ h) - a * a * ref.constraints(model, f)[R]
         Q = applied_forces_reference(model, f)
         MinvJ = model.Minv[:, None] * JR
         factor = cho_factor(JR.T @ MinvJ)
         lam0 = cho_solve(factor, MinvJ.T @ Q - g)
-        blocks = [(model.joints[j], model.joints[j].module.jac_h(model.joints[j], f)[0])
-                  for j in model.friction_joints]
         pos = {row: k for k, row in enumerate(R)}
         xrows = [pos[r] for j in model.friction_joints for r in model.joints[j].rows if r in pos]
 
@@ -219,7 +231,7 @@ def test_evaluate_matches_reference_solve(name):
             return out
 
         def G(lr):
-            return lam0 + cho_solve(factor, MinvJ.T @ dynamics._friction_generalized(model, f, blocks, full(lr)))
+            return lam0 + cho_solve(factor, MinvJ.T @ ref.friction_generalized(model, f, full(lr)))
 
         lr, its, ok = dynamics._fixed_point(G, lam0.copy(), xrows, solver.friction_tol, solver.friction_max_iter)
         fallback = not ok
@@ -231,23 +243,24 @@ def test_evaluate_matches_reference_solve(name):
             continue
         assert ok
         assert (its, fallback) == (ev.iterations, ev.fallback)
-        Qf = dynamics._friction_generalized(model, f, blocks, full(lr))
+        Qf = ref.friction_generalized(model, f, full(lr))
         close(ev.lam, full(lr), 1e-12)
         close(ev.hdot, model.Minv * (Q + Qf - JR @ lr), 1e-12)
 
 
 def test_plan_follows_replaced_model():
-    """A model whose joints or retained equations were replaced gets a matching plan."""
+    """A model whose retained equations were replaced gets its own matching plan (built by
+    Model.__post_init__; no cache), and a Model's arrays cannot be written to."""
     model = model_of("planar_f45_wo4")
-    assert model.plan is not None and model.plan.matches(model)
-    other = dataclasses.replace(model, retained=np.array([i for i in range(model.m) if i != 5]))
-    assert not model.plan.matches(other)
-    plan = plan_of(other)
-    assert plan.matches(other) and plan is plan_of(other)
-    ref = build_plan(other)
-    assert np.array_equal(plan.friction_xrows, ref.friction_xrows)
-    same = dataclasses.replace(model, scene=model.scene)
-    assert plan_of(same) is model.plan
+    row = model.joints[model.friction_joints[0]].rows[0]  # a friction row, retained in model
+    assert row in model.retained and not model.plan.friction_pad
+    other = dataclasses.replace(model, retained=np.array([i for i in range(model.m) if i != row]))
+    expected = build_plan(other)
+    assert other.plan.friction_pad and np.array_equal(other.plan.friction_xrows, expected.friction_xrows)
+    for arr in (model.q0, model.M, model.retained, model.joints[0].p["s_A"], model.plan.groups[0].data["s_A"],
+                model.plan.groups[0].flat_i):
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0] = 1.0
 
 
 def test_lapack_wrappers_keep_scipy_errors():
@@ -269,8 +282,11 @@ def test_lapack_wrappers_keep_scipy_errors():
         assert np.array_equal(dynamics._lstsq(A, f, 1e-12), np.linalg.lstsq(A, f, rcond=1e-12)[0])
 
 
-def test_every_joint_type_has_batched_forms():
-    for name, mod in TYPES.items():
-        for fn in ("batch_prepare", "batch_phi", "batch_jac_h", "batch_gamma", "batch_friction_setup",
-                   "batch_friction"):
+def test_every_joint_type_has_one_batched_form():
+    """Each joint module has the batched functions only: no single-joint Phi next to a batch one."""
+    for name, jt in TYPES.items():
+        mod = jt.module
+        for fn in ("constants", "stack", "phi", "jac_h", "gamma", "reaction", "friction_setup", "friction",
+                   "friction_force"):
             assert callable(getattr(mod, fn, None)), (name, fn)
+        assert not [n for n in vars(mod) if n.startswith("batch_")], name

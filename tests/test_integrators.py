@@ -13,13 +13,13 @@ from overcon import integrators, scene, spec
 from overcon.fmu import statecodec
 from overcon.fmu.variables import rule
 from overcon.model import compile_model
-from overcon.simulate import Simulation, SimulationError, run
+from overcon.simulate import Simulation, SimulationError, run_scene
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
 ALL = ("dopri5", "dop853", "rk4", "radau")
 
 
-def model_of(name, *, mu=None, v_reg=None, stop_time=1.0, tolerance=1e-8, **solver):
+def scene_of(name, *, mu=None, v_reg=None, stop_time=1.0, tolerance=1e-8, **solver):
     sc = scene.as_scene(scene.load(MECH / f"{name}.toml"), stop_time=stop_time, tolerance=tolerance)
     changes = {k: v for k, v in (("mu", mu), ("v_reg", v_reg)) if v is not None}
     if changes:
@@ -27,7 +27,7 @@ def model_of(name, *, mu=None, v_reg=None, stop_time=1.0, tolerance=1e-8, **solv
                                                       for k, v in sc.friction_params.items()})
     if solver:
         sc = dataclasses.replace(sc, solver=dataclasses.replace(sc.solver, **solver))
-    return compile_model(sc)
+    return sc
 
 
 def positions(res):
@@ -48,13 +48,14 @@ def test_every_method_is_offered_everywhere(tmp_path):
 def test_state_round_trip_bit_for_bit(method):
     """get_state at t1, continue to t2; set_state (through the FMU state codec) and continue
     again: identical bits, also for the counters."""
-    model = model_of("planar_f45_wo4", step=2e-3)
-    sim = Simulation(model, method=method)
+    sc = scene_of("planar_f45_wo4", step=2e-3)
+    model = compile_model(sc)
+    sim = Simulation(model, sc.solver, method=method)
     sim.advance(0.3)
     saved = statecodec.loads(statecodec.dumps(sim.get_state()))
     a = [sim.outputs(t, sim.advance(t)) for t in (0.31, 0.45, 0.6)]
     ev_a = sim.evaluations
-    fresh = Simulation(model, method=method)
+    fresh = Simulation(model, sc.solver, method=method)
     fresh.set_state(saved)
     b = [fresh.outputs(t, fresh.advance(t)) for t in (0.31, 0.45, 0.6)]
     assert all(np.array_equal(x, y) for x, y in zip(a, b))
@@ -68,9 +69,9 @@ def test_state_round_trip_bit_for_bit(method):
 def test_results_do_not_depend_on_the_output_grid(method):
     """Dense output only reads: a fine grid and a coarse one give the same bits where they meet,
     and the same number of right-hand-side evaluations for the integration."""
-    model = model_of("planar_f45_wo4", stop_time=0.5, step=2e-3)
-    fine = run(model, method=method, output_interval=2.0**-10)  # binary fractions: the coarse
-    coarse = run(model, method=method, output_interval=2.0**-3)  # times are exactly fine ones
+    sc = scene_of("planar_f45_wo4", stop_time=0.5, step=2e-3)
+    fine = run_scene(sc, method=method, output_interval=2.0**-10)  # binary fractions: the coarse
+    coarse = run_scene(sc, method=method, output_interval=2.0**-3)  # times are exactly fine ones
     idx = np.searchsorted(fine.time, coarse.time)
     assert np.array_equal(fine.time[idx], coarse.time)
     assert np.array_equal(fine.values[idx], coarse.values)
@@ -78,8 +79,8 @@ def test_results_do_not_depend_on_the_output_grid(method):
 
 
 def test_radau_agrees_with_explicit_methods_on_a_nonstiff_case():
-    ref = positions(run(model_of("planar_f45_wo4", stop_time=2.0, tolerance=1e-11), method="dop853"))
-    res = run(model_of("planar_f45_wo4", stop_time=2.0, tolerance=1e-8), method="radau")
+    ref = positions(run_scene(scene_of("planar_f45_wo4", stop_time=2.0, tolerance=1e-11), method="dop853"))
+    res = run_scene(scene_of("planar_f45_wo4", stop_time=2.0, tolerance=1e-8), method="radau")
     assert np.max(np.abs(positions(res) - ref)) < 1e-6
     assert res.max_drift < 1e-8
 
@@ -89,9 +90,9 @@ def test_stiff_sticking_case_stops_dopri5_and_radau_integrates_it():
     band (stiffness mu N / (m v_reg) ~ 2e4 1/s). dopri5 stops with a stiffness report; radau runs
     through, and its result converges with the tolerance (1e-8 against 1e-10: < 1e-7 m)."""
     with pytest.raises(SimulationError, match="stiff"):
-        run(model_of("planar_f145_wo6", mu=1.0), method="dopri5")
-    a = run(model_of("planar_f145_wo6", mu=1.0, tolerance=1e-8), method="radau")
-    b = run(model_of("planar_f145_wo6", mu=1.0, tolerance=1e-10), method="radau")
+        run_scene(scene_of("planar_f145_wo6", mu=1.0), method="dopri5")
+    a = run_scene(scene_of("planar_f145_wo6", mu=1.0, tolerance=1e-8), method="radau")
+    b = run_scene(scene_of("planar_f145_wo6", mu=1.0, tolerance=1e-10), method="radau")
     assert np.all(np.isfinite(a.values)) and a.max_drift < 1e-9
     assert np.max(np.abs(positions(a) - positions(b))) < 1e-7
     assert a.evaluations < 2000
@@ -102,8 +103,8 @@ def test_radau_tiny_regularisation_sticking(v_reg):
     """v_reg = 1e-6 and 1e-7 with sticking (mu = 1, joints 1, 4, 5): radau stays cheap (stiffness
     1e3-1e4 times that of v_reg = 1e-3), finite, on the constraints; the sticking slider creeps
     by less than v_reg x time (here 0-1 s) and the result converges with the tolerance."""
-    a = run(model_of("planar_f145_wo6", mu=1.0, v_reg=v_reg, tolerance=1e-8), method="radau")
-    b = run(model_of("planar_f145_wo6", mu=1.0, v_reg=v_reg, tolerance=1e-10), method="radau")
+    a = run_scene(scene_of("planar_f145_wo6", mu=1.0, v_reg=v_reg, tolerance=1e-8), method="radau")
+    b = run_scene(scene_of("planar_f145_wo6", mu=1.0, v_reg=v_reg, tolerance=1e-10), method="radau")
     assert np.all(np.isfinite(a.values)) and a.max_drift < 1e-9
     x1 = a.column("slider1.x")
     assert np.max(np.abs(x1 - 2.0)) < v_reg * 1.0
@@ -114,6 +115,42 @@ def test_radau_tiny_regularisation_sticking(v_reg):
 def test_radau_failure_is_reported_with_time():
     """A right-hand side that cannot be evaluated (friction solve capped at 1 iteration) ends the
     run with the time and a reason, not with garbage."""
-    model = model_of("planar_f45_wo4", mu=1.0, friction_max_iter=1)
+    sc = scene_of("planar_f45_wo4", mu=1.0, friction_max_iter=1)
     with pytest.raises(SimulationError, match=r"t = "):
-        run(model, method="radau")
+        run_scene(sc, method="radau")
+
+
+def _decay(t, y):
+    return -y
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_unknown_option_is_an_error(method):
+    """Strict contract: a misspelled option is refused by the class and by ``create`` (it used to
+    be swallowed by ``**_``)."""
+    cls = integrators.METHODS[method]
+    options = {"tolerance": 1e-8, "max_step": 0.1, "step": 1e-2}
+    good = {k: v for k, v in options.items() if k in cls.OPTIONS}
+    cls(_decay, 0.0, np.ones(2), **good)  # the declared options are accepted
+    with pytest.raises(TypeError):
+        cls(_decay, 0.0, np.ones(2), **good, tolerence=1e-8)
+    with pytest.raises(TypeError, match="tolerence"):
+        integrators.create(method, _decay, 0.0, np.ones(2), **options, tolerence=1e-8)
+    itg = integrators.create(method, _decay, 0.0, np.ones(2), **options)  # others' options: passed over
+    itg.step()
+    assert itg.t > 0.0 and itg.nsteps == 1
+
+
+def test_tableaux_equal_scipy_private_constants():
+    """The constants read through SciPy's public classes (or written out for Radau) are bitwise
+    SciPy's private ones the integrators used before."""
+    from scipy.integrate._ivp import dop853_coefficients as D
+    from scipy.integrate._ivp import radau as R
+    c, n = integrators.Dop853, D.N_STAGES
+    for ours, theirs in ((c.A, D.A[:n, :n]), (c.B, D.B), (c.C, D.C[:n]), (c.E3, D.E3), (c.E5, D.E5),
+                         (c.D, D.D), (c.A_EXTRA, D.A[n + 1:]), (c.C_EXTRA, D.C[n + 1:])):
+        assert np.array_equal(ours, theirs)
+    assert (c.n_stages, c.N_STAGES_EXTENDED, c.INTERPOLATOR_POWER) == (n, D.N_STAGES_EXTENDED, D.INTERPOLATOR_POWER)
+    r = integrators.Radau5
+    for name in ("C", "E", "T", "TI", "P", "TI_REAL", "TI_COMPLEX", "MU_REAL", "MU_COMPLEX"):
+        assert np.array_equal(getattr(r, name), getattr(R, name)), name

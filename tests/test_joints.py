@@ -11,7 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from overcon import model as M
+import reference_joints as ref
+from overcon import evaluation as M
+from overcon.joints import TYPES as JOINT_TYPES
+from overcon.model import Model, compile_model
 from overcon.friction_laws import make_law
 from overcon.kinematics import OMEGA, EulerSingularity, cross2, cross3, euler_H, euler_R, rot2
 from overcon.scene import as_scene, load
@@ -30,10 +33,10 @@ RTOL = 1e-7
 _CACHE: dict = {}
 
 
-def compiled(path) -> M.Model:
+def compiled(path) -> Model:
     key = str(path)
     if key not in _CACHE:
-        _CACHE[key] = M.compile_model(as_scene(load(path)))
+        _CACHE[key] = compile_model(as_scene(load(path)))
     return _CACHE[key]
 
 
@@ -81,7 +84,7 @@ def assert_close(a, b, rtol=RTOL, what=""):
 
 def check_jacobian_q(model, q):
     f = M.frames(model, q)
-    Jq = M.jacobian_q(model, f)
+    Jq = ref.jacobian(model, f, "jac_q")
     fd = fd_jacobian(lambda x: M.constraints(model, M.frames(model, x)), q)
     assert Jq.shape == (model.m, model.n)
     assert_close(Jq, fd, what="Phi_q vs FD")
@@ -91,7 +94,7 @@ def check_jacobian_h(model, q):
     f = M.frames(model, q)
     Jh = M.jacobian_h(model, f)
     assert Jh.shape == (model.m, model.nh)
-    assert_close(Jh, M.jacobian_q(model, f) @ T_matrix(model, q), rtol=1e-12, what="Phi_h vs Phi_q T")
+    assert_close(Jh, ref.jacobian(model, f, "jac_q") @ T_matrix(model, q), rtol=1e-12, what="Phi_h vs Phi_q T")
 
 
 def check_gamma(model, q, h):
@@ -199,7 +202,7 @@ def single(tmp_path_factory):
     def get(jtype, seed):
         if (jtype, seed) not in cache:
             # random configurations, not on the constraint manifold: derivatives only
-            cache[jtype, seed] = M.compile_model(as_scene(load(write_single_type(tmp, jtype, seed))),
+            cache[jtype, seed] = compile_model(as_scene(load(write_single_type(tmp, jtype, seed))),
                                                  check_initial=False)
         return cache[jtype, seed]
 
@@ -224,11 +227,12 @@ def test_single_type_block_shapes(single, jtype):
     model = single(jtype, 0)
     f = M.frames(model, model.q0, model.h0)
     for c in model.joints:
-        ne = c.module.N_EQUATIONS
-        for J in (*c.module.jac_q(c, f), *c.module.jac_h(c, f)):
-            assert J.shape == (ne, model.nq_b)
-        assert c.module.phi(c, f).shape == (ne,)
-        assert c.module.gamma(c, f).shape == (ne,)
+        ne, d = JOINT_TYPES[c.type].n_equations, model.plan.single[c.index]
+        for J in (*ref.ref(c).jac_q(c, f), *c.module.jac_h(d, f)):
+            assert J.shape[-2:] == (ne, model.nq_b)
+        assert c.module.phi(d, f).shape == (1, ne)
+        assert c.module.gamma(d, f).shape == (1, ne)
+        assert c.module.reaction(d, f, np.zeros((1, model.nq_b))).shape == (1, len(JOINT_TYPES[c.type].reaction))
 
 
 # -------------------------------------------------------------------- 4. reaction transforms
@@ -247,12 +251,12 @@ def test_revolute_reaction_transform_by_hand(single, seed):
     lam = rng.normal(size=model.m) * 10
     for c in model.joints:
         fi = M.reaction_on_body_i(model, c, f, lam)
-        Ji, _ = c.module.jac_h(c, f)
+        Ji, _ = one(model, c, "jac_h", f)
         assert np.allclose(fi, Ji.T @ lam[list(c.rows)])
         F, T_O = fi[:2], fi[2]
         Ri = rot2(f.phi[c.bi])
         arm = Ri @ c.p["s_i"]
-        local = c.module.reaction_transform(c, f) @ fi
+        local = one(model, c, "reaction_transform", f) @ fi
         assert np.allclose(local[:2], Ri.T @ F, atol=1e-12)
         assert np.isclose(local[2], T_O - cross2(arm, F), atol=1e-12)
         assert abs(local[2]) < 1e-12  # a revolute joint carries no moment about P
@@ -277,7 +281,7 @@ def test_translational_reaction_transform_by_hand(single, seed):
         e_x = rot2(f.phi[c.bi] - c.p["psi"]) @ (OMEGA.T @ v / np.linalg.norm(v))
         e_y = OMEGA @ e_x
         arm = rot2(f.phi[c.bi]) @ c.p["s_A"]
-        local = c.module.reaction_transform(c, f) @ fi
+        local = one(model, c, "reaction_transform", f) @ fi
         assert np.allclose(local[:2], [e_x @ F, e_y @ F], atol=1e-12)
         assert np.isclose(local[2], T_O - cross2(arm, F), atol=1e-12)
         p = -M.physical_reaction(model, c, f, lam)
@@ -298,9 +302,9 @@ def test_translational_reaction_normal_to_guide_when_angle_holds(single, seed):
         else:
             qc[3 * c.bj + 2] = -c.p["psi"]
         f = M.frames(model, qc)
-        assert abs(c.module.phi(c, f)[1]) < 1e-12
+        assert abs(one(model, c, "phi", f)[1]) < 1e-12
         lam = rng.normal(size=model.m)
-        local = c.module.reaction_transform(c, f) @ M.reaction_on_body_i(model, c, f, lam)
+        local = one(model, c, "reaction_transform", f) @ M.reaction_on_body_i(model, c, f, lam)
         assert abs(local[0]) < 1e-12
 
 
@@ -317,7 +321,7 @@ def test_spherical_reaction_transform(single, seed, which):
         F_body = Ri.T @ fi[:3]
         # moment about P of the generalized reaction (body axes) vanishes: A.10 gives [F', 0]
         assert np.allclose(fi[3:] - cross3(c.p["s_i"], F_body), 0.0, atol=1e-12)
-        A = c.module.reaction_transform(c, f)
+        A = one(model, c, "reaction_transform", f)
         assert np.allclose(A @ fi, F_body, atol=1e-12)
         p = -M.physical_reaction(model, c, f, lam)
         assert np.allclose(p, np.r_[F_body, fi[:3]])
@@ -332,10 +336,24 @@ LAWS = {
 }
 
 
+def one(model, c, name, f):
+    """The joint module's ``name`` for joint c alone (a batch of one; production code)."""
+    out = getattr(c.module, name)(model.plan.single[c.index], f)
+    return tuple(x[0] for x in out) if isinstance(out, tuple) else out[0]
+
+
+def friction_of(c, f, lam, law):
+    """(Qi, Qj) of joint c with friction law ``law`` at the multipliers lam (all m): the joint
+    module's batched friction for c alone."""
+    d = c.module.stack([dataclasses.replace(c, law=law)])
+    Qi, Qj = c.module.friction(d, c.module.friction_setup(d, f), lam[list(c.rows)][None, :])
+    return Qi[0], Qj[0]
+
+
 def _joint_velocity_null(model, c, f, rng):
     """A random h with this joint's velocity constraint Phi_h h = 0 (spherical friction assumes a
     joint whose two ball centres move together)."""
-    Ji, Jj = c.module.jac_h(c, f)
+    Ji, Jj = one(model, c, "jac_h", f)
     J = np.zeros((len(c.rows), model.nh))
     for b, blk in ((c.bi, Ji), (c.bj, Jj)):
         if b >= 0:
@@ -345,8 +363,7 @@ def _joint_velocity_null(model, c, f, rng):
 
 
 def friction_power(model, c, f, h, lam, law):
-    fi = M.reaction_on_body_i(model, c, f, lam)
-    Qi, Qj = c.module.friction(c, f, fi, law)
+    Qi, Qj = friction_of(c, f, lam, law)
     P = 0.0
     if c.bi >= 0:
         P += Qi @ h[model.body_slice(c.bi)]

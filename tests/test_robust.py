@@ -24,7 +24,7 @@ from overcon.cli import main
 from overcon.fmu import variables
 from overcon.integrators import Radau5
 from overcon.model import InconsistentInitialState, compile_model
-from overcon.simulate import BudgetExceeded, Simulation, run
+from overcon.simulate import BudgetExceeded, Simulation, run, run_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 MECH = ROOT / "mechanisms"
@@ -232,16 +232,18 @@ def test_step_budget_ends_the_run_with_a_clear_message(tmp_path):
 
 
 def test_wall_time_budget_ends_the_run(tmp_path):
-    model = compile_model(scene.load(MECH / "planar_f45_wo4.toml"))
-    sim = Simulation(model, max_wall_time=1e-9)
+    sc = scene.load(MECH / "planar_f45_wo4.toml")
+    model = compile_model(sc)
+    sim = Simulation(model, sc.solver, max_wall_time=1e-9)
     with pytest.raises(BudgetExceeded, match=r"wall time .* \(max_wall_time = 1e-09 s\) reached t = .*--max-wall-time"):
         sim.advance(1.0)
-    sim = Simulation(model, max_steps=None, max_wall_time=None)  # no limits: runs
+    sim = Simulation(model, sc.solver, max_steps=None, max_wall_time=None)  # no limits: runs
     assert np.all(np.isfinite(sim.advance(0.05)))
 
 
 def test_budget_defaults_documented():
-    sim = Simulation(compile_model(scene.load(MECH / "planar_none_wo4.toml")))
+    sc = scene.load(MECH / "planar_none_wo4.toml")
+    sim = Simulation(compile_model(sc), sc.solver)
     assert sim.max_steps == 1_000_000 and sim.max_wall_time == 3600.0
 
 
@@ -250,7 +252,7 @@ def test_time_that_does_not_advance_is_an_error():
     sc = scene.load(MECH / "planar_none_wo4.toml")
     sc = dataclasses.replace(sc, start_time=1e12, stop_time=1e12 + 10.0,
                              solver=dataclasses.replace(sc.solver, method="rk4", step=1e-5))
-    sim = Simulation(compile_model(sc))
+    sim = Simulation(compile_model(sc), sc.solver)
     with pytest.raises(Exception, match="time does not advance"):
         sim.advance(1e12 + 10.0)
 
@@ -403,18 +405,19 @@ def test_bug10_friction_output_translational(tmp_path):
 
 
 def test_friction_outputs_every_friction_joint_after_the_reactions(tmp_path):
-    model = compile_model(scene.as_scene(scene.load(MECH / "spatial_GHMN_wo5.toml"), friction_outputs="all"))
+    sc = scene.as_scene(scene.load(MECH / "spatial_GHMN_wo5.toml"), friction_outputs="all")
+    model = compile_model(sc)
     names = model.output_names()
     assert names[-4:] == ["G.friction", "H.friction", "M.friction", "N.friction"]
-    res = run(model, stop_time=0.2)
+    res = run(model, sc.solver, stop_time=0.2)
     assert np.all(res.column("G.friction") >= 0)  # spherical: magnitude
     assert np.any(res.column("G.friction") > 0)
-    table = variables.table(model, {j: True for j in "GHMN"}, True)
+    table = variables.table(model, sc.solver, {j: True for j in "GHMN"}, True)
     outs = [v for v in table if v.causality == "output" and v.type == "Real"]
     assert [v.name for v in outs] == names  # the FMU's outputs are Simulation.outputs, in order
     assert {v.unit for v in outs if v.name.endswith(".friction")} == {"N"}
-    planar = compile_model(scene.as_scene(scene.load(MECH / "planar_f45_wo4.toml"), friction_outputs="joint4,joint5"))
-    fr = [v for v in variables.table(planar, {f"joint{k}": True for k in range(1, 7)}, True)
+    planar_sc = scene.as_scene(scene.load(MECH / "planar_f45_wo4.toml"), friction_outputs="joint4,joint5")
+    fr = [v for v in variables.table(compile_model(planar_sc), planar_sc.solver, {f"joint{k}": True for k in range(1, 7)}, True)
           if v.name.endswith(".friction")]
     assert [(v.name, v.unit) for v in fr] == [("joint4.friction", "N.m"), ("joint5.friction", "N.m")]
 
@@ -423,12 +426,14 @@ def test_friction_outputs_opt_in_for_scenes_listing_outputs_and_columns_unchange
     """A scene with an [outputs] table keeps exactly its outputs (the paper scenes: their FMUs'
     baselines); outputs.friction = "all" adds the friction forces after them, the other columns
     bit-identical. A bare mechanism run with friction has them by default."""
-    plain = compile_model(scene.load(MECH / "planar_f45_wo4.toml"))
+    plain_sc = scene.load(MECH / "planar_f45_wo4.toml")
+    plain = compile_model(plain_sc)
     assert not any(n.endswith(".friction") for n in plain.output_names())
     path = scene_copy(tmp_path, edit=lambda t: t.replace("[outputs]\n", '[outputs]\nfriction = "all"\n', 1))
-    with_fr = compile_model(scene.load(path))
+    with_fr_sc = scene.load(path)
+    with_fr = compile_model(with_fr_sc)
     assert with_fr.output_names() == plain.output_names() + ["joint4.friction", "joint5.friction"]
-    a, b = run(with_fr, stop_time=0.3), run(plain, stop_time=0.3)
+    a, b = run(with_fr, with_fr_sc.solver, stop_time=0.3), run(plain, plain_sc.solver, stop_time=0.3)
     assert np.array_equal(a.values[:, : len(b.names)], b.values)
     mech = compile_model(scene.as_scene(scene.load(MECH / "planar_sliders.toml"), friction="joint4"))
     assert mech.output_names()[-1] == "joint4.friction"
@@ -458,13 +463,14 @@ def test_ctrl_c_ends_a_run_cleanly(tmp_path):
 
 
 def test_library_arguments_obey_the_same_rules():
-    model = compile_model(scene.load(MECH / "planar_none_wo4.toml"))
+    sc = scene.load(MECH / "planar_none_wo4.toml")
+    model = compile_model(sc)
     with pytest.raises(ValueError, match=r"Simulation\(tolerance=1e-300\): must be in \[1e-14, 0.01\]"):
-        Simulation(model, tolerance=1e-300)
+        Simulation(model, sc.solver, tolerance=1e-300)
     with pytest.raises(ValueError, match=r"Simulation\(tolerance=0\)"):
-        Simulation(model, tolerance=0)  # not silently the scene's value
+        Simulation(model, sc.solver, tolerance=0)  # not silently the scene's value
     with pytest.raises(ValueError, match=r"run\(output_interval=1e-12\)"):
-        run(model, output_interval=1e-12)
+        run(model, sc.solver, output_interval=1e-12)
 
 
 def test_friction_output_through_the_fmu(tmp_path):
@@ -481,7 +487,7 @@ def test_friction_output_through_the_fmu(tmp_path):
     units = {v.name: v.unit for v in md.modelVariables if v.causality == "output" and v.type == "Real"}
     assert units["joint4.friction"] == units["joint5.friction"] == "N.m"
     out = fmpy.simulate_fmu(str(res.fmu), stop_time=0.2, output_interval=0.01)
-    ref = run(compile_model(scene.load(path)), stop_time=0.2)
+    ref = run_scene(scene.load(path), stop_time=0.2)
     for name in ("joint4.friction", "joint5.friction"):
         assert np.max(np.abs(out[name] - ref.column(name))) <= 1e-9
         assert np.max(np.abs(ref.column(name))) > 0

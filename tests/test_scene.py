@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from overcon import spec as S
+from overcon.joints import TYPES as JOINT_TYPES
 from overcon.scene import Problem, SceneError, as_scene, load, parse_eliminate, parse_joint_list
 from overcon.spec import FrictionSpec, MechanismSpec, SceneSpec
 
@@ -180,7 +181,7 @@ def test_planar_mechanism_values():
                                         (1.0, 2.0, 0.0)]
     assert [j.name for j in m.joints] == [f"joint{k}" for k in range(1, 7)]
     assert [j.type for j in m.joints] == ["translational"] * 3 + ["revolute"] * 3
-    assert sum(S.JOINT_FIELDS[j.type]["n_equations"] for j in m.joints) == 12
+    assert sum(JOINT_TYPES[j.type].n_equations for j in m.joints) == 12
     assert [(j.body_i, j.body_j) for j in m.joints] == [
         ("slider1", "base"), ("slider2", "base"), ("slider1", "slider2"),
         ("slider1", "link3"), ("slider2", "link4"), ("link3", "link4")]
@@ -220,7 +221,7 @@ def test_spatial_mechanism_values():
     assert m.bodies[6].q0 == (1 - 2 * s, 1 + 2 * c, 2.0, math.pi / 2, math.pi / 2, 0.0)
     assert [j.name for j in m.joints] == list("ABCDEFGHKLMN")
     assert len(m.joints) == 12 and all(j.type == "spherical" for j in m.joints)
-    assert sum(S.JOINT_FIELDS[j.type]["n_equations"] for j in m.joints) == 36
+    assert sum(JOINT_TYPES[j.type].n_equations for j in m.joints) == 36
     assert all(j.body_i.startswith("link") for j in m.joints)
     assert m.joints[0].params["s_i"] == (0.0, 0.0, -math.sqrt(2))
     assert m.joints[8].params == {"s_i": (0.0, 0.0, math.sqrt(2)), "s_j": (0.0, 1.0, 4.0)}

@@ -417,3 +417,18 @@ def test_one_group_needs_one_prediction(f45, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "do not share one friction set" in err and "planar_f1_wo4.fmu: joint1" in err
     assert not (tmp_path / "o" / "planar_f1_wo4.csv").exists()
+
+
+def test_tooling_does_not_import_the_engine():
+    """The fmpy black-box layer must not load the engine: importing every tooling module in a
+    fresh interpreter leaves paper, simulate, model and dynamics unloaded."""
+    import subprocess
+    import sys
+    code = ("import pkgutil, sys, overcon.tooling as t\n"
+            "for m in pkgutil.iter_modules(t.__path__): __import__('overcon.tooling.' + m.name)\n"
+            "print(' '.join(sorted(sys.modules)))")
+    loaded = set(subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,
+                                text=True).stdout.split())
+    assert "overcon.tooling.sweep" in loaded and "overcon.tooling.pipeline" in loaded
+    engine = {f"overcon.{m}" for m in ("paper", "simulate", "model", "dynamics")}
+    assert not engine & loaded, engine & loaded

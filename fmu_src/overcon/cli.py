@@ -187,7 +187,8 @@ def _lockstep(args):
 
 
 def _load(args):
-    """Scene with the command-line overrides applied, compiled. Raises SceneError/ModelError."""
+    """(scene with the command-line overrides applied, its compiled model). Raises
+    SceneError/ModelError."""
     from . import scene as scene_mod
     from .model import compile_model
 
@@ -199,7 +200,7 @@ def _load(args):
         stop_time=args.stop_time, solver=solver, friction_outputs=getattr(args, "friction_outputs", None),
         source=args.file)
     spec = scene_mod.as_scene(spec, **overrides)
-    return compile_model(spec)
+    return spec, compile_model(spec)
 
 
 SOLVER_FLAGS = ("method", "tolerance", "step", "max_step", "output_interval")
@@ -214,10 +215,10 @@ def _input_error(exc) -> int:
 def cmd_check(args) -> int:
     from .precheck import format_table, precheck
 
-    model = _load(args)  # refuses an inconsistent q0/h0 (exit 2), as simulate and build do
+    _, model = _load(args)  # refuses an inconsistent q0/h0 (exit 2), as simulate and build do
     report = precheck(model, args.file)
-    print(json.dumps(report, indent=2) if args.json else format_table(report))
-    return EXIT_NONUNIQUE if report["friction_on_nonunique"] or not report["methods_agree"] else EXIT_OK
+    print(json.dumps(report.to_json(), indent=2) if args.json else format_table(report))
+    return EXIT_NONUNIQUE if report.friction_on_nonunique or not report.methods_agree else EXIT_OK
 
 
 def cmd_simulate(args) -> int:
@@ -225,12 +226,12 @@ def cmd_simulate(args) -> int:
 
     from .precheck import friction_warnings
 
-    model = _load(args)
+    spec, model = _load(args)
     for w in friction_warnings(model):
         print(f"overcon: warning: {w}", file=sys.stderr)
     start = time.perf_counter()
     try:
-        res = run(model, max_steps=args.max_steps or MAX_STEPS, max_wall_time=args.max_wall_time or MAX_WALL_TIME)
+        res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS, max_wall_time=args.max_wall_time or MAX_WALL_TIME)
     except SimulationError as exc:
         print(f"overcon: {args.file}: {exc}", file=sys.stderr)
         return EXIT_RUNTIME

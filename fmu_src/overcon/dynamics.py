@@ -8,7 +8,7 @@ M is diagonal and positive, so it is solved through the Schur complement
 ``S = J_R^T M^-1 J_R`` (Cholesky, factored once per evaluation):
 ``lam_R = S^-1 (J_R^T M^-1 (Q + Q_f) - gamma_R)``, ``h' = M^-1 (Q + Q_f - J_R lam_R)``.
 S is singular when the kept equations are dependent at this configuration (a singular position):
-that raises :class:`overcon.model.SingularConfiguration`.
+that raises :class:`overcon.evaluation.SingularConfiguration`.
 
 Friction: Q_f depends on lam only through the friction joints' multipliers, and enters the right
 hand side linearly, so ``lam_R = lam0 + S^-1 J_R^T M^-1 Q_f(lam)`` is a fixed point in the
@@ -21,10 +21,12 @@ iterations) fall back to Newton's method on ``x - G(x) = 0`` with a finite-diffe
 iterate, so h' and lam are consistent to that residual.
 
 Hot path: the friction forces of all friction joints of a type come from one call of the joint
-module's ``batch_friction`` (per-evaluation constants from ``batch_friction_setup``, computed
-once before the iteration), and the Cholesky factor/solve call LAPACK's dpotrf/dpotrs directly
-(with scipy's finiteness checks and messages). The numbers are bitwise those of the per-joint
-reference :func:`_friction_generalized`.
+module's ``friction`` (per-evaluation constants from ``friction_setup``, computed once before the
+iteration), and the Cholesky factor/solve call LAPACK's dpotrf/dpotrs directly through SciPy's
+public ``scipy.linalg.lapack`` (with scipy's finiteness checks and messages).
+
+Solver options: :func:`evaluate` reads ``baumgarte``, ``friction_tol`` and ``friction_max_iter``
+from the :class:`overcon.spec.SolverSpec` it is given (the Model carries none).
 """
 from __future__ import annotations
 
@@ -35,10 +37,15 @@ import numpy as np
 from scipy.linalg import LinAlgError
 from scipy.linalg.lapack import dpotrf, dpotrs
 
-from .model import (AssemblyPlan, Frames, Model, SingularConfiguration, applied_forces, constraints,
-                    frames, gamma, jacobian_h, plan_of)
+from .evaluation import Frames, SingularConfiguration, applied_forces, constraints, frames, gamma, jacobian_h
+from .model import AssemblyPlan, Model
+from .spec import SolverSpec
 
-try:  # numpy.linalg.lstsq without its Python-level wrapping: the same LAPACK call, the same bits
+# numpy private API, kept for a measured hot-path gain: numpy.linalg.lstsq without its Python-level
+# wrapping (the same LAPACK gelsd call, the same bits; tests/test_hot_path.py checks equality):
+# 13.5 us instead of 17.4 us per 4x3 solve on this machine, one solve per Anderson-accelerated
+# friction iteration (several per evaluation of Eq. 18). Without it: the public call.
+try:
     from numpy.linalg import _umath_linalg
     from numpy.linalg._linalg import _raise_linalgerror_lstsq
     _LSTSQ = _umath_linalg.lstsq
@@ -108,21 +115,21 @@ def _lstsq(A: np.ndarray, b: np.ndarray, rcond: float) -> np.ndarray:
 
 def _friction_setup(plan: AssemblyPlan, f: Frames) -> list:
     """Per-evaluation constants of every friction group (frames only)."""
-    return [g.module.batch_friction_setup(g.data, f) for g in plan.friction]
+    return [g.module.friction_setup(g.data, f) for g in plan.friction]
 
 
 def _friction_batched(model: Model, plan: AssemblyPlan, ctx: list, lr: np.ndarray) -> np.ndarray:
-    """Q_f (nh,) of the retained multipliers lam_R = lr: bitwise :func:`_friction_generalized`
-    (contributions summed per body in the same order: joint order, body i then body j)."""
+    """Q_f (nh,) of the retained multipliers lam_R = lr (contributions summed per body in joint
+    order, body i then body j: the per-joint reference's order)."""
     src = np.concatenate((lr, (0.0,))) if plan.friction_pad else lr
     k = model.nq_b
     if len(plan.friction) == 1:  # one joint type: contributions already in joint order, i then j
         g = plan.friction[0]
-        vals = np.concatenate(g.module.batch_friction(g.data, ctx[0], src[g.lam_index]), 1).reshape(-1, k)
+        vals = np.concatenate(g.module.friction(g.data, ctx[0], src[g.lam_index]), 1).reshape(-1, k)
     else:
         vals = np.empty((len(plan.friction_slots), k))
         for g, cx in zip(plan.friction, ctx):
-            Qi, Qj = g.module.batch_friction(g.data, cx, src[g.lam_index])
+            Qi, Qj = g.module.friction(g.data, cx, src[g.lam_index])
             vals[g.out_i] = Qi
             vals[g.out_j] = Qj
     Qf = np.zeros((model.nb + 1, k))
@@ -130,29 +137,12 @@ def _friction_batched(model: Model, plan: AssemblyPlan, ctx: list, lr: np.ndarra
     return Qf[: model.nb].reshape(-1)
 
 
-def _friction_generalized(model: Model, f: Frames, blocks, lam: np.ndarray) -> np.ndarray:
-    """Reference of the friction forces Q_f (nh,): joint by joint with the joints' ``friction``
-    (blocks: (joint, (J_X)_i) pairs; lam: all m multipliers)."""
-    Qf = np.zeros((model.nb, model.nq_b))
-    for c, Ji in blocks:
-        fi = Ji.T @ lam[list(c.rows)]
-        Qi, Qj = c.module.friction(c, f, fi, c.law)
-        if c.bi >= 0:
-            Qf[c.bi] += Qi
-        if c.bj >= 0:
-            Qf[c.bj] += Qj
-    return Qf.reshape(-1)
-
-
 def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np.ndarray | None = None,
-             *, baumgarte: float | None = None, friction_tol: float | None = None,
-             friction_max_iter: int | None = None) -> Evaluation:
-    """Accelerations h' and multipliers lam at (t, q, h) (Eq. 18 with elimination)."""
-    solver = model.scene.solver
-    a = solver.baumgarte if baumgarte is None else baumgarte
-    tol = solver.friction_tol if friction_tol is None else friction_tol
-    max_iter = solver.friction_max_iter if friction_max_iter is None else friction_max_iter
-    plan = plan_of(model)
+             *, solver: SolverSpec) -> Evaluation:
+    """Accelerations h' and multipliers lam at (t, q, h) (Eq. 18 with elimination), with the
+    Baumgarte frequency and friction-solve settings of ``solver``."""
+    a, tol, max_iter = solver.baumgarte, solver.friction_tol, solver.friction_max_iter
+    plan = model.plan
     f = frames(model, q, h)
     Phi_h = jacobian_h(model, f)
     R = model.retained

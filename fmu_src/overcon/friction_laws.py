@@ -8,7 +8,12 @@
 ``v`` is the sliding velocity of body j relative to body i (m/s, or rad/s for the revolute
 joint's relative angular velocity); the law is odd in v, so friction on body i acts along v and
 never adds energy. The vector form used by spherical joints (A.14) is
-``F = mu_over_speed(|v|) |N| v`` with ``mu_over_speed(s) = mu(s)/s`` (finite at s = 0 for B, C).
+``F = mu_over_speed(|v|) |N| v`` with ``mu_over_speed(s) = coefficient(s)/s`` (finite at s = 0
+for B, C).
+
+Names (decided here): one coefficient has one name on its way from the file to the solver, ``mu``
+(file key, :class:`overcon.spec.FrictionSpec`, the FMU parameter ``<joint>.mu``, :class:`Law`);
+the velocity-dependent value is the method :meth:`Law.coefficient`.
 """
 from __future__ import annotations
 
@@ -20,8 +25,12 @@ from .spec import FrictionSpec
 
 @dataclass(frozen=True)
 class Law:
+    """A friction law ``name`` (A, B, C above) with the kinetic coefficient ``mu``, the
+    regularisation velocity ``v_reg``, the joint's friction size and, for C, ``mu_static`` and
+    ``v_stribeck``."""
+
     name: str
-    mu_kinetic: float
+    mu: float
     v_reg: float
     size: float
     mu_static: float | None = None
@@ -29,13 +38,13 @@ class Law:
 
     def _magnitude(self, speed: float) -> float:
         if self.name == "stribeck":
-            return self.mu_kinetic + (self.mu_static - self.mu_kinetic) * math.exp(-(speed / self.v_stribeck) ** 2)
-        return self.mu_kinetic
+            return self.mu + (self.mu_static - self.mu) * math.exp(-(speed / self.v_stribeck) ** 2)
+        return self.mu
 
-    def mu(self, v: float) -> float:
-        """Signed friction coefficient mu(v)."""
+    def coefficient(self, v: float) -> float:
+        """Signed friction coefficient mu(v) at the sliding velocity v."""
         if self.name == "coulomb":
-            return math.copysign(self.mu_kinetic, v) if v != 0.0 else 0.0
+            return math.copysign(self.mu, v) if v != 0.0 else 0.0
         return min(max(v / self.v_reg, -1.0), 1.0) * self._magnitude(abs(v))
 
     def mu_over_speed(self, speed: float) -> float:
@@ -43,7 +52,7 @@ class Law:
         if self.name == "coulomb":
             if speed == 0.0:
                 raise ZeroDivisionError("Coulomb law (variant A) has no finite mu(v)/v at v = 0")
-            return self.mu_kinetic / speed
+            return self.mu / speed
         return self._magnitude(speed) / max(speed, self.v_reg)
 
 

@@ -20,13 +20,31 @@ integrator state is a few arrays (``get_state``/``set_state`` give an exact roun
 
 A right-hand side ``fun(t, y)`` may raise; the exception propagates with the time attached by the
 caller.
+
+Contract (every class in ``METHODS``, in the manner of SciPy's ``OdeSolver``)
+----------------------------------------------------------------------------
+``cls(fun, t0, y0, **options)`` takes exactly the keyword options named in ``cls.OPTIONS``
+(required ones without a default); an unknown or misspelled option is a ``TypeError`` (no
+``**kwargs`` swallow it). :func:`create` selects the method by name and passes it only the options
+of ``OPTIONS``, so a caller may hand over one settings record for all methods. After construction
+``fun`` has been evaluated once at (t0, y0). Attributes: ``t``, ``y`` (current state), ``f``
+(= fun(t, y)), ``t_old``/``y_old`` (start of the last step), ``nfev``, ``nsteps``. Methods:
+
+- ``step()``: one accepted step (may raise :class:`StepSizeTooSmall`,
+  :class:`StiffnessDetected`, or what ``fun`` raises); advances ``t`` strictly;
+- ``dense(t)``: the solution at ``t_old <= t <= t``, without changing the state;
+- ``get_state() -> dict`` / ``set_state(dict)``: an exact round trip of the whole state (plain
+  arrays and numbers, for FMI get/set FMU state).
+
+SciPy is used through its public API: the tableaux are read from the public classes
+``scipy.integrate.RK45`` and ``DOP853``; Radau's constants are written out below with the
+formulas of SciPy's ``radau`` module (tests/test_integrators.py checks them bit for bit).
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate._ivp import dop853_coefficients as _D853
-from scipy.integrate._ivp import radau as _RADAU
-from scipy.integrate._ivp.rk import RK45 as _RK45
+from scipy.integrate import DOP853 as _DOP853
+from scipy.integrate import RK45 as _RK45
 from scipy.linalg import lu_factor, lu_solve
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
@@ -65,8 +83,10 @@ class AdaptiveRK:
     stiff_h_rho: float
     name: str
 
+    OPTIONS = ("tolerance", "max_step", "first_step", "detect_stiffness", "dense_fun")
+
     def __init__(self, fun, t0, y0, *, tolerance, max_step, first_step=None, detect_stiffness=True,
-                 dense_fun=None, **_):
+                 dense_fun=None):
         self.fun = fun
         self.dense_fun = dense_fun or fun  # evaluations for dense output only (must not alter state)
         self.detect_stiffness = detect_stiffness
@@ -184,13 +204,12 @@ class Dop853(AdaptiveRK):
     ``dense_fun`` (which must not change the integration's state, so outputs never alter the
     trajectory). Coefficients from SciPy's ``dop853_coefficients``."""
 
-    n_stages = _D853.N_STAGES
-    A = _D853.A[:n_stages, :n_stages]
-    B = _D853.B
-    C = _D853.C[:n_stages]
-    E3, E5, D = _D853.E3, _D853.E5, _D853.D
-    A_EXTRA = _D853.A[n_stages + 1:]
-    C_EXTRA = _D853.C[n_stages + 1:]
+    n_stages = _DOP853.n_stages
+    A, B, C = _DOP853.A, _DOP853.B, _DOP853.C
+    E3, E5, D = _DOP853.E3, _DOP853.E5, _DOP853.D
+    A_EXTRA, C_EXTRA = _DOP853.A_EXTRA, _DOP853.C_EXTRA
+    N_STAGES_EXTENDED = n_stages + 1 + len(A_EXTRA)  # 16: the step's stages, f(y_new), 3 extra
+    INTERPOLATOR_POWER = 3 + len(D)  # 7
     error_order = 7
     stiff_h_rho = 6.1
     name = "dop853"
@@ -205,11 +224,11 @@ class Dop853(AdaptiveRK):
 
     def _dense_setup(self):
         h, n = self.h_old, self.y.size
-        K = np.empty((_D853.N_STAGES_EXTENDED, n))
+        K = np.empty((self.N_STAGES_EXTENDED, n))
         K[: self.n_stages + 1] = self.K
         for s, (a, c) in enumerate(zip(self.A_EXTRA, self.C_EXTRA), start=self.n_stages + 1):
             K[s] = self.dense_fun(self.t_old + c * h, self.y_old + (K[:s].T @ a[:s]) * h)
-        F = np.empty((_D853.INTERPOLATOR_POWER, n))
+        F = np.empty((self.INTERPOLATOR_POWER, n))
         delta = self.y - self.y_old
         F[0] = delta
         F[1] = h * K[0] - delta
@@ -226,7 +245,12 @@ class Dop853(AdaptiveRK):
 
 
 class RK4:
-    def __init__(self, fun, t0, y0, *, step, **_):
+    """Classical Runge-Kutta 4 with the fixed step ``step`` (s); dense output by cubic Hermite
+    interpolation between steps."""
+
+    OPTIONS = ("step",)
+
+    def __init__(self, fun, t0, y0, *, step):
         self.fun = fun
         self.step_size = float(step)
         self.t0 = float(t0)
@@ -272,6 +296,26 @@ class RK4:
         self.nfev, self.nsteps = s["nfev"], s["nsteps"]
 
 
+# Radau IIA (order 5) constants, written with the formulas of SciPy's radau module (not public API)
+_S6 = 6 ** 0.5
+_RADAU_C = np.array([(4 - _S6) / 10, (4 + _S6) / 10, 1])
+_RADAU_E = np.array([-13 - 7 * _S6, -13 + 7 * _S6, -1]) / 3
+_RADAU_MU_REAL = 3 + 3 ** (2 / 3) - 3 ** (1 / 3)
+_RADAU_MU_COMPLEX = (3 + 0.5 * (3 ** (1 / 3) - 3 ** (2 / 3)) - 0.5j * (3 ** (5 / 6) + 3 ** (7 / 6)))
+_RADAU_T = np.array([
+    [0.09443876248897524, -0.14125529502095421, 0.03002919410514742],
+    [0.25021312296533332, 0.20412935229379994, -0.38294211275726192],
+    [1, 1, 0]])
+_RADAU_TI = np.array([
+    [4.17871859155190428, 0.32768282076106237, 0.52337644549944951],
+    [-4.17871859155190428, -0.32768282076106237, 0.47662355450055044],
+    [0.50287263494578682, -2.57192694985560522, 0.59603920482822492]])
+_RADAU_P = np.array([
+    [13 / 3 + 7 * _S6 / 3, -23 / 3 - 22 * _S6 / 3, 10 / 3 + 5 * _S6],
+    [13 / 3 - 7 * _S6 / 3, -23 / 3 + 22 * _S6 / 3, 10 / 3 - 5 * _S6],
+    [1 / 3, -8 / 3, 10 / 3]])
+
+
 class Radau5:
     """Radau IIA, order 5 (Hairer & Wanner's RADAU5 as in SciPy's ``Radau``), with plain-array state.
 
@@ -285,12 +329,13 @@ class Radau5:
     """
 
     name = "radau"
-    C, E, T, TI, P = _RADAU.C, _RADAU.E, _RADAU.T, _RADAU.TI, _RADAU.P
-    MU_REAL, MU_COMPLEX = _RADAU.MU_REAL, _RADAU.MU_COMPLEX
-    TI_REAL, TI_COMPLEX = _RADAU.TI_REAL, _RADAU.TI_COMPLEX
+    C, E, T, TI, P = _RADAU_C, _RADAU_E, _RADAU_T, _RADAU_TI, _RADAU_P
+    MU_REAL, MU_COMPLEX = _RADAU_MU_REAL, _RADAU_MU_COMPLEX
+    TI_REAL, TI_COMPLEX = _RADAU_TI[0], _RADAU_TI[1] + 1j * _RADAU_TI[2]
     NEWTON_MAXITER = 6
+    OPTIONS = ("tolerance", "max_step", "first_step")
 
-    def __init__(self, fun, t0, y0, *, tolerance, max_step, first_step=None, **_):
+    def __init__(self, fun, t0, y0, *, tolerance, max_step, first_step=None):
         self.fun = fun
         self.rtol = self.atol = float(tolerance)
         self.max_step = float(max_step)
@@ -491,3 +536,15 @@ class Radau5:
 
 
 METHODS = {"dopri5": Dopri5, "dop853": Dop853, "rk4": RK4, "radau": Radau5}
+
+
+def create(method: str, fun, t0, y0, **options):
+    """The integrator ``METHODS[method]`` started at (t0, y0), given those of ``options`` it
+    declares in ``OPTIONS`` (the others belong to other methods, e.g. ``step`` to ``rk4`` only).
+    A name that no method declares is refused: a misspelled option is an error, not ignored."""
+    known = {name for cls in METHODS.values() for name in cls.OPTIONS}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise TypeError(f"unknown integrator option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    cls = METHODS[method]
+    return cls(fun, t0, y0, **{k: v for k, v in options.items() if k in cls.OPTIONS})

@@ -1,4 +1,4 @@
-"""Compile a scene into an immutable :class:`Model`, and evaluate frames, constraints and loads.
+"""Compile a scene into an immutable :class:`Model` (evaluating it: :mod:`overcon.evaluation`).
 
 Glossary (paper symbols spelled for code; shapes for b moving bodies, m equations)
 -----------------------------------------------------------------------------------
@@ -21,16 +21,20 @@ generalized reaction of joint X on its bodies is ``f_X = J_X lam_X`` on the left
 in its auxiliary frame: ``p' = -A_i (J_X)_i lam_X`` (Eq. 19), as components named by the joint
 type (``Fx, Fy, T`` planar, ``Fx, Fy, Fz`` spherical); units N and N.m.
 
-The model is never mutated after :func:`compile_model`; everything that changes during a run
-lives in the integrator state (see :mod:`overcon.simulate`).
+Immutability (decided here): a Model is a frozen dataclass whose arrays are read-only
+(``writeable = False``, set by ``Model.__post_init__``, also in its compiled joints, loads and
+plan); everything that changes during a run lives in the integrator state (see
+:mod:`overcon.simulate`). A Model carries no solver options: ``Model.scene`` is the compiled scene
+with ``solver=None``; the options (:class:`overcon.spec.SolverSpec`, a frozen record) are given to
+:class:`overcon.simulate.Simulation`, so changing them never recompiles the Model nor reruns the
+rank analysis.
 
-Hot path: :func:`compile_model` also stores an :class:`AssemblyPlan` (``Model.plan``): per joint
-type the stacked constant arrays of the joint module's ``batch_*`` functions and flat scatter
-indices into Phi_h, and for the friction joints the multiplier gather and force scatter indices.
-:func:`constraints`, :func:`jacobian_h` and :func:`gamma` evaluate all joints of a type at once
-with it; the results are bitwise equal to the per-joint assembly (``*_per_joint``, kept as the
-reference). A model changed by ``dataclasses.replace`` (other joints or retained equations) gets
-a matching plan built on demand.
+Assembly plan: every Model holds an :class:`AssemblyPlan` (``Model.plan``), built by
+``__post_init__`` from its joints and retained equations (so ``dataclasses.replace`` gives a new
+model a matching plan; there is no cache): per joint type the stacked constants of the joint
+module (``stack``) and flat scatter indices into Phi_h, per joint its constants as a batch of one
+(reported reactions and friction), and for the friction joints the multiplier gather and force
+scatter indices.
 """
 from __future__ import annotations
 
@@ -40,11 +44,10 @@ from typing import Mapping
 import numpy as np
 
 from . import analysis
+from .evaluation import constraints, frames, jacobian_h
 from .friction_laws import Law, make_law
 from .joints import TYPES
-from .kinematics import euler_H, euler_R  # noqa: F401  (re-exported, as before)
-from .kinematics import cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec
-from .spec import BASE, COORDINATES, JOINT_FIELDS, MechanismSpec, SceneSpec
+from .spec import BASE, COORDINATES, MechanismSpec, SceneSpec
 
 
 GLOBAL_COMPONENTS = {"planar": ("Fx0", "Fy0"), "spatial": ("Fx0", "Fy0", "Fz0")}
@@ -58,10 +61,6 @@ class ModelError(ValueError):
 class InconsistentInitialState(ModelError):
     """q0 or h0 off the constraint manifold (refused by :func:`compile_model`, so ``check``,
     ``simulate`` and ``build`` all refuse it with the same message)."""
-
-
-class SingularConfiguration(ArithmeticError):
-    """The retained constraint Jacobian lost rank (singular position), or a spring has zero length."""
 
 
 @dataclass(frozen=True)
@@ -78,7 +77,7 @@ class CompiledJoint:
 
     @property
     def module(self):
-        return TYPES[self.type]
+        return TYPES[self.type].module
 
 
 @dataclass(frozen=True)
@@ -95,6 +94,9 @@ class CompiledLoad:
 
 @dataclass(frozen=True)
 class Model:
+    """A compiled scene (read-only arrays, see the module docstring). ``scene`` is the compiled
+    scene with ``solver=None``: solver options go to :class:`overcon.simulate.Simulation`."""
+
     scene: SceneSpec
     kind: str
     dim: int  # 2 planar, 3 spatial
@@ -118,7 +120,12 @@ class Model:
     position_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into q)
     reaction_joints: tuple[int, ...] = field(default=())
     friction_outputs: tuple[int, ...] = field(default=())  # joints with a <joint>.friction output
-    plan: "AssemblyPlan | None" = field(default=None, repr=False, compare=False)  # filled by compile_model
+    plan: "AssemblyPlan" = field(init=False, repr=False, compare=False)  # built by __post_init__
+
+    def __post_init__(self):
+        for name in ("mass", "inertia", "M", "Minv", "gravity", "q0", "h0", "retained"):
+            _read_only(getattr(self, name))
+        object.__setattr__(self, "plan", build_plan(self))
 
     @property
     def n(self) -> int:
@@ -140,188 +147,23 @@ class Model:
         return names
 
 
-@dataclass
-class Frames:
-    """Body frames of one evaluation; slot -1 (the last) is the base."""
-
-    r: np.ndarray
-    R: np.ndarray
-    v: np.ndarray
-    w: np.ndarray
-    phi: np.ndarray | None = None  # planar angles
-    angles: np.ndarray | None = None  # spatial Euler angles
-
-
-def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:
-    nb, d, k = model.nb, model.dim, model.nq_b
-    Q = q.reshape(nb, k)
-    H = np.zeros((nb, k)) if h is None else h.reshape(nb, k)
-    r = np.zeros((nb + 1, d))
-    r[:nb] = Q[:, :d]
-    v = np.zeros((nb + 1, d))
-    v[:nb] = H[:, :d]
-    if model.kind == "planar":
-        phi = np.zeros(nb + 1)
-        phi[:nb] = Q[:, 2]
-        c, s = np.cos(phi), np.sin(phi)
-        R = np.empty((nb + 1, 2, 2))
-        R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = c, -s, s, c
-        w = np.zeros(nb + 1)
-        w[:nb] = H[:, 2]
-        return Frames(r=r, R=R, v=v, w=w, phi=phi)
-    angles = np.zeros((nb + 1, 3))
-    angles[:nb] = Q[:, 3:]
-    R = euler_R_rows(angles)
-    w = np.zeros((nb + 1, 3))
-    w[:nb] = H[:, 3:]
-    return Frames(r=r, R=R, v=v, w=w, angles=angles)
-
-
-# ----------------------------------------------------------------------------- assembly
-
-def _place(model: Model, out: np.ndarray, rows, blocks) -> None:
-    (Ji, Jj), c = blocks
-    for b, block in ((c.bi, Ji), (c.bj, Jj)):
-        if b >= 0:
-            out[np.ix_(rows, range(b * model.nq_b, (b + 1) * model.nq_b))] += block
-
-
-def _stack_rows(model: Model, f: Frames, batch: str) -> np.ndarray:
-    """(m,) vector from every joint type's ``batch_<name>`` rows, in equation order."""
-    out = np.empty(model.m)
-    for g in plan_of(model).groups:
-        out[g.rows] = getattr(g.module, batch)(g.data, f).reshape(-1)
-    return out
-
-
-def constraints(model: Model, f: Frames) -> np.ndarray:
-    """Phi (m,)."""
-    return _stack_rows(model, f, "batch_phi")
-
-
-def jacobian_q(model: Model, f: Frames) -> np.ndarray:
-    """Phi_q (m, n), exact derivative by q."""
-    out = np.zeros((model.m, model.n))
-    for c in model.joints:
-        _place(model, out, list(c.rows), (c.module.jac_q(c, f), c))
-    return out
-
-
-def jacobian_h(model: Model, f: Frames) -> np.ndarray:
-    """Phi_h (m, nh): planar Phi_q, spatial the modified Jacobian of Eq. 7."""
-    plan = plan_of(model)
-    out = np.zeros((model.m, model.nh))
-    flat = out.reshape(-1)
-    for g in plan.groups:
-        Ji, Jj = g.module.batch_jac_h(g.data, f)
-        # += on zeros, in the order of _place (body i, then body j): the same numbers, -0.0 included
-        flat[g.flat_i] += Ji[g.sel_i].reshape(-1)
-        flat[g.flat_j] += Jj[g.sel_j].reshape(-1)
-    return out
-
-
-def gamma(model: Model, f: Frames) -> np.ndarray:
-    """gamma (m,): Phi_h h' = gamma (Eq. 11)."""
-    return _stack_rows(model, f, "batch_gamma")
-
-
-def constraints_per_joint(model: Model, f: Frames) -> np.ndarray:
-    """Reference of :func:`constraints`: joint by joint with the joints' ``phi``."""
-    return np.concatenate([c.module.phi(c, f) for c in model.joints])
-
-
-def jacobian_h_per_joint(model: Model, f: Frames) -> np.ndarray:
-    """Reference of :func:`jacobian_h`: joint by joint with the joints' ``jac_h``."""
-    out = np.zeros((model.m, model.nh))
-    for c in model.joints:
-        _place(model, out, list(c.rows), (c.module.jac_h(c, f), c))
-    return out
-
-
-def gamma_per_joint(model: Model, f: Frames) -> np.ndarray:
-    """Reference of :func:`gamma`: joint by joint with the joints' ``gamma``."""
-    return np.concatenate([c.module.gamma(c, f) for c in model.joints])
-
-
-def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """q' from (q, h): planar q' = h; spatial Euler rates = H omega (Eq. 4). Raises
-    EulerSingularity near sin(beta) = 0."""
-    if model.kind == "planar":
-        return h.copy()
-    nb = model.nb
-    qd = h.copy()
-    H = euler_H_rows(q.reshape(nb, 6)[:, 3:], model.body_names)
-    qd.reshape(nb, 6)[:, 3:] = matvec(H, h.reshape(nb, 6)[:, 3:])
-    return qd
-
-
-def generalized_force(model: Model, f: Frames, b: int, point: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Generalized force on body slot b of a global force F applied at a global point (the C_i
-    matrices of App. A): planar [F, (p - r) x F]; spatial [F, s x (R^T F)] (torque in body axes)."""
-    arm = point - f.r[b]
-    if model.kind == "planar":
-        return np.array([F[0], F[1], cross2(arm, F)])
-    return np.concatenate([F, cross3(f.R[b].T @ arm, f.R[b].T @ F)])
-
-
-def applied_forces(model: Model, f: Frames) -> np.ndarray:
-    """Q (nh,): gravity, constant forces and torques, springs, gyroscopic terms -omega x J omega."""
-    nb, d, k = model.nb, model.dim, model.nq_b
-    Q = np.zeros((nb, k))
-    Q[:, :d] = model.mass[:, None] * model.gravity[None, :]
-    if model.kind == "spatial":
-        Jw = model.inertia * f.w[:nb]
-        Q[:, 3:] -= cross3_rows(f.w[:nb], Jw)
-    for ld in model.loads:
-        if ld.type == "force":
-            Q[ld.bi, :d] += ld.value
-        elif ld.type == "torque":
-            Q[ld.bi, d:] += ld.value if model.kind == "planar" else f.R[ld.bi].T @ ld.value
-        else:  # spring between two body points
-            pi = f.r[ld.bi] + f.R[ld.bi] @ ld.s_i
-            pj = f.r[ld.bj] + f.R[ld.bj] @ ld.s_j
-            dvec = pi - pj
-            length = float(np.linalg.norm(dvec))
-            if length < 1e-12 * max(1.0, ld.free_length):
-                raise SingularConfiguration("spring attachment points coincide: direction undefined")
-            F = -ld.stiffness * (length - ld.free_length) * dvec / length
-            for b, point, sign in ((ld.bi, pi, 1.0), (ld.bj, pj, -1.0)):
-                if b >= 0:
-                    Q[b] += generalized_force(model, f, b, point, sign * F)
-    return Q.reshape(-1)
-
-
-def reaction_on_body_i(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> np.ndarray:
-    """fi = (J_X)_i lam_X: left-hand-side generalized reaction of joint c on its body i."""
-    Ji, _ = c.module.jac_h(c, f)
-    return Ji.T @ lam[list(c.rows)]
-
-
-def physical_reaction(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> np.ndarray:
-    """Physical reaction of joint c on body i: in its auxiliary frame, -A_i (J_X)_i lam_X
-    (components ``REACTION_COMPONENTS`` of the joint type), followed by the force in the global
-    frame pi_0 (components ``Fx0, Fy0(, Fz0)``: the paper's F^(0) of Eq. A.9, the frame of
-    Fig. 7)."""
-    fi = reaction_on_body_i(model, c, f, lam)
-    local = c.module.reaction_transform(c, f) @ fi
-    n_local = len(c.module.REACTION_COMPONENTS)
-    return -np.concatenate([local[:n_local], fi[: model.dim]])
-
-
-def friction_output(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> float:
-    """The friction output ``<joint>.friction`` of friction joint c (unit ``FRICTION_UNIT`` of
-    the joint type): the joint module's ``friction_force`` at the multipliers lam. Sign
-    convention (README "Conventions"): the friction on body i of the joint; translational:
-    force along the guide x' (N), revolute: torque (N.m, counter-clockwise positive), both
-    positive the way body j moves relative to body i; spherical: magnitude (N, >= 0)."""
-    return float(c.module.friction_force(c, f, reaction_on_body_i(model, c, f, lam), c.law))
-
-
 # ----------------------------------------------------------------------------- assembly plan
 
+class _TypedArrays:
+    """Base of the plan's groups (dataclasses with a ``type`` field): the joint type's producer
+    module, and read-only arrays."""
+
+    def __post_init__(self):
+        _freeze_fields(self)
+
+    @property
+    def module(self):
+        return TYPES[self.type].module
+
+
 @dataclass(frozen=True, eq=False)
-class JointGroup:
-    """All joints of one type: the module's ``batch_prepare`` data and where their blocks go."""
+class JointGroup(_TypedArrays):
+    """All joints of one type: the module's ``stack`` data and where their blocks go."""
 
     type: str
     data: Mapping[str, object]
@@ -332,14 +174,10 @@ class JointGroup:
     sel_j: np.ndarray
     flat_j: np.ndarray
 
-    @property
-    def module(self):
-        return TYPES[self.type]
-
 
 @dataclass(frozen=True, eq=False)
-class FrictionGroup:
-    """The friction joints of one type: ``batch_prepare`` data (laws included), where their
+class FrictionGroup(_TypedArrays):
+    """The friction joints of one type: ``stack`` data (laws included), where their
     multipliers are read from lam_R and where their forces go in the contribution list."""
 
     type: str
@@ -349,31 +187,40 @@ class FrictionGroup:
     out_i: np.ndarray  # (k,) rows of Qi in the contribution list
     out_j: np.ndarray
 
-    @property
-    def module(self):
-        return TYPES[self.type]
-
 
 @dataclass(frozen=True, eq=False)
 class AssemblyPlan:
     """Compile-time index data of the batched hot path (built by :func:`build_plan`)."""
 
-    joints: tuple[CompiledJoint, ...]  # the model's joints and retained rows it was built for
-    retained: np.ndarray
-    nb: int
-    nq_b: int
     groups: tuple[JointGroup, ...]
+    single: tuple[Mapping[str, object], ...]  # per joint (model order): its constants as a batch of one
     friction: tuple[FrictionGroup, ...]
     friction_slots: np.ndarray  # (2 nf,) body slot per contribution (joint order; i then j; base -> nb)
     friction_xrows: np.ndarray  # positions in lam_R of the retained friction rows (joint order)
     friction_pad: bool  # some friction row is eliminated (read as 0.0)
 
-    def matches(self, model: "Model") -> bool:
-        return (self.joints is model.joints and self.retained is model.retained
-                and self.nb == model.nb and self.nq_b == model.nq_b)
+    def __post_init__(self):
+        _freeze_fields(self)
+
+
+def _freeze_fields(obj) -> None:
+    """Mark every array field of a dataclass instance read-only."""
+    for name in obj.__dataclass_fields__:
+        _read_only(getattr(obj, name))
+
+
+def _read_only(x):
+    """Mark an array (or the arrays in a dict) read-only; returns it."""
+    if isinstance(x, np.ndarray):
+        x.flags.writeable = False
+    elif isinstance(x, dict):
+        for v in x.values():
+            _read_only(v)
+    return x
 
 
 def build_plan(model: Model) -> AssemblyPlan:
+    """The plan of ``model``'s joints and retained equations (every array read-only)."""
     k, nh = model.nq_b, model.nh
     by_type: dict[str, list[int]] = {}
     for c in model.joints:
@@ -381,7 +228,6 @@ def build_plan(model: Model) -> AssemblyPlan:
     groups = []
     for jtype, idx in by_type.items():
         js = [model.joints[i] for i in idx]
-        ne = len(js[0].rows)
         blocks = {}
         for side in ("i", "j"):
             sel, flat = [], []
@@ -394,7 +240,7 @@ def build_plan(model: Model) -> AssemblyPlan:
             blocks[side] = (np.array(sel, np.intp),
                             np.concatenate(flat).astype(np.intp) if flat else np.zeros(0, np.intp))
         groups.append(JointGroup(
-            type=jtype, data=TYPES[jtype].batch_prepare(js), joints=tuple(idx),
+            type=jtype, data=_read_only(TYPES[jtype].module.stack(js)), joints=tuple(idx),
             rows=np.array([r for c in js for r in c.rows], np.intp),
             sel_i=blocks["i"][0], flat_i=blocks["i"][1], sel_j=blocks["j"][0], flat_j=blocks["j"][1]))
     retained = model.retained
@@ -408,34 +254,17 @@ def build_plan(model: Model) -> AssemblyPlan:
     friction = []
     for jtype, js in fr_types.items():
         friction.append(FrictionGroup(
-            type=jtype, data=TYPES[jtype].batch_prepare(js), joints=tuple(c.index for c in js),
+            type=jtype, data=_read_only(TYPES[jtype].module.stack(js)), joints=tuple(c.index for c in js),
             lam_index=np.array([[pos.get(r, pad) for r in c.rows] for c in js], np.intp),
             out_i=np.array([2 * order[c.index] for c in js], np.intp),
             out_j=np.array([2 * order[c.index] + 1 for c in js], np.intp)))
     slots = [b if b >= 0 else model.nb for c in fjoints for b in (c.bi, c.bj)]
     xrows = [pos[r] for c in fjoints for r in c.rows if r in pos]
     return AssemblyPlan(
-        joints=model.joints, retained=retained, nb=model.nb, nq_b=k, groups=tuple(groups),
+        groups=tuple(groups), single=tuple(_read_only(c.module.stack([c])) for c in model.joints),
         friction=tuple(friction), friction_slots=np.array(slots, np.intp),
         friction_xrows=np.array(xrows, np.intp),
         friction_pad=any(r not in pos for c in fjoints for r in c.rows))
-
-
-_PLAN_CACHE: dict = {}
-
-
-def plan_of(model: Model) -> AssemblyPlan:
-    """The model's assembly plan; built (and cached) when the model has none that matches."""
-    plan = model.plan
-    if plan is not None and plan.matches(model):
-        return plan
-    key = (id(model.joints), id(model.retained), model.nb, model.nq_b)
-    plan = _PLAN_CACHE.get(key)
-    if plan is None or not plan.matches(model):
-        if len(_PLAN_CACHE) >= 16:
-            _PLAN_CACHE.clear()
-        plan = _PLAN_CACHE[key] = build_plan(model)  # holds joints/retained: ids stay valid
-    return plan
 
 
 # ----------------------------------------------------------------------------- compile
@@ -462,28 +291,30 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
     joints = []
     row = 0
     for idx, js in enumerate(mech.joints):
-        ne = JOINT_FIELDS[js.type]["n_equations"]
+        jt = TYPES[js.type]
+        ne = jt.n_equations
         law = None
         if js.name in friction_on:
             fspec = scene.friction_params.get(js.name, js.friction)
             law = make_law(fspec)
         joints.append(CompiledJoint(
             name=js.name, type=js.type, index=idx, bi=slot[js.body_i], bj=slot[js.body_j],
-            rows=tuple(range(row, row + ne)), p=TYPES[js.type].prepare(js.params), law=law,
-            components=TYPES[js.type].REACTION_COMPONENTS + GLOBAL_COMPONENTS[kind]))
+            rows=tuple(range(row, row + ne)), p=_read_only(jt.module.constants(js.params)), law=law,
+            components=jt.reaction_components + GLOBAL_COMPONENTS[kind]))
         row += ne
     loads = []
     for ld in mech.loads:
         p = ld.params
         if ld.type in ("force", "torque"):
-            loads.append(CompiledLoad(ld.type, slot[p["body"]], -1, value=np.asarray(p["value"], float)))
+            loads.append(CompiledLoad(ld.type, slot[p["body"]], -1,
+                                      value=_read_only(np.array(p["value"], float))))
         else:
             zero = np.zeros(dim)
             loads.append(CompiledLoad(
                 "spring", slot[p["body_i"]], slot[p["body_j"]], stiffness=float(p["stiffness"]),
                 free_length=float(p["free_length"]),
-                s_i=zero if p.get("s_i") is None else np.asarray(p["s_i"], float),
-                s_j=zero if p.get("s_j") is None else np.asarray(p["s_j"], float)))
+                s_i=_read_only(zero if p.get("s_i") is None else np.array(p["s_i"], float)),
+                s_j=_read_only(zero.copy() if p.get("s_j") is None else np.array(p["s_j"], float))))
     q0 = np.concatenate([np.asarray(b.q0, float) for b in mech.bodies])
     h0 = np.concatenate([np.asarray(b.h0, float) for b in mech.bodies])
     coord_index = {}
@@ -492,7 +323,7 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
             coord_index[f"{name}.{cname}"] = b * k + i
     joint_index = {c.name: c.index for c in joints}
     base = Model(
-        scene=scene, kind=kind, dim=dim, nq_b=k, nb=nb, body_names=names, mass=mass,
+        scene=replace(scene, solver=None), kind=kind, dim=dim, nq_b=k, nb=nb, body_names=names, mass=mass,
         inertia=inertia, M=M, Minv=1.0 / M, gravity=np.asarray(mech.gravity, float),
         joints=tuple(joints), loads=tuple(loads), q0=q0, h0=h0, m=row,
         retained=np.arange(row), eliminated=(), elimination_mode="given",
@@ -506,8 +337,7 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
         check_initial_state(base)
     eliminated, mode = resolve_elimination(base, scene.eliminate)
     retained = np.array([i for i in range(row) if i + 1 not in set(eliminated)], int)
-    model = replace(base, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
-    return replace(model, plan=build_plan(model))
+    return replace(base, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
 
 
 def check_initial_state(model: Model, tol: float = 1e-9) -> None:

@@ -16,7 +16,7 @@ import numpy as np
 from . import scene
 from .model import compile_model
 from .precheck import precheck
-from .simulate import Result, run
+from .simulate import Result, run_scene
 from .spec import SceneSpec
 from .verdict import LOCKSTEP_METHOD, LOCKSTEP_STEP, lockstep_tolerance, variant_label
 
@@ -106,13 +106,13 @@ def run_group(items: list[tuple[Path, SceneSpec]], *, tolerance: float | None = 
     for path, spec in items:
         if stop_time is not None:
             spec = dataclasses.replace(spec, stop_time=stop_time)
-        predicted.append(precheck(compile_model(scene.as_scene(spec)), str(path))["motion_unique"])
+        predicted.append(precheck(compile_model(scene.as_scene(spec)), str(path)).motion_unique)
         labels.append(variant_label(spec.eliminate))
         lock_spec = dataclasses.replace(_with_solver(spec, method=LOCKSTEP_METHOD, step=lockstep_step),
                                         reactions=(), positions=outputs or spec.positions)
-        lock.append(run(compile_model(scene.as_scene(lock_spec))))
+        lock.append(run_scene(scene.as_scene(lock_spec)))
         if adaptive:
-            results.append(run(compile_model(scene.as_scene(spec, tolerance=tolerance))))
+            results.append(run_scene(scene.as_scene(spec, tolerance=tolerance)))
     names = _positions(outputs or lock[0].names)
     scale = {n: max(float(np.max(np.abs(r.column(n)))) for r in lock) for n in names}
     adaptive_diff = _max_diffs(results, names) if results else {}

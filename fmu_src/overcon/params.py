@@ -201,12 +201,17 @@ def check_relations(solver, start: float, stop: float) -> list[tuple[str, str]]:
     return out
 
 
-def apply_overrides(scene, values: dict):
+def apply_overrides(scene, values: dict, *, relations: bool = True):
     """``scene`` with ``values`` applied: names ``solver.<field>`` (SolverSpec) or
     ``<joint>.<friction field>`` (a friction joint of the scene). Returns ``(new scene, [])`` or
     ``(None, [(name, message), ...])`` with every problem (each value against its rule, a name
-    that is not a parameter, ``mu_static >= mu``, and the relations of :func:`check_relations`
-    for the changed solver, reported against the changed parameter when it is one of them)."""
+    that is not a parameter, ``mu_static >= mu``, and, unless ``relations`` is false, the
+    relations of :func:`check_relations` for the changed solver over the scene's interval,
+    reported against the changed parameter when it is one of them). The FMU passes
+    ``relations=False``: its run length is the host's, bounded per step by its work budget.
+
+    This is the one override function: the scene loader (``as_scene``), the command line
+    (``simulate``/``check`` flags) and the FMU (its parameters) all call it."""
     problems: list[tuple[str, str]] = []
     solver_changes: dict = {}
     friction_changes: dict[str, dict] = {}
@@ -235,7 +240,7 @@ def apply_overrides(scene, values: dict):
     if problems:
         return None, problems
     solver = dataclasses.replace(scene.solver, **solver_changes)
-    for name, msg in check_relations(solver, scene.start_time, scene.stop_time):
+    for name, msg in check_relations(solver, scene.start_time, scene.stop_time) if relations else ():
         changed = [n for n in ("solver.output_interval", "solver.step", "solver.max_step", "solver.method")
                    if n.split(".", 1)[1] in solver_changes]
         problems.append((name if name.split(".", 1)[1] in solver_changes or not changed else changed[0], msg))

@@ -7,8 +7,11 @@ non-singular configuration gives the same answer, paper App. B); a singular q0 i
 """
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass
+
 from . import analysis
-from .model import Model, frames, jacobian_h
+from .evaluation import frames, jacobian_h
+from .model import Model
 
 
 def joint_groups(model: Model) -> dict[str, list[int]]:
@@ -40,17 +43,70 @@ def friction_warnings(model: Model) -> list[str]:
     return out
 
 
-def precheck(model: Model, source: str = "") -> dict:
-    """JSON-ready report. Keys: file, scene, kind, n_coordinates, n_equations, rank, dof,
-    redundant, joints (name, type, unique, methods {rank, svd, qr}, rank_defect, agree),
-    methods_agree, friction, friction_on_nonunique, friction_set_unique, motion_unique,
-    eliminated, elimination_mode, problems (human-readable reasons), warnings (human-readable,
-    not affecting the verdict: :func:`friction_warnings`)."""
+@dataclass(frozen=True)
+class JointVerdict:
+    """Pre-check verdict of one joint: its reaction is ``unique`` (all three tests ``methods``
+    {rank, svd, qr} say so when they ``agree``); ``rank_defect`` = rank(J_X) + rank(J_-X) -
+    rank(J)."""
+
+    name: str
+    unique: bool
+    methods: dict[str, bool]
+    rank_defect: int
+    agree: bool
+    type: str
+
+
+@dataclass(frozen=True)
+class PrecheckResult:
+    """The pre-check of a scene (typed; :meth:`to_json` is the ``check --json`` document, its keys
+    in this field order). ``problems`` are human-readable reasons against uniqueness;
+    ``warnings`` do not affect the verdict (:func:`friction_warnings`)."""
+
+    n_coordinates: int
+    n_equations: int
+    rank: int
+    dof: int
+    redundant: int
+    joints: tuple[JointVerdict, ...]
+    file: str
+    scene: str
+    kind: str
+    methods_agree: bool
+    friction: tuple[str, ...]
+    friction_on_nonunique: tuple[str, ...]
+    friction_set_unique: bool
+    motion_unique: bool
+    eliminated: tuple[int, ...]
+    elimination_mode: str
+    problems: tuple[str, ...]
+    warnings: tuple[str, ...]
+
+    def to_json(self) -> dict:
+        """JSON-ready dict (lists, plain types), keys in field order."""
+        return _lists(asdict(self))
+
+    @property
+    def reaction_unique(self) -> dict[str, bool]:
+        """Joint name -> its reaction is unique."""
+        return {j.name: j.unique for j in self.joints}
+
+
+def _lists(x):
+    """Tuples to lists, recursively (the JSON document's types)."""
+    if isinstance(x, dict):
+        return {k: _lists(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_lists(v) for v in x]
+    return x
+
+
+def precheck(model: Model, source: str = "") -> PrecheckResult:
+    """The pre-check of ``model`` (``source``: the file name reported)."""
     res = analyse_model(model)
-    report = analysis.to_json(res)
+    summary = analysis.to_json(res)
     types = {c.name: c.type for c in model.joints}
-    for j in report["joints"]:
-        j["type"] = types[j["name"]]
+    joints = tuple(JointVerdict(type=types[j["name"]], **j) for j in summary.pop("joints"))
     friction = [model.joints[j].name for j in model.friction_joints]
     nonunique = [name for name in friction if not res.joints[name].unique]
     problems = []
@@ -60,24 +116,23 @@ def precheck(model: Model, source: str = "") -> dict:
             f"friction on joint {name}, whose reaction is not unique: its Jacobian columns are not "
             f"a direct summand of span(J) (rank(J_X) + rank(J_-X) - rank(J) = {v.rank_defect}); the "
             "friction force, and so the motion, depends on which redundant equation is eliminated")
-    disagree = [j["name"] for j in report["joints"] if not j["agree"]]
+    disagree = [j.name for j in joints if not j.agree]
     for name in disagree:
         problems.append(f"joint {name}: the rank, SVD and QR tests disagree {res.joints[name].methods}")
     set_unique = True
     if friction:
-        sv = res.set_unique(friction)
-        set_unique = bool(sv.unique)
-    report.update({
-        "file": source, "scene": model.scene.name, "kind": model.kind,
-        "methods_agree": not disagree, "friction": friction, "friction_on_nonunique": nonunique,
-        "friction_set_unique": set_unique, "motion_unique": not nonunique and set_unique,
-        "eliminated": list(model.eliminated), "elimination_mode": model.elimination_mode,
-        "problems": problems, "warnings": friction_warnings(model),
-    })
-    return report
+        set_unique = bool(res.set_unique(friction).unique)
+    return PrecheckResult(
+        **summary, joints=joints, file=source, scene=model.scene.name, kind=model.kind,
+        methods_agree=not disagree, friction=tuple(friction), friction_on_nonunique=tuple(nonunique),
+        friction_set_unique=set_unique, motion_unique=not nonunique and set_unique,
+        eliminated=tuple(model.eliminated), elimination_mode=model.elimination_mode,
+        problems=tuple(problems), warnings=tuple(friction_warnings(model)))
 
 
-def format_table(report: dict) -> str:
+def format_table(result: PrecheckResult) -> str:
+    """The human-readable table of ``check`` (from the JSON document of ``result``)."""
+    report = result.to_json()
     lines = [
         f"{report['file'] or report['scene']}: {report['kind']} mechanism, "
         f"{report['n_coordinates']} coordinates, {report['n_equations']} equations, rank {report['rank']}, "

@@ -23,9 +23,10 @@ What is validated
 * Mechanism: ``name`` an identifier (letter, then letters/digits/_), ``kind`` in
   ``spec.KINDS``; at least one body; body names identifiers, unique, not ``base``; mass > 0;
   inertia > 0 (planar: one number, stored as a 1-tuple; spatial: 3 numbers); ``h0`` defaults to
-  zeros. Joints: names identifiers and unique; ``type`` in ``spec.JOINT_FIELDS`` and allowed for
+  zeros. Joints: names identifiers and unique; ``type`` in ``overcon.joints.TYPES`` and allowed for
   the mechanism kind; ``body_i``/``body_j`` a body or ``base`` and different; the type's required
-  and optional fields (``spec.JOINT_FIELDS``) with their shapes; translational ``v`` non-zero.
+  and optional fields (``overcon.joints.TYPES``) with their shapes (shape ``dir``, e.g.
+  translational ``v``: non-zero).
   Joint friction tables: ``law`` in ``spec.FRICTION_LAWS`` (default ``regularised``), ``mu``,
   ``v_reg`` (default 1e-3), ``mu_static``, ``v_stribeck`` by :mod:`overcon.params`, the type's size key (``length`` for translational, ``radius`` for
   revolute/spherical; stored as ``FrictionSpec.size``) > 0 and no other size key; ``stribeck``
@@ -74,6 +75,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import params
+from .joints import TYPES as JOINT_TYPES
 from . import spec as S
 from .spec import (
     BASE,
@@ -337,7 +339,7 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
     if jtype is None:
         size_keys = ("length", "radius")
     else:
-        size_keys = (S.JOINT_FIELDS[jtype]["friction_size"][0],)
+        size_keys = (JOINT_TYPES[jtype].friction_size[0],)
     allowed = _FRICTION_KEYS + size_keys
     hint = {}
     if jtype is not None:
@@ -493,23 +495,23 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
     joint_names: dict[str, str] = {}
     common = ("name", "type", "body_i", "body_j", "friction")
     all_joint_fields = tuple(dict.fromkeys(
-        f for d in S.JOINT_FIELDS.values() for f in (*d["required"], *d["optional"])))
+        f for d in JOINT_TYPES.values() for f in (*d.required, *d.optional)))
     for k, jt in _array_of_tables(ctx, doc, "joints", required=False, limit=MAX_JOINTS):
         p = f"joints[{k}]"
         jname = jtype = bi = bj = None
         ok = True
         v = _get(ctx, jt, "type", p)
         if v is not _MISSING:
-            jtype = _choice(ctx, v, f"{p}.type", tuple(S.JOINT_FIELDS))
-            if jtype is not None and kind is not None and S.JOINT_FIELDS[jtype]["kind"] != kind:
-                allowed = [t for t, d in S.JOINT_FIELDS.items() if d["kind"] == kind]
+            jtype = _choice(ctx, v, f"{p}.type", tuple(JOINT_TYPES))
+            if jtype is not None and kind is not None and JOINT_TYPES[jtype].kind != kind:
+                allowed = [t for t, d in JOINT_TYPES.items() if d.kind == kind]
                 ctx.add(f"{p}.type", f"joint type '{jtype}' is not allowed in a {kind} mechanism "
                                      f"(allowed: {', '.join(allowed)})")
                 ok = False
         # a type not allowed for the kind is reported once; its fields are then not checked
-        fields = S.JOINT_FIELDS[jtype] if jtype and ok else None
+        fields = JOINT_TYPES[jtype] if jtype and ok else None
         if fields is not None:
-            _unknown_keys(ctx, jt, p, common + tuple(fields["required"]) + tuple(fields["optional"]))
+            _unknown_keys(ctx, jt, p, common + tuple(fields.required) + tuple(fields.optional))
         else:
             _unknown_keys(ctx, jt, p, common + all_joint_fields)
         v = _get(ctx, jt, "name", p)
@@ -526,7 +528,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
             ok = False
         params: dict = {}
         if fields is not None and ok:
-            for fname, (shape, _doc) in fields["required"].items():
+            for fname, (shape, _doc) in fields.required.items():
                 v = _get(ctx, jt, fname, p)
                 if v is _MISSING:
                     ok = False
@@ -535,12 +537,8 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
                 if val is None:
                     ok = False
                     continue
-                if jtype == "translational" and fname == "v" and all(x == 0.0 for x in val):
-                    ctx.add(f"{p}.v", "must not be the zero vector")
-                    ok = False
-                    continue
                 params[fname] = val
-            for fname, (shape, _doc, default) in fields["optional"].items():
+            for fname, (shape, _doc, default) in fields.optional.items():
                 v = _get(ctx, jt, fname, p, required=False)
                 if v is _MISSING:
                     params[fname] = default
@@ -617,11 +615,17 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
 
 
 def _shaped(ctx: _Ctx, value, field: str, shape: str, kind: str | None):
-    """A value of shape code ``vec`` / ``rot`` / ``scalar`` (spec.JOINT_FIELDS)."""
+    """A value of shape code ``vec`` / ``dir`` / ``rot`` / ``scalar`` (:class:`overcon.joints.JointType`)."""
     if shape == "scalar":
         return _num(ctx, value, field)
     if shape == "vec":
         return _vec(ctx, value, field, _DIM.get(kind))
+    if shape == "dir":
+        val = _vec(ctx, value, field, _DIM.get(kind))
+        if val is not None and all(x == 0.0 for x in val):
+            ctx.add(field, "must not be the zero vector")
+            return None
+        return val
     if shape == "rot":
         if kind == "planar":
             return _num(ctx, value, field)
@@ -633,7 +637,7 @@ def _shaped(ctx: _Ctx, value, field: str, shape: str, kind: str | None):
 
 
 def _n_equations(mech: MechanismSpec) -> int:
-    return sum(S.JOINT_FIELDS[j.type]["n_equations"] for j in mech.joints)
+    return sum(JOINT_TYPES[j.type].n_equations for j in mech.joints)
 
 
 def _all_positions(mech: MechanismSpec) -> tuple[str, ...]:

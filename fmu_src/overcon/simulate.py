@@ -2,7 +2,7 @@
 
 State y = [q, h]; y' = [q'(q, h), h'(q, h)] in index-1 form (Eq. 18 with the chosen
 elimination) with Baumgarte stabilisation ``gamma - 2 a Phi' - a^2 Phi`` (frequency a from the
-scene's ``solver.baumgarte``, 1/s; default 10). The constraint drift max |Phi| over the accepted
+solver options' ``baumgarte``, 1/s; default 10). The constraint drift max |Phi| over the accepted
 steps is reported (:attr:`Simulation.max_drift`, m or rad; once per step, not per output point, so
 a fine output grid costs nothing extra).
 
@@ -10,6 +10,11 @@ A :class:`Simulation` owns everything that changes during a run (integrator arra
 converged lam used as the friction solve's warm start, counters); the :class:`Model` never
 changes. ``get_state``/``set_state`` round-trip it exactly; outputs are read by dense output at
 any time inside the last step and never disturb the integration.
+
+Solver options (decided here): a Simulation is given the Model and, separately, the solver
+options (:class:`overcon.spec.SolverSpec`, frozen; a scene's ``scene.solver``). The Model carries
+none, so a new tolerance or method is a new Simulation of the same Model: no recompilation, no
+rank analysis (the FMU relies on this).
 """
 from __future__ import annotations
 
@@ -23,11 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dynamics import evaluate
-from .integrators import METHODS
+from . import integrators
+from .evaluation import (SingularConfiguration, constraints, coordinate_rates, frames,  # noqa: F401
+                         friction_output, jacobian_h, physical_reaction)
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
-from .model import (InconsistentInitialState, Model, ModelError, SingularConfiguration,  # noqa: F401
-                    check_initial_state, constraints, coordinate_rates, frames, friction_output, jacobian_h,
-                    physical_reaction)
+from .model import InconsistentInitialState, Model, ModelError, check_initial_state  # noqa: F401
+from .spec import SceneSpec, SolverSpec
 
 
 class SingularityMonitor:
@@ -42,10 +48,10 @@ class SingularityMonitor:
     The smallest ratio seen is reported as ``min_ratio``.
     """
 
-    def __init__(self, model: Model, y: np.ndarray, ratio_tol: float = 1e-6):
+    def __init__(self, model: Model, y: np.ndarray, t0: float | None = None, ratio_tol: float = 1e-6):
         self.model, self.ratio_tol = model, ratio_tol
         self.min_ratio = np.inf
-        self.t_prev = model.scene.start_time
+        self.t_prev = model.scene.start_time if t0 is None else t0
         J = self._jac(y)
         self.N, ratio = self._null(J, None)
         self._check_ratio(self.t_prev, ratio)
@@ -113,21 +119,20 @@ class Simulation:
     :mod:`overcon.scene`, no run can go on without end.
     """
 
-    def __init__(self, model: Model, *, method: str | None = None, tolerance: float | None = None,
+    def __init__(self, model: Model, solver: SolverSpec, *, method: str | None = None, tolerance: float | None = None,
                  step: float | None = None, max_step: float | None = None, start_time: float | None = None,
                  max_steps: int | None = MAX_STEPS, max_wall_time: float | None = MAX_WALL_TIME):
         self.model = model
         self.max_steps, self.max_wall_time = max_steps, max_wall_time
         self.wall_time = 0.0  # s spent in advance()
-        s = model.scene.solver
         given = {"method": method, "tolerance": tolerance, "step": step, "max_step": max_step}
-        for name, value in given.items():  # arguments over the scene's (validated) solver: same rules
+        for name, value in given.items():  # arguments over the given (validated) solver: same rules
             reason = None if value is None else check_param(f"solver.{name}", value)
             if reason is not None:
                 raise ValueError(f"Simulation({name}={value!r}): {reason}")
-        eff = {k: getattr(s, k) if v is None else v for k, v in given.items()}
-        self.method = eff.pop("method")
-        self.settings = eff
+        self.solver = dataclasses.replace(solver, **{k: v for k, v in given.items() if v is not None})
+        self.method = self.solver.method
+        self.settings = {k: getattr(self.solver, k) for k in ("tolerance", "step", "max_step")}
         check_initial_state(model)
         for c in model.joints:
             if c.law is not None and c.law.name == "coulomb":
@@ -142,8 +147,9 @@ class Simulation:
         t0 = model.scene.start_time if start_time is None else start_time
         y0 = np.concatenate([model.q0, model.h0])
         try:
-            self._integrator = METHODS[self.method](self._rhs, t0, y0, dense_fun=self._rhs_dense, **self.settings)
-            self.monitor = SingularityMonitor(model, y0)
+            self._integrator = integrators.create(self.method, self._rhs, t0, y0, dense_fun=self._rhs_dense,
+                                                  **self.settings)
+            self.monitor = SingularityMonitor(model, y0, t0)
         except (ArithmeticError, np.linalg.LinAlgError) as exc:
             where = "" if str(exc).startswith("t = ") else f"t = {t0:.9g} s: "
             raise SimulationError(f"cannot start: {where}{exc}") from exc
@@ -151,7 +157,7 @@ class Simulation:
     # -- right-hand side -------------------------------------------------------------------
     def _rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, self.lam)
+        ev = evaluate(self.model, t, q, h, self.lam, solver=self.solver)
         if self.model.friction_joints:
             self.lam = ev.lam
         self.friction_iterations += ev.iterations
@@ -165,7 +171,7 @@ class Simulation:
         """Right-hand side for dense-output stages only: warm-started from the integrator's lam but
         leaving it (and the counters) unchanged, so reading outputs never alters the trajectory."""
         q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy())
+        ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver)
         return np.concatenate([coordinate_rates(self.model, q, h), ev.hdot])
 
     # -- stepping --------------------------------------------------------------------------
@@ -228,13 +234,13 @@ class Simulation:
 
     def outputs(self, t: float, y: np.ndarray) -> np.ndarray:
         """Output vector (model.output_names() order) at (t, y): positions, reactions, friction
-        forces (:func:`overcon.model.friction_output`); reactions and friction need one evaluation
+        forces (:func:`overcon.evaluation.friction_output`); reactions and friction need one evaluation
         of Eq. 18, warm-started from the integrator's lam but without changing it."""
         model = self.model
         q, h = y[: self.n], y[self.n:]
         vals = [q[i] for _, i in model.position_outputs]
         if model.reaction_joints or model.friction_outputs:  # one evaluation of Eq. 18; positions only: none
-            ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy())
+            ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver)
             for j in model.reaction_joints:
                 vals.extend(physical_reaction(model, model.joints[j], ev.frames, ev.lam))
             vals.extend(friction_output(model, model.joints[j], ev.frames, ev.lam) for j in model.friction_outputs)
@@ -285,17 +291,21 @@ def output_grid(start: float, stop: float, interval: float) -> np.ndarray:
     return grid
 
 
-def run(model: Model, *, stop_time: float | None = None, output_interval: float | None = None, **settings) -> Result:
+def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, output_interval: float | None = None,
+        **settings) -> Result:
+    """Simulate ``model`` with the solver options ``solver`` from the scene's start to ``stop_time``
+    (default the scene's), outputs every ``output_interval`` (default ``solver.output_interval``);
+    ``settings`` go to :class:`Simulation`."""
     scene = model.scene
     stop = scene.stop_time if stop_time is None else stop_time
-    interval = scene.solver.output_interval if output_interval is None else output_interval
+    interval = solver.output_interval if output_interval is None else output_interval
     reason = check_param("solver.output_interval", interval)
-    if reason is None and not output_points(dataclasses.replace(scene.solver, output_interval=interval),
+    if reason is None and not output_points(dataclasses.replace(solver, output_interval=interval),
                                            scene.start_time, stop) <= MAX_OUTPUT_POINTS:
         reason = f"more than {MAX_OUTPUT_POINTS:.0e} output points from {scene.start_time:g} to {stop:g} s"
     if reason is not None:
         raise ValueError(f"run(output_interval={interval!r}): {reason}")
-    sim = Simulation(model, **settings)
+    sim = Simulation(model, solver, **settings)
     grid = output_grid(scene.start_time, stop, interval)
     rows = []
     for t in grid:
@@ -304,6 +314,12 @@ def run(model: Model, *, stop_time: float | None = None, output_interval: float 
     itg = sim._integrator
     return Result(model.output_names(), grid, np.array(rows), sim.max_drift, sim.evaluations,
                   sim.friction_iterations, itg.nsteps, getattr(itg, "stiff_steps", 0))
+
+
+def run_scene(scene: SceneSpec, **kw) -> Result:
+    """Compile ``scene`` and :func:`run` it with its own solver options ``scene.solver``."""
+    from .model import compile_model
+    return run(compile_model(scene), scene.solver, **kw)
 
 
 def write_csv(result: Result, path) -> None:

@@ -6,9 +6,9 @@ numerics. Units are SI throughout; angles in radians.
 
 Field tables
 ------------
-``JOINT_FIELDS`` and ``LOAD_FIELDS`` state, per joint/load type, which fields the file must (or
-may) give and their shape, so that the loader validates every type the same way. A new joint type
-adds one entry here and one producer module in :mod:`overcon.joints`.
+``LOAD_FIELDS`` states, per load type, which fields the file must (or may) give and their shape,
+so that the loader validates every type the same way. Joint types state theirs in their one
+table, :data:`overcon.joints.TYPES` (with equations, reaction components and units).
 
 Shape codes used in the tables: ``"vec"`` a vector of the mechanism's dimension (2 planar,
 3 spatial); ``"rot"`` a rotation quantity (planar: scalar, spatial: 3-vector); ``"scalar"``.
@@ -29,45 +29,6 @@ COORDINATES = {
     "spatial": ("x", "y", "z", "alpha", "beta", "gamma"),
 }
 COORDINATE_UNITS = {"x": "m", "y": "m", "z": "m", "phi": "rad", "alpha": "rad", "beta": "rad", "gamma": "rad"}
-
-# Joint types per mechanism kind, their number of constraint equations, required fields
-# (name -> shape code, description) and optional fields with defaults.
-JOINT_FIELDS: Mapping[str, Mapping] = {
-    "translational": {
-        "kind": "planar",
-        "n_equations": 2,
-        "required": {
-            "s_A": ("vec", "point A on body i, in body i frame (m)"),
-            "s_B": ("vec", "point B on body j, in body j frame (m)"),
-            "v": ("vec", "vector on body j perpendicular to the guide, in body j frame"),
-        },
-        "optional": {"psi": ("scalar", "constant angle phi_i - phi_j (rad)", 0.0)},
-        "friction_size": ("length", "slider length l between contact points A and B (m)"),
-        "reaction_components": ("Fx", "Fy", "T"),
-    },
-    "revolute": {
-        "kind": "planar",
-        "n_equations": 2,
-        "required": {
-            "s_i": ("vec", "joint point P on body i, in body i frame (m)"),
-            "s_j": ("vec", "joint point P on body j, in body j frame (m)"),
-        },
-        "optional": {},
-        "friction_size": ("radius", "shaft radius a (m)"),
-        "reaction_components": ("Fx", "Fy", "T"),
-    },
-    "spherical": {
-        "kind": "spatial",
-        "n_equations": 3,
-        "required": {
-            "s_i": ("vec", "ball centre P on body i, in body i frame (m)"),
-            "s_j": ("vec", "ball centre P on body j, in body j frame (m)"),
-        },
-        "optional": {},
-        "friction_size": ("radius", "ball radius rho (m)"),
-        "reaction_components": ("Fx", "Fy", "Fz"),
-    },
-}
 
 LOAD_FIELDS: Mapping[str, Mapping] = {
     "force": {
@@ -139,7 +100,7 @@ class BodySpec:
 @dataclass(frozen=True)
 class JointSpec:
     """A joint between body i and body j (either may be ``base``). ``params`` holds the fields of
-    ``JOINT_FIELDS[type]`` as tuples/floats; ``friction`` the parameters used when a scene switches
+    ``overcon.joints.TYPES[type]`` as tuples/floats; ``friction`` the parameters used when a scene switches
     friction on for this joint (None: the file gives none)."""
 
     name: str
@@ -195,7 +156,9 @@ class SceneSpec:
     output names ``<body>.<coordinate>``; ``reactions`` joint names whose reactions are outputs;
     ``friction_outputs`` the friction joints whose friction force ``<joint>.friction`` is an
     output (``"all"``: every joint in ``friction``, the default; a scene file's ``[outputs]``
-    table without a ``friction`` key gives ``()``)."""
+    table without a ``friction`` key gives ``()``). ``solver``: the solver options, a separate
+    frozen record (None in the scene a compiled :class:`overcon.model.Model` keeps: a Model has
+    no solver options)."""
 
     name: str
     mechanism: MechanismSpec
@@ -207,7 +170,7 @@ class SceneSpec:
     friction_outputs: tuple[str, ...] | str = "all"
     start_time: float = 0.0
     stop_time: float = 1.0
-    solver: SolverSpec = field(default_factory=SolverSpec)
+    solver: SolverSpec | None = field(default_factory=SolverSpec)
     group: str = ""
     description: str = ""
     source: str = ""

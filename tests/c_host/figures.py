@@ -65,7 +65,8 @@ def overhead(unz: str, scene: str, n: int = 20000, h: float = 1e-5) -> str:
     fmu = time.perf_counter() - t0
     s.terminate()
     s.freeInstance()
-    sim = Simulation(compile_model(scene_mod.load(ROOT / "mechanisms" / f"{scene}.toml")))
+    spec = scene_mod.load(ROOT / "mechanisms" / f"{scene}.toml")
+    sim = Simulation(compile_model(spec), spec.solver)
     t0 = time.perf_counter()
     for k in range(n):
         t_next = (k + 1) * h

@@ -55,7 +55,7 @@ from pathlib import Path
 
 from .. import scene as scene_mod
 from ..model import ModelError, compile_model
-from ..precheck import precheck
+from ..precheck import PrecheckResult, precheck
 from ..spec import SceneSpec
 from . import description, pyinfo, variables
 
@@ -173,13 +173,13 @@ def _scene_layout(scene_path: Path, mech_ref: str) -> tuple[str, str]:
 # ---------------------------------------------------------------------------------------------
 # one FMU
 
-def _verdict(report: dict) -> str:
-    if not report["friction"]:
+def _verdict(report: PrecheckResult) -> str:
+    if not report.friction:
         return "no friction: motion unique"
-    fr = ", ".join(report["friction"])
-    if report["motion_unique"]:
+    fr = ", ".join(report.friction)
+    if report.motion_unique:
         return f"friction in {fr}: reactions unique, motion UNIQUE"
-    bad = ", ".join(report["friction_on_nonunique"]) or fr
+    bad = ", ".join(report.friction_on_nonunique) or fr
     return f"friction in {fr}: friction on non-unique reaction(s) of {bad}, motion NOT UNIQUE"
 
 
@@ -216,13 +216,13 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         return done("invalid", f"{path}: {exc}")
     res.name = spec.name
     report = precheck(model, str(path))
-    res.motion_unique = bool(report["motion_unique"])
+    res.motion_unique = bool(report.motion_unique)
     echo(f"{spec.name}: pre-check: {_verdict(report)}")
-    for problem in report["problems"]:
+    for problem in report.problems:
         echo(f"{spec.name}:   {problem}")
-    if report["friction_on_nonunique"] and not allow_nonunique:
+    if report.friction_on_nonunique and not allow_nonunique:
         return done("refused", f"{path}: refused: friction on a joint whose reaction is not unique "
-                               f"({', '.join(report['friction_on_nonunique'])}); the simulated motion "
+                               f"({', '.join(report.friction_on_nonunique)}); the simulated motion "
                                "would depend on the eliminated equations (--allow-nonunique builds it "
                                "anyway)")
     try:
@@ -242,17 +242,17 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         digest = h.hexdigest()
         guid = "{" + str(uuid.UUID(digest[:32])) + "}"
         pkg = f"{_PKG_NAME}_{digest[:16]}"
-        reaction_unique = {j["name"]: bool(j["unique"]) for j in report["joints"]}
-        table = variables.table(model, reaction_unique, res.motion_unique)
+        reaction_unique = report.reaction_unique
+        table = variables.table(model, spec.solver, reaction_unique, res.motion_unique)
         overcon_version = _overcon_version()
         xml = description.model_description(
-            model, table, guid=guid, version=overcon_version,
+            spec, table, guid=guid, version=overcon_version,
             generation_tool=f"overcon {overcon_version} build_fmu (native binary, Python "
                             f"{platform.python_version()})")
         manifest = {"scene": scene_zip, "guid": guid, "package": pkg, "model_identifier": spec.name,
                     "reaction_unique": reaction_unique, "motion_unique": res.motion_unique,
-                    "precheck_problems": report["problems"],
-                    "precheck_warnings": list(report.get("warnings", [])),
+                    "precheck_problems": list(report.problems),
+                    "precheck_warnings": list(report.warnings),
                     "binary": {"platform": binary.platform, "compiler": binary.compiler,
                                "source": NATIVE_SOURCE.name}}
 

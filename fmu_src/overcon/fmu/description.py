@@ -33,11 +33,10 @@ def _num(x) -> str:
     return repr(float(x))
 
 
-def model_description(model, table: list[Var], *, guid: str, generation_tool: str,
+def model_description(scene, table: list[Var], *, guid: str, generation_tool: str,
                       version: str = "") -> bytes:
-    """The XML document (UTF-8 bytes) for ``model`` (its scene gives name, description and the
-    default experiment) with the variables of ``table``."""
-    scene = model.scene
+    """The XML document (UTF-8 bytes) for ``scene`` (name, description and the default
+    experiment, from its solver options) with the variables of ``table``."""
     attrib = {"fmiVersion": "2.0", "modelName": scene.name, "guid": guid}
     if scene.description:
         attrib["description"] = scene.description

@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import copy
 import ctypes
-import dataclasses
 import enum
 import functools
 import json
@@ -57,7 +56,7 @@ import numpy as np
 
 from .. import scene as scene_mod
 from ..model import compile_model
-from ..params import check_mu_static
+from ..params import apply_overrides, check_mu_static
 from ..precheck import friction_warnings
 from ..simulate import BudgetExceeded, Simulation
 from . import statecodec, variables
@@ -65,7 +64,6 @@ from . import statecodec, variables
 MANIFEST = "overcon_fmu.json"
 """Build-time facts in the FMU's resources/: scene path, guid, reaction_unique, motion_unique."""
 
-_FRICTION_FIELDS = ("mu", "v_reg", "mu_static", "v_stribeck")
 _LOG_FUNCTION = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int, ctypes.c_char_p)
 _C_TYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int,
             "String": ctypes.c_char_p}
@@ -161,7 +159,8 @@ class OverconSlave:
         spec = scene_mod.load(res / self._manifest["scene"])
         self._scene = spec
         self._model0 = compile_model(spec)
-        self._vars = variables.table(self._model0, self._manifest["reaction_unique"],
+        self._model, self._model_friction = self._model0, spec.friction_params  # compiled for these
+        self._vars = variables.table(self._model0, spec.solver, self._manifest["reaction_unique"],
                                      self._manifest["motion_unique"])
         self._defaults = {v.key[1]: v.start for v in self._vars if v.key[0] == "param"}
         self._tunable = {v.key[1] for v in self._vars if v.key[0] == "param" and v.variability == "tunable"}
@@ -306,32 +305,32 @@ class OverconSlave:
     def _key(self):
         return (self._start_time, tuple(sorted((k, v) for k, v in self._params.items() if k not in self._tunable)))
 
-    def _build_model(self, key):
-        start, _ = key
-        spec, p = self._scene, self._params
-        solver = dataclasses.replace(
-            spec.solver, method=p["solver.method"], tolerance=p["solver.tolerance"], step=p["solver.step"],
-            max_step=p["solver.max_step"], baumgarte=p["solver.baumgarte"],
-            friction_tol=p["solver.friction_tol"], friction_max_iter=int(p["solver.friction_max_iter"]))
-        fparams = dict(spec.friction_params)
-        for jname, fspec in spec.friction_params.items():
-            changes = {f: p[f"{jname}.{f}"] for f in _FRICTION_FIELDS if f"{jname}.{f}" in p}
-            fparams[jname] = dataclasses.replace(fspec, **changes)
-            reason = check_mu_static(fparams[jname].mu, fparams[jname].mu_static, f"{jname}.mu")
-            if reason is not None:
-                raise ParameterRefused(f"parameter {jname}.mu_static refused: {reason}")
-        stop = spec.stop_time if spec.stop_time > start else start + 1.0  # unused by Simulation
-        new = dataclasses.replace(spec, solver=solver, friction_params=fparams, start_time=start,
-                                  stop_time=stop)
-        if new == spec:
-            return self._model0
-        return compile_model(new)
+    def _current_scene(self):
+        """The scene with the current solver and friction parameters, through the one override
+        function :func:`overcon.params.apply_overrides` (its range rules and ``mu_static >= mu``).
+        Its run-length relations are not applied: an FMU's run length is the host's, bounded per
+        fmi2DoStep by the work budget."""
+        values = {k: v for k, v in self._params.items() if k not in self._tunable}
+        new, problems = apply_overrides(self._scene, values, relations=False)
+        if problems:
+            raise ParameterRefused("; ".join(f"parameter {name} refused: {msg}" for name, msg in problems))
+        return new
+
+    def _model_for(self, spec):
+        """The compiled model of ``spec``: recompiled (rank analysis included) only when the
+        friction parameters changed. Solver options are not part of a Model (they go to the
+        Simulation), so a new ``solver.*`` value never recompiles."""
+        if spec.friction_params != self._model_friction:
+            self._model = self._model0 if spec.friction_params == self._scene.friction_params else compile_model(spec)
+            self._model_friction = spec.friction_params
+        return self._model
 
     def _ensure_sim(self, compute_outputs: bool = True) -> Simulation:
         key = self._key()
         if self._sim is None or self._sim_key != key:
             self._sim = None
-            sim = Simulation(self._build_model(key))
+            spec = self._current_scene()
+            sim = Simulation(self._model_for(spec), spec.solver, start_time=key[0])
             self._sim, self._sim_key = sim, key
             self._t = key[0]
             self._have_outputs = False

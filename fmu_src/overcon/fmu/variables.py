@@ -4,7 +4,7 @@ Value references are the positions in :func:`table` (0-based), in this order:
 
 1. outputs, exactly ``model.output_names()``: positions (m, rad), reaction components
    (N, N.m) and the friction forces ``<joint>.friction`` of the scene's friction joints (N, or
-   N.m for revolute joints; :func:`overcon.model.friction_output`), causality output,
+   N.m for revolute joints; :func:`overcon.evaluation.friction_output`), causality output,
    variability continuous, initial calculated;
 2. pre-check verdicts (Booleans, causality output, variability constant, initial exact):
    ``<joint>.reaction_unique`` per reaction joint of the scene, and ``motion_unique``;
@@ -37,7 +37,6 @@ UNITS: dict[str, dict[str, int]] = {
 }
 """Units used by the variables, with the exponents of the SI base units (and rad)."""
 
-COMPONENT_UNITS = {"T": "N.m"}  # every other reaction component is a force (N)
 
 COORDINATE_TEXT = {
     "x": "x coordinate of the origin (centre of mass), global frame",
@@ -49,16 +48,6 @@ COORDINATE_TEXT = {
     "gamma": "z-x-z Euler angle gamma",
 }
 
-FRICTION_TEXT = {
-    "translational": "force along the guide x' (positive along +x', the way body j slides relative to body i)",
-    "revolute": "torque (counter-clockwise positive, the way body j turns relative to body i)",
-    "spherical": "force magnitude at the contact point (>= 0)",
-}
-"""What the output ``<joint>.friction`` is, per joint type (convention: overcon.model.friction_output)."""
-
-SLIDING_UNIT = {"translational": "m/s", "revolute": "rad/s", "spherical": "m/s"}
-"""Unit of a joint's friction regularisation velocity (sliding speed; revolute: relative angular
-velocity)."""
 
 
 @dataclass(frozen=True)
@@ -126,9 +115,11 @@ def _friction_param_names(law) -> tuple[str, ...]:
     return ("mu", "v_reg", "mu_static", "v_stribeck") if law.name == "stribeck" else ("mu", "v_reg")
 
 
-def table(model, reaction_unique: dict[str, bool], motion_unique: bool) -> list[Var]:
-    """All variables of the FMU of ``model`` (see the module docstring for the order).
-    ``reaction_unique``: pre-check verdict per joint name; ``motion_unique``: the scene's."""
+def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool) -> list[Var]:
+    """All variables of the FMU of ``model`` with the solver options ``solver`` (the start values
+    of the ``solver.*`` parameters; see the module docstring for the order). Per joint type
+    facts (units, texts) come from :data:`overcon.joints.TYPES`. ``reaction_unique``: pre-check
+    verdict per joint name; ``motion_unique``: the scene's."""
     out: list[Var] = []
     body_of = {i: name for i, name in enumerate(model.body_names)}
     k = 0
@@ -141,18 +132,19 @@ def table(model, reaction_unique: dict[str, bool], motion_unique: bool) -> list[
     for j in model.reaction_joints:
         c = model.joints[j]
         bi = body_of.get(c.bi, "base")
+        units = dict(TYPES[c.type].reaction)
         for comp in c.components:
             frame = "global frame" if comp.endswith("0") else f"auxiliary frame of the {c.type} joint"
             what = "moment" if comp == "T" else "force"
             out.append(Var(f"{c.name}.{comp}", "Real", "output", "continuous", "calculated",
                            f"reaction {what} of joint {c.name} on body {bi}, component {comp}, {frame}",
-                           unit=COMPONENT_UNITS.get(comp, "N"), key=("output", k)))
+                           unit=units.get(comp, "N"), key=("output", k)))
             k += 1
     for j in model.friction_outputs:
         c = model.joints[j]
-        unit = TYPES[c.type].FRICTION_UNIT
+        unit = TYPES[c.type].friction_unit
         out.append(Var(f"{c.name}.friction", "Real", "output", "continuous", "calculated",
-                       f"friction {FRICTION_TEXT[c.type]} of joint {c.name} on body {body_of.get(c.bi, 'base')} "
+                       f"friction {TYPES[c.type].friction_text} of joint {c.name} on body {body_of.get(c.bi, 'base')} "
                        f"({c.law.name} law)", unit=unit, key=("output", k)))
         k += 1
     for j in model.reaction_joints:
@@ -167,14 +159,13 @@ def table(model, reaction_unique: dict[str, bool], motion_unique: bool) -> list[
     for j in model.friction_joints:
         c = model.joints[j]
         for p in _friction_param_names(c.law):
-            value = c.law.mu_kinetic if p == "mu" else getattr(c.law, p)
-            unit = "1" if p.startswith("mu") else SLIDING_UNIT[c.type]
+            value = getattr(c.law, p)
+            unit = "1" if p.startswith("mu") else TYPES[c.type].sliding_unit
             name = f"{c.name}.{p}"
             out.append(Var(name, "Real", "parameter", "fixed", "exact",
                            f"joint {c.name} ({c.law.name} law): {FRICTION_PARAMS[p]} "
                            f"({rule(name).range_text()})", unit=unit,
                            start=float(value), key=("param", name)))
-    solver = model.scene.solver
     for p, (typ, unit, text) in SOLVER_PARAMS.items():
         value = getattr(solver, p)
         value = float(value) if typ == "Real" else value

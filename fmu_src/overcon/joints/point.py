@@ -1,5 +1,6 @@
 """Point coincidence, shared by the planar revolute joint (Eq. 36) and the spatial spherical joint
-(Eq. 41): ``Phi = r_i + R_i s_i - r_j - R_j s_j`` in 2 or 3 dimensions."""
+(Eq. 41): ``Phi = r_i + R_i s_i - r_j - R_j s_j`` in 2 or 3 dimensions (batched, see
+:mod:`overcon.joints`)."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,15 +8,22 @@ import numpy as np
 from ..kinematics import matvec
 
 
-def prepare(params) -> dict:
+def constants(params) -> dict:
+    """One joint's constants: the joint point in body i and in body j axes."""
     return {"s_i": np.asarray(params["s_i"], float), "s_j": np.asarray(params["s_j"], float)}
 
 
-def phi(c, f):
-    return f.r[c.bi] + f.R[c.bi] @ c.p["s_i"] - f.r[c.bj] - f.R[c.bj] @ c.p["s_j"]
+def stack_points(joints, dim: int) -> dict:
+    """Stacked body slots, joint points (k, dim) and friction laws of k compiled joints."""
+    return {
+        "bi": np.array([c.bi for c in joints], np.intp), "bj": np.array([c.bj for c in joints], np.intp),
+        "s_i": np.array([c.p["s_i"] for c in joints], float).reshape(-1, dim),
+        "s_j": np.array([c.p["s_j"] for c in joints], float).reshape(-1, dim),
+        "laws": tuple(c.law for c in joints),
+    }
 
 
-def batch_phi(d, f):
-    """(k, dim): :func:`phi` of every joint."""
+def phi(d, f):
+    """(k, dim): r_i + R_i s_i - r_j - R_j s_j of every joint."""
     bi, bj = d["bi"], d["bj"]
     return f.r[bi] + matvec(f.R[bi], d["s_i"]) - f.r[bj] - matvec(f.R[bj], d["s_j"])

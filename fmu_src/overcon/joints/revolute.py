@@ -4,7 +4,8 @@ Phi = r_i + R_i s_i - r_j - R_j s_j. Auxiliary frame: origin at the joint point 
 to body i. Physical reaction p' = [Fx, Fy, T] (T = 0 for a revolute joint). Friction: a torque
 a mu(omega_ij) sqrt(Fx^2 + Fy^2) on body i (minus on body j), omega_ij = phi_j' - phi_i'.
 
-Batched forms ``batch_*``: see :mod:`overcon.joints`.
+All functions are batched (k joints at once): see :mod:`overcon.joints`; the type's facts are
+its entry in :data:`overcon.joints.TYPES`.
 """
 from __future__ import annotations
 
@@ -13,71 +14,17 @@ import math
 import numpy as np
 
 from ..kinematics import OMEGA, matvec
-from .point import batch_phi, phi, prepare  # noqa: F401  (point coincidence, Eq. 36/41)
-
-N_EQUATIONS = 2
-REACTION_COMPONENTS = ("Fx", "Fy", "T")
-FRICTION_UNIT = "N.m"  # friction_force: torque
+from .point import constants, phi, stack_points
 
 
-def jac_q(c, f):
-    ti = OMEGA @ (f.R[c.bi] @ c.p["s_i"])
-    tj = OMEGA @ (f.R[c.bj] @ c.p["s_j"])
-    Ji = np.array([[1.0, 0.0, ti[0]], [0.0, 1.0, ti[1]]])
-    Jj = np.array([[-1.0, 0.0, -tj[0]], [0.0, -1.0, -tj[1]]])
-    return Ji, Jj
-
-
-jac_h = jac_q
-
-
-def gamma(c, f):
-    return (f.R[c.bi] @ c.p["s_i"]) * f.w[c.bi] ** 2 - (f.R[c.bj] @ c.p["s_j"]) * f.w[c.bj] ** 2
-
-
-def reaction_transform(c, f):
-    """A_i of Eq. (A.5)."""
-    Ri = f.R[c.bi]
-    A = np.zeros((3, 3))
-    A[:2, :2] = Ri.T
-    A[2, :2] = -(OMEGA @ (Ri @ c.p["s_i"]))
-    A[2, 2] = 1.0
-    return A
-
-
-def relative_speed(c, f):
-    """Relative angular velocity of body j with respect to body i (rad/s)."""
-    return f.w[c.bj] - f.w[c.bi]
-
-
-def friction_force(c, f, fi, law) -> float:
-    """Friction torque on body i (N.m), counter-clockwise positive (A.6): a mu(omega_ij)
-    sqrt(Fx^2 + Fy^2); it turns body i the way body j turns relative to it."""
-    p_aux = reaction_transform(c, f) @ fi
-    return law.size * law.mu(relative_speed(c, f)) * math.hypot(p_aux[0], p_aux[1])
-
-
-def friction(c, f, fi, law):
-    """Friction torque (A.6-A.8): C_i = C_j = I."""
-    torque = friction_force(c, f, fi, law)
-    return np.array([0.0, 0.0, torque]), np.array([0.0, 0.0, -torque])
-
-
-# ----------------------------------------------------------------------------- batched forms
-
-def batch_prepare(joints) -> dict:
+def stack(joints) -> dict:
     """Constant stacked arrays of a list of compiled revolute joints (done once at compile)."""
-    laws = tuple(c.law for c in joints)
-    return {
-        "bi": np.array([c.bi for c in joints], np.intp), "bj": np.array([c.bj for c in joints], np.intp),
-        "s_i": np.array([c.p["s_i"] for c in joints], float).reshape(-1, 2),
-        "s_j": np.array([c.p["s_j"] for c in joints], float).reshape(-1, 2),
-        "laws": laws,
-    }
+    return stack_points(joints, 2)
 
 
-def batch_jac_q(d, f):
-    """(Ji, Jj), each (k, 2, 3): :func:`jac_q` of every joint."""
+def jac_h(d, f):
+    """(Ji, Jj), each (k, 2, 3): Phi_q = Phi_h (planar), [I, OMEGA R_i s_i] and
+    [-I, -OMEGA R_j s_j]."""
     ti = matvec(OMEGA, matvec(f.R[d["bi"]], d["s_i"]))
     tj = matvec(OMEGA, matvec(f.R[d["bj"]], d["s_j"]))
     k = len(ti)
@@ -90,18 +37,15 @@ def batch_jac_q(d, f):
     return Ji, Jj
 
 
-batch_jac_h = batch_jac_q
-
-
-def batch_gamma(d, f):
-    """(k, 2): :func:`gamma` of every joint."""
+def gamma(d, f):
+    """(k, 2): R_i s_i w_i^2 - R_j s_j w_j^2 (Eq. 11)."""
     bi, bj = d["bi"], d["bj"]
     return (matvec(f.R[bi], d["s_i"]) * (f.w[bi] ** 2)[:, None]
             - matvec(f.R[bj], d["s_j"]) * (f.w[bj] ** 2)[:, None])
 
 
-def batch_reaction_transform(d, f):
-    """(k, 3, 3): :func:`reaction_transform` of every joint."""
+def reaction_transform(d, f):
+    """(k, 3, 3): A_i of Eq. (A.5)."""
     Ri = f.R[d["bi"]]
     A = np.zeros((len(Ri), 3, 3))
     A[:, :2, :2] = Ri.transpose(0, 2, 1)
@@ -110,22 +54,35 @@ def batch_reaction_transform(d, f):
     return A
 
 
-def batch_friction_setup(d, f, Ji=None):
-    """Per-evaluation constants of :func:`batch_friction`: (J_X)_i, A_i and size * mu(omega_ij)."""
+def reaction(d, f, fi):
+    """(k, 3): the physical reaction [Fx, Fy, T] = -A_i fi in the auxiliary frame (T = 0)."""
+    return -matvec(reaction_transform(d, f), fi)
+
+
+def friction_setup(d, f, Ji=None):
+    """Per-evaluation constants of :func:`friction`: (J_X)_i, A_i and size * mu(omega_ij),
+    omega_ij = phi_j' - phi_i' the relative angular velocity of body j."""
     if Ji is None:
-        Ji = batch_jac_h(d, f)[0]
-    speed = f.w[d["bj"]] - f.w[d["bi"]]  # relative_speed
-    return {"JiT": Ji.transpose(0, 2, 1), "A": batch_reaction_transform(d, f),
-            "size_mu": [law.size * law.mu(v) for law, v in zip(d["laws"], speed)]}
+        Ji = jac_h(d, f)[0]
+    speed = f.w[d["bj"]] - f.w[d["bi"]]
+    return {"JiT": Ji.transpose(0, 2, 1), "A": reaction_transform(d, f),
+            "size_mu": [law.size * law.coefficient(v) for law, v in zip(d["laws"], speed)]}
 
 
-def batch_friction(d, ctx, lam):
-    """(Qi, Qj), each (k, 3): :func:`friction` of every joint, given the joints' multipliers lam
-    (k, 2) (fi = (J_X)_i^T lam)."""
+def friction_force(d, ctx, lam):
+    """(k,): friction torque on body i (N.m), counter-clockwise positive (A.6): a mu(omega_ij)
+    sqrt(Fx^2 + Fy^2); it turns body i the way body j turns relative to it."""
     p_aux = matvec(ctx["A"], matvec(ctx["JiT"], lam))
-    k = len(p_aux)
+    return np.array([sm * math.hypot(p[0], p[1]) for sm, p in zip(ctx["size_mu"], p_aux)], float)
+
+
+def friction(d, ctx, lam):
+    """(Qi, Qj), each (k, 3): the friction torque (A.6-A.8) on body i and its opposite on body j
+    (C_i = C_j = I), given the joints' multipliers lam (k, 2) (fi = (J_X)_i^T lam)."""
+    torque = friction_force(d, ctx, lam)
+    k = len(torque)
     Qi = np.zeros((k, 3))
     Qj = np.zeros((k, 3))
-    Qi[:, 2] = [sm * math.hypot(p[0], p[1]) for sm, p in zip(ctx["size_mu"], p_aux)]
+    Qi[:, 2] = torque
     Qj[:, 2] = -Qi[:, 2]
     return Qi, Qj

@@ -5,7 +5,8 @@ Phi = r_i + R_i s_i - r_j - R_j s_j (3 equations). Velocities h_k = [r_k' (globa
 Auxiliary frame: origin at the ball centre P, axes parallel to body i (A.10). Physical reaction
 p' = [Fx, Fy, Fz] in body i axes (the moment about P is zero).
 
-Batched forms ``batch_*``: see :mod:`overcon.joints`.
+All functions are batched (k joints at once): see :mod:`overcon.joints`; the type's facts are
+its entry in :data:`overcon.joints.TYPES`.
 
 Friction (A.11-A.18): contact point s'_C = -rho F'/|F'| with F' taken from the left-hand-side
 generalized reaction (f_X)_i = (J_X)_i lam_X (a project decision, see README: the paper's figures cannot
@@ -17,118 +18,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import cross3, cross3_rows, euler_dR, matvec, rowdot, skew
-from .point import batch_phi, phi, prepare  # noqa: F401  (point coincidence, Eq. 36/41)
+from ..kinematics import cross3_rows, matvec, rowdot, skew
+from .point import constants, phi, stack_points  # noqa: F401  (point coincidence, Eq. 41)
 
-N_EQUATIONS = 3
-REACTION_COMPONENTS = ("Fx", "Fy", "Fz")
-FRICTION_UNIT = "N"  # friction_force: magnitude of the force at the contact point
-
-
-def _dpoint_dangles(angles, s):
-    return np.column_stack([dR @ s for dR in euler_dR(angles)])
-
-
-def jac_q(c, f):
-    eye = np.eye(3)
-    Ji = np.hstack([eye, _dpoint_dangles(f.angles[c.bi], c.p["s_i"])])
-    Jj = np.hstack([-eye, -_dpoint_dangles(f.angles[c.bj], c.p["s_j"])])
-    return Ji, Jj
-
-
-def jac_h(c, f):
-    eye = np.eye(3)
-    Ji = np.hstack([eye, -f.R[c.bi] @ skew(c.p["s_i"])])
-    Jj = np.hstack([-eye, f.R[c.bj] @ skew(c.p["s_j"])])
-    return Ji, Jj
-
-
-def gamma(c, f):
-    wi, wj = f.w[c.bi], f.w[c.bj]
-    si, sj = c.p["s_i"], c.p["s_j"]
-    return -f.R[c.bi] @ cross3(wi, cross3(wi, si)) + f.R[c.bj] @ cross3(wj, cross3(wj, sj))
-
-
-def reaction_transform(c, f):
-    """Force rows of A_i (Eq. A.10): F' = R_i^T F^(0); the moment row is identically zero."""
-    A = np.zeros((3, 6))
-    A[:, :3] = f.R[c.bi].T
-    return A
-
-
-def _relative_omega(c, f):
-    Ri, Rj = f.R[c.bi], f.R[c.bj]
-    return Ri.T @ (Rj @ f.w[c.bj]) - f.w[c.bi]
-
-
-def relative_speed(c, f, fi=None):
-    """Sliding speed |v'| at the contact point (m/s); needs the reaction to place the contact."""
-    if fi is None:
-        return float(np.linalg.norm(_relative_omega(c, f)))
-    F_aux = f.R[c.bi].T @ fi[:3]
-    norm = np.linalg.norm(F_aux)
-    if norm == 0.0:
-        return 0.0
-    return float(np.linalg.norm(cross3(_relative_omega(c, f), -F_aux / norm)))
-
-
-def _friction_vector(c, f, fi, law):
-    """(F'_fr, s'_C) in body i axes (A.11-A.14), or None when the reaction is zero."""
-    F_aux = f.R[c.bi].T @ fi[:3]
-    norm = np.linalg.norm(F_aux)
-    if norm == 0.0:
-        return None
-    s_C = -law.size * F_aux / norm
-    v_slip = cross3(_relative_omega(c, f), s_C)
-    return law.mu_over_speed(np.linalg.norm(v_slip)) * norm * v_slip, s_C
-
-
-def friction_force(c, f, fi, law) -> float:
-    """Magnitude |F'_fr| of the friction force at the contact point C (N, >= 0): its direction is
-    the sliding velocity of body j relative to body i at C, which has no fixed axis to sign it
-    against."""
-    fv = _friction_vector(c, f, fi, law)
-    return 0.0 if fv is None else float(np.linalg.norm(fv[0]))
-
-
-def friction(c, f, fi, law):
-    Ri, Rj = f.R[c.bi], f.R[c.bj]
-    fv = _friction_vector(c, f, fi, law)
-    if fv is None:
-        z = np.zeros(6)
-        return z, z.copy()
-    F_fr, s_C = fv
-    torque_i = cross3(c.p["s_i"] + s_C, F_fr)
-    Qi = np.concatenate([Ri @ F_fr, torque_i])
-    Rji = Rj.T @ Ri
-    torque_j = cross3(c.p["s_j"], Rji @ F_fr) + Rji @ cross3(s_C, F_fr)
-    Qj = -np.concatenate([Ri @ F_fr, torque_j])
-    return Qi, Qj
-
-
-# ----------------------------------------------------------------------------- batched forms
 
 _EYE = np.eye(3)
 _NEG_EYE = -np.eye(3)
 
 
-def batch_prepare(joints) -> dict:
+def stack(joints) -> dict:
     """Constant stacked arrays of a list of compiled spherical joints (done once at compile)."""
-    s_i = np.array([c.p["s_i"] for c in joints], float).reshape(-1, 3)
-    s_j = np.array([c.p["s_j"] for c in joints], float).reshape(-1, 3)
-    laws = tuple(c.law for c in joints)
-    return {
-        "bi": np.array([c.bi for c in joints], np.intp), "bj": np.array([c.bj for c in joints], np.intp),
-        "s_i": s_i, "s_j": s_j,
-        "skew_i": np.array([skew(v) for v in s_i]).reshape(-1, 3, 3),
-        "skew_j": np.array([skew(v) for v in s_j]).reshape(-1, 3, 3),
-        "laws": laws,
-        "neg_size": np.array([-law.size if law is not None else np.nan for law in laws], float),
-    }
+    d = stack_points(joints, 3)
+    d["skew_i"] = np.array([skew(v) for v in d["s_i"]]).reshape(-1, 3, 3)
+    d["skew_j"] = np.array([skew(v) for v in d["s_j"]]).reshape(-1, 3, 3)
+    d["neg_size"] = np.array([-law.size if law is not None else np.nan for law in d["laws"]], float)
+    return d
 
 
-def batch_jac_h(d, f):
-    """(Ji, Jj), each (k, 3, 6): :func:`jac_h` of every joint."""
+def jac_h(d, f):
+    """(Ji, Jj), each (k, 3, 6): the modified Jacobian blocks [I, -R_i skew(s_i)] and
+    [-I, R_j skew(s_j)]."""
     k = len(d["bi"])
     Ji = np.empty((k, 3, 6))
     Jj = np.empty((k, 3, 6))
@@ -139,25 +48,43 @@ def batch_jac_h(d, f):
     return Ji, Jj
 
 
-def batch_gamma(d, f):
-    """(k, 3): :func:`gamma` of every joint."""
+def gamma(d, f):
+    """(k, 3): -R_i (w_i x (w_i x s_i)) + R_j (w_j x (w_j x s_j)) (Eq. 11)."""
     bi, bj = d["bi"], d["bj"]
     wi, wj = f.w[bi], f.w[bj]
     return (matvec(-f.R[bi], cross3_rows(wi, cross3_rows(wi, d["s_i"])))
             + matvec(f.R[bj], cross3_rows(wj, cross3_rows(wj, d["s_j"]))))
 
 
-def batch_friction_setup(d, f, Ji=None):
-    """Per-evaluation constants of :func:`batch_friction` (frames only, not the reaction)."""
+def reaction_transform(d, f):
+    """(k, 3, 6): the force rows of A_i (Eq. A.10), F' = R_i^T F^(0); the moment row is
+    identically zero and not reported."""
+    RiT = f.R[d["bi"]].transpose(0, 2, 1)
+    A = np.zeros((len(RiT), 3, 6))
+    A[:, :, :3] = RiT
+    return A
+
+
+def reaction(d, f, fi):
+    """(k, 3): the physical reaction [Fx, Fy, Fz] = -A_i fi in body i axes."""
+    return -matvec(reaction_transform(d, f), fi)
+
+
+def friction_setup(d, f, Ji=None):
+    """Per-evaluation constants of :func:`friction` (frames only, not the reaction): R_i, R_i^T,
+    omega'_ij = R_i^T R_j omega_j - omega_i and R_j^T R_i. ``Ji`` is not needed: the force part
+    of (J_X)_i is the identity."""
     Ri, Rj = f.R[d["bi"]], f.R[d["bj"]]
     RiT = Ri.transpose(0, 2, 1)
-    omega = matvec(RiT, matvec(Rj, f.w[d["bj"]])) - f.w[d["bi"]]  # _relative_omega
+    omega = matvec(RiT, matvec(Rj, f.w[d["bj"]])) - f.w[d["bi"]]
     return {"Ri": Ri, "RiT": RiT, "omega": omega, "Rji": np.matmul(Rj.transpose(0, 2, 1), Ri)}
 
 
-def batch_friction(d, ctx, lam):
-    """(Qi, Qj), each (k, 6): :func:`friction` of every joint, given the joints' multipliers lam
-    (k, 3). (J_X)_i = [I, -R_i skew(s_i)], so the force part of fi = (J_X)_i^T lam is lam itself."""
+def _friction_vector(d, ctx, lam):
+    """(F'_fr, s'_C, nonzero) in body i axes (A.11-A.14), given the joints' multipliers lam
+    (k, 3). (J_X)_i = [I, -R_i skew(s_i)], so the force part of fi = (J_X)_i^T lam is lam itself.
+    ``nonzero`` is None when every reaction is non-zero, else the mask of those that are (the
+    others get zero friction: no contact point)."""
     F_aux = matvec(ctx["RiT"], lam)
     norm = np.sqrt(rowdot(F_aux, F_aux))
     zero = 0.0 in norm.tolist()
@@ -172,13 +99,31 @@ def batch_friction(d, ctx, lam):
     else:
         mos = [law.mu_over_speed(v) for law, v in zip(d["laws"], speed)]
     F_fr = (np.array(mos) * norm)[:, None] * v_slip
+    return F_fr, s_C, (nonzero if zero else None)
+
+
+def friction_force(d, ctx, lam):
+    """(k,): magnitude |F'_fr| of the friction force at the contact point C (N, >= 0): its
+    direction is the sliding velocity of body j relative to body i at C, which has no fixed axis
+    to sign it against."""
+    F_fr, _, nonzero = _friction_vector(d, ctx, lam)
+    out = np.sqrt(rowdot(F_fr, F_fr))
+    if nonzero is not None:
+        out[~nonzero] = 0.0
+    return out
+
+
+def friction(d, ctx, lam):
+    """(Qi, Qj), each (k, 6): F'_fr applied to body i at C and its opposite on body j (A.15-A.18),
+    given the joints' multipliers lam (k, 3)."""
+    F_fr, s_C, nonzero = _friction_vector(d, ctx, lam)
     RiF = matvec(ctx["Ri"], F_fr)
     Rji = ctx["Rji"]
     Qi = np.concatenate((RiF, cross3_rows(d["s_i"] + s_C, F_fr)), 1)
     Qj = np.concatenate(
         (RiF, cross3_rows(d["s_j"], matvec(Rji, F_fr)) + matvec(Rji, cross3_rows(s_C, F_fr))), 1)
     np.negative(Qj, out=Qj)
-    if zero:
+    if nonzero is not None:
         Qi[~nonzero] = 0.0
         Qj[~nonzero] = 0.0
     return Qi, Qj

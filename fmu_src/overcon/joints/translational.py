@@ -9,20 +9,18 @@ p' = [Fx (along the guide, zero without friction), Fy = N (normal), T (moment ab
 Friction (A.2): magnitude mu(v_ij) (|N - T/l| + |T/l|) along x', v_ij the sliding velocity of
 body j relative to body i along x', l the slider length.
 
-Batched forms ``batch_*``: see :mod:`overcon.joints`.
+All functions are batched (k joints at once): see :mod:`overcon.joints`; the type's facts are
+its entry in :data:`overcon.joints.TYPES`.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import OMEGA, cross2, matvec, rot2, rowdot
-
-N_EQUATIONS = 2
-REACTION_COMPONENTS = ("Fx", "Fy", "T")
-FRICTION_UNIT = "N"  # friction_force: force along the guide
+from ..kinematics import OMEGA, matvec, rot2, rowdot
 
 
-def prepare(params) -> dict:
+def constants(params) -> dict:
+    """One joint's constants: s_A, s_B, v, psi and the auxiliary frame B_i (in body i axes)."""
     v = np.asarray(params["v"], float)
     psi = float(params.get("psi", 0.0))
     axis_j = OMEGA.T @ v / np.linalg.norm(v)
@@ -32,88 +30,7 @@ def prepare(params) -> dict:
             "v": v, "psi": psi, "B": B}
 
 
-def _geometry(c, f):
-    p = c.p
-    Ri, Rj = f.R[c.bi], f.R[c.bj]
-    a_i = Ri @ p["s_A"]
-    b_j = Rj @ p["s_B"]
-    d = f.r[c.bi] + a_i - f.r[c.bj] - b_j
-    u = Rj @ p["v"]
-    return a_i, b_j, d, u
-
-
-def phi(c, f):
-    _, _, d, u = _geometry(c, f)
-    return np.array([d @ u, f.phi[c.bi] - f.phi[c.bj] - c.p["psi"]])
-
-
-def jac_q(c, f):
-    a_i, b_j, d, u = _geometry(c, f)
-    Ji = np.array([[u[0], u[1], (OMEGA @ a_i) @ u], [0.0, 0.0, 1.0]])
-    Jj = np.array([[-u[0], -u[1], -(OMEGA @ b_j) @ u + d @ (OMEGA @ u)], [0.0, 0.0, -1.0]])
-    return Ji, Jj
-
-
-jac_h = jac_q
-
-
-def gamma(c, f):
-    a_i, b_j, d, u = _geometry(c, f)
-    wi, wj = f.w[c.bi], f.w[c.bj]
-    d_dot = f.v[c.bi] + OMEGA @ a_i * wi - f.v[c.bj] - OMEGA @ b_j * wj
-    u_dot = OMEGA @ u * wj
-    quad = (-a_i * wi**2 + b_j * wj**2) @ u + 2.0 * d_dot @ u_dot - d @ u * wj**2
-    return np.array([-quad, 0.0])
-
-
-def reaction_transform(c, f):
-    """A_i of Eq. (A.1): p' = [Fx', Fy', T_A] = A_i (f_X)_i."""
-    Ri = f.R[c.bi]
-    A = np.zeros((3, 3))
-    A[:2, :2] = c.p["B"].T @ Ri.T
-    A[2, :2] = -(OMEGA @ (Ri @ c.p["s_A"]))  # moment of the force about A: T_A = T_O - (R s_A) x F
-    A[2, 2] = 1.0
-    return A
-
-
-def _contact(c, f):
-    Ri = f.R[c.bi]
-    point = f.r[c.bi] + Ri @ c.p["s_A"]
-    e = Ri @ c.p["B"][:, 0]
-    return point, e
-
-
-def relative_speed(c, f):
-    """Sliding velocity of body j relative to body i along x' (m/s)."""
-    point, e = _contact(c, f)
-    vel_j = f.v[c.bj] + OMEGA @ (point - f.r[c.bj]) * f.w[c.bj]
-    vel_i = f.v[c.bi] + OMEGA @ (point - f.r[c.bi]) * f.w[c.bi]
-    return (vel_j - vel_i) @ e
-
-
-def friction_force(c, f, fi, law) -> float:
-    """Friction force on body i along the guide x' (N), signed: positive along +x' (A.2),
-    mu(v_ij) (|N - T/l| + |T/l|); it points the way body j slides relative to body i."""
-    p_aux = reaction_transform(c, f) @ fi
-    N, T = p_aux[1], p_aux[2]
-    l = law.size
-    magnitude = abs(N - T / l) + abs(T / l)
-    return law.mu(relative_speed(c, f)) * magnitude
-
-
-def friction(c, f, fi, law):
-    """Generalized friction forces (A.2-A.4): t_i = [mu(v) (|N - T/l| + |T/l|), 0, 0] in the
-    auxiliary frame, applied at A; Q_i = C_i t_i, Q_j = -C_j t_i."""
-    point, e = _contact(c, f)
-    F = friction_force(c, f, fi, law) * e
-    Qi = np.array([F[0], F[1], cross2(point - f.r[c.bi], F)])
-    Qj = -np.array([F[0], F[1], cross2(point - f.r[c.bj], F)])
-    return Qi, Qj
-
-
-# ----------------------------------------------------------------------------- batched forms
-
-def batch_prepare(joints) -> dict:
+def stack(joints) -> dict:
     """Constant stacked arrays of a list of compiled translational joints (done once at compile)."""
     laws = tuple(c.law for c in joints)
     return {
@@ -132,7 +49,7 @@ def _omega(x):
     return matvec(OMEGA, x)
 
 
-def _batch_geometry(d, f):
+def _geometry(d, f):
     Ri, Rj = f.R[d["bi"]], f.R[d["bj"]]
     a_i = matvec(Ri, d["s_A"])
     b_j = matvec(Rj, d["s_B"])
@@ -141,18 +58,18 @@ def _batch_geometry(d, f):
     return a_i, b_j, dd, u
 
 
-def batch_phi(d, f):
-    """(k, 2): :func:`phi` of every joint."""
-    _, _, dd, u = _batch_geometry(d, f)
+def phi(d, f):
+    """(k, 2): [(r_i + R_i s_A - r_j - R_j s_B) . R_j v, phi_i - phi_j - psi]."""
+    _, _, dd, u = _geometry(d, f)
     out = np.empty((len(u), 2))
     out[:, 0] = rowdot(dd, u)
     out[:, 1] = f.phi[d["bi"]] - f.phi[d["bj"]] - d["psi"]
     return out
 
 
-def batch_jac_q(d, f):
-    """(Ji, Jj), each (k, 2, 3): :func:`jac_q` of every joint."""
-    a_i, b_j, dd, u = _batch_geometry(d, f)
+def jac_h(d, f):
+    """(Ji, Jj), each (k, 2, 3): Phi_q = Phi_h (planar)."""
+    a_i, b_j, dd, u = _geometry(d, f)
     k = len(u)
     Ji = np.zeros((k, 2, 3))
     Jj = np.zeros((k, 2, 3))
@@ -165,12 +82,10 @@ def batch_jac_q(d, f):
     return Ji, Jj
 
 
-batch_jac_h = batch_jac_q
 
-
-def batch_gamma(d, f):
-    """(k, 2): :func:`gamma` of every joint."""
-    a_i, b_j, dd, u = _batch_geometry(d, f)
+def gamma(d, f):
+    """(k, 2): gamma of Eq. 11 (second derivative of Phi without the h' terms, negated)."""
+    a_i, b_j, dd, u = _geometry(d, f)
     bi, bj = d["bi"], d["bj"]
     wi, wj = f.w[bi], f.w[bj]
     d_dot = f.v[bi] + _omega(a_i) * wi[:, None] - f.v[bj] - _omega(b_j) * wj[:, None]
@@ -183,8 +98,9 @@ def batch_gamma(d, f):
     return out
 
 
-def batch_reaction_transform(d, f):
-    """(k, 3, 3): :func:`reaction_transform` of every joint."""
+def reaction_transform(d, f):
+    """(k, 3, 3): A_i of Eq. (A.1), p' = [Fx', Fy', T_A] = A_i (f_X)_i; the moment of the force
+    about A is T_A = T_O - (R_i s_A) x F."""
     Ri = f.R[d["bi"]]
     A = np.zeros((len(Ri), 3, 3))
     A[:, :2, :2] = np.matmul(d["B"].transpose(0, 2, 1), Ri.transpose(0, 2, 1))
@@ -193,30 +109,43 @@ def batch_reaction_transform(d, f):
     return A
 
 
-def batch_friction_setup(d, f, Ji=None):
-    """Per-evaluation constants of :func:`batch_friction`: (J_X)_i, A_i, the contact point's arms
+def friction_setup(d, f, Ji=None):
+    """Per-evaluation constants of :func:`friction`: (J_X)_i, A_i, the contact point's arms
     from both body origins, the guide direction e and mu(v_ij)."""
     if Ji is None:
-        Ji = batch_jac_h(d, f)[0]
+        Ji = jac_h(d, f)[0]
     bi, bj = d["bi"], d["bj"]
     Ri = f.R[bi]
-    point = f.r[bi] + matvec(Ri, d["s_A"])  # _contact
+    point = f.r[bi] + matvec(Ri, d["s_A"])  # contact point A
     e = matvec(Ri, d["B"][:, :, 0])
-    vel_j = f.v[bj] + _omega(point - f.r[bj]) * f.w[bj][:, None]  # relative_speed
+    vel_j = f.v[bj] + _omega(point - f.r[bj]) * f.w[bj][:, None]  # sliding velocity of j relative to i along x'
     vel_i = f.v[bi] + _omega(point - f.r[bi]) * f.w[bi][:, None]
     speed = rowdot(vel_j - vel_i, e)
-    return {"JiT": Ji.transpose(0, 2, 1), "A": batch_reaction_transform(d, f), "e": e,
+    return {"JiT": Ji.transpose(0, 2, 1), "A": reaction_transform(d, f), "e": e,
             "arm_i": point - f.r[bi], "arm_j": point - f.r[bj],
-            "mu": np.array([law.mu(v) for law, v in zip(d["laws"], speed)], float)}
+            "mu": np.array([law.coefficient(v) for law, v in zip(d["laws"], speed)], float)}
 
 
-def batch_friction(d, ctx, lam):
-    """(Qi, Qj), each (k, 3): :func:`friction` of every joint, given the joints' multipliers lam
-    (k, 2) (fi = (J_X)_i^T lam)."""
+def reaction(d, f, fi):
+    """(k, 3): the physical reaction [Fx, Fy, T] = -A_i fi in the auxiliary frame (Fx along the
+    guide, zero without friction; Fy = N the normal force; T the moment about A)."""
+    return -matvec(reaction_transform(d, f), fi)
+
+
+def friction_force(d, ctx, lam):
+    """(k,): friction force on body i along the guide x' (N), signed, positive along +x' (A.2):
+    mu(v_ij) (|N - T/l| + |T/l|); it points the way body j slides relative to body i."""
     p_aux = matvec(ctx["A"], matvec(ctx["JiT"], lam))
     N, T, l = p_aux[:, 1], p_aux[:, 2], d["size"]
     magnitude = np.abs(N - T / l) + np.abs(T / l)
-    F = (ctx["mu"] * magnitude)[:, None] * ctx["e"]
+    return ctx["mu"] * magnitude
+
+
+def friction(d, ctx, lam):
+    """(Qi, Qj), each (k, 3): generalized friction forces (A.2-A.4), the force
+    :func:`friction_force` along x' applied at A on body i (Q_i = C_i t_i) and its opposite on body
+    j (Q_j = -C_j t_i), given the joints' multipliers lam (k, 2) (fi = (J_X)_i^T lam)."""
+    F = friction_force(d, ctx, lam)[:, None] * ctx["e"]
     arm_i, arm_j = ctx["arm_i"], ctx["arm_j"]
     k = len(F)
     Qi = np.empty((k, 3))

@@ -1,0 +1,178 @@
+"""Evaluate a compiled :class:`overcon.model.Model` at (q, h): body frames, constraints Phi, the
+Jacobian Phi_h, gamma, applied loads, coordinate rates and the reported reactions and friction
+forces. :mod:`overcon.model` compiles; this module only evaluates (nothing here changes a Model).
+
+Glossary and sign convention: :mod:`overcon.model`. Every joint term comes from the joint type's
+batched producer module (:mod:`overcon.joints`), called once per joint type with the stacked
+constants and scatter indices of ``Model.plan`` (built at compile time).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .kinematics import cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec
+
+if TYPE_CHECKING:  # model imports this module (check_initial_state, resolve_elimination)
+    from .model import CompiledJoint, Model
+
+
+class SingularConfiguration(ArithmeticError):
+    """The retained constraint Jacobian lost rank (singular position), or a spring has zero length."""
+
+
+@dataclass
+class Frames:
+    """Body frames of one evaluation; slot -1 (the last) is the base."""
+
+    r: np.ndarray
+    R: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    phi: np.ndarray | None = None  # planar angles
+    angles: np.ndarray | None = None  # spatial Euler angles
+
+
+def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:
+    nb, d, k = model.nb, model.dim, model.nq_b
+    Q = q.reshape(nb, k)
+    H = np.zeros((nb, k)) if h is None else h.reshape(nb, k)
+    r = np.zeros((nb + 1, d))
+    r[:nb] = Q[:, :d]
+    v = np.zeros((nb + 1, d))
+    v[:nb] = H[:, :d]
+    if model.kind == "planar":
+        phi = np.zeros(nb + 1)
+        phi[:nb] = Q[:, 2]
+        c, s = np.cos(phi), np.sin(phi)
+        R = np.empty((nb + 1, 2, 2))
+        R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = c, -s, s, c
+        w = np.zeros(nb + 1)
+        w[:nb] = H[:, 2]
+        return Frames(r=r, R=R, v=v, w=w, phi=phi)
+    angles = np.zeros((nb + 1, 3))
+    angles[:nb] = Q[:, 3:]
+    R = euler_R_rows(angles)
+    w = np.zeros((nb + 1, 3))
+    w[:nb] = H[:, 3:]
+    return Frames(r=r, R=R, v=v, w=w, angles=angles)
+
+
+def _stack_rows(model: Model, f: Frames, name: str) -> np.ndarray:
+    """(m,) vector from every joint type's ``<name>`` rows, in equation order."""
+    out = np.empty(model.m)
+    for g in model.plan.groups:
+        out[g.rows] = getattr(g.module, name)(g.data, f).reshape(-1)
+    return out
+
+
+def constraints(model: Model, f: Frames) -> np.ndarray:
+    """Phi (m,)."""
+    return _stack_rows(model, f, "phi")
+
+
+def jacobian_h(model: Model, f: Frames) -> np.ndarray:
+    """Phi_h (m, nh): planar Phi_q, spatial the modified Jacobian of Eq. 7."""
+    out = np.zeros((model.m, model.nh))
+    flat = out.reshape(-1)
+    for g in model.plan.groups:
+        Ji, Jj = g.module.jac_h(g.data, f)
+        # += on zeros, body i then body j (the per-joint assembly's order): -0.0 kept
+        flat[g.flat_i] += Ji[g.sel_i].reshape(-1)
+        flat[g.flat_j] += Jj[g.sel_j].reshape(-1)
+    return out
+
+
+def gamma(model: Model, f: Frames) -> np.ndarray:
+    """gamma (m,): Phi_h h' = gamma (Eq. 11)."""
+    return _stack_rows(model, f, "gamma")
+
+
+def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """q' from (q, h): planar q' = h; spatial Euler rates = H omega (Eq. 4). Raises
+    EulerSingularity near sin(beta) = 0."""
+    if model.kind == "planar":
+        return h.copy()
+    nb = model.nb
+    qd = h.copy()
+    H = euler_H_rows(q.reshape(nb, 6)[:, 3:], model.body_names)
+    qd.reshape(nb, 6)[:, 3:] = matvec(H, h.reshape(nb, 6)[:, 3:])
+    return qd
+
+
+def generalized_force(model: Model, f: Frames, b: int, point: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Generalized force on body slot b of a global force F applied at a global point (the C_i
+    matrices of App. A): planar [F, (p - r) x F]; spatial [F, s x (R^T F)] (torque in body axes)."""
+    arm = point - f.r[b]
+    if model.kind == "planar":
+        return np.array([F[0], F[1], cross2(arm, F)])
+    return np.concatenate([F, cross3(f.R[b].T @ arm, f.R[b].T @ F)])
+
+
+def applied_forces(model: Model, f: Frames) -> np.ndarray:
+    """Q (nh,): gravity, constant forces and torques, springs, gyroscopic terms -omega x J omega."""
+    nb, d, k = model.nb, model.dim, model.nq_b
+    Q = np.zeros((nb, k))
+    Q[:, :d] = model.mass[:, None] * model.gravity[None, :]
+    if model.kind == "spatial":
+        Jw = model.inertia * f.w[:nb]
+        Q[:, 3:] -= cross3_rows(f.w[:nb], Jw)
+    for ld in model.loads:
+        if ld.type == "force":
+            Q[ld.bi, :d] += ld.value
+        elif ld.type == "torque":
+            Q[ld.bi, d:] += ld.value if model.kind == "planar" else f.R[ld.bi].T @ ld.value
+        else:  # spring between two body points
+            pi = f.r[ld.bi] + f.R[ld.bi] @ ld.s_i
+            pj = f.r[ld.bj] + f.R[ld.bj] @ ld.s_j
+            dvec = pi - pj
+            length = float(np.linalg.norm(dvec))
+            if length < 1e-12 * max(1.0, ld.free_length):
+                raise SingularConfiguration("spring attachment points coincide: direction undefined")
+            F = -ld.stiffness * (length - ld.free_length) * dvec / length
+            for b, point, sign in ((ld.bi, pi, 1.0), (ld.bj, pj, -1.0)):
+                if b >= 0:
+                    Q[b] += generalized_force(model, f, b, point, sign * F)
+    return Q.reshape(-1)
+
+
+# ----------------------------------------------------------------------------- reported values
+
+def _one(model: Model, c: CompiledJoint):
+    """The joint's producer module and its constants as a batch of one (from ``Model.plan``)."""
+    return c.module, model.plan.single[c.index]
+
+
+def _rows(c: CompiledJoint, lam: np.ndarray) -> np.ndarray:
+    return lam[list(c.rows)][None, :]
+
+
+def reaction_on_body_i(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> np.ndarray:
+    """fi = (J_X)_i^T lam_X (n_coord,): left-hand-side generalized reaction of joint c on its
+    body i."""
+    mod, d = _one(model, c)
+    Ji = mod.jac_h(d, f)[0]
+    return matvec(Ji.transpose(0, 2, 1), _rows(c, lam))[0]
+
+
+def physical_reaction(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> np.ndarray:
+    """Physical reaction of joint c on body i: in its auxiliary frame, -A_i (J_X)_i lam_X
+    (components ``reaction`` of the joint type, from the joint module's ``reaction``), followed
+    by the force in the global frame pi_0 (components ``Fx0, Fy0(, Fz0)``: the paper's F^(0) of
+    Eq. A.9, the frame of Fig. 7)."""
+    mod, d = _one(model, c)
+    fi = reaction_on_body_i(model, c, f, lam)
+    return np.concatenate([mod.reaction(d, f, fi[None, :])[0], -fi[: model.dim]])
+
+
+def friction_output(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> float:
+    """The friction output ``<joint>.friction`` of friction joint c (unit ``friction_unit`` of
+    the joint type): the joint module's ``friction_force`` at the multipliers lam. Sign
+    convention (README "Conventions"): the friction on body i of the joint; translational:
+    force along the guide x' (N), revolute: torque (N.m, counter-clockwise positive), both
+    positive the way body j moves relative to body i; spherical: magnitude (N, >= 0)."""
+    mod, d = _one(model, c)
+    ctx = mod.friction_setup(d, f)
+    return float(mod.friction_force(d, ctx, _rows(c, lam))[0])

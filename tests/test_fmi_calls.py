@@ -388,3 +388,15 @@ def test_setting_solver_tolerance_runs_no_rank_analysis(unz, monkeypatch):
     calls.clear()
     initialise(other, **{"joint4.mu": 0.2})
     assert "compile_model" in calls and "numerical_rank" in calls
+
+
+def test_switching_friction_off_by_a_parameter_is_logged(unz):
+    """joint4.mu = 0 removes joint 4's friction: the build-time verdict may no longer hold, and the
+    FMU says so (a warning, which reaches the host with logging off)."""
+    s = Slave(unz("planar_f45_wo4")).init(**{"joint4.mu": 0.0})
+    assert any(st == 1 and "friction in joint(s) joint4 switched between mu = 0 and mu > 0" in m
+               for st, _, m in s.logs.records)
+    s.free()
+    s = Slave(unz("planar_f45_wo4")).init(**{"joint4.mu": 0.2})
+    assert not any("switched between mu = 0" in m for _, _, m in s.logs.records)
+    s.free()

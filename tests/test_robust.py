@@ -491,3 +491,41 @@ def test_friction_output_through_the_fmu(tmp_path):
     for name in ("joint4.friction", "joint5.friction"):
         assert np.max(np.abs(out[name] - ref.column(name))) <= 1e-9
         assert np.max(np.abs(ref.column(name))) > 0
+
+
+def test_friction_with_mu_zero_does_not_count_in_the_verdict(tmp_path, capsys):
+    """Friction switched on with mu = 0 on a joint whose reaction is not unique exerts no force:
+    the motion is unique, so the pre-check says so (exit 0), with a warning naming the joint."""
+    mech = ROOT / "mechanisms"
+    (tmp_path / "planar_sliders.toml").write_text((mech / "planar_sliders.toml").read_text())
+    text = (mech / "planar_f1_wo4.toml").read_text() + "\n[scene.friction_params.joint1]\nmu = 0.0\n"
+    (tmp_path / "f1_mu0.toml").write_text(text)
+    assert main(["check", str(tmp_path / "f1_mu0.toml"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["friction"] == ["joint1"] and report["friction_on_nonunique"] == []
+    assert report["motion_unique"] is True
+    assert any("joint joint1 has mu = 0" in w for w in report["warnings"])
+    assert main(["check", str(mech / "planar_f1_wo4.toml")]) == 1  # mu = 0.01 there: not unique
+
+
+def test_closed_output_pipe_exits_141_without_a_traceback():
+    """``overcon check ... | head -1``: when the reader has gone, the command stops quietly with
+    the shell's SIGPIPE status instead of blaming the input file (exit 2) or a random code."""
+    r, w = os.pipe()
+    os.close(r)  # the reader is gone before anything is written
+    try:
+        proc = subprocess.run([sys.executable, "-m", "overcon.cli", "check", str(ROOT / "mechanisms" / "planar_f1_wo4.toml")],
+                              stdout=w, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(w)
+    assert proc.returncode == 141, proc.stderr
+    assert "Traceback" not in proc.stderr and "Broken pipe" not in proc.stderr
+
+
+@pytest.mark.parametrize("value", ["0", "-2", "x"])
+def test_build_jobs_must_be_a_positive_integer(tmp_path, capsys, value):
+    with pytest.raises(SystemExit) as exc:
+        main(["build", str(ROOT / "mechanisms" / "planar_f45_wo4.toml"), "--jobs", value, "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert "--jobs" in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.fmu"))

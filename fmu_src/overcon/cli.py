@@ -13,6 +13,7 @@ Solver flags of ``simulate`` (``--tolerance``, ``--step``, ``--max-step``, ``--o
 from __future__ import annotations
 
 import argparse
+import os
 import json
 import sys
 import time
@@ -23,6 +24,7 @@ from .verdict import LOCKSTEP_STEP
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # Ctrl-C (SIGINT), as a shell reports it
+EXIT_BROKEN_PIPE = 141  # the output pipe was closed by its reader (SIGPIPE, as a shell reports it)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -404,7 +406,13 @@ def main(argv=None) -> int:
                "build": cmd_build, "run": cmd_run, "compare": cmd_compare,
                "reproduce": cmd_reproduce, "sweep": cmd_sweep}[args.command]
     try:
-        return handler(args)
+        code = handler(args)
+        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+        return code
+    except BrokenPipeError:
+        # the reader went away (e.g. | head): no more output, exit as a process killed by SIGPIPE
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except KeyboardInterrupt:
         print("overcon: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

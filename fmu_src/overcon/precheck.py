@@ -25,16 +25,28 @@ def analyse_model(model: Model):
     return analysis.analyse(J, joint_groups(model))
 
 
+def frictionless(law) -> bool:
+    """A friction law with every coefficient zero (mu = 0, and mu_static 0 or none) exerts no
+    friction force at all: such a joint does not count in the motion verdict (Eq. 17 concerns
+    joints with friction forces)."""
+    return law.mu == 0 and not law.mu_static
+
+
 def friction_warnings(model: Model) -> list[str]:
     """Warnings (not errors) about the friction set: a friction joint whose constraint equations
     are all eliminated carries lam = 0, so its friction force is exactly zero. That is one
     legitimate outcome of a joint with a non-unique reaction (another elimination gives it a
     reaction and a friction force), so it is not refused, only said (``check``, ``simulate``,
-    and the pre-check report's ``warnings`` for the FMU)."""
+    and the pre-check report's ``warnings`` for the FMU). A friction joint with mu = 0 is said
+    too: it does not count in the verdict (:func:`frictionless`)."""
     out = []
     eliminated = set(model.eliminated)
     for j in model.friction_joints:
         c = model.joints[j]
+        if frictionless(c.law):
+            out.append(f"friction on joint {c.name} has mu = 0: it exerts no friction force and does not count "
+                       "in the motion verdict (a scene or FMU that sets mu > 0 there needs the pre-check again)")
+            continue
         eqs = [r + 1 for r in c.rows]
         if eliminated.issuperset(eqs):
             out.append(f"friction on joint {c.name}, whose equations {', '.join('Phi%d' % i for i in eqs)} are all "
@@ -108,7 +120,8 @@ def precheck(model: Model, source: str = "") -> PrecheckResult:
     types = {c.name: c.type for c in model.joints}
     joints = tuple(JointVerdict(type=types[j["name"]], **j) for j in summary.pop("joints"))
     friction = [model.joints[j].name for j in model.friction_joints]
-    nonunique = [name for name in friction if not res.joints[name].unique]
+    acting = [model.joints[j].name for j in model.friction_joints if not frictionless(model.joints[j].law)]
+    nonunique = [name for name in acting if not res.joints[name].unique]
     problems = []
     for name in nonunique:
         v = res.joints[name]
@@ -120,8 +133,8 @@ def precheck(model: Model, source: str = "") -> PrecheckResult:
     for name in disagree:
         problems.append(f"joint {name}: the rank, SVD and QR tests disagree {res.joints[name].methods}")
     set_unique = True
-    if friction:
-        set_unique = bool(res.set_unique(friction).unique)
+    if acting:
+        set_unique = bool(res.set_unique(acting).unique)
     return PrecheckResult(
         **summary, joints=joints, file=source, scene=model.scene.name, kind=model.kind,
         methods_agree=not disagree, friction=tuple(friction), friction_on_nonunique=tuple(nonunique),

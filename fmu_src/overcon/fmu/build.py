@@ -470,6 +470,8 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from ..cli import _jobs  # one parser of a job count for every command
+
     p.add_argument("paths", nargs="+", metavar="PATH",
                    help="scene files or directories of them (mechanism files are skipped)")
     p.add_argument("--out", default="dist/fmus", metavar="DIR", help="output directory (default dist/fmus)")
@@ -478,8 +480,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-ref", action="store_true",
                    help="skip the compatibility files <Model>_ref.csv/.opt (they need a full simulation)")
     p.add_argument("--no-validate", action="store_true", help="skip fmpy's validation of each FMU")
-    p.add_argument("--jobs", type=int, metavar="N",
+    p.add_argument("--jobs", type=_jobs, metavar="N",
                    help="processes for the reference simulations (default: number of CPUs)")
+
 
 
 def run_args(args) -> int:

@@ -57,7 +57,7 @@ import numpy as np
 from .. import scene as scene_mod
 from ..model import compile_model
 from ..params import apply_overrides, check_mu_static
-from ..precheck import friction_warnings
+from ..precheck import friction_warnings, frictionless
 from ..simulate import BudgetExceeded, Simulation
 from . import statecodec, variables
 
@@ -323,6 +323,12 @@ class OverconSlave:
         if spec.friction_params != self._model_friction:
             self._model = self._model0 if spec.friction_params == self._scene.friction_params else compile_model(spec)
             self._model_friction = spec.friction_params
+            switched = [self._model.joints[j].name for j in self._model.friction_joints
+                        if frictionless(self._model.joints[j].law) != frictionless(self._model0.joints[j].law)]
+            if switched:
+                self.log(f"friction in joint(s) {', '.join(switched)} switched between mu = 0 and mu > 0 by the "
+                         "parameters: the constant motion_unique (the pre-check at the build's parameters) may "
+                         "not hold for this run; run overcon check with these values", Status.WARNING)
         return self._model
 
     def _ensure_sim(self, compute_outputs: bool = True) -> Simulation:

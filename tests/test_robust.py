@@ -529,3 +529,44 @@ def test_build_jobs_must_be_a_positive_integer(tmp_path, capsys, value):
     assert exc.value.code == 2
     assert "--jobs" in capsys.readouterr().err
     assert not list(tmp_path.glob("*.fmu"))
+
+
+def test_simulate_out_that_is_a_directory_names_the_flag(tmp_path, capsys):
+    assert main(["simulate", str(ROOT / "mechanisms" / "planar_f45_wo4.toml"), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {tmp_path}: is a directory" in err and "planar_f45_wo4.toml" not in err
+
+
+def test_figures_without_the_groups_names_the_directory(tmp_path, capsys):
+    assert main(["figures", "--mechanisms", str(tmp_path), "--out", str(tmp_path / "f")]) == 2
+    assert capsys.readouterr().err.startswith(f"overcon: {tmp_path}: no scenes of group")
+
+
+def test_check_json_prints_a_document_for_bad_input(tmp_path, capsys):
+    assert main(["check", str(tmp_path / "missing.toml"), "--json"]) == 2
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["file"] == str(tmp_path / "missing.toml") and "file not found" in doc["error"]
+
+
+def test_direction_too_small_to_normalise_is_refused(tmp_path, capsys):
+    mech = (ROOT / "mechanisms" / "planar_sliders.toml").read_text().replace("v = [0.0, 1.0]", "v = [0.0, 1e-300]", 1)
+    (tmp_path / "planar_sliders.toml").write_text(mech)
+    (tmp_path / "s.toml").write_text((ROOT / "mechanisms" / "planar_f45_wo4.toml").read_text())
+    assert main(["check", str(tmp_path / "s.toml")]) == 2
+    assert "joints[0].v: a direction, normalised as v/|v|: |v| = 0" in capsys.readouterr().err
+
+
+def test_friction_coefficient_envelope():
+    assert params.check_param("joint4.mu", 1e6) is None
+    assert "must be in [0, 1e+06]" in params.check_param("joint4.mu", 1e300)
+    assert "must be in [0, 1e+06]" in params.check_param("joint4.mu_static", 2e6)
+
+
+def test_inconsistent_q0_names_the_joint_and_the_mechanism_file(tmp_path):
+    mech = (ROOT / "mechanisms" / "planar_sliders.toml").read_text().replace("q0 = [2.0, 0.0, 0.0]", "q0 = [2.0, 0.5, 0.0]", 1)
+    (tmp_path / "planar_sliders.toml").write_text(mech)
+    (tmp_path / "s.toml").write_text((ROOT / "mechanisms" / "planar_f45_wo4.toml").read_text())
+    with pytest.raises(InconsistentInitialState) as exc:
+        compile_model(scene.load(tmp_path / "s.toml"))
+    text = str(exc.value)
+    assert "Phi1 (joint joint1)" in text and str(tmp_path / "planar_sliders.toml") in text

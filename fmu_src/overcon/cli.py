@@ -209,8 +209,12 @@ SOLVER_FLAGS = ("method", "tolerance", "step", "max_step", "output_interval")
 """``simulate`` flags that override the scene's [solver] table (checked by overcon.params)."""
 
 
-def _input_error(exc) -> int:
+def _input_error(exc, args=None) -> int:
+    """Exit 2 with the reason on stderr; ``check --json`` also prints ``{"file", "error"}`` on
+    stdout, so that a script parsing the JSON gets a document for bad input too."""
     print(f"overcon: {exc}", file=sys.stderr)
+    if args is not None and getattr(args, "json", False):
+        print(json.dumps({"file": getattr(args, "file", ""), "error": str(exc)}, indent=2))
     return EXIT_INPUT
 
 
@@ -224,10 +228,16 @@ def cmd_check(args) -> int:
 
 
 def cmd_simulate(args) -> int:
+    from pathlib import Path
+
     from .simulate import SimulationError, run, write_csv
 
     from .precheck import friction_warnings
 
+    out = Path(args.out)
+    if out.is_dir() or not out.parent.is_dir():
+        return _input_error(f"--out {args.out}: " + ("is a directory (give a CSV file name)" if out.is_dir()
+                                                     else f"the directory {out.parent} does not exist"))
     spec, model = _load(args)
     for w in friction_warnings(model):
         print(f"overcon: warning: {w}", file=sys.stderr)
@@ -417,9 +427,10 @@ def main(argv=None) -> int:
         print("overcon: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except SceneError as exc:  # already names file and field
-        return _input_error(exc)
+        return _input_error(exc, args)
     except (ModelError, InconsistentInitialState, ValueError, OSError) as exc:
-        return _input_error(f"{getattr(args, 'file', '')}: {exc}")
+        where = getattr(args, "file", None)
+        return _input_error(f"{where}: {exc}" if where else exc, args)
 
 
 if __name__ == "__main__":

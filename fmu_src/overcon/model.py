@@ -343,8 +343,16 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
 def check_initial_state(model: Model, tol: float = 1e-9) -> None:
     """Refuse q0/h0 off the constraint manifold: |Phi| or |Phi_h h0| above tol (m or rad; m/s
     or rad/s), scaled by max(1, max |q0|) (max(1, max |h0|)); a non-finite value is refused too.
-    Raises :class:`InconsistentInitialState` naming the violated equations."""
+    Raises :class:`InconsistentInitialState` naming the violated equations, their joints and
+    the mechanism file that holds q0/h0."""
     f = frames(model, model.q0, model.h0)
+    joint_of = {r + 1: c.name for c in model.joints for r in c.rows}
+    mech = model.scene.mechanism
+    where = f" (bodies' q0/h0 in {mech.source or mech.name})"
+
+    def eqs(numbers) -> str:
+        return ", ".join(f"Phi{i} (joint {joint_of.get(i, '?')})" for i in numbers)
+
     with np.errstate(all="ignore"):
         Phi = constraints(model, f)
         scale = max(1.0, float(np.max(np.abs(model.q0))))
@@ -353,15 +361,13 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> None:
             absphi = np.where(np.isfinite(Phi), np.abs(Phi), np.inf)
             worst = int(np.argmax(absphi))
             raise InconsistentInitialState(
-                "initial coordinates q0 violate the constraints "
-                + ", ".join(f"Phi{i}" for i in bad)
-                + f" (largest |Phi{worst + 1}| = {abs(Phi[worst]):.3g})")
+                f"initial coordinates q0 violate the constraints {eqs(bad)}: largest |Phi{worst + 1}| = "
+                f"{abs(Phi[worst]):.3g}{where}")
         vel = jacobian_h(model, f) @ model.h0
         hscale = max(1.0, float(np.max(np.abs(model.h0))))
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(vel) <= tol * hscale))]
     if bad:
-        raise InconsistentInitialState(
-            "initial velocities h0 violate the velocity constraints " + ", ".join(f"Phi{i}" for i in bad))
+        raise InconsistentInitialState(f"initial velocities h0 violate the velocity constraints {eqs(bad)}{where}")
 
 
 def resolve_elimination(model: Model, eliminate) -> tuple[list[int], str]:

@@ -38,7 +38,8 @@ so 1000 bounds one evaluation to well under a second.
 
 ``solver.method`` one of :data:`overcon.spec.METHODS`.
 
-Friction (per joint): ``mu`` >= 0 and ``mu_static`` >= ``mu`` (1), ``v_reg`` > 0 and
+Friction (per joint): ``mu`` in [0, 1e6] and ``mu_static`` >= ``mu`` (1; 1e6 is far beyond any
+physical coefficient, and larger values overflow the friction solve into non-finite forces), ``v_reg`` > 0 and
 ``v_stribeck`` > 0 (m/s, rad/s for revolute), all finite. (A tiny ``v_reg`` makes the problem
 stiff: dopri5 stops with "stiff", radau takes small steps inside the work budget of
 :class:`overcon.simulate.Simulation`.)
@@ -131,8 +132,10 @@ RULES: dict[str, Rule] = {
                                       why="work budget of one FMU fmi2DoStep (integrator steps)"),
     "solver.max_wall_time": Rule("real", 0.0, 86400.0, low_open=True, unit="s",
                                  why="work budget of one FMU fmi2DoStep (wall-clock seconds, at most a day)"),
-    "mu": Rule("real", 0.0, unit="1"),
-    "mu_static": Rule("real", 0.0, unit="1"),
+    "mu": Rule("real", 0.0, 1e6, unit="1",
+               why="far beyond any physical friction coefficient (< 10); larger values overflow the friction solve"),
+    "mu_static": Rule("real", 0.0, 1e6, unit="1",
+                      why="far beyond any physical friction coefficient (< 10); larger values overflow the friction solve"),
     "v_reg": Rule("real", 0.0, low_open=True, unit="m/s or rad/s"),
     "v_stribeck": Rule("real", 0.0, low_open=True, unit="m/s or rad/s"),
 }

@@ -625,6 +625,12 @@ def _shaped(ctx: _Ctx, value, field: str, shape: str, kind: str | None):
         if val is not None and all(x == 0.0 for x in val):
             ctx.add(field, "must not be the zero vector")
             return None
+        if val is not None:
+            norm = math.sqrt(math.fsum(x * x for x in val))  # as the joint normalises it (underflow: 0)
+            if not (0.0 < norm < math.inf):
+                ctx.add(field, f"a direction, normalised as v/|v|: |v| = {norm:g} in double precision (give "
+                               "components between about 1e-150 and 1e150)")
+                return None
         return val
     if shape == "rot":
         if kind == "planar":

@@ -401,7 +401,7 @@ def test_parse_helpers():
     assert parse_eliminate("auto") == "auto"
     assert parse_eliminate("4,6") == (4, 6)
     assert parse_eliminate("18") == (18,)
-    for bad in ("4.5", "x", "4,,6", "4;6"):
+    for bad in ("4.5", "4,,6", "4;6", "joint 6"):
         with pytest.raises(SceneError) as err:
             parse_eliminate(bad)
         assert err.value.problems[0].field == "--eliminate"
@@ -802,3 +802,113 @@ def test_fuzz_never_raises_other_exceptions(tmp_path):
             assert isinstance(result, (MechanismSpec, SceneSpec))
             outcomes["ok"] += 1
     assert outcomes["error"] > 100  # the mutations really do break files
+
+
+# ------------------------------------------------------------------------------------------------
+# conveniences: angles in degrees (<field>_deg), joint names in eliminate
+
+
+def _planar_mech_doc(**joint0):
+    """The planar mechanism with joint1 (translational) updated by ``joint0`` (None: key removed)."""
+    doc = read(PLANAR)
+    for key, value in joint0.items():
+        if value is None:
+            doc["joints"][0].pop(key, None)
+        else:
+            doc["joints"][0][key] = value
+    return doc
+
+
+def _load_mech(tmp_path, doc):
+    path = tmp_path / "mech.toml"
+    path.write_text(dump(doc), encoding="utf-8")
+    return load(path)
+
+
+@pytest.mark.parametrize("deg", [90, 30.5, -1e-3, 0])
+def test_psi_deg_gives_the_radians_spec(tmp_path, deg):
+    rad = _load_mech(tmp_path, _planar_mech_doc(psi=math.radians(deg)))
+    via_deg = _load_mech(tmp_path, _planar_mech_doc(psi=None, psi_deg=deg))
+    assert via_deg.joints == rad.joints
+    assert via_deg.joints[0].params["psi"] == math.radians(deg)
+
+
+def test_psi_and_psi_deg_both_given(tmp_path):
+    with pytest.raises(SceneError) as err:
+        _load_mech(tmp_path, _planar_mech_doc(psi=0.0, psi_deg=0))
+    [p] = err.value.problems
+    assert (p.field, p.file) == ("joints[0].psi_deg", str(tmp_path / "mech.toml"))
+    assert "'psi'" in p.message and "'psi_deg'" in p.message
+
+
+def test_psi_deg_checked_as_a_number(tmp_path):
+    with pytest.raises(SceneError) as err:
+        _load_mech(tmp_path, _planar_mech_doc(psi=None, psi_deg="90"))
+    assert [p.field for p in err.value.problems] == ["joints[0].psi_deg"]
+
+
+@pytest.mark.parametrize("where,key", [("joints", "v_deg"), ("joints", "s_A_deg"), ("bodies", "q0_deg"),
+                                       ("bodies", "h0_deg"), ("joints", "theta_deg")])
+def test_deg_form_only_for_angle_fields(tmp_path, where, key):
+    doc = read(PLANAR)
+    doc[where][0][key] = 1.0
+    with pytest.raises(SceneError) as err:
+        _load_mech(tmp_path, doc)
+    [p] = err.value.problems
+    assert p.field == f"{where}[0].{key}" and p.message.startswith("unknown key")
+    assert ("no degrees form" in p.message) == (key != "theta_deg")
+
+
+def test_psi_deg_not_allowed_on_a_revolute_joint(tmp_path):
+    doc = read(PLANAR)
+    doc["joints"][3]["psi_deg"] = 0  # joint4: revolute
+    with pytest.raises(SceneError) as err:
+        _load_mech(tmp_path, doc)
+    assert [p.field for p in err.value.problems] == ["joints[3].psi_deg"]
+
+
+@pytest.mark.parametrize("names,numbers", [(["joint6"], (11, 12)), (["joint2", 1], (3, 4, 1)),
+                                           ([1, "joint2"], (1, 3, 4))])
+def test_eliminate_by_joint_name(tmp_path, names, numbers):
+    doc = _planar_scene_doc()
+    doc["scene"]["eliminate"] = names
+    by_name = load(_write_scene(tmp_path, doc))
+    doc["scene"]["eliminate"] = list(numbers)
+    assert by_name == load(_write_scene(tmp_path, doc))
+    assert by_name.eliminate == numbers
+
+
+def test_eliminate_by_joint_name_spatial(tmp_path):
+    doc = _spatial_scene_doc()
+    doc["scene"]["eliminate"] = ["N"]
+    scene = load(_write_scene(tmp_path, doc, mech_src=SPATIAL))
+    names = [j.name for j in scene.mechanism.joints]
+    first = 3 * names.index("N") + 1
+    assert scene.eliminate == (first, first + 1, first + 2)
+
+
+@pytest.mark.parametrize("value,field,message", [
+    (["joint9"], "scene.eliminate[0]", "unknown joint 'joint9'"),
+    ([4, "joint2"], "scene.eliminate[1]", "equation 4 listed twice"),
+    (["joint2", "joint2"], "scene.eliminate[1]", "joint 'joint2' listed twice"),
+    ([1.5], "scene.eliminate[0]", "equation index (integer) or a joint name"),
+])
+def test_eliminate_name_errors(tmp_path, value, field, message):
+    doc = _planar_scene_doc()
+    doc["scene"]["eliminate"] = value
+    path = _write_scene(tmp_path, doc)
+    with pytest.raises(SceneError) as err:
+        load(path)
+    assert [(p.file, p.field) for p in err.value.problems] == [(str(path), field)]
+    assert message in err.value.problems[0].message
+
+
+def test_cli_eliminate_by_joint_name():
+    mech = load(PLANAR)
+    assert parse_eliminate("joint6, 2") == ("joint6", 2)
+    assert as_scene(mech, eliminate="joint6,2").eliminate == (11, 12, 2)
+    assert as_scene(mech, eliminate=("joint1",)).eliminate == (1, 2)
+    with pytest.raises(SceneError) as err:
+        as_scene(mech, eliminate="joint9")
+    [p] = err.value.problems
+    assert p.field == "--eliminate" and "unknown joint 'joint9'" in p.message

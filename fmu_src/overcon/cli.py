@@ -39,7 +39,7 @@ def _scene_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--friction", metavar="J1,J2|none",
                    help="joints with friction switched on (overrides the scene), e.g. joint4,joint5 or none")
     p.add_argument("--eliminate", metavar="K1,K2|auto",
-                   help="1-based paper equation indices to eliminate, or auto (pivoted QR)")
+                   help="1-based paper equation indices and/or joint names (all their equations) to eliminate, or auto (pivoted QR)")
     p.add_argument("--stop-time", type=float, metavar="T", help="stop time (s)")
 
 

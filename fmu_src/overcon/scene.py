@@ -26,7 +26,8 @@ What is validated
   zeros. Joints: names identifiers and unique; ``type`` in ``overcon.joints.TYPES`` and allowed for
   the mechanism kind; ``body_i``/``body_j`` a body or ``base`` and different; the type's required
   and optional fields (``overcon.joints.TYPES``) with their shapes (shape ``dir``, e.g.
-  translational ``v``: non-zero).
+  translational ``v``: non-zero); an ``angle`` field (translational ``psi``) may be given in
+  degrees as ``<field>_deg`` (not both; stored in radians); vectors (``q0``, ``h0``) are in radians.
   Joint friction tables: ``law`` in ``spec.FRICTION_LAWS`` (default ``regularised``), ``mu``,
   ``v_reg`` (default 1e-3), ``mu_static``, ``v_stribeck`` by :mod:`overcon.params`, the type's size key (``length`` for translational, ``radius`` for
   revolute/spherical; stored as ``FrictionSpec.size``) > 0 and no other size key; ``stribeck``
@@ -39,8 +40,8 @@ What is validated
   distinct joints that have friction parameters (mechanism table or scene ``friction_params``);
   ``friction_params.<joint>`` names a joint and is merged onto the mechanism's parameters (a joint
   without a mechanism friction table needs ``mu`` and its size key there);
-  ``eliminate`` ``"auto"`` or distinct integers in 1..m (m = total number of constraint
-  equations); ``stop_time`` > ``start_time``; ``[outputs]`` ``positions`` are distinct
+  ``eliminate`` ``"auto"`` or integers in 1..m (m = total number of constraint
+  equations) and joint names (all the joint's equations, expanded in place), distinct once expanded; ``stop_time`` > ``start_time``; ``[outputs]`` ``positions`` are distinct
   ``<body>.<coordinate>`` (``spec.COORDINATES``) or ``"all"``, ``reactions`` distinct joint names
   or ``"all"`` (a missing ``[outputs]`` table or key means ``"all"``), ``friction`` distinct
   joints of ``scene.friction`` or ``"all"`` (a ``<joint>.friction`` output for each; a missing
@@ -291,7 +292,25 @@ def _unknown_keys(ctx: _Ctx, table: dict, prefix: str, allowed, hint: dict | Non
         if key not in allowed:
             extra = (hint or {}).get(key)
             msg = f"unknown key (allowed: {', '.join(allowed)})" if extra is None else extra
-            ctx.add(_join(prefix, key), msg)
+            ctx.add(_join(prefix, key), msg + _deg_note(key, allowed))
+
+
+DEG_SUFFIX = "_deg"
+"""``<field>_deg``: an angle field (shape code ``"angle"``) given in degrees."""
+
+
+def _deg_keys(fields) -> tuple[str, ...]:
+    """The ``<field>_deg`` keys of the angle fields of a joint type's ``required``/``optional``."""
+    return tuple(name + DEG_SUFFIX for name, (shape, *_rest) in fields.items() if shape == "angle")
+
+
+def _deg_note(key: str, allowed) -> str:
+    """Why an unknown ``<field>_deg`` key is unknown when ``<field>`` is allowed ("" otherwise)."""
+    base = key[:-len(DEG_SUFFIX)]
+    if not key.endswith(DEG_SUFFIX) or base not in allowed:
+        return ""
+    return (f"; '{base}' is not a scalar angle field, so it has no degrees form (only scalar angles such as "
+            f"a translational joint's psi do; vectors mixing lengths and angles, like q0 and h0, are in radians)")
 
 
 def _get(ctx: _Ctx, table: dict, key: str, prefix: str, required: bool = True):
@@ -495,7 +514,8 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
     joint_names: dict[str, str] = {}
     common = ("name", "type", "body_i", "body_j", "friction")
     all_joint_fields = tuple(dict.fromkeys(
-        f for d in JOINT_TYPES.values() for f in (*d.required, *d.optional)))
+        f for d in JOINT_TYPES.values()
+        for f in (*d.required, *d.optional, *_deg_keys(d.required), *_deg_keys(d.optional))))
     for k, jt in _array_of_tables(ctx, doc, "joints", required=False, limit=MAX_JOINTS):
         p = f"joints[{k}]"
         jname = jtype = bi = bj = None
@@ -511,7 +531,8 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
         # a type not allowed for the kind is reported once; its fields are then not checked
         fields = JOINT_TYPES[jtype] if jtype and ok else None
         if fields is not None:
-            _unknown_keys(ctx, jt, p, common + tuple(fields.required) + tuple(fields.optional))
+            _unknown_keys(ctx, jt, p, common + tuple(fields.required) + tuple(fields.optional)
+                          + _deg_keys(fields.required) + _deg_keys(fields.optional))
         else:
             _unknown_keys(ctx, jt, p, common + all_joint_fields)
         v = _get(ctx, jt, "name", p)
@@ -529,25 +550,17 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
         params: dict = {}
         if fields is not None and ok:
             for fname, (shape, _doc) in fields.required.items():
-                v = _get(ctx, jt, fname, p)
-                if v is _MISSING:
-                    ok = False
-                    continue
-                val = _shaped(ctx, v, f"{p}.{fname}", shape, kind)
-                if val is None:
-                    ok = False
-                    continue
-                params[fname] = val
-            for fname, (shape, _doc, default) in fields.optional.items():
-                v = _get(ctx, jt, fname, p, required=False)
-                if v is _MISSING:
-                    params[fname] = default
-                    continue
-                val = _shaped(ctx, v, f"{p}.{fname}", shape, kind)
-                if val is None:
+                val = _field(ctx, jt, fname, p, shape, kind, required=True)
+                if val is None or val is _MISSING:
                     ok = False
                 else:
                     params[fname] = val
+            for fname, (shape, _doc, default) in fields.optional.items():
+                val = _field(ctx, jt, fname, p, shape, kind, required=False)
+                if val is None:
+                    ok = False
+                else:
+                    params[fname] = default if val is _MISSING else val
         friction = None
         v = _get(ctx, jt, "friction", p, required=False)
         if v is not _MISSING and _table(ctx, v, f"{p}.friction") is not None:
@@ -616,7 +629,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
 
 def _shaped(ctx: _Ctx, value, field: str, shape: str, kind: str | None):
     """A value of shape code ``vec`` / ``dir`` / ``rot`` / ``scalar`` (:class:`overcon.joints.JointType`)."""
-    if shape == "scalar":
+    if shape in ("scalar", "angle"):
         return _num(ctx, value, field)
     if shape == "vec":
         return _vec(ctx, value, field, _DIM.get(kind))
@@ -642,6 +655,22 @@ def _shaped(ctx: _Ctx, value, field: str, shape: str, kind: str | None):
     raise ValueError(f"unknown shape code {shape!r}")  # programming error in spec tables
 
 
+def _field(ctx: _Ctx, table: dict, name: str, prefix: str, shape: str, kind: str | None,
+           required: bool):
+    """Field ``name`` of shape ``shape`` from ``table``: its value, None if invalid, _MISSING if
+    absent (reported if ``required``). An angle (shape ``"angle"``) may be given in degrees as
+    ``<name>_deg`` instead (stored in radians, ``math.radians``); giving both is a problem."""
+    deg = name + DEG_SUFFIX
+    if shape != "angle" or deg not in table:
+        v = _get(ctx, table, name, prefix, required)
+        return v if v is _MISSING else _shaped(ctx, v, _join(prefix, name), shape, kind)
+    if name in table:
+        ctx.add(_join(prefix, deg), f"give either '{name}' (radians) or '{deg}' (degrees), not both")
+        return None
+    val = _num(ctx, table[deg], _join(prefix, deg))
+    return None if val is None else math.radians(val)
+
+
 def _n_equations(mech: MechanismSpec) -> int:
     return sum(JOINT_TYPES[j.type].n_equations for j in mech.joints)
 
@@ -657,20 +686,64 @@ _SCENE_KEYS = ("name", "mechanism", "group", "description", "friction", "elimina
                "start_time", "stop_time", "friction_params")
 
 
-def _check_eliminate(ctx: _Ctx, value, field: str, m: int | None, elem_field) -> tuple | str | None:
-    """``"auto"`` or distinct ints in 1..m. ``elem_field(k)`` names element k."""
+def _joint_equations(mech: MechanismSpec) -> dict[str, tuple[int, ...]]:
+    """Joint name -> its 1-based equation numbers (the joints' equations in file order)."""
+    out, first = {}, 1
+    for j in mech.joints:
+        n = JOINT_TYPES[j.type].n_equations
+        out[j.name] = tuple(range(first, first + n))
+        first += n
+    return out
+
+
+def _eliminate_item(ctx: _Ctx, item, field: str, equations: dict | None) -> tuple[int, ...] | None:
+    """One element of ``eliminate``: an equation number -> ``(i,)``; a joint name -> all its
+    equation numbers (``equations``: :func:`_joint_equations`, None: mechanism not read, names
+    not checked and nothing returned)."""
+    if isinstance(item, str):
+        if equations is None:
+            return None
+        if item not in equations:
+            ctx.add(field, f"unknown joint {_short(item)} (an element is an equation index or a joint name)")
+            return None
+        return equations[item]
+    if isinstance(item, bool) or not isinstance(item, int):
+        ctx.add(field, f"expected an equation index (integer) or a joint name, got {_desc(item)}")
+        return None
+    return (item,)
+
+
+def _check_eliminate(ctx: _Ctx, value, field: str, mech: MechanismSpec | None,
+                     elem_field) -> tuple | str | None:
+    """``"auto"``, or an array of equation indices in 1..m and joint names (all the joint's
+    equations), distinct once names are expanded in place -> ``"auto"`` or the equation indices.
+    ``elem_field(k)`` names element k; ``mech`` None: the mechanism could not be read."""
     if isinstance(value, str):
         if value == "auto":
             return "auto"
-        ctx.add(field, f"expected \"auto\" or an array of equation indices, got {_desc(value)}")
+        ctx.add(field, f"expected \"auto\" or an array of equation indices and joint names, got {_desc(value)}")
         return None
     if not isinstance(value, (list, tuple)):
-        ctx.add(field, f"expected \"auto\" or an array of equation indices, got {_desc(value)}")
+        ctx.add(field, f"expected \"auto\" or an array of equation indices and joint names, got {_desc(value)}")
         return None
-    return _distinct_items(
-        ctx, value, elem_field, _int,
+    equations = _joint_equations(mech) if mech is not None else None
+    m = _n_equations(mech) if mech is not None else None
+    ok, numbered, names = True, [], set()  # numbered: (element field, equation index)
+    for k, item in enumerate(value):
+        if isinstance(item, str):
+            if item in names:
+                ctx.add(elem_field(k), f"joint '{item}' listed twice")
+                ok = False
+                continue
+            names.add(item)
+        got = _eliminate_item(ctx, item, elem_field(k), equations)
+        ok = ok and got is not None
+        numbered.extend((elem_field(k), i) for i in got or ())
+    indices = _distinct_items(
+        ctx, numbered, lambda k: numbered[k][0], lambda _ctx, pair, _f: pair[1],
         invalid=lambda i: f"equation index {i} outside 1..{m}" if m is not None and not 1 <= i <= m else None,
         duplicate=lambda i: f"equation {i} listed twice")
+    return indices if ok else None
 
 
 def _distinct_items(ctx: _Ctx, value, elem_field, parse, *, invalid, duplicate, late=lambda x: None):
@@ -784,9 +857,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     eliminate = None
     v = _get(ctx, st, "eliminate", "scene")
     if v is not _MISSING:
-        eliminate = _check_eliminate(ctx, v, "scene.eliminate",
-                                     _n_equations(mech) if mech is not None else None,
-                                     lambda k: f"scene.eliminate[{k}]")
+        eliminate = _check_eliminate(ctx, v, "scene.eliminate", mech, lambda k: f"scene.eliminate[{k}]")
 
     start_time = 0.0
     v = _get(ctx, st, "start_time", "scene", required=False)
@@ -1000,10 +1071,12 @@ def parse_joint_list(text: str) -> tuple[str, ...]:
     return tuple(item.strip() for item in text.split(",") if item.strip())
 
 
-def parse_eliminate(text: str, *, source: str = CLI_SOURCE) -> tuple[int, ...] | str:
-    """``"auto"`` -> ``"auto"``; ``"4,6"`` -> ``(4, 6)``; ``""``/``"none"`` -> ``()``.
+def parse_eliminate(text: str, *, source: str = CLI_SOURCE) -> tuple[int | str, ...] | str:
+    """``"auto"`` -> ``"auto"``; ``"4,6"`` -> ``(4, 6)``; ``"joint6,2"`` -> ``("joint6", 2)``
+    (joint names: checked against the mechanism by :func:`as_scene`); ``""``/``"none"`` -> ``()``.
 
-    A non-integer item raises :class:`SceneError` with field ``--eliminate``."""
+    An item neither an integer nor an identifier raises :class:`SceneError` with field
+    ``--eliminate``."""
     text = text.strip()
     if text.lower() == "auto":
         return "auto"
@@ -1016,8 +1089,11 @@ def parse_eliminate(text: str, *, source: str = CLI_SOURCE) -> tuple[int, ...] |
         try:
             out.append(int(item))
         except ValueError:
-            bad.append(Problem(source, "--eliminate",
-                               f"{_short(item)} is not an integer equation index (or \"auto\")"))
+            if _is_identifier(item):
+                out.append(item)
+            else:
+                bad.append(Problem(source, "--eliminate", f"{_short(item)} is not an integer equation "
+                                                          "index or a joint name (or \"auto\")"))
     if bad:
         raise SceneError(bad)
     return tuple(out)
@@ -1029,7 +1105,7 @@ def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, 
     """A :class:`SceneSpec` from a mechanism (name = mechanism name, every position and every
     reaction as outputs, no friction, eliminate ``"auto"``, stop time 1 s) or from a scene, with
     the given overrides applied. ``friction``: joint names (or a text for
-    :func:`parse_joint_list`); ``eliminate``: ints or ``"auto"`` (or a text for
+    :func:`parse_joint_list`); ``eliminate``: ints and joint names, or ``"auto"`` (or a text for
     :func:`parse_eliminate`); ``stop_time`` > start time; ``solver``: ``{field: value}`` of
     :class:`~overcon.spec.SolverSpec` (``tolerance`` is a shorthand for ``solver={"tolerance": ..}``);
     ``friction_outputs``: ``"all"``, joint names or a text for :func:`parse_joint_list`, each a
@@ -1083,8 +1159,7 @@ def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, 
                 problems.extend(exc.problems)
                 eliminate = None
         if eliminate is not None:
-            val = _check_eliminate(ctx, eliminate, "--eliminate", _n_equations(mech),
-                                   lambda k: "--eliminate")
+            val = _check_eliminate(ctx, eliminate, "--eliminate", mech, lambda k: "--eliminate")
             if val is not None:
                 changes["eliminate"] = val
 

@@ -45,7 +45,8 @@ class JointType:
     ``required``: field -> (shape code, description); ``optional``: field -> (shape code,
     description, default). Shape codes: ``"vec"`` a vector of the mechanism's dimension,
     ``"dir"`` the same but not the zero vector, ``"rot"`` a rotation quantity (planar scalar,
-    spatial 3-vector), ``"scalar"``. ``friction_size``: (key of the friction table, description).
+    spatial 3-vector), ``"scalar"``, ``"angle"`` (a scalar angle in radians; the file may give it
+    in degrees as ``<field>_deg``). ``friction_size``: (key of the friction table, description).
     ``reaction``: (component, unit) of the reported reaction in the auxiliary frame.
     ``sliding_unit``: unit of the friction law's velocity (``v_reg``, ``v_stribeck``)."""
 
@@ -81,7 +82,7 @@ TYPES: Mapping[str, JointType] = {
             "s_B": ("vec", "point B on body j, in body j frame (m)"),
             "v": ("dir", "vector on body j perpendicular to the guide, in body j frame"),
         },
-        optional={"psi": ("scalar", "constant angle phi_i - phi_j (rad)", 0.0)},
+        optional={"psi": ("angle", "constant angle phi_i - phi_j (rad)", 0.0)},
         friction_size=("length", "slider length l between contact points A and B (m)"),
         sliding_unit="m/s", friction_unit="N",
         friction_text="force along the guide x' (positive along +x', the way body j slides relative to body i)"),

@@ -46,13 +46,10 @@ def run_paths(paths, out_dir, *, stop_time=None, step=None, jobs: int = 2, echo=
     return run_fmus(infos, out_dir, jobs=jobs, echo=echo, experiments=exps)
 
 
-@dataclass
-class CompareOutcome:
+class _Verdicts:
+    """The groups of an outcome by what became of them (``comparisons``: list of Comparison)."""
+
     comparisons: list[Comparison]
-    report: Path
-    plots: dict = field(default_factory=dict)  # group -> [png]
-    skipped: list[str] = field(default_factory=list)  # groups with one FMU
-    results: dict = field(default_factory=dict)  # run key (model, lockstep/<model>) -> RunResult
 
     @property
     def failed(self) -> list[Comparison]:
@@ -61,7 +58,17 @@ class CompareOutcome:
 
     @property
     def invalid(self) -> list[Comparison]:
+        """Groups that were not run: their FMUs do not form a group."""
         return [c for c in self.comparisons if c.invalid]
+
+
+@dataclass
+class CompareOutcome(_Verdicts):
+    comparisons: list[Comparison]
+    report: Path
+    plots: dict = field(default_factory=dict)  # group -> [png]
+    skipped: list[str] = field(default_factory=list)  # groups with one FMU
+    results: dict = field(default_factory=dict)  # run key (model, lockstep/<model>) -> RunResult
 
 
 def _select(infos: list[FmuInfo], group: str | None,
@@ -269,7 +276,7 @@ def compare_with_reference(fmu, ref_csv, out_dir, *, tolerance: float | None = N
 # the main job
 
 @dataclass
-class ReproduceOutcome:
+class ReproduceOutcome(_Verdicts):
     comparisons: list[Comparison]
     report: Path
     figures: list[Path]
@@ -278,15 +285,6 @@ class ReproduceOutcome:
     @property
     def all_match(self) -> bool:
         return all(c.matches for c in self.comparisons)
-
-    @property
-    def failed(self) -> list[Comparison]:
-        """Groups with a failed simulation (no verdict, or a verdict without the adaptive runs)."""
-        return [c for c in self.comparisons if c.run_failed]
-
-    @property
-    def invalid(self) -> list[Comparison]:
-        return [c for c in self.comparisons if c.invalid]
 
 
 def _figures(comparisons: list[Comparison], out_dir: Path, echo) -> list[tuple[str, Path]]:

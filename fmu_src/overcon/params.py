@@ -133,9 +133,9 @@ RULES: dict[str, Rule] = {
     "solver.max_wall_time": Rule("real", 0.0, 86400.0, low_open=True, unit="s",
                                  why="work budget of one FMU fmi2DoStep (wall-clock seconds, at most a day)"),
     "mu": Rule("real", 0.0, 1e6, unit="1",
-               why="far beyond any physical friction coefficient (< 10); larger values overflow the friction solve"),
+               why="a friction coefficient is >= 0; 1e6 is far beyond any physical one (< 10), above it the friction solve overflows"),
     "mu_static": Rule("real", 0.0, 1e6, unit="1",
-                      why="far beyond any physical friction coefficient (< 10); larger values overflow the friction solve"),
+                      why="a friction coefficient is >= 0; 1e6 is far beyond any physical one (< 10), above it the friction solve overflows"),
     "v_reg": Rule("real", 0.0, low_open=True, unit="m/s or rad/s"),
     "v_stribeck": Rule("real", 0.0, low_open=True, unit="m/s or rad/s"),
 }

@@ -46,6 +46,13 @@ def _scene_copy(dst: Path, name: str, *, mech_text: str | None = None, **replace
     return out
 
 
+def _regrouped(dst: Path, name: str, group: str, new_name: str, *, mech_text: str | None = None) -> Path:
+    """Copy of scene ``name`` renamed ``new_name`` in group ``group`` (see :func:`_scene_copy`)."""
+    old_group = name.rsplit("_wo", 1)[0]
+    return _scene_copy(dst, name, mech_text=mech_text, g=(f'group = "{old_group}"', f'group = "{group}"'),
+                       n=(f'name = "{name}"', f'name = "{new_name}"'))
+
+
 @pytest.fixture(scope="module")
 def f45(tmp_path_factory) -> dict[str, Path]:
     out = tmp_path_factory.mktemp("f45")
@@ -165,9 +172,8 @@ def test_compare_reports_every_group_when_one_run_fails(f45, tmp_path, capsys):
     """A group whose run fails (joint 4 with mu = 1e6 jams at once) is reported as FAILED with the
     reason; the healthy group keeps its verdict, report.md is written, and the exit code is 3."""
     mech = (MECH / "planar_sliders.toml").read_text().replace("mu = 0.1", "mu = 1e6", 1)
-    broken = [_scene_copy(tmp_path / "b", f"planar_f45_wo{k}", mech_text=mech,
-                          g=('group = "planar_f45"', 'group = "broken"'),
-                          n=(f'name = "planar_f45_wo{k}"', f'name = "broken_wo{k}"')) for k in (4, 6)]
+    broken = [_regrouped(tmp_path / "b", f"planar_f45_wo{k}", "broken", f"broken_wo{k}", mech_text=mech)
+              for k in (4, 6)]
     fmus = _build(broken, tmp_path / "fmus")
     out = tmp_path / "cmp"
     code = main(["compare", *map(str, fmus.values()), *map(str, f45.values()), "--stop-time", "0.5",
@@ -185,10 +191,8 @@ def test_compare_reports_every_group_when_one_run_fails(f45, tmp_path, capsys):
 def test_group_without_one_friction_set_is_not_compared_and_the_others_are(f45, tmp_path, capsys):
     """Two scenes in one group with different friction sets are a user's mistake, not a pre-check
     failure: that group is reported as not compared (exit 2), the healthy group keeps its verdict."""
-    a = _scene_copy(tmp_path / "a", "planar_f45_wo4", g=('group = "planar_f45"', 'group = "mixed"'),
-                    n=('name = "planar_f45_wo4"', 'name = "mixed_wo4"'))
-    b = _scene_copy(tmp_path / "b", "planar_none_wo6", g=('group = "planar_none"', 'group = "mixed"'),
-                    n=('name = "planar_none_wo6"', 'name = "mixed_wo6"'))
+    a = _regrouped(tmp_path / "a", "planar_f45_wo4", "mixed", "mixed_wo4")
+    b = _regrouped(tmp_path / "b", "planar_none_wo6", "mixed", "mixed_wo6")
     fmus = _build([a, b], tmp_path / "fmus")
     out = tmp_path / "cmp"
     code = main(["compare", *map(str, fmus.values()), *map(str, f45.values()), "--stop-time", "0.2",

@@ -122,7 +122,7 @@ def _friction_batched(model: Model, plan: AssemblyPlan, ctx: list, lr: np.ndarra
     """Q_f (nh,) of the retained multipliers lam_R = lr (contributions summed per body in joint
     order, body i then body j: the per-joint reference's order)."""
     src = np.concatenate((lr, (0.0,))) if plan.friction_pad else lr
-    k = model.nq_b
+    k = model.nh_b
     if len(plan.friction) == 1:  # one joint type: contributions already in joint order, i then j
         g = plan.friction[0]
         vals = np.concatenate(g.module.friction(g.data, ctx[0], src[g.lam_index]), 1).reshape(-1, k)

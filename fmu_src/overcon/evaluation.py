@@ -13,7 +13,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .kinematics import cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec
+from .kinematics import (cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec, quat_R_rows,
+                         quat_rates_rows)
 
 if TYPE_CHECKING:  # model imports this module (check_initial_state, resolve_elimination)
     from .model import CompiledJoint, Model
@@ -32,13 +33,17 @@ class Frames:
     v: np.ndarray
     w: np.ndarray
     phi: np.ndarray | None = None  # planar angles
-    angles: np.ndarray | None = None  # spatial Euler angles
+    angles: np.ndarray | None = None  # spatial Euler angles (rotation "euler_zxz")
+    quat: np.ndarray | None = None  # spatial quaternions as in q (rotation "quaternion"; R uses e / |e|)
 
 
 def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:
+    """Body frames at q (n,) and h (nh,; zeros if None): origins r (m), R body -> global,
+    v (global, m/s), w (planar rad/s; spatial body axes, rad/s). A quaternion body's R is built
+    from e / |e| (:func:`overcon.kinematics.quat_R_rows`)."""
     nb, d, k = model.nb, model.dim, model.nq_b
     Q = q.reshape(nb, k)
-    H = np.zeros((nb, k)) if h is None else h.reshape(nb, k)
+    H = np.zeros((nb, model.nh_b)) if h is None else h.reshape(nb, model.nh_b)
     r = np.zeros((nb + 1, d))
     r[:nb] = Q[:, :d]
     v = np.zeros((nb + 1, d))
@@ -52,11 +57,16 @@ def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:
         w = np.zeros(nb + 1)
         w[:nb] = H[:, 2]
         return Frames(r=r, R=R, v=v, w=w, phi=phi)
+    w = np.zeros((nb + 1, 3))
+    w[:nb] = H[:, 3:]
+    if model.rotation == "quaternion":
+        quat = np.zeros((nb + 1, 4))
+        quat[:nb] = Q[:, 3:]
+        quat[nb, 0] = 1.0  # the base: identity
+        return Frames(r=r, R=quat_R_rows(quat), v=v, w=w, quat=quat)
     angles = np.zeros((nb + 1, 3))
     angles[:nb] = Q[:, 3:]
     R = euler_R_rows(angles)
-    w = np.zeros((nb + 1, 3))
-    w[:nb] = H[:, 3:]
     return Frames(r=r, R=R, v=v, w=w, angles=angles)
 
 
@@ -91,11 +101,19 @@ def gamma(model: Model, f: Frames) -> np.ndarray:
 
 
 def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """q' from (q, h): planar q' = h; spatial Euler rates = H omega (Eq. 4). Raises
-    EulerSingularity near sin(beta) = 0."""
+    """q' (n,) from q (n,) and h (nh,): planar q' = h; spatial r' = v and Euler rates = H omega
+    (Eq. 4; raises EulerSingularity near sin(beta) = 0) or quaternion rates
+    e' = 1/2 e (x) (0, omega) + the norm stabilisation along e
+    (:func:`overcon.kinematics.quat_rates_rows`; omega in body axes)."""
     if model.kind == "planar":
         return h.copy()
     nb = model.nb
+    if model.rotation == "quaternion":
+        Q, H = q.reshape(nb, 7), h.reshape(nb, 6)
+        qd = np.empty((nb, 7))
+        qd[:, :3] = H[:, :3]
+        qd[:, 3:] = quat_rates_rows(Q[:, 3:], H[:, 3:])
+        return qd.reshape(-1)
     qd = h.copy()
     H = euler_H_rows(q.reshape(nb, 6)[:, 3:], model.body_names)
     qd.reshape(nb, 6)[:, 3:] = matvec(H, h.reshape(nb, 6)[:, 3:])
@@ -113,7 +131,7 @@ def generalized_force(model: Model, f: Frames, b: int, point: np.ndarray, F: np.
 
 def applied_forces(model: Model, f: Frames) -> np.ndarray:
     """Q (nh,): gravity, constant forces and torques, springs, gyroscopic terms -omega x J omega."""
-    nb, d, k = model.nb, model.dim, model.nq_b
+    nb, d, k = model.nb, model.dim, model.nh_b
     Q = np.zeros((nb, k))
     Q[:, :d] = model.mass[:, None] * model.gravity[None, :]
     if model.kind == "spatial":
@@ -136,6 +154,16 @@ def applied_forces(model: Model, f: Frames) -> np.ndarray:
                 if b >= 0:
                     Q[b] += generalized_force(model, f, b, point, sign * F)
     return Q.reshape(-1)
+
+
+def normalized_coordinates(model: Model, q: np.ndarray) -> np.ndarray:
+    """q (n,) with every quaternion replaced by e / |e| (the orientation the dynamics use, and
+    what the position outputs report); other coordinates unchanged (a copy)."""
+    out = np.array(q, float)
+    if model.rotation == "quaternion":
+        E = out.reshape(model.nb, 7)[:, 3:]
+        E /= np.sqrt(np.einsum("ij,ij->i", E, E))[:, None]
+    return out
 
 
 # ----------------------------------------------------------------------------- reported values

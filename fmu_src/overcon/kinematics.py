@@ -8,6 +8,16 @@ Spatial: z-x-z Euler angles ``(alpha, beta, gamma)``, ``R = Rz(alpha) Rx(beta) R
 (Eq. 40). Angular velocity ``omega`` is expressed in body axes and ``phi_dot = H(beta, gamma)
 omega`` (Eq. 4, B.15). ``H`` is singular at ``sin(beta) = 0``: :func:`euler_H` raises
 :class:`EulerSingularity` when ``|sin beta|`` falls below :data:`SIN_BETA_MIN`.
+
+Spatial, ``rotation = "quaternion"``: a quaternion ``e = (e0, e1, e2, e3)``, scalar first, body
+to global (``R(e) s = e (0, s) e*``), valid in every orientation. The rotation matrix is always
+built from ``e / |e|`` (:func:`quat_R_rows`), so the dynamics never see a non-unit quaternion.
+Kinematics (omega in body axes): ``e' = 1/2 e (x) (0, omega)`` plus the norm stabilisation
+``QUAT_NORM_RATE / 2 (1 - |e|^2) e`` (:func:`quat_rates_rows`). The added term is along e, so it
+never changes e / |e| (the orientation, hence the motion); it pulls |e| back to 1 at the rate
+:data:`QUAT_NORM_RATE` against the integrator's error. A stabilisation term (rather than projecting
+e after every step) keeps y' one smooth function of y, so every integrator (FSAL stages, dense
+output, Radau's Newton iteration), the lockstep runs and the saved FMU state work unchanged.
 """
 from __future__ import annotations
 
@@ -76,6 +86,29 @@ def euler_H(angles, body: str = "") -> np.ndarray:
         [cg, -sg, 0.0],
         [-cb * sg / sb, -cb * cg / sb, 1.0],
     ])
+
+
+QUAT_NORM_RATE = 1.0
+"""Rate k (1/s) of the quaternion norm stabilisation: ``d|e|^2/dt = k (1 - |e|^2) |e|^2``, so a
+norm error decays as exp(-k t). Never stiff inside the step envelope (steps <= 1 s, so
+h k <= 1, inside the stability region of rk4, dopri5, dop853 and radau); the norm error is then
+bounded by the integrator error made in about 1/k seconds."""
+
+
+def quat_mul(a, b) -> np.ndarray:
+    """Quaternion product a (x) b, scalar first."""
+    a0, av, b0, bv = a[0], np.asarray(a[1:], float), b[0], np.asarray(b[1:], float)
+    return np.concatenate([[a0 * b0 - av @ bv], a0 * bv + b0 * av + cross3(av, bv)])
+
+
+def euler_to_quat(angles) -> np.ndarray:
+    """Unit quaternion (scalar first) of z-x-z Euler angles: the rotation :func:`euler_R`, as
+    qz(alpha) (x) qx(beta) (x) qz(gamma) (e0 >= 0 not enforced)."""
+    a, b, g = angles
+    qa = [math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)]
+    qb = [math.cos(b / 2), math.sin(b / 2), 0.0, 0.0]
+    qg = [math.cos(g / 2), 0.0, 0.0, math.sin(g / 2)]
+    return quat_mul(quat_mul(qa, qb), qg)
 
 
 def cross3(a, b) -> np.ndarray:
@@ -166,3 +199,33 @@ def euler_H_rows(angles: np.ndarray, bodies=()) -> np.ndarray:
     H[:, 2, 1] = -cb * cg / sb
     H[:, 2, 2] = 1.0
     return H
+
+
+def quat_R_rows(e: np.ndarray) -> np.ndarray:
+    """Rotation matrices body -> global (n, 3, 3) of (n, 4) quaternions (scalar first), each
+    normalised first (R of e / |e|; |e| > 0 assumed)."""
+    u = e / np.sqrt(rowdot(e, e))[:, None]
+    e0, e1, e2, e3 = u[:, 0], u[:, 1], u[:, 2], u[:, 3]
+    R = np.empty((e.shape[0], 3, 3))
+    R[:, 0, 0] = e0 * e0 + e1 * e1 - e2 * e2 - e3 * e3
+    R[:, 0, 1] = 2.0 * (e1 * e2 - e0 * e3)
+    R[:, 0, 2] = 2.0 * (e1 * e3 + e0 * e2)
+    R[:, 1, 0] = 2.0 * (e1 * e2 + e0 * e3)
+    R[:, 1, 1] = e0 * e0 - e1 * e1 + e2 * e2 - e3 * e3
+    R[:, 1, 2] = 2.0 * (e2 * e3 - e0 * e1)
+    R[:, 2, 0] = 2.0 * (e1 * e3 - e0 * e2)
+    R[:, 2, 1] = 2.0 * (e2 * e3 + e0 * e1)
+    R[:, 2, 2] = e0 * e0 - e1 * e1 - e2 * e2 + e3 * e3
+    return R
+
+
+def quat_rates_rows(e: np.ndarray, w: np.ndarray, rate: float = QUAT_NORM_RATE) -> np.ndarray:
+    """e' (n, 4) of quaternions e (n, 4) and body-axes angular velocities w (n, 3, rad/s):
+    ``1/2 e (x) (0, w) = 1/2 [-ev . w, e0 w + ev x w]`` plus the norm stabilisation
+    ``rate / 2 (1 - |e|^2) e`` (1/s; see the module docstring)."""
+    ev = e[:, 1:]
+    out = np.empty_like(e)
+    out[:, 0] = -0.5 * rowdot(ev, w)
+    out[:, 1:] = 0.5 * (e[:, :1] * w + cross3_rows(ev, w))
+    out += (0.5 * rate * (1.0 - rowdot(e, e)))[:, None] * e
+    return out

@@ -3,9 +3,12 @@
 Glossary (paper symbols spelled for code; shapes for b moving bodies, m equations)
 -----------------------------------------------------------------------------------
 ``q``      (n,)     absolute coordinates, per body [x, y, phi] (planar, n = 3b) or
-                    [x, y, z, alpha, beta, gamma] (spatial, z-x-z Euler, n = 6b); Eq. 33, 39.
+                    [x, y, z, alpha, beta, gamma] (spatial, z-x-z Euler, n = 6b; Eq. 33, 39) or
+                    [x, y, z, e0, e1, e2, e3] (spatial, ``rotation = "quaternion"``, n = 7b).
 ``h``      (nh,)    velocities: planar q' (Eq. 2); spatial per body [r' (global), omega (body
-                    axes)] (Eq. 3); nh = n.
+                    axes)] (Eq. 3); nh = 3b planar, 6b spatial (nh = n but for quaternions).
+                    ``nq_b``/``nh_b``: coordinates/velocities per body; q' from (q, h) is
+                    :func:`overcon.evaluation.coordinate_rates`.
 ``Phi``    (m,)     constraint equations, numbered as in the paper (Eq. 5, 37, 42).
 ``Phi_q``  (m, n)   exact derivative of Phi by q (Eq. 6).
 ``Phi_h``  (m, nh)  derivative by h: planar Phi_q, spatial the modified Jacobian (Eq. 7).
@@ -47,7 +50,7 @@ from . import analysis
 from .evaluation import constraints, frames, jacobian_h
 from .friction_laws import Law, make_law
 from .joints import TYPES
-from .spec import BASE, COORDINATES, MechanismSpec, SceneSpec
+from .spec import BASE, VELOCITIES_PER_BODY, MechanismSpec, SceneSpec, coordinates
 
 
 GLOBAL_COMPONENTS = {"planar": ("Fx0", "Fy0"), "spatial": ("Fx0", "Fy0", "Fz0")}
@@ -100,7 +103,8 @@ class Model:
     scene: SceneSpec
     kind: str
     dim: int  # 2 planar, 3 spatial
-    nq_b: int  # coordinates per body
+    nq_b: int  # coordinates per body (entries of q_i)
+    nh_b: int  # velocities per body (entries of h_i): 3 planar, 6 spatial
     nb: int
     body_names: tuple[str, ...]
     mass: np.ndarray  # (nb,)
@@ -120,6 +124,7 @@ class Model:
     position_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into q)
     reaction_joints: tuple[int, ...] = field(default=())
     friction_outputs: tuple[int, ...] = field(default=())  # joints with a <joint>.friction output
+    rotation: str = "euler_zxz"  # spatial orientation coordinates (spec.ROTATIONS)
     plan: "AssemblyPlan" = field(init=False, repr=False, compare=False)  # built by __post_init__
 
     def __post_init__(self):
@@ -133,10 +138,11 @@ class Model:
 
     @property
     def nh(self) -> int:
-        return self.nb * self.nq_b
+        return self.nb * self.nh_b
 
     def body_slice(self, b: int) -> slice:
-        return slice(b * self.nq_b, (b + 1) * self.nq_b)
+        """Body slot b's entries of h (and of Q, the Jacobian's columns)."""
+        return slice(b * self.nh_b, (b + 1) * self.nh_b)
 
     def output_names(self) -> list[str]:
         names = [name for name, _ in self.position_outputs]
@@ -221,7 +227,7 @@ def _read_only(x):
 
 def build_plan(model: Model) -> AssemblyPlan:
     """The plan of ``model``'s joints and retained equations (every array read-only)."""
-    k, nh = model.nq_b, model.nh
+    k, nh = model.nh_b, model.nh
     by_type: dict[str, list[int]] = {}
     for c in model.joints:
         by_type.setdefault(c.type, []).append(c.index)
@@ -279,7 +285,9 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
     mech: MechanismSpec = scene.mechanism
     kind = mech.kind
     dim = 2 if kind == "planar" else 3
-    k = 3 if kind == "planar" else 6
+    rotation = mech.rotation if kind == "spatial" else "euler_zxz"
+    coord_names = coordinates(kind, rotation)
+    k = len(coord_names)
     names = tuple(b.name for b in mech.bodies)
     slot = {name: i for i, name in enumerate(names)}
     slot[BASE] = -1
@@ -319,11 +327,11 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
     h0 = np.concatenate([np.asarray(b.h0, float) for b in mech.bodies])
     coord_index = {}
     for b, name in enumerate(names):
-        for i, cname in enumerate(COORDINATES[kind]):
+        for i, cname in enumerate(coord_names):
             coord_index[f"{name}.{cname}"] = b * k + i
     joint_index = {c.name: c.index for c in joints}
     base = Model(
-        scene=replace(scene, solver=None), kind=kind, dim=dim, nq_b=k, nb=nb, body_names=names, mass=mass,
+        scene=replace(scene, solver=None), kind=kind, dim=dim, nq_b=k, nh_b=VELOCITIES_PER_BODY[kind], nb=nb, body_names=names, mass=mass,
         inertia=inertia, M=M, Minv=1.0 / M, gravity=np.asarray(mech.gravity, float),
         joints=tuple(joints), loads=tuple(loads), q0=q0, h0=h0, m=row,
         retained=np.arange(row), eliminated=(), elimination_mode="given",
@@ -332,6 +340,7 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
         reaction_joints=tuple(joint_index[j] for j in scene.reactions),
         friction_outputs=tuple(joint_index[j] for j in
                                (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
+        rotation=rotation,
     )
     if check_initial:
         check_initial_state(base)

@@ -19,11 +19,14 @@ What is validated
   required fields, types (a table where a table is expected, arrays where arrays are expected,
   strings, integers); numbers must be finite (no nan/inf); integers are accepted where floats are
   expected, booleans are never numbers; vector lengths (2 planar / 3 spatial for points, vectors
-  and gravity; 3 / 6 for ``q0`` and ``h0``).
+  and gravity; 3 / 6 for ``q0`` and ``h0``; spatial with ``rotation = "quaternion"``: 7 for ``q0``).
 * Mechanism: ``name`` an identifier (letter, then letters/digits/_), ``kind`` in
   ``spec.KINDS``; at least one body; body names identifiers, unique, not ``base``; mass > 0;
   inertia > 0 (planar: one number, stored as a 1-tuple; spatial: 3 numbers); ``h0`` defaults to
-  zeros. Joints: names identifiers and unique; ``type`` in ``overcon.joints.TYPES`` and allowed for
+  zeros. ``rotation`` (spatial only; a planar mechanism giving it is an error) in
+  ``spec.ROTATIONS``, default ``euler_zxz``; with ``quaternion`` a body's ``q0`` is
+  ``[x, y, z, e0, e1, e2, e3]`` whose quaternion norm must be within ``spec.QUATERNION_NORM_TOL``
+  of 1 (refused with the norm otherwise) and is stored normalised. Joints: names identifiers and unique; ``type`` in ``overcon.joints.TYPES`` and allowed for
   the mechanism kind; ``body_i``/``body_j`` a body or ``base`` and different; the type's required
   and optional fields (``overcon.joints.TYPES``) with their shapes (shape ``dir``, e.g.
   translational ``v``: non-zero); an ``angle`` field (translational ``psi``) may be given in
@@ -42,7 +45,7 @@ What is validated
   without a mechanism friction table needs ``mu`` and its size key there);
   ``eliminate`` ``"auto"`` or integers in 1..m (m = total number of constraint
   equations) and joint names (all the joint's equations, expanded in place), distinct once expanded; ``stop_time`` > ``start_time``; ``[outputs]`` ``positions`` are distinct
-  ``<body>.<coordinate>`` (``spec.COORDINATES``) or ``"all"``, ``reactions`` distinct joint names
+  ``<body>.<coordinate>`` (``spec.coordinates``) or ``"all"``, ``reactions`` distinct joint names
   or ``"all"`` (a missing ``[outputs]`` table or key means ``"all"``), ``friction`` distinct
   joints of ``scene.friction`` or ``"all"`` (a ``<joint>.friction`` output for each; a missing
   ``[outputs]`` table means ``"all"``, a missing ``friction`` key in an ``[outputs]`` table means
@@ -430,15 +433,41 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
 # Mechanism
 
 
+def _rotation(ctx: _Ctx, mt: dict, kind: str | None) -> str | None:
+    """``mechanism.rotation`` (default ``euler_zxz``); None if invalid (already reported)."""
+    v = _get(ctx, mt, "rotation", "mechanism", required=False)
+    if v is _MISSING:
+        return "euler_zxz"
+    if kind == "planar":
+        ctx.add("mechanism.rotation", "a planar mechanism has one rotation angle (phi) per body: "
+                                      "'rotation' applies to spatial mechanisms only")
+        return "euler_zxz"
+    return _choice(ctx, v, "mechanism.rotation", S.ROTATIONS)
+
+
+def _unit_quaternion(ctx: _Ctx, q0: tuple[float, ...], field: str, body: str | None) -> tuple[float, ...] | None:
+    """q0 = [x, y, z, e0..e3] with the quaternion normalised, or None (reported) if its norm is
+    further than ``spec.QUATERNION_NORM_TOL`` from 1."""
+    e = q0[3:]
+    norm = math.sqrt(sum(x * x for x in e))
+    if not abs(norm - 1.0) <= S.QUATERNION_NORM_TOL:
+        who = f"body {body!r}: " if body else ""
+        ctx.add(field, f"{who}quaternion [e0, e1, e2, e3] = {_short(list(e))} has norm {norm:.10g}; it must be "
+                       f"1 within {S.QUATERNION_NORM_TOL:g} (smaller deviations are normalised)")
+        return None
+    return q0[:3] + tuple(x / norm for x in e)
+
+
 def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
     n_problems = len(ctx.problems)
     _unknown_keys(ctx, doc, "", ("mechanism", "bodies", "joints", "loads"))
 
     name = kind = gravity = None
+    rotation = "euler_zxz"
     description = ""
     mt = _get(ctx, doc, "mechanism", "")
     if mt is not _MISSING and _table(ctx, mt, "mechanism") is not None:
-        _unknown_keys(ctx, mt, "mechanism", ("name", "kind", "gravity", "description"))
+        _unknown_keys(ctx, mt, "mechanism", ("name", "kind", "gravity", "description", "rotation"))
         v = _get(ctx, mt, "name", "mechanism")
         if v is not _MISSING:
             name = _ident(ctx, v, "mechanism.name")
@@ -451,8 +480,10 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
         v = _get(ctx, mt, "gravity", "mechanism")
         if v is not _MISSING:
             gravity = _vec(ctx, v, "mechanism.gravity", _DIM.get(kind))
+        rotation = _rotation(ctx, mt, kind)
     dim = _DIM.get(kind)
-    ncoord = len(S.COORDINATES[kind]) if kind else None
+    ncoord = len(S.coordinates(kind, rotation)) if kind and rotation else None
+    nvel = S.VELOCITIES_PER_BODY.get(kind)
 
     # --- bodies
     bodies: list[BodySpec] = []
@@ -464,7 +495,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
         p = f"bodies[{k}]"
         _unknown_keys(ctx, bt, p, ("name", "mass", "inertia", "q0", "h0"))
         bname = mass = inertia = q0 = None
-        h0 = tuple(0.0 for _ in range(ncoord)) if ncoord else None
+        h0 = tuple(0.0 for _ in range(nvel)) if nvel else None
         v = _get(ctx, bt, "name", p)
         if v is not _MISSING:
             bname = _ident(ctx, v, f"{p}.name")
@@ -489,9 +520,11 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
         v = _get(ctx, bt, "q0", p)
         if v is not _MISSING:
             q0 = _vec(ctx, v, f"{p}.q0", ncoord)
+            if q0 is not None and kind == "spatial" and rotation == "quaternion":
+                q0 = _unit_quaternion(ctx, q0, f"{p}.q0", bname)
         v = _get(ctx, bt, "h0", p, required=False)
         if v is not _MISSING:
-            h0 = _vec(ctx, v, f"{p}.h0", ncoord)
+            h0 = _vec(ctx, v, f"{p}.h0", nvel)
         if None not in (bname, mass, inertia, q0, h0):
             bodies.append(BodySpec(bname, mass, inertia, q0, h0))
 
@@ -624,7 +657,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
         return None
     return MechanismSpec(name=name, kind=kind, gravity=gravity, bodies=tuple(bodies),
                          joints=tuple(joints), loads=tuple(loads), source=ctx.file,
-                         description=description)
+                         description=description, rotation=rotation or "euler_zxz")
 
 
 def _shaped(ctx: _Ctx, value, field: str, shape: str, kind: str | None):
@@ -676,7 +709,7 @@ def _n_equations(mech: MechanismSpec) -> int:
 
 
 def _all_positions(mech: MechanismSpec) -> tuple[str, ...]:
-    return tuple(f"{b.name}.{c}" for b in mech.bodies for c in S.COORDINATES[mech.kind])
+    return tuple(f"{b.name}.{c}" for b in mech.bodies for c in S.coordinates(mech.kind, mech.rotation))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -938,7 +971,7 @@ def _pos_message(mech: MechanismSpec | None):
             return f"{_short(s)} is not of the form '<body>.<coordinate>'"
         if mech is not None and body not in {b.name for b in mech.bodies}:
             return f"unknown body {_short(body)}"
-        coords = S.COORDINATES[mech.kind] if mech is not None else ()
+        coords = S.coordinates(mech.kind, mech.rotation) if mech is not None else ()
         return f"unknown coordinate {_short(coord)} (allowed: {', '.join(coords)})"
     return message
 

@@ -30,7 +30,7 @@ import numpy as np
 from .dynamics import evaluate
 from . import integrators
 from .evaluation import (SingularConfiguration, constraints, coordinate_rates, frames,  # noqa: F401
-                         friction_output, jacobian_h, physical_reaction)
+                         friction_output, jacobian_h, normalized_coordinates, physical_reaction)
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
 from .model import InconsistentInitialState, Model, ModelError, check_initial_state  # noqa: F401
 from .spec import SceneSpec, SolverSpec
@@ -238,7 +238,8 @@ class Simulation:
         of Eq. 18, warm-started from the integrator's lam but without changing it."""
         model = self.model
         q, h = y[: self.n], y[self.n:]
-        vals = [q[i] for _, i in model.position_outputs]
+        qn = normalized_coordinates(model, q)  # quaternions reported as e / |e|
+        vals = [qn[i] for _, i in model.position_outputs]
         if model.reaction_joints or model.friction_outputs:  # one evaluation of Eq. 18; positions only: none
             ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver)
             for j in model.reaction_joints:

@@ -23,12 +23,38 @@ BASE = "base"
 
 KINDS = ("planar", "spatial")
 
-# Coordinates per body, in the order they appear in q_i (paper Eq. 33 and 39).
+# Coordinates per body, in the order they appear in q_i (paper Eq. 33 and 39), for the default
+# rotation of each kind (spatial: z-x-z Euler angles). :func:`coordinates` gives them for any rotation.
 COORDINATES = {
     "planar": ("x", "y", "phi"),
     "spatial": ("x", "y", "z", "alpha", "beta", "gamma"),
 }
-COORDINATE_UNITS = {"x": "m", "y": "m", "z": "m", "phi": "rad", "alpha": "rad", "beta": "rad", "gamma": "rad"}
+COORDINATE_UNITS = {"x": "m", "y": "m", "z": "m", "phi": "rad", "alpha": "rad", "beta": "rad", "gamma": "rad",
+                    "e0": "1", "e1": "1", "e2": "1", "e3": "1"}
+
+ROTATIONS = ("euler_zxz", "quaternion")
+"""Orientation coordinates of a spatial body (``[mechanism] rotation``, spatial only; default
+``euler_zxz``): z-x-z Euler angles (alpha, beta, gamma), singular at sin(beta) = 0 (paper Eq. 40),
+or a unit quaternion (e0, e1, e2, e3), scalar first, body to global, valid in every orientation
+(:mod:`overcon.kinematics`). Velocities are the same for both: [v (global), omega (body axes)]."""
+
+QUATERNION_COORDINATES = ("x", "y", "z", "e0", "e1", "e2", "e3")
+
+QUATERNION_NORM_TOL = 1e-6
+"""A ``q0`` quaternion whose norm differs from 1 by more than this is refused (a typo rather than
+round-off of a written-out value); within it, the loader normalises it."""
+
+VELOCITIES_PER_BODY = {"planar": 3, "spatial": 6}
+"""Length of a body's velocity vector h_i (and of ``h0``): planar [x', y', phi'], spatial
+[v (global), omega (body axes)], whatever the rotation coordinates."""
+
+
+def coordinates(kind: str, rotation: str = "euler_zxz") -> tuple[str, ...]:
+    """Coordinate names of one body, in the order of q_i: ``COORDINATES[kind]``, or
+    ``QUATERNION_COORDINATES`` for a spatial mechanism with ``rotation = "quaternion"``."""
+    if kind == "spatial" and rotation == "quaternion":
+        return QUATERNION_COORDINATES
+    return COORDINATES[kind]
 
 LOAD_FIELDS: Mapping[str, Mapping] = {
     "force": {
@@ -88,7 +114,9 @@ class FrictionSpec:
 @dataclass(frozen=True)
 class BodySpec:
     """A moving rigid body. ``inertia``: planar (J,) in kg.m^2; spatial principal moments
-    (Jx, Jy, Jz) about the body axes (kg.m^2). Origin at the centre of mass."""
+    (Jx, Jy, Jz) about the body axes (kg.m^2). Origin at the centre of mass. ``q0`` in the
+    order of :func:`coordinates` (a quaternion stored normalised), ``h0`` the velocities
+    (:data:`VELOCITIES_PER_BODY`)."""
 
     name: str
     mass: float
@@ -127,6 +155,7 @@ class MechanismSpec:
     loads: tuple[LoadSpec, ...]
     source: str = ""
     description: str = ""
+    rotation: str = "euler_zxz"  # spatial orientation coordinates (ROTATIONS); planar: unused default
 
 
 @dataclass(frozen=True)

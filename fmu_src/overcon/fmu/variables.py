@@ -46,6 +46,10 @@ COORDINATE_TEXT = {
     "alpha": "z-x-z Euler angle alpha",
     "beta": "z-x-z Euler angle beta",
     "gamma": "z-x-z Euler angle gamma",
+    "e0": "orientation quaternion body -> global, scalar part e0 (unit quaternion e / |e|)",
+    "e1": "orientation quaternion body -> global, vector part e1 (unit quaternion e / |e|)",
+    "e2": "orientation quaternion body -> global, vector part e2 (unit quaternion e / |e|)",
+    "e3": "orientation quaternion body -> global, vector part e3 (unit quaternion e / |e|)",
 }
 
 

@@ -19,6 +19,7 @@ from overcon.model import compile_model
 from overcon.scene import SceneError, as_scene, load
 from overcon.simulate import Simulation, SimulationError, run, run_scene
 from overcon.spec import BodySpec, JointSpec, LoadSpec, MechanismSpec, SolverSpec
+from overcon.tooling.fmus import inspect_fmu
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data" / "quaternion"
@@ -334,6 +335,8 @@ def test_fmu_of_a_quaternion_scene(tmp_path):
         v = by_name[f"rod.e{k}"]
         assert v.causality == "output" and f"e{k}" in v.description and "quaternion" in v.description
     assert "rod.alpha" not in by_name
+    kinds = {o.name: o.kind for o in inspect_fmu(fmu).outputs}  # quaternion outputs decide verdicts
+    assert [kinds[f"rod.{c}"] for c in ("x", "e0", "e3")] == ["position"] * 3 and kinds["P.Fx"] == "reaction"
     res = fmpy.simulate_fmu(str(fmu), stop_time=0.2)
     ref = run_scene(load(PENDULUM_SCENE), stop_time=0.2)
     got = np.column_stack([res[n] for n in ref.names])

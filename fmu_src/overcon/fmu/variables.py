@@ -2,7 +2,7 @@
 
 Value references are the positions in :func:`table` (0-based), in this order:
 
-1. outputs, exactly ``model.output_names()``: positions (m, rad), reaction components
+1. outputs, exactly ``model.output_names()``: positions (m, rad; quaternion components 1), reaction components
    (N, N.m) and the friction forces ``<joint>.friction`` of the scene's friction joints (N, or
    N.m for revolute joints; :func:`overcon.evaluation.friction_output`), causality output,
    variability continuous, initial calculated;

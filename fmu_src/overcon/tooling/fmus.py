@@ -20,13 +20,17 @@ from pathlib import Path
 from . import InputError
 
 POSITION_UNITS = ("m", "rad")
+QUATERNION_SUFFIXES = (".e0", ".e1", ".e2", ".e3")
+"""Dimensionless (unit "1") outputs with these suffixes are the orientation quaternions of
+spatial bodies with ``rotation = "quaternion"``: positions too (they decide a verdict)."""
 OTHER_GROUP = "fmus"  # the group of FMUs without an overcon scene (other tools): compared together
 REACTION_UNITS = ("N", "N.m")
 
 
 @dataclass(frozen=True)
 class Output:
-    """A Real output. ``kind``: "position" (unit m or rad), "reaction" (N or N.m) or "other"."""
+    """A Real output. ``kind``: "position" (unit m or rad, or a quaternion component
+    :data:`QUATERNION_SUFFIXES` of unit 1), "reaction" (N or N.m) or "other"."""
 
     name: str
     unit: str | None
@@ -148,7 +152,8 @@ def inspect_fmu(path) -> FmuInfo:
             continue
         if v.type == "Real" and v.variability != "constant":
             unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
-            kind = "position" if unit in POSITION_UNITS else "reaction" if unit in REACTION_UNITS else "other"
+            position = unit in POSITION_UNITS or (unit == "1" and v.name.endswith(QUATERNION_SUFFIXES))
+            kind = "position" if position else "reaction" if unit in REACTION_UNITS else "other"
             outputs.append(Output(v.name, unit, kind))
         elif v.type == "Boolean" and v.variability == "constant":
             constants[v.name] = _bool(v.start)

@@ -474,7 +474,9 @@ def joint_uniqueness(
 class Analysis:
     """Result of ``analyse``.
 
-    n_coordinates  n (rows of J)          n_equations  m (columns of J)
+    n_coordinates  n (rows of J: velocity coordinates, 3 per planar and 6 per spatial body,
+                   whatever the rotation coordinates)
+                                          n_equations  m (columns of J)
     rank           r = rank(J)            dof          n - r
     redundant      m - r                  joints       name -> JointVerdict, in insertion order
     singular_values  of the decision matrix (equilibrated J unless equilibrate=False), descending

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .kinematics import (cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec, quat_R_rows,
+from .kinematics import (cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec, quat_R_rows, rowdot,
                          quat_rates_rows)
 
 if TYPE_CHECKING:  # model imports this module (check_initial_state, resolve_elimination)
@@ -162,7 +162,7 @@ def normalized_coordinates(model: Model, q: np.ndarray) -> np.ndarray:
     out = np.array(q, float)
     if model.rotation == "quaternion":
         E = out.reshape(model.nb, 7)[:, 3:]
-        E /= np.sqrt(np.einsum("ij,ij->i", E, E))[:, None]
+        E /= np.sqrt(rowdot(E, E))[:, None]
     return out
 
 

@@ -415,6 +415,36 @@ def test_pendulum_period_matches_small_angle_formula():
     assert period == pytest.approx(expected, rel=2e-5)
 
 
+def test_flywheel_friction_decelerates_uniformly():
+    """Revolute friction in a simulation: the radial load is m g (centre of mass on the axis), so
+    the spin decreases at mu a m g / Jz and gamma(t) = w0 t - mu a m g t^2 / (2 Jz)."""
+    scene = as_scene(load(DATA / "flywheel.toml"), friction=["axle"], stop_time=1.0, solver={"tolerance": 1e-10})
+    model = compile_model(scene)
+    res = run(model, scene.solver, output_interval=0.1)
+    decel = 0.2 * 0.05 * 2.0 * 9.81 / 0.1
+    t = res.time
+    np.testing.assert_allclose(res.column("wheel.gamma"), 10.0 * t - 0.5 * decel * t ** 2, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(res.column("axle.friction")[1:], -0.2 * 0.05 * 2.0 * 9.81, rtol=1e-6)
+    np.testing.assert_allclose(res.column("axle.Fz"), 0.0, atol=1e-8)  # no axial load
+
+
+def test_incline_friction_gives_the_textbook_acceleration():
+    """Prismatic friction in a simulation: a block on a guide inclined at 30 degrees slides with
+    acceleration g (sin 30 - mu cos 30) (normal load m g cos 30, no moment: the joint point is
+    the centre of mass)."""
+    scene = as_scene(load(DATA / "incline.toml"), friction=["guide"], stop_time=0.5, solver={"tolerance": 1e-10})
+    model = compile_model(scene)
+    res = run(model, scene.solver, output_interval=0.05)
+    th = math.radians(30)
+    a = 9.81 * (math.sin(th) - 0.2 * math.cos(th))
+    t = res.time
+    x = res.column("block.x") - model.q0[0]
+    z = res.column("block.z") - model.q0[2]
+    s = x * math.cos(th) - z * math.sin(th)
+    np.testing.assert_allclose(s, 0.5 * a * t ** 2, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(res.column("guide.friction")[2:], -0.2 * 3.0 * 9.81 * math.cos(th), rtol=1e-6)
+
+
 # ----------------------------------------------------------------------------- friction
 
 LAWS = {"regularised": dict(), "stribeck": dict(law="stribeck", mu_static=0.5, v_stribeck=0.01)}

@@ -136,7 +136,8 @@ def test_type_names_resolve_per_mechanism_kind():
     assert names("planar") == ("translational", "revolute")
     for key, jt in TYPES.items():
         assert resolve(jt.kind, jt.name) == key
-        assert jt.n_equations == N_ROWS.get(jt.name, jt.n_equations) or jt.kind == "planar"
+        if jt.kind == "spatial":
+            assert jt.n_equations == N_ROWS[jt.name]
 
 
 def test_type_not_allowed_names_the_field(tmp_path):
@@ -179,6 +180,24 @@ def test_jacobian_and_gamma_by_finite_differences(single, jtype, seed):
         J = ev.jacobian_h(model, f)
         np.testing.assert_allclose(J @ h, _fd_jacobian(model, r, R, v, w), rtol=0, atol=1e-9)
         np.testing.assert_allclose(ev.gamma(model, f), -_fd_second(model, r, R, v, w), rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("jtype", AXIS_TYPES)
+def test_batch_equals_single_joints_bit_for_bit(single, jtype):
+    """A joint gets the same numbers in its type's batch as alone (Model.plan.single)."""
+    model = single(jtype, 0)
+    rng = np.random.default_rng(7)
+    f = make_frames(*random_state(rng))
+    (group,) = model.plan.groups
+    mod = group.module
+    fi = rng.normal(size=(3, 6))
+    batch = [mod.phi(group.data, f), *mod.jac_h(group.data, f), mod.gamma(group.data, f),
+             mod.reaction(group.data, f, fi)]
+    for n, c in enumerate(model.joints):
+        d = model.plan.single[c.index]
+        one = [mod.phi(d, f), *mod.jac_h(d, f), mod.gamma(d, f), mod.reaction(d, f, fi[n:n + 1])]
+        for b, o in zip(batch, one):
+            np.testing.assert_array_equal(b[n], o[0])
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -621,7 +640,7 @@ def test_revolute_friction_pure_radial_load():
     assert sr.bearing_radial_load(p, np.array([0.1]))[0] == pytest.approx(5.0)
     # the prismatic guide reduces to the planar A.2 (|N - T/l| + |T/l|) for a planar load
     N, T, l = 7.0, 1.2, 0.3
-    planar = np.array([[0.0, N, 0.0, -T, 0.0, 0.0]])  # moment T about x' ... bends in y'-z
+    planar = np.array([[0.0, N, 0.0, -T, 0.0, 0.0]])  # normal force N along y', moment T in the y'-z plane
     assert sr.guide_normal_load(planar, np.array([l]))[0] == pytest.approx(abs(N - T / l) + abs(T / l))
 
 
@@ -644,6 +663,16 @@ def test_friction_refused_on_universal_and_fixed(tmp_path, jtype):
         load(path)
     msg = str(e.value)
     assert f"m.toml: joints[0].friction: a {jtype} joint has no friction model" in msg
+
+
+def test_friction_params_refused_on_a_universal_joint(tmp_path):
+    (tmp_path / "us.toml").write_text((DATA / "universal_spherical.toml").read_text())
+    (tmp_path / "s.toml").write_text(
+        '[scene]\nname = "s"\nmechanism = "us.toml"\nfriction = []\neliminate = "auto"\nstop_time = 1.0\n'
+        "[scene.friction_params.U]\nmu = 0.1\nradius = 0.01\n")
+    with pytest.raises(SceneError) as e:
+        load(tmp_path / "s.toml")
+    assert "s.toml: scene.friction_params.U: a universal joint has no friction model" in str(e.value)
 
 
 def test_friction_size_keys(tmp_path):

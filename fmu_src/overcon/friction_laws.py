@@ -26,8 +26,9 @@ from .spec import FrictionSpec
 @dataclass(frozen=True)
 class Law:
     """A friction law ``name`` (A, B, C above) with the kinetic coefficient ``mu``, the
-    regularisation velocity ``v_reg``, the joint's friction size and, for C, ``mu_static`` and
-    ``v_stribeck``."""
+    regularisation velocity ``v_reg``, the joint's friction size, for C ``mu_static`` and
+    ``v_stribeck``, and ``sizes``: every friction size of the joint type by its key (m; the
+    primary one is ``size``; empty for the planar and spherical types, which have one size)."""
 
     name: str
     mu: float
@@ -35,6 +36,11 @@ class Law:
     size: float
     mu_static: float | None = None
     v_stribeck: float | None = None
+    sizes: tuple[tuple[str, float], ...] = ()
+
+    def size_of(self, key: str) -> float:
+        """The friction size ``key`` (m)."""
+        return dict(self.sizes)[key]
 
     def _magnitude(self, speed: float) -> float:
         if self.name == "stribeck":
@@ -56,5 +62,8 @@ class Law:
         return self._magnitude(speed) / max(speed, self.v_reg)
 
 
-def make_law(spec: FrictionSpec) -> Law:
-    return Law(spec.law, spec.mu, spec.v_reg, spec.size, spec.mu_static, spec.v_stribeck)
+def make_law(spec: FrictionSpec, sizes=None) -> Law:
+    """The law of ``spec``; ``sizes``: size key -> value of a type with several sizes
+    (:meth:`overcon.joints.JointType.friction_sizes`), None for one."""
+    return Law(spec.law, spec.mu, spec.v_reg, spec.size, spec.mu_static, spec.v_stribeck,
+               tuple(sizes.items()) if sizes else ())

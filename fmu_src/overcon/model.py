@@ -49,7 +49,7 @@ import numpy as np
 from . import analysis
 from .evaluation import constraints, frames, jacobian_h
 from .friction_laws import Law, make_law
-from .joints import TYPES
+from .joints import TYPES, InitialFrames
 from .spec import BASE, VELOCITIES_PER_BODY, MechanismSpec, SceneSpec, coordinates
 
 
@@ -295,21 +295,6 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
     mass = np.array([b.mass for b in mech.bodies], float)
     inertia = np.array([b.inertia for b in mech.bodies], float).reshape(nb, -1)
     M = np.concatenate([np.concatenate([np.full(dim, mass[i]), inertia[i]]) for i in range(nb)])
-    friction_on = set(scene.friction)
-    joints = []
-    row = 0
-    for idx, js in enumerate(mech.joints):
-        jt = TYPES[js.type]
-        ne = jt.n_equations
-        law = None
-        if js.name in friction_on:
-            fspec = scene.friction_params.get(js.name, js.friction)
-            law = make_law(fspec)
-        joints.append(CompiledJoint(
-            name=js.name, type=js.type, index=idx, bi=slot[js.body_i], bj=slot[js.body_j],
-            rows=tuple(range(row, row + ne)), p=_read_only(jt.module.constants(js.params)), law=law,
-            components=jt.reaction_components + GLOBAL_COMPONENTS[kind]))
-        row += ne
     loads = []
     for ld in mech.loads:
         p = ld.params
@@ -329,14 +314,35 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
     for b, name in enumerate(names):
         for i, cname in enumerate(coord_names):
             coord_index[f"{name}.{cname}"] = b * k + i
-    joint_index = {c.name: c.index for c in joints}
-    base = Model(
-        scene=replace(scene, solver=None), kind=kind, dim=dim, nq_b=k, nh_b=VELOCITIES_PER_BODY[kind], nb=nb, body_names=names, mass=mass,
+    # the bodies alone (no joints yet): their frames at q0 give the joints' constants
+    bodies = Model(
+        scene=replace(scene, solver=None), kind=kind, dim=dim, nq_b=k, nh_b=VELOCITIES_PER_BODY[kind], nb=nb,
+        body_names=names, mass=mass,
         inertia=inertia, M=M, Minv=1.0 / M, gravity=np.asarray(mech.gravity, float),
-        joints=tuple(joints), loads=tuple(loads), q0=q0, h0=h0, m=row,
-        retained=np.arange(row), eliminated=(), elimination_mode="given",
+        joints=(), loads=tuple(loads), q0=q0, h0=h0, m=0, retained=np.arange(0), eliminated=(),
+        elimination_mode="given", friction_joints=(),
+        position_outputs=tuple((p, coord_index[p]) for p in scene.positions))
+    R0 = frames(bodies, q0).R
+    friction_on = set(scene.friction)
+    joints = []
+    row = 0
+    for idx, js in enumerate(mech.joints):
+        jt = TYPES[js.type]
+        ne = jt.n_equations
+        law = None
+        if js.name in friction_on:
+            fspec = scene.friction_params.get(js.name, js.friction)
+            law = make_law(fspec, jt.friction_sizes(fspec) if jt.friction_extra else None)
+        bi, bj = slot[js.body_i], slot[js.body_j]
+        joints.append(CompiledJoint(
+            name=js.name, type=js.type, index=idx, bi=bi, bj=bj, rows=tuple(range(row, row + ne)),
+            p=_read_only(jt.module.constants(js.params, InitialFrames(R0[bi], R0[bj]))), law=law,
+            components=jt.reaction_components + GLOBAL_COMPONENTS[kind]))
+        row += ne
+    joint_index = {c.name: c.index for c in joints}
+    base = replace(
+        bodies, joints=tuple(joints), m=row, retained=np.arange(row),
         friction_joints=tuple(c.index for c in joints if c.law is not None),
-        position_outputs=tuple((p, coord_index[p]) for p in scene.positions),
         reaction_joints=tuple(joint_index[j] for j in scene.reactions),
         friction_outputs=tuple(joint_index[j] for j in
                                (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),

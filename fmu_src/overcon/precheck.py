@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass
 
 from . import analysis
 from .evaluation import frames, jacobian_h
+from .joints import TYPES
 from .model import Model
 
 
@@ -117,7 +118,7 @@ def precheck(model: Model, source: str = "") -> PrecheckResult:
     """The pre-check of ``model`` (``source``: the file name reported)."""
     res = analyse_model(model)
     summary = analysis.to_json(res)
-    types = {c.name: c.type for c in model.joints}
+    types = {c.name: TYPES[c.type].name for c in model.joints}  # the files' type names
     joints = tuple(JointVerdict(type=types[j["name"]], **j) for j in summary.pop("joints"))
     friction = [model.joints[j].name for j in model.friction_joints]
     acting = [model.joints[j].name for j in model.friction_joints if not frictionless(model.joints[j].law)]

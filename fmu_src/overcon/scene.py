@@ -26,14 +26,18 @@ What is validated
   zeros. ``rotation`` (spatial only; a planar mechanism giving it is an error) in
   ``spec.ROTATIONS``, default ``euler_zxz``; with ``quaternion`` a body's ``q0`` is
   ``[x, y, z, e0, e1, e2, e3]`` whose quaternion norm must be within ``spec.QUATERNION_NORM_TOL``
-  of 1 (refused with the norm otherwise) and is stored normalised. Joints: names identifiers and unique; ``type`` in ``overcon.joints.TYPES`` and allowed for
-  the mechanism kind; ``body_i``/``body_j`` a body or ``base`` and different; the type's required
+  of 1 (refused with the norm otherwise) and is stored normalised. Joints: names identifiers and
+  unique; ``type`` a joint type name allowed for the mechanism kind (resolved to its key in
+  ``overcon.joints.TYPES`` by :func:`overcon.joints.resolve`: ``revolute`` is the planar or the
+  spatial revolute joint); ``body_i``/``body_j`` a body or ``base`` and different; the type's required
   and optional fields (``overcon.joints.TYPES``) with their shapes (shape ``dir``, e.g.
   translational ``v``: non-zero); an ``angle`` field (translational ``psi``) may be given in
   degrees as ``<field>_deg`` (not both; stored in radians); vectors (``q0``, ``h0``) are in radians.
   Joint friction tables: ``law`` in ``spec.FRICTION_LAWS`` (default ``regularised``), ``mu``,
   ``v_reg`` (default 1e-3), ``mu_static``, ``v_stribeck`` by :mod:`overcon.params`, the type's size key (``length`` for translational, ``radius`` for
-  revolute/spherical; stored as ``FrictionSpec.size``) > 0 and no other size key; ``stribeck``
+  revolute/spherical; stored as ``FrictionSpec.size``) > 0 and no other size key (spatial
+  revolute, prismatic, cylindrical: their further size keys ``friction_extra``, stored as
+  ``FrictionSpec.extra``; universal and fixed joints take no friction table); ``stribeck``
   needs ``mu_static`` (>= ``mu``, :func:`overcon.params.check_mu_static`) and ``v_stribeck``,
   which other laws do not take. Loads:
   ``type`` in ``spec.LOAD_FIELDS`` with its fields; force/torque act on a moving body; a spring
@@ -80,6 +84,8 @@ from pathlib import Path
 
 from . import params
 from .joints import TYPES as JOINT_TYPES
+from .joints import names as joint_type_names
+from .joints import resolve as resolve_joint_type
 from . import spec as S
 from .spec import (
     BASE,
@@ -357,17 +363,25 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
     """Validate a friction table, merged onto ``base`` (None: mu and the size key required,
     unless ``require`` is false: the mechanism could not be read, so its table is unknown).
 
-    ``jtype`` None (unknown joint type): either size key is accepted and none is required."""
+    ``jtype`` None (unknown joint type): either size key is accepted and none is required.
+    ``jtype`` is a key of :data:`overcon.joints.TYPES`: its friction size keys are the primary
+    one (stored as ``size``) and the type's ``friction_extra`` (stored in ``extra`` when given;
+    required unless they have a default). A type without friction is refused here, naming the
+    table."""
+    if jtype is not None and JOINT_TYPES[jtype].friction_size is None:
+        ctx.add(prefix, f"a {JOINT_TYPES[jtype].name} joint has no friction model (joint friction: "
+                        f"{', '.join(n for n in joint_type_names() if _has_friction(n))} joints)")
+        return None
     if jtype is None:
         size_keys = ("length", "radius")
     else:
-        size_keys = (JOINT_TYPES[jtype].friction_size[0],)
+        size_keys = JOINT_TYPES[jtype].friction_keys
     allowed = _FRICTION_KEYS + size_keys
     hint = {}
     if jtype is not None:
         for other in ("length", "radius"):
             if other not in size_keys:
-                hint[other] = (f"unknown key: the friction size of a {jtype} joint is "
+                hint[other] = (f"unknown key: the friction size of a {JOINT_TYPES[jtype].name} joint is "
                                f"'{size_keys[0]}', not '{other}'")
     _unknown_keys(ctx, table, prefix, allowed, hint)
 
@@ -387,24 +401,32 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
     for key in params.FRICTION_FIELDS:
         take(key, lambda v, f, key=key: _param(ctx, v, f, key))
     size = None
+    extra = {}
     for key in size_keys:
         if key in table:
             val = _num(ctx, table[key], _join(prefix, key), _POSITIVE)
             if val is None:
                 ok = False
-            else:
+            elif jtype is None or key == size_keys[0]:
                 size = val
+            else:
+                extra[key] = val
     if base is None and require:
         if "mu" not in table:
             ctx.add(_join(prefix, "mu"), "missing required field")
             ok = False
-        if jtype is not None and size_keys[0] not in table:
-            ctx.add(_join(prefix, size_keys[0]), "missing required field")
-            ok = False
+        required_sizes = () if jtype is None else (size_keys[0], *(
+            key for key, (_text, default) in JOINT_TYPES[jtype].friction_extra.items() if default is None))
+        for key in required_sizes:
+            if key not in table:
+                ctx.add(_join(prefix, key), "missing required field")
+                ok = False
     if not ok:
         return None
     if size is not None:
         given["size"] = size
+    if extra:
+        given["extra"] = tuple({**dict(base.extra if base is not None else ()), **extra}.items())
     if base is None:
         if "size" not in given:  # unknown joint type: cannot build a spec
             return None
@@ -427,6 +449,11 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
                 ctx.add(_join(prefix, key), f"only used by law 'stribeck' (law is '{result.law}')")
                 ok = False
     return result if ok else None
+
+
+def _has_friction(name: str) -> bool:
+    """Whether some joint type called ``name`` has a friction model."""
+    return any(jt.friction_size is not None for jt in JOINT_TYPES.values() if jt.name == name)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -555,12 +582,15 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
         ok = True
         v = _get(ctx, jt, "type", p)
         if v is not _MISSING:
-            jtype = _choice(ctx, v, f"{p}.type", tuple(JOINT_TYPES))
-            if jtype is not None and kind is not None and JOINT_TYPES[jtype].kind != kind:
-                allowed = [t for t, d in JOINT_TYPES.items() if d.kind == kind]
-                ctx.add(f"{p}.type", f"joint type '{jtype}' is not allowed in a {kind} mechanism "
-                                     f"(allowed: {', '.join(allowed)})")
-                ok = False
+            tname = _choice(ctx, v, f"{p}.type", joint_type_names())
+            if tname is not None:
+                # kind unknown (reported): check the fields of the first type of that name
+                jtype = resolve_joint_type(kind, tname) if kind is not None else next(
+                    key for key, d in JOINT_TYPES.items() if d.name == tname)
+                if jtype is None:
+                    ctx.add(f"{p}.type", f"joint type '{tname}' is not allowed in a {kind} mechanism "
+                                         f"(allowed: {', '.join(joint_type_names(kind))})")
+                    ok = False
         # a type not allowed for the kind is reported once; its fields are then not checked
         fields = JOINT_TYPES[jtype] if jtype and ok else None
         if fields is not None:

@@ -98,7 +98,9 @@ class FrictionSpec:
     """Friction parameters of one joint (paper App. A).
 
     ``size`` is the joint's geometric friction size: translational slider length l, revolute shaft
-    radius a, spherical ball radius rho (all m). ``v_reg`` is the regularisation velocity of law B
+    radius a, spherical ball radius rho, the spatial types' first size key of
+    :data:`overcon.joints.TYPES` (all m); ``extra`` the further size keys given (key, value in m),
+    e.g. a spatial revolute joint's ``length`` (defaults are filled in at compile time). ``v_reg`` is the regularisation velocity of law B
     (m/s for sliding, rad/s for the revolute relative angular velocity). ``mu_static`` and
     ``v_stribeck`` are used by law C only.
     """
@@ -109,6 +111,7 @@ class FrictionSpec:
     v_reg: float = 1e-3
     mu_static: float | None = None
     v_stribeck: float | None = None
+    extra: tuple[tuple[str, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -127,8 +130,10 @@ class BodySpec:
 
 @dataclass(frozen=True)
 class JointSpec:
-    """A joint between body i and body j (either may be ``base``). ``params`` holds the fields of
-    ``overcon.joints.TYPES[type]`` as tuples/floats; ``friction`` the parameters used when a scene switches
+    """A joint between body i and body j (either may be ``base``). ``type`` is the key in
+    ``overcon.joints.TYPES`` (the file's name resolved for the mechanism kind:
+    :func:`overcon.joints.resolve`). ``params`` holds the fields of
+    ``overcon.joints.TYPES[type]`` as tuples/floats (None for an optional field without default); ``friction`` the parameters used when a scene switches
     friction on for this joint (None: the file gives none)."""
 
     name: str

@@ -138,8 +138,8 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool) 
         bi = body_of.get(c.bi, "base")
         units = dict(TYPES[c.type].reaction)
         for comp in c.components:
-            frame = "global frame" if comp.endswith("0") else f"auxiliary frame of the {c.type} joint"
-            what = "moment" if comp == "T" else "force"
+            frame = "global frame" if comp.endswith("0") else f"auxiliary frame of the {TYPES[c.type].name} joint"
+            what = "moment" if comp.startswith("T") else "force"
             out.append(Var(f"{c.name}.{comp}", "Real", "output", "continuous", "calculated",
                            f"reaction {what} of joint {c.name} on body {bi}, component {comp}, {frame}",
                            unit=units.get(comp, "N"), key=("output", k)))

@@ -7,7 +7,8 @@ batch of one (there is no separate single-joint form; tests/reference_joints.py 
 per-joint reference for the tests). A module offers, with ``f`` the evaluation's
 :class:`overcon.evaluation.Frames` and ``d`` the stacked constants of k joints:
 
-- ``constants(params) -> dict``: one joint's constant arrays from the file's fields (compile);
+- ``constants(params, init) -> dict``: one joint's constant arrays from the file's fields and
+  ``init`` (:class:`InitialFrames`: the rotation matrices of its bodies at q0) (compile);
 - ``stack(joints) -> d``: the constants of k compiled joints stacked (body slots ``bi``/``bj``,
   -1 = base; friction laws ``laws``); done once at compile time (``Model.plan``);
 - ``phi(d, f) -> (k, n_eq)``: constraint equations Phi_X;
@@ -17,6 +18,8 @@ per-joint reference for the tests). A module offers, with ``f`` the evaluation's
 - ``reaction(d, f, fi) -> (k, n_components)``: the physical reaction in the joint's auxiliary
   frame, ``-A_i fi`` (Eq. 19; A.1, A.5, A.10), given fi = (J_X)_i^T lam_X (k, n_coord), the
   left-hand-side generalized reaction on body i; the components are the table's ``reaction``;
+Types without friction (``friction_size`` None) need not offer the three friction functions:
+
 - ``friction_setup(d, f) -> ctx``: what friction needs from the frames (once per evaluation);
 - ``friction(d, ctx, lam) -> (Qi, Qj)``, each (k, n_coord): generalized Coulomb friction forces
   on bodies i and j (Eq. 20-22) given the joints' multipliers lam (k, n_eq) (once per friction
@@ -34,7 +37,16 @@ from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Mapping
 
-from . import revolute, spherical, translational
+from . import cylindrical, fixed, prismatic, revolute, spatial_revolute, spherical, translational, universal
+
+
+@dataclass(frozen=True)
+class InitialFrames:
+    """The rotation matrices (body -> global; 2x2 planar, 3x3 spatial) of a joint's body i and
+    body j at the initial configuration q0, given to the module's ``constants`` (the base: I)."""
+
+    R_i: object
+    R_j: object
 
 
 @dataclass(frozen=True)
@@ -46,24 +58,47 @@ class JointType:
     description, default). Shape codes: ``"vec"`` a vector of the mechanism's dimension,
     ``"dir"`` the same but not the zero vector, ``"rot"`` a rotation quantity (planar scalar,
     spatial 3-vector), ``"scalar"``, ``"angle"`` (a scalar angle in radians; the file may give it
-    in degrees as ``<field>_deg``). ``friction_size``: (key of the friction table, description).
-    ``reaction``: (component, unit) of the reported reaction in the auxiliary frame.
+    in degrees as ``<field>_deg``). ``name``: the type's name in files and in every message and
+    output (several types share a name, one per mechanism kind: :func:`resolve`).
+    ``friction_size``: (key of the friction table, description) of the size stored as
+    ``FrictionSpec.size``, None for a type without friction (refused by the loader);
+    ``friction_extra``: further size keys, key -> (description, default), default None for a
+    required key or the name of the key whose value it takes (stored as ``FrictionSpec.extra``
+    when given). ``reaction``: (component, unit) of the reported reaction in the auxiliary frame.
     ``sliding_unit``: unit of the friction law's velocity (``v_reg``, ``v_stribeck``)."""
 
     module: ModuleType
     kind: str
+    name: str
     n_equations: int
     required: Mapping[str, tuple[str, str]]
-    friction_size: tuple[str, str]
+    friction_size: tuple[str, str] | None
     reaction: tuple[tuple[str, str], ...]
     sliding_unit: str
     friction_unit: str
     friction_text: str
     optional: Mapping[str, tuple[str, str, object]] = field(default_factory=dict)
+    friction_extra: Mapping[str, tuple[str, str | None]] = field(default_factory=dict)
 
     @property
     def reaction_components(self) -> tuple[str, ...]:
         return tuple(name for name, _ in self.reaction)
+
+    @property
+    def friction_keys(self) -> tuple[str, ...]:
+        """Every friction size key of the type (the primary one first); () without friction."""
+        if self.friction_size is None:
+            return ()
+        return (self.friction_size[0], *self.friction_extra)
+
+    def friction_sizes(self, spec) -> dict[str, float]:
+        """Size key -> value (m) of a :class:`overcon.spec.FrictionSpec` of this type, defaults
+        filled in."""
+        sizes = {self.friction_size[0]: spec.size, **dict(spec.extra)}
+        for key, (_text, default) in self.friction_extra.items():
+            if key not in sizes:
+                sizes[key] = sizes[default]
+        return sizes
 
 
 def _point_fields(what: str) -> dict:
@@ -74,9 +109,23 @@ def _point_fields(what: str) -> dict:
 
 _PLANAR_REACTION = (("Fx", "N"), ("Fy", "N"), ("T", "N.m"))  # forces, moment about the joint point
 
+
+def _axis_fields(what: str) -> dict:
+    """Required fields of a spatial axis joint (:mod:`overcon.joints.spatial_rows`)."""
+    return {**_point_fields("joint point P"),
+            "axis_i": ("dir", f"{what} on body i, in body i frame (normalised)"),
+            "axis_j": ("dir", f"{what} on body j, in body j frame (normalised)")}
+
+
+def _spatial_reaction(*components: str) -> tuple[tuple[str, str], ...]:
+    return tuple((c, "N" if c.startswith("F") else "N.m") for c in components)
+
+
+_GUIDE_SIZES = {"radius": ("torsion arm r of the guide (m)", None)}
+
 TYPES: Mapping[str, JointType] = {
     "translational": JointType(
-        module=translational, kind="planar", n_equations=2, reaction=_PLANAR_REACTION,
+        module=translational, kind="planar", name="translational", n_equations=2, reaction=_PLANAR_REACTION,
         required={
             "s_A": ("vec", "point A on body i, in body i frame (m)"),
             "s_B": ("vec", "point B on body j, in body j frame (m)"),
@@ -87,13 +136,60 @@ TYPES: Mapping[str, JointType] = {
         sliding_unit="m/s", friction_unit="N",
         friction_text="force along the guide x' (positive along +x', the way body j slides relative to body i)"),
     "revolute": JointType(
-        module=revolute, kind="planar", n_equations=2, reaction=_PLANAR_REACTION,
+        module=revolute, kind="planar", name="revolute", n_equations=2, reaction=_PLANAR_REACTION,
         required=_point_fields("joint point P"), friction_size=("radius", "shaft radius a (m)"),
         sliding_unit="rad/s", friction_unit="N.m",
         friction_text="torque (counter-clockwise positive, the way body j turns relative to body i)"),
     "spherical": JointType(
-        module=spherical, kind="spatial", n_equations=3, reaction=(("Fx", "N"), ("Fy", "N"), ("Fz", "N")),
+        module=spherical, kind="spatial", name="spherical", n_equations=3, reaction=(("Fx", "N"), ("Fy", "N"), ("Fz", "N")),
         required=_point_fields("ball centre P"), friction_size=("radius", "ball radius rho (m)"),
         sliding_unit="m/s", friction_unit="N", friction_text="force magnitude at the contact point (>= 0)"),
+    "spatial_revolute": JointType(
+        module=spatial_revolute, kind="spatial", name="revolute", n_equations=5,
+        reaction=_spatial_reaction("Fx", "Fy", "Fz", "Tx", "Ty"), required=_axis_fields("joint axis"),
+        friction_size=("radius", "pin radius a (m)"),
+        friction_extra={"length": ("bearing length L (m)", None),
+                        "collar_radius": ("collar radius c for the axial load (m); default: radius", "radius")},
+        sliding_unit="rad/s", friction_unit="N.m",
+        friction_text="torque about the axis (positive the way body j turns relative to body i)"),
+    "spatial_prismatic": JointType(
+        module=prismatic, kind="spatial", name="prismatic", n_equations=5,
+        reaction=_spatial_reaction("Fx", "Fy", "Tx", "Ty", "Tz"), required=_axis_fields("slide axis"),
+        friction_size=("length", "slider length l between contact points A and B (m)"),
+        friction_extra=_GUIDE_SIZES, sliding_unit="m/s", friction_unit="N",
+        friction_text="force along the axis (positive the way body j slides relative to body i)"),
+    "spatial_cylindrical": JointType(
+        module=cylindrical, kind="spatial", name="cylindrical", n_equations=4,
+        reaction=_spatial_reaction("Fx", "Fy", "Tx", "Ty"), required=_axis_fields("joint axis"),
+        friction_size=("length", "guide length l between contact points A and B (m)"),
+        friction_extra={"radius": ("shaft radius a (m)", None)}, sliding_unit="m/s", friction_unit="N",
+        friction_text="force magnitude at the contact surface (>= 0)"),
+    "spatial_universal": JointType(
+        module=universal, kind="spatial", name="universal", n_equations=4,
+        reaction=_spatial_reaction("Fx", "Fy", "Fz", "Tx", "Ty"), required=_axis_fields("cross axis"),
+        friction_size=None, sliding_unit="", friction_unit="", friction_text=""),
+    "spatial_fixed": JointType(
+        module=fixed, kind="spatial", name="fixed", n_equations=6,
+        reaction=_spatial_reaction("Fx", "Fy", "Fz", "Tx", "Ty", "Tz"), required=_point_fields("joint point P"),
+        optional={"axis_i": ("dir", "axis of the reaction frame on body i, in body i frame; "
+                                    "default [0, 0, 1]", None),
+                  "axis_j": ("dir", "the same axis on body j, in body j frame (parallel to axis_i "
+                                    "at q0); default: the image of axis_i at q0", None)},
+        friction_size=None, sliding_unit="", friction_unit="", friction_text=""),
 }
-"""Joint type name -> its facts and producer module: the one place a joint type is declared."""
+"""Joint type key -> its facts and producer module: the one place a joint type is declared. The
+key is internal (CompiledJoint.type, JointSpec.type); files and outputs use ``name``, resolved per
+mechanism kind by :func:`resolve`. The planar and spherical types' keys equal their names."""
+
+
+def resolve(kind: str, name: str) -> str | None:
+    """The key in :data:`TYPES` of the joint type called ``name`` in a ``kind`` mechanism, or None."""
+    for key, jt in TYPES.items():
+        if jt.kind == kind and jt.name == name:
+            return key
+    return None
+
+
+def names(kind: str | None = None) -> tuple[str, ...]:
+    """The file names of the joint types (of a mechanism kind, or of all), in table order."""
+    return tuple(dict.fromkeys(jt.name for jt in TYPES.values() if kind is None or jt.kind == kind))

@@ -8,8 +8,9 @@ import numpy as np
 from ..kinematics import matvec
 
 
-def constants(params) -> dict:
-    """One joint's constants: the joint point in body i and in body j axes."""
+def constants(params, init=None) -> dict:
+    """One joint's constants: the joint point in body i and in body j axes (``init``, the
+    initial frames, is not needed)."""
     return {"s_i": np.asarray(params["s_i"], float), "s_j": np.asarray(params["s_j"], float)}
 
 

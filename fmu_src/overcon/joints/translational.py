@@ -19,8 +19,9 @@ import numpy as np
 from ..kinematics import OMEGA, matvec, rot2, rowdot
 
 
-def constants(params) -> dict:
-    """One joint's constants: s_A, s_B, v, psi and the auxiliary frame B_i (in body i axes)."""
+def constants(params, init=None) -> dict:
+    """One joint's constants: s_A, s_B, v, psi and the auxiliary frame B_i (in body i axes)
+    (``init``, the initial frames, is not needed: psi fixes the relative angle)."""
     v = np.asarray(params["v"], float)
     psi = float(params.get("psi", 0.0))
     axis_j = OMEGA.T @ v / np.linalg.norm(v)

@@ -1,0 +1,728 @@
+"""Spatial revolute, prismatic, cylindrical, universal and fixed joints: derivatives by finite
+differences, row order, reactions, initial consistency, simulations, the pre-check on the test
+mechanisms of tests/data/spatial, friction (dissipation, symmetry, hand computations) and the FMU
+description."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from overcon import cli, evaluation as ev
+from overcon.evaluation import Frames
+from overcon.friction_laws import make_law
+from overcon.joints import TYPES, names, resolve
+from overcon.joints.spatial_rows import completion
+from overcon.kinematics import euler_R
+from overcon.model import InconsistentInitialState, compile_model
+from overcon.scene import SceneError, as_scene, load
+from overcon.simulate import run
+from overcon.spec import FrictionSpec
+
+DATA = Path(__file__).parent / "data" / "spatial"
+SEEDS = [0, 1, 2]
+AXIS_TYPES = ["revolute", "prismatic", "cylindrical", "universal", "fixed"]
+FRICTION_TYPES = ["revolute", "prismatic", "cylindrical"]
+N_ROWS = {"revolute": 5, "prismatic": 5, "cylindrical": 4, "universal": 4, "fixed": 6, "spherical": 3}
+FRICTION_TABLE = {"revolute": "radius = 0.02\nlength = 0.1", "prismatic": "length = 0.3\nradius = 0.05",
+                  "cylindrical": "length = 0.3\nradius = 0.05"}
+
+
+# ----------------------------------------------------------------------------- helpers
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(repr(float(x)) for x in np.atleast_1d(v)) + "]"
+
+
+def rodrigues(w: np.ndarray) -> np.ndarray:
+    """exp(skew(w)) (3x3)."""
+    th = float(np.linalg.norm(w))
+    if th == 0.0:
+        return np.eye(3)
+    k = w / th
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
+
+
+def random_rotation(rng) -> np.ndarray:
+    return euler_R((rng.uniform(-3, 3), rng.uniform(0.4, 2.7), rng.uniform(-3, 3)))
+
+
+def make_frames(r, R, v, w) -> Frames:
+    """Frames of the moving bodies (arrays (nb, ...)) with the base appended as slot -1."""
+    nb = len(r)
+    return Frames(r=np.vstack([r, np.zeros((1, 3))]), R=np.concatenate([R, np.eye(3)[None]]),
+                  v=np.vstack([v, np.zeros((1, 3))]), w=np.vstack([w, np.zeros((1, 3))]),
+                  angles=np.zeros((nb + 1, 3)))
+
+
+def moved(r, R, v, w, t) -> Frames:
+    """Frames after moving for a time t with constant h = (v, w): r + t v, R exp(t skew(w))."""
+    Rt = np.array([Rk @ rodrigues(t * wk) for Rk, wk in zip(R, w)])
+    return make_frames(r + t * v, Rt, v, w)
+
+
+def joint_lines(name, jtype, bi, bj, s_i, s_j, a_i=None, a_j=None, friction=None) -> list[str]:
+    lines = ["[[joints]]", f'name = "{name}"', f'type = "{jtype}"', f'body_i = "{bi}"', f'body_j = "{bj}"',
+             f"s_i = {_fmt(s_i)}", f"s_j = {_fmt(s_j)}"]
+    if a_i is not None:
+        lines += [f"axis_i = {_fmt(a_i)}", f"axis_j = {_fmt(a_j)}"]
+    if friction is not None:
+        lines += ["[joints.friction]", "mu = 0.3", friction]
+    return lines + [""]
+
+
+def mechanism_text(name, bodies, joints) -> str:
+    """A spatial mechanism: ``bodies`` [(name, q0)], ``joints`` lists of lines."""
+    lines = ["[mechanism]", f'name = "{name}"', 'kind = "spatial"', "gravity = [0.0, 0.0, -9.81]", ""]
+    for bname, q0 in bodies:
+        lines += ["[[bodies]]", f'name = "{bname}"', "mass = 1.5", "inertia = [0.3, 0.4, 0.5]",
+                  f"q0 = {_fmt(q0)}", ""]
+    for j in joints:
+        lines += j
+    return "\n".join(lines)
+
+
+def random_q0(rng):
+    return np.r_[rng.uniform(-1, 1, 3), rng.uniform(-3, 3), rng.uniform(0.4, 2.7), rng.uniform(-3, 3)]
+
+
+def write_single_type(tmp: Path, jtype: str, seed: int) -> Path:
+    """Two bodies and three joints of one type, (b1, base), (b1, b2), (base, b2), with random
+    points and axes and random q0 (not assembled: derivatives only)."""
+    rng = np.random.default_rng(seed)
+    joints = []
+    for k, (bi, bj) in enumerate((("b1", "base"), ("b1", "b2"), ("base", "b2"))):
+        axes = (rng.normal(size=3), rng.normal(size=3))
+        joints.append(joint_lines(f"J{k}", jtype, bi, bj, rng.uniform(-1, 1, 3), rng.uniform(-1, 1, 3), *axes))
+    path = tmp / f"single_{jtype}_{seed}.toml"
+    path.write_text(mechanism_text(f"single_{jtype}", [("b1", random_q0(rng)), ("b2", random_q0(rng))], joints))
+    return path
+
+
+@pytest.fixture(scope="module")
+def single(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("spatial_single")
+    cache = {}
+
+    def get(jtype, seed):
+        if (jtype, seed) not in cache:
+            cache[jtype, seed] = compile_model(as_scene(load(write_single_type(tmp, jtype, seed))),
+                                               check_initial=False)
+        return cache[jtype, seed]
+
+    return get
+
+
+def random_state(rng, nb=2):
+    r = rng.uniform(-1, 1, (nb, 3))
+    R = np.array([random_rotation(rng) for _ in range(nb)])
+    return r, R, rng.normal(size=(nb, 3)), rng.normal(size=(nb, 3))
+
+
+# ----------------------------------------------------------------------------- type resolution
+
+def test_type_names_resolve_per_mechanism_kind():
+    assert resolve("planar", "revolute") == "revolute"
+    assert resolve("spatial", "revolute") == "spatial_revolute"
+    assert resolve("planar", "prismatic") is None
+    assert resolve("spatial", "translational") is None
+    assert names("spatial") == ("spherical", "revolute", "prismatic", "cylindrical", "universal", "fixed")
+    assert names("planar") == ("translational", "revolute")
+    for key, jt in TYPES.items():
+        assert resolve(jt.kind, jt.name) == key
+        if jt.kind == "spatial":
+            assert jt.n_equations == N_ROWS[jt.name]
+
+
+def test_type_not_allowed_names_the_field(tmp_path):
+    text = mechanism_text("m", [("b1", [0, 0, 0, 0, 1, 0])],
+                          [joint_lines("J", "translational", "b1", "base", [0, 0, 0], [0, 0, 0])])
+    (tmp_path / "m.toml").write_text(text)
+    with pytest.raises(SceneError) as e:
+        load(tmp_path / "m.toml")
+    msg = str(e.value)
+    assert "joints[0].type: joint type 'translational' is not allowed in a spatial mechanism" in msg
+    assert "(allowed: spherical, revolute, prismatic, cylindrical, universal, fixed)" in msg
+
+
+# ----------------------------------------------------------------------------- derivatives
+
+def _fd_jacobian(model, r, R, v, w, eps=1e-4):
+    """Phi_h h by central differences of Phi along the motion (4th order)."""
+    def phi(t):
+        return ev.constraints(model, moved(r, R, v, w, t))
+    return (-phi(2 * eps) + 8 * phi(eps) - 8 * phi(-eps) + phi(-2 * eps)) / (12 * eps)
+
+
+def _fd_second(model, r, R, v, w, eps=1e-3):
+    def phi(t):
+        return ev.constraints(model, moved(r, R, v, w, t))
+    return (-phi(2 * eps) + 16 * phi(eps) - 30 * phi(0.0) + 16 * phi(-eps) - phi(-2 * eps)) / (12 * eps ** 2)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("jtype", AXIS_TYPES)
+def test_jacobian_and_gamma_by_finite_differences(single, jtype, seed):
+    model = single(jtype, seed)
+    assert [TYPES[c.type].name for c in model.joints] == [jtype] * 3
+    assert model.m == 3 * N_ROWS[jtype]
+    rng = np.random.default_rng(100 + seed)
+    for _ in range(3):
+        r, R, v, w = random_state(rng)
+        f = make_frames(r, R, v, w)
+        h = np.concatenate([np.r_[v[b], w[b]] for b in range(2)])
+        J = ev.jacobian_h(model, f)
+        np.testing.assert_allclose(J @ h, _fd_jacobian(model, r, R, v, w), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ev.gamma(model, f), -_fd_second(model, r, R, v, w), rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("jtype", AXIS_TYPES)
+def test_batch_equals_single_joints_bit_for_bit(single, jtype):
+    """A joint gets the same numbers in its type's batch as alone (Model.plan.single)."""
+    model = single(jtype, 0)
+    rng = np.random.default_rng(7)
+    f = make_frames(*random_state(rng))
+    (group,) = model.plan.groups
+    mod = group.module
+    fi = rng.normal(size=(3, 6))
+    batch = [mod.phi(group.data, f), *mod.jac_h(group.data, f), mod.gamma(group.data, f),
+             mod.reaction(group.data, f, fi)]
+    for n, c in enumerate(model.joints):
+        d = model.plan.single[c.index]
+        one = [mod.phi(d, f), *mod.jac_h(d, f), mod.gamma(d, f), mod.reaction(d, f, fi[n:n + 1])]
+        for b, o in zip(batch, one):
+            np.testing.assert_array_equal(b[n], o[0])
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_rows_in_the_contract_order(tmp_path, seed):
+    """One joint of every type between the same bodies at the same points and axes: the rows
+    shared by two types are equal (revolute = spherical + 2 axis rows; cylindrical = 2 point
+    rows + the same 2 axis rows; prismatic = cylindrical + lock; fixed = revolute + the same
+    lock; universal = spherical + 1 row)."""
+    rng = np.random.default_rng(200 + seed)
+    s_i, s_j, a_i, a_j = rng.uniform(-1, 1, 3), rng.uniform(-1, 1, 3), rng.normal(size=3), rng.normal(size=3)
+    joints = [joint_lines("S", "spherical", "b1", "b2", s_i, s_j)]
+    joints += [joint_lines(t[0].upper(), t, "b1", "b2", s_i, s_j, a_i, a_j) for t in AXIS_TYPES]
+    (tmp_path / "all.toml").write_text(mechanism_text("all", [("b1", random_q0(rng)), ("b2", random_q0(rng))], joints))
+    model = compile_model(as_scene(load(tmp_path / "all.toml")), check_initial=False)
+    rows = {TYPES[c.type].name: list(c.rows) for c in model.joints}
+    assert {k: len(v) for k, v in rows.items()} == N_ROWS
+    for _ in range(3):
+        r, R, v, w = random_state(rng)
+        f = make_frames(r, R, v, w)
+        phi, J, g = ev.constraints(model, f), ev.jacobian_h(model, f), ev.gamma(model, f)
+        for x in (phi, J, g):
+            sel = {k: x[v] for k, v in rows.items()}
+            np.testing.assert_array_equal(sel["revolute"][:3], sel["spherical"])
+            np.testing.assert_array_equal(sel["universal"][:3], sel["spherical"])
+            np.testing.assert_array_equal(sel["cylindrical"][2:], sel["revolute"][3:])
+            np.testing.assert_array_equal(sel["prismatic"][:4], sel["cylindrical"])
+            np.testing.assert_array_equal(sel["fixed"][:5], sel["revolute"])
+            np.testing.assert_array_equal(sel["fixed"][5], sel["prismatic"][4])
+        # the formulas of the rows, written out
+        Ri, Rj = R[0], R[1]
+        ai, aj = a_i / np.linalg.norm(a_i), a_j / np.linalg.norm(a_j)
+        b1, b2 = completion(aj)
+        d = r[0] + Ri @ s_i - r[1] - Rj @ s_j
+        np.testing.assert_allclose(phi[rows["revolute"][3:]], [(Ri @ ai) @ (Rj @ b1), (Ri @ ai) @ (Rj @ b2)],
+                                   atol=1e-14)
+        np.testing.assert_allclose(phi[rows["cylindrical"][:2]], [d @ (Rj @ b1), d @ (Rj @ b2)], atol=1e-14)
+        np.testing.assert_allclose(phi[rows["universal"][3]], (Ri @ ai) @ (Rj @ aj), atol=1e-14)
+        R0 = [euler_R(model.q0[3:6]), euler_R(model.q0[9:12])]
+        c_i = R0[0].T @ R0[1] @ b1
+        np.testing.assert_allclose(phi[rows["prismatic"][4]], (Ri @ c_i) @ (Rj @ b2), atol=1e-14)
+
+
+def test_completion_rule():
+    b1, b2 = completion(np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_array_equal(b1, [1.0, 0.0, 0.0])  # e1 and e2 tie: the first
+    np.testing.assert_array_equal(b2, [0.0, 1.0, 0.0])
+    b1, _ = completion(np.array([1.0, 0.0, 0.0]))
+    np.testing.assert_array_equal(b1, [0.0, 1.0, 0.0])
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a = rng.normal(size=3)
+        a /= np.linalg.norm(a)
+        b1, b2 = completion(a)
+        B = np.column_stack([b1, b2, a])
+        np.testing.assert_allclose(B.T @ B, np.eye(3), atol=1e-15)
+        assert np.linalg.det(B) == pytest.approx(1.0)
+
+
+# ----------------------------------------------------------------------------- reactions
+
+def assembled_pair(rng, jtype, slide=True):
+    """(s_i, s_j, a_i, a_j, [q0 of b1, q0 of b2], u): bodies b1, b2 placed so that a joint of
+    ``jtype`` with these constants holds; cylindrical and prismatic joints slid along the axis
+    (P_i != P_j) if ``slide``."""
+    s_i, s_j = rng.uniform(-1, 1, 3), rng.uniform(-1, 1, 3)
+    a_i = rng.normal(size=3)
+    a_i /= np.linalg.norm(a_i)
+    R1 = random_rotation(rng)
+    C = random_rotation(rng)  # body i axes -> body j axes at q0
+    a_j = C @ a_i
+    if jtype == "universal":
+        a_j = np.cross(a_j, rng.normal(size=3))
+        a_j /= np.linalg.norm(a_j)
+    R2 = R1 @ C.T
+    P = rng.uniform(-1, 1, 3)
+    slide = rng.uniform(-0.5, 0.5) if slide and jtype in ("cylindrical", "prismatic") else 0.0
+    r1 = P - R1 @ s_i
+    r2 = P - slide * (R1 @ a_i) - R2 @ s_j
+    q = [np.r_[r1, _euler_of(R1)], np.r_[r2, _euler_of(R2)]]
+    return s_i, s_j, a_i, a_j, q, (R1 @ a_i)
+
+
+def _euler_of(R):
+    b = math.acos(R[2, 2])
+    return [math.atan2(R[0, 2], -R[1, 2]), b, math.atan2(R[2, 0], R[2, 1])]
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("jtype", AXIS_TYPES)
+def test_reaction_components(tmp_path, jtype, seed):
+    """At an assembled configuration: the reported components equal a direct computation from
+    -(J_X)_i^T lam (force and moment about P_i in the frame z = axis_i); the left-out ones vanish."""
+    rng = np.random.default_rng(300 + seed)
+    s_i, s_j, a_i, a_j, q, u = assembled_pair(rng, jtype)
+    text = mechanism_text("pair", [("b1", q[0]), ("b2", q[1])],
+                          [joint_lines("X", jtype, "b1", "b2", s_i, s_j, a_i, a_j)])
+    (tmp_path / "pair.toml").write_text(text)
+    model = compile_model(as_scene(load(tmp_path / "pair.toml")))  # assembled: q0 accepted
+    c = model.joints[0]
+    comps = TYPES[c.type].reaction_components
+    f = ev.frames(model, model.q0, model.h0)
+    J = ev.jacobian_h(model, f)
+    R1 = f.R[0]
+    x, y = completion(a_i)
+    E = np.column_stack([x, y, a_i])
+    for _ in range(5):
+        lam = rng.normal(size=model.m) * 10
+        fi = J[:, :6].T @ lam
+        F, T = -fi[:3], -fi[3:]
+        F_body = R1.T @ F
+        full = dict(zip(("Fx", "Fy", "Fz", "Tx", "Ty", "Tz"), np.r_[E.T @ F_body, E.T @ (T - np.cross(s_i, F_body))]))
+        out = ev.physical_reaction(model, c, f, lam)
+        assert len(out) == len(comps) + 3
+        np.testing.assert_allclose(out[:len(comps)], [full[k] for k in comps], atol=1e-12)
+        np.testing.assert_allclose(out[len(comps):], F, atol=1e-12)
+        left_out = [k for k in full if k not in comps]
+        scale = max(1.0, np.abs(lam).max())
+        assert all(abs(full[k]) <= 1e-12 * scale for k in left_out), (left_out, full)
+        assert all(abs(full[k]) > 1e-6 for k in comps)  # none of the reported is zero by construction
+
+
+def test_fixed_joint_axes_optional(tmp_path):
+    rng = np.random.default_rng(11)
+    s_i, s_j, a_i, a_j, q, _ = assembled_pair(rng, "fixed")
+    (tmp_path / "f.toml").write_text(mechanism_text("f", [("b1", q[0]), ("b2", q[1])],
+                                                    [joint_lines("X", "fixed", "b1", "b2", s_i, s_j)]))
+    model = compile_model(as_scene(load(tmp_path / "f.toml")))
+    p = model.joints[0].p
+    np.testing.assert_array_equal(p["a_i"], [0.0, 0.0, 1.0])
+    np.testing.assert_array_equal(p["E"], np.eye(3))  # the joint frame is body i's axes
+    f = ev.frames(model, model.q0)
+    np.testing.assert_allclose(f.R[0] @ p["a_i"], f.R[1] @ p["a_j"], atol=1e-15)
+    # the relative rotation is frozen: rank 6 and the single body pair has no DOF
+    assert np.linalg.matrix_rank(ev.jacobian_h(model, f)) == 6
+    # given axes that are not parallel at q0 are refused like any other constraint
+    bad = mechanism_text("f", [("b1", q[0]), ("b2", q[1])],
+                         [joint_lines("X", "fixed", "b1", "b2", s_i, s_j, a_i, np.cross(a_j, [0.3, 1, 0]))])
+    (tmp_path / "bad.toml").write_text(bad)
+    with pytest.raises(InconsistentInitialState, match=r"Phi4 \(joint X\)"):
+        compile_model(as_scene(load(tmp_path / "bad.toml")))
+
+
+# ----------------------------------------------------------------------------- initial consistency
+
+def test_door_with_hinge_axes_not_parallel_refused(tmp_path):
+    text = (DATA / "door.toml").read_text()
+    lines = text.splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("axis_j"))  # the upper hinge's
+    lines[k] = "axis_j = [0.35, 0.1, 1.0]"
+    (tmp_path / "door.toml").write_text("\n".join(lines))
+    with pytest.raises(InconsistentInitialState) as e:
+        compile_model(as_scene(load(tmp_path / "door.toml")))
+    msg = str(e.value)
+    assert "Phi4 (joint upper)" in msg and "lower" not in msg
+    assert "door.toml" in msg
+
+
+def test_universal_axes_must_be_perpendicular_at_q0(tmp_path):
+    text = (DATA / "universal_spherical.toml").read_text().replace(
+        "axis_j = [0.0, 1.0, 0.0]", "axis_j = [0.2, 1.0, 0.0]")
+    assert text != (DATA / "universal_spherical.toml").read_text()
+    (tmp_path / "us.toml").write_text(text)
+    with pytest.raises(InconsistentInitialState, match=r"Phi4 \(joint U\)"):
+        compile_model(as_scene(load(tmp_path / "us.toml")))
+
+
+# ----------------------------------------------------------------------------- check --json
+
+def check_json(path, capsys) -> dict:
+    code = cli.main(["check", str(path), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0, doc
+    return doc
+
+
+@pytest.mark.parametrize("name, expect", [
+    ("universal_spherical", dict(n_coordinates=12, n_equations=7, rank=7, dof=5, redundant=0,
+                                 joints={"U": ("universal", True), "S": ("spherical", True)})),
+    ("bennett", dict(n_coordinates=18, n_equations=20, rank=17, dof=1, redundant=3,
+                     joints={f"J{k}": ("revolute", False) for k in (1, 2, 3, 4)})),
+    ("door", dict(n_coordinates=6, n_equations=10, rank=5, dof=1, redundant=5,
+                  joints={"upper": ("revolute", False), "lower": ("revolute", False)})),
+])
+def test_check_json(capsys, name, expect):
+    doc = check_json(DATA / f"{name}.toml", capsys)
+    for key in ("n_coordinates", "n_equations", "rank", "dof", "redundant"):
+        assert doc[key] == expect[key], key
+    assert {j["name"]: (j["type"], j["unique"]) for j in doc["joints"]} == expect["joints"]
+    assert all(j["agree"] for j in doc["joints"])
+
+
+def test_bennett_moves_with_one_dof():
+    """The Bennett linkage is mobile: its velocity null space at q0 is one-dimensional and the
+    gravity run keeps the constraints."""
+    scene = as_scene(load(DATA / "bennett.toml"), stop_time=0.5, solver={"tolerance": 1e-10})
+    model = compile_model(scene)
+    res = run(model, scene.solver)
+    assert res.max_drift <= 1e-8
+    moved_by = np.abs(res.values[-1] - res.values[0])[:9].max()  # positions of the three links
+    assert moved_by > 1e-3
+
+
+# ----------------------------------------------------------------------------- simulations
+
+def test_door_swings_and_stays_on_its_constraints():
+    scene = as_scene(load(DATA / "door.toml"), stop_time=1.0, solver={"tolerance": 1e-10})
+    model = compile_model(scene)
+    assert model.eliminated  # auto elimination of the 5 redundant equations
+    assert len(model.eliminated) == 5
+    res = run(model, scene.solver, output_interval=0.05)
+    assert res.max_drift <= 1e-8
+    q_end = np.array([res.column(f"door.{c}")[-1] for c in ("x", "y", "z", "alpha", "beta", "gamma")])
+    f = ev.frames(model, q_end)
+    assert np.abs(ev.constraints(model, f)).max() <= 1e-8
+    assert np.linalg.norm(q_end[:3] - model.q0[:3]) > 0.05  # it swung
+
+
+def test_pendulum_period_matches_small_angle_formula():
+    scene = as_scene(load(DATA / "pendulum.toml"), stop_time=3.2, solver={"tolerance": 1e-11})
+    model = compile_model(scene)
+    res = run(model, scene.solver, output_interval=0.005)
+    assert res.max_drift <= 1e-8
+    y = res.column("bob.y")
+    t = res.time
+    crossings = []
+    for k in range(len(y) - 1):
+        if y[k] > 0 >= y[k + 1] or y[k] < 0 <= y[k + 1]:
+            crossings.append(t[k] - y[k] * (t[k + 1] - t[k]) / (y[k + 1] - y[k]))
+    period = 2 * np.mean(np.diff(crossings))
+    m, Jx, L, theta0 = 2.0, 0.1, 0.5, 0.02
+    T0 = 2 * math.pi * math.sqrt((Jx + m * L ** 2) / (m * 9.81 * L))
+    expected = T0 * (1 + theta0 ** 2 / 16)  # first finite-amplitude correction
+    assert len(crossings) >= 4
+    assert period == pytest.approx(expected, rel=2e-5)
+
+
+def test_flywheel_friction_decelerates_uniformly():
+    """Revolute friction in a simulation: the radial load is m g (centre of mass on the axis), so
+    the spin decreases at mu a m g / Jz and gamma(t) = w0 t - mu a m g t^2 / (2 Jz)."""
+    scene = as_scene(load(DATA / "flywheel.toml"), friction=["axle"], stop_time=1.0, solver={"tolerance": 1e-10})
+    model = compile_model(scene)
+    res = run(model, scene.solver, output_interval=0.1)
+    decel = 0.2 * 0.05 * 2.0 * 9.81 / 0.1
+    t = res.time
+    np.testing.assert_allclose(res.column("wheel.gamma"), 10.0 * t - 0.5 * decel * t ** 2, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(res.column("axle.friction")[1:], -0.2 * 0.05 * 2.0 * 9.81, rtol=1e-6)
+    np.testing.assert_allclose(res.column("axle.Fz"), 0.0, atol=1e-8)  # no axial load
+
+
+def test_incline_friction_gives_the_textbook_acceleration():
+    """Prismatic friction in a simulation: a block on a guide inclined at 30 degrees slides with
+    acceleration g (sin 30 - mu cos 30) (normal load m g cos 30, no moment: the joint point is
+    the centre of mass)."""
+    scene = as_scene(load(DATA / "incline.toml"), friction=["guide"], stop_time=0.5, solver={"tolerance": 1e-10})
+    model = compile_model(scene)
+    res = run(model, scene.solver, output_interval=0.05)
+    th = math.radians(30)
+    a = 9.81 * (math.sin(th) - 0.2 * math.cos(th))
+    t = res.time
+    x = res.column("block.x") - model.q0[0]
+    z = res.column("block.z") - model.q0[2]
+    s = x * math.cos(th) - z * math.sin(th)
+    np.testing.assert_allclose(s, 0.5 * a * t ** 2, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(res.column("guide.friction")[2:], -0.2 * 3.0 * 9.81 * math.cos(th), rtol=1e-6)
+
+
+# ----------------------------------------------------------------------------- friction
+
+LAWS = {"regularised": dict(), "stribeck": dict(law="stribeck", mu_static=0.5, v_stribeck=0.01)}
+
+
+def law_for(jtype, mu=0.3, **kw):
+    jt = TYPES[resolve("spatial", jtype)]
+    spec = FrictionSpec(mu=mu, size=0.05, v_reg=1e-3,
+                        extra=tuple((k, 0.2 + 0.1 * n) for n, k in enumerate(jt.friction_extra)), **kw)
+    return make_law(spec, jt.friction_sizes(spec))
+
+
+def friction_of(c, f, lam, law):
+    """(Qi, Qj, output) of joint c with ``law`` at the multipliers lam (all m)."""
+    d = c.module.stack([dataclasses.replace(c, law=law)])
+    ctx = c.module.friction_setup(d, f)
+    lam_x = lam[list(c.rows)][None, :]
+    Qi, Qj = c.module.friction(d, ctx, lam_x)
+    return Qi[0], Qj[0], float(c.module.friction_force(d, ctx, lam_x)[0])
+
+
+def power(c, f, Qi, Qj):
+    P = 0.0
+    for b, Q in ((c.bi, Qi), (c.bj, Qj)):
+        if b >= 0:
+            P += Q @ np.r_[f.v[b], f.w[b]]
+    return P
+
+
+@pytest.mark.parametrize("law", list(LAWS))
+@pytest.mark.parametrize("jtype", FRICTION_TYPES)
+def test_friction_dissipates(single, jtype, law):
+    lawobj = law_for(jtype, **LAWS[law])
+    n_negative = 0
+    for seed in SEEDS:
+        model = single(jtype, seed)
+        rng = np.random.default_rng(400 + seed)
+        for _ in range(20):
+            r, R, v, w = random_state(rng)
+            scale = 10.0 ** rng.uniform(-5, 0)  # reach the linear part of the regularised law
+            f = make_frames(r, R, v * scale, w * scale)
+            lam = rng.normal(size=model.m) * 10
+            for c in model.joints:
+                Qi, Qj, _ = friction_of(c, f, lam, lawobj)
+                P = power(c, f, Qi, Qj)
+                assert P <= 1e-12, (c.name, P)
+                n_negative += P < -1e-12
+    assert n_negative > 0
+
+
+def pair_model(tmp_path, jtype, seed):
+    """Bodies b1, b2 assembled for two joints of ``jtype``: X (b1, b2) and Y (b2, b1), the same
+    joint with i and j (points, axes) swapped; the joint points coincide (the contact geometry
+    of a guide is attached to body i: with P_i != P_j the two descriptions are different
+    guides)."""
+    rng = np.random.default_rng(500 + seed)
+    s_i, s_j, a_i, a_j, q, u = assembled_pair(rng, jtype, slide=False)
+    fr = FRICTION_TABLE[jtype]
+    joints = [joint_lines("X", jtype, "b1", "b2", s_i, s_j, a_i, a_j, fr),
+              joint_lines("Y", jtype, "b2", "b1", s_j, s_i, a_j, a_i, fr)]
+    (tmp_path / "pair.toml").write_text(mechanism_text("pair", [("b1", q[0]), ("b2", q[1])], joints))
+    scene = as_scene(load(tmp_path / "pair.toml"), friction=["X", "Y"])
+    model = compile_model(scene, check_initial=False)
+    return model, rng
+
+
+def _swap_multipliers(model, f, lam_x):
+    """Multipliers of Y whose reaction on its body i (b2) is X's reaction on b2."""
+    X, Y = model.joints
+    J = ev.jacobian_h(model, f)
+    fj = J[list(X.rows), 6:].T @ lam_x
+    JY = J[list(Y.rows), 6:]
+    lam_y, *_ = np.linalg.lstsq(JY.T, fj, rcond=None)
+    np.testing.assert_allclose(JY.T @ lam_y, fj, atol=1e-9)  # the same reaction space
+    return lam_y
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("jtype", FRICTION_TYPES)
+def test_friction_symmetry(tmp_path, jtype, seed):
+    model, rng = pair_model(tmp_path, jtype, seed)
+    X, Y = model.joints
+    law = X.law
+    f0 = ev.frames(model, model.q0)
+    # a velocity that keeps the joint (null space of X's rows), so the joint stays assembled
+    J = ev.jacobian_h(model, f0)[list(X.rows)]
+    h = rng.normal(size=12)
+    h -= np.linalg.pinv(J) @ (J @ h)
+    f = ev.frames(model, model.q0, h * 0.01)
+    lam = np.zeros(model.m)
+    lam[list(X.rows)] = rng.normal(size=len(X.rows)) * 10
+    lam[list(Y.rows)] = _swap_multipliers(model, f, lam[list(X.rows)])
+    QiX, QjX, outX = friction_of(X, f, lam, law)
+    QiY, QjY, outY = friction_of(Y, f, lam, law)
+    assert np.abs(QiX).max() > 1e-6
+    np.testing.assert_allclose(QiY, QjX, atol=1e-9)  # on b2
+    np.testing.assert_allclose(QjY, QiX, atol=1e-9)  # on b1
+    assert outY == pytest.approx(outX if jtype == "cylindrical" else -outX, abs=1e-9)
+    # odd in the relative velocity
+    fneg = ev.frames(model, model.q0, -h * 0.01)
+    QiN, QjN, outN = friction_of(X, fneg, lam, law)
+    np.testing.assert_allclose(QiN, -QiX, atol=1e-12)
+    np.testing.assert_allclose(QjN, -QjX, atol=1e-12)
+    # rotating the whole configuration rotates the result (global force rotates, body torque not)
+    Q = random_rotation(rng)
+    fr = Frames(r=f.r @ Q.T, R=np.einsum("ab,kbc->kac", Q, f.R), v=f.v @ Q.T, w=f.w, angles=f.angles)
+    fr.r[-1] = 0.0
+    fr.R[-1] = np.eye(3)
+    fr.v[-1] = 0.0
+    lam_r = lam.copy()
+    if jtype == "revolute":  # point rows are global components
+        for c in model.joints:
+            lam_r[list(c.rows)[:3]] = Q @ lam[list(c.rows)[:3]]
+    QiR, QjR, outR = friction_of(X, fr, lam_r, law)
+    np.testing.assert_allclose(QiR[:3], Q @ QiX[:3], atol=1e-9)
+    np.testing.assert_allclose(QiR[3:], QiX[3:], atol=1e-9)
+    np.testing.assert_allclose(QjR[:3], Q @ QjX[:3], atol=1e-9)
+    np.testing.assert_allclose(QjR[3:], QjX[3:], atol=1e-9)
+    assert outR == pytest.approx(outX, rel=1e-9, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("jtype", FRICTION_TYPES)
+def test_friction_output_by_hand(tmp_path, jtype, seed):
+    """The output <joint>.friction from the reported reaction by the formulas of
+    docs/joint-friction.md, and the friction's force and torque about the axis."""
+    model, rng = pair_model(tmp_path, jtype, seed)
+    X = model.joints[0]
+    h = rng.normal(size=12) * 0.01
+    f = ev.frames(model, model.q0, h)
+    lam = rng.normal(size=model.m) * 10
+    p = dict(zip(TYPES[X.type].reaction_components, ev.physical_reaction(model, X, f, lam)))
+    Fx, Fy, Tx, Ty = p["Fx"], p["Fy"], p["Tx"], p["Ty"]
+    u = f.R[0] @ X.p["a_i"]
+    spin = (f.R[1] @ f.w[1] - f.R[0] @ f.w[0]) @ u
+    P = f.r[0] + f.R[0] @ X.p["s_i"]
+    vel = [f.v[b] + np.cross(f.R[b] @ f.w[b], P - f.r[b]) for b in (0, 1)]
+    slide = (vel[1] - vel[0]) @ u
+    law = X.law
+    Qi, Qj, out = friction_of(X, f, lam, law)
+    if jtype == "revolute":
+        a, L = 0.02, 0.1
+        m = np.array([Ty, -Tx]) / L
+        Nr = np.linalg.norm([Fx / 2 + m[0], Fy / 2 + m[1]]) + np.linalg.norm([Fx / 2 - m[0], Fy / 2 - m[1]])
+        expected = law.coefficient(spin) * (a * Nr + a * abs(p["Fz"]))  # collar radius defaults to radius
+        torque_i = f.R[0] @ Qi[3:]
+        np.testing.assert_allclose(torque_i, expected * u, atol=1e-12)
+        np.testing.assert_allclose(Qi[:3], 0.0, atol=0)
+    else:
+        l, r = 0.3, 0.05
+        fB = np.array([Ty, -Tx]) / l
+        fA = np.array([Fx, Fy]) - fB
+        N = np.linalg.norm(fA) + np.linalg.norm(fB)
+        if jtype == "prismatic":
+            N += abs(p["Tz"]) / r
+            expected = law.coefficient(slide) * N
+            np.testing.assert_allclose(Qi[:3], expected * u, atol=1e-12)
+        else:
+            s = math.hypot(slide, r * spin)
+            expected = law.coefficient(s) * N
+            mos = law.mu_over_speed(s)
+            np.testing.assert_allclose(Qi[:3], mos * N * slide * u, atol=1e-12)
+            np.testing.assert_allclose(f.R[0] @ Qi[3:] - np.cross(f.R[0] @ X.p["s_i"], Qi[:3]),
+                                       mos * N * r * r * spin * u, atol=1e-12)
+    assert out == pytest.approx(expected, rel=1e-12, abs=1e-14)
+    assert abs(out) > 1e-6
+    assert out == pytest.approx(ev.friction_output(model, X, f, lam), rel=0, abs=0)
+
+
+def test_revolute_friction_pure_radial_load():
+    """Without bending or axial load the radial load is |F_perp| and T_f = mu a |F_perp|."""
+    from overcon.joints import spatial_rows as sr
+    p = np.array([[3.0, 4.0, 0.0, 0.0, 0.0, 0.0]])
+    assert sr.bearing_radial_load(p, np.array([0.1]))[0] == pytest.approx(5.0)
+    # the prismatic guide reduces to the planar A.2 (|N - T/l| + |T/l|) for a planar load
+    N, T, l = 7.0, 1.2, 0.3
+    planar = np.array([[0.0, N, 0.0, -T, 0.0, 0.0]])  # normal force N along y', moment T in the y'-z plane
+    assert sr.guide_normal_load(planar, np.array([l]))[0] == pytest.approx(abs(N - T / l) + abs(T / l))
+
+
+# ----------------------------------------------------------------------------- friction fields
+
+def _mech_with_friction(tmp_path, jtype, friction_lines) -> Path:
+    rng = np.random.default_rng(9)
+    s_i, s_j, a_i, a_j, q, _ = assembled_pair(rng, jtype)
+    lines = joint_lines("X", jtype, "b1", "b2", s_i, s_j, a_i, a_j)
+    lines = lines[:-1] + ["[joints.friction]", *friction_lines, ""]
+    path = tmp_path / "m.toml"
+    path.write_text(mechanism_text("m", [("b1", q[0]), ("b2", q[1])], [lines]))
+    return path
+
+
+@pytest.mark.parametrize("jtype", ["universal", "fixed"])
+def test_friction_refused_on_universal_and_fixed(tmp_path, jtype):
+    path = _mech_with_friction(tmp_path, jtype, ["mu = 0.1", "radius = 0.01"])
+    with pytest.raises(SceneError) as e:
+        load(path)
+    msg = str(e.value)
+    assert f"m.toml: joints[0].friction: a {jtype} joint has no friction model" in msg
+
+
+def test_friction_params_refused_on_a_universal_joint(tmp_path):
+    (tmp_path / "us.toml").write_text((DATA / "universal_spherical.toml").read_text())
+    (tmp_path / "s.toml").write_text(
+        '[scene]\nname = "s"\nmechanism = "us.toml"\nfriction = []\neliminate = "auto"\nstop_time = 1.0\n'
+        "[scene.friction_params.U]\nmu = 0.1\nradius = 0.01\n")
+    with pytest.raises(SceneError) as e:
+        load(tmp_path / "s.toml")
+    assert "s.toml: scene.friction_params.U: a universal joint has no friction model" in str(e.value)
+
+
+def test_friction_size_keys(tmp_path):
+    with pytest.raises(SceneError) as e:
+        load(_mech_with_friction(tmp_path, "revolute", ["mu = 0.1", "radius = 0.01"]))
+    assert "joints[0].friction.length: missing required field" in str(e.value)
+    with pytest.raises(SceneError) as e:
+        load(_mech_with_friction(tmp_path, "prismatic", ["mu = 0.1", "length = 0.01"]))
+    assert "joints[0].friction.radius: missing required field" in str(e.value)
+    with pytest.raises(SceneError) as e:
+        load(_mech_with_friction(tmp_path, "cylindrical", ["mu = 0.1", "length = 0.1", "radius = 0.1",
+                                                           "collar_radius = 0.2"]))
+    assert "joints[0].friction.collar_radius: unknown key" in str(e.value)
+    mech = load(_mech_with_friction(tmp_path, "revolute", ["mu = 0.1", "radius = 0.01", "length = 0.2"]))
+    spec = mech.joints[0].friction
+    assert (spec.size, spec.extra) == (0.01, (("length", 0.2),))
+    jt = TYPES[mech.joints[0].type]
+    assert jt.friction_sizes(spec) == {"radius": 0.01, "length": 0.2, "collar_radius": 0.01}
+    # a scene's friction_params override merges onto the mechanism's sizes
+    (tmp_path / "s.toml").write_text(
+        '[scene]\nname = "s"\nmechanism = "m.toml"\nfriction = ["X"]\neliminate = "auto"\nstop_time = 1.0\n'
+        "[scene.friction_params.X]\ncollar_radius = 0.03\n")
+    scene = load(tmp_path / "s.toml")
+    law = compile_model(scene).joints[0].law
+    assert dict(law.sizes) == {"radius": 0.01, "length": 0.2, "collar_radius": 0.03}
+
+
+# ----------------------------------------------------------------------------- FMU description
+
+def test_fmu_description_of_spatial_joints(tmp_path):
+    """A small FMU with a spatial revolute joint with friction: the outputs, units and texts of
+    its modelDescription.xml come from the joint type's table and name the file's type name."""
+    from overcon.fmu import build as fmu_build
+    import xml.etree.ElementTree as ET
+    (tmp_path / "pendulum.toml").write_text((DATA / "pendulum.toml").read_text().replace(
+        "axis_j = [1.0, 0.0, 0.0]", "axis_j = [1.0, 0.0, 0.0]\n[joints.friction]\nmu = 0.1\nradius = 0.01\nlength = 0.05"))
+    (tmp_path / "scene.toml").write_text(
+        '[scene]\nname = "pendulum_friction"\nmechanism = "pendulum.toml"\nfriction = ["pivot"]\n'
+        'eliminate = "auto"\nstop_time = 0.2\n')
+    res = fmu_build.build_scene(tmp_path / "scene.toml", tmp_path / "out", validate=False, echo=lambda s: None)
+    assert res.status == "built", res.messages
+    with zipfile.ZipFile(res.fmu) as z:
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    sv = {v.get("name"): v for v in root.iter("ScalarVariable")}
+    comps = ["Fx", "Fy", "Fz", "Tx", "Ty", "Fx0", "Fy0", "Fz0"]
+    assert [n for n in sv if n.startswith("pivot.") and n.split(".")[1] in comps + ["Tz"]] == \
+        [f"pivot.{c}" for c in comps]
+    unit = {n: v.find("Real").get("unit") for n, v in sv.items() if v.find("Real") is not None}
+    assert unit["pivot.Tx"] == "N.m" and unit["pivot.Fz"] == "N" and unit["pivot.friction"] == "N.m"
+    assert unit["pivot.v_reg"] == "rad/s"
+    assert "auxiliary frame of the revolute joint" in sv["pivot.Tx"].get("description")
+    assert "moment" in sv["pivot.Tx"].get("description")
+    assert "torque about the axis" in sv["pivot.friction"].get("description")

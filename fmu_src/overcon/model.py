@@ -317,7 +317,7 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
     # the bodies alone (no joints yet): their frames at q0 give the joints' constants
     bodies = Model(
         scene=replace(scene, solver=None), kind=kind, dim=dim, nq_b=k, nh_b=VELOCITIES_PER_BODY[kind], nb=nb,
-        body_names=names, mass=mass,
+        body_names=names, mass=mass, rotation=rotation,
         inertia=inertia, M=M, Minv=1.0 / M, gravity=np.asarray(mech.gravity, float),
         joints=(), loads=tuple(loads), q0=q0, h0=h0, m=0, retained=np.arange(0), eliminated=(),
         elimination_mode="given", friction_joints=(),
@@ -346,7 +346,6 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
         reaction_joints=tuple(joint_index[j] for j in scene.reactions),
         friction_outputs=tuple(joint_index[j] for j in
                                (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
-        rotation=rotation,
     )
     if check_initial:
         check_initial_state(base)

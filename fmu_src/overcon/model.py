@@ -22,7 +22,10 @@ Sign convention (one place): equations of motion ``M h' + J lam = Q + Q_f`` (Eq.
 generalized reaction of joint X on its bodies is ``f_X = J_X lam_X`` on the left-hand side, so the
 *physical* reaction a joint exerts is ``-J_X lam_X``. Reactions are reported on body i of the joint
 in its auxiliary frame: ``p' = -A_i (J_X)_i lam_X`` (Eq. 19), as components named by the joint
-type (``Fx, Fy, T`` planar, ``Fx, Fy, Fz`` spherical); units N and N.m.
+type (``Fx, Fy, T`` planar, ``Fx, Fy, Fz`` spherical, the non-vanishing ones of
+``Fx, Fy, Fz, Tx, Ty, Tz`` for the other spatial joints: :mod:`overcon.joints.spatial_rows`);
+units N and N.m. Joint constants may depend on the bodies' rotation matrices at q0
+(:class:`overcon.joints.InitialFrames`, from :func:`overcon.evaluation.frames` of the bodies).
 
 Immutability (decided here): a Model is a frozen dataclass whose arrays are read-only
 (``writeable = False``, set by ``Model.__post_init__``, also in its compiled joints, loads and

@@ -17,7 +17,8 @@ per-joint reference for the tests). A module offers, with ``f`` the evaluation's
 - ``gamma(d, f) -> (k, n_eq)``: right-hand side of Phi_h h' = gamma (Eq. 11);
 - ``reaction(d, f, fi) -> (k, n_components)``: the physical reaction in the joint's auxiliary
   frame, ``-A_i fi`` (Eq. 19; A.1, A.5, A.10), given fi = (J_X)_i^T lam_X (k, n_coord), the
-  left-hand-side generalized reaction on body i; the components are the table's ``reaction``;
+  left-hand-side generalized reaction on body i; the components are the table's ``reaction``.
+
 Types without friction (``friction_size`` None) need not offer the three friction functions:
 
 - ``friction_setup(d, f) -> ctx``: what friction needs from the frames (once per evaluation);
@@ -29,7 +30,12 @@ Types without friction (``friction_size`` None) need not offer the three frictio
 
 Floating point: stacked ``np.matmul``/``np.vecdot`` run the same kernel per item as the 2-D
 products, so a batch gives each joint the numbers it gets alone (tests/test_hot_path.py checks
-the batches against the per-joint reference, bit for bit for the reported outputs).
+the batches against the per-joint reference, bit for bit for the reported outputs; the spatial
+axis types against their single joints in tests/test_spatial_joints.py).
+
+The spatial axis types (revolute, prismatic, cylindrical, universal, fixed) are tuples of the
+row primitives of :mod:`overcon.joints.spatial_rows`, which also holds their constants, reaction
+frame and friction kinematics.
 """
 from __future__ import annotations
 

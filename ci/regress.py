@@ -4,7 +4,7 @@
     python ci/regress.py [--scenes NAME|GLOB ...] [--out DIR] [--jobs N]      # the check (CI)
     python ci/regress.py --regenerate [--scenes ...] [--stop-time T] [--step S]  # by hand only
 
-The check, for every scene file of ``mechanisms/`` (files with a ``[scene]`` table):
+The check, for every scene file of ``mechanisms/`` and its subdirectories (files with a ``[scene]`` table):
 
 1. finds its baseline ``ci/baselines/<scene>_ref.csv`` + ``<scene>_ref.opt`` (FMI cross-check
    files: time and every Real output; StartTime, StopTime, StepSize, RelTol). A scene without one
@@ -102,7 +102,8 @@ def _rel(p: Path) -> str:
 # scenes and baselines
 
 def discover_scenes(mechanisms: Path) -> tuple[dict[str, Path], list[str]]:
-    """Scene name -> file for the *.toml files of ``mechanisms`` that have a [scene] table (the
+    """Scene name -> file for the *.toml files of ``mechanisms`` and its subdirectories (the
+    paper's scenes, and the examples in ``mechanisms/examples/``) that have a [scene] table (the
     name is the scene's ``name``, which names its FMU), and problems (unreadable or invalid scene
     files, duplicate names)."""
     from overcon import scene as scene_mod
@@ -112,7 +113,7 @@ def discover_scenes(mechanisms: Path) -> tuple[dict[str, Path], list[str]]:
         raise BadInput(f"{mechanisms}: no such directory (--mechanisms: the directory of the scene files)")
     scenes: dict[str, Path] = {}
     problems: list[str] = []
-    for f in sorted(mechanisms.glob("*.toml")):
+    for f in sorted(mechanisms.rglob("*.toml")):
         try:
             doc = tomllib.loads(f.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:

@@ -16,7 +16,7 @@ from overcon.fmu.build import build_all
 from overcon.tooling.pipeline import compare_paths
 
 ROOT = Path(__file__).resolve().parent.parent
-MECH = ROOT / "mechanisms"
+MECH = ROOT / "mechanisms" / "examples"
 QUIET = dict(echo=lambda s: None, echo_err=lambda s: None)
 
 # mechanism: (n_coordinates (velocity coordinates), n_equations, rank, dof, redundant, unique joints, other joints)

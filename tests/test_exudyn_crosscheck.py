@@ -26,7 +26,7 @@ from exudyn.utilities import RigidBodyInertia, SensorBody  # noqa: E402
 from overcon import scene as scene_mod  # noqa: E402
 from overcon.simulate import run_scene  # noqa: E402
 
-MECH = Path(__file__).resolve().parent.parent / "mechanisms"
+MECH = Path(__file__).resolve().parent.parent / "mechanisms" / "examples"
 STOP = 2.0
 BOUND = 1e-6  # m
 

@@ -20,8 +20,7 @@ ROOT = Path(__file__).resolve().parent.parent
 MECH_DIR = ROOT / "mechanisms"
 PLANAR = MECH_DIR / "planar_sliders.toml"
 SPATIAL = MECH_DIR / "spatial_parallelogram.toml"
-# the paper's files (the examples' files are loaded by tests/test_examples.py)
-ALL_FILES = sorted(p for p in MECH_DIR.glob("*.toml") if p.name.startswith(("planar_", "spatial_")))
+ALL_FILES = sorted(MECH_DIR.glob("*.toml"))
 SCENE_FILES = [p for p in ALL_FILES if p not in (PLANAR, SPATIAL)]
 
 PLANAR_POSITIONS = ("slider1.x", "slider1.y", "slider2.x", "slider2.y", "link3.x", "link3.y",

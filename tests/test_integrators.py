@@ -154,3 +154,35 @@ def test_tableaux_equal_scipy_private_constants():
     r = integrators.Radau5
     for name in ("C", "E", "T", "TI", "P", "TI_REAL", "TI_COMPLEX", "MU_REAL", "MU_COMPLEX"):
         assert np.array_equal(getattr(r, name), getattr(R, name)), name
+
+
+@pytest.mark.parametrize("h_lambda, stable", [(2.5, True), (2.78, True), (2.8, False), (10.0, False)])
+def test_rk4_refuses_a_step_beyond_its_stability_boundary(h_lambda, stable):
+    """y' = -lambda y: rk4's amplification |R(-h lambda)| exceeds 1 beyond h lambda = 2.785; the
+    stage-based estimate of rho is exact for a linear problem, so the guard trips exactly there,
+    names the time and a stable step, and the comparison can read that step."""
+    from overcon.verdict import next_lockstep_step
+
+    lam, h = 1000.0, h_lambda / 1000.0
+    itg = integrators.RK4(lambda t, y: -lam * y, 0.0, np.array([1.0, 2.0]), step=h)
+    if stable:
+        for _ in range(5):
+            itg.step()
+        assert abs(itg.y[0]) <= 1.0  # damped
+        return
+    with pytest.raises(integrators.UnstableStep, match=r"t = 0 s: rk4 is unstable with the fixed step") as exc:
+        itg.step()
+    assert itg.t == 0.0 and itg.nsteps == 0  # the step is refused, the state kept
+    assert next_lockstep_step(h, [str(exc.value)]) == pytest.approx(min(h / 4, 0.002), rel=0.5)
+    assert next_lockstep_step(h, [str(exc.value)]) <= 2.0 / lam
+
+
+def test_next_lockstep_step_reads_only_unstable_failures():
+    from overcon.verdict import LOCKSTEP_MIN_STEP, next_lockstep_step
+
+    unstable = "t = 0.1 s: rk4 is unstable with the fixed step 0.005 s (...): a step of at most 0.00087 s is stable; or"
+    assert next_lockstep_step(5e-3, [unstable]) == pytest.approx(8e-4)
+    assert next_lockstep_step(5e-3, [unstable, "the problem is stiff for dopri5"]) is None
+    assert next_lockstep_step(5e-3, [unstable.replace("0.00087", "0.004")]) == pytest.approx(1e-3)  # at most h/4
+    assert next_lockstep_step(2e-6, [unstable.replace("0.00087", "5e-7")]) is None  # below LOCKSTEP_MIN_STEP
+    assert LOCKSTEP_MIN_STEP == 1e-6

@@ -436,3 +436,52 @@ def test_tooling_does_not_import_the_engine():
     assert "overcon.tooling.sweep" in loaded and "overcon.tooling.pipeline" in loaded
     engine = {f"overcon.{m}" for m in ("paper", "simulate", "model", "dynamics")}
     assert not engine & loaded, engine & loaded
+
+
+# ------------------------------------------------------------------------------- lockstep stability
+
+STICKING = ROOT / "tests" / "data" / "sticking"
+
+
+@pytest.mark.integration
+def test_unstable_lockstep_step_is_repeated_smaller_and_the_verdict_holds(tmp_path):
+    """The handle's friction sticks inside its regularisation band at once: rk4 at the default 5 ms
+    is beyond its stability boundary there (its chatter made this unique group look NOT unique).
+    The rk4 integrator refuses the step; compare repeats the group's lockstep runs at the stable
+    step the refusal names (0.8 ms) and gets the predicted verdict, saying so."""
+    fmus = _build([STICKING / "handle_a.toml", STICKING / "handle_b.toml"], tmp_path / "fmus")
+    from overcon.tooling.pipeline import compare_paths
+    out = compare_paths(list(fmus.values()), tmp_path / "cmp", echo=lambda s: None)
+    (c,) = out.comparisons
+    assert c.failure is None and c.mode == "lockstep"
+    assert c.lockstep_step == pytest.approx(8e-4)
+    assert "rk4 unstable at the lockstep step 0.005 s" in c.lockstep_note and "repeated at 0.0008 s" in c.lockstep_note
+    assert c.predicted is True and c.observed is True and c.matches
+    assert max(d.max_abs for d in c.diffs if d.decides) < 1e-12
+    assert "repeated at 0.0008 s" in (tmp_path / "cmp" / "report.md").read_text()
+
+
+def test_predicted_not_unique_observed_unique_is_consistent_not_a_mismatch(f45):
+    """The pre-check's condition is one-directional: friction on a non-unique reaction lets the
+    motion depend on the elimination, and loads that never reach the non-unique part leave the
+    eliminations equal. Such a group is reported as "not excited" and counts as consistent."""
+    from overcon.tooling.report import verdict_line
+    infos = [inspect_fmu(f45[n]) for n in ("planar_f45_wo4", "planar_f45_wo6")]
+    t = np.linspace(0.0, 1.0, 11)
+
+    def series(shift=0.0):
+        vals = {o.name: np.full_like(t, 1.0) for o in infos[0].outputs}
+        vals["slider1.x"] = vals["slider1.x"] + shift
+        return Series(t, vals)
+
+    same = [series(), series()]
+    c = compare_group("planar_f45", infos, same, lockstep=same, lockstep_step=5e-3)
+    c.predicted = False
+    assert c.observed and c.not_excited and c.matches
+    assert "OK (not excited" in verdict_line(c)
+    c.predicted = True
+    assert not c.not_excited and c.matches
+    moved = [series(), series(1e-3)]
+    d = compare_group("planar_f45", infos, moved, lockstep=moved, lockstep_step=5e-3)
+    d.predicted = True
+    assert not d.observed and not d.matches and "MISMATCH" in verdict_line(d)

@@ -129,7 +129,8 @@ def precheck(model: Model, source: str = "") -> PrecheckResult:
         problems.append(
             f"friction on joint {name}, whose reaction is not unique: its Jacobian columns are not "
             f"a direct summand of span(J) (rank(J_X) + rank(J_-X) - rank(J) = {v.rank_defect}); the "
-            "friction force, and so the motion, depends on which redundant equation is eliminated")
+            "friction force, and so the motion, can depend on which redundant equation is eliminated (it does "
+            "whenever the loads reach the non-unique part of the reaction)")
     disagree = [j.name for j in joints if not j.agree]
     for name in disagree:
         problems.append(f"joint {name}: the rank, SVD and QR tests disagree {res.joints[name].methods}")

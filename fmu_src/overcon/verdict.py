@@ -28,7 +28,13 @@ non-unique difference: no round-off pattern of any CPU moves a verdict, and a ch
 in any position is still caught.
 
 The lockstep grid does not need to be accurate for the verdict: both variants carry the same
-truncation error, and whether their functions f agree does not depend on the step. Its remaining
+truncation error, and whether their functions f agree does not depend on the step. It must be
+*stable*, though: beyond rk4's stability boundary (e.g. sticking friction inside a small
+regularisation band) the fixed-step solution chatters, and the chatter amplifies round-off like a
+chaotic map, so a unique group would look non-unique. The rk4 integrator refuses such a step
+(:class:`overcon.integrators.UnstableStep`, message with :data:`LOCKSTEP_UNSTABLE` and a stable
+step); the comparison then repeats the group's lockstep runs at :func:`next_lockstep_step`, at
+most :data:`LOCKSTEP_RETRIES` times, and reports the step it used. Its remaining
 error against the adaptive runs is reported, not hidden (rk4 at 5 ms on the paper scenes: 1e-5 m
 for planar friction 4, 5; up to 6e-4 m for friction 1, 4, 5, where sticking makes the
 right-hand side kink). The adaptive runs (the FMUs' own settings, used for the figures) are
@@ -41,12 +47,24 @@ says so.
 """
 from __future__ import annotations
 
+import re
+
 LOCKSTEP_METHOD = "rk4"
 """Fixed-step method of the verdict runs (see the module docstring)."""
 
 LOCKSTEP_STEP = 5e-3
 """Default step of the verdict runs (s): stable and well resolved on every paper scene (friction
 sticking included), 2 to 4 times the cost of an adaptive run at tolerance 1e-9."""
+
+LOCKSTEP_UNSTABLE = "rk4 is unstable"
+"""Marker of an unstable-step failure in a run's reason (raised by the rk4 integrator, read by the
+comparison, which then repeats the group's lockstep runs with a smaller step)."""
+
+LOCKSTEP_RETRIES = 3
+"""How many times a group's lockstep runs are repeated with a smaller step after an unstable step."""
+
+LOCKSTEP_MIN_STEP = 1e-6
+"""Smallest lockstep step (s), also the lower bound of ``--lockstep-step``."""
 
 LOCKSTEP_FACTOR = 1e-8
 """Lockstep verdict threshold relative to max(1, scale) (see :func:`lockstep_tolerance`)."""
@@ -78,6 +96,35 @@ def variant_label(eliminate) -> str:
     if eliminate == "auto":
         return "auto elimination"
     return "without eq. " + ", ".join(str(k) for k in eliminate) if eliminate else "no elimination"
+
+
+_UNSTABLE = re.compile(r"t = [^:]*: " + LOCKSTEP_UNSTABLE + r".*?a step of at most ([0-9.eE+-]+) s is stable", re.S)
+
+
+def unstable_message(reason: str) -> str | None:
+    """The rk4 integrator's unstable-step message inside a run's failure text, or None."""
+    m = _UNSTABLE.search(reason)
+    return None if m is None else " ".join(m.group(0).split())
+
+
+def next_lockstep_step(step: float, reasons: list[str]) -> float | None:
+    """The step of the repeated lockstep runs after ``reasons`` (failure texts of the group's
+    lockstep runs at ``step``), or None when a failure is not an unstable step (or the step would
+    fall below :data:`LOCKSTEP_MIN_STEP`): the smallest stable step the failures name, and at most
+    a quarter of ``step``, rounded down to one significant digit (so every variant gets the same
+    grid)."""
+    hints = []
+    for r in reasons:
+        m = _UNSTABLE.search(r)
+        if m is None:
+            return None
+        hints.append(float(m.group(1)))
+    h = min([step / 4.0, *hints])
+    if not h > 0.0:
+        return None
+    e = 10.0 ** int(f"{h:e}".split("e")[1])
+    h = int(h / e) * e
+    return h if h >= LOCKSTEP_MIN_STEP else None
 
 
 def lockstep_start_values(step: float) -> dict:

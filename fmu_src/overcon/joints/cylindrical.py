@@ -31,19 +31,17 @@ reaction = sr.reported((0, 1, 3, 4))
 
 def stack(joints) -> dict:
     """Constant stacked arrays of k compiled joints; friction sizes length, radius (m)."""
-    d = sr.stack_axes(joints)
-    for key in ("length", "radius"):
-        d[key] = sr.law_sizes(d, key)
-    return d
+    return sr.stack_axes(joints, ("length", "radius"))
+
+
+_context = sr.friction_setup_of(jac_h)
 
 
 def friction_setup(d, f, Ji=None):
     """Frames-only part of the friction: the context of :func:`spatial_rows.friction_context`,
     the slip speed |s| = sqrt(v_rel^2 + a^2 omega_rel^2) (m/s), mu(|s|) and mu(|s|)/|s| (0 when
     the contact does not slip: no direction)."""
-    if Ji is None:
-        Ji = jac_h(d, f)[0]
-    ctx = sr.friction_context(d, f, Ji)
+    ctx = _context(d, f, Ji)
     speed = [math.hypot(v, a * w) for v, a, w in
              zip(ctx["slide"].tolist(), d["radius"].tolist(), ctx["spin"].tolist())]
     ctx["mu"] = np.array([law.coefficient(s) for law, s in zip(d["laws"], speed)], float)

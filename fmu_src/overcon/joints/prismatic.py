@@ -29,19 +29,11 @@ reaction = sr.reported((0, 1, 3, 4, 5))
 
 def stack(joints) -> dict:
     """Constant stacked arrays of k compiled joints; friction sizes length, radius (m)."""
-    d = sr.stack_axes(joints)
-    for key in ("length", "radius"):
-        d[key] = sr.law_sizes(d, key)
-    return d
+    return sr.stack_axes(joints, ("length", "radius"))
 
 
-def friction_setup(d, f, Ji=None):
-    """Frames-only part of the friction: :func:`spatial_rows.friction_context` and mu(v_rel)."""
-    if Ji is None:
-        Ji = jac_h(d, f)[0]
-    ctx = sr.friction_context(d, f, Ji)
-    ctx["mu"] = np.array([law.coefficient(v) for law, v in zip(d["laws"], ctx["slide"].tolist())], float)
-    return ctx
+friction_setup = sr.friction_setup_of(jac_h, "slide")
+"""Frames-only part of the friction: :func:`spatial_rows.friction_context` and mu(v_rel)."""
 
 
 def friction_force(d, ctx, lam):

@@ -29,19 +29,11 @@ reaction = sr.reported((0, 1, 2, 3, 4))
 def stack(joints) -> dict:
     """Constant stacked arrays of k compiled joints; friction sizes radius, length, collar_radius
     (m) from the laws."""
-    d = sr.stack_axes(joints)
-    for key in ("radius", "length", "collar_radius"):
-        d[key] = sr.law_sizes(d, key)
-    return d
+    return sr.stack_axes(joints, ("radius", "length", "collar_radius"))
 
 
-def friction_setup(d, f, Ji=None):
-    """Frames-only part of the friction: :func:`spatial_rows.friction_context` and mu(omega_rel)."""
-    if Ji is None:
-        Ji = jac_h(d, f)[0]
-    ctx = sr.friction_context(d, f, Ji)
-    ctx["mu"] = np.array([law.coefficient(w) for law, w in zip(d["laws"], ctx["spin"].tolist())], float)
-    return ctx
+friction_setup = sr.friction_setup_of(jac_h, "spin")
+"""Frames-only part of the friction: :func:`spatial_rows.friction_context` and mu(omega_rel)."""
 
 
 def friction_force(d, ctx, lam):

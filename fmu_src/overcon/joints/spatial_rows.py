@@ -80,14 +80,16 @@ def axis_constants(params, init) -> dict:
 _VECTORS = ("s_i", "s_j", "a_i", "a_j", "b1_j", "b2_j", "c_i")
 
 
-def stack_axes(joints) -> dict:
+def stack_axes(joints, sizes=()) -> dict:
     """Stacked body slots, constants and friction laws of k compiled joints of one spatial axis
-    type (compile time)."""
+    type (compile time), with the friction sizes named in ``sizes`` (m, from the laws)."""
     d = {"bi": np.array([c.bi for c in joints], np.intp), "bj": np.array([c.bj for c in joints], np.intp),
          "laws": tuple(c.law for c in joints),
          "E": np.array([c.p["E"] for c in joints], float).reshape(-1, 3, 3)}
     for key in _VECTORS:
         d[key] = np.array([c.p[key] for c in joints], float).reshape(-1, 3)
+    for key in sizes:
+        d[key] = law_sizes(d, key)
     return d
 
 
@@ -296,6 +298,18 @@ def friction_context(d, f, Ji) -> dict:
     u = axis_global(d, f)
     return {"f": f, "JiT": Ji.transpose(0, 2, 1), "u": u,
             "spin": relative_spin(d, f, u), "slide": relative_slide(d, f, u)}
+
+
+def friction_setup_of(jac_h, speed: str | None = None):
+    """The module protocol's ``friction_setup(d, f, Ji=None)`` of an axis joint type with the
+    Jacobian ``jac_h``: :func:`friction_context`, and with ``speed`` ("spin", rad/s, or "slide",
+    m/s) also ``mu``, each joint's signed coefficient mu(v) at that relative velocity."""
+    def friction_setup(d, f, Ji=None):
+        ctx = friction_context(d, f, jac_h(d, f)[0] if Ji is None else Ji)
+        if speed is not None:
+            ctx["mu"] = np.array([law.coefficient(v) for law, v in zip(d["laws"], ctx[speed].tolist())], float)
+        return ctx
+    return friction_setup
 
 
 def reaction_of(d, ctx, lam) -> np.ndarray:

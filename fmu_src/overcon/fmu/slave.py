@@ -168,6 +168,7 @@ class OverconSlave:
         self._next_state = 1
         self._strings: list[bytes] = []  # fmi2GetString's results, valid until the next call
         self._ref_cache: dict[tuple[str, bytes], list] = {}
+        self._fast_get: dict[tuple[str, bytes], tuple] = {}  # see _remember_get
         self._init_fields()
         for text in friction_warnings(self._model0):  # the pre-check's warnings (also in the manifest)
             self.log(text, Status.WARNING)
@@ -225,9 +226,21 @@ class OverconSlave:
         return self._params[arg]
 
     def _get(self, typ: str, vr_address: int, n: int, values_address: int) -> None:
+        if n and vr_address and values_address:  # a list of outputs or constants seen before: one copy
+            fast = self._fast_get.get((typ, ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint))))
+            if fast is not None:
+                outputs, arg, array_type = fast
+                if outputs:
+                    if not self._have_outputs:
+                        self._ensure_sim()
+                    array_type.from_address(values_address)[:] = self._outputs[arg].tolist()
+                else:
+                    array_type.from_address(values_address)[:] = arg
+                return
         refs = self._refs(vr_address, n, typ)
         if n and not values_address:
             raise CallRefused(f"value is NULL but nvr = {n}")
+        self._remember_get(typ, vr_address, refs)
         if typ == "Real" and refs and all(v.key[0] == "output" for _, v in refs):
             if not self._have_outputs:
                 self._ensure_sim()
@@ -243,6 +256,22 @@ class OverconSlave:
         else:
             for i, x in enumerate(vals):
                 out[i] = int(bool(x)) if typ == "Boolean" else x
+
+    def _remember_get(self, typ: str, vr_address: int, refs) -> None:
+        """Cache how to answer this list of value references again (hosts read the same list every
+        step): Real outputs as an index array into the outputs, Real/Integer/Boolean constants as
+        their values. Parameters and strings always take the general path."""
+        n = len(refs)
+        if not n or len(self._fast_get) >= 256 or typ == "String":
+            return
+        raw = ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint))
+        kinds = {v.key[0] for _, v in refs}
+        if kinds == {"output"} and typ == "Real":
+            self._fast_get[(typ, raw)] = (True, np.array([v.key[1] for _, v in refs], np.intp),
+                                          ctypes.c_double * n)
+        elif kinds == {"constant"}:
+            vals = [int(bool(v.key[1])) if typ == "Boolean" else v.key[1] for _, v in refs]
+            self._fast_get[(typ, raw)] = (False, vals, _C_TYPES[typ] * n)
 
     def _set(self, typ: str, vr_address: int, n: int, values_address: int) -> None:
         refs = self._refs(vr_address, n, typ)
@@ -406,11 +435,12 @@ class OverconSlave:
             if abs(current_time - self._t) > 1e-9 * max(1.0, abs(self._t)):
                 raise CallRefused(f"communication point {current_time!r} s is not the end of the previous "
                                   f"step ({self._t!r} s)")
-            sim = self._ensure_sim()
+            # while stepping, no parameter that builds the Simulation can change: no key check
+            sim = self._sim if self._sim is not None else self._ensure_sim()
             t_new = current_time + step_size
             y = self._advance(sim, t_new)
             out = sim.outputs(t_new, y)
-            if not np.all(np.isfinite(out)):
+            if not np.isfinite(out).all():
                 bad = [n for n, v in zip(self._model0.output_names(), out) if not math.isfinite(v)]
                 raise ArithmeticError(f"t = {t_new:.9g} s: non-finite outputs {', '.join(bad)}")
         except Exception as exc:  # the run cannot continue: fmi2Error, never NaN, never a crash

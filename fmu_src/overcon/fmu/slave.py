@@ -239,19 +239,6 @@ class OverconSlave:
         return self._params[arg]
 
     def _get(self, typ: str, vr_address: int, n: int, values_address: int) -> None:
-        if n and vr_address and values_address:  # a list of outputs or constants seen before: one copy
-            fast = self._fast_get.get((typ, ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint))))
-            if fast is not None:
-                outputs, arg, array_type, derived = fast
-                if outputs:
-                    if not self._have_outputs:
-                        self._ensure_sim()
-                    if derived:
-                        self._read_derived()
-                    array_type.from_address(values_address)[:] = self._outputs[arg].tolist()
-                else:
-                    array_type.from_address(values_address)[:] = arg
-                return
         refs = self._refs(vr_address, n, typ)
         if n and not values_address:
             raise CallRefused(f"value is NULL but nvr = {n}")
@@ -310,15 +297,39 @@ class OverconSlave:
         return fmi_call(function, modes)(
             lambda self, vr_address, n, values_address: impl(self, typ, vr_address, n, values_address))
 
-    get_real = _accessor("fmi2GetReal", READABLE, _get, "Real")
+    _get_real_checked = _accessor("fmi2GetReal", READABLE, _get, "Real")
     get_integer = _accessor("fmi2GetInteger", READABLE, _get, "Integer")
-    get_boolean = _accessor("fmi2GetBoolean", READABLE, _get, "Boolean")
+    _get_boolean_checked = _accessor("fmi2GetBoolean", READABLE, _get, "Boolean")
     get_string = _accessor("fmi2GetString", READABLE, _get, "String")
     set_real = _accessor("fmi2SetReal", WRITABLE, _set, "Real")
     set_integer = _accessor("fmi2SetInteger", WRITABLE, _set, "Integer")
     set_boolean = _accessor("fmi2SetBoolean", WRITABLE, _set, "Boolean")
     set_string = _accessor("fmi2SetString", WRITABLE, _set, "String")
     del _accessor
+
+    def _get_cached(self, typ: str, vr_address: int, n: int, values_address: int) -> bool:
+        """Answer a get of a list seen before (see _remember_get) while the values are readable
+        and current, without the checked call's layers; False: take the checked call."""
+        if not (n and vr_address and values_address and self._have_outputs and self._mode in READABLE):
+            return False
+        fast = self._fast_get.get((typ, ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint))))
+        if fast is None or (fast[3] and self._derived_stale):
+            return False
+        outputs, arg, array_type, _ = fast
+        array_type.from_address(values_address)[:] = self._outputs[arg].tolist() if outputs else arg
+        return True
+
+    def get_real(self, vr_address: int, n: int, values_address: int):
+        """fmi2GetReal (the checked call, or the cached answer of :meth:`_get_cached`)."""
+        if self._get_cached("Real", vr_address, n, values_address):
+            return Status.OK
+        return self._get_real_checked(vr_address, n, values_address)
+
+    def get_boolean(self, vr_address: int, n: int, values_address: int):
+        """fmi2GetBoolean (the checked call, or the cached answer of :meth:`_get_cached`)."""
+        if self._get_cached("Boolean", vr_address, n, values_address):
+            return Status.OK
+        return self._get_boolean_checked(vr_address, n, values_address)
 
     def _set_param(self, name: str, value) -> None:
         tunable = name in self._tunable

@@ -175,3 +175,17 @@ def test_warm_start_at_the_solution_converges_at_once():
         again = dynamics.evaluate(model, 0.0, q, h, ev.lam, solver=solver)
         assert again.iterations == 1 and not again.fallback
         assert np.max(np.abs(again.lam - ev.lam)) <= 1e3 * solver.friction_tol * (1 + np.max(np.abs(ev.lam)))
+        forces = dynamics.evaluate(model, 0.0, q, h, solver=solver, qf_guess=ev.qf)  # the forces' warm start
+        assert forces.iterations == 1 and not forces.fallback
+        assert np.max(np.abs(forces.lam - ev.lam)) <= 1e3 * solver.friction_tol * (1 + np.max(np.abs(ev.lam)))
+
+
+def test_forces_warm_start_at_a_nearby_state():
+    """qf_guess from a nearby state (h changed by 1e-3) is a valid start: same solution as a
+    cold start, within the tolerance bound."""
+    model, solver, states = cases("planar_f145_wo4", n=4)
+    for q, h, expected in states:
+        near = dynamics.evaluate(model, 0.0, q, h * (1 + 1e-3), solver=solver)
+        ev = dynamics.evaluate(model, 0.0, q, h, solver=solver, qf_guess=near.qf)
+        assert not ev.fallback
+        agree(ev, expected, model, solver)

@@ -76,6 +76,7 @@ class Evaluation:
     iterations: int = 0
     fallback: bool = False
     S: np.ndarray | None = None  # Schur complement J_R^T M^-1 J_R (for conditioning checks)
+    qf: np.ndarray | None = None  # friction forces on plan.friction_cols (Newton path; a warm start)
 
 
 def _chkfinite(a: np.ndarray) -> np.ndarray:
@@ -147,9 +148,13 @@ def _friction_batched(model: Model, plan: AssemblyPlan, ctx: list, lr: np.ndarra
 
 
 def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np.ndarray | None = None,
-             *, solver: SolverSpec) -> Evaluation:
+             *, solver: SolverSpec, qf_guess: np.ndarray | None = None) -> Evaluation:
     """Accelerations h' and multipliers lam at (t, q, h) (Eq. 18 with elimination), with the
-    Baumgarte frequency and friction-solve settings of ``solver``."""
+    Baumgarte frequency and friction-solve settings of ``solver``. Warm start of the friction
+    solve: ``qf_guess`` (the friction forces on ``plan.friction_cols`` of a nearby evaluation,
+    its ``Evaluation.qf``) gives the first iterate lam0_x + W_x qf_guess, one fixed-point step
+    taken with this state's lam0 and W and without evaluating a force; else ``lam_guess``'s
+    friction multipliers; else lam0."""
     a, tol, max_iter = solver.baumgarte, solver.friction_tol, solver.friction_max_iter
     plan = model.plan
     f = frames(model, q, h)
@@ -172,16 +177,20 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     MinvJT = MinvJ.T
     lam_R = _cho_solve(factor, MinvJT @ Q - g)
     lam = np.zeros(model.m)
-    iterations, fallback = 0, False
+    iterations, fallback, qf_out = 0, False, None
     if model.friction_joints:
         ctx = _friction_setup(plan, f)
         lam0 = lam_R
         xrows = plan.friction_xrows
         cols = plan.friction_cols
         W = _cho_solve_many(factor, MinvJT[:, cols])  # lam_R = lam0 + W qf(x)
-        x0 = (lam0 if lam_guess is None else lam_guess[R])[xrows]
+        if qf_guess is not None:
+            x0 = lam0[xrows] + W[xrows] @ qf_guess
+        else:
+            x0 = (lam0 if lam_guess is None else lam_guess[R])[xrows]
         x, qf, iterations, ok = _newton_reduced(plan, ctx, lam0[xrows], W[xrows], x0, tol, max_iter)
         if ok:
+            qf_out = qf
             lam_R = lam0 + W @ qf
             Q = Q.copy()
             Q[cols] += qf
@@ -209,7 +218,7 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
             Q = Q + _friction_batched(model, plan, ctx, lr)
     lam[R] = lam_R
     hdot = model.Minv * (Q - JR @ lam_R)
-    return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S)
+    return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S, qf=qf_out)
 
 
 def _cho_solve_many(factor, B: np.ndarray) -> np.ndarray:

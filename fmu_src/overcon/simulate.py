@@ -142,6 +142,7 @@ class Simulation:
                     "discontinuous at v = 0: for analysis only, not for integration; use 'regularised'")
         self.n = model.n
         self.lam = None  # last converged multipliers (friction warm start)
+        self.qf = None  # their friction forces (Evaluation.qf; the better warm start)
         self._last_eval = None  # (t, y, lam) of the last right-hand side: reused by outputs() at that point
         self._derived = _DerivedPlan(model)
         self.friction_iterations = 0
@@ -160,9 +161,9 @@ class Simulation:
     # -- right-hand side -------------------------------------------------------------------
     def _rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, self.lam, solver=self.solver)
+        ev = evaluate(self.model, t, q, h, self.lam, solver=self.solver, qf_guess=self.qf)
         if self.model.friction_joints:
-            self.lam = ev.lam
+            self.lam, self.qf = ev.lam, ev.qf
         self.friction_iterations += ev.iterations
         self.evaluations += 1
         self._last_eval = (t, y.copy(), ev.lam)
@@ -175,7 +176,8 @@ class Simulation:
         """Right-hand side for dense-output stages only: warm-started from the integrator's lam but
         leaving it (and the counters) unchanged, so reading outputs never alters the trajectory."""
         q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver)
+        ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver,
+                      qf_guess=self.qf)
         return np.concatenate([coordinate_rates(self.model, q, h), ev.hdot])
 
     # -- stepping --------------------------------------------------------------------------
@@ -263,13 +265,15 @@ class Simulation:
         if last is not None and last[0] == t and np.array_equal(last[1], y):
             f, lam = frames(model, q, h), last[2]
         else:
-            ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver)
+            ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver,
+                          qf_guess=self.qf)
             f, lam = ev.frames, ev.lam
         return plan.values(model, f, lam)
     # -- state -----------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {"integrator": self._integrator.get_state(),
                 "lam": None if self.lam is None else self.lam.copy(),
+                "qf": None if self.qf is None else self.qf.copy(),
                 "last_eval": None if self._last_eval is None else tuple(
                     x.copy() if isinstance(x, np.ndarray) else x for x in self._last_eval),
                 "friction_iterations": self.friction_iterations, "evaluations": self.evaluations,
@@ -280,6 +284,7 @@ class Simulation:
         state = copy.deepcopy(state)
         self._integrator.set_state(state["integrator"])
         self.lam = state["lam"]
+        self.qf = state.get("qf")  # states saved before it existed: the lam warm start
         self._last_eval = state.get("last_eval")  # states saved before it existed: None (a fresh solve)
         self.friction_iterations = state["friction_iterations"]
         self.evaluations = state["evaluations"]

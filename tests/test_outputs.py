@@ -61,3 +61,26 @@ def test_output_at_a_step_end_reuses_the_step_evaluation():
     other = Simulation(model, spec.solver, method="rk4", step=0.01)
     other.set_state(state)
     assert np.array_equal(other.outputs(0.05, y), out)  # the reused evaluation is part of the state
+
+
+def test_forces_history_extrapolates_linearly():
+    """The friction solve's warm start: exact for forces linear in time within twice the
+    distance of the last two solves, the last forces beyond that; a solve at the same time
+    replaces the newest entry (stages at one time); a round trip through the state is exact."""
+    from overcon.simulate import _ForcesHistory
+
+    hist = _ForcesHistory()
+    assert hist.guess(0.0) is None
+    hist.push(0.0, None)  # a solve without forces (the fallback path): nothing kept
+    assert hist.guess(0.0) is None
+    line = lambda t: np.array([1.0 + 2.0 * t, -3.0 * t])  # noqa: E731
+    hist.push(0.0, line(0.0))
+    assert np.array_equal(hist.guess(0.5), line(0.0))  # one entry: the last forces
+    hist.push(0.25, line(0.25) + 1.0)
+    hist.push(0.25, line(0.25))  # same time: replaces, keeps t = 0 as the older entry
+    for t in (0.1, 0.3, 0.5):
+        assert np.allclose(hist.guess(t), line(t), rtol=0, atol=1e-15)
+    assert np.array_equal(hist.guess(0.8), line(0.25))  # more than twice the distance ahead
+    other = _ForcesHistory()
+    other.set_state(hist.state())
+    assert np.array_equal(other.guess(0.4), hist.guess(0.4))

@@ -142,7 +142,8 @@ class Simulation:
                     "discontinuous at v = 0: for analysis only, not for integration; use 'regularised'")
         self.n = model.n
         self.lam = None  # last converged multipliers (friction warm start)
-        self.qf = None  # their friction forces (Evaluation.qf; the better warm start)
+        self._warm = _ForcesHistory()  # friction forces of the integration's solves (warm start)
+        self._step_warm = _ForcesHistory()  # the latest ones at the last two step ends (outputs' warm start)
         self._last_eval = None  # (t, y, lam) of the last right-hand side: reused by outputs() at that point
         self._derived = _DerivedPlan(model)
         self.friction_iterations = 0
@@ -161,9 +162,10 @@ class Simulation:
     # -- right-hand side -------------------------------------------------------------------
     def _rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, self.lam, solver=self.solver, qf_guess=self.qf)
+        ev = evaluate(self.model, t, q, h, self.lam, solver=self.solver, qf_guess=self._warm.guess(t))
         if self.model.friction_joints:
-            self.lam, self.qf = ev.lam, ev.qf
+            self.lam = ev.lam
+            self._warm.push(t, ev.qf)
         self.friction_iterations += ev.iterations
         self.evaluations += 1
         self._last_eval = (t, y.copy(), ev.lam)
@@ -177,7 +179,7 @@ class Simulation:
         leaving it (and the counters) unchanged, so reading outputs never alters the trajectory."""
         q, h = y[: self.n], y[self.n:]
         ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver,
-                      qf_guess=self.qf)
+                      qf_guess=self._warm.guess(t))
         return np.concatenate([coordinate_rates(self.model, q, h), ev.hdot])
 
     # -- stepping --------------------------------------------------------------------------
@@ -202,6 +204,8 @@ class Simulation:
                     raise SimulationError(
                         f"t = {t_before:.9g} s: time does not advance (step below the resolution of t)")
                 self.monitor.check(itg.t, itg.y)
+                if self._warm.items:
+                    self._step_warm.push(itg.t, self._warm.items[0][1])
                 f = frames(self.model, itg.y[: self.n])
                 self.max_drift = max(self.max_drift, float(np.max(np.abs(constraints(self.model, f)), initial=0.0)))
                 self._check_budget(itg, started, call)
@@ -256,7 +260,9 @@ class Simulation:
         computed per joint type at once). They need lam at (t, y): the last right-hand side's if it was
         evaluated at exactly this (t, y) (an output at the end of a step: the last stage of
         dopri5/dop853 and rk4's step end, the same evaluation of Eq. 18), else one evaluation of Eq. 18
-        warm-started from the integrator's lam without changing it."""
+        warm-started from the friction forces at the ends of the last two integrator steps,
+        interpolated linearly to t (so the values depend on the integrator's state only, never on
+        the output grid), without changing the integrator's warm start."""
         model, plan = self.model, self._derived
         if not plan.size:
             return np.zeros(0)
@@ -265,15 +271,16 @@ class Simulation:
         if last is not None and last[0] == t and np.array_equal(last[1], y):
             f, lam = frames(model, q, h), last[2]
         else:
+            warm = self._step_warm if self._step_warm.items else self._warm
             ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver,
-                          qf_guess=self.qf)
+                          qf_guess=warm.guess(t))
             f, lam = ev.frames, ev.lam
         return plan.values(model, f, lam)
     # -- state -----------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {"integrator": self._integrator.get_state(),
                 "lam": None if self.lam is None else self.lam.copy(),
-                "qf": None if self.qf is None else self.qf.copy(),
+                "friction_warm": self._warm.state(), "step_warm": self._step_warm.state(),
                 "last_eval": None if self._last_eval is None else tuple(
                     x.copy() if isinstance(x, np.ndarray) else x for x in self._last_eval),
                 "friction_iterations": self.friction_iterations, "evaluations": self.evaluations,
@@ -284,13 +291,46 @@ class Simulation:
         state = copy.deepcopy(state)
         self._integrator.set_state(state["integrator"])
         self.lam = state["lam"]
-        self.qf = state.get("qf")  # states saved before it existed: the lam warm start
+        self._warm.set_state(state.get("friction_warm", ()))  # states saved before: the lam warm start
+        self._step_warm.set_state(state.get("step_warm", ()))
         self._last_eval = state.get("last_eval")  # states saved before it existed: None (a fresh solve)
         self.friction_iterations = state["friction_iterations"]
         self.evaluations = state["evaluations"]
         self.max_drift = state["max_drift"]
         mon = self.monitor
         mon.N, mon.sign, mon.t_prev, mon.min_ratio = state["monitor"]
+
+
+class _ForcesHistory:
+    """Warm start of the friction solve (``qf_guess`` of :func:`overcon.dynamics.evaluate`): the
+    friction forces of the last two solves at distinct times, extrapolated linearly to the next
+    solve's time when it is at most twice their distance ahead, else the last forces. Only the
+    number of Newton iterations depends on it, not the solution (beyond the friction tolerance)."""
+
+    def __init__(self):
+        self.items: tuple = ()  # ((t, qf), (t_before, qf_before)), newest first
+
+    def push(self, t: float, qf: np.ndarray | None) -> None:
+        if qf is None:
+            return
+        older = self.items[1:] if self.items and self.items[0][0] == t else self.items[:1]
+        self.items = ((t, qf),) + older
+
+    def guess(self, t: float) -> np.ndarray | None:
+        if not self.items:
+            return None
+        t1, q1 = self.items[0]
+        if len(self.items) == 2:
+            t0, q0 = self.items[1]
+            if abs(t - t1) <= 2.0 * abs(t1 - t0):
+                return q1 + (q1 - q0) * ((t - t1) / (t1 - t0))
+        return q1
+
+    def state(self) -> tuple:
+        return tuple((t, qf.copy()) for t, qf in self.items)
+
+    def set_state(self, items) -> None:
+        self.items = tuple((float(t), np.array(qf, float)) for t, qf in items)
 
 
 class _DerivedPlan:

@@ -95,7 +95,11 @@ WHAT_IT_DECLARES = [("planar_none_wo4_pos", "frictionless, positions only"),
                     ("spatial_MN_wo5", "friction M, N, positions + reactions G, H, M, N")]
 DECLARE_SETTING = {"planar": ("dop853", 1e-7), "spatial": ("dop853", 1e-7)}
 EXUDYN_STEPS = (1e-3, 5e-4, 2.5e-4, 1.25e-4)
-TARGETS = {"planar_f45_wo4_pos": 1.0, "spatial_MN_wo5_pos": 5.0}  # s, to 1e-6 m
+TARGETS = {"planar_f45_wo4_pos": 0.15, "spatial_MN_wo5_pos": 0.5}  # s, positions to 1e-6 m (issue 14)
+SHIPPED_TARGETS = {"planar_f45_wo4": 0.3, "spatial_MN_wo5": 1.0}  # s, the same as shipped (all declared outputs)
+PEER_RATIO = 0.5  # overcon FMU / Exudyn wall time at matched accuracy, at every accuracy
+OVERHEAD_RATIO = 1.2  # FMI overhead per communication point / the trivial pythonfmu FMU's
+LIMIT_CASES = {"spatial_MN_wo5_pos": ("dopri5", 1e-9), "planar_f45_wo4_pos": ("dop853", 1e-7)}
 
 
 def log(msg: str) -> None:
@@ -432,6 +436,72 @@ def exudyn_rows(ref: np.ndarray, repeat: int):
     return rows, ""
 
 
+# ------------------------------------------------------------------------------------ the limit
+
+def limit_row(scene_path: Path, stop: float, method: str, tol: float, repeat: int) -> dict:
+    """In process, one scene run: CPU time per right-hand-side evaluation (time inside
+    ``Simulation._rhs``, median over ``repeat`` runs) beside what the linear algebra alone costs
+    at a state of that run: the Cholesky factorisation of S = J_R^T M^-1 J_R (dpotrf), the solve
+    for lam0 and the multi-column solve for W (dpotrs), and per friction iteration the small
+    Newton solve (dgetrf/dgetrs), timed with ``timeit`` on the same arrays; numbers in us."""
+    import timeit
+
+    from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
+
+    from overcon import scene as scene_mod
+    from overcon import simulate
+    from overcon.evaluation import frames, jacobian_h
+    from overcon.model import compile_model
+
+    spec = scene_mod.load(scene_path)
+    model = compile_model(spec)
+    per_eval, res = [], None
+    orig = simulate.Simulation._rhs
+    for _ in range(repeat):
+        acc = [0.0]
+
+        def timed(sim, t, y):
+            t0 = time.process_time()
+            try:
+                return orig(sim, t, y)
+            finally:
+                acc[0] += time.process_time() - t0
+
+        simulate.Simulation._rhs = timed
+        try:
+            res = simulate.run(model, spec.solver, stop_time=stop, output_interval=INTERVAL, method=method,
+                               tolerance=tol)
+        finally:
+            simulate.Simulation._rhs = orig
+        per_eval.append(1e6 * acc[0] / res.evaluations)
+    sim = simulate.Simulation(model, spec.solver, method=method, tolerance=tol)
+    y = sim.advance(stop / 2)
+    f = frames(model, y[: model.n], y[model.n:])
+    JR = jacobian_h(model, f)[model.retained].T
+    MinvJ = model.Minv[:, None] * JR
+    S = JR.T @ MinvJ
+    c, _ = dpotrf(S)
+    b = MinvJ.T @ np.ones(model.nh)
+    B = np.ascontiguousarray(MinvJ.T[:, model.plan.friction_cols])
+    nx = len(model.plan.friction_xrows)
+    A = np.eye(nx) + 0.01 * np.ones((nx, nx))
+    n = 2000
+
+    def us(stmt):
+        return 1e6 * min(timeit.repeat(stmt, number=n, repeat=5)) / n
+
+    factor = us(lambda: dpotrf(S))
+    solves = us(lambda: dpotrs(c, b)) + us(lambda: dpotrs(c, B))
+    lu, piv, _ = dgetrf(A)
+    newton = us(lambda: dgetrf(A)) + us(lambda: dgetrs(lu, piv, np.ones(nx)))
+    its = res.friction_iterations / res.evaluations
+    linalg = factor + solves + its * newton
+    return {"scene": scene_path.stem, "method": method, "tol": tol, "size": S.shape[0], "nx": nx,
+            "per_eval_us": statistics.median(per_eval), "evaluations": res.evaluations, "its": its,
+            "factor_us": factor, "solves_us": solves, "newton_us": newton, "linalg_us": linalg,
+            "ratio": statistics.median(per_eval) / linalg}
+
+
 # ------------------------------------------------------------------------------------ report
 
 def fmt(x, spec=".2e"):
@@ -563,6 +633,22 @@ def main(argv=None) -> int:
             declared.append((what, len(fmus[n].outputs), r))
             log(f"{n}: {r.wall:.3f} s")
 
+        shipped = []
+        for n, _limit in SHIPPED_TARGETS.items():
+            f = fastest(ladders.get(n + "_pos", []), 1e-6)
+            if f is None:
+                continue
+            hit = [r for _w, _o, r in declared if r.scene == n and (r.method, r.setting) == (f.method, f.setting)]
+            r = hit[0] if hit else measure(fmus[n], f.method, f.setting, refs[n], repeat)
+            shipped.append(r)
+            log(f"{n} as shipped, {r.method} {r.label}: {r.wall:.3f} s")
+
+        limits = []
+        for n, (method, tol) in LIMIT_CASES.items():
+            limits.append(limit_row(paths[n], SCENES[n][1], method, tol, repeat))
+            log(f"limit {n}: {limits[-1]['per_eval_us']:.0f} us per evaluation, linear algebra "
+                f"{limits[-1]['linalg_us']:.1f} us")
+
         stiff = [] if args.quick else stiff_rows(fmus[STIFF], paths[STIFF], repeat)
 
         ovh = overhead(fmus["planar_none_wo4_pos"], build_trivial(tmp, len(fmus["planar_none_wo4_pos"].outputs)),
@@ -578,7 +664,7 @@ def main(argv=None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         pareto_plot(ladders, exu, out / "pareto.png")
         md = report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, args,
-                    time.perf_counter() - t_start)
+                    time.perf_counter() - t_start, shipped, limits)
         (out / "benchmarks.md").write_text(md)
         print(md)
         log(f"wrote {out / 'benchmarks.md'} and {out / 'pareto.png'} ({time.perf_counter() - t_start:.0f} s)")
@@ -587,7 +673,8 @@ def main(argv=None) -> int:
     return 0
 
 
-def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, args, total) -> str:
+def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, args, total, shipped=(),
+           limits=()) -> str:
     cmd = "python benchmarks/bench.py" + (" --quick" if args.quick else "") + (
         f" --repeat {args.repeat}" if args.repeat != 3 and not args.quick else "")
     L = ["# Benchmarks: speed against accuracy", "",
@@ -651,27 +738,70 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
           "| FMU | per point (us) | fixed cost per run (s) |", "|---|---:|---:|",
           f"| overcon planar_none_wo4_pos ({ovh['n_outputs']} Real outputs) | {ovh['ours_us']:.1f} | {ovh['ours_fixed_s']:.3f} |",
           f"| trivial pythonfmu | {ovh['trivial_us']:.1f} | {ovh['trivial_fixed_s']:.3f} |",
-          f"| ratio | {ovh['ours_us'] / ovh['trivial_us']:.2f} | |", "",
-          "## Targets (issue 6)", ""]
+          f"| ratio | {ovh['ours_us'] / ovh['trivial_us']:.2f} | |", ""]
+    if limits:
+        L += ["## The limit: time per evaluation against the linear algebra", "",
+              "In process (no FMI), positions only: CPU time inside `Simulation._rhs` per right-hand-side "
+              "evaluation, median of the runs, beside the cost of the linear algebra one evaluation "
+              "needs at a state from the middle of the run, timed alone on the same arrays (best of 5 x "
+              "2000 calls): the Cholesky factorisation of S = J_R^T M^-1 J_R (LAPACK dpotrf), the "
+              "back-substitutions for lam0 and for the friction columns W (dpotrs), and per friction "
+              "iteration the Newton matrix's LU factorisation and solve (dgetrf/dgetrs). Everything "
+              "else (building Phi_h, gamma, Q and the friction forces in numpy, and the Python "
+              "between the calls) is the overhead that remains.", "",
+              "| scene | solver | S size | friction unknowns | friction it./eval | us per evaluation | "
+              "dpotrf (us) | dpotrs x2 (us) | Newton LU per it. (us) | linear algebra (us) | ratio |",
+              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for m in limits:
+            L.append(f"| {m['scene']} | {m['method']} tol = {m['tol']:g} | {m['size']} | {m['nx']} | {m['its']:.2f} | "
+                     f"{m['per_eval_us']:.0f} | {m['factor_us']:.1f} | {m['solves_us']:.1f} | {m['newton_us']:.1f} | "
+                     f"{m['linalg_us']:.1f} | {m['ratio']:.0f} |")
+        L.append("")
+    L += ["## Targets (issue 14)", ""]
     for n, limit in TARGETS.items():
         f = fastest(ladders.get(n, []), 1e-6)
-        L.append(f"- {titles[n]} to 1e-6 m under {limit:g} s: " + (
+        L.append(f"- {titles[n]} to 1e-6 m, target <= {limit:g} s: " + (
             f"fastest {f.method} {f.label}: {f.wall:.2f} s, error {f.error:.1e} m -> "
-            f"{'met' if f.wall < limit else 'NOT met'}" if f else "no run reached 1e-6 m"))
-    for what, _n, r in declared:
-        limit = TARGETS.get(r.scene + "_pos")
-        if limit and "reactions" in what:
-            L.append(f"- The same as shipped ({r.scene}: {what}), {r.method} {r.label}: {r.wall:.2f} s -> "
-                     f"{'met' if r.wall < limit else 'NOT met'} (one Eq. 18 solve per output point for the reactions)")
+            f"{'met' if f.wall <= limit else 'NOT met'}" if f else "no run reached 1e-6 m"))
+    for r in shipped:
+        limit = SHIPPED_TARGETS[r.scene]
+        L.append(f"- The same as shipped ({r.scene}, every declared output), {r.method} {r.label}, target <= "
+                 f"{limit:g} s: {r.wall:.2f} s -> {'met' if r.wall <= limit else 'NOT met'}")
     if exu:
-        f = fastest(ladders.get("planar_none_wo4_pos", []), 1e-6)
-        e = fastest(exu, 1e-6)
-        if f and e:
-            L.append(f"- Planar frictionless to 1e-6 m: overcon FMU {f.wall:.3f} s ({f.method} {f.label}) vs "
-                     f"Exudyn {e.wall:.3f} s (h = {e.setting:g}): ratio {f.wall / e.wall:.2f} -> "
-                     f"{'met' if f.wall < e.wall else 'NOT met'}")
-    L.append(f"- FMI overhead per point: {ovh['ours_us']:.1f} us vs trivial {ovh['trivial_us']:.1f} us: ratio "
-             f"{ovh['ours_us'] / ovh['trivial_us']:.2f} -> {'met' if ovh['ours_us'] <= 2 * ovh['trivial_us'] else 'NOT met'}")
+        ratios = []
+        for r in exu:
+            f = fastest(ladders.get("planar_none_wo4_pos", []), r.error) if np.isfinite(r.error) else None
+            ratios.append(f"{f.wall / r.wall:.2f} at {r.error:.1e} m" if f else f"none as accurate as {r.error:.1e} m")
+        ok = all(" at " in x and float(x.split()[0]) <= PEER_RATIO for x in ratios)
+        L.append(f"- Planar frictionless against Exudyn at matched accuracy, target <= {PEER_RATIO:g}x at every "
+                 f"accuracy: {'; '.join(ratios)} -> {'met' if ok else 'NOT met'}")
+    ratio = ovh['ours_us'] / ovh['trivial_us']
+    L.append(f"- FMI overhead per point, target <= {OVERHEAD_RATIO:g}x the trivial FMU: {ovh['ours_us']:.1f} us vs "
+             f"{ovh['trivial_us']:.1f} us: ratio {ratio:.2f} -> {'met' if ratio <= OVERHEAD_RATIO else 'NOT met'}")
+    L.append("- Compiled kernel: none; every figure above is the numpy/scipy path (the only one).")
+    L += ["", "### Where the time goes, and why targets are missed", "",
+          "- The limit table above: one evaluation of Eq. 18 costs 20-30 times its linear algebra. The rest is "
+          "Python around small arrays: an evaluation makes about a hundred numpy calls (frames, Phi_h, gamma, Phi "
+          "and Q per joint type; per friction iteration each friction type's forces and their scatter; once or "
+          "twice the friction Jacobian), each 1-5 us for arrays of 2 to 35 entries, whatever their size.",
+          "- The friction solve needs 2-4 force evaluations per right-hand side (Newton with the analytic Jacobian "
+          "from a warm start; the fixed point needed about 5 planar and 11-12 spatial). Fewer are not possible at "
+          "friction_tol = 1e-12 from the previous stage's solution: check, Newton step, check, and a second step "
+          "when the first residual is large.",
+          "- As shipped, every 1 ms output point with reactions needs one evaluation of Eq. 18 at the "
+          "interpolated state (taking lam from the step is exact only at a step end, where it is reused); "
+          "with a 1 ms grid that is 4001 (planar) or 10001 (spatial) extra evaluations, more than the "
+          "integration's own. A host that reads positions only no longer pays for them (the FMU computes "
+          "reactions only once one is read), but fmpy's simulate_fmu reads every output.",
+          "- FMI overhead: fmpy reads the Boolean constants (`motion_unique`, `<joint>.reaction_unique`) at "
+          "every point, one more call into the FMU per point than the trivial FMU has (about 3 us here), "
+          "besides doStep and getReal.",
+          "- A compiled kernel (numba, or C through the FMU build) was not added: the whole evaluation "
+          "(frames, three joint types, loads, friction and its Jacobian) would have to exist twice with "
+          "equality to 1e-12, and numba compiles at every FMU instantiation from a freshly extracted FMU "
+          "(seconds, longer than a whole run here) unless its cache is written next to the FMU's resources. "
+          "The targets above need it: spatial <= 0.5 s is about 90 us per evaluation including the "
+          "integrator."]
     L += ["", "![error vs wall time](pareto.png)", ""]
     return "\n".join(L)
 

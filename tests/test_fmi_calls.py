@@ -400,3 +400,68 @@ def test_switching_friction_off_by_a_parameter_is_logged(unz):
     s = Slave(unz("planar_f45_wo4")).init(**{"joint4.mu": 0.2})
     assert not any("switched between mu = 0" in m for _, _, m in s.logs.records)
     s.free()
+
+
+def test_outputs_the_host_does_not_read_are_not_computed(unz, monkeypatch):
+    """A host that reads only positions never pays for the reactions (no derived_outputs call
+    in fmi2DoStep); its first read of a reaction computes them at the current point, equal bit
+    for bit to those of a host that read everything every step; from then on fmi2DoStep computes
+    them. Repeated reads of the same list (the cached path) give the same values as a first read."""
+    import ctypes
+
+    from overcon import simulate
+    from overcon.fmu.slave import OverconSlave, Status
+
+    calls = []
+    original = simulate.Simulation.derived_outputs
+
+    def counted(self, t, y):
+        calls.append(t)
+        return original(self, t, y)
+    monkeypatch.setattr(simulate.Simulation, "derived_outputs", counted)
+
+    def get_real(inst, refs):
+        vr, vals = (ctypes.c_uint * len(refs))(*refs), (ctypes.c_double * len(refs))()
+        assert inst.get_real(ctypes.addressof(vr), len(refs), ctypes.addressof(vals)) == Status.OK, inst.messages
+        return list(vals)
+
+    resources = unz("planar_f45_wo4") / "resources"
+    full, lazy = OverconSlave(resources), OverconSlave(resources)
+    outputs = [k for k, v in enumerate(full._vars) if v.key and v.key[0] == "output"]
+    positions = [k for k in outputs if full._vars[k].key[1] < len(full._model0.position_outputs)]
+    assert 0 < len(positions) < len(outputs)
+    for inst in (full, lazy):
+        assert inst.setup_experiment(0, 0.0, 0.0) == Status.OK
+        assert inst.enter_initialization_mode() == Status.OK
+        assert inst.exit_initialization_mode() == Status.OK
+    t = 0.0
+    for _ in range(5):
+        assert full.do_step(t, 0.01) == Status.OK and lazy.do_step(t, 0.01) == Status.OK
+        t += 0.01
+        a = get_real(full, outputs)
+        calls.clear()
+        assert get_real(lazy, positions) == get_real(lazy, positions) == [a[outputs.index(k)] for k in positions]
+        assert calls == []
+    assert lazy.do_step(t, 0.01) == Status.OK and full.do_step(t, 0.01) == Status.OK
+    assert calls == [pytest.approx(0.06)]  # the full reader's step
+    t += 0.01
+    calls.clear()
+    assert get_real(lazy, outputs) == get_real(full, outputs) == get_real(lazy, outputs)
+    assert len(calls) == 1  # computed once, at the first read
+    calls.clear()
+    assert lazy.do_step(t, 0.01) == Status.OK
+    assert len(calls) == 1  # now every step computes them
+    # an FMU state saved before any read keeps the skipped point: restored, the read computes it
+    other = OverconSlave(resources)
+    assert other.setup_experiment(0, 0.0, 0.0) == Status.OK
+    assert other.enter_initialization_mode() == Status.OK and other.exit_initialization_mode() == Status.OK
+    assert other.do_step(0.0, 0.01) == Status.OK
+    handle = ctypes.c_void_p(None)
+    assert other.get_fmu_state(ctypes.addressof(handle)) == Status.OK
+    assert other.do_step(0.01, 0.01) == Status.OK
+    assert other.set_fmu_state(handle.value) == Status.OK
+    reference = OverconSlave(resources)
+    assert reference.setup_experiment(0, 0.0, 0.0) == Status.OK
+    assert reference.enter_initialization_mode() == Status.OK and reference.exit_initialization_mode() == Status.OK
+    assert reference.do_step(0.0, 0.01) == Status.OK
+    assert get_real(other, outputs) == get_real(reference, outputs)

@@ -198,56 +198,6 @@ def test_coordinate_rates_singularity_names_first_body():
         coordinate_rates(model, q, model.h0)
 
 
-@pytest.mark.parametrize("name", ["planar_f145_wo6", "spatial_GHMN_wo9"])
-def test_evaluate_matches_reference_solve(name):
-    """evaluate() (batched forces, direct LAPACK) against the same solve written with the
-    per-joint reference functions and scipy's cho_factor/cho_solve: the friction fixed point is
-    shared, so results agree to round-off and the iteration counts are equal."""
-    from scipy.linalg import cho_factor, cho_solve
-
-    model = model_of(name)
-    R = model.retained
-    solver = scene_mod.as_scene(scene_mod.load(MECH / f"{name}.toml")).solver
-    for q, h in random_states(model, n=6, seed=6, scale=0.02):
-        f = frames(model, q, h)
-        try:
-            ev = dynamics.evaluate(model, 0.0, q, h, solver=solver)
-        except dynamics.FrictionSolveError:
-            ev = None
-        Phi_h = ref.jacobian(model, f)
-        JR = Phi_h[R].T
-        a = solver.baumgarte
-        g = ref.gamma(model, f)[R] - 2.0 * a * (Phi_h[R] @ h) - a * a * ref.constraints(model, f)[R]
-        Q = applied_forces_reference(model, f)
-        MinvJ = model.Minv[:, None] * JR
-        factor = cho_factor(JR.T @ MinvJ)
-        lam0 = cho_solve(factor, MinvJ.T @ Q - g)
-        pos = {row: k for k, row in enumerate(R)}
-        xrows = [pos[r] for j in model.friction_joints for r in model.joints[j].rows if r in pos]
-
-        def full(lr):
-            out = np.zeros(model.m)
-            out[R] = lr
-            return out
-
-        def G(lr):
-            return lam0 + cho_solve(factor, MinvJ.T @ ref.friction_generalized(model, f, full(lr)))
-
-        lr, its, ok = dynamics._fixed_point(G, lam0.copy(), xrows, solver.friction_tol, solver.friction_max_iter)
-        fallback = not ok
-        if fallback:
-            lr, more, ok = dynamics._newton(G, lr, xrows, solver.friction_tol, solver.friction_max_iter)
-            its += more
-        if ev is None:  # the solve failed: it fails the same way in the reference
-            assert not ok
-            continue
-        assert ok
-        assert (its, fallback) == (ev.iterations, ev.fallback)
-        Qf = ref.friction_generalized(model, f, full(lr))
-        close(ev.lam, full(lr), 1e-12)
-        close(ev.hdot, model.Minv * (Q + Qf - JR @ lr), 1e-12)
-
-
 def test_plan_follows_replaced_model():
     """A model whose retained equations were replaced gets its own matching plan (built by
     Model.__post_init__; no cache), and a Model's arrays cannot be written to."""

@@ -10,20 +10,29 @@ M is diagonal and positive, so it is solved through the Schur complement
 S is singular when the kept equations are dependent at this configuration (a singular position):
 that raises :class:`overcon.evaluation.SingularConfiguration`.
 
-Friction: Q_f depends on lam only through the friction joints' multipliers, and enters the right
-hand side linearly, so ``lam_R = lam0 + S^-1 J_R^T M^-1 Q_f(lam)`` is a fixed point in the
-friction joints' multipliers ``x``. Solve: fixed-point iteration from the last converged lam
-(warm start), accelerated by Anderson mixing (depth 3); on non-convergence (iteration cap) or divergence (residual growth over 3
-iterations) fall back to Newton's method on ``x - G(x) = 0`` with a finite-difference Jacobian
-(x has at most a dozen entries) and a backtracking line search; if that fails too,
-:class:`FrictionSolveError` names the time, the joints and the residual. Convergence:
-``|G(x) - x| <= tol (1 + |x|)`` (infinity norms, N). The returned lam is G(x) of the last
-iterate, so h' and lam are consistent to that residual.
+Friction: Q_f depends on lam only through the friction joints' multipliers ``x`` (the retained
+friction rows, ``plan.friction_xrows``) and acts only on the velocities of the friction joints'
+bodies (``plan.friction_cols``), so with ``W = S^-1 J_R^T M^-1`` restricted to those columns
+(one multi-column back-substitution with the evaluation's one Cholesky factor)
+``lam_R = lam0 + W qf(x)`` and the solve is the small fixed point ``x = lam0_x + W_x qf(x)``.
+Solve (decided here): Newton's method on it from the last converged lam (warm start), Jacobian
+``I - W_x dqf/dx`` with dqf/dx from each joint module's optional ``friction_jacobian`` (forward
+differences of its ``friction`` for a type without one), kept for the next step while a step
+reduces the residual 1000-fold; typically 2-4 force evaluations. If Newton gives up
+(NEWTON_MAX_ITER force evaluations, a residual growing twice, a singular Newton matrix) the
+robust path of before runs from the warm start: fixed-point iteration accelerated by Anderson
+mixing (depth 3), on non-convergence or divergence (residual growth over 3 iterations) Newton's
+method on ``x - G(x) = 0`` with a finite-difference Jacobian and a backtracking line search
+(``Evaluation.fallback``); if that fails too, :class:`FrictionSolveError` names the time, the
+joints and the residual. Convergence everywhere: ``|G(x) - x| <= tol (1 + |x|)`` (infinity norms,
+N). The returned lam is G(x) of the last iterate, so h' and lam are consistent to that residual.
+``Evaluation.iterations`` counts evaluations of the friction forces.
 
 Hot path: the friction forces of all friction joints of a type come from one call of the joint
 module's ``friction`` (per-evaluation constants from ``friction_setup``, computed once before the
 iteration), and the Cholesky factor/solve call LAPACK's dpotrf/dpotrs directly through SciPy's
-public ``scipy.linalg.lapack`` (with scipy's finiteness checks and messages).
+public ``scipy.linalg.lapack`` (with scipy's finiteness checks and messages); the Newton matrix
+is factored with dgetrf/dgetrs from there too.
 
 Solver options: :func:`evaluate` reads ``baumgarte``, ``friction_tol`` and ``friction_max_iter``
 from the :class:`overcon.spec.SolverSpec` it is given (the Model carries none).
@@ -35,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import LinAlgError
-from scipy.linalg.lapack import dpotrf, dpotrs
+from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
 
 from .evaluation import Frames, SingularConfiguration, applied_forces, constraints, frames, gamma, jacobian_h
 from .model import AssemblyPlan, Model
@@ -67,6 +76,7 @@ class Evaluation:
     iterations: int = 0
     fallback: bool = False
     S: np.ndarray | None = None  # Schur complement J_R^T M^-1 J_R (for conditioning checks)
+    qf: np.ndarray | None = None  # friction forces on plan.friction_cols (Newton path; a warm start)
 
 
 def _chkfinite(a: np.ndarray) -> np.ndarray:
@@ -138,9 +148,13 @@ def _friction_batched(model: Model, plan: AssemblyPlan, ctx: list, lr: np.ndarra
 
 
 def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np.ndarray | None = None,
-             *, solver: SolverSpec) -> Evaluation:
+             *, solver: SolverSpec, qf_guess: np.ndarray | None = None) -> Evaluation:
     """Accelerations h' and multipliers lam at (t, q, h) (Eq. 18 with elimination), with the
-    Baumgarte frequency and friction-solve settings of ``solver``."""
+    Baumgarte frequency and friction-solve settings of ``solver``. Warm start of the friction
+    solve: ``qf_guess`` (the friction forces on ``plan.friction_cols`` of a nearby evaluation,
+    its ``Evaluation.qf``) gives the first iterate lam0_x + W_x qf_guess, one fixed-point step
+    taken with this state's lam0 and W and without evaluating a force; else ``lam_guess``'s
+    friction multipliers; else lam0."""
     a, tol, max_iter = solver.baumgarte, solver.friction_tol, solver.friction_max_iter
     plan = model.plan
     f = frames(model, q, h)
@@ -163,33 +177,149 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     MinvJT = MinvJ.T
     lam_R = _cho_solve(factor, MinvJT @ Q - g)
     lam = np.zeros(model.m)
-    iterations, fallback = 0, False
+    iterations, fallback, qf_out = 0, False, None
     if model.friction_joints:
         ctx = _friction_setup(plan, f)
         lam0 = lam_R
         xrows = plan.friction_xrows
-
-        def G(lr):
-            Qf = _friction_batched(model, plan, ctx, lr)
-            return lam0 + _cho_solve(factor, MinvJT @ Qf)
-
-        lr = lam0.copy() if lam_guess is None else lam_guess[R].copy()
-        lr, iterations, ok = _fixed_point(G, lr, xrows, tol, max_iter)
-        if not ok:
+        cols = plan.friction_cols
+        W = _cho_solve_many(factor, MinvJT[:, cols])  # lam_R = lam0 + W qf(x)
+        if qf_guess is not None:
+            x0 = lam0[xrows] + W[xrows] @ qf_guess
+        else:
+            x0 = (lam0 if lam_guess is None else lam_guess[R])[xrows]
+        x, qf, iterations, ok = _newton_reduced(plan, ctx, lam0[xrows], W[xrows], x0, tol, max_iter)
+        if ok:
+            qf_out = qf
+            lam_R = lam0 + W @ qf
+            Q = Q.copy()
+            Q[cols] += qf
+        else:  # the robust path: Anderson-accelerated fixed point, then Newton with FD Jacobian
             fallback = True
-            lr, more, ok = _newton(G, lr, xrows, tol, max_iter)
+
+            def G(lr):
+                Qf = _friction_batched(model, plan, ctx, lr)
+                return lam0 + _cho_solve(factor, MinvJT @ Qf)
+
+            lr = lam0.copy() if lam_guess is None else lam_guess[R].copy()
+            lr, more, ok = _fixed_point(G, lr, xrows, tol, max_iter)
             iterations += more
-        if not ok:
-            res = np.max(np.abs(G(lr)[xrows] - lr[xrows]))
-            names = ", ".join(model.joints[j].name for j in model.friction_joints)
-            raise FrictionSolveError(
-                f"t = {t:.9g} s: friction solve in joints {names} did not converge "
-                f"(residual {res:.3g} N after {iterations} iterations, fixed point then Newton)")
-        lam_R = lr
-        Q = Q + _friction_batched(model, plan, ctx, lr)
+            if not ok:
+                lr, more, ok = _newton(G, lr, xrows, tol, max_iter)
+                iterations += more
+            if not ok:
+                res = np.max(np.abs(G(lr)[xrows] - lr[xrows]))
+                names = ", ".join(model.joints[j].name for j in model.friction_joints)
+                raise FrictionSolveError(
+                    f"t = {t:.9g} s: friction solve in joints {names} did not converge "
+                    f"(residual {res:.3g} N after {iterations} iterations: Newton, fixed point, "
+                    "then Newton with a finite-difference Jacobian)")
+            lam_R = lr
+            Q = Q + _friction_batched(model, plan, ctx, lr)
     lam[R] = lam_R
     hdot = model.Minv * (Q - JR @ lam_R)
-    return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S)
+    return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S, qf=qf_out)
+
+
+def _cho_solve_many(factor, B: np.ndarray) -> np.ndarray:
+    """S^-1 B for a 2-D B (columns solved at once) with the factor of :func:`_cho_factor`."""
+    c, lower = factor
+    if B.shape[1] == 0:
+        return np.zeros((c.shape[0], 0))
+    _chkfinite(B)
+    X, info = dpotrs(c, B, lower=lower, overwrite_b=0)
+    if info != 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal potrs")
+    return X
+
+
+NEWTON_MAX_ITER = 12
+"""Evaluations of the friction forces in the Newton solve before the fixed-point fallback."""
+NEWTON_REFRESH = 1e-3
+"""The Newton solve keeps its Jacobian while each step reduces the residual at least this much
+(a chord step; the first step of every evaluation uses a fresh Jacobian)."""
+
+
+def _friction_forces_reduced(plan: AssemblyPlan, ctx: list, x: np.ndarray):
+    """Friction forces on the velocities ``plan.friction_cols`` (ncols,) at the friction
+    multipliers x = lam_R[friction_xrows] (eliminated rows read as 0), and the per-group inputs
+    (lam, Qi, Qj) that :func:`_friction_jacobian_reduced` needs."""
+    xp = np.concatenate((x, (0.0,)))
+    qf = np.zeros(len(plan.friction_cols) + 1)
+    parts = []
+    for g, cx in zip(plan.friction, ctx):
+        lam = xp[g.x_index]
+        Qi, Qj = g.module.friction(g.data, cx, lam)
+        np.add.at(qf, g.col_i, Qi)
+        np.add.at(qf, g.col_j, Qj)
+        parts.append((lam, Qi, Qj))
+    return qf[:-1], parts
+
+
+def _friction_jacobian_reduced(plan: AssemblyPlan, ctx: list, parts: list, nx: int) -> np.ndarray:
+    """Derivative (ncols, nx) of :func:`_friction_forces_reduced`'s forces by x: from each joint
+    module's optional ``friction_jacobian(d, ctx, lam)`` where it has one, else by forward
+    differences of its ``friction`` (one batched call per equation of the type: a joint's forces
+    depend on its own multipliers only)."""
+    Dq = np.zeros((len(plan.friction_cols) + 1, nx + 1))
+    for g, cx, (lam, Qi, Qj) in zip(plan.friction, ctx, parts):
+        jac = getattr(g.module, "friction_jacobian", None)
+        dQi, dQj = jac(g.data, cx, lam) if jac is not None else _fd_friction_jacobian(g, cx, lam, Qi, Qj)
+        xi = g.x_index[:, None, :]
+        np.add.at(Dq, (g.col_i[:, :, None], xi), dQi)
+        np.add.at(Dq, (g.col_j[:, :, None], xi), dQj)
+    return Dq[:-1, :nx]
+
+
+def _fd_friction_jacobian(g, cx, lam: np.ndarray, Qi: np.ndarray, Qj: np.ndarray):
+    """(dQi, dQj), each (k, n_coord, n_eq): forward differences of ``g.module.friction`` by the
+    joints' multipliers lam (k, n_eq), step 1e-7 max(1, |lam|) (N)."""
+    k, ne = lam.shape
+    dQi = np.empty(Qi.shape + (ne,))
+    dQj = np.empty(Qj.shape + (ne,))
+    for c in range(ne):
+        step = 1e-7 * np.maximum(1.0, np.abs(lam[:, c]))
+        lp = lam.copy()
+        lp[:, c] += step
+        Pi, Pj = g.module.friction(g.data, cx, lp)
+        dQi[..., c] = (Pi - Qi) / step[:, None]
+        dQj[..., c] = (Pj - Qj) / step[:, None]
+    return dQi, dQj
+
+
+def _newton_reduced(plan: AssemblyPlan, ctx: list, lam0x: np.ndarray, Wx: np.ndarray, x: np.ndarray,
+                    tol: float, max_iter: int):
+    """Newton's method on the friction multipliers x alone: x = G(x) = lam0x + Wx qf(x) (Wx =
+    rows of S^-1 J_R^T M^-1 for x, columns for ``friction_cols``), Jacobian I - Wx dqf/dx,
+    kept while it reduces the residual by NEWTON_REFRESH per step. Convergence as the fixed
+    point's, ``|G(x) - x| <= tol (1 + |x|)``; gives up (converged False) on a non-finite or twice
+    growing residual or after min(max_iter, NEWTON_MAX_ITER) force evaluations. Returns (x,
+    qf(x), evaluations, converged)."""
+    n_max = min(max_iter, NEWTON_MAX_ITER)
+    eye = np.eye(len(x))
+    prev, growth, lu, piv = np.inf, 0, None, None
+    for it in range(1, n_max + 1):
+        qf, parts = _friction_forces_reduced(plan, ctx, x)
+        r = lam0x + Wx @ qf - x
+        res = np.abs(r).max(initial=0.0)
+        if not math.isfinite(res):
+            return x, qf, it, False
+        if res <= tol * (1.0 + np.abs(x).max(initial=0.0)):
+            return x, qf, it, True
+        growth = growth + 1 if res >= prev else 0
+        if growth >= 2 or it == n_max:
+            return x, qf, it, False
+        if lu is None or res > NEWTON_REFRESH * prev:
+            Dq = _friction_jacobian_reduced(plan, ctx, parts, len(x))
+            lu, piv, info = dgetrf(eye - Wx @ Dq)
+            if info != 0:  # singular Newton matrix (or an illegal value): the fallback decides
+                return x, qf, it, False
+        prev = res
+        dx, info = dgetrs(lu, piv, r)
+        if info != 0:  # pragma: no cover - dgetrs fails only on illegal arguments
+            return x, qf, it, False
+        x = x + dx
+    return x, qf, n_max, False
 
 
 ANDERSON_DEPTH = 3

@@ -61,6 +61,21 @@ class Law:
             return self.mu / speed
         return self._magnitude(speed) / max(speed, self.v_reg)
 
+    def mu_over_speed_slope(self, speed: float) -> float:
+        """d(mu_over_speed)/ds at s >= 0 (1/(m/s)^2), the one-sided derivative from above at the
+        kink s = v_reg (for the friction solve's Newton Jacobian; law A: raises at s = 0)."""
+        if self.name == "coulomb":
+            if speed == 0.0:
+                raise ZeroDivisionError("Coulomb law (variant A) has no finite mu(v)/v at v = 0")
+            return -self.mu / (speed * speed)
+        slope = 0.0
+        if self.name == "stribeck":
+            x = speed / self.v_stribeck
+            slope = -2.0 * x / self.v_stribeck * (self.mu_static - self.mu) * math.exp(-x * x)
+        if speed < self.v_reg:
+            return slope / self.v_reg
+        return (slope - self._magnitude(speed) / speed) / speed
+
 
 def make_law(spec: FrictionSpec, sizes=None) -> Law:
     """The law of ``spec``; ``sizes``: size key -> value of a type with several sizes

@@ -195,6 +195,9 @@ class FrictionGroup(_TypedArrays):
     lam_index: np.ndarray  # (k, n_equations) into lam_R extended by one 0.0 (eliminated rows)
     out_i: np.ndarray  # (k,) rows of Qi in the contribution list
     out_j: np.ndarray
+    x_index: np.ndarray = None  # (k, n_equations) into x = lam_R[friction_xrows], extended by one pad slot
+    col_i: np.ndarray = None  # (k, n_coord) into friction_cols of body i's velocities, extended by one pad slot
+    col_j: np.ndarray = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,6 +210,7 @@ class AssemblyPlan:
     friction_slots: np.ndarray  # (2 nf,) body slot per contribution (joint order; i then j; base -> nb)
     friction_xrows: np.ndarray  # positions in lam_R of the retained friction rows (joint order)
     friction_pad: bool  # some friction row is eliminated (read as 0.0)
+    friction_cols: np.ndarray = None  # velocity indices (into h) that friction forces act on, sorted
 
     def __post_init__(self):
         _freeze_fields(self)
@@ -260,20 +264,28 @@ def build_plan(model: Model) -> AssemblyPlan:
     fr_types: dict[str, list] = {}
     for c in fjoints:
         fr_types.setdefault(c.type, []).append(c)
+    xrows = [pos[r] for c in fjoints for r in c.rows if r in pos]
+    xpos = {row: n for n, row in enumerate(xrows)}
+    fbodies = sorted({b for c in fjoints for b in (c.bi, c.bj) if b >= 0})
+    cols = [b * k + i for b in fbodies for i in range(k)]
+    cpos = {b: [n * k + i for i in range(k)] for n, b in enumerate(fbodies)}
+    cpos[-1] = [len(cols)] * k  # the base: the pad slot
     friction = []
     for jtype, js in fr_types.items():
         friction.append(FrictionGroup(
             type=jtype, data=_read_only(TYPES[jtype].module.stack(js)), joints=tuple(c.index for c in js),
             lam_index=np.array([[pos.get(r, pad) for r in c.rows] for c in js], np.intp),
             out_i=np.array([2 * order[c.index] for c in js], np.intp),
-            out_j=np.array([2 * order[c.index] + 1 for c in js], np.intp)))
+            out_j=np.array([2 * order[c.index] + 1 for c in js], np.intp),
+            x_index=np.array([[xpos.get(pos.get(r, pad), len(xrows)) for r in c.rows] for c in js], np.intp),
+            col_i=np.array([cpos[c.bi] for c in js], np.intp), col_j=np.array([cpos[c.bj] for c in js], np.intp)))
     slots = [b if b >= 0 else model.nb for c in fjoints for b in (c.bi, c.bj)]
-    xrows = [pos[r] for c in fjoints for r in c.rows if r in pos]
     return AssemblyPlan(
         groups=tuple(groups), single=tuple(_read_only(c.module.stack([c])) for c in model.joints),
         friction=tuple(friction), friction_slots=np.array(slots, np.intp),
         friction_xrows=np.array(xrows, np.intp),
-        friction_pad=any(r not in pos for c in fjoints for r in c.rows))
+        friction_pad=any(r not in pos for c in fjoints for r in c.rows),
+        friction_cols=np.array(cols, np.intp))
 
 
 # ----------------------------------------------------------------------------- compile

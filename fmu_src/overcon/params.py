@@ -32,8 +32,9 @@ stabilisation alone (stiff), with no accuracy gain (default 10).
 cannot meet the test (round-off of one Cholesky solve is ~1e-16 x cond); above 1e-3 friction
 forces are off by more than 0.1 %.
 
-``solver.friction_max_iter`` integer in [1, 1000]: iterations of the friction fixed point (and,
-after it, of the Newton fallback) per evaluation; each costs one Cholesky solve (planar ~20 us),
+``solver.friction_max_iter`` integer in [1, 1000]: force evaluations of each stage of the friction
+solve per evaluation (Newton, at most min(this, 12); then the fixed point; then the Newton
+fallback); each costs one evaluation of the friction forces and one back-substitution (~40 us),
 so 1000 bounds one evaluation to well under a second.
 
 ``solver.method`` one of :data:`overcon.spec.METHODS`.

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dynamics import evaluate
+from .kinematics import matvec
 from . import integrators
 from .evaluation import (SingularConfiguration, constraints, coordinate_rates, frames,  # noqa: F401
                          friction_output, jacobian_h, normalized_coordinates, physical_reaction)
@@ -141,6 +142,10 @@ class Simulation:
                     "discontinuous at v = 0: for analysis only, not for integration; use 'regularised'")
         self.n = model.n
         self.lam = None  # last converged multipliers (friction warm start)
+        self._warm = _ForcesHistory()  # friction forces of the integration's solves (warm start)
+        self._step_warm = _ForcesHistory()  # the latest ones at the last two step ends (outputs' warm start)
+        self._last_eval = None  # (t, y, lam) of the last right-hand side: reused by outputs() at that point
+        self._derived = _DerivedPlan(model)
         self.friction_iterations = 0
         self.evaluations = 0
         self.max_drift = 0.0
@@ -157,11 +162,13 @@ class Simulation:
     # -- right-hand side -------------------------------------------------------------------
     def _rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, self.lam, solver=self.solver)
+        ev = evaluate(self.model, t, q, h, self.lam, solver=self.solver, qf_guess=self._warm.guess(t))
         if self.model.friction_joints:
             self.lam = ev.lam
+            self._warm.push(t, ev.qf)
         self.friction_iterations += ev.iterations
         self.evaluations += 1
+        self._last_eval = (t, y.copy(), ev.lam)
         out = np.concatenate([coordinate_rates(self.model, q, h), ev.hdot])
         if not np.all(np.isfinite(out)):
             raise SimulationError(f"t = {t:.9g} s: non-finite derivative")
@@ -171,7 +178,8 @@ class Simulation:
         """Right-hand side for dense-output stages only: warm-started from the integrator's lam but
         leaving it (and the counters) unchanged, so reading outputs never alters the trajectory."""
         q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver)
+        ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver,
+                      qf_guess=self._warm.guess(t))
         return np.concatenate([coordinate_rates(self.model, q, h), ev.hdot])
 
     # -- stepping --------------------------------------------------------------------------
@@ -196,6 +204,8 @@ class Simulation:
                     raise SimulationError(
                         f"t = {t_before:.9g} s: time does not advance (step below the resolution of t)")
                 self.monitor.check(itg.t, itg.y)
+                if self._warm.items:
+                    self._step_warm.push(itg.t, self._warm.items[0][1])
                 f = frames(self.model, itg.y[: self.n])
                 self.max_drift = max(self.max_drift, float(np.max(np.abs(constraints(self.model, f)), initial=0.0)))
                 self._check_budget(itg, started, call)
@@ -233,24 +243,50 @@ class Simulation:
                 "looser tolerance")
 
     def outputs(self, t: float, y: np.ndarray) -> np.ndarray:
-        """Output vector (model.output_names() order) at (t, y): positions, reactions, friction
-        forces (:func:`overcon.evaluation.friction_output`); reactions and friction need one evaluation
-        of Eq. 18, warm-started from the integrator's lam but without changing it."""
-        model = self.model
-        q, h = y[: self.n], y[self.n:]
-        qn = normalized_coordinates(model, q)  # quaternions reported as e / |e|
-        vals = [qn[i] for _, i in model.position_outputs]
-        if model.reaction_joints or model.friction_outputs:  # one evaluation of Eq. 18; positions only: none
-            ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver)
-            for j in model.reaction_joints:
-                vals.extend(physical_reaction(model, model.joints[j], ev.frames, ev.lam))
-            vals.extend(friction_output(model, model.joints[j], ev.frames, ev.lam) for j in model.friction_outputs)
-        return np.array(vals, float)
+        """Output vector (model.output_names() order) at (t, y): positions, then
+        :meth:`derived_outputs` (reactions, friction forces)."""
+        pos = self.position_outputs(y)
+        if not self._derived.size:
+            return pos
+        return np.concatenate((pos, self.derived_outputs(t, y)))
 
+    def position_outputs(self, y: np.ndarray) -> np.ndarray:
+        """The position outputs (m, rad; quaternions as e / |e|, the orientation the dynamics use)
+        at the state y."""
+        q = y[: self.n]
+        if self.model.rotation == "quaternion":
+            q = normalized_coordinates(self.model, q)
+        return q[self._derived.position_index]
+
+    def derived_outputs(self, t: float, y: np.ndarray) -> np.ndarray:
+        """Reactions and friction forces at (t, y) (model.output_names() order after the
+        positions; :func:`overcon.evaluation.physical_reaction`, :func:`overcon.evaluation.friction_output`,
+        computed per joint type at once). They need lam at (t, y): the last right-hand side's if it was
+        evaluated at exactly this (t, y) (an output at the end of a step: the last stage of
+        dopri5/dop853 and rk4's step end, the same evaluation of Eq. 18), else one evaluation of Eq. 18
+        warm-started from the friction forces at the ends of the last two integrator steps,
+        interpolated linearly to t (so the values depend on the integrator's state only, never on
+        the output grid), without changing the integrator's warm start."""
+        model, plan = self.model, self._derived
+        if not plan.size:
+            return np.zeros(0)
+        last = self._last_eval
+        q, h = y[: self.n], y[self.n:]
+        if last is not None and last[0] == t and np.array_equal(last[1], y):
+            f, lam = frames(model, q, h), last[2]
+        else:
+            warm = self._step_warm if self._step_warm.items else self._warm
+            ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver,
+                          qf_guess=warm.guess(t))
+            f, lam = ev.frames, ev.lam
+        return plan.values(model, f, lam)
     # -- state -----------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {"integrator": self._integrator.get_state(),
                 "lam": None if self.lam is None else self.lam.copy(),
+                "friction_warm": self._warm.state(), "step_warm": self._step_warm.state(),
+                "last_eval": None if self._last_eval is None else tuple(
+                    x.copy() if isinstance(x, np.ndarray) else x for x in self._last_eval),
                 "friction_iterations": self.friction_iterations, "evaluations": self.evaluations,
                 "max_drift": self.max_drift,
                 "monitor": (self.monitor.N.copy(), self.monitor.sign, self.monitor.t_prev, self.monitor.min_ratio)}
@@ -259,11 +295,91 @@ class Simulation:
         state = copy.deepcopy(state)
         self._integrator.set_state(state["integrator"])
         self.lam = state["lam"]
+        self._warm.set_state(state.get("friction_warm", ()))  # states saved before: the lam warm start
+        self._step_warm.set_state(state.get("step_warm", ()))
+        self._last_eval = state.get("last_eval")  # states saved before it existed: None (a fresh solve)
         self.friction_iterations = state["friction_iterations"]
         self.evaluations = state["evaluations"]
         self.max_drift = state["max_drift"]
         mon = self.monitor
         mon.N, mon.sign, mon.t_prev, mon.min_ratio = state["monitor"]
+
+
+class _ForcesHistory:
+    """Warm start of the friction solve (``qf_guess`` of :func:`overcon.dynamics.evaluate`): the
+    friction forces of the last two solves at distinct times, extrapolated linearly to the next
+    solve's time when it is at most twice their distance ahead, else the last forces. Only the
+    number of Newton iterations depends on it, not the solution (beyond the friction tolerance)."""
+
+    def __init__(self):
+        self.items: tuple = ()  # ((t, qf), (t_before, qf_before)), newest first
+
+    def push(self, t: float, qf: np.ndarray | None) -> None:
+        if qf is None:
+            return
+        older = self.items[1:] if self.items and self.items[0][0] == t else self.items[:1]
+        self.items = ((t, qf),) + older
+
+    def guess(self, t: float) -> np.ndarray | None:
+        if not self.items:
+            return None
+        t1, q1 = self.items[0]
+        if len(self.items) == 2:
+            t0, q0 = self.items[1]
+            if abs(t - t1) <= 2.0 * abs(t1 - t0):
+                return q1 + (q1 - q0) * ((t - t1) / (t1 - t0))
+        return q1
+
+    def state(self) -> tuple:
+        return tuple((t, qf.copy()) for t, qf in self.items)
+
+    def set_state(self, items) -> None:
+        self.items = tuple((float(t), np.array(qf, float)) for t, qf in items)
+
+
+class _DerivedPlan:
+    """Where a model's outputs come from: ``position_index`` into y, and per joint type the
+    reaction joints and friction-output joints (positions in the type's ``Model.plan`` group) with
+    the slots of their values in the derived part of the output vector."""
+
+    def __init__(self, model: Model):
+        self.position_index = np.array([i for _, i in model.position_outputs], np.intp)
+        where = {j: (n, pos) for n, g in enumerate(model.plan.groups) for pos, j in enumerate(g.joints)}
+        self.reactions = {}  # group number -> (positions in the group, output slots (k, n_components))
+        slot = 0
+        for j in model.reaction_joints:
+            n, pos = where[j]
+            width = len(model.joints[j].components)
+            self.reactions.setdefault(n, ([], []))
+            self.reactions[n][0].append(pos)
+            self.reactions[n][1].append(list(range(slot, slot + width)))
+            slot += width
+        self.reactions = {n: (np.array(p, np.intp), np.array(s, np.intp)) for n, (p, s) in self.reactions.items()}
+        self.friction = []  # (module, stacked constants, multiplier rows (k, n_eq), output slots (k,))
+        by_type: dict[str, list] = {}
+        for j in model.friction_outputs:
+            by_type.setdefault(model.joints[j].type, []).append((j, slot))
+            slot += 1
+        for jtype, items in by_type.items():
+            js = [model.joints[j] for j, _ in items]
+            self.friction.append((js[0].module, js[0].module.stack(js), np.array([c.rows for c in js], np.intp),
+                                  np.array([s for _, s in items], np.intp)))
+        self.size = slot
+
+    def values(self, model: Model, f, lam: np.ndarray) -> np.ndarray:
+        """The derived outputs from the frames f and the multipliers lam (m,): per reaction joint
+        ``-A_i fi`` in its auxiliary frame then ``-fi`` force part (global), fi = (J_X)_i^T lam_X;
+        per friction-output joint the module's ``friction_force``."""
+        out = np.empty(self.size)
+        for n, (pos, slots) in self.reactions.items():
+            g = model.plan.groups[n]
+            Ji = g.module.jac_h(g.data, f)[0]
+            fi = matvec(Ji.transpose(0, 2, 1), lam[g.rows].reshape(len(g.joints), -1))
+            vals = np.concatenate((g.module.reaction(g.data, f, fi), -fi[:, : model.dim]), 1)
+            out[slots] = vals[pos]
+        for module, data, rows, slots in self.friction:
+            out[slots] = module.friction_force(data, module.friction_setup(data, f), lam[rows])
+        return out
 
 
 @dataclass

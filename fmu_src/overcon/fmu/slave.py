@@ -35,6 +35,13 @@ Behaviour
   host with debug logging off too); the instance enters ``error``, the outputs keep their last
   good values (never NaN), and later steps are refused until the state is set back
   (``fmi2SetFMUstate``) or the FMU is reset.
+* Outputs the host does not read are not computed: ``fmi2DoStep`` always stores the positions;
+  the reactions and friction forces (one evaluation of Eq. 18 at the communication point) only
+  once the host has read one of them (fmpy's ``simulate_fmu`` reads every output, so for it
+  nothing changes). A first read after steps that skipped them computes them at the current
+  point (the same values the step would have stored); if that fails, that ``fmi2GetReal``
+  returns fmi2Error with the reason. ``fmi2GetReal``/``fmi2GetBoolean`` answer a list of value
+  references seen before (outputs, constants) with one copy.
 * Work budget of one ``fmi2DoStep``: at most ``solver.max_internal_steps`` integrator steps and
   ``solver.max_wall_time`` seconds, checked after every internal step
   (:meth:`overcon.simulate.Simulation.advance`); the trajectory does not depend on the budget.
@@ -168,6 +175,8 @@ class OverconSlave:
         self._next_state = 1
         self._strings: list[bytes] = []  # fmi2GetString's results, valid until the next call
         self._ref_cache: dict[tuple[str, bytes], list] = {}
+        self._fast_get: dict[tuple[str, bytes], tuple] = {}  # see _remember_get
+        self._n_positions = len(self._model0.position_outputs)  # outputs before the reactions
         self._init_fields()
         for text in friction_warnings(self._model0):  # the pre-check's warnings (also in the manifest)
             self.log(text, Status.WARNING)
@@ -184,6 +193,9 @@ class OverconSlave:
         self._outputs = np.zeros(len(self._model0.output_names()))
         self._have_outputs = False
         self._failed: str | None = None
+        self._y = None  # the state at self._t (for outputs computed when first read)
+        self._derived_stale = False  # reactions/friction outputs not yet computed at self._t
+        self._derived_read = False  # the host has read a reaction or friction output
 
     def log(self, message: str, status=Status.OK) -> None:
         if self._log_sink is None:
@@ -219,6 +231,8 @@ class OverconSlave:
         if kind == "output":
             if not self._have_outputs:
                 self._ensure_sim()
+            if arg >= self._n_positions:
+                self._read_derived()
             return float(self._outputs[arg])
         if kind == "constant":
             return arg
@@ -228,10 +242,13 @@ class OverconSlave:
         refs = self._refs(vr_address, n, typ)
         if n and not values_address:
             raise CallRefused(f"value is NULL but nvr = {n}")
+        self._remember_get(typ, vr_address, refs)
         if typ == "Real" and refs and all(v.key[0] == "output" for _, v in refs):
             if not self._have_outputs:
                 self._ensure_sim()
             idx = [v.key[1] for _, v in refs]
+            if max(idx) >= self._n_positions:
+                self._read_derived()
             np.ctypeslib.as_array((ctypes.c_double * n).from_address(values_address))[:] = self._outputs[idx]
             return
         vals = [self._value(v) for _, v in refs]
@@ -243,6 +260,22 @@ class OverconSlave:
         else:
             for i, x in enumerate(vals):
                 out[i] = int(bool(x)) if typ == "Boolean" else x
+
+    def _remember_get(self, typ: str, vr_address: int, refs) -> None:
+        """Cache how to answer this list of value references again (hosts read the same list every
+        step): Real outputs as an index array into the outputs, Real/Integer/Boolean constants as
+        their values. Parameters and strings always take the general path."""
+        n = len(refs)
+        if not n or len(self._fast_get) >= 256 or typ == "String":
+            return
+        raw = ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint))
+        kinds = {v.key[0] for _, v in refs}
+        if kinds == {"output"} and typ == "Real":
+            idx = np.array([v.key[1] for _, v in refs], np.intp)
+            self._fast_get[(typ, raw)] = (True, idx, ctypes.c_double * n, bool(idx.max() >= self._n_positions))
+        elif kinds == {"constant"}:
+            vals = [int(bool(v.key[1])) if typ == "Boolean" else v.key[1] for _, v in refs]
+            self._fast_get[(typ, raw)] = (False, vals, _C_TYPES[typ] * n, False)
 
     def _set(self, typ: str, vr_address: int, n: int, values_address: int) -> None:
         refs = self._refs(vr_address, n, typ)
@@ -264,15 +297,39 @@ class OverconSlave:
         return fmi_call(function, modes)(
             lambda self, vr_address, n, values_address: impl(self, typ, vr_address, n, values_address))
 
-    get_real = _accessor("fmi2GetReal", READABLE, _get, "Real")
+    _get_real_checked = _accessor("fmi2GetReal", READABLE, _get, "Real")
     get_integer = _accessor("fmi2GetInteger", READABLE, _get, "Integer")
-    get_boolean = _accessor("fmi2GetBoolean", READABLE, _get, "Boolean")
+    _get_boolean_checked = _accessor("fmi2GetBoolean", READABLE, _get, "Boolean")
     get_string = _accessor("fmi2GetString", READABLE, _get, "String")
     set_real = _accessor("fmi2SetReal", WRITABLE, _set, "Real")
     set_integer = _accessor("fmi2SetInteger", WRITABLE, _set, "Integer")
     set_boolean = _accessor("fmi2SetBoolean", WRITABLE, _set, "Boolean")
     set_string = _accessor("fmi2SetString", WRITABLE, _set, "String")
     del _accessor
+
+    def _get_cached(self, typ: str, vr_address: int, n: int, values_address: int) -> bool:
+        """Answer a get of a list seen before (see _remember_get) while the values are readable
+        and current, without the checked call's layers; False: take the checked call."""
+        if not (n and vr_address and values_address and self._have_outputs and self._mode in READABLE):
+            return False
+        fast = self._fast_get.get((typ, ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint))))
+        if fast is None or (fast[3] and self._derived_stale):
+            return False
+        outputs, arg, array_type, _ = fast
+        array_type.from_address(values_address)[:] = self._outputs[arg].tolist() if outputs else arg
+        return True
+
+    def get_real(self, vr_address: int, n: int, values_address: int):
+        """fmi2GetReal (the checked call, or the cached answer of :meth:`_get_cached`)."""
+        if self._get_cached("Real", vr_address, n, values_address):
+            return Status.OK
+        return self._get_real_checked(vr_address, n, values_address)
+
+    def get_boolean(self, vr_address: int, n: int, values_address: int):
+        """fmi2GetBoolean (the checked call, or the cached answer of :meth:`_get_cached`)."""
+        if self._get_cached("Boolean", vr_address, n, values_address):
+            return Status.OK
+        return self._get_boolean_checked(vr_address, n, values_address)
 
     def _set_param(self, name: str, value) -> None:
         tunable = name in self._tunable
@@ -345,8 +402,25 @@ class OverconSlave:
             out = self._sim.outputs(self._t, y)
             if not np.all(np.isfinite(out)):
                 raise ArithmeticError(f"non-finite initial outputs at t = {self._t:.9g} s")
-            self._outputs, self._have_outputs = out, True
+            self._outputs, self._have_outputs, self._y, self._derived_stale = out, True, y, False
         return self._sim
+
+    def _read_derived(self) -> None:
+        """The host reads a reaction or friction output: compute them at self._t if the last
+        fmi2DoStep skipped them (nobody had read one before), and compute them in every later
+        fmi2DoStep. A failure is this read's fmi2Error (the values keep their previous ones)."""
+        self._derived_read = True
+        if not self._derived_stale:
+            return
+        try:
+            vals = self._sim.derived_outputs(self._t, self._y)
+            if not np.isfinite(vals).all():
+                raise ArithmeticError("non-finite values")
+        except Exception as exc:
+            raise CallRefused(f"reactions and friction forces at t = {self._t!r} s could not be computed: "
+                              f"{type(exc).__name__}: {exc}") from exc
+        self._outputs[self._n_positions:] = vals
+        self._derived_stale = False
 
     def _advance(self, sim: Simulation, t_new: float) -> np.ndarray:
         """sim.advance(t_new) within the doStep work budget (see the module docstring)."""
@@ -406,11 +480,16 @@ class OverconSlave:
             if abs(current_time - self._t) > 1e-9 * max(1.0, abs(self._t)):
                 raise CallRefused(f"communication point {current_time!r} s is not the end of the previous "
                                   f"step ({self._t!r} s)")
-            sim = self._ensure_sim()
+            # while stepping, no parameter that builds the Simulation can change: no key check
+            sim = self._sim if self._sim is not None else self._ensure_sim()
             t_new = current_time + step_size
             y = self._advance(sim, t_new)
-            out = sim.outputs(t_new, y)
-            if not np.all(np.isfinite(out)):
+            if self._derived_read or len(self._outputs) == self._n_positions:
+                out = sim.outputs(t_new, y)
+            else:  # reactions and friction forces only once the host reads one (_read_derived)
+                out = self._outputs.copy()
+                out[: self._n_positions] = sim.position_outputs(y)
+            if not np.isfinite(out).all():
                 bad = [n for n, v in zip(self._model0.output_names(), out) if not math.isfinite(v)]
                 raise ArithmeticError(f"t = {t_new:.9g} s: non-finite outputs {', '.join(bad)}")
         except Exception as exc:  # the run cannot continue: fmi2Error, never NaN, never a crash
@@ -420,7 +499,8 @@ class OverconSlave:
             self.log(f"{self._failed}; the run stopped at t = {self._t!r} s (the outputs keep their values "
                      "there; fmi2SetFMUstate or fmi2Reset to continue)", Status.ERROR)
             return Status.ERROR
-        self._outputs, self._t, self._have_outputs = out, t_new, True
+        self._outputs, self._t, self._have_outputs, self._y = out, t_new, True, y
+        self._derived_stale = not self._derived_read and len(out) > self._n_positions
         return Status.OK
 
     @fmi_call("fmi2Terminate", {Mode.STEPPING, Mode.ERROR})
@@ -466,6 +546,7 @@ class OverconSlave:
             "params": dict(self._params), "explicit": sorted(self._explicit),
             "start_time": self._start_time, "mode": self._mode.value, "t": self._t,
             "outputs": self._outputs.copy(), "have_outputs": self._have_outputs, "failed": self._failed,
+            "y": None if self._y is None else self._y.copy(), "derived_stale": self._derived_stale,
             "sim": None if self._sim is None else copy.deepcopy(self._sim.get_state()),
         }
 
@@ -482,6 +563,8 @@ class OverconSlave:
         self._mode, self._t = Mode(state["mode"]), state["t"]
         self._outputs = np.array(state["outputs"], float)
         self._have_outputs, self._failed = state["have_outputs"], state["failed"]
+        self._y = state.get("y")  # states of earlier versions: outputs complete
+        self._derived_stale = bool(state.get("derived_stale", False)) and self._y is not None
 
     def _handle(self, address: int) -> int:
         if not address:

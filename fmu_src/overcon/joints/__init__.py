@@ -27,6 +27,10 @@ Types without friction (``friction_size`` None) need not offer the three frictio
   iteration);
 - ``friction_force(d, ctx, lam) -> (k,)``: the friction output ``<joint>.friction`` (unit
   ``friction_unit``, meaning ``friction_text``).
+- optional ``friction_jacobian(d, ctx, lam) -> (dQi, dQj)``, each (k, n_coord, n_eq): the
+  derivatives of ``friction``'s forces by lam, for the friction solve's Newton step (a type
+  without it gets forward differences of ``friction``; tests/test_friction_newton.py checks each
+  one against central differences).
 
 Floating point: stacked ``np.matmul``/``np.vecdot`` run the same kernel per item as the 2-D
 products, so a batch gives each joint the numbers it gets alone (tests/test_hot_path.py checks

@@ -86,3 +86,18 @@ def friction(d, ctx, lam):
     Qi[:, 2] = torque
     Qj[:, 2] = -Qi[:, 2]
     return Qi, Qj
+
+
+def friction_jacobian(d, ctx, lam):
+    """(dQi, dQj), each (k, 3, 2): derivatives of :func:`friction`'s (Qi, Qj) by the joints'
+    multipliers lam (k, 2) (N.m per N), for the friction solve's Newton step; zero where the
+    reaction force is zero (the norm has no derivative there)."""
+    P = np.matmul(ctx["A"], ctx["JiT"])[:, :2]  # (k, 2, 2): [Fx, Fy] = P lam
+    p = matvec(P, lam)
+    norm = np.hypot(p[:, 0], p[:, 1])
+    scale = np.array(ctx["size_mu"], float) / np.where(norm > 0.0, norm, 1.0)
+    scale[norm == 0.0] = 0.0
+    dT = scale[:, None] * (p[:, 0:1] * P[:, 0] + p[:, 1:2] * P[:, 1])  # (k, 2)
+    dQi = np.zeros((len(p), 3, 2))
+    dQi[:, 2] = dT
+    return dQi, -dQi

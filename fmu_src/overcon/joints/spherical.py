@@ -127,3 +127,50 @@ def friction(d, ctx, lam):
         Qi[~nonzero] = 0.0
         Qj[~nonzero] = 0.0
     return Qi, Qj
+
+
+def _skew_rows(a):
+    """(k, 3, 3): skew(a[k]) (skew(a) @ b = a x b)."""
+    out = np.zeros(a.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -a[..., 2], a[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = a[..., 2], -a[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -a[..., 1], a[..., 0]
+    return out
+
+
+def friction_jacobian(d, ctx, lam):
+    """(dQi, dQj), each (k, 6, 3): derivatives of :func:`friction`'s (Qi, Qj) by the joints'
+    multipliers lam (k, 3), for the friction solve's Newton step (N per N, N.m per N). Chain of
+    A.11-A.18: F' = R_i^T lam, s'_C = -rho F'/|F'|, v' = omega'_ij x s'_C, F'_fr = m(|v'|) |F'| v'
+    with m = mu_over_speed; zero for a zero reaction (no contact point) and, for the speed
+    term, at zero sliding speed."""
+    F = matvec(ctx["RiT"], lam)
+    norm = np.sqrt(rowdot(F, F))
+    nonzero = norm != 0.0
+    n = np.where(nonzero, norm, 1.0)
+    u = F / n[:, None]
+    rho = -d["neg_size"]
+    s_C = -rho[:, None] * u
+    proj = (np.eye(3) - u[:, :, None] * u[:, None, :]) / n[:, None, None]
+    dsC = -rho[:, None, None] * proj  # d s_C / d F'
+    W = _skew_rows(ctx["omega"])
+    v = cross3_rows(ctx["omega"], s_C)
+    dv = np.matmul(W, dsC)
+    speed = np.sqrt(rowdot(v, v))
+    m = np.array([law.mu_over_speed(x) for law, x in zip(d["laws"], speed)])
+    slope = np.array([law.mu_over_speed_slope(x) if x > 0.0 else 0.0 for law, x in zip(d["laws"], speed)])
+    dspeed = np.matmul((v / np.where(speed > 0.0, speed, 1.0)[:, None])[:, None, :], dv)[:, 0]  # (k, 3)
+    F_fr = (m * norm)[:, None] * v
+    dFfr = ((slope * norm)[:, None, None] * v[:, :, None] * dspeed[:, None, :]
+            + m[:, None, None] * v[:, :, None] * u[:, None, :] + (m * norm)[:, None, None] * dv)
+    Ri, Rji = ctx["Ri"], ctx["Rji"]
+    d_arm = -np.matmul(_skew_rows(F_fr), dsC)  # d(s_C x F_fr) by F' through s_C
+    top = np.matmul(Ri, dFfr)
+    dQi = np.concatenate((top, d_arm + np.matmul(_skew_rows(d["s_i"] + s_C), dFfr)), 1)
+    dQj = -np.concatenate((top, np.matmul(_skew_rows(d["s_j"]), np.matmul(Rji, dFfr))
+                           + np.matmul(Rji, d_arm + np.matmul(_skew_rows(s_C), dFfr))), 1)
+    RiT = ctx["RiT"]
+    dQi, dQj = np.matmul(dQi, RiT), np.matmul(dQj, RiT)  # d F' / d lam = R_i^T
+    dQi[~nonzero] = 0.0
+    dQj[~nonzero] = 0.0
+    return dQi, dQj

@@ -157,3 +157,21 @@ def friction(d, ctx, lam):
     Qj[:, 2] = arm_j[:, 0] * F[:, 1] - arm_j[:, 1] * F[:, 0]
     np.negative(Qj, out=Qj)
     return Qi, Qj
+
+
+def friction_jacobian(d, ctx, lam):
+    """(dQi, dQj), each (k, 3, 2): derivatives of :func:`friction`'s (Qi, Qj) by the joints'
+    multipliers lam (k, 2), for the friction solve's Newton step (N per N). The magnitude
+    |N - T/l| + |T/l| is piecewise linear in lam; at a kink the derivative of the side where
+    the argument is positive is taken (sign(0) = 0 there)."""
+    P = np.matmul(ctx["A"], ctx["JiT"])  # (k, 3, 2): p_aux = P lam
+    l = d["size"][:, None]
+    PN, PT = P[:, 1], P[:, 2] / l
+    p_aux = matvec(P, lam)
+    N, T = p_aux[:, 1], p_aux[:, 2] / d["size"]
+    dmag = np.sign(N - T)[:, None] * (PN - PT) + np.sign(T)[:, None] * PT  # (k, 2)
+    dF = ctx["mu"][:, None] * dmag
+    e, arm_i, arm_j = ctx["e"], ctx["arm_i"], ctx["arm_j"]
+    ci = np.stack((e[:, 0], e[:, 1], arm_i[:, 0] * e[:, 1] - arm_i[:, 1] * e[:, 0]), 1)
+    cj = np.stack((e[:, 0], e[:, 1], arm_j[:, 0] * e[:, 1] - arm_j[:, 1] * e[:, 0]), 1)
+    return ci[:, :, None] * dF[:, None, :], -cj[:, :, None] * dF[:, None, :]

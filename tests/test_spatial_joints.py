@@ -765,6 +765,26 @@ def test_friction_refused_on_universal_and_fixed(tmp_path, jtype):
     assert f"m.toml: joints[0].friction: a {jtype} joint has no friction model" in msg
 
 
+@pytest.mark.parametrize("jtype", ["universal", "fixed"])
+def test_friction_switched_on_for_a_type_without_friction_says_so(tmp_path, capsys, jtype):
+    """scene.friction or --friction naming a universal or fixed joint (no friction table): the
+    refusal is the type's, naming the field, not an invitation to add a table."""
+    rng = np.random.default_rng(9)
+    s_i, s_j, a_i, a_j, q, _ = assembled_pair(rng, jtype)
+    (tmp_path / "m.toml").write_text(mechanism_text("m", [("b1", q[0]), ("b2", q[1])],
+                                                    [joint_lines("X", jtype, "b1", "b2", s_i, s_j, a_i, a_j)]))
+    (tmp_path / "s.toml").write_text('[scene]\nname = "s"\nmechanism = "m.toml"\nfriction = ["X"]\n'
+                                     'eliminate = "auto"\nstop_time = 1.0\n')
+    expect = f"joint 'X': a {jtype} joint has no friction model (joint friction: "
+    with pytest.raises(SceneError) as e:
+        load(tmp_path / "s.toml")
+    assert f"s.toml: scene.friction[0]: {expect}" in str(e.value)
+    assert "no friction parameters" not in str(e.value)
+    assert cli.main(["check", str(tmp_path / "m.toml"), "--friction", "X"]) == 2
+    err = capsys.readouterr().err
+    assert f"m.toml: --friction: {expect}" in err and "no friction parameters" not in err
+
+
 def test_friction_params_refused_on_a_universal_joint(tmp_path):
     (tmp_path / "us.toml").write_text((DATA / "universal_spherical.toml").read_text())
     (tmp_path / "s.toml").write_text(

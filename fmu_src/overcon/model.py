@@ -280,10 +280,12 @@ def build_plan(model: Model) -> AssemblyPlan:
 
 # ----------------------------------------------------------------------------- compile
 
-def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
+def compile_model(scene: SceneSpec, *, check_initial: bool = True,
+                  eliminate_field: str = "scene.eliminate") -> Model:
     """Compile a validated scene. Raises ModelError for an elimination the mechanism does not
-    admit (removing an independent equation, or leaving dependent ones), naming the equations,
-    and :class:`InconsistentInitialState` for q0/h0 off the constraints (before the elimination
+    admit (removing an independent equation, or leaving dependent ones), naming the equations
+    and the field that gave them, ``eliminate_field`` (``scene.eliminate``, or the command line's
+    ``--eliminate`` when it overrides the scene; the callers name the file), and :class:`InconsistentInitialState` for q0/h0 off the constraints (before the elimination
     is checked: a rank at an inconsistent q0 means nothing). ``check_initial=False`` skips that
     check: only for evaluating kinematics at arbitrary configurations (tests); a Simulation
     checks again."""
@@ -354,7 +356,7 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True) -> Model:
     )
     if check_initial:
         check_initial_state(base)
-    eliminated, mode = resolve_elimination(base, scene.eliminate)
+    eliminated, mode = resolve_elimination(base, scene.eliminate, eliminate_field)
     retained = np.array([i for i in range(row) if i + 1 not in set(eliminated)], int)
     return replace(base, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
 
@@ -437,8 +439,10 @@ def check_euler_q0(model: Model) -> None:
             f"in [mechanism] (no singularity) (bodies' q0 in {mech.source or mech.name})")
 
 
-def resolve_elimination(model: Model, eliminate) -> tuple[list[int], str]:
-    """Check (or choose, for "auto") the eliminated equations at q0. Returns 1-based indices."""
+def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate") -> tuple[list[int], str]:
+    """Check (or choose, for "auto") the eliminated equations at q0. Returns 1-based indices.
+    Raises ModelError naming ``field`` (where ``eliminate`` was given) for an elimination the
+    mechanism does not admit."""
     f = frames(model, model.q0, model.h0)
     J = jacobian_h(model, f).T
     r = analysis.numerical_rank(J)
@@ -451,10 +455,10 @@ def resolve_elimination(model: Model, eliminate) -> tuple[list[int], str]:
     listed = ", ".join(f"Phi{i}" for i in removed) or "nothing"
     if r_kept < r:
         raise ModelError(
-            f"eliminating {listed} removes an independent equation: rank of the kept equations is "
+            f"{field}: eliminating {listed} removes an independent equation: rank of the kept equations is "
             f"{r_kept} < rank {r} of all {model.m}; the mechanism would gain {r - r_kept} DOF")
     if r_kept < len(kept):
         raise ModelError(
-            f"eliminating {listed} leaves {len(kept)} equations of rank {r_kept}: "
+            f"{field}: eliminating {listed} leaves {len(kept)} equations of rank {r_kept}: "
             f"{len(kept) - r_kept} more must be eliminated (the mechanism has {model.m - r} redundant)")
     return removed, "given"

@@ -285,7 +285,8 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True,
     """Compile a validated scene. Raises ModelError for an elimination the mechanism does not
     admit (removing an independent equation, or leaving dependent ones), naming the equations
     and the field that gave them, ``eliminate_field`` (``scene.eliminate``, or the command line's
-    ``--eliminate`` when it overrides the scene; the callers name the file), and :class:`InconsistentInitialState` for q0/h0 off the constraints (before the elimination
+    ``--eliminate`` when it overrides the scene; the callers name the file), and
+    :class:`InconsistentInitialState` for q0/h0 off the constraints (before the elimination
     is checked: a rank at an inconsistent q0 means nothing). ``check_initial=False`` skips that
     check: only for evaluating kinematics at arbitrary configurations (tests); a Simulation
     checks again."""
@@ -405,7 +406,7 @@ def _split_violations(model: Model, Phi: np.ndarray, bad: list[int]):
     """The violated equations ``bad`` (1-based) split by their meaning
     (:attr:`overcon.joints.JointType.row_meanings`): (point rows and non-finite values, in order;
     {(joint index, meaning): its axis rows} in joint order)."""
-    point, axes = [], {}
+    point, axes, bad = [], {}, set(bad)
     for c in model.joints:
         meanings = TYPES[c.type].row_meanings
         for k, r in enumerate(c.rows):

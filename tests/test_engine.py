@@ -130,8 +130,28 @@ def test_paper_svd_B_at_q_star():
     ([], "more must be eliminated"),
 ])
 def test_bad_elimination_refused(elim, message):
-    with pytest.raises(ModelError, match=message):
+    with pytest.raises(ModelError, match=f"^scene.eliminate: eliminating .* {message}"):
         model_of("planar_sliders.toml", eliminate=elim)
+
+
+def test_bad_elimination_names_the_field_and_file(tmp_path, capsys):
+    """Too few equations eliminated: the scene file and scene.eliminate are named (or --eliminate
+    when the command line gave them), by check and build alike."""
+    from overcon.cli import main
+    from overcon.fmu.build import build_scene
+
+    (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
+    text = (MECH / "planar_f45_wo4.toml").read_text()
+    assert "eliminate = [4]" in text
+    path = tmp_path / "s.toml"
+    path.write_text(text.replace("eliminate = [4]", "eliminate = []"))
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: scene.eliminate: eliminating nothing leaves 12 equations of rank 11: 1 more must be" in err
+    res = build_scene(path, tmp_path / "fmus", echo=lambda s: None, validate=False)
+    assert res.status == "invalid" and res.messages[0].startswith(f"{path}: scene.eliminate: eliminating nothing")
+    assert main(["check", str(MECH / "planar_sliders.toml"), "--eliminate", "7"]) == 2
+    assert "planar_sliders.toml: --eliminate: eliminating Phi7 removes an independent" in capsys.readouterr().err
 
 
 def test_auto_elimination_reports_choice_and_gives_same_motion(planar_runs):

@@ -277,6 +277,8 @@ def test_reference_run_that_ends_early_fails_the_build(tmp_path):
     assert ("planar_stuck: reference simulation failed: the reference run of planar_stuck (default experiment "
             "0.0 to 4.0 s) stopped") in proc.stderr
     assert "did not converge" in proc.stderr
+    # the summary counts the failed reference run (the FMU itself was built)
+    assert "build: 1 FMU(s) built, 0 refused by the pre-check, 0 failed, 1 reference run(s) failed, " in proc.stdout
     assert "wrote planar_stuck_ref.csv" not in proc.stdout
     assert not (tmp_path / "out" / "planar_stuck_ref.csv").exists()  # no stale file either
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import zipfile
 from pathlib import Path
 
@@ -18,7 +19,7 @@ from overcon.evaluation import Frames
 from overcon.friction_laws import make_law
 from overcon.joints import TYPES, names, resolve
 from overcon.joints.spatial_rows import completion
-from overcon.kinematics import euler_R
+from overcon.kinematics import SIN_BETA_MIN, euler_R
 from overcon.model import InconsistentInitialState, compile_model
 from overcon.scene import SceneError, as_scene, load
 from overcon.simulate import run
@@ -336,7 +337,8 @@ def test_fixed_joint_axes_optional(tmp_path):
     bad = mechanism_text("f", [("b1", q[0]), ("b2", q[1])],
                          [joint_lines("X", "fixed", "b1", "b2", s_i, s_j, a_i, np.cross(a_j, [0.3, 1, 0]))])
     (tmp_path / "bad.toml").write_text(bad)
-    with pytest.raises(InconsistentInitialState, match=r"Phi4 \(joint X\)"):
+    with pytest.raises(InconsistentInitialState, match=r"joint X \(joints\[0\]\): axis_i and axis_j are not "
+                                                       r"parallel at q0 \(angle [0-9.]+ deg\): Phi4"):
         compile_model(as_scene(load(tmp_path / "bad.toml")))
 
 
@@ -351,7 +353,7 @@ def test_door_with_hinge_axes_not_parallel_refused(tmp_path):
     with pytest.raises(InconsistentInitialState) as e:
         compile_model(as_scene(load(tmp_path / "door.toml")))
     msg = str(e.value)
-    assert "Phi4 (joint upper)" in msg and "lower" not in msg
+    assert "joint upper (joints[0]): axis_i and axis_j are not parallel at q0" in msg and "lower" not in msg
     assert "door.toml" in msg
 
 
@@ -360,8 +362,106 @@ def test_universal_axes_must_be_perpendicular_at_q0(tmp_path):
         "axis_j = [0.0, 1.0, 0.0]", "axis_j = [0.2, 1.0, 0.0]")
     assert text != (DATA / "universal_spherical.toml").read_text()
     (tmp_path / "us.toml").write_text(text)
-    with pytest.raises(InconsistentInitialState, match=r"Phi4 \(joint U\)"):
+    with pytest.raises(InconsistentInitialState, match=r"joint U \(joints\[0\]\): axis_i and axis_j are not "
+                                                       r"perpendicular at q0 \(angle [0-9.]+ deg\): Phi4"):
         compile_model(as_scene(load(tmp_path / "us.toml")))
+
+
+# the axis rows of each type, 1-based equation numbers of a single joint (joints[0])
+AXIS_ROWS = {"revolute": (4, 5), "prismatic": (3, 4), "cylindrical": (3, 4), "universal": (4,), "fixed": (4, 5)}
+Q0 = (0.1, 0.2, 0.3, 0.4, 1.0, -0.3)
+
+
+def one_joint_file(tmp_path, jtype, a_i, a_j_body, s_j_shift=(0.0, 0.0, 0.0)) -> Path:
+    """A body at Q0 on one ``jtype`` joint to the base at its origin (s_i = 0); axis_i = a_i in
+    the body, axis_j = R0 a_j_body (the body's a_j_body seen from the base at q0); the base's
+    joint point moved by ``s_j_shift`` (m)."""
+    R0 = euler_R(Q0[3:])
+    s_j = np.array(Q0[:3]) + np.array(s_j_shift)
+    path = tmp_path / f"{jtype}.toml"
+    path.write_text(mechanism_text("m", [("b", Q0)], [joint_lines("J", jtype, "b", "base", (0, 0, 0), s_j,
+                                                                   a_i, R0 @ np.array(a_j_body, float))]))
+    return path
+
+
+def refusal(path) -> str:
+    with pytest.raises(InconsistentInitialState) as e:
+        compile_model(as_scene(load(path)))
+    return str(e.value)
+
+
+@pytest.mark.parametrize("jtype, a_i, a_j, relation, angle, good", [
+    ("revolute", (1, 0, 0), (0, 1, 0), "parallel", "90", (1, 0, 0)),
+    ("prismatic", (1, 0, 0), (0, 0, 1), "parallel", "90", (1, 0, 0)),
+    ("cylindrical", (0, 0, 1), (0, math.sin(0.5), math.cos(0.5)), "parallel", "28.65", (0, 0, 1)),
+    ("universal", (1, 0, 0), (0.5, math.sqrt(0.75), 0), "perpendicular", "60", (0, 1, 0)),
+    ("fixed", (0, 0, 1), (math.sin(math.pi / 6), 0, math.cos(math.pi / 6)), "parallel", "30", (0, 0, 1)),
+])
+def test_axis_rows_violated_name_the_axis_fields(tmp_path, jtype, a_i, a_j, relation, angle, good):
+    """Axes at fault: the message names the joint, its fields axis_i and axis_j, what they fail
+    to be and their angle at q0 (and q0 as the other suspect); no point-row wording."""
+    msg = refusal(one_joint_file(tmp_path, jtype, a_i, a_j))
+    assert f"joint J (joints[0]): axis_i and axis_j are not {relation} at q0 (angle {angle} deg): Phi" in msg
+    assert "joints[0].axis_i, joints[0].axis_j or the bodies' q0" in msg and f"{jtype}.toml" in msg
+    listed = {int(k) for k in re.findall(r"Phi(\d+)", msg)}
+    assert listed and listed <= set(AXIS_ROWS[jtype])
+    assert "initial coordinates q0 violate" not in msg
+    # the same joint with axes that hold at q0 compiles
+    compile_model(as_scene(load(one_joint_file(tmp_path, jtype, a_i, good))))
+
+
+def test_point_rows_keep_their_wording_and_mix_with_axis_rows(tmp_path):
+    msg = refusal(one_joint_file(tmp_path, "revolute", (1, 0, 0), (1, 0, 0), s_j_shift=(0.0, 0.0, 0.25)))
+    assert msg.startswith("initial coordinates q0 violate the constraints Phi3 (joint J): largest |Phi3| = 0.25")
+    assert "axis_i" not in msg
+    both = refusal(one_joint_file(tmp_path, "revolute", (1, 0, 0), (0, 1, 0), s_j_shift=(0.0, 0.0, 0.25)))
+    assert both.startswith("initial coordinates q0 violate the constraints Phi3 (joint J): largest |Phi3| = 0.25; "
+                           "joint J (joints[0]): axis_i and axis_j are not parallel at q0 (angle 90 deg): Phi4")
+
+
+def test_row_meanings_declared_once_per_type():
+    """Every type states a meaning per equation; the axis types' axis rows are where AXIS_ROWS
+    says, a prismatic and a fixed joint also have their lock row last."""
+    for key, jt in TYPES.items():
+        assert len(jt.row_meanings) == jt.n_equations
+        if jt.kind == "spatial" and jt.name in AXIS_ROWS:
+            axis = {k + 1 for k, m in enumerate(jt.row_meanings) if m in ("parallel", "perpendicular")}
+            assert axis == set(AXIS_ROWS[jt.name]), key
+        if jt.name in ("prismatic", "fixed"):
+            assert jt.row_meanings[-1] == "lock"
+    assert set(TYPES["spatial_universal"].row_meanings) == {"point", "perpendicular"}
+    assert set(TYPES["revolute"].row_meanings) == {"point"}  # planar: today's wording
+
+
+def test_euler_beta_zero_refused_at_compile_time_everywhere(tmp_path, capsys):
+    """A body at beta = 0 with Euler angles: check, simulate and build refuse it (exit 2) with
+    one message naming the file, the body, its field q0 and the quaternion alternative."""
+    from overcon.fmu.build import build_scene
+
+    mech = tmp_path / "beta0.toml"
+    mech.write_text(mechanism_text("beta0", [("link", (0.0, 0.5, 0.0, 0.0, 0.0, 0.0))],
+                                   [joint_lines("h", "revolute", "link", "base", (0, 0, 0), (0, 0.5, 0),
+                                                (1, 0, 0), (1, 0, 0))]))
+    scene = tmp_path / "s.toml"
+    scene.write_text('[scene]\nname = "s"\nmechanism = "beta0.toml"\nfriction = []\neliminate = []\n'
+                     "stop_time = 0.1\n")
+    expect = ("body 'link': bodies[0].q0 has beta = q0[4] = 0 rad, at the z-x-z Euler angle singularity "
+              "(|sin(beta)| = 0 < 0.001)")
+    errors = []
+    for argv in (["check", str(mech)], ["check", str(scene)],
+                 ["simulate", str(scene), "--out", str(tmp_path / "o.csv")]):
+        assert cli.main(argv) == 2
+        err = capsys.readouterr().err
+        assert expect in err and 'rotation = "quaternion"' in err and f"bodies' q0 in {mech}" in err
+        errors.append(err.split(": ", 2)[-1])
+    assert errors[0] == errors[1] == errors[2]
+    res = build_scene(scene, tmp_path / "fmus", echo=lambda s: None, validate=False)
+    assert res.status == "invalid" and res.messages == [f"{scene}: {errors[0].strip()}"]
+    assert not (tmp_path / "fmus").exists()
+    # just outside the threshold (|sin beta| = 2 SIN_BETA_MIN) the same file compiles
+    mech.write_text(mech.read_text().replace("q0 = [0.0, 0.5, 0.0, 0.0, 0.0, 0.0]",
+                                             f"q0 = [0.0, 0.5, 0.0, 0.0, {math.asin(2 * SIN_BETA_MIN)!r}, 0.0]"))
+    assert cli.main(["check", str(scene)]) == 0
 
 
 # ----------------------------------------------------------------------------- check --json
@@ -663,6 +763,26 @@ def test_friction_refused_on_universal_and_fixed(tmp_path, jtype):
         load(path)
     msg = str(e.value)
     assert f"m.toml: joints[0].friction: a {jtype} joint has no friction model" in msg
+
+
+@pytest.mark.parametrize("jtype", ["universal", "fixed"])
+def test_friction_switched_on_for_a_type_without_friction_says_so(tmp_path, capsys, jtype):
+    """scene.friction or --friction naming a universal or fixed joint (no friction table): the
+    refusal is the type's, naming the field, not an invitation to add a table."""
+    rng = np.random.default_rng(9)
+    s_i, s_j, a_i, a_j, q, _ = assembled_pair(rng, jtype)
+    (tmp_path / "m.toml").write_text(mechanism_text("m", [("b1", q[0]), ("b2", q[1])],
+                                                    [joint_lines("X", jtype, "b1", "b2", s_i, s_j, a_i, a_j)]))
+    (tmp_path / "s.toml").write_text('[scene]\nname = "s"\nmechanism = "m.toml"\nfriction = ["X"]\n'
+                                     'eliminate = "auto"\nstop_time = 1.0\n')
+    expect = f"joint 'X': a {jtype} joint has no friction model (joint friction: "
+    with pytest.raises(SceneError) as e:
+        load(tmp_path / "s.toml")
+    assert f"s.toml: scene.friction[0]: {expect}" in str(e.value)
+    assert "no friction parameters" not in str(e.value)
+    assert cli.main(["check", str(tmp_path / "m.toml"), "--friction", "X"]) == 2
+    err = capsys.readouterr().err
+    assert f"m.toml: --friction: {expect}" in err and "no friction parameters" not in err
 
 
 def test_friction_params_refused_on_a_universal_joint(tmp_path):

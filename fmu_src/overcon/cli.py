@@ -202,7 +202,7 @@ def _load(args):
         stop_time=args.stop_time, solver=solver, friction_outputs=getattr(args, "friction_outputs", None),
         source=args.file)
     spec = scene_mod.as_scene(spec, **overrides)
-    return spec, compile_model(spec)
+    return spec, compile_model(spec, eliminate_field="scene.eliminate" if args.eliminate is None else "--eliminate")
 
 
 SOLVER_FLAGS = ("method", "tolerance", "step", "max_step", "output_interval")

@@ -38,6 +38,13 @@ class EulerSingularity(ArithmeticError):
     """z-x-z Euler parametrisation singular (sin beta ~ 0)."""
 
 
+def euler_singular(sin_beta):
+    """Whether the z-x-z angles are refused at sin(beta) = ``sin_beta`` (a float or an array):
+    ``|sin beta| < SIN_BETA_MIN``. The one test of the singularity: :func:`euler_H` (integration)
+    and the compile-time check of q0 (:func:`overcon.model.check_initial_state`) use it."""
+    return np.abs(sin_beta) < SIN_BETA_MIN
+
+
 def rot2(phi: float) -> np.ndarray:
     c, s = math.cos(phi), math.sin(phi)
     return np.array([[c, -s], [s, c]])
@@ -75,7 +82,7 @@ def euler_H(angles, body: str = "") -> np.ndarray:
     """H of paper B.15: Euler-angle rates = H @ omega (omega in body axes)."""
     _, b, g = angles
     sb, cb = math.sin(b), math.cos(b)
-    if abs(sb) < SIN_BETA_MIN:
+    if euler_singular(sb):
         raise EulerSingularity(
             f"Euler angle singularity{' of body ' + repr(body) if body else ''}: "
             f"beta = {b:.6g} rad, |sin(beta)| = {abs(sb):.3g} < {SIN_BETA_MIN:g}"
@@ -186,7 +193,7 @@ def euler_H_rows(angles: np.ndarray, bodies=()) -> np.ndarray:
     n = angles.shape[0]
     c, s = _cos_sin(angles[:, 1:])
     cb, sb, cg, sg = c[:, 0], s[:, 0], c[:, 1], s[:, 1]
-    bad = np.abs(sb) < SIN_BETA_MIN
+    bad = euler_singular(sb)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         euler_H(angles[k], bodies[k] if k < len(bodies) else "")  # raises with the usual message

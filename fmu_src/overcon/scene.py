@@ -369,8 +369,7 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
     required unless they have a default). A type without friction is refused here, naming the
     table."""
     if jtype is not None and JOINT_TYPES[jtype].friction_size is None:
-        ctx.add(prefix, f"a {JOINT_TYPES[jtype].name} joint has no friction model (joint friction: "
-                        f"{', '.join(n for n in joint_type_names() if _has_friction(n))} joints)")
+        ctx.add(prefix, _no_friction_model(jtype))
         return None
     if jtype is None:
         size_keys = ("length", "radius")
@@ -449,6 +448,13 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
                 ctx.add(_join(prefix, key), f"only used by law 'stribeck' (law is '{result.law}')")
                 ok = False
     return result if ok else None
+
+
+def _no_friction_model(jtype: str) -> str:
+    """The refusal of friction on a joint of type ``jtype`` (a key of :data:`overcon.joints.TYPES`
+    whose type has no friction model), listing the joint types that have one."""
+    return (f"a {JOINT_TYPES[jtype].name} joint has no friction model (joint friction: "
+            f"{', '.join(n for n in joint_type_names() if _has_friction(n))} joints)")
 
 
 def _has_friction(name: str) -> bool:
@@ -834,14 +840,22 @@ def _check_friction_list(ctx: _Ctx, value, field: str, mech: MechanismSpec | Non
     if not isinstance(value, (list, tuple)):
         ctx.add(field, f"expected an array of joint names, got {_desc(value)}")
         return None
-    names = {j.name for j in mech.joints} if mech is not None else None
+    types = {j.name: j.type for j in mech.joints} if mech is not None else None
+
+    def late(s):
+        if types is None:
+            return None
+        if JOINT_TYPES[types[s]].friction_size is None:
+            return f"joint '{s}': {_no_friction_model(types[s])}"
+        if not has_params(s):
+            return (f"joint '{s}' has no friction parameters (no [joints.friction] table in "
+                    f"the mechanism and no scene friction_params.{s})")
+        return None
+
     return _distinct_items(
         ctx, value, elem_field, _str,
-        invalid=lambda s: f"unknown joint {_short(s)}" if names is not None and s not in names else None,
-        duplicate=lambda s: f"joint '{s}' listed twice",
-        late=lambda s: (f"joint '{s}' has no friction parameters (no [joints.friction] table in "
-                        f"the mechanism and no scene friction_params.{s})")
-        if names is not None and not has_params(s) else None)
+        invalid=lambda s: f"unknown joint {_short(s)}" if types is not None and s not in types else None,
+        duplicate=lambda s: f"joint '{s}' listed twice", late=late)
 
 
 def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | None:

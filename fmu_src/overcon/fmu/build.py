@@ -452,15 +452,17 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
             pool.shutdown()
         t_ref = time.perf_counter() - t1
     counts = {s: sum(r.status == s for r in results) for s in ("built", "refused", "skipped", "invalid", "failed")}
+    ref_failed = sum(r.ref_status == "failed" for r in results)
     summary = (f"build: {counts['built']} FMU(s) built, {counts['refused']} refused by the pre-check, "
-               f"{counts['invalid'] + counts['failed']} failed, {counts['skipped']} mechanism file(s) "
-               f"skipped; FMUs built in {t_build:.2f} s")
+               f"{counts['invalid'] + counts['failed']} failed, "
+               + (f"{ref_failed} reference run(s) failed, " if refs and built else "")
+               + f"{counts['skipped']} mechanism file(s) skipped; FMUs built in {t_build:.2f} s")
     if refs and built:
         summary += f", reference results in {t_ref:.1f} s"
     echo(summary + f" (total {time.perf_counter() - t0:.1f} s)")
     if counts["invalid"] or counts["failed"]:
         code = EXIT_INPUT
-    elif any(r.ref_status == "failed" for r in results):
+    elif ref_failed:
         code = EXIT_RUNTIME
     elif counts["refused"]:
         code = EXIT_NONUNIQUE

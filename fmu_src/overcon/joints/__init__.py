@@ -47,7 +47,8 @@ from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Mapping
 
-from . import cylindrical, fixed, prismatic, revolute, spatial_revolute, spherical, translational, universal
+from . import (cylindrical, fixed, prismatic, revolute, spatial_revolute, spatial_rows, spherical, translational,
+               universal)
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,21 @@ class JointType:
         if self.friction_size is None:
             return ()
         return (self.friction_size[0], *self.friction_extra)
+
+    @property
+    def row_meanings(self) -> tuple[str, ...]:
+        """Per equation (in order), what it holds: the module's ``ROWS`` for the spatial axis
+        types (:func:`overcon.joints.spatial_rows.row_meanings`: point, parallel, perpendicular,
+        lock), ``"point"`` for every equation of the other types (a violation at q0 is the
+        coordinates' or the joint points')."""
+        rows = getattr(self.module, "ROWS", None)
+        return spatial_rows.row_meanings(rows) if rows is not None else (spatial_rows.POINT_ROW,) * self.n_equations
+
+    @staticmethod
+    def violation_text(meaning: str, p, init: InitialFrames) -> str:
+        """What violated equations of a non-point ``meaning`` of one joint (constants ``p``,
+        rotation matrices ``init`` at q0) say: :func:`overcon.joints.spatial_rows.violation_text`."""
+        return spatial_rows.violation_text(meaning, p, init)
 
     def friction_sizes(self, spec) -> dict[str, float]:
         """Size key -> value (m) of a :class:`overcon.spec.FrictionSpec` of this type, defaults

@@ -22,9 +22,10 @@ import math
 import numpy as np
 
 from . import spatial_rows as sr
-from .spatial_rows import Dot, PointDot, axis_constants as constants  # noqa: F401  (module protocol)
+from .spatial_rows import PARALLEL, Dot, PointDot, axis_constants as constants  # noqa: F401  (module protocol)
 
-ROWS = (PointDot("b1_j"), PointDot("b2_j"), Dot("a_i", "b1_j"), Dot("a_i", "b2_j"))
+ROWS = (PointDot("b1_j"), PointDot("b2_j"), Dot("a_i", "b1_j", PARALLEL),
+        Dot("a_i", "b2_j", PARALLEL))
 phi, jac_h, gamma = sr.row_functions(ROWS)
 reaction = sr.reported((0, 1, 3, 4))
 

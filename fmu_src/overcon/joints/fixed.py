@@ -19,8 +19,8 @@ from __future__ import annotations
 
 from . import spatial_rows as sr
 from . import spatial_revolute
-from .spatial_rows import Dot, axis_constants as constants, stack_axes as stack  # noqa: F401
+from .spatial_rows import LOCK, Dot, axis_constants as constants, stack_axes as stack  # noqa: F401
 
-ROWS = spatial_revolute.ROWS + (Dot("c_i", "b2_j"),)
+ROWS = spatial_revolute.ROWS + (Dot("c_i", "b2_j", LOCK),)
 phi, jac_h, gamma = sr.row_functions(ROWS)
 reaction = sr.reported((0, 1, 2, 3, 4, 5))

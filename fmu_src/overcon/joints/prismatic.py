@@ -20,9 +20,9 @@ import numpy as np
 
 from . import cylindrical
 from . import spatial_rows as sr
-from .spatial_rows import Dot, axis_constants as constants  # noqa: F401  (module protocol)
+from .spatial_rows import LOCK, Dot, axis_constants as constants  # noqa: F401  (module protocol)
 
-ROWS = cylindrical.ROWS + (Dot("c_i", "b2_j"),)
+ROWS = cylindrical.ROWS + (Dot("c_i", "b2_j", LOCK),)
 phi, jac_h, gamma = sr.row_functions(ROWS)
 reaction = sr.reported((0, 1, 3, 4, 5))
 

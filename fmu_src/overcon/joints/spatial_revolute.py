@@ -19,9 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from . import spatial_rows as sr
-from .spatial_rows import POINT, Dot, axis_constants as constants  # noqa: F401  (module protocol)
+from .spatial_rows import PARALLEL, POINT, Dot, axis_constants as constants  # noqa: F401  (module protocol)
 
-ROWS = (POINT, Dot("a_i", "b1_j"), Dot("a_i", "b2_j"))
+ROWS = (POINT, Dot("a_i", "b1_j", PARALLEL), Dot("a_i", "b2_j", PARALLEL))
 phi, jac_h, gamma = sr.row_functions(ROWS)
 reaction = sr.reported((0, 1, 2, 3, 4))
 

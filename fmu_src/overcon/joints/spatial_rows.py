@@ -20,6 +20,13 @@ Primitives (``ROW`` objects; a joint type is a tuple of them, its rows in that o
   gamma = -(d''·B + 2 d'·B' + d·B''), d' = v_i + R_i(w_i x s_i) - v_j - R_j(w_j x s_j),
   d'' = R_i(w_i x (w_i x s_i)) - R_j(w_j x (w_j x s_j)), B' = R_j(w_j x b), B'' = R_j(w_j x (w_j x b)).
 
+Row meanings (the one place they are declared): every primitive states what its rows hold, read
+by the compiler's initial-state message (:func:`row_meanings`, :func:`violation_text`):
+:data:`POINT` and :class:`PointDot` rows are ``"point"`` rows (on the joint points: q0 at fault),
+a :class:`Dot` row holds axis_i ``"parallel"`` or ``"perpendicular"`` to axis_j, or is a rotation
+``"lock"`` row. A violated axis row at q0 names the fields axis_i and axis_j and the angle between
+the axes; a lock row holds at q0 by construction of ``c_i``.
+
 Axis constants (decided here): the axes are normalised; ``b1_j``, ``b2_j`` complete ``a_j`` to
 an orthonormal basis of body j by a deterministic rule (:func:`completion`: the standard basis
 vector least aligned with the axis, the first on ties, Gram-Schmidt against the axis, then
@@ -115,10 +122,15 @@ def point_difference(d, f) -> np.ndarray:
     return f.r[bi] + matvec(f.R[bi], d["s_i"]) - f.r[bj] - matvec(f.R[bj], d["s_j"])
 
 
+POINT_ROW, PARALLEL, PERPENDICULAR, LOCK = "point", "parallel", "perpendicular", "lock"
+"""The meanings of the rows (see the module docstring)."""
+
+
 class _Point:
     """The 3 rows d = P_i - P_j."""
 
     n = 3
+    meaning = POINT_ROW
 
     def value(self, d, f):
         return point_difference(d, f)
@@ -142,10 +154,12 @@ POINT = _Point()
 
 @dataclass(frozen=True)
 class Dot:
-    """1 row (R_i a)·(R_j b): ``a`` the key of a body i vector, ``b`` of a body j vector."""
+    """1 row (R_i a)·(R_j b): ``a`` the key of a body i vector, ``b`` of a body j vector;
+    ``meaning`` :data:`PARALLEL`, :data:`PERPENDICULAR` (axis_i to axis_j) or :data:`LOCK`."""
 
     a: str
     b: str
+    meaning: str
     n: int = 1
 
     def value(self, d, f):
@@ -177,6 +191,7 @@ class PointDot:
 
     b: str
     n: int = 1
+    meaning: str = POINT_ROW
 
     def value(self, d, f):
         return rowdot(point_difference(d, f), matvec(f.R[d["bj"]], d[self.b]))[:, None]
@@ -221,6 +236,26 @@ def jac_h(rows, d, f):
 def gamma(rows, d, f) -> np.ndarray:
     """(k, n_eq): the rows' gamma, in order."""
     return np.concatenate([r.gamma(d, f) for r in rows], 1)
+
+
+def row_meanings(rows) -> tuple[str, ...]:
+    """Per equation of a joint made of ``rows`` (in order): what it holds (the meanings above)."""
+    return tuple(r.meaning for r in rows for _ in range(r.n))
+
+
+def axis_angle(p, init) -> float:
+    """Angle (deg, in [0, 180]) between axis_i and axis_j of one joint (constants ``p``) at the
+    bodies' rotation matrices ``init`` (:class:`overcon.joints.InitialFrames`)."""
+    c = float(np.dot(init.R_i @ p["a_i"], init.R_j @ p["a_j"]))
+    return float(np.degrees(np.arccos(min(1.0, max(-1.0, c)))))
+
+
+def violation_text(meaning: str, p, init) -> str:
+    """What violated rows of ``meaning`` (not :data:`POINT_ROW`) of one joint say at q0: the axis
+    fields and the angle between the axes (constants ``p``, rotations ``init`` at q0)."""
+    if meaning == LOCK:
+        return "the rotation about axis_i is not at its locked value at q0"
+    return f"axis_i and axis_j are not {meaning} at q0 (angle {axis_angle(p, init):.4g} deg)"
 
 
 # ----------------------------------------------------------------------------- reactions

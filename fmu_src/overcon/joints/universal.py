@@ -13,8 +13,8 @@ its entry in :data:`overcon.joints.TYPES`.
 from __future__ import annotations
 
 from . import spatial_rows as sr
-from .spatial_rows import POINT, Dot, axis_constants as constants, stack_axes as stack  # noqa: F401
+from .spatial_rows import PERPENDICULAR, POINT, Dot, axis_constants as constants, stack_axes as stack  # noqa: F401
 
-ROWS = (POINT, Dot("a_i", "a_j"))
+ROWS = (POINT, Dot("a_i", "a_j", PERPENDICULAR))
 phi, jac_h, gamma = sr.row_functions(ROWS)
 reaction = sr.reported((0, 1, 2, 3, 4))

@@ -16,9 +16,10 @@ import numpy as np
 from . import scene
 from .model import compile_model
 from .precheck import precheck
-from .simulate import Result, run_scene
+from .simulate import Result, SimulationError, run_scene
 from .spec import SceneSpec
-from .verdict import LOCKSTEP_METHOD, LOCKSTEP_STEP, lockstep_tolerance, variant_label
+from .verdict import (LOCKSTEP_METHOD, LOCKSTEP_RETRIES, LOCKSTEP_STEP, lockstep_tolerance, next_lockstep_step,
+                      variant_label)
 
 
 @dataclass(frozen=True)
@@ -96,23 +97,40 @@ def _with_solver(spec: SceneSpec, **changes) -> SceneSpec:
     return dataclasses.replace(spec, solver=dataclasses.replace(spec.solver, **changes))
 
 
+def _lockstep_runs(specs: list[SceneSpec], step: float, outputs) -> tuple[list[Result], float]:
+    """Every variant on one rk4 grid (positions only); an unstable step (the rk4 integrator's
+    refusal) repeats all of them at :func:`overcon.verdict.next_lockstep_step`, at most
+    :data:`overcon.verdict.LOCKSTEP_RETRIES` times, as the FMU comparison does. Returns the runs
+    and the step used."""
+    for attempt in range(LOCKSTEP_RETRIES + 1):
+        try:
+            return [run_scene(scene.as_scene(dataclasses.replace(
+                _with_solver(spec, method=LOCKSTEP_METHOD, step=step), reactions=(),
+                positions=outputs or spec.positions))) for spec in specs], step
+        except SimulationError as exc:
+            smaller = next_lockstep_step(step, [str(exc)])
+            if smaller is None or attempt == LOCKSTEP_RETRIES:
+                raise
+            step = smaller
+    raise AssertionError("unreachable")
+
+
 def run_group(items: list[tuple[Path, SceneSpec]], *, tolerance: float | None = None,
               outputs: tuple[str, ...] | None = None, adaptive: bool = True,
               lockstep_step: float = LOCKSTEP_STEP, stop_time: float | None = None) -> GroupRun:
     """Run every variant of a group twice: in lockstep (positions only, :data:`LOCKSTEP_METHOD`
     with ``lockstep_step``: the verdict) and, if ``adaptive``, with the scene's own solver at
     ``tolerance`` (default: the scene's) with every output (figures, second figure)."""
-    labels, results, lock, predicted = [], [], [], []
+    labels, results, predicted, specs = [], [], [], []
     for path, spec in items:
         if stop_time is not None:
             spec = dataclasses.replace(spec, stop_time=stop_time)
+        specs.append(spec)
         predicted.append(precheck(compile_model(scene.as_scene(spec)), str(path)).motion_unique)
         labels.append(variant_label(spec.eliminate))
-        lock_spec = dataclasses.replace(_with_solver(spec, method=LOCKSTEP_METHOD, step=lockstep_step),
-                                        reactions=(), positions=outputs or spec.positions)
-        lock.append(run_scene(scene.as_scene(lock_spec)))
         if adaptive:
             results.append(run_scene(scene.as_scene(spec, tolerance=tolerance)))
+    lock, lockstep_step = _lockstep_runs(specs, lockstep_step, outputs)
     names = _positions(outputs or lock[0].names)
     scale = {n: max(float(np.max(np.abs(r.column(n)))) for r in lock) for n in names}
     adaptive_diff = _max_diffs(results, names) if results else {}

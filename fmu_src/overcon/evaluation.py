@@ -85,14 +85,23 @@ def constraints(model: Model, f: Frames) -> np.ndarray:
 
 def jacobian_h(model: Model, f: Frames) -> np.ndarray:
     """Phi_h (m, nh): planar Phi_q, spatial the modified Jacobian of Eq. 7."""
+    return jacobian_h_blocks(model, f)[0]
+
+
+def jacobian_h_blocks(model: Model, f: Frames) -> tuple[np.ndarray, list]:
+    """Phi_h (m, nh) as :func:`jacobian_h`, and the (J_X)_i blocks (k, n_eq, n_coord) of every
+    joint group (``model.plan.groups`` order), from the same ``jac_h`` calls (for the friction
+    setup, which needs them again)."""
     out = np.zeros((model.m, model.nh))
     flat = out.reshape(-1)
+    blocks_i = []
     for g in model.plan.groups:
         Ji, Jj = g.module.jac_h(g.data, f)
         # += on zeros, body i then body j (the per-joint assembly's order): -0.0 kept
         flat[g.flat_i] += Ji[g.sel_i].reshape(-1)
         flat[g.flat_j] += Jj[g.sel_j].reshape(-1)
-    return out
+        blocks_i.append(Ji)
+    return out, blocks_i
 
 
 def gamma(model: Model, f: Frames) -> np.ndarray:

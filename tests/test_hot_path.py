@@ -267,3 +267,17 @@ def test_friction_setup_from_jacobian_blocks(name):
             assert cf.keys() == cs.keys()
             for key in cf:
                 assert _same_bits(cf[key], cs[key]), key
+
+
+def test_frames_memo_not_shared():
+    """Geometry cached on one evaluation's frames (Frames.cached) is never read for other frames,
+    also not for a dataclasses.replace copy with other rotations."""
+    model = model_of("planar_f145_wo4")
+    (q1, h1), (q2, h2) = list(random_states(model, n=2, seed=5))
+    f1, f2 = frames(model, q1, h1), frames(model, q2, h2)
+    jacobian_h(model, f1), gamma(model, f1)  # fills f1's memo
+    assert f1.memo
+    mixed = dataclasses.replace(f1, r=f2.r, R=f2.R, v=f2.v, w=f2.w, phi=f2.phi)
+    assert not mixed.memo
+    assert np.array_equal(jacobian_h(model, mixed), jacobian_h(model, frames(model, q2, h2)))
+    assert np.array_equal(gamma(model, mixed), gamma(model, frames(model, q2, h2)))

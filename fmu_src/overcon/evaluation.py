@@ -8,7 +8,7 @@ constants and scatter indices of ``Model.plan`` (built at compile time).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -35,6 +35,19 @@ class Frames:
     phi: np.ndarray | None = None  # planar angles
     angles: np.ndarray | None = None  # spatial Euler angles (rotation "euler_zxz")
     quat: np.ndarray | None = None  # spatial quaternions as in q (rotation "quaternion"; R uses e / |e|)
+    memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def cached(self, name: str, d, compute):
+        """``compute(d, self)`` once for these frames and the stacked joint constants ``d`` (the
+        same object): geometry that several producers of one joint group need in one evaluation
+        (phi, jac_h, gamma, the reaction frame), computed once with the same operations, so the
+        same bits. The frames must not be changed after a call; callers must not write into the
+        result."""
+        key = (name, id(d))
+        hit = self.memo.get(key)
+        if hit is None or hit[0] is not d:
+            hit = self.memo[key] = (d, compute(d, self))
+        return hit[1]
 
 
 def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:

@@ -292,6 +292,18 @@ def _fd_friction_jacobian(g, cx, lam: np.ndarray, Qi: np.ndarray, Qj: np.ndarray
     return dQi, dQj
 
 
+_IDENTITIES: dict = {}
+
+
+def _identity(n: int) -> np.ndarray:
+    """The (n, n) identity, made once per size (read-only)."""
+    eye = _IDENTITIES.get(n)
+    if eye is None:
+        eye = _IDENTITIES[n] = np.eye(n)
+        eye.flags.writeable = False
+    return eye
+
+
 def _newton_reduced(plan: AssemblyPlan, ctx: list, lam0x: np.ndarray, Wx: np.ndarray, x: np.ndarray,
                     tol: float, max_iter: int):
     """Newton's method on the friction multipliers x alone: x = G(x) = lam0x + Wx qf(x) (Wx =
@@ -301,7 +313,7 @@ def _newton_reduced(plan: AssemblyPlan, ctx: list, lam0x: np.ndarray, Wx: np.nda
     growing residual or after min(max_iter, NEWTON_MAX_ITER) force evaluations. Returns (x,
     qf(x), evaluations, converged)."""
     n_max = min(max_iter, NEWTON_MAX_ITER)
-    eye = np.eye(len(x))
+    eye = _identity(len(x))
     prev, growth, lu, piv = np.inf, 0, None, None
     for it in range(1, n_max + 1):
         qf, parts = _friction_forces_reduced(plan, ctx, x)

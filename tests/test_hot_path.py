@@ -281,3 +281,14 @@ def test_frames_memo_not_shared():
     assert not mixed.memo
     assert np.array_equal(jacobian_h(model, mixed), jacobian_h(model, frames(model, q2, h2)))
     assert np.array_equal(gamma(model, mixed), gamma(model, frames(model, q2, h2)))
+
+
+@pytest.mark.parametrize("name", ["spatial_GHMN_wo5", "examples/door_h1_wo_hinge2"])
+def test_coordinate_rates_from_frames(name):
+    """The Euler rates from the frames' cosines and sines equal those computed from q, bit for bit."""
+    model = model_of(name)
+    for q, h in random_states(model, n=10, seed=6):
+        f = frames(model, q, h)
+        if model.rotation != "quaternion":
+            assert "euler.cos_sin" in f.memo
+        assert np.array_equal(coordinate_rates(model, q, h, f), coordinate_rates(model, q, h))

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .kinematics import (cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec, quat_R_rows, rowdot,
+from .kinematics import (cos_sin, cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec, quat_R_rows, rowdot,
                          quat_rates_rows)
 
 if TYPE_CHECKING:  # model imports this module (check_initial_state, resolve_elimination)
@@ -79,8 +79,10 @@ def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:
         return Frames(r=r, R=quat_R_rows(quat), v=v, w=w, quat=quat)
     angles = np.zeros((nb + 1, 3))
     angles[:nb] = Q[:, 3:]
-    R = euler_R_rows(angles)
-    return Frames(r=r, R=R, v=v, w=w, angles=angles)
+    cs = cos_sin(angles)
+    f = Frames(r=r, R=euler_R_rows(angles, cs), v=v, w=w, angles=angles)
+    f.memo["euler.cos_sin"] = cs  # for coordinate_rates at the same q
+    return f
 
 
 def _stack_rows(model: Model, f: Frames, name: str) -> np.ndarray:
@@ -122,11 +124,12 @@ def gamma(model: Model, f: Frames) -> np.ndarray:
     return _stack_rows(model, f, "gamma")
 
 
-def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray) -> np.ndarray:
+def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray, f: Frames | None = None) -> np.ndarray:
     """q' (n,) from q (n,) and h (nh,): planar q' = h; spatial r' = v and Euler rates = H omega
     (Eq. 4; raises EulerSingularity near sin(beta) = 0) or quaternion rates
     e' = 1/2 e (x) (0, omega) + the norm stabilisation along e
-    (:func:`overcon.kinematics.quat_rates_rows`; omega in body axes)."""
+    (:func:`overcon.kinematics.quat_rates_rows`; omega in body axes). ``f``: the frames at this
+    q, if already built (their cosines and sines of the Euler angles are reused)."""
     if model.kind == "planar":
         return h.copy()
     nb = model.nb
@@ -137,7 +140,10 @@ def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray) -> np.ndarray:
         qd[:, 3:] = quat_rates_rows(Q[:, 3:], H[:, 3:])
         return qd.reshape(-1)
     qd = h.copy()
-    H = euler_H_rows(q.reshape(nb, 6)[:, 3:], model.body_names)
+    cs = None if f is None else f.memo.get("euler.cos_sin")
+    if cs is not None:
+        cs = (cs[0][:nb, 1:], cs[1][:nb, 1:])
+    H = euler_H_rows(q.reshape(nb, 6)[:, 3:], model.body_names, cs)
     qd.reshape(nb, 6)[:, 3:] = matvec(H, h.reshape(nb, 6)[:, 3:])
     return qd
 

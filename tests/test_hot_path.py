@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import reference_joints as ref
-from overcon import dynamics
+from overcon import dynamics, evaluation
 from overcon import scene as scene_mod
 from overcon.evaluation import (applied_forces, constraints, coordinate_rates, frames, friction_output, gamma,
                                 generalized_force, jacobian_h, physical_reaction)
@@ -240,3 +240,55 @@ def test_every_joint_type_has_one_batched_form():
         for fn in ("constants", "stack", "phi", "jac_h", "gamma", "reaction", *friction):
             assert callable(getattr(mod, fn, None)), (name, fn)
         assert not [n for n in vars(mod) if n.startswith("batch_")], name
+
+
+def _same_bits(a, b):
+    """Equal values of a friction context entry (arrays, lists, frames) bit for bit."""
+    if isinstance(a, (np.ndarray, list, tuple)):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        return a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
+    return a is b
+
+
+@pytest.mark.parametrize("name", SCENES + ["examples/door_h1_wo_hinge2", "examples/carriage_guide_wo_rod",
+                                           "examples/fourbar_A_wo3_4_5", "examples/loop_A1_wo_A2"])
+def test_friction_setup_from_jacobian_blocks(name):
+    """The friction setup given the evaluation's (J_X)_i blocks (each friction group's rows of its
+    type's block) equals the setup that calls jac_h on the friction joints alone, bit for bit."""
+    model = model_of(name)
+    assert model.friction_joints
+    for q, h in random_states(model, n=5, seed=4):
+        f = frames(model, q, h)
+        blocks = evaluation.jacobian_h_blocks(model, f)
+        assert np.array_equal(blocks[0], evaluation.jacobian_h(model, f))
+        fast = dynamics._friction_setup(model.plan, f, blocks[1])
+        slow = dynamics._friction_setup(model.plan, f)
+        for cf, cs in zip(fast, slow):
+            assert cf.keys() == cs.keys()
+            for key in cf:
+                assert _same_bits(cf[key], cs[key]), key
+
+
+def test_frames_memo_not_shared():
+    """Geometry cached on one evaluation's frames (Frames.cached) is never read for other frames,
+    also not for a dataclasses.replace copy with other rotations."""
+    model = model_of("planar_f145_wo4")
+    (q1, h1), (q2, h2) = list(random_states(model, n=2, seed=5))
+    f1, f2 = frames(model, q1, h1), frames(model, q2, h2)
+    jacobian_h(model, f1), gamma(model, f1)  # fills f1's memo
+    assert f1.memo
+    mixed = dataclasses.replace(f1, r=f2.r, R=f2.R, v=f2.v, w=f2.w, phi=f2.phi)
+    assert not mixed.memo
+    assert np.array_equal(jacobian_h(model, mixed), jacobian_h(model, frames(model, q2, h2)))
+    assert np.array_equal(gamma(model, mixed), gamma(model, frames(model, q2, h2)))
+
+
+@pytest.mark.parametrize("name", ["spatial_GHMN_wo5", "examples/door_h1_wo_hinge2"])
+def test_coordinate_rates_from_frames(name):
+    """The Euler rates from the frames' cosines and sines equal those computed from q, bit for bit."""
+    model = model_of(name)
+    for q, h in random_states(model, n=10, seed=6):
+        f = frames(model, q, h)
+        if model.rotation != "quaternion":
+            assert "euler.cos_sin" in f.memo
+        assert np.array_equal(coordinate_rates(model, q, h, f), coordinate_rates(model, q, h))

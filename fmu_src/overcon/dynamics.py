@@ -46,7 +46,7 @@ import numpy as np
 from scipy.linalg import LinAlgError
 from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
 
-from .evaluation import Frames, SingularConfiguration, applied_forces, constraints, frames, gamma, jacobian_h
+from .evaluation import Frames, SingularConfiguration, applied_forces, constraints, frames, gamma, jacobian_h_blocks
 from .model import AssemblyPlan, Model
 from .spec import SolverSpec
 
@@ -123,9 +123,14 @@ def _lstsq(A: np.ndarray, b: np.ndarray, rcond: float) -> np.ndarray:
     return x[:, 0].copy()
 
 
-def _friction_setup(plan: AssemblyPlan, f: Frames) -> list:
-    """Per-evaluation constants of every friction group (frames only)."""
-    return [g.module.friction_setup(g.data, f) for g in plan.friction]
+def _friction_setup(plan: AssemblyPlan, f: Frames, blocks_i: list | None = None) -> list:
+    """Per-evaluation constants of every friction group (frames only). With ``blocks_i``, the
+    (J_X)_i blocks of every joint group (:func:`overcon.evaluation.jacobian_h_blocks`), each
+    friction group takes its rows of its type's block instead of calling ``jac_h`` again (a
+    batched ``jac_h`` gives each joint the numbers it gets alone: the same bits)."""
+    if blocks_i is None:
+        return [g.module.friction_setup(g.data, f) for g in plan.friction]
+    return [g.module.friction_setup(g.data, f, blocks_i[g.group][g.in_group]) for g in plan.friction]
 
 
 def _friction_batched(model: Model, plan: AssemblyPlan, ctx: list, lr: np.ndarray) -> np.ndarray:
@@ -158,7 +163,7 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     a, tol, max_iter = solver.baumgarte, solver.friction_tol, solver.friction_max_iter
     plan = model.plan
     f = frames(model, q, h)
-    Phi_h = jacobian_h(model, f)
+    Phi_h, blocks_i = jacobian_h_blocks(model, f)
     R = model.retained
     PR = Phi_h[R]
     JR = PR.T
@@ -179,7 +184,7 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     lam = np.zeros(model.m)
     iterations, fallback, qf_out = 0, False, None
     if model.friction_joints:
-        ctx = _friction_setup(plan, f)
+        ctx = _friction_setup(plan, f, blocks_i)
         lam0 = lam_R
         xrows = plan.friction_xrows
         cols = plan.friction_cols
@@ -287,6 +292,18 @@ def _fd_friction_jacobian(g, cx, lam: np.ndarray, Qi: np.ndarray, Qj: np.ndarray
     return dQi, dQj
 
 
+_IDENTITIES: dict = {}
+
+
+def _identity(n: int) -> np.ndarray:
+    """The (n, n) identity, made once per size (read-only)."""
+    eye = _IDENTITIES.get(n)
+    if eye is None:
+        eye = _IDENTITIES[n] = np.eye(n)
+        eye.flags.writeable = False
+    return eye
+
+
 def _newton_reduced(plan: AssemblyPlan, ctx: list, lam0x: np.ndarray, Wx: np.ndarray, x: np.ndarray,
                     tol: float, max_iter: int):
     """Newton's method on the friction multipliers x alone: x = G(x) = lam0x + Wx qf(x) (Wx =
@@ -296,7 +313,7 @@ def _newton_reduced(plan: AssemblyPlan, ctx: list, lam0x: np.ndarray, Wx: np.nda
     growing residual or after min(max_iter, NEWTON_MAX_ITER) force evaluations. Returns (x,
     qf(x), evaluations, converged)."""
     n_max = min(max_iter, NEWTON_MAX_ITER)
-    eye = np.eye(len(x))
+    eye = _identity(len(x))
     prev, growth, lu, piv = np.inf, 0, None, None
     for it in range(1, n_max + 1):
         qf, parts = _friction_forces_reduced(plan, ctx, x)

@@ -8,12 +8,12 @@ constants and scatter indices of ``Model.plan`` (built at compile time).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .kinematics import (cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec, quat_R_rows, rowdot,
+from .kinematics import (cos_sin, cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec, quat_R_rows, rowdot,
                          quat_rates_rows)
 
 if TYPE_CHECKING:  # model imports this module (check_initial_state, resolve_elimination)
@@ -35,6 +35,19 @@ class Frames:
     phi: np.ndarray | None = None  # planar angles
     angles: np.ndarray | None = None  # spatial Euler angles (rotation "euler_zxz")
     quat: np.ndarray | None = None  # spatial quaternions as in q (rotation "quaternion"; R uses e / |e|)
+    memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def cached(self, name: str, d, compute):
+        """``compute(d, self)`` once for these frames and the stacked joint constants ``d`` (the
+        same object): geometry that several producers of one joint group need in one evaluation
+        (phi, jac_h, gamma, the reaction frame), computed once with the same operations, so the
+        same bits. The frames must not be changed after a call; callers must not write into the
+        result."""
+        key = (name, id(d))
+        hit = self.memo.get(key)
+        if hit is None or hit[0] is not d:
+            hit = self.memo[key] = (d, compute(d, self))
+        return hit[1]
 
 
 def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:
@@ -66,8 +79,10 @@ def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:
         return Frames(r=r, R=quat_R_rows(quat), v=v, w=w, quat=quat)
     angles = np.zeros((nb + 1, 3))
     angles[:nb] = Q[:, 3:]
-    R = euler_R_rows(angles)
-    return Frames(r=r, R=R, v=v, w=w, angles=angles)
+    cs = cos_sin(angles)
+    f = Frames(r=r, R=euler_R_rows(angles, cs), v=v, w=w, angles=angles)
+    f.memo["euler.cos_sin"] = cs  # for coordinate_rates at the same q
+    return f
 
 
 def _stack_rows(model: Model, f: Frames, name: str) -> np.ndarray:
@@ -85,14 +100,23 @@ def constraints(model: Model, f: Frames) -> np.ndarray:
 
 def jacobian_h(model: Model, f: Frames) -> np.ndarray:
     """Phi_h (m, nh): planar Phi_q, spatial the modified Jacobian of Eq. 7."""
+    return jacobian_h_blocks(model, f)[0]
+
+
+def jacobian_h_blocks(model: Model, f: Frames) -> tuple[np.ndarray, list]:
+    """Phi_h (m, nh) as :func:`jacobian_h`, and the (J_X)_i blocks (k, n_eq, n_coord) of every
+    joint group (``model.plan.groups`` order), from the same ``jac_h`` calls (for the friction
+    setup, which needs them again)."""
     out = np.zeros((model.m, model.nh))
     flat = out.reshape(-1)
+    blocks_i = []
     for g in model.plan.groups:
         Ji, Jj = g.module.jac_h(g.data, f)
         # += on zeros, body i then body j (the per-joint assembly's order): -0.0 kept
         flat[g.flat_i] += Ji[g.sel_i].reshape(-1)
         flat[g.flat_j] += Jj[g.sel_j].reshape(-1)
-    return out
+        blocks_i.append(Ji)
+    return out, blocks_i
 
 
 def gamma(model: Model, f: Frames) -> np.ndarray:
@@ -100,11 +124,12 @@ def gamma(model: Model, f: Frames) -> np.ndarray:
     return _stack_rows(model, f, "gamma")
 
 
-def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray) -> np.ndarray:
+def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray, f: Frames | None = None) -> np.ndarray:
     """q' (n,) from q (n,) and h (nh,): planar q' = h; spatial r' = v and Euler rates = H omega
     (Eq. 4; raises EulerSingularity near sin(beta) = 0) or quaternion rates
     e' = 1/2 e (x) (0, omega) + the norm stabilisation along e
-    (:func:`overcon.kinematics.quat_rates_rows`; omega in body axes)."""
+    (:func:`overcon.kinematics.quat_rates_rows`; omega in body axes). ``f``: the frames at this
+    q, if already built (their cosines and sines of the Euler angles are reused)."""
     if model.kind == "planar":
         return h.copy()
     nb = model.nb
@@ -115,7 +140,10 @@ def coordinate_rates(model: Model, q: np.ndarray, h: np.ndarray) -> np.ndarray:
         qd[:, 3:] = quat_rates_rows(Q[:, 3:], H[:, 3:])
         return qd.reshape(-1)
     qd = h.copy()
-    H = euler_H_rows(q.reshape(nb, 6)[:, 3:], model.body_names)
+    cs = None if f is None else f.memo.get("euler.cos_sin")
+    if cs is not None:
+        cs = (cs[0][:nb, 1:], cs[1][:nb, 1:])
+    H = euler_H_rows(q.reshape(nb, 6)[:, 3:], model.body_names, cs)
     qd.reshape(nb, 6)[:, 3:] = matvec(H, h.reshape(nb, 6)[:, 3:])
     return qd
 

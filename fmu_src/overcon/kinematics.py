@@ -158,17 +158,19 @@ def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.matmul(A, x[..., None])[..., 0]
 
 
-def _cos_sin(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def cos_sin(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(cos, sin) of every entry (math.cos/math.sin, the single-item functions' numbers)."""
     flat = values.ravel().tolist()
     c = np.array([math.cos(x) for x in flat]).reshape(values.shape)
     s = np.array([math.sin(x) for x in flat]).reshape(values.shape)
     return c, s
 
 
-def euler_R_rows(angles: np.ndarray) -> np.ndarray:
-    """Stacked :func:`euler_R` of (n, 3) z-x-z Euler angles -> (n, 3, 3), bitwise equal."""
+def euler_R_rows(angles: np.ndarray, cs=None) -> np.ndarray:
+    """Stacked :func:`euler_R` of (n, 3) z-x-z Euler angles -> (n, 3, 3), bitwise equal; ``cs``:
+    their :func:`cos_sin` if already known."""
     n = angles.shape[0]
-    c, s = _cos_sin(angles)
+    c, s = cos_sin(angles) if cs is None else cs
     za = np.zeros((n, 3, 3))
     xb = np.zeros((n, 3, 3))
     zg = np.zeros((n, 3, 3))
@@ -187,11 +189,12 @@ def euler_R_rows(angles: np.ndarray) -> np.ndarray:
     return np.matmul(np.matmul(za, xb), zg)
 
 
-def euler_H_rows(angles: np.ndarray, bodies=()) -> np.ndarray:
+def euler_H_rows(angles: np.ndarray, bodies=(), cs=None) -> np.ndarray:
     """Stacked :func:`euler_H` of (n, 3) Euler angles -> (n, 3, 3), bitwise equal; raises
-    :class:`EulerSingularity` for the first singular row (named from ``bodies`` as euler_H does)."""
+    :class:`EulerSingularity` for the first singular row (named from ``bodies`` as euler_H does).
+    ``cs``: the :func:`cos_sin` of ``angles[:, 1:]`` if already known."""
     n = angles.shape[0]
-    c, s = _cos_sin(angles[:, 1:])
+    c, s = cos_sin(angles[:, 1:]) if cs is None else cs
     cb, sb, cg, sg = c[:, 0], s[:, 0], c[:, 1], s[:, 1]
     bad = euler_singular(sb)
     if bad.any():

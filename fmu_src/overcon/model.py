@@ -200,6 +200,8 @@ class FrictionGroup(_TypedArrays):
     x_index: np.ndarray = None  # (k, n_equations) into x = lam_R[friction_xrows], extended by one pad slot
     col_i: np.ndarray = None  # (k, n_coord) into friction_cols of body i's velocities, extended by one pad slot
     col_j: np.ndarray = None
+    group: int = -1  # index into AssemblyPlan.groups of the joint group of the same type
+    in_group: np.ndarray = None  # (k,) positions of these joints in that group (its jac_h rows)
 
 
 @dataclass(frozen=True, eq=False)
@@ -273,14 +275,17 @@ def build_plan(model: Model) -> AssemblyPlan:
     cpos = {b: [n * k + i for i in range(k)] for n, b in enumerate(fbodies)}
     cpos[-1] = [len(cols)] * k  # the base: the pad slot
     friction = []
+    group_of = {gr.type: n for n, gr in enumerate(groups)}
     for jtype, js in fr_types.items():
+        members = groups[group_of[jtype]].joints
         friction.append(FrictionGroup(
             type=jtype, data=_read_only(TYPES[jtype].module.stack(js)), joints=tuple(c.index for c in js),
             lam_index=np.array([[pos.get(r, pad) for r in c.rows] for c in js], np.intp),
             out_i=np.array([2 * order[c.index] for c in js], np.intp),
             out_j=np.array([2 * order[c.index] + 1 for c in js], np.intp),
             x_index=np.array([[xpos.get(pos.get(r, pad), len(xrows)) for r in c.rows] for c in js], np.intp),
-            col_i=np.array([cpos[c.bi] for c in js], np.intp), col_j=np.array([cpos[c.bj] for c in js], np.intp)))
+            col_i=np.array([cpos[c.bi] for c in js], np.intp), col_j=np.array([cpos[c.bj] for c in js], np.intp),
+            group=group_of[jtype], in_group=np.array([members.index(c.index) for c in js], np.intp)))
     slots = [b if b >= 0 else model.nb for c in fjoints for b in (c.bi, c.bj)]
     return AssemblyPlan(
         groups=tuple(groups), single=tuple(_read_only(c.module.stack([c])) for c in model.joints),

@@ -169,7 +169,7 @@ class Simulation:
         self.friction_iterations += ev.iterations
         self.evaluations += 1
         self._last_eval = (t, y.copy(), ev.lam)
-        out = np.concatenate([coordinate_rates(self.model, q, h), ev.hdot])
+        out = np.concatenate([coordinate_rates(self.model, q, h, ev.frames), ev.hdot])
         if not np.all(np.isfinite(out)):
             raise SimulationError(f"t = {t:.9g} s: non-finite derivative")
         return out
@@ -180,7 +180,7 @@ class Simulation:
         q, h = y[: self.n], y[self.n:]
         ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver,
                       qf_guess=self._warm.guess(t))
-        return np.concatenate([coordinate_rates(self.model, q, h), ev.hdot])
+        return np.concatenate([coordinate_rates(self.model, q, h, ev.frames), ev.hdot])
 
     # -- stepping --------------------------------------------------------------------------
     @property

@@ -21,7 +21,9 @@ per-joint reference for the tests). A module offers, with ``f`` the evaluation's
 
 Types without friction (``friction_size`` None) need not offer the three friction functions:
 
-- ``friction_setup(d, f) -> ctx``: what friction needs from the frames (once per evaluation);
+- ``friction_setup(d, f, Ji=None) -> ctx``: what friction needs from the frames (once per
+  evaluation); ``Ji``: these joints' (J_X)_i blocks of ``jac_h`` when already computed (the
+  hot path passes its own, :func:`overcon.dynamics.evaluate`), else the module computes them;
 - ``friction(d, ctx, lam) -> (Qi, Qj)``, each (k, n_coord): generalized Coulomb friction forces
   on bodies i and j (Eq. 20-22) given the joints' multipliers lam (k, n_eq) (once per friction
   iteration);
@@ -31,6 +33,10 @@ Types without friction (``friction_size`` None) need not offer the three frictio
   derivatives of ``friction``'s forces by lam, for the friction solve's Newton step (a type
   without it gets forward differences of ``friction``; tests/test_friction_newton.py checks each
   one against central differences).
+
+Geometry that several of these functions need in one evaluation (e.g. R_i s_i for phi, jac_h
+and gamma) may be computed once per evaluation with ``f.cached(name, d, compute)``
+(:meth:`overcon.evaluation.Frames.cached`).
 
 Floating point: stacked ``np.matmul``/``np.vecdot`` run the same kernel per item as the 2-D
 products, so a batch gives each joint the numbers it gets alone (tests/test_hot_path.py checks

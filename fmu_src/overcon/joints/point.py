@@ -24,7 +24,17 @@ def stack_points(joints, dim: int) -> dict:
     }
 
 
+def _arms(d, f):
+    return matvec(f.R[d["bi"]], d["s_i"]), matvec(f.R[d["bj"]], d["s_j"])
+
+
+def arms(d, f):
+    """(R_i s_i, R_j s_j), each (k, dim): the joint point from each body origin in global axes
+    (once per evaluation: :meth:`overcon.evaluation.Frames.cached`; read-only by convention)."""
+    return f.cached("point.arms", d, _arms)
+
+
 def phi(d, f):
     """(k, dim): r_i + R_i s_i - r_j - R_j s_j of every joint."""
-    bi, bj = d["bi"], d["bj"]
-    return f.r[bi] + matvec(f.R[bi], d["s_i"]) - f.r[bj] - matvec(f.R[bj], d["s_j"])
+    a_i, a_j = arms(d, f)
+    return f.r[d["bi"]] + a_i - f.r[d["bj"]] - a_j

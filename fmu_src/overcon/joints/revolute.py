@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from ..kinematics import OMEGA, matvec
-from .point import constants, phi, stack_points
+from .point import arms, constants, phi, stack_points
 
 
 def stack(joints) -> dict:
@@ -25,8 +25,9 @@ def stack(joints) -> dict:
 def jac_h(d, f):
     """(Ji, Jj), each (k, 2, 3): Phi_q = Phi_h (planar), [I, OMEGA R_i s_i] and
     [-I, -OMEGA R_j s_j]."""
-    ti = matvec(OMEGA, matvec(f.R[d["bi"]], d["s_i"]))
-    tj = matvec(OMEGA, matvec(f.R[d["bj"]], d["s_j"]))
+    a_i, a_j = arms(d, f)
+    ti = matvec(OMEGA, a_i)
+    tj = matvec(OMEGA, a_j)
     k = len(ti)
     Ji = np.zeros((k, 2, 3))
     Jj = np.zeros((k, 2, 3))
@@ -40,8 +41,8 @@ def jac_h(d, f):
 def gamma(d, f):
     """(k, 2): R_i s_i w_i^2 - R_j s_j w_j^2 (Eq. 11)."""
     bi, bj = d["bi"], d["bj"]
-    return (matvec(f.R[bi], d["s_i"]) * (f.w[bi] ** 2)[:, None]
-            - matvec(f.R[bj], d["s_j"]) * (f.w[bj] ** 2)[:, None])
+    a_i, a_j = arms(d, f)
+    return a_i * (f.w[bi] ** 2)[:, None] - a_j * (f.w[bj] ** 2)[:, None]
 
 
 def reaction_transform(d, f):
@@ -49,7 +50,7 @@ def reaction_transform(d, f):
     Ri = f.R[d["bi"]]
     A = np.zeros((len(Ri), 3, 3))
     A[:, :2, :2] = Ri.transpose(0, 2, 1)
-    A[:, 2, :2] = -matvec(OMEGA, matvec(Ri, d["s_i"]))
+    A[:, 2, :2] = -matvec(OMEGA, arms(d, f)[0])
     A[:, 2, 2] = 1.0
     return A
 

@@ -149,10 +149,10 @@ def friction_jacobian(d, ctx, lam):
     nonzero = norm != 0.0
     n = np.where(nonzero, norm, 1.0)
     u = F / n[:, None]
-    rho = -d["neg_size"]
-    s_C = -rho[:, None] * u
-    proj = (np.eye(3) - u[:, :, None] * u[:, None, :]) / n[:, None, None]
-    dsC = -rho[:, None, None] * proj  # d s_C / d F'
+    neg_rho = d["neg_size"]  # -rho (negation is exact)
+    s_C = neg_rho[:, None] * u
+    proj = (_EYE - u[:, :, None] * u[:, None, :]) / n[:, None, None]
+    dsC = neg_rho[:, None, None] * proj  # d s_C / d F'
     W = _skew_rows(ctx["omega"])
     v = cross3_rows(ctx["omega"], s_C)
     dv = np.matmul(W, dsC)
@@ -167,10 +167,11 @@ def friction_jacobian(d, ctx, lam):
     d_arm = -np.matmul(_skew_rows(F_fr), dsC)  # d(s_C x F_fr) by F' through s_C
     top = np.matmul(Ri, dFfr)
     dQi = np.concatenate((top, d_arm + np.matmul(_skew_rows(d["s_i"] + s_C), dFfr)), 1)
-    dQj = -np.concatenate((top, np.matmul(_skew_rows(d["s_j"]), np.matmul(Rji, dFfr))
+    dQj = -np.concatenate((top, np.matmul(d["skew_j"], np.matmul(Rji, dFfr))
                            + np.matmul(Rji, d_arm + np.matmul(_skew_rows(s_C), dFfr))), 1)
     RiT = ctx["RiT"]
     dQi, dQj = np.matmul(dQi, RiT), np.matmul(dQj, RiT)  # d F' / d lam = R_i^T
-    dQi[~nonzero] = 0.0
-    dQj[~nonzero] = 0.0
+    if not nonzero.all():
+        dQi[~nonzero] = 0.0
+        dQj[~nonzero] = 0.0
     return dQi, dQj

@@ -51,6 +51,12 @@ def _omega(x):
 
 
 def _geometry(d, f):
+    """(R_i s_A, R_j s_B, r_i + R_i s_A - r_j - R_j s_B, R_j v), each (k, 2), once per evaluation
+    (:meth:`overcon.evaluation.Frames.cached`; read-only by convention)."""
+    return f.cached("translational.geometry", d, _compute_geometry)
+
+
+def _compute_geometry(d, f):
     Ri, Rj = f.R[d["bi"]], f.R[d["bj"]]
     a_i = matvec(Ri, d["s_A"])
     b_j = matvec(Rj, d["s_B"])
@@ -105,7 +111,7 @@ def reaction_transform(d, f):
     Ri = f.R[d["bi"]]
     A = np.zeros((len(Ri), 3, 3))
     A[:, :2, :2] = np.matmul(d["B"].transpose(0, 2, 1), Ri.transpose(0, 2, 1))
-    A[:, 2, :2] = -_omega(matvec(Ri, d["s_A"]))
+    A[:, 2, :2] = -_omega(_geometry(d, f)[0])
     A[:, 2, 2] = 1.0
     return A
 
@@ -117,7 +123,7 @@ def friction_setup(d, f, Ji=None):
         Ji = jac_h(d, f)[0]
     bi, bj = d["bi"], d["bj"]
     Ri = f.R[bi]
-    point = f.r[bi] + matvec(Ri, d["s_A"])  # contact point A
+    point = f.r[bi] + _geometry(d, f)[0]  # contact point A
     e = matvec(Ri, d["B"][:, :, 0])
     vel_j = f.v[bj] + _omega(point - f.r[bj]) * f.w[bj][:, None]  # sliding velocity of j relative to i along x'
     vel_i = f.v[bi] + _omega(point - f.r[bi]) * f.w[bi][:, None]

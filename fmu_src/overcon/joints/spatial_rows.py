@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..kinematics import cross3_rows, matvec, rowdot
+from ..kinematics import cross3_rows, dot3_rows, matvec
 
 
 # ----------------------------------------------------------------------------- constants
@@ -163,7 +163,7 @@ class Dot:
     n: int = 1
 
     def value(self, d, f):
-        return rowdot(matvec(f.R[d["bi"]], d[self.a]), matvec(f.R[d["bj"]], d[self.b]))[:, None]
+        return dot3_rows(matvec(f.R[d["bi"]], d[self.a]), matvec(f.R[d["bj"]], d[self.b]))[:, None]
 
     def jac(self, d, f):
         Ri, Rj = f.R[d["bi"]], f.R[d["bj"]]
@@ -179,9 +179,9 @@ class Dot:
         bi, bj = d["bi"], d["bj"]
         Ri, Rj, wi, wj = f.R[bi], f.R[bj], f.w[bi], f.w[bj]
         a, b = d[self.a], d[self.b]
-        second = (rowdot(matvec(Ri, _ww(wi, a)), matvec(Rj, b))
-                  + 2.0 * rowdot(matvec(Ri, cross3_rows(wi, a)), matvec(Rj, cross3_rows(wj, b)))
-                  + rowdot(matvec(Ri, a), matvec(Rj, _ww(wj, b))))
+        second = (dot3_rows(matvec(Ri, _ww(wi, a)), matvec(Rj, b))
+                  + 2.0 * dot3_rows(matvec(Ri, cross3_rows(wi, a)), matvec(Rj, cross3_rows(wj, b)))
+                  + dot3_rows(matvec(Ri, a), matvec(Rj, _ww(wj, b))))
         return -second[:, None]
 
 
@@ -194,7 +194,7 @@ class PointDot:
     meaning: str = POINT_ROW
 
     def value(self, d, f):
-        return rowdot(point_difference(d, f), matvec(f.R[d["bj"]], d[self.b]))[:, None]
+        return dot3_rows(point_difference(d, f), matvec(f.R[d["bj"]], d[self.b]))[:, None]
 
     def jac(self, d, f):
         Ri, Rj = f.R[d["bi"]], f.R[d["bj"]]
@@ -217,8 +217,8 @@ class PointDot:
         b, s_i, s_j = d[self.b], d["s_i"], d["s_j"]
         dd1 = (f.v[bi] + matvec(Ri, cross3_rows(wi, s_i)) - f.v[bj] - matvec(Rj, cross3_rows(wj, s_j)))
         dd2 = matvec(Ri, _ww(wi, s_i)) - matvec(Rj, _ww(wj, s_j))
-        second = (rowdot(dd2, matvec(Rj, b)) + 2.0 * rowdot(dd1, matvec(Rj, cross3_rows(wj, b)))
-                  + rowdot(point_difference(d, f), matvec(Rj, _ww(wj, b))))
+        second = (dot3_rows(dd2, matvec(Rj, b)) + 2.0 * dot3_rows(dd1, matvec(Rj, cross3_rows(wj, b)))
+                  + dot3_rows(point_difference(d, f), matvec(Rj, _ww(wj, b))))
         return -second[:, None]
 
 
@@ -280,7 +280,7 @@ def axis_global(d, f) -> np.ndarray:
 def relative_spin(d, f, u) -> np.ndarray:
     """(k,): omega_rel = (omega_j - omega_i)·u, global angular velocities (rad/s)."""
     bi, bj = d["bi"], d["bj"]
-    return rowdot(matvec(f.R[bj], f.w[bj]) - matvec(f.R[bi], f.w[bi]), u)
+    return dot3_rows(matvec(f.R[bj], f.w[bj]) - matvec(f.R[bi], f.w[bi]), u)
 
 
 def relative_slide(d, f, u) -> np.ndarray:
@@ -291,7 +291,7 @@ def relative_slide(d, f, u) -> np.ndarray:
     vi = f.v[bi] + matvec(f.R[bi], cross3_rows(f.w[bi], d["s_i"]))
     arm_j = matvec(f.R[bj].transpose(0, 2, 1), P - f.r[bj])
     vj = f.v[bj] + matvec(f.R[bj], cross3_rows(f.w[bj], arm_j))
-    return rowdot(vj - vi, u)
+    return dot3_rows(vj - vi, u)
 
 
 def axial_loads(d, f, force, torque, u):

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from compiled import compiled_models
 
 import reference_joints as ref
 from overcon import evaluation as M
@@ -196,17 +197,7 @@ TYPES = ["translational", "revolute", "spherical"]
 
 @pytest.fixture(scope="module")
 def single(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("single")
-    cache = {}
-
-    def get(jtype, seed):
-        if (jtype, seed) not in cache:
-            # random configurations, not on the constraint manifold: derivatives only
-            cache[jtype, seed] = compile_model(as_scene(load(write_single_type(tmp, jtype, seed))),
-                                                 check_initial=False)
-        return cache[jtype, seed]
-
-    return get
+    return compiled_models(tmp_path_factory.mktemp("single"), write_single_type)
 
 
 @pytest.mark.parametrize("seed", SEEDS)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from compiled import compiled_models
 
 from overcon import cli, evaluation as ev
 from overcon.evaluation import Frames
@@ -108,16 +109,7 @@ def write_single_type(tmp: Path, jtype: str, seed: int) -> Path:
 
 @pytest.fixture(scope="module")
 def single(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("spatial_single")
-    cache = {}
-
-    def get(jtype, seed):
-        if (jtype, seed) not in cache:
-            cache[jtype, seed] = compile_model(as_scene(load(write_single_type(tmp, jtype, seed))),
-                                               check_initial=False)
-        return cache[jtype, seed]
-
-    return get
+    return compiled_models(tmp_path_factory.mktemp("spatial_single"), write_single_type)
 
 
 def random_state(rng, nb=2):

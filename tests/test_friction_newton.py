@@ -45,7 +45,7 @@ def test_friction_jacobian_matches_central_differences(name):
         f = frames(model, q, h)
         for g in model.plan.friction:
             cx = g.module.friction_setup(g.data, f)
-            lam = 50.0 * rng.standard_normal(g.lam_index.shape)
+            lam = 50.0 * rng.standard_normal(g.x_index.shape)
             dQi, dQj = g.module.friction_jacobian(g.data, cx, lam)
             step = 1e-6 * max(1.0, float(np.abs(lam).max()))
             for c in range(lam.shape[1]):

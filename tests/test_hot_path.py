@@ -133,9 +133,11 @@ def test_batched_friction_equals_per_joint(name):
         lr = 50.0 * rng.standard_normal(len(R))
         lam = np.zeros(model.m)
         lam[R] = lr
-        close(dynamics._friction_batched(model, plan, ctx, lr), ref.friction_generalized(model, f, lam))
+        Qf = np.zeros(model.nh)
+        Qf[plan.friction_cols] = dynamics._friction_forces_reduced(plan, ctx, lr[plan.friction_xrows])[0]
+        close(Qf, ref.friction_generalized(model, f, lam))
         for g, cx in zip(plan.friction, ctx):  # joint by joint, with the joint's own fi
-            lam_rows = np.concatenate((lr, [0.0]))[g.lam_index]
+            lam_rows = np.concatenate((lr[plan.friction_xrows], [0.0]))[g.x_index]
             Qi, Qj = g.module.friction(g.data, cx, lam_rows)
             for n, j in enumerate(g.joints):
                 c = model.joints[j]
@@ -203,10 +205,12 @@ def test_plan_follows_replaced_model():
     Model.__post_init__; no cache), and a Model's arrays cannot be written to."""
     model = model_of("planar_f45_wo4")
     row = model.joints[model.friction_joints[0]].rows[0]  # a friction row, retained in model
-    assert row in model.retained and not model.plan.friction_pad
+    assert row in model.retained and len(model.plan.friction_xrows) == sum(len(model.joints[j].rows)
+                                                                          for j in model.friction_joints)
     other = dataclasses.replace(model, retained=np.array([i for i in range(model.m) if i != row]))
     expected = build_plan(other)
-    assert other.plan.friction_pad and np.array_equal(other.plan.friction_xrows, expected.friction_xrows)
+    assert len(other.plan.friction_xrows) == len(model.plan.friction_xrows) - 1  # the eliminated row reads 0
+    assert np.array_equal(other.plan.friction_xrows, expected.friction_xrows)
     for arr in (model.q0, model.M, model.retained, model.joints[0].p["s_A"], model.plan.groups[0].data["s_A"],
                 model.plan.groups[0].flat_i):
         with pytest.raises(ValueError, match="read-only"):

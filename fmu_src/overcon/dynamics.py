@@ -133,25 +133,6 @@ def _friction_setup(plan: AssemblyPlan, f: Frames, blocks_i: list | None = None)
     return [g.module.friction_setup(g.data, f, blocks_i[g.group][g.in_group]) for g in plan.friction]
 
 
-def _friction_batched(model: Model, plan: AssemblyPlan, ctx: list, lr: np.ndarray) -> np.ndarray:
-    """Q_f (nh,) of the retained multipliers lam_R = lr (contributions summed per body in joint
-    order, body i then body j: the per-joint reference's order)."""
-    src = np.concatenate((lr, (0.0,))) if plan.friction_pad else lr
-    k = model.nh_b
-    if len(plan.friction) == 1:  # one joint type: contributions already in joint order, i then j
-        g = plan.friction[0]
-        vals = np.concatenate(g.module.friction(g.data, ctx[0], src[g.lam_index]), 1).reshape(-1, k)
-    else:
-        vals = np.empty((len(plan.friction_slots), k))
-        for g, cx in zip(plan.friction, ctx):
-            Qi, Qj = g.module.friction(g.data, cx, src[g.lam_index])
-            vals[g.out_i] = Qi
-            vals[g.out_j] = Qj
-    Qf = np.zeros((model.nb + 1, k))
-    np.add.at(Qf, plan.friction_slots, vals)
-    return Qf[: model.nb].reshape(-1)
-
-
 def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np.ndarray | None = None,
              *, solver: SolverSpec, qf_guess: np.ndarray | None = None) -> Evaluation:
     """Accelerations h' and multipliers lam at (t, q, h) (Eq. 18 with elimination), with the
@@ -197,14 +178,11 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
         if ok:
             qf_out = qf
             lam_R = lam0 + W @ qf
-            Q = Q.copy()
-            Q[cols] += qf
         else:  # the robust path: Anderson-accelerated fixed point, then Newton with FD Jacobian
             fallback = True
 
             def G(lr):
-                Qf = _friction_batched(model, plan, ctx, lr)
-                return lam0 + _cho_solve(factor, MinvJT @ Qf)
+                return lam0 + W @ _friction_forces_reduced(plan, ctx, lr[xrows])[0]
 
             lr = lam0.copy() if lam_guess is None else lam_guess[R].copy()
             lr, more, ok = _fixed_point(G, lr, xrows, tol, max_iter)
@@ -220,7 +198,9 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
                     f"(residual {res:.3g} N after {iterations} iterations: Newton, fixed point, "
                     "then Newton with a finite-difference Jacobian)")
             lam_R = lr
-            Q = Q + _friction_batched(model, plan, ctx, lr)
+            qf = _friction_forces_reduced(plan, ctx, lr[xrows])[0]
+        Q = Q.copy()
+        Q[cols] += qf
     lam[R] = lam_R
     hdot = model.Minv * (Q - JR @ lam_R)
     return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S, qf=qf_out)

@@ -189,19 +189,17 @@ class JointGroup(_TypedArrays):
 @dataclass(frozen=True, eq=False)
 class FrictionGroup(_TypedArrays):
     """The friction joints of one type: ``stack`` data (laws included), where their
-    multipliers are read from lam_R and where their forces go in the contribution list."""
+    multipliers are read from the friction multipliers x and where their forces go among the
+    velocities ``AssemblyPlan.friction_cols``."""
 
     type: str
     data: Mapping[str, object]
     joints: tuple[int, ...]
-    lam_index: np.ndarray  # (k, n_equations) into lam_R extended by one 0.0 (eliminated rows)
-    out_i: np.ndarray  # (k,) rows of Qi in the contribution list
-    out_j: np.ndarray
-    x_index: np.ndarray = None  # (k, n_equations) into x = lam_R[friction_xrows], extended by one pad slot
-    col_i: np.ndarray = None  # (k, n_coord) into friction_cols of body i's velocities, extended by one pad slot
-    col_j: np.ndarray = None
-    group: int = -1  # index into AssemblyPlan.groups of the joint group of the same type
-    in_group: np.ndarray = None  # (k,) positions of these joints in that group (its jac_h rows)
+    x_index: np.ndarray  # (k, n_equations) into x = lam_R[friction_xrows], extended by one pad slot
+    col_i: np.ndarray  # (k, n_coord) into friction_cols of body i's velocities, extended by one pad slot
+    col_j: np.ndarray
+    group: int  # index into AssemblyPlan.groups of the joint group of the same type
+    in_group: np.ndarray  # (k,) positions of these joints in that group (its jac_h rows)
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,10 +209,8 @@ class AssemblyPlan:
     groups: tuple[JointGroup, ...]
     single: tuple[Mapping[str, object], ...]  # per joint (model order): its constants as a batch of one
     friction: tuple[FrictionGroup, ...]
-    friction_slots: np.ndarray  # (2 nf,) body slot per contribution (joint order; i then j; base -> nb)
     friction_xrows: np.ndarray  # positions in lam_R of the retained friction rows (joint order)
-    friction_pad: bool  # some friction row is eliminated (read as 0.0)
-    friction_cols: np.ndarray = None  # velocity indices (into h) that friction forces act on, sorted
+    friction_cols: np.ndarray  # velocity indices (into h) that friction forces act on, sorted
 
     def __post_init__(self):
         _freeze_fields(self)
@@ -264,7 +260,6 @@ def build_plan(model: Model) -> AssemblyPlan:
     pos = {int(row): p for p, row in enumerate(retained)}
     pad = len(retained)  # index of the appended 0.0
     fjoints = [model.joints[j] for j in model.friction_joints]
-    order = {c.index: n for n, c in enumerate(fjoints)}
     fr_types: dict[str, list] = {}
     for c in fjoints:
         fr_types.setdefault(c.type, []).append(c)
@@ -280,18 +275,12 @@ def build_plan(model: Model) -> AssemblyPlan:
         members = groups[group_of[jtype]].joints
         friction.append(FrictionGroup(
             type=jtype, data=_read_only(TYPES[jtype].module.stack(js)), joints=tuple(c.index for c in js),
-            lam_index=np.array([[pos.get(r, pad) for r in c.rows] for c in js], np.intp),
-            out_i=np.array([2 * order[c.index] for c in js], np.intp),
-            out_j=np.array([2 * order[c.index] + 1 for c in js], np.intp),
             x_index=np.array([[xpos.get(pos.get(r, pad), len(xrows)) for r in c.rows] for c in js], np.intp),
             col_i=np.array([cpos[c.bi] for c in js], np.intp), col_j=np.array([cpos[c.bj] for c in js], np.intp),
             group=group_of[jtype], in_group=np.array([members.index(c.index) for c in js], np.intp)))
-    slots = [b if b >= 0 else model.nb for c in fjoints for b in (c.bi, c.bj)]
     return AssemblyPlan(
         groups=tuple(groups), single=tuple(_read_only(c.module.stack([c])) for c in model.joints),
-        friction=tuple(friction), friction_slots=np.array(slots, np.intp),
-        friction_xrows=np.array(xrows, np.intp),
-        friction_pad=any(r not in pos for c in fjoints for r in c.rows),
+        friction=tuple(friction), friction_xrows=np.array(xrows, np.intp),
         friction_cols=np.array(cols, np.intp))
 
 

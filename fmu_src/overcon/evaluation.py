@@ -213,14 +213,23 @@ def reaction_on_body_i(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarra
     return matvec(Ji.transpose(0, 2, 1), _rows(c, lam))[0]
 
 
+def physical_reactions(module, data, f: Frames, lam_rows: np.ndarray, dim: int) -> np.ndarray:
+    """(k, n_components + dim): the physical reactions of k joints of one type (``module`` and
+    its stacked constants ``data``) at their multipliers lam_rows (k, n_equations): in each
+    joint's auxiliary frame -A_i fi (the module's ``reaction``), then the force -fi[:dim] in the
+    global frame pi_0, fi = (J_X)_i^T lam_X."""
+    Ji = module.jac_h(data, f)[0]
+    fi = matvec(Ji.transpose(0, 2, 1), lam_rows)
+    return np.concatenate((module.reaction(data, f, fi), -fi[:, :dim]), 1)
+
+
 def physical_reaction(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> np.ndarray:
     """Physical reaction of joint c on body i: in its auxiliary frame, -A_i (J_X)_i lam_X
     (components ``reaction`` of the joint type, from the joint module's ``reaction``), followed
     by the force in the global frame pi_0 (components ``Fx0, Fy0(, Fz0)``: the paper's F^(0) of
-    Eq. A.9, the frame of Fig. 7)."""
+    Eq. A.9, the frame of Fig. 7); :func:`physical_reactions` of a batch of one."""
     mod, d = _one(model, c)
-    fi = reaction_on_body_i(model, c, f, lam)
-    return np.concatenate([mod.reaction(d, f, fi[None, :])[0], -fi[: model.dim]])
+    return physical_reactions(mod, d, f, _rows(c, lam), model.dim)[0]
 
 
 def friction_output(model: Model, c: CompiledJoint, f: Frames, lam: np.ndarray) -> float:

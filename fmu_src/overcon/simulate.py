@@ -28,10 +28,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dynamics import evaluate
-from .kinematics import matvec
 from . import integrators
 from .evaluation import (SingularConfiguration, constraints, coordinate_rates, frames,  # noqa: F401
-                         friction_output, jacobian_h, normalized_coordinates, physical_reaction)
+                         friction_output, jacobian_h, normalized_coordinates, physical_reaction,
+                         physical_reactions)
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
 from .model import InconsistentInitialState, Model, ModelError, check_initial_state  # noqa: F401
 from .spec import SceneSpec, SolverSpec
@@ -373,10 +373,7 @@ class _DerivedPlan:
         out = np.empty(self.size)
         for n, (pos, slots) in self.reactions.items():
             g = model.plan.groups[n]
-            Ji = g.module.jac_h(g.data, f)[0]
-            fi = matvec(Ji.transpose(0, 2, 1), lam[g.rows].reshape(len(g.joints), -1))
-            vals = np.concatenate((g.module.reaction(g.data, f, fi), -fi[:, : model.dim]), 1)
-            out[slots] = vals[pos]
+            out[slots] = physical_reactions(g.module, g.data, f, lam[g.rows].reshape(len(g.joints), -1), model.dim)[pos]
         for module, data, rows, slots in self.friction:
             out[slots] = module.friction_force(data, module.friction_setup(data, f), lam[rows])
         return out

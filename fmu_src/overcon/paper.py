@@ -102,17 +102,20 @@ def _lockstep_runs(specs: list[SceneSpec], step: float, outputs) -> tuple[list[R
     refusal) repeats all of them at :func:`overcon.verdict.next_lockstep_step`, at most
     :data:`overcon.verdict.LOCKSTEP_RETRIES` times, as the FMU comparison does. Returns the runs
     and the step used."""
-    for attempt in range(LOCKSTEP_RETRIES + 1):
+    def runs(h: float) -> list[Result]:
+        return [run_scene(scene.as_scene(dataclasses.replace(
+            _with_solver(spec, method=LOCKSTEP_METHOD, step=h), reactions=(),
+            positions=outputs or spec.positions))) for spec in specs]
+
+    for _ in range(LOCKSTEP_RETRIES):
         try:
-            return [run_scene(scene.as_scene(dataclasses.replace(
-                _with_solver(spec, method=LOCKSTEP_METHOD, step=step), reactions=(),
-                positions=outputs or spec.positions))) for spec in specs], step
+            return runs(step), step
         except SimulationError as exc:
             smaller = next_lockstep_step(step, [str(exc)])
-            if smaller is None or attempt == LOCKSTEP_RETRIES:
+            if smaller is None:
                 raise
             step = smaller
-    raise AssertionError("unreachable")
+    return runs(step), step
 
 
 def run_group(items: list[tuple[Path, SceneSpec]], *, tolerance: float | None = None,

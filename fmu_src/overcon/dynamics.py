@@ -134,13 +134,16 @@ def _friction_setup(plan: AssemblyPlan, f: Frames, blocks_i: list | None = None)
 
 
 def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np.ndarray | None = None,
-             *, solver: SolverSpec, qf_guess: np.ndarray | None = None) -> Evaluation:
+             *, solver: SolverSpec, qf_guess: np.ndarray | None = None, newton_failed: int = 0) -> Evaluation:
     """Accelerations h' and multipliers lam at (t, q, h) (Eq. 18 with elimination), with the
     Baumgarte frequency and friction-solve settings of ``solver``. Warm start of the friction
     solve: ``qf_guess`` (the friction forces on ``plan.friction_cols`` of a nearby evaluation,
     its ``Evaluation.qf``) gives the first iterate lam0_x + W_x qf_guess, one fixed-point step
     taken with this state's lam0 and W and without evaluating a force; else ``lam_guess``'s
-    friction multipliers; else lam0."""
+    friction multipliers; else lam0. ``newton_failed``: the force evaluations of a Newton solve
+    already tried at this very state (the compiled kernel's, :mod:`overcon.kernel`), which gave
+    up: the robust path starts at once (what it would do after its own Newton gave up; the
+    count is added to ``Evaluation.iterations``)."""
     a, tol, max_iter = solver.baumgarte, solver.friction_tol, solver.friction_max_iter
     plan = model.plan
     f = frames(model, q, h)
@@ -174,7 +177,10 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
             x0 = lam0[xrows] + W[xrows] @ qf_guess
         else:
             x0 = (lam0 if lam_guess is None else lam_guess[R])[xrows]
-        x, qf, iterations, ok = _newton_reduced(plan, ctx, lam0[xrows], W[xrows], x0, tol, max_iter)
+        if newton_failed:
+            qf, iterations, ok = None, newton_failed, False
+        else:
+            x, qf, iterations, ok = _newton_reduced(plan, ctx, lam0[xrows], W[xrows], x0, tol, max_iter)
         if ok:
             qf_out = qf
             lam_R = lam0 + W @ qf

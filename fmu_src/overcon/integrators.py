@@ -241,11 +241,15 @@ class Dop853(AdaptiveRK):
         return F
 
     def _dense_eval(self, F, x):
-        y = np.zeros_like(self.y_old)
-        for i, f in enumerate(F[::-1]):
-            y += f
-            y *= x if i % 2 == 0 else 1 - x
-        return y + self.y_old
+        """y_old + the nested polynomial (((F[-1] x + F[-2]) (1 - x) + F[-3]) x + ...) in x: its
+        scalar weight per row of F first (suffix products of the factors x, 1 - x, x, ...), then
+        one matrix-vector product instead of two array operations per row."""
+        n = len(F)
+        w, p = [0.0] * n, 1.0
+        for i in range(n):  # F[i] is multiplied by the factors of rows n - 1 - i ... 0 of F[::-1]
+            p *= x if (n - 1 - i) % 2 == 0 else 1 - x
+            w[i] = p
+        return np.array(w) @ F + self.y_old
 
 
 RK4_STABILITY = 2.785

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import kernel as kernel_mod
 from .dynamics import evaluate
 from . import integrators
 from .evaluation import (SingularConfiguration, constraints, coordinate_rates, frames,  # noqa: F401
@@ -141,6 +142,11 @@ class Simulation:
                     f"joint {c.name}: friction law 'coulomb' (paper Fig. 1 variant A, mu sign(v)) is "
                     "discontinuous at v = 0: for analysis only, not for integration; use 'regularised'")
         self.n = model.n
+        try:
+            self._kernel, self.kernel_note = kernel_mod.select(model, self.solver)
+        except kernel_mod.KernelUnavailable as exc:
+            raise SimulationError(f"cannot start: {exc}") from exc
+        self.kernel_repeats = 0  # evaluations the kernel handed back to the numpy path
         self.lam = None  # last converged multipliers (friction warm start)
         self._warm = _ForcesHistory()  # friction forces of the integration's solves (warm start)
         self._step_warm = _ForcesHistory()  # the latest ones at the last two step ends (outputs' warm start)
@@ -160,16 +166,30 @@ class Simulation:
             raise SimulationError(f"cannot start: {where}{exc}") from exc
 
     # -- right-hand side -------------------------------------------------------------------
-    def _rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+    def _evaluate(self, t: float, y: np.ndarray, lam_guess, qf_guess):
+        """(y', lam, qf, friction iterations) at (t, y): the compiled kernel's when this run has
+        one and it succeeds, else (and for every evaluation it hands back: a singular position, the
+        friction solve's fallback, ...) :func:`overcon.dynamics.evaluate` and the coordinate rates.
+        Warm start as :func:`overcon.dynamics.evaluate` (``qf_guess``, then ``lam_guess``)."""
+        failed = 0
+        if self._kernel is not None:
+            r = self._kernel.evaluate(t, y, lam_guess, qf_guess)
+            if r is not None:
+                return r
+            self.kernel_repeats += 1
+            failed = self._kernel.newton_failed()
         q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, self.lam, solver=self.solver, qf_guess=self._warm.guess(t))
+        ev = evaluate(self.model, t, q, h, lam_guess, solver=self.solver, qf_guess=qf_guess, newton_failed=failed)
+        return np.concatenate([coordinate_rates(self.model, q, h, ev.frames), ev.hdot]), ev.lam, ev.qf, ev.iterations
+
+    def _rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        out, lam, qf, iterations = self._evaluate(t, y, self.lam, self._warm.guess(t))
         if self.model.friction_joints:
-            self.lam = ev.lam
-            self._warm.push(t, ev.qf)
-        self.friction_iterations += ev.iterations
+            self.lam = lam
+            self._warm.push(t, qf)
+        self.friction_iterations += iterations
         self.evaluations += 1
-        self._last_eval = (t, y.copy(), ev.lam)
-        out = np.concatenate([coordinate_rates(self.model, q, h, ev.frames), ev.hdot])
+        self._last_eval = (t, y.copy(), lam)
         if not np.all(np.isfinite(out)):
             raise SimulationError(f"t = {t:.9g} s: non-finite derivative")
         return out
@@ -177,10 +197,7 @@ class Simulation:
     def _rhs_dense(self, t: float, y: np.ndarray) -> np.ndarray:
         """Right-hand side for dense-output stages only: warm-started from the integrator's lam but
         leaving it (and the counters) unchanged, so reading outputs never alters the trajectory."""
-        q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver,
-                      qf_guess=self._warm.guess(t))
-        return np.concatenate([coordinate_rates(self.model, q, h, ev.frames), ev.hdot])
+        return self._evaluate(t, y, None if self.lam is None else self.lam.copy(), self._warm.guess(t))[0]
 
     # -- stepping --------------------------------------------------------------------------
     @property
@@ -276,9 +293,15 @@ class Simulation:
             f, lam = frames(model, q, h), last[2]
         else:
             warm = self._step_warm if self._step_warm.items else self._warm
-            ev = evaluate(model, t, q, h, None if self.lam is None else self.lam.copy(), solver=self.solver,
-                          qf_guess=warm.guess(t))
-            f, lam = ev.frames, ev.lam
+            lam_guess = None if self.lam is None else self.lam.copy()
+            r = None if self._kernel is None else self._kernel.evaluate(t, y, lam_guess, warm.guess(t))
+            if r is not None:
+                f, lam = frames(model, q, h), r[1]
+            else:
+                failed = 0 if self._kernel is None else self._kernel.newton_failed()
+                ev = evaluate(model, t, q, h, lam_guess, solver=self.solver, qf_guess=warm.guess(t),
+                              newton_failed=failed)
+                f, lam = ev.frames, ev.lam
         return plan.values(model, f, lam)
     # -- state -----------------------------------------------------------------------------
     def get_state(self) -> dict:

@@ -89,6 +89,8 @@ integration), B ``regularised`` (mu*clip(v/v_reg, -1, 1), the paper's choice), C
 (B with a Stribeck peak)."""
 
 METHODS = ("dopri5", "dop853", "rk4", "radau")
+KERNELS = ("auto", "c", "numpy")
+"""Values of the solver setting ``kernel`` (:mod:`overcon.kernel`)."""
 """Integrators offered (see :mod:`overcon.integrators`): adaptive explicit ``dopri5`` and
 ``dop853``, fixed-step ``rk4``, implicit (stiff) ``radau``."""
 
@@ -168,7 +170,8 @@ class SolverSpec:
     """Integration settings. ``tolerance`` is the accuracy target (relative and absolute
     tolerance of the adaptive methods dopri5, dop853, radau; for ``rk4`` it is unused). ``step`` is the fixed step of
     ``rk4`` (s). ``baumgarte`` is the constraint-stabilisation frequency (1/s, 0 disables).
-    ``friction_tol``/``friction_max_iter`` control the friction solve. Defaults from the
+    ``friction_tol``/``friction_max_iter`` control the friction solve. ``kernel`` picks the
+    right-hand side's implementation, one of :data:`KERNELS` (:mod:`overcon.kernel`). Defaults from the
     measurements in docs/benchmarks.md: dopri5 at 1e-9 reaches about 1e-7 m with friction (at 1e-8
     only about 2e-6 m: the kink of the regularised friction law spoils the error estimate)."""
 
@@ -180,6 +183,7 @@ class SolverSpec:
     friction_tol: float = 1e-12
     friction_max_iter: int = 50
     max_step: float = 0.05
+    kernel: str = "auto"
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,9 @@ refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each F
 
     modelDescription.xml              overcon.fmu.description (validated with fmpy after writing)
     binaries/<platform>/<scene>.so    native/overcon_fmi2.c compiled here (C compiler: $CC or cc)
+    binaries/<platform>/overcon_kernel.so
+                                      the optional compiled kernel (overcon/kernel.c, see
+                                      overcon.kernel), same compiler; loaded by the FMU's Python
     resources/overcon_package.txt     name of the package copy below, for the binary
     resources/overcon_python.txt      the building Python (libpython, home, site-packages),
                                       written by overcon.fmu.pyinfo, read by the binary
@@ -53,6 +56,7 @@ import uuid
 import zipfile
 from pathlib import Path
 
+from .. import kernel as kernel_mod
 from .. import scene as scene_mod
 from ..model import ModelError, compile_model
 from ..precheck import PrecheckResult, precheck
@@ -147,6 +151,25 @@ def native_binary() -> NativeBinary:
     return nb
 
 
+_KERNEL_CACHE: dict[tuple, bytes] = {}
+
+
+def kernel_library() -> bytes:
+    """The compiled kernel (:mod:`overcon.kernel`, ``kernel.c``) the FMU carries next to its binary,
+    compiled with the same compiler once per process, source and compiler. Raises
+    :class:`BuildError`."""
+    cc = shlex.split(os.environ.get("CC") or "cc")
+    key = (tuple(cc), hashlib.sha256(kernel_mod.SOURCE.read_bytes()).hexdigest())
+    if key not in _KERNEL_CACHE:
+        with tempfile.TemporaryDirectory() as tmp:
+            try:
+                out = kernel_mod.compile_library(Path(tmp) / kernel_mod.library_name(), cc)
+            except OSError as exc:
+                raise BuildError(str(exc)) from exc
+            _KERNEL_CACHE[key] = out.read_bytes()
+    return _KERNEL_CACHE[key]
+
+
 def _overcon_version() -> str:
     try:
         from importlib.metadata import version  # noqa: PLC0415
@@ -234,7 +257,9 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         binary = native_binary() if binary is None else binary
 
         h = hashlib.sha256()
-        for part in (FORMAT_VERSION.encode(), NATIVE_SOURCE.read_bytes(), scene_zip.encode(),
+        kernel_bytes = kernel_library()
+        kernel_zip = f"binaries/{binary.platform}/{kernel_mod.library_name()}"
+        for part in (FORMAT_VERSION.encode(), NATIVE_SOURCE.read_bytes(), kernel_mod.SOURCE.read_bytes(), scene_zip.encode(),
                      scene_bytes, mech_zip.encode(), mech_bytes):
             h.update(len(part).to_bytes(8, "little") + part)
         for rel, data in sources:
@@ -254,7 +279,8 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
                     "precheck_problems": list(report.problems),
                     "precheck_warnings": list(report.warnings),
                     "binary": {"platform": binary.platform, "compiler": binary.compiler,
-                               "source": NATIVE_SOURCE.name}}
+                               "source": NATIVE_SOURCE.name},
+                    "kernel": {"library": kernel_zip, "source": kernel_mod.SOURCE.name}}
 
         out_dir.mkdir(parents=True, exist_ok=True)
         fmu = out_dir / f"{spec.name}.fmu"
@@ -262,6 +288,7 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         with zipfile.ZipFile(tmp, "w") as zf:
             _zip_write(zf, "modelDescription.xml", xml)
             _zip_write(zf, f"binaries/{binary.platform}/{spec.name}.{binary.ext}", binary.data, 0o755)
+            _zip_write(zf, kernel_zip, kernel_bytes, 0o755)
             _zip_write(zf, "resources/overcon_package.txt", f"{pkg}\n".encode())
             _zip_write(zf, "resources/overcon_python.txt", pyinfo.text().encode())
             _zip_write(zf, "resources/overcon_fmu.json", json.dumps(manifest, indent=1).encode())

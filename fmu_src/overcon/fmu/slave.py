@@ -61,6 +61,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import kernel
 from .. import scene as scene_mod
 from ..model import compile_model
 from ..params import apply_overrides, check_mu_static
@@ -160,6 +161,11 @@ class OverconSlave:
         if guid is not None and guid != self._manifest["guid"]:
             raise CallRefused(f"fmi2Instantiate: GUID {guid} does not match this FMU's "
                               f"{self._manifest['guid']} (modelDescription.xml of another build?)")
+        kernel_lib = self._manifest.get("kernel", {}).get("library")
+        if kernel_lib:  # the compiled kernel built with this FMU (overcon.kernel): never compiled here
+            kernel.use_library(res.parent / kernel_lib)
+        else:
+            kernel.disable("this FMU carries no compiled kernel")
         self.instance_name = instance_name
         self.messages: list[tuple[int, str]] = []
         self._log_sink = log
@@ -469,7 +475,7 @@ class OverconSlave:
             raise CallRefused(f"initialization failed: {type(exc).__name__}: {exc}") from exc
         self._mode = Mode.STEPPING
         self.log(f"initialized at t = {self._t!r} s: method {self._params['solver.method']}, tolerance "
-                 f"{self._params['solver.tolerance']!r}", Status.OK)
+                 f"{self._params['solver.tolerance']!r}; {self._sim.kernel_note}", Status.OK)
 
     @fmi_call("fmi2DoStep", {Mode.STEPPING})
     def do_step(self, current_time: float, step_size: float, no_set_fmu_state_prior: int = 0):

@@ -96,6 +96,8 @@ SOLVER_PARAMS = {
     "baumgarte": ("Real", "1/s", "Baumgarte constraint stabilisation frequency (0 disables)"),
     "friction_tol": ("Real", "1", "friction fixed-point tolerance (relative, on lambda)"),
     "friction_max_iter": ("Integer", None, "friction fixed-point iteration limit"),
+    "kernel": ("String", None, "right-hand side: auto (the compiled kernel where it covers the model, else numpy), "
+                               "c (the compiled kernel, an error where it cannot run) or numpy"),
 }
 
 BUDGET_PARAMS = {

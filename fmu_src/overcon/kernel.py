@@ -1,0 +1,327 @@
+"""The optional compiled kernel: one evaluation of Eq. 18 and the coordinate rates in C
+(``kernel.c`` next to this file), called through ctypes.
+
+Why: an evaluation in numpy costs 20-30 times its linear algebra (docs/benchmarks.md, "The
+limit"): about a hundred numpy calls on arrays of 2 to 35 entries. The kernel does the same
+arithmetic in one call.
+
+What it covers (:func:`support`): planar mechanisms of revolute and translational joints, spatial
+mechanisms with z-x-z Euler angles and spherical joints (the paper's two mechanisms and any other
+built from these joints); gravity, forces, torques, springs; friction laws ``regularised`` and
+``stribeck``; up to :data:`MAX_FRICTION` friction joints. Anything else runs on the numpy path
+(the reason is logged). Within an evaluation, whatever the numpy path reports or falls back on
+(a singular position, the friction solve's fixed-point fallback, an Euler singularity, a spring
+of zero length, a non-finite number) makes the kernel return a status, and that evaluation is
+repeated on the numpy path, which raises or falls back exactly as without the kernel: the kernel
+never changes what fails or how, and the robust friction fallback exists once, in
+:mod:`overcon.dynamics`.
+
+Selection (decided here): the solver setting ``kernel`` (scene ``[solver] kernel``, FMU parameter
+``solver.kernel``): ``"auto"`` (default) uses the kernel where it covers the model and a compiled
+library is at hand, else numpy; ``"c"`` requires it (a clear error otherwise); ``"numpy"`` never
+uses it. Both paths implement the same formulas in the same order; they agree to round-off
+(tests/test_kernel.py checks <= 1e-12 relative per evaluation and whole runs). A run says which
+path it took (:attr:`overcon.simulate.Simulation.kernel_note`, logged by the FMU at
+instantiation).
+
+Where the library comes from: an FMU carries it (compiled by ``overcon build`` with the FMU's own
+binary, ``binaries/<platform>/overcon_kernel.<ext>``; the FMU calls :func:`use_library`). In
+process it is compiled on first use with ``$CC`` (default ``cc``) into
+``$OVERCON_CACHE_DIR`` (default ``~/.cache/overcon``), named by a hash of the source and the
+compiler, about 0.3 s once; without a compiler, ``auto`` runs numpy. Compiler flags
+(:data:`CFLAGS`): ``-O2 -ffp-contract=off``: no fused multiply-add contraction, so the numbers do
+not depend on the CPU's FMA support.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import platform
+import shlex
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .spec import KERNELS  # noqa: F401  (the values of the solver setting ``kernel``)
+
+SOURCE = Path(__file__).with_name("kernel.c")
+CFLAGS = ["-shared", "-fPIC", "-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"]
+LIBS = ["-lm"]
+ABI = 1  # OVK_ABI in kernel.c: the layout of _CModel
+MAX_FRICTION = 32  # OVK_MAX_FRICTION in kernel.c
+
+STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
+          3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory"}
+
+_JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3}
+_LAWS = {"regularised": 1, "stribeck": 2}
+_LOADS = {"force": 1, "torque": 2, "spring": 3}
+NJC, NLP, NLD = 12, 5, 11  # doubles per joint, per friction law, per load (kernel.c)
+
+
+class KernelUnavailable(RuntimeError):
+    """``kernel = "c"`` was asked for and the kernel cannot run (the message says why)."""
+
+
+# ----------------------------------------------------------------------------- the library
+
+_state: dict = {"lib": None, "reason": None, "path": None, "tried": False}
+
+
+def _bind(path: Path) -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(path))
+    if lib.ovk_abi() != ABI:
+        raise OSError(f"{path}: kernel ABI {lib.ovk_abi()}, expected {ABI} (a library of another overcon version)")
+    if lib.ovk_max_friction() != MAX_FRICTION:
+        raise OSError(f"{path}: kernel built for {lib.ovk_max_friction()} friction joints, expected {MAX_FRICTION}")
+    f = lib.ovk_evaluate
+    f.restype = ctypes.c_int
+    f.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p,
+                  ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+    return lib
+
+
+def use_library(path) -> None:
+    """Use the compiled kernel at ``path`` (an FMU's shipped library). A library that cannot be
+    loaded is recorded as the reason the kernel is unavailable (``auto`` then runs numpy)."""
+    _state.update(lib=None, reason=None, path=str(path), tried=True)
+    try:
+        _state["lib"] = _bind(Path(path))
+    except OSError as exc:
+        _state["reason"] = f"cannot load {path}: {exc}"
+
+
+def disable(reason: str) -> None:
+    """No compiled kernel in this process (``auto`` runs numpy; ``reason`` is reported)."""
+    _state.update(lib=None, reason=reason, path=None, tried=True)
+
+
+def compiler() -> list[str]:
+    """The C compiler command: ``$CC`` or ``cc``."""
+    return shlex.split(os.environ.get("CC") or "cc")
+
+
+def library_name() -> str:
+    return "overcon_kernel" + (".dll" if platform.system() == "Windows" else
+                               ".dylib" if platform.system() == "Darwin" else ".so")
+
+
+def compile_library(out: Path, cc: list[str] | None = None) -> Path:
+    """Compile ``kernel.c`` into the shared library ``out`` (raises OSError naming the command and
+    the compiler's message)."""
+    cc = cc or compiler()
+    if not cc or shutil.which(cc[0]) is None:
+        raise OSError(f"no C compiler: {' '.join(cc) or 'cc'} not found (set CC or install one, e.g. gcc)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
+        tmp_out = Path(tmp) / out.name
+        cmd = [*cc, *CFLAGS, "-o", str(tmp_out), str(SOURCE), *LIBS]
+        run = subprocess.run(cmd, capture_output=True, text=True)
+        if run.returncode != 0:
+            raise OSError(f"compiling the kernel failed ({shlex.join(cmd)}): {run.stderr.strip()[-2000:]}")
+        os.replace(tmp_out, out)  # atomic: concurrent processes never load a half-written file
+    return out
+
+
+def _cache_path(cc: list[str]) -> Path:
+    base = Path(os.environ.get("OVERCON_CACHE_DIR") or Path.home() / ".cache" / "overcon")
+    key = hashlib.sha256(SOURCE.read_bytes() + "\0".join([*cc, *CFLAGS, platform.machine()]).encode()).hexdigest()
+    return base / f"kernel-{key[:16]}" / library_name()
+
+
+def library():
+    """(the loaded kernel library or None, the reason it is None). Compiled into the cache on
+    first use in a process that was not given one by :func:`use_library`."""
+    if not _state["tried"]:
+        _state["tried"] = True
+        cc = compiler()
+        try:
+            path = _cache_path(cc)
+            if not path.exists():
+                compile_library(path, cc)
+            _state["lib"], _state["path"] = _bind(path), str(path)
+        except OSError as exc:
+            _state["reason"] = str(exc)
+    return _state["lib"], _state["reason"]
+
+
+# ----------------------------------------------------------------------------- the model
+
+def support(model) -> str | None:
+    """None if the kernel covers ``model``, else the reason it does not."""
+    if model.kind == "spatial" and model.rotation != "euler_zxz":
+        return f"rotation {model.rotation!r} (the kernel has z-x-z Euler angles only)"
+    for c in model.joints:
+        if (model.kind, c.type) not in _JOINTS:
+            return f"joint {c.name}: type {c.type!r} in a {model.kind} mechanism"
+        if c.law is not None and c.law.name not in _LAWS:
+            return f"joint {c.name}: friction law {c.law.name!r}"
+    for ld in model.loads:
+        if ld.type not in _LOADS:
+            return f"load type {ld.type!r}"
+    if len(model.friction_joints) > MAX_FRICTION:
+        return f"{len(model.friction_joints)} friction joints (the kernel takes at most {MAX_FRICTION})"
+    return None
+
+
+class _CModel(ctypes.Structure):
+    """``ovk_model`` of kernel.c (same order)."""
+    _fields_ = ([(n, ctypes.c_int) for n in ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols",
+                                             "nfj", "nfg", "max_iter")]
+                + [("baumgarte", ctypes.c_double), ("tol", ctypes.c_double)]
+                + [(n, ctypes.c_void_p) for n in ("retained", "Minv", "mass", "inertia", "gravity", "jtype", "jbi",
+                                                  "jbj", "jneq", "jrows", "jconst", "jlaw", "jlawp", "ltype", "lbi",
+                                                  "lbj", "lp", "xrows", "cols", "fj", "fgroup", "fx", "fci", "fcj")])
+
+
+def _joint_constants(model, c) -> np.ndarray:
+    out = np.zeros(NJC)
+    p = c.p
+    if c.type == "translational":
+        out[0:2], out[2:4], out[4:6] = p["s_A"], p["s_B"], p["v"]
+        out[6] = p["psi"]
+        out[7:11] = np.asarray(p["B"], float).reshape(-1)
+    else:
+        k = model.dim
+        out[0:k], out[k:2 * k] = p["s_i"], p["s_j"]
+    return out
+
+
+def _law_constants(law) -> np.ndarray:
+    if law is None:
+        return np.zeros(NLP)
+    return np.array([law.mu, law.v_reg, law.size, law.mu_static if law.mu_static is not None else 0.0,
+                     law.v_stribeck if law.v_stribeck is not None else 1.0])
+
+
+def _load_constants(ld) -> np.ndarray:
+    out = np.zeros(NLD)
+    if ld.value is not None:
+        v = np.atleast_1d(np.asarray(ld.value, float))
+        out[: len(v)] = v
+    if ld.s_i is not None:
+        out[3:3 + len(ld.s_i)] = ld.s_i
+    if ld.s_j is not None:
+        out[6:6 + len(ld.s_j)] = ld.s_j
+    out[9], out[10] = ld.stiffness, ld.free_length
+    return out
+
+
+class Kernel:
+    """The kernel bound to one model and solver settings: packed arrays and output buffers made
+    once. :meth:`evaluate` returns (y', lam, qf, friction iterations) or None when the evaluation
+    must be done on the numpy path (the status is kept in :attr:`last_status`)."""
+
+    def __init__(self, lib, model, solver):
+        self.model, self._fn = model, lib.ovk_evaluate
+        plan = model.plan
+        I32 = np.int32
+        keep = self._keep = []
+
+        def arr(a, dtype):
+            a = np.ascontiguousarray(np.asarray(a, dtype).reshape(-1))
+            if a.size == 0:
+                a = np.zeros(1, dtype)
+            keep.append(a)
+            return a.ctypes.data
+
+        joints = model.joints
+        rows = np.full((len(joints), 3), -1)
+        for n, c in enumerate(joints):
+            rows[n, :len(c.rows)] = c.rows
+        fj = [j for g in plan.friction for j in g.joints]
+        fgroup = np.cumsum([0] + [len(g.joints) for g in plan.friction])
+        nh_b = model.nh_b
+
+        def pad_cols(a):
+            out = np.full((len(a), 6), len(plan.friction_cols))
+            out[:, :nh_b] = a
+            return out
+
+        def pad_x(a):
+            out = np.full((len(a), 3), len(plan.friction_xrows))
+            out[:, :a.shape[1]] = a
+            return out
+
+        fx = np.concatenate([pad_x(g.x_index) for g in plan.friction]) if plan.friction else np.zeros((0, 3))
+        fci = np.concatenate([pad_cols(g.col_i) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
+        fcj = np.concatenate([pad_cols(g.col_j) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
+        m = _CModel(dim=model.dim, nb=model.nb, nq_b=model.nq_b, nh_b=nh_b, m=model.m, nR=len(model.retained),
+                    nj=len(joints), nl=len(model.loads), nx=len(plan.friction_xrows), ncols=len(plan.friction_cols),
+                    nfj=len(fj), nfg=len(plan.friction), max_iter=solver.friction_max_iter,
+                    baumgarte=solver.baumgarte, tol=solver.friction_tol)
+        m.retained = arr(model.retained, I32)
+        m.Minv, m.mass = arr(model.Minv, float), arr(model.mass, float)
+        m.inertia = arr(model.inertia if model.kind == "spatial" else np.zeros((model.nb, 3)), float)
+        m.gravity = arr(model.gravity, float)
+        m.jtype = arr([_JOINTS[(model.kind, c.type)] for c in joints], I32)
+        m.jbi, m.jbj = arr([c.bi for c in joints], I32), arr([c.bj for c in joints], I32)
+        m.jneq, m.jrows = arr([len(c.rows) for c in joints], I32), arr(rows, I32)
+        m.jconst = arr([_joint_constants(model, c) for c in joints], float)
+        m.jlaw = arr([_LAWS[c.law.name] if c.law is not None else 0 for c in joints], I32)
+        m.jlawp = arr([_law_constants(c.law) for c in joints], float)
+        m.ltype = arr([_LOADS[ld.type] for ld in model.loads], I32)
+        m.lbi, m.lbj = arr([ld.bi for ld in model.loads], I32), arr([ld.bj for ld in model.loads], I32)
+        m.lp = arr([_load_constants(ld) for ld in model.loads], float)
+        m.xrows, m.cols = arr(plan.friction_xrows, I32), arr(plan.friction_cols, I32)
+        m.fj, m.fgroup = arr(fj, I32), arr(fgroup, I32)
+        m.fx, m.fci, m.fcj = arr(fx, I32), arr(fci, I32), arr(fcj, I32)
+        self._cmodel = m
+        self._pm = ctypes.addressof(m)
+        n_y = model.n + model.nh
+        self._y = np.zeros(n_y)
+        self._ydot = np.zeros(n_y)
+        self._lam = np.zeros(model.m)
+        self._qf = np.zeros(max(1, len(plan.friction_cols)))
+        self._guess_qf = np.zeros(max(1, len(plan.friction_cols)))
+        self._guess_lam = np.zeros(model.m)
+        self._its = ctypes.c_int(0)
+        self._ptrs = (self._y.ctypes.data, self._ydot.ctypes.data, self._lam.ctypes.data, self._qf.ctypes.data,
+                      ctypes.addressof(self._its), self._guess_qf.ctypes.data, self._guess_lam.ctypes.data)
+        self._ncols = len(plan.friction_cols)
+        self.last_status = 0
+
+    def newton_failed(self) -> int:
+        """The force evaluations of the last call's Newton solve if that is why it returned None
+        (status 2), else 0 (for :func:`overcon.dynamics.evaluate`'s ``newton_failed``)."""
+        return self._its.value if self.last_status == 2 else 0
+
+    def evaluate(self, t: float, y: np.ndarray, lam_guess=None, qf_guess=None):
+        """(y' (n + nh,), lam (m,), qf (ncols,), iterations) at (t, y), warm-started as
+        :func:`overcon.dynamics.evaluate` (qf_guess first, then lam_guess); None: repeat on the
+        numpy path (status in :attr:`last_status`)."""
+        py, pyd, plam, pqf, pits, pgq, pgl = self._ptrs
+        self._y[:] = y
+        if qf_guess is not None and self._ncols:
+            self._guess_qf[: self._ncols] = qf_guess
+            mode, pg = 1, pgq
+        elif lam_guess is not None:
+            self._guess_lam[:] = lam_guess
+            mode, pg = 2, pgl
+        else:
+            mode, pg = 0, pgq
+        status = self._fn(self._pm, t, py, mode, pg, pyd, plam, pqf, pits)
+        self.last_status = status
+        if status:
+            return None
+        return self._ydot.copy(), self._lam.copy(), self._qf[: self._ncols].copy(), self._its.value
+
+
+def select(model, solver):
+    """(a :class:`Kernel` or None, a note saying which path runs and why) for ``solver.kernel``;
+    raises :class:`KernelUnavailable` for ``"c"`` when the kernel cannot run."""
+    choice = getattr(solver, "kernel", "auto")
+    if choice == "numpy":
+        return None, "right-hand side: numpy (solver.kernel = 'numpy')"
+    why = support(model)
+    lib, reason = (None, None) if why else library()
+    if why or lib is None:
+        why = why or f"no compiled kernel: {reason}"
+        if choice == "c":
+            raise KernelUnavailable(f"solver.kernel = 'c': {why}")
+        return None, f"right-hand side: numpy (solver.kernel = 'auto': {why})"
+    return Kernel(lib, model, solver), f"right-hand side: compiled kernel ({_state['path']})"

@@ -200,5 +200,9 @@ def test_libcosim_matches_fmpy(fmus, name):
     res = fmpy.simulate_fmu(str(f.path), stop_time=stop)
     ref = np.column_stack([res[v.name] for v in f.outputs])[1:]
     assert cosim.shape == ref.shape
-    # libcosim's communication points are integer nanoseconds: k * 10 ms exactly as fmpy's grid
-    assert np.max(np.abs(cosim - ref)) <= 1e-12
+    # libcosim's communication points are integer nanoseconds (k * 10 ms rounded once), fmpy's are
+    # k * h in floating point: at some k (0.35, 0.41, 0.47 s) they differ by one ulp, so the
+    # outputs are read at times 6e-17 s apart. The positions then agree to round-off; the reactions
+    # come from a friction solve converged to friction_tol = 1e-12 (relative to the multipliers),
+    # so they agree to that tolerance relative to their size (measured 1.2e-12 N on 155 N).
+    assert np.all(np.abs(cosim - ref) <= 1e-12 * (1.0 + np.abs(ref)))

@@ -297,7 +297,7 @@ static void friction_setup(const ovk_model *M, const frames_t *f, int j, const d
     if (M->jtype[j] == J_REVOLUTE) {
         mat2vec(Ri, c, ai);
         cx->A[0] = Ri[0]; cx->A[1] = Ri[2]; cx->A[3] = Ri[1]; cx->A[4] = Ri[3];
-        cx->coef = lp[2] * law_coefficient(lp, law, f->w[bj] - f->w[bi]);
+        cx->coef = law == LAW_NONE ? 0.0 : lp[2] * law_coefficient(lp, law, f->w[bj] - f->w[bi]);
     } else {
         const double *B = c + 7; /* 2 x 2 row-major, column 0 = guide in body i axes */
         mat2vec(Ri, c, ai);
@@ -315,7 +315,7 @@ static void friction_setup(const ovk_model *M, const frames_t *f, int j, const d
         double speed = (velj[0] - veli[0]) * cx->e[0] + (velj[1] - veli[1]) * cx->e[1];
         cx->arm_i[0] = pi[0]; cx->arm_i[1] = pi[1];
         cx->arm_j[0] = pj[0]; cx->arm_j[1] = pj[1];
-        cx->coef = law_coefficient(lp, law, speed);
+        cx->coef = law == LAW_NONE ? 0.0 : law_coefficient(lp, law, speed);
     }
     cx->A[6] = ai[1]; cx->A[7] = -ai[0]; cx->A[8] = 1.0; /* -OMEGA a_i */
 }
@@ -838,6 +838,8 @@ int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, 
         }
         lamR[i] = s - g[i];
     }
+    for (int i = 0; i < nR; i++)
+        if (!isfinite(lamR[i])) { status = OVK_NONFINITE; goto done; }
     cho_solve(S, nR, lamR);
     *iterations = 0;
     if (M->nfj) {
@@ -912,4 +914,73 @@ done:
     free(mem);
     free(ctx);
     return status;
+}
+
+/* ------------------------------------------------------------------------------ reported values */
+
+/* The reported reactions and friction forces at y and the multipliers lam (m) (overcon.evaluation
+ * physical_reactions and friction_output): per joint j, reac[6 j ...] = -A_i fi in its auxiliary
+ * frame (3 components: planar Fx, Fy, T; spherical Fx, Fy, Fz), then -fi[:dim] in the global
+ * frame, fi = (J_X)_i^T lam_X; fric[j] = the friction output of a joint with friction (else 0). */
+int ovk_outputs(const ovk_model *M, const double *y, const double *lam, double *reac, double *fric) {
+    int nb = M->nb, d = M->dim, kh = M->nh_b, wd = d == 2 ? 1 : 3, n = nb * M->nq_b;
+    double *mem = malloc(sizeof(double) * ((size_t)(nb + 1) * (2 * d + d * d + wd) + 4 * (size_t)nb + 1));
+    if (!mem) return OVK_NOMEM;
+    frames_t f;
+    double *p = mem;
+    f.r = p; p += (nb + 1) * d;
+    f.v = p; p += (nb + 1) * d;
+    f.R = p; p += (nb + 1) * d * d;
+    f.w = p; p += (nb + 1) * wd;
+    f.sb = p; p += nb; f.cb = p; p += nb; f.sg = p; p += nb; f.cg = p;
+    build_frames(M, y, y + n, &f);
+    double blkI[18], blkJ[18], ph[3], gm[3], lj[3], fi[6];
+    for (int j = 0; j < M->nj; j++) {
+        int ne = M->jneq[j], bi = slot(M, M->jbi[j]);
+        double *out = reac + 6 * j;
+        joint_rows(M, &f, j, ph, blkI, blkJ, gm);
+        for (int e = 0; e < ne; e++) lj[e] = lam[M->jrows[3 * j + e]];
+        for (int k = 0; k < kh; k++) {
+            double s = 0.0;
+            for (int e = 0; e < ne; e++) s += blkI[e * kh + k] * lj[e];
+            fi[k] = s;
+        }
+        for (int k = 0; k < 6; k++) out[k] = 0.0;
+        fctx_t cx;
+        if (M->jtype[j] == J_SPHERICAL) {
+            double t[3];
+            mat3tvec(f.R + 9 * bi, fi, t);
+            for (int k = 0; k < 3; k++) { out[k] = -t[k]; out[3 + k] = -fi[k]; }
+        } else {
+            friction_setup(M, &f, j, blkI, &cx); /* A_i (the friction constants are not used without a law) */
+            for (int a = 0; a < 3; a++) out[a] = -(cx.A[3 * a] * fi[0] + cx.A[3 * a + 1] * fi[1] + cx.A[3 * a + 2] * fi[2]);
+            out[3] = -fi[0];
+            out[4] = -fi[1];
+        }
+        fric[j] = 0.0;
+        if (M->jlaw[j] == LAW_NONE) continue;
+        if (M->jtype[j] == J_SPHERICAL) friction_setup(M, &f, j, blkI, &cx);
+        const double *lp = M->jlawp + NLP * j;
+        if (M->jtype[j] == J_REVOLUTE) {
+            double pa[3];
+            planar_paux(&cx, lj, pa);
+            fric[j] = cx.coef * hypot(pa[0], pa[1]);
+        } else if (M->jtype[j] == J_TRANSLATIONAL) {
+            double pa[3], l = lp[2];
+            planar_paux(&cx, lj, pa);
+            fric[j] = cx.coef * (fabs(pa[1] - pa[2] / l) + fabs(pa[2] / l));
+        } else {
+            double F[3];
+            mat3vec(cx.RiT, lj, F);
+            if (sqrt(dot3(F, F)) == 0.0) continue; /* no contact point: no friction */
+            double norm = sqrt(dot3(F, F)), sC[3], v[3], Ffr[3];
+            for (int k = 0; k < 3; k++) sC[k] = -lp[2] * F[k] / norm;
+            cross3(cx.omega, sC, v);
+            double mn = law_mu_over_speed(lp, M->jlaw[j], sqrt(dot3(v, v))) * norm;
+            for (int k = 0; k < 3; k++) Ffr[k] = mn * v[k];
+            fric[j] = sqrt(dot3(Ffr, Ffr));
+        }
+    }
+    free(mem);
+    return OVK_OK;
 }

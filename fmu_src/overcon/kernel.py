@@ -82,6 +82,9 @@ def _bind(path: Path) -> ctypes.CDLL:
     f.restype = ctypes.c_int
     f.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p,
                   ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+    g = lib.ovk_outputs
+    g.restype = ctypes.c_int
+    g.argtypes = [ctypes.c_void_p] * 5
     return lib
 
 
@@ -217,7 +220,7 @@ class Kernel:
     must be done on the numpy path (the status is kept in :attr:`last_status`)."""
 
     def __init__(self, lib, model, solver):
-        self.model, self._fn = model, lib.ovk_evaluate
+        self.model, self._fn, self._out_fn = model, lib.ovk_evaluate, lib.ovk_outputs
         plan = model.plan
         I32 = np.int32
         keep = self._keep = []
@@ -284,6 +287,10 @@ class Kernel:
                       ctypes.addressof(self._its), self._guess_qf.ctypes.data, self._guess_lam.ctypes.data)
         self._ncols = len(plan.friction_cols)
         self.last_status = 0
+        self._reac = np.zeros((len(joints), 6))
+        self._fric = np.zeros(len(joints))
+        self._lam_in = np.zeros(model.m)
+        self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
 
     def newton_failed(self) -> int:
         """The force evaluations of the last call's Newton solve if that is why it returned None
@@ -309,6 +316,20 @@ class Kernel:
         if status:
             return None
         return self._ydot.copy(), self._lam.copy(), self._qf[: self._ncols].copy(), self._its.value
+
+
+    def outputs(self, y: np.ndarray, lam: np.ndarray):
+        """(reactions (nj, 6), friction outputs (nj,)) at y and the multipliers lam (m,), every
+        joint in model order: the reaction components of the joint type (3: planar Fx, Fy, T;
+        spherical Fx, Fy, Fz in the auxiliary frame) then the force in the global frame (dim),
+        zeros after; the friction output of a joint with friction (else 0). As
+        :func:`overcon.evaluation.physical_reactions` and :func:`overcon.evaluation.friction_output`.
+        Views of buffers overwritten by the next call."""
+        plam, preac, pfric = self._out_ptrs
+        self._y[:] = y
+        self._lam_in[:] = lam
+        self._out_fn(self._pm, self._ptrs[0], plam, preac, pfric)
+        return self._reac, self._fric
 
 
 def select(model, solver):

@@ -289,20 +289,23 @@ class Simulation:
             return np.zeros(0)
         last = self._last_eval
         q, h = y[: self.n], y[self.n:]
+        f = None
         if last is not None and last[0] == t and np.array_equal(last[1], y):
-            f, lam = frames(model, q, h), last[2]
+            lam = last[2]
         else:
             warm = self._step_warm if self._step_warm.items else self._warm
             lam_guess = None if self.lam is None else self.lam.copy()
             r = None if self._kernel is None else self._kernel.evaluate(t, y, lam_guess, warm.guess(t))
             if r is not None:
-                f, lam = frames(model, q, h), r[1]
+                lam = r[1]
             else:
                 failed = 0 if self._kernel is None else self._kernel.newton_failed()
                 ev = evaluate(model, t, q, h, lam_guess, solver=self.solver, qf_guess=warm.guess(t),
                               newton_failed=failed)
                 f, lam = ev.frames, ev.lam
-        return plan.values(model, f, lam)
+        if self._kernel is not None:
+            return plan.values_from_kernel(*self._kernel.outputs(y, lam))
+        return plan.values(model, frames(model, q, h) if f is None else f, lam)
     # -- state -----------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {"integrator": self._integrator.get_state(),
@@ -378,6 +381,14 @@ class _DerivedPlan:
             self.reactions[n][1].append(list(range(slot, slot + width)))
             slot += width
         self.reactions = {n: (np.array(p, np.intp), np.array(s, np.intp)) for n, (p, s) in self.reactions.items()}
+        # the same outputs from the compiled kernel's per-joint table (overcon.kernel.Kernel.outputs):
+        # (joint, component, output slot) as flat index arrays
+        kj, kc, ks = [], [], []
+        for j in model.reaction_joints:
+            for comp in range(len(model.joints[j].components)):
+                kj.append(j)
+                kc.append(comp)
+        ks = list(range(len(kj)))
         self.friction = []  # (module, stacked constants, multiplier rows (k, n_eq), output slots (k,))
         by_type: dict[str, list] = {}
         for j in model.friction_outputs:
@@ -388,6 +399,18 @@ class _DerivedPlan:
             self.friction.append((js[0].module, js[0].module.stack(js), np.array([c.rows for c in js], np.intp),
                                   np.array([s for _, s in items], np.intp)))
         self.size = slot
+        self.kernel_reactions = (np.array(kj, np.intp), np.array(kc, np.intp), np.array(ks, np.intp))
+        self.kernel_friction = (np.array([j for j in model.friction_outputs], np.intp),
+                                np.arange(len(ks), slot, dtype=np.intp))
+
+    def values_from_kernel(self, reac: np.ndarray, fric: np.ndarray) -> np.ndarray:
+        """The derived outputs from the kernel's table (:meth:`overcon.kernel.Kernel.outputs`)."""
+        out = np.empty(self.size)
+        j, c, s = self.kernel_reactions
+        out[s] = reac[j, c]
+        j, s = self.kernel_friction
+        out[s] = fric[j]
+        return out
 
     def values(self, model: Model, f, lam: np.ndarray) -> np.ndarray:
         """The derived outputs from the frames f and the multipliers lam (m,): per reaction joint

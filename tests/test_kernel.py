@@ -1,0 +1,252 @@
+"""The optional compiled kernel (overcon/kernel.c through overcon.kernel) against the numpy path:
+the same numbers per evaluation, the same failures, the selection and its note, and FMUs that
+carry it and still run with numpy alone."""
+from __future__ import annotations
+
+import dataclasses
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from overcon import kernel, scene as scene_mod
+from overcon.dynamics import evaluate
+from overcon.evaluation import SingularConfiguration, coordinate_rates
+from overcon.kinematics import EulerSingularity
+from overcon.model import compile_model
+from overcon.simulate import Simulation, SimulationError, run
+
+MECH = Path(__file__).resolve().parent.parent / "mechanisms"
+EXAMPLES = MECH / "examples"
+SCENES = ["planar_none_wo4", "planar_f45_wo4", "planar_f145_wo6", "planar_f1_wo4", "spatial_none_wo5",
+          "spatial_MN_wo5", "spatial_GHMN_wo18", "spatial_GH_wo9"]
+REL = 1e-12
+"""Per evaluation, both paths agree to this (relative to the largest entry, at least 1): the same
+formulas in the same order except summation orders (the kernel has no BLAS), so round-off only."""
+REL_OTHER_COUNT = 1e-9
+"""When the two friction solves stop after different numbers of Newton steps (the convergence
+test met on one side of round-off and not the other), each result is within the friction
+tolerance (1e-12 relative on the multipliers) of the solution, not of each other's bits: the
+accelerations then agree to the friction tolerance times the Newton matrix's conditioning."""
+
+
+def spec_of(name: str, **solver):
+    spec = scene_mod.as_scene(scene_mod.load(MECH / f"{name}.toml"))
+    return dataclasses.replace(spec, solver=dataclasses.replace(spec.solver, **solver)) if solver else spec
+
+
+def kernel_for(model, solver):
+    k, note = kernel.select(model, dataclasses.replace(solver, kernel="c"))
+    assert k is not None and "compiled kernel" in note
+    return k
+
+
+def numpy_eval(model, solver, t, y, lam_guess=None, qf_guess=None):
+    q, h = y[: model.n], y[model.n:]
+    ev = evaluate(model, t, q, h, lam_guess, solver=solver, qf_guess=qf_guess)
+    return np.concatenate([coordinate_rates(model, q, h, ev.frames), ev.hdot]), ev
+
+
+def rel(a, b) -> float:
+    return float(np.max(np.abs(a - b), initial=0.0) / max(1.0, float(np.max(np.abs(b), initial=0.0))))
+
+
+def states(model, n=20, seed=0):
+    """Random states around the initial one (not on the constraints: Eq. 18 is defined anyway)."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        q = model.q0 + (0.02 * rng.standard_normal(model.n) if i else 0.0)
+        h = model.h0 + (0.5 * rng.standard_normal(model.nh) if i else 0.0)
+        yield np.concatenate([q, h])
+
+
+@pytest.mark.parametrize("name", SCENES)
+@pytest.mark.parametrize("baumgarte", [10.0, 0.0])
+def test_kernel_equals_numpy_per_evaluation(name, baumgarte):
+    """y' and lam of the kernel equal the numpy path's to 1e-12 (relative) at random states, cold
+    and warm-started (from lam and from friction forces, as the integration does), and the kernel
+    hands back exactly the evaluations where the numpy Newton gives up (its fallback decides)."""
+    spec = spec_of(name, baumgarte=baumgarte)
+    model = compile_model(spec)
+    k = kernel_for(model, spec.solver)
+    compared = 0
+    for y in states(model):
+        ref, ev = numpy_eval(model, spec.solver, 0.3, y)
+        guesses = [(None, None), (ev.lam * 1.01, None)]
+        if ev.qf is not None:
+            guesses.append((None, ev.qf * 0.99))
+        for lam_guess, qf_guess in guesses:
+            ref, ev = numpy_eval(model, spec.solver, 0.3, y, lam_guess, qf_guess)
+            got = k.evaluate(0.3, y, lam_guess, qf_guess)
+            if got is None:
+                assert k.last_status == 2 and ev.fallback, kernel.STATUS[k.last_status]
+                continue
+            assert not ev.fallback
+            ydot, lam, qf, iterations = got
+            tol = REL if iterations == ev.iterations else REL_OTHER_COUNT
+            assert rel(ydot, ref) <= tol and rel(lam, ev.lam) <= tol, (rel(ydot, ref), rel(lam, ev.lam))
+            if ev.qf is not None:
+                assert rel(qf, ev.qf) <= tol
+            compared += 1
+    assert compared >= 20
+
+
+def test_kernel_covers_loads_and_friction_laws():
+    """The Stribeck law on a revolute and a translational joint, in the planar mechanism with its
+    spring and torque (the spatial one's force and torque: test_kernel_equals_numpy_per_evaluation):
+    per evaluation as the numpy path."""
+    spatial = compile_model(spec_of("spatial_MN_wo5"))
+    assert {ld.type for ld in spatial.loads} == {"force", "torque"}
+    spec = scene_mod.as_scene(scene_mod.load(MECH / "planar_f145_wo6.toml"))
+    laws = {j: dataclasses.replace(fp, law="stribeck", mu_static=1.5 * fp.mu, v_stribeck=0.05)
+            for j, fp in spec.friction_params.items()}
+    spec = dataclasses.replace(spec, friction_params=laws)
+    model = compile_model(spec)
+    assert {ld.type for ld in model.loads} == {"torque", "spring"}
+    assert {model.joints[j].type for j in model.friction_joints} == {"revolute", "translational"}
+    k = kernel_for(model, spec.solver)
+    for y in states(model, 15, seed=3):
+        ref, ev = numpy_eval(model, spec.solver, 0.0, y)
+        got = k.evaluate(0.0, y)
+        if got is None:
+            assert ev.fallback
+            continue
+        tol = REL if got[3] == ev.iterations else REL_OTHER_COUNT
+        assert rel(got[0], ref) <= tol and rel(got[1], ev.lam) <= tol
+
+
+def test_kernel_hands_back_what_numpy_reports():
+    """A non-finite state and an Euler singularity: the kernel returns a status and the numpy
+    path raises its own error, so a run fails as it would without the kernel."""
+    spec = spec_of("spatial_MN_wo5")
+    model = compile_model(spec)
+    k = kernel_for(model, spec.solver)
+    y = np.concatenate([model.q0, model.h0])
+    bad = y.copy()
+    bad[0] = np.nan
+    assert k.evaluate(0.0, bad) is None and kernel.STATUS[k.last_status] == "non-finite number"
+    with pytest.raises(ValueError, match="infs or NaNs"):
+        numpy_eval(model, spec.solver, 0.0, bad)
+    flat = y.copy()
+    flat[4] = 1e-4  # beta of the first body: |sin beta| < SIN_BETA_MIN
+    assert k.evaluate(0.0, flat) is None and kernel.STATUS[k.last_status] == "Euler angles singular"
+    with pytest.raises(EulerSingularity):
+        numpy_eval(model, spec.solver, 0.0, flat)
+
+
+def test_singular_position_stops_both_paths_alike(tmp_path):
+    """The planar sliders driven into K = L = O: the same error, the same time, either path."""
+    text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
+    (tmp_path / "planar_sliders.toml").write_text(text)
+    (tmp_path / "s.toml").write_text((MECH / "planar_none_wo4.toml").read_text())
+    spec = scene_mod.as_scene(scene_mod.load(tmp_path / "s.toml"), stop_time=2.0)
+    model = compile_model(spec)
+    errors = []
+    for choice in ("numpy", "c"):
+        with pytest.raises(SimulationError, match="singular position") as exc:
+            run(model, dataclasses.replace(spec.solver, kernel=choice), stop_time=2.0)
+        errors.append(str(exc.value))
+    assert errors[0] == errors[1]
+
+
+@pytest.mark.parametrize("name,stop", [("planar_none_wo4", 1.0), ("spatial_none_wo5", 1.0)])
+def test_fixed_step_runs_equal(name, stop):
+    """Without friction, a fixed-step rk4 run takes the same steps on both paths: the outputs
+    (positions, reactions) agree to round-off (1e-12 relative to their scale) over the run."""
+    spec = spec_of(name, method="rk4", step=2e-3)
+    model = compile_model(spec)
+    out = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=stop).values for c in ("numpy", "c")]
+    assert rel(out[1], out[0]) <= 1e-12
+
+
+def test_adaptive_friction_runs_agree_within_accuracy():
+    """With friction and an adaptive method the step sequences differ by round-off decisions, so
+    the runs differ by the integration error, not by round-off: both stay within 1e-6 m of each
+    other in the positions (the integrator's tolerance is 1e-9; measured 8.2e-10 m)."""
+    spec = spec_of("planar_f45_wo4")
+    model = compile_model(spec)
+    res = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=2.0) for c in ("numpy", "c")]
+    cols = [i for i, n in enumerate(res[0].names) if n.rsplit(".", 1)[1] in ("x", "y")]
+    assert np.max(np.abs(res[1].values[:, cols] - res[0].values[:, cols])) < 1e-6
+
+
+def test_selection_and_note(monkeypatch):
+    """auto takes the kernel where it covers the model, else numpy with the reason; c refuses to
+    start without it (naming why); numpy never uses it. The note names the path."""
+    spec = spec_of("planar_f45_wo4")
+    model = compile_model(spec)
+    assert "compiled kernel" in Simulation(model, spec.solver).kernel_note
+    assert Simulation(model, dataclasses.replace(spec.solver, kernel="numpy")).kernel_note == \
+        "right-hand side: numpy (solver.kernel = 'numpy')"
+    door = compile_model(scene_mod.as_scene(scene_mod.load(EXAMPLES / "door_h1_wo_hinge2.toml")))
+    note = Simulation(door, spec.solver).kernel_note
+    assert note.startswith("right-hand side: numpy (solver.kernel = 'auto': ") and "quaternion" in note
+    with pytest.raises(SimulationError, match=r"solver.kernel = 'c': rotation 'quaternion'"):
+        Simulation(door, dataclasses.replace(spec.solver, kernel="c"))
+    saved = dict(kernel._state)
+    try:
+        kernel.disable("no compiler here (test)")
+        assert "no compiled kernel: no compiler here (test)" in Simulation(model, spec.solver).kernel_note
+        with pytest.raises(SimulationError, match="no compiler here"):
+            Simulation(model, dataclasses.replace(spec.solver, kernel="c"))
+    finally:
+        kernel._state.update(saved)
+
+
+def test_compile_failure_is_named(tmp_path):
+    """A compiler that fails: the error names the command (auto then runs numpy)."""
+    with pytest.raises(OSError, match="no C compiler: /nonexistent/cc not found"):
+        kernel.compile_library(tmp_path / "k.so", ["/nonexistent/cc"])
+    with pytest.raises(OSError, match="compiling the kernel failed"):
+        kernel.compile_library(tmp_path / "k.so", ["false"])
+
+
+def test_kernel_in_fmu_and_numpy_alone(tmp_path):
+    """An FMU carries the kernel next to its binary and logs the path it runs; with the parameter
+    solver.kernel = 'numpy' the same FMU runs on numpy and scipy alone, to round-off the same
+    outputs (frictionless scene, rk4: the same steps)."""
+    import fmpy
+
+    from overcon.fmu.build import build_scene
+    from test_fmu import Instance, Logs
+
+    r = build_scene(MECH / "planar_none_wo4.toml", tmp_path, echo=lambda *a: None)
+    assert r.status == "built", r.messages
+    with zipfile.ZipFile(r.fmu) as zf:
+        assert any(n.startswith("binaries/") and n.endswith("/" + kernel.library_name()) for n in zf.namelist())
+    unz = Path(fmpy.extract(str(r.fmu), str(tmp_path / "unz")))
+    logs, outs = {}, {}
+    for choice in ("c", "numpy"):
+        logs[choice] = Logs()
+        inst = Instance(unz, name=choice, logs=logs[choice])
+        inst.fmu.setString([inst.vr["solver.kernel"], inst.vr["solver.method"]], [choice, "rk4"])
+        inst.fmu.setReal([inst.vr["solver.step"]], [2e-3])
+        inst.init()
+        outs[choice] = inst.steps(50)
+        inst.free()
+    assert "right-hand side: compiled kernel" in logs["c"].text()
+    assert "right-hand side: numpy (solver.kernel = 'numpy')" in logs["numpy"].text()
+    assert rel(outs["c"], outs["numpy"]) <= 1e-12
+
+
+@pytest.mark.parametrize("name", ["planar_f145_wo6", "spatial_GHMN_wo18"])
+def test_kernel_outputs_equal_numpy(name):
+    """The reported reactions (every joint) and friction forces (every friction joint) from the
+    kernel's table equal the numpy path's to 1e-14 (relative) at random states and multipliers."""
+    from overcon.evaluation import frames
+
+    spec = spec_of(name)
+    joints = tuple(j.name for j in spec.mechanism.joints)
+    spec = dataclasses.replace(spec, reactions=joints, friction_outputs="all")
+    model = compile_model(spec)
+    assert model.friction_outputs and len(model.reaction_joints) == len(joints)
+    sims = {c: Simulation(model, dataclasses.replace(spec.solver, kernel=c)) for c in ("numpy", "c")}
+    rng = np.random.default_rng(5)
+    for y in states(model, 10, seed=5):
+        lam = 100.0 * rng.standard_normal(model.m)
+        ref = sims["numpy"]._derived.values(model, frames(model, y[: model.n], y[model.n:]), lam)
+        got = sims["c"]._derived.values_from_kernel(*sims["c"]._kernel.outputs(y, lam))
+        assert rel(got, ref) <= 1e-14
+    zero = np.zeros(model.m)  # no reaction: zero friction (the spherical joint has no contact point)
+    assert not np.any(sims["c"]._derived.values_from_kernel(*sims["c"]._kernel.outputs(y, zero)))

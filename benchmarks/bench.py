@@ -69,8 +69,9 @@ STIFF_RUNS = [("dopri5", 1e-8), ("dop853", 1e-8), ("radau", 1e-6), ("radau", 1e-
 
 # ladders: (method, tolerance or rk4 step)
 LADDERS = {
-    "planar_none_wo4_pos": [("dopri5", 1e-6), ("dopri5", 1e-8), ("dopri5", 1e-10),
-                            ("dop853", 1e-6), ("dop853", 1e-8), ("dop853", 1e-10),
+    "planar_none_wo4_pos": [("dopri5", 1e-4), ("dopri5", 1e-5), ("dopri5", 1e-6), ("dopri5", 1e-8),
+                            ("dopri5", 1e-10), ("dop853", 1e-4), ("dop853", 1e-6), ("dop853", 1e-8),
+                            ("dop853", 1e-10),
                             ("rk4", 4e-3), ("rk4", 2e-3), ("rk4", 1e-3),
                             ("radau", 1e-6), ("radau", 1e-8)],
     "planar_f45_wo4_pos": [("dopri5", 1e-6), ("dopri5", 1e-7), ("dopri5", 1e-8), ("dopri5", 1e-9),
@@ -181,8 +182,8 @@ def engine_timer(fmu: FMU):
             setattr(cls, k, f)
 
 
-def start_values(method: str, setting: float) -> dict:
-    sv = {"solver.method": method}
+def start_values(method: str, setting: float, kernel: str = "auto") -> dict:
+    sv = {"solver.method": method, "solver.kernel": kernel}
     sv["solver.step" if method == "rk4" else "solver.tolerance"] = setting
     return sv
 
@@ -215,16 +216,19 @@ class Row:
     error: float
     drift: float
     note: str = ""
+    path: str = ""  # Simulation.kernel_note: which right-hand side ran
+    handed_back: int = 0  # evaluations the kernel handed back to the numpy path
 
     @property
     def label(self) -> str:
         return f"h = {self.setting:g} s" if self.method == "rk4" else f"tol = {self.setting:g}"
 
 
-def measure(fmu: FMU, method: str, setting: float, ref: np.ndarray | None, repeat: int) -> Row:
+def measure(fmu: FMU, method: str, setting: float, ref: np.ndarray | None, repeat: int,
+            kernel: str = "auto") -> Row:
     walls, res, sim = [], None, None
     for _ in range(repeat):
-        wall, res, sim = fmu_run(fmu, start_values(method, setting))
+        wall, res, sim = fmu_run(fmu, start_values(method, setting, kernel))
         walls.append(wall)
     err = np.nan
     if ref is not None:
@@ -234,7 +238,8 @@ def measure(fmu: FMU, method: str, setting: float, ref: np.ndarray | None, repea
         err = float(np.max(np.abs(got - ref)))
     ev = sim.evaluations
     return Row(fmu.name, method, setting, statistics.median(walls), walls, ev, sim._integrator.nsteps,
-               sim.friction_iterations / ev if ev else 0.0, err, sim.max_drift)
+               sim.friction_iterations / ev if ev else 0.0, err, sim.max_drift, path=sim.kernel_note,
+               handed_back=sim.kernel_repeats)
 
 
 # ------------------------------------------------------------------------------------ references
@@ -455,25 +460,27 @@ def limit_row(scene_path: Path, stop: float, method: str, tol: float, repeat: in
 
     spec = scene_mod.load(scene_path)
     model = compile_model(spec)
-    per_eval, res = [], None
+    per_eval, res = {"c": [], "numpy": []}, None
     orig = simulate.Simulation._rhs
-    for _ in range(repeat):
-        acc = [0.0]
+    for kernel in ("c", "numpy"):
+        solver = replace(spec.solver, kernel=kernel)
+        for _ in range(repeat):
+            acc = [0.0]
 
-        def timed(sim, t, y):
-            t0 = time.process_time()
+            def timed(sim, t, y):
+                t0 = time.process_time()
+                try:
+                    return orig(sim, t, y)
+                finally:
+                    acc[0] += time.process_time() - t0
+
+            simulate.Simulation._rhs = timed
             try:
-                return orig(sim, t, y)
+                res = simulate.run(model, solver, stop_time=stop, output_interval=INTERVAL, method=method,
+                                   tolerance=tol)
             finally:
-                acc[0] += time.process_time() - t0
-
-        simulate.Simulation._rhs = timed
-        try:
-            res = simulate.run(model, spec.solver, stop_time=stop, output_interval=INTERVAL, method=method,
-                               tolerance=tol)
-        finally:
-            simulate.Simulation._rhs = orig
-        per_eval.append(1e6 * acc[0] / res.evaluations)
+                simulate.Simulation._rhs = orig
+            per_eval[kernel].append(1e6 * acc[0] / res.evaluations)
     sim = simulate.Simulation(model, spec.solver, method=method, tolerance=tol)
     y = sim.advance(stop / 2)
     f = frames(model, y[: model.n], y[model.n:])
@@ -496,10 +503,11 @@ def limit_row(scene_path: Path, stop: float, method: str, tol: float, repeat: in
     newton = us(lambda: dgetrf(A)) + us(lambda: dgetrs(lu, piv, np.ones(nx)))
     its = res.friction_iterations / res.evaluations
     linalg = factor + solves + its * newton
+    c_us, np_us = statistics.median(per_eval["c"]), statistics.median(per_eval["numpy"])
     return {"scene": scene_path.stem, "method": method, "tol": tol, "size": S.shape[0], "nx": nx,
-            "per_eval_us": statistics.median(per_eval), "evaluations": res.evaluations, "its": its,
+            "per_eval_us": c_us, "numpy_us": np_us, "evaluations": res.evaluations, "its": its,
             "factor_us": factor, "solves_us": solves, "newton_us": newton, "linalg_us": linalg,
-            "ratio": statistics.median(per_eval) / linalg}
+            "ratio": c_us / linalg, "numpy_ratio": np_us / linalg}
 
 
 # ------------------------------------------------------------------------------------ report
@@ -643,6 +651,16 @@ def main(argv=None) -> int:
             shipped.append(r)
             log(f"{n} as shipped, {r.method} {r.label}: {r.wall:.3f} s")
 
+        both = []  # (kernel row, numpy row): the same FMU and settings on both right-hand sides
+        for n in ("planar_f45_wo4_pos", "spatial_MN_wo5_pos", "planar_none_wo4_pos"):
+            f = fastest(ladders.get(n, []), 1e-6)
+            if f is not None:
+                both.append((f, measure(fmus[n], f.method, f.setting, refs[n], repeat, kernel="numpy")))
+        for r in shipped:
+            both.append((r, measure(fmus[r.scene], r.method, r.setting, refs[r.scene], repeat, kernel="numpy")))
+        for c, n_ in both:
+            log(f"both paths {c.scene} {c.method} {c.label}: kernel {c.wall:.3f} s, numpy {n_.wall:.3f} s")
+
         limits = []
         for n, (method, tol) in LIMIT_CASES.items():
             limits.append(limit_row(paths[n], SCENES[n][1], method, tol, repeat))
@@ -664,7 +682,7 @@ def main(argv=None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         pareto_plot(ladders, exu, out / "pareto.png")
         md = report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, args,
-                    time.perf_counter() - t_start, shipped, limits)
+                    time.perf_counter() - t_start, shipped, limits, both)
         (out / "benchmarks.md").write_text(md)
         print(md)
         log(f"wrote {out / 'benchmarks.md'} and {out / 'pareto.png'} ({time.perf_counter() - t_start:.0f} s)")
@@ -673,8 +691,14 @@ def main(argv=None) -> int:
     return 0
 
 
+def short_path(note: str) -> str:
+    """'compiled kernel' or 'numpy (why)' from a Simulation.kernel_note."""
+    note = note.removeprefix("right-hand side: ")
+    return "compiled kernel" if note.startswith("compiled kernel") else note
+
+
 def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, args, total, shipped=(),
-           limits=()) -> str:
+           limits=(), both=()) -> str:
     cmd = "python benchmarks/bench.py" + (" --quick" if args.quick else "") + (
         f" --repeat {args.repeat}" if args.repeat != 3 and not args.quick else "")
     L = ["# Benchmarks: speed against accuracy", "",
@@ -684,7 +708,11 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
          f"wall time is the median of {repeat} run(s) of the whole call. RHS evaluations count the "
          "integration (a scene with reaction outputs adds one evaluation of Eq. 18 per output point). "
          "Error: max over the output points of the length coordinates (m) against dop853 at 1e-13 "
-         "in process. `_pos` scenes declare positions only. See `benchmarks/bench.py` for details.", ""]
+         "in process. `_pos` scenes declare positions only. See `benchmarks/bench.py` for details.", "",
+         "Right-hand side: every run uses the FMU's default `solver.kernel = \"auto\"`; the path the runs took: "
+         + ", ".join(sorted({short_path(r.path) for rows in ladders.values() for r in rows} or {"-"}))
+         + ". The numpy path (`solver.kernel = \"numpy\"`, the FMU with numpy and scipy alone) is measured beside "
+         "it in \"Both paths\" and in the limit table.", ""]
     titles = {"planar_f45_wo4_pos": "Planar friction (joints 4, 5), 0-4 s, positions only",
               "spatial_MN_wo5_pos": "Spatial friction (M, N), 0-10 s, positions only",
               "planar_none_wo4_pos": "Planar frictionless, 0-4 s, positions only"}
@@ -713,6 +741,19 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
                 L.append("")
             else:
                 L += [f"Peer: {exu_note}.", ""]
+    if both:
+        L += ["## Both paths: compiled kernel and numpy", "",
+              "The same FMU and solver settings, `solver.kernel = \"auto\"` (the compiled kernel) against "
+              "`solver.kernel = \"numpy\"`; the settings are each scene's fastest run to 1e-6 m above (shipped "
+              "scenes: the setting of the target). Handed back: evaluations the kernel returned to the numpy "
+              "path (the friction solve's fixed-point fallback, which exists in numpy only).", "",
+              "| scene | method | setting | kernel wall (s) | numpy wall (s) | numpy / kernel | RHS evals kernel / numpy | "
+              "max pos. error kernel / numpy (m) | handed back |",
+              "|---|---|---|---:|---:|---:|---:|---:|---:|"]
+        for c, n_ in both:
+            L.append(f"| {c.scene} | {c.method} | {c.label} | {c.wall:.3f} | {n_.wall:.3f} | {n_.wall / c.wall:.1f} | "
+                     f"{c.evaluations} / {n_.evaluations} | {fmt(c.error)} / {fmt(n_.error)} | {c.handed_back} |")
+        L.append("")
     L += ["## What the scene declares: cost per scene", "",
           f"Same solver for all rows ({DECLARE_SETTING['planar'][0]}, tol {DECLARE_SETTING['planar'][1]:g}); "
           "fmpy records every output.", "",
@@ -749,13 +790,16 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
               "iteration the Newton matrix's LU factorisation and solve (dgetrf/dgetrs). Everything "
               "else (building Phi_h, gamma, Q and the friction forces in numpy, and the Python "
               "between the calls) is the overhead that remains.", "",
-              "| scene | solver | S size | friction unknowns | friction it./eval | us per evaluation | "
-              "dpotrf (us) | dpotrs x2 (us) | Newton LU per it. (us) | linear algebra (us) | ratio |",
-              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              "| scene | solver | S size | friction unknowns | friction it./eval | us per evaluation, kernel | "
+              "us per evaluation, numpy | dpotrf (us) | dpotrs x2 (us) | Newton LU per it. (us) | linear algebra (us) | "
+              "ratio kernel | ratio numpy |",
+              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for m in limits:
             L.append(f"| {m['scene']} | {m['method']} tol = {m['tol']:g} | {m['size']} | {m['nx']} | {m['its']:.2f} | "
-                     f"{m['per_eval_us']:.0f} | {m['factor_us']:.1f} | {m['solves_us']:.1f} | {m['newton_us']:.1f} | "
-                     f"{m['linalg_us']:.1f} | {m['ratio']:.0f} |")
+                     f"{m['per_eval_us']:.0f} | {m['numpy_us']:.0f} | {m['factor_us']:.1f} | {m['solves_us']:.1f} | "
+                     f"{m['newton_us']:.1f} | {m['linalg_us']:.1f} | {m['ratio']:.1f} | {m['numpy_ratio']:.0f} |")
+        L += ["", "The kernel's time per evaluation includes the ctypes call and the copies into and out of "
+              "its buffers (a few us), and, in the few evaluations it hands back, the numpy path's."]
         L.append("")
     L += ["## Targets (issue 14)", ""]
     for n, limit in TARGETS.items():
@@ -778,30 +822,21 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
     ratio = ovh['ours_us'] / ovh['trivial_us']
     L.append(f"- FMI overhead per point, target <= {OVERHEAD_RATIO:g}x the trivial FMU: {ovh['ours_us']:.1f} us vs "
              f"{ovh['trivial_us']:.1f} us: ratio {ratio:.2f} -> {'met' if ratio <= OVERHEAD_RATIO else 'NOT met'}")
-    L.append("- Compiled kernel: none; every figure above is the numpy/scipy path (the only one).")
-    L += ["", "### Where the time goes, and why targets are missed", "",
-          "- The limit table above: one evaluation of Eq. 18 costs 20-30 times its linear algebra. The rest is "
-          "Python around small arrays: an evaluation makes about a hundred numpy calls (frames, Phi_h, gamma, Phi "
-          "and Q per joint type; per friction iteration each friction type's forces and their scatter; once or "
-          "twice the friction Jacobian), each 1-5 us for arrays of 2 to 35 entries, whatever their size.",
-          "- The friction solve needs 2-4 force evaluations per right-hand side (Newton with the analytic Jacobian "
-          "from a warm start; the fixed point needed about 5 planar and 11-12 spatial). Fewer are not possible at "
-          "friction_tol = 1e-12 from the previous stage's solution: check, Newton step, check, and a second step "
-          "when the first residual is large.",
+    L.append("- Compiled kernel: the optional C kernel (`overcon/kernel.c`, `solver.kernel`) ran every run above "
+             "unless the table says numpy; the FMUs run with numpy and scipy alone too (`solver.kernel = \"numpy\"`, "
+             "\"Both paths\"), equal per evaluation to 1e-12 (tests/test_kernel.py).")
+    L += ["", "### Where the time goes", "",
+          "- One evaluation of Eq. 18 in the kernel costs a few times its linear algebra (limit table); on the "
+          "numpy path 20-30 times (about a hundred numpy calls on arrays of 2 to 35 entries).",
+          "- What remains of a run is Python around the kernel: the integrator's stage arithmetic (numpy on "
+          "vectors of 12-84 entries), the dense output at every 1 ms output point, the singularity monitor "
+          "(an SVD of the kept Jacobian after every step), the friction solve's fixed-point fallback where the "
+          "Newton solve gives up (spatial sticking; it exists in numpy only: the \"handed back\" column), and "
+          "the FMI calls per output point (FMI overhead above).",
           "- As shipped, every 1 ms output point with reactions needs one evaluation of Eq. 18 at the "
-          "interpolated state (taking lam from the step is exact only at a step end, where it is reused); "
-          "with a 1 ms grid that is 4001 (planar) or 10001 (spatial) extra evaluations, more than the "
-          "integration's own. A host that reads positions only no longer pays for them (the FMU computes "
-          "reactions only once one is read), but fmpy's simulate_fmu reads every output.",
-          "- FMI overhead: fmpy reads the Boolean constants (`motion_unique`, `<joint>.reaction_unique`) at "
-          "every point, one more call into the FMU per point than the trivial FMU has (about 3 us here), "
-          "besides doStep and getReal.",
-          "- A compiled kernel (numba, or C through the FMU build) was not added: the whole evaluation "
-          "(frames, three joint types, loads, friction and its Jacobian) would have to exist twice with "
-          "equality to 1e-12, and numba compiles at every FMU instantiation from a freshly extracted FMU "
-          "(seconds, longer than a whole run here) unless its cache is written next to the FMU's resources. "
-          "The targets above need it: spatial <= 0.5 s is about 90 us per evaluation including the "
-          "integrator."]
+          "interpolated state (taking lam from the step is exact only at a step end, where it is reused) and the "
+          "reactions from it (both in the kernel): 4001 (planar) or 10001 (spatial) extra evaluations, more than "
+          "the integration's own. A host that reads positions only does not pay for them."]
     L += ["", "![error vs wall time](pareto.png)", ""]
     return "\n".join(L)
 

@@ -36,6 +36,11 @@ is factored with dgetrf/dgetrs from there too.
 
 Solver options: :func:`evaluate` reads ``baumgarte``, ``friction_tol`` and ``friction_max_iter``
 from the :class:`overcon.spec.SolverSpec` it is given (the Model carries none).
+
+This module is the reference implementation. :mod:`overcon.kernel` has the same evaluation in C
+(``kernel.c``, selected by the solver setting ``kernel``); every evaluation it cannot finish the
+way this module would (a singular position, the fallback of the friction solve, ...) is repeated
+here (``newton_failed`` skips a Newton solve the kernel already tried at that state).
 """
 from __future__ import annotations
 

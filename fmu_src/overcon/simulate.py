@@ -11,6 +11,11 @@ converged lam used as the friction solve's warm start, counters); the :class:`Mo
 changes. ``get_state``/``set_state`` round-trip it exactly; outputs are read by dense output at
 any time inside the last step and never disturb the integration.
 
+Right-hand side: the compiled kernel (:mod:`overcon.kernel`) where the solver setting ``kernel``
+and the model allow it, else :func:`overcon.dynamics.evaluate`; :attr:`Simulation.kernel_note`
+says which (the FMU logs it), :attr:`Simulation.kernel_repeats` counts the evaluations the kernel
+handed back to the numpy path.
+
 Solver options (decided here): a Simulation is given the Model and, separately, the solver
 options (:class:`overcon.spec.SolverSpec`, frozen; a scene's ``scene.solver``). The Model carries
 none, so a new tolerance or method is a new Simulation of the same Model: no recompilation, no

@@ -69,9 +69,8 @@ STIFF_RUNS = [("dopri5", 1e-8), ("dop853", 1e-8), ("radau", 1e-6), ("radau", 1e-
 
 # ladders: (method, tolerance or rk4 step)
 LADDERS = {
-    "planar_none_wo4_pos": [("dopri5", 1e-4), ("dopri5", 1e-5), ("dopri5", 1e-6), ("dopri5", 1e-8),
-                            ("dopri5", 1e-10), ("dop853", 1e-4), ("dop853", 1e-6), ("dop853", 1e-8),
-                            ("dop853", 1e-10),
+    "planar_none_wo4_pos": [("dopri5", 1e-6), ("dopri5", 1e-8), ("dopri5", 1e-10),
+                            ("dop853", 1e-6), ("dop853", 1e-8), ("dop853", 1e-10),
                             ("rk4", 4e-3), ("rk4", 2e-3), ("rk4", 1e-3),
                             ("radau", 1e-6), ("radau", 1e-8)],
     "planar_f45_wo4_pos": [("dopri5", 1e-6), ("dopri5", 1e-7), ("dopri5", 1e-8), ("dopri5", 1e-9),

@@ -154,11 +154,27 @@ def test_joint_type_without_friction_jacobian_uses_differences(name, monkeypatch
 
 
 @pytest.mark.parametrize("name", ["planar_f145_wo4", "spatial_GHMN_wo5"])
-def test_fixed_point_fallback_when_newton_gives_up(name, monkeypatch):
-    """Newton limited to one force evaluation cannot converge from lam0: the robust path
-    (Anderson fixed point, then finite-difference Newton) takes over, flagged, same solution."""
+def test_damped_newton_when_newton_gives_up(name, monkeypatch):
+    """Newton limited to one force evaluation cannot converge from lam0: the damped Newton solve
+    takes over from the same start, flagged (not the fixed-point fallback), same solution."""
     model, solver, states = cases(name)
     monkeypatch.setattr(dynamics, "NEWTON_MAX_ITER", 1)
+    damped = 0
+    for q, h, expected in states:
+        ev = dynamics.evaluate(model, 0.0, q, h, solver=solver)
+        damped += ev.damped
+        assert not ev.fallback
+        agree(ev, expected, model, solver)
+    assert damped > 0
+
+
+@pytest.mark.parametrize("name", ["planar_f145_wo4", "spatial_GHMN_wo5"])
+def test_fixed_point_fallback_when_newton_gives_up(name, monkeypatch):
+    """Both Newton solves limited to one force evaluation cannot converge from lam0: the robust
+    path (Anderson fixed point, then finite-difference Newton) takes over, flagged, same solution."""
+    model, solver, states = cases(name)
+    monkeypatch.setattr(dynamics, "NEWTON_MAX_ITER", 1)
+    monkeypatch.setattr(dynamics, "DAMPED_MAX_ITER", 1)
     fell_back = 0
     for q, h, expected in states:
         ev = dynamics.evaluate(model, 0.0, q, h, solver=solver)

@@ -19,7 +19,9 @@ Solve (decided here): Newton's method on it from the last converged lam (warm st
 ``I - W_x dqf/dx`` with dqf/dx from each joint module's optional ``friction_jacobian`` (forward
 differences of its ``friction`` for a type without one), kept for the next step while a step
 reduces the residual 1000-fold; typically 2-4 force evaluations. If Newton gives up
-(NEWTON_MAX_ITER force evaluations, a residual growing twice, a singular Newton matrix) the
+(NEWTON_MAX_ITER force evaluations, a residual growing twice, a singular Newton matrix), a damped
+Newton solve from the same start (a fresh Jacobian every step, backtracking line search on the
+residual: :func:`_damped_newton_reduced`, ``Evaluation.damped``); if that gives up too, the
 robust path of before runs from the warm start: fixed-point iteration accelerated by Anderson
 mixing (depth 3), on non-convergence or divergence (residual growth over 3 iterations) Newton's
 method on ``x - G(x) = 0`` with a finite-difference Jacobian and a backtracking line search
@@ -79,9 +81,10 @@ class Evaluation:
     lam: np.ndarray  # (m,), zeros at eliminated equations
     frames: Frames
     iterations: int = 0
-    fallback: bool = False
+    fallback: bool = False  # the fixed-point fallback ran (both Newton solves gave up)
     S: np.ndarray | None = None  # Schur complement J_R^T M^-1 J_R (for conditioning checks)
     qf: np.ndarray | None = None  # friction forces on plan.friction_cols (Newton path; a warm start)
+    damped: bool = False  # the undamped Newton solve gave up and the damped one ran
 
 
 def _chkfinite(a: np.ndarray) -> np.ndarray:
@@ -171,7 +174,7 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     MinvJT = MinvJ.T
     lam_R = _cho_solve(factor, MinvJT @ Q - g)
     lam = np.zeros(model.m)
-    iterations, fallback, qf_out = 0, False, None
+    iterations, fallback, damped, qf_out = 0, False, False, None
     if model.friction_joints:
         ctx = _friction_setup(plan, f, blocks_i)
         lam0 = lam_R
@@ -186,6 +189,10 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
             qf, iterations, ok = None, newton_failed, False
         else:
             x, qf, iterations, ok = _newton_reduced(plan, ctx, lam0[xrows], W[xrows], x0, tol, max_iter)
+            if not ok:  # the damped Newton solve from the same start
+                damped = True
+                x, qf, more, ok = _damped_newton_reduced(plan, ctx, lam0[xrows], W[xrows], x0, tol, max_iter)
+                iterations += more
         if ok:
             qf_out = qf
             lam_R = lam0 + W @ qf
@@ -214,7 +221,8 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
         Q[cols] += qf
     lam[R] = lam_R
     hdot = model.Minv * (Q - JR @ lam_R)
-    return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S, qf=qf_out)
+    return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S, qf=qf_out,
+                      damped=damped or (newton_failed > 0))
 
 
 def _cho_solve_many(factor, B: np.ndarray) -> np.ndarray:
@@ -328,6 +336,56 @@ def _newton_reduced(plan: AssemblyPlan, ctx: list, lam0x: np.ndarray, Wx: np.nda
             return x, qf, it, False
         x = x + dx
     return x, qf, n_max, False
+
+
+DAMPED_MAX_ITER = 30
+"""Force evaluations of the damped Newton solve (the second stage of the friction solve)."""
+ARMIJO = 1e-4
+"""Sufficient decrease of the damped Newton solve's line search: a step a is taken when
+``|r(x + a dx)| < (1 - ARMIJO a) |r(x)|`` (max norms); a is halved down to ARMIJO."""
+
+
+def _damped_newton_reduced(plan: AssemblyPlan, ctx: list, lam0x: np.ndarray, Wx: np.ndarray, x: np.ndarray,
+                           tol: float, max_iter: int):
+    """Newton's method on x = lam0x + Wx qf(x) with a fresh Jacobian every step and a backtracking
+    line search on the residual's max norm (:data:`ARMIJO`), from the start the undamped solve
+    was given. Where the undamped solve wanders (sticking inside the regularisation band of a
+    spherical joint, measured: residuals 50-90 N that never settle) this converges in 6-26 force
+    evaluations, against about 50 of the fixed point. Gives up (converged False) on a singular
+    Newton matrix, a step that no halving down to ARMIJO makes decrease, or after
+    min(max_iter, DAMPED_MAX_ITER) force evaluations. Returns (x, qf(x), evaluations, converged)."""
+    n_max = min(max_iter, DAMPED_MAX_ITER)
+    eye = _identity(len(x))
+    qf, parts = _friction_forces_reduced(plan, ctx, x)
+    r = lam0x + Wx @ qf - x
+    evals = 1
+    while True:
+        res = np.abs(r).max(initial=0.0)
+        if not math.isfinite(res):
+            return x, qf, evals, False
+        if res <= tol * (1.0 + np.abs(x).max(initial=0.0)):
+            return x, qf, evals, True
+        if evals >= n_max:
+            return x, qf, evals, False
+        Dq = _friction_jacobian_reduced(plan, ctx, parts, len(x))
+        lu, piv, info = dgetrf(eye - Wx @ Dq)
+        if info != 0:
+            return x, qf, evals, False
+        dx, info = dgetrs(lu, piv, r)
+        if info != 0:  # pragma: no cover - dgetrs fails only on illegal arguments
+            return x, qf, evals, False
+        a = 1.0
+        while True:
+            xn = x + a * dx
+            qn, pn = _friction_forces_reduced(plan, ctx, xn)
+            evals += 1
+            rn = lam0x + Wx @ qn - xn
+            if np.abs(rn).max(initial=0.0) < (1.0 - ARMIJO * a) * res:
+                break
+            a *= 0.5
+            if a < ARMIJO or evals >= n_max:
+                return x, qf, evals, False
+        x, qf, parts, r = xn, qn, pn, rn
 
 
 ANDERSON_DEPTH = 3

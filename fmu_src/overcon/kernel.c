@@ -28,7 +28,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define OVK_ABI 1
+#define OVK_ABI 2
 
 enum { OVK_OK = 0, OVK_SINGULAR = 1, OVK_FRICTION = 2, OVK_EULER = 3, OVK_NONFINITE = 4, OVK_SPRING = 5,
        OVK_NOMEM = 6 };
@@ -666,13 +666,72 @@ static int newton_reduced(fsolve_t *s, const double *lam0x, const double *Wx /* 
     return 0;
 }
 
+#define DAMPED_MAX_ITER 30
+#define ARMIJO 1e-4
+
+/* The damped Newton solve (dynamics._damped_newton_reduced): a fresh Jacobian every step and a
+ * backtracking line search on the residual's max norm. Returns 1 when converged; *iters counts
+ * its force evaluations. */
+static int damped_newton_reduced(fsolve_t *s, const double *lam0x, const double *Wx, double *x, double *qf,
+                                 int *iters, double *work) {
+    const ovk_model *M = s->M;
+    int nx = M->nx, nc = M->ncols;
+    int n_max = M->max_iter < DAMPED_MAX_ITER ? M->max_iter : DAMPED_MAX_ITER;
+    double *r = work, *Dq = r + nx, *Mx = Dq + nc * nx, *dx = Mx + nx * nx, *xn = dx + nx, *qn = xn + nx,
+           *rn = qn + nc;
+    int piv[OVK_MAX_FRICTION * 3];
+    forces_reduced(s, x, qf);
+    int evals = 1;
+    for (int a = 0; a < nx; a++) {
+        double t = 0.0;
+        for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * qf[c];
+        r[a] = lam0x[a] + t - x[a];
+    }
+    for (;;) {
+        *iters = evals;
+        double res = maxabs(r, nx);
+        if (!isfinite(res)) return 0;
+        if (res <= M->tol * (1.0 + maxabs(x, nx))) return 1;
+        if (evals >= n_max) return 0;
+        /* the Jacobian at x: s->flam holds x's multipliers (the last forces_reduced was at x) */
+        jacobian_reduced(s, Dq);
+        for (int a = 0; a < nx; a++)
+            for (int b = 0; b < nx; b++) {
+                double t = 0.0;
+                for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * Dq[c * nx + b];
+                Mx[a * nx + b] = (a == b ? 1.0 : 0.0) - t;
+            }
+        if (lu_factor(Mx, nx, piv)) return 0;
+        memcpy(dx, r, sizeof(double) * nx);
+        lu_solve(Mx, nx, piv, dx);
+        double step = 1.0;
+        for (;;) {
+            for (int a = 0; a < nx; a++) xn[a] = x[a] + step * dx[a];
+            forces_reduced(s, xn, qn);
+            evals++;
+            *iters = evals;
+            for (int a = 0; a < nx; a++) {
+                double t = 0.0;
+                for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * qn[c];
+                rn[a] = lam0x[a] + t - xn[a];
+            }
+            if (maxabs(rn, nx) < (1.0 - ARMIJO * step) * res) break;
+            step *= 0.5;
+            if (step < ARMIJO || evals >= n_max) return 0;
+        }
+        memcpy(x, xn, sizeof(double) * nx);
+        memcpy(qf, qn, sizeof(double) * nc);
+        memcpy(r, rn, sizeof(double) * nx);
+    }
+}
+
 /* ------------------------------------------------------------------------------ the evaluation */
 
 /* y = [q (nb nq_b), h (nb nh_b)] -> ydot, lam (m; zeros at eliminated rows), qf (ncols; friction
  * forces, the next evaluation's warm start), *iterations (friction force evaluations).
  * guess_mode: 0 none (x0 = lam0), 1 guess = qf of a nearby evaluation (ncols), 2 guess = lam (m). */
 int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, const double *guess,
-                 double *ydot, double *lam, double *qf, int *iterations) {
+                 double *ydot, double *lam, double *qf, int *iterations, int *damped) {
     (void)t;
     int nb = M->nb, d = M->dim, kh = M->nh_b, m = M->m, nR = M->nR, nh = nb * kh, n = nb * M->nq_b;
     int wd = d == 2 ? 1 : 3, nx = M->nx, nc = M->ncols;
@@ -680,7 +739,7 @@ int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, 
     size_t need = (size_t)(nb + 1) * (2 * d + d * d + wd) + 4 * (size_t)nb /* frames */
                   + (size_t)m * (nh + 2) /* J, phi, gamma */ + (size_t)nR * (nR + 2) /* S, g, lamR */
                   + (size_t)nh /* Q */ + (size_t)nR * nc /* W */ + (size_t)nx * (nc + 3)
-                  + (size_t)nc * nx + (size_t)nx * nx + (size_t)nR + 64;
+                  + (size_t)nc * nx + (size_t)nx * nx + (size_t)nR + 5 * (size_t)nx + 2 * (size_t)nc + 64;
     double *mem = malloc(need * sizeof(double));
     fctx_t *ctx = M->nfj ? malloc(sizeof(fctx_t) * M->nfj) : NULL;
     if (!mem || (M->nfj && !ctx)) { free(mem); free(ctx); return OVK_NOMEM; }
@@ -842,6 +901,7 @@ int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, 
         if (!isfinite(lamR[i])) { status = OVK_NONFINITE; goto done; }
     cho_solve(S, nR, lamR);
     *iterations = 0;
+    *damped = 0;
     if (M->nfj) {
         /* W = S^-1 J_R^T M^-1 [:, cols]: one column per friction velocity */
         for (int i = 0; i < nR; i++)
@@ -873,7 +933,17 @@ int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, 
             friction_setup(M, &f, j, blkI, ctx + nfr);
         }
         fsolve_t s = {M, ctx, flam, Qib, Qjb};
-        if (!newton_reduced(&s, lam0x, Wx, x, qf, iterations, nwork)) { status = OVK_FRICTION; goto done; }
+        double *x0 = nwork; /* the start, kept for the damped solve */
+        nwork += nx;
+        memcpy(x0, x, sizeof(double) * nx);
+        if (!newton_reduced(&s, lam0x, Wx, x, qf, iterations, nwork)) {
+            int first = *iterations, more = 0;
+            memcpy(x, x0, sizeof(double) * nx);
+            int ok = damped_newton_reduced(&s, lam0x, Wx, x, qf, &more, nwork);
+            *iterations = first + more;
+            *damped = 1;
+            if (!ok) { status = OVK_FRICTION; goto done; }
+        }
         for (int i = 0; i < nR; i++) {
             double acc = 0.0;
             for (int c = 0; c < nc; c++) acc += W[i * nc + c] * qf[c];

@@ -51,7 +51,7 @@ from .spec import KERNELS  # noqa: F401  (the values of the solver setting ``ker
 SOURCE = Path(__file__).with_name("kernel.c")
 CFLAGS = ["-shared", "-fPIC", "-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"]
 LIBS = ["-lm"]
-ABI = 1  # OVK_ABI in kernel.c: the layout of _CModel
+ABI = 2  # OVK_ABI in kernel.c: the layout of _CModel
 MAX_FRICTION = 32  # OVK_MAX_FRICTION in kernel.c
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
@@ -81,7 +81,7 @@ def _bind(path: Path) -> ctypes.CDLL:
     f = lib.ovk_evaluate
     f.restype = ctypes.c_int
     f.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p,
-                  ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+                  ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
     g = lib.ovk_outputs
     g.restype = ctypes.c_int
     g.argtypes = [ctypes.c_void_p] * 5
@@ -283,8 +283,10 @@ class Kernel:
         self._guess_qf = np.zeros(max(1, len(plan.friction_cols)))
         self._guess_lam = np.zeros(model.m)
         self._its = ctypes.c_int(0)
+        self._damped = ctypes.c_int(0)
         self._ptrs = (self._y.ctypes.data, self._ydot.ctypes.data, self._lam.ctypes.data, self._qf.ctypes.data,
-                      ctypes.addressof(self._its), self._guess_qf.ctypes.data, self._guess_lam.ctypes.data)
+                      ctypes.addressof(self._its), self._guess_qf.ctypes.data, self._guess_lam.ctypes.data,
+                      ctypes.addressof(self._damped))
         self._ncols = len(plan.friction_cols)
         self.last_status = 0
         self._reac = np.zeros((len(joints), 6))
@@ -292,16 +294,22 @@ class Kernel:
         self._lam_in = np.zeros(model.m)
         self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
 
+    @property
+    def damped(self) -> bool:
+        """The last call's undamped Newton solve gave up and the damped one ran."""
+        return bool(self._damped.value)
+
     def newton_failed(self) -> int:
-        """The force evaluations of the last call's Newton solve if that is why it returned None
-        (status 2), else 0 (for :func:`overcon.dynamics.evaluate`'s ``newton_failed``)."""
+        """The force evaluations of the last call's Newton solves (undamped and damped) if their
+        giving up is why it returned None (status 2), else 0 (for
+        :func:`overcon.dynamics.evaluate`'s ``newton_failed``: the fixed-point fallback starts)."""
         return self._its.value if self.last_status == 2 else 0
 
     def evaluate(self, t: float, y: np.ndarray, lam_guess=None, qf_guess=None):
         """(y' (n + nh,), lam (m,), qf (ncols,), iterations) at (t, y), warm-started as
         :func:`overcon.dynamics.evaluate` (qf_guess first, then lam_guess); None: repeat on the
         numpy path (status in :attr:`last_status`)."""
-        py, pyd, plam, pqf, pits, pgq, pgl = self._ptrs
+        py, pyd, plam, pqf, pits, pgq, pgl, pdamped = self._ptrs
         self._y[:] = y
         if qf_guess is not None and self._ncols:
             self._guess_qf[: self._ncols] = qf_guess
@@ -311,7 +319,7 @@ class Kernel:
             mode, pg = 2, pgl
         else:
             mode, pg = 0, pgq
-        status = self._fn(self._pm, t, py, mode, pg, pyd, plam, pqf, pits)
+        status = self._fn(self._pm, t, py, mode, pg, pyd, plam, pqf, pits, pdamped)
         self.last_status = status
         if status:
             return None

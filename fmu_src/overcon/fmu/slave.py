@@ -535,8 +535,20 @@ class OverconSlave:
                  f"{self._params['solver.tolerance']!r}; {self._sim.kernel_note}", Status.OK)
         self._publish()
 
-    @fmi_call("fmi2DoStep", {Mode.STEPPING})
     def do_step(self, current_time: float, step_size: float, no_set_fmu_state_prior: int = 0):
+        """fmi2DoStep: in state slave initialized the step itself without the :func:`fmi_call`
+        layer (this is the per-communication-point call; the step catches its own failures);
+        otherwise the checked call, which refuses it with the message."""
+        if self._mode is not Mode.STEPPING:
+            return self._do_step_checked(current_time, step_size, no_set_fmu_state_prior)
+        try:
+            return self._step(current_time, step_size)
+        except Exception as exc:  # as fmi_call: a bug is fmi2Error, never a crash
+            self.log(f"fmi2DoStep: {type(exc).__name__}: {exc}", Status.ERROR)
+            return Status.ERROR
+
+    def _step(self, current_time: float, step_size: float, no_set_fmu_state_prior: int = 0):
+        """The step of :meth:`do_step` (see the module docstring)."""
         try:
             if not (math.isfinite(current_time) and math.isfinite(step_size) and step_size >= 0):
                 raise CallRefused("the communication step must be finite and >= 0")
@@ -567,6 +579,8 @@ class OverconSlave:
         self._derived_stale = not self._derived_read and len(out) > self._n_positions
         self._publish()
         return Status.OK
+
+    _do_step_checked = fmi_call("fmi2DoStep", {Mode.STEPPING})(_step)
 
     @fmi_call("fmi2Terminate", {Mode.STEPPING, Mode.ERROR})
     def terminate(self):

@@ -1,7 +1,9 @@
 """Entry point of the FMU binary (``native/overcon_fmi2.c``) into Python: imported by
 ``fmi2Instantiate`` with ``resources/`` on ``sys.path``. Standard library only at import time,
 because in an interpreter the binary started itself numpy and scipy become importable only after
-:func:`add_site_dirs`."""
+:func:`add_site_dirs`. The binary also hands over the addresses of its C functions the slave calls
+back: the log function and the registration of the published values (the outputs fmi2GetReal
+and fmi2GetBoolean answer without entering Python; see :mod:`overcon.fmu.slave`)."""
 from __future__ import annotations
 
 import importlib.util
@@ -41,10 +43,11 @@ def _borrow_recorded_site_dirs(resources: str) -> None:
 
 
 def instantiate(instance_name: str, guid: str, resources: str, log_address: int, component: int,
-                logging_on: int, site_dirs: str):
+                logging_on: int, site_dirs: str, publish_address: int = 0):
     """Called by fmi2Instantiate; returns the slave (an exception is logged by the binary and
     fmi2Instantiate returns NULL). ``site_dirs``: newline-separated folders, given only when the
-    binary initialised the interpreter."""
+    binary initialised the interpreter. ``publish_address``: the binary's ``register_published``
+    (0: a binary without published values)."""
     if site_dirs:
         add_site_dirs([d for d in site_dirs.split("\n") if d])
     elif _missing():
@@ -57,4 +60,4 @@ def instantiate(instance_name: str, guid: str, resources: str, log_address: int,
         raise ImportError(f"{exc}: the FMU needs numpy and scipy in the interpreter it runs in "
                           f"({sys.version.split()[0]}, sys.path = {sys.path}); set OVERCON_PYTHON to "
                           "a Python executable that has them") from exc
-    return make(instance_name, guid, resources, log_address, component, bool(logging_on))
+    return make(instance_name, guid, resources, log_address, component, bool(logging_on), publish_address)

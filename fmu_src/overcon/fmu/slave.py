@@ -42,6 +42,21 @@ Behaviour
   point (the same values the step would have stored); if that fails, that ``fmi2GetReal``
   returns fmi2Error with the reason. ``fmi2GetReal``/``fmi2GetBoolean`` answer a list of value
   references seen before (outputs, constants) with one copy.
+* Published values: in an FMU the slave registers arrays it owns with the binary (once, at
+  fmi2Instantiate, through the binary's ``register_published``): per value reference the slot of
+  a Real output (or -1) and the value of a constant Boolean output (or -1), the published outputs
+  and two flags (positions and constants valid; reactions and friction forces valid). The binary
+  answers ``fmi2GetReal``/``fmi2GetBoolean`` of published references from there without entering
+  Python while their flag is set, and clears both flags before every call into the slave that is
+  not a getter. :meth:`OverconSlave._publish` sets them at the end of a successful
+  ``fmi2DoStep`` and ``fmi2ExitInitializationMode`` (state ``slave initialized``, the outputs
+  those the Python getter returns), the reactions' flag only while they are current and the host
+  has read one through Python (so the laziness above is unchanged), and again once a read
+  computed the reactions. Any other state (initialization mode, after fmi2SetReal, fmi2Reset,
+  fmi2SetFMUstate, a failed step, fmi2Terminate) is answered by Python until the next successful
+  step. The environment variable ``OVERCON_NO_PUBLISH=1`` at fmi2Instantiate switches the
+  registration off (every get through Python, as before; for tests and diagnosis). In-process use
+  (no binary) registers nothing.
 * Work budget of one ``fmi2DoStep``: at most ``solver.max_internal_steps`` integrator steps and
   ``solver.max_wall_time`` seconds, checked after every internal step
   (:meth:`overcon.simulate.Simulation.advance`); the trajectory does not depend on the budget.
@@ -56,6 +71,7 @@ import enum
 import functools
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -73,6 +89,10 @@ MANIFEST = "overcon_fmu.json"
 """Build-time facts in the FMU's resources/: scene path, guid, reaction_unique, motion_unique."""
 
 _LOG_FUNCTION = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int, ctypes.c_char_p)
+_PUBLISH_FUNCTION = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p,
+                                     ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_void_p)
+"""register_published(component, flags, n_real_map, real_slot, real_values, n_pos, n_bool_map,
+bool_value) of the binary (native/overcon_fmi2.c)."""
 _C_TYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int,
             "String": ctypes.c_char_p}
 
@@ -140,15 +160,19 @@ def fmi_call(name: str, modes=ANY_MODE):
 
 
 def instantiate(instance_name: str, guid: str, resources: str, log_address: int, component: int,
-                logging_on: bool) -> "OverconSlave":
+                logging_on: bool, publish_address: int = 0) -> "OverconSlave":
     """fmi2Instantiate (through :func:`overcon.fmu.boot.instantiate`): the slave, logging through
-    the binary's log function at ``log_address`` for ``component``."""
+    the binary's log function at ``log_address`` for ``component`` and publishing its outputs
+    through ``register_published`` at ``publish_address`` (0 or ``OVERCON_NO_PUBLISH=1``: not)."""
     log_function = _LOG_FUNCTION(log_address)
 
     def log(status: int, message: str) -> None:
         log_function(component, int(status), message.encode("utf-8", "replace"))
 
-    return OverconSlave(resources, guid=guid, instance_name=instance_name, log=log)
+    slave = OverconSlave(resources, guid=guid, instance_name=instance_name, log=log)
+    if publish_address and os.environ.get("OVERCON_NO_PUBLISH", "") in ("", "0"):
+        slave._register_published(_PUBLISH_FUNCTION(publish_address), component)
+    return slave
 
 
 class OverconSlave:
@@ -183,6 +207,17 @@ class OverconSlave:
         self._ref_cache: dict[tuple[str, bytes], list] = {}
         self._fast_get: dict[tuple[str, bytes], tuple] = {}  # see _remember_get
         self._n_positions = len(self._model0.position_outputs)  # outputs before the reactions
+        # published values (see the module docstring); fixed arrays: the binary keeps their addresses
+        self._publishing = False
+        self._pub_flags = np.zeros(2, np.intc)
+        self._pub_values = np.zeros(len(self._model0.output_names()))
+        self._pub_real_slot = np.full(len(self._vars), -1, np.intc)
+        self._pub_bool = np.full(len(self._vars), -1, np.intc)
+        for r, v in enumerate(self._vars):
+            if v.type == "Real" and v.key[0] == "output":
+                self._pub_real_slot[r] = v.key[1]
+            elif v.type == "Boolean" and v.key[0] == "constant" and v.causality == "output":
+                self._pub_bool[r] = int(bool(v.key[1]))
         self._init_fields()
         for text in friction_warnings(self._model0):  # the pre-check's warnings (also in the manifest)
             self.log(text, Status.WARNING)
@@ -202,6 +237,24 @@ class OverconSlave:
         self._y = None  # the state at self._t (for outputs computed when first read)
         self._derived_stale = False  # reactions/friction outputs not yet computed at self._t
         self._derived_read = False  # the host has read a reaction or friction output
+
+    def _register_published(self, register, component: int) -> None:
+        """Hand the published arrays to the binary (``register``: its register_published)."""
+        self._pub_flags[:] = 0
+        register(component, self._pub_flags.ctypes.data, len(self._pub_real_slot), self._pub_real_slot.ctypes.data,
+                 self._pub_values.ctypes.data, self._n_positions, len(self._pub_bool), self._pub_bool.ctypes.data)
+        self._publishing = True
+
+    def _publish(self) -> None:
+        """Publish the current outputs (state slave initialized, outputs current): positions and
+        constants always; reactions and friction forces only if current and read by the host
+        before (a first read goes through Python, which switches them on in later steps)."""
+        if not self._publishing:
+            return
+        self._pub_values[:] = self._outputs
+        derived_ok = not self._derived_stale and (self._derived_read or len(self._outputs) == self._n_positions)
+        self._pub_flags[1] = 1 if derived_ok else 0
+        self._pub_flags[0] = 1
 
     def log(self, message: str, status=Status.OK) -> None:
         if self._log_sink is None:
@@ -417,6 +470,8 @@ class OverconSlave:
         fmi2DoStep. A failure is this read's fmi2Error (the values keep their previous ones)."""
         self._derived_read = True
         if not self._derived_stale:
+            if self._pub_flags[0] and not self._pub_flags[1]:
+                self._publish()  # the first read: from now on the reactions are published too
             return
         try:
             vals = self._sim.derived_outputs(self._t, self._y)
@@ -427,6 +482,8 @@ class OverconSlave:
                               f"{type(exc).__name__}: {exc}") from exc
         self._outputs[self._n_positions:] = vals
         self._derived_stale = False
+        if self._pub_flags[0]:  # published positions are current: add the reactions
+            self._publish()
 
     def _advance(self, sim: Simulation, t_new: float) -> np.ndarray:
         """sim.advance(t_new) within the doStep work budget (see the module docstring)."""
@@ -476,10 +533,22 @@ class OverconSlave:
         self._mode = Mode.STEPPING
         self.log(f"initialized at t = {self._t!r} s: method {self._params['solver.method']}, tolerance "
                  f"{self._params['solver.tolerance']!r}; {self._sim.kernel_note}", Status.OK)
+        self._publish()
 
-    @fmi_call("fmi2DoStep", {Mode.STEPPING})
     def do_step(self, current_time: float, step_size: float, no_set_fmu_state_prior: int = 0):
-        call = f"fmi2DoStep({current_time!r}, {step_size!r})"
+        """fmi2DoStep: in state slave initialized the step itself without the :func:`fmi_call`
+        layer (this is the per-communication-point call; the step catches its own failures);
+        otherwise the checked call, which refuses it with the message."""
+        if self._mode is not Mode.STEPPING:
+            return self._do_step_checked(current_time, step_size, no_set_fmu_state_prior)
+        try:
+            return self._step(current_time, step_size)
+        except Exception as exc:  # as fmi_call: a bug is fmi2Error, never a crash
+            self.log(f"fmi2DoStep: {type(exc).__name__}: {exc}", Status.ERROR)
+            return Status.ERROR
+
+    def _step(self, current_time: float, step_size: float, no_set_fmu_state_prior: int = 0):
+        """The step of :meth:`do_step` (see the module docstring)."""
         try:
             if not (math.isfinite(current_time) and math.isfinite(step_size) and step_size >= 0):
                 raise CallRefused("the communication step must be finite and >= 0")
@@ -495,19 +564,23 @@ class OverconSlave:
             else:  # reactions and friction forces only once the host reads one (_read_derived)
                 out = self._outputs.copy()
                 out[: self._n_positions] = sim.position_outputs(y)
-            if not np.isfinite(out).all():
+            if not math.isfinite(sum(out.tolist())):  # cheaper than np.isfinite for a few outputs
                 bad = [n for n, v in zip(self._model0.output_names(), out) if not math.isfinite(v)]
-                raise ArithmeticError(f"t = {t_new:.9g} s: non-finite outputs {', '.join(bad)}")
+                if bad:  # (else the sum overflowed)
+                    raise ArithmeticError(f"t = {t_new:.9g} s: non-finite outputs {', '.join(bad)}")
         except Exception as exc:  # the run cannot continue: fmi2Error, never NaN, never a crash
             what = str(exc) if isinstance(exc, CallRefused) else f"{type(exc).__name__}: {exc}"
-            self._failed = f"{call}: {what}"
+            self._failed = f"fmi2DoStep({current_time!r}, {step_size!r}): {what}"
             self._mode = Mode.ERROR
             self.log(f"{self._failed}; the run stopped at t = {self._t!r} s (the outputs keep their values "
                      "there; fmi2SetFMUstate or fmi2Reset to continue)", Status.ERROR)
             return Status.ERROR
         self._outputs, self._t, self._have_outputs, self._y = out, t_new, True, y
         self._derived_stale = not self._derived_read and len(out) > self._n_positions
+        self._publish()
         return Status.OK
+
+    _do_step_checked = fmi_call("fmi2DoStep", {Mode.STEPPING})(_step)
 
     @fmi_call("fmi2Terminate", {Mode.STEPPING, Mode.ERROR})
     def terminate(self):
@@ -519,6 +592,8 @@ class OverconSlave:
 
     def free_instance(self) -> int:
         self._states.clear()
+        self._publishing = False
+        self._pub_flags[:] = 0
         self._sim = None
         self._log_sink = None
         return Status.OK

@@ -23,6 +23,19 @@
  * for every call and logs through log_from_python() below, which applies fmi2SetDebugLogging's
  * categories. Error and fatal messages always reach the host's logger; warnings too unless the
  * host switched the category logStatusWarning off; the other categories only with debug logging on.
+ *
+ * Published values: a host reads the same outputs after every fmi2DoStep, and entering Python for
+ * that (GIL, call) costs more than the copy. So the slave registers, once at fmi2Instantiate
+ * (through register_published() below, whose address it gets like log_from_python's), arrays it
+ * owns and keeps alive: two flags (positions valid, reactions/friction valid), per value reference
+ * the slot of a Real output in the published output vector (or -1), the published outputs, and
+ * per value reference the 0/1 value of a constant Boolean output (or -1). fmi2GetReal and
+ * fmi2GetBoolean copy from there without the GIL when every requested reference is published and
+ * its flag is set; anything else (a parameter, an unknown reference, a NULL array, nvr = 0, a flag
+ * off) takes the Python call, which checks and reports as always. Every call of a slave method
+ * other than a getter (get_*) clears both flags before entering Python, so after any such FMI call
+ * the values are served by Python until the slave publishes again (after a successful fmi2DoStep
+ * or fmi2ExitInitializationMode, or once it computed the reactions a host read).
  */
 #define _GNU_SOURCE /* RTLD_DEFAULT, RTLD_NODELETE, dladdr */
 #include <dlfcn.h>
@@ -123,6 +136,14 @@ typedef struct {
     fmi2CallbackLogger logger;
     fmi2ComponentEnvironment env;
     int enabled[N_CATEGORIES];
+    /* published values (register_published; all NULL/0 until registered), owned by the slave */
+    int *pub_flags;         /* [0]: positions and constants valid, [1]: reactions/friction valid */
+    int n_real_map;         /* entries of real_slot (the number of value references) */
+    const int *real_slot;   /* value reference -> slot in real_values, or -1 */
+    const double *real_values;
+    int n_pos;              /* slots < n_pos: positions (flag 0); others: reactions, friction (flag 1) */
+    int n_bool_map;         /* entries of bool_value */
+    const int *bool_value;  /* value reference -> 0/1 of a constant Boolean output, or -1 */
 } Instance;
 
 static void default_categories(Instance *c, int logging_on)
@@ -165,6 +186,58 @@ static void log_from_python(void *component, int status, const char *message)
 {
     host_log((Instance *)component, (fmi2Status)status, category_of((fmi2Status)status), "%s",
              message ? message : "");
+}
+
+/* called by the Python slave (through ctypes, once at construction) with the addresses of its
+ * published arrays (see the header comment); flags NULL unregisters */
+static void register_published(void *component, int *flags, int n_real_map, const int *real_slot,
+                               const double *real_values, int n_pos, int n_bool_map,
+                               const int *bool_value)
+{
+    Instance *c = (Instance *)component;
+    if (c == NULL)
+        return;
+    int ok = flags && real_slot && real_values && bool_value && n_real_map >= 0 && n_bool_map >= 0;
+    c->pub_flags = ok ? flags : NULL;
+    c->n_real_map = ok ? n_real_map : 0;
+    c->real_slot = ok ? real_slot : NULL;
+    c->real_values = ok ? real_values : NULL;
+    c->n_pos = ok ? n_pos : 0;
+    c->n_bool_map = ok ? n_bool_map : 0;
+    c->bool_value = ok ? bool_value : NULL;
+}
+
+/* fmi2GetReal from the published values: 1 if every reference is published and valid (values
+ * copied), 0 otherwise (nothing written: the caller takes the Python call) */
+static int published_reals(const Instance *c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    const int *flags = c->pub_flags;
+    if (flags == NULL || !flags[0] || vr == NULL || value == NULL || nvr == 0)
+        return 0;
+    for (size_t i = 0; i < nvr; i++) {
+        if (vr[i] >= (fmi2ValueReference)c->n_real_map)
+            return 0;
+        int slot = c->real_slot[vr[i]];
+        if (slot < 0 || (slot >= c->n_pos && !flags[1]))
+            return 0;
+    }
+    for (size_t i = 0; i < nvr; i++)
+        value[i] = c->real_values[c->real_slot[vr[i]]];
+    return 1;
+}
+
+static int published_booleans(const Instance *c, const fmi2ValueReference vr[], size_t nvr,
+                              fmi2Boolean value[])
+{
+    const int *flags = c->pub_flags;
+    if (flags == NULL || !flags[0] || vr == NULL || value == NULL || nvr == 0)
+        return 0;
+    for (size_t i = 0; i < nvr; i++)
+        if (vr[i] >= (fmi2ValueReference)c->n_bool_map || c->bool_value[vr[i]] < 0)
+            return 0;
+    for (size_t i = 0; i < nvr; i++)
+        value[i] = c->bool_value[vr[i]] ? fmi2True : fmi2False;
+    return 1;
 }
 
 /* ---------------------------------------------------------------- starting Python */
@@ -431,6 +504,8 @@ static fmi2Status call(fmi2Component comp, const char *fn, const char *method, c
     Instance *c = checked(comp, fn);
     if (!c)
         return fmi2Error;
+    if (c->pub_flags && strncmp(method, "get_", 4) != 0)
+        c->pub_flags[0] = c->pub_flags[1] = 0; /* published values invalid until published again */
     PyGILState_STATE g = py.PyGILState_Ensure();
     va_list ap;
     va_start(ap, fmt);
@@ -562,9 +637,9 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     snprintf(module, sizeof module, "%s.fmu.boot", package);
     PyObject *boot = py.PyImport_ImportModule(module);
     if (boot) {
-        res = py_method(c, "fmi2Instantiate", boot, "instantiate", "(sssKKis)", c->name,
+        res = py_method(c, "fmi2Instantiate", boot, "instantiate", "(sssKKisK)", c->name,
                         guid ? guid : "", resources, ADDR(&log_from_python), ADDR(c),
-                        loggingOn ? 1 : 0, started_here ? site_dirs : "");
+                        loggingOn ? 1 : 0, started_here ? site_dirs : "", ADDR(&register_published));
         py.Py_DecRef(boot);
     }
     if (py.PyErr_Occurred())
@@ -588,6 +663,7 @@ EXPORT void fmi2FreeInstance(fmi2Component comp)
     PyObject *r = py_method(c, "fmi2FreeInstance", c->slave, "free_instance", "()");
     if (r)
         py.Py_DecRef(r);
+    c->pub_flags = NULL; /* the slave's arrays go with it */
     py.Py_DecRef(c->slave);
     py.PyGILState_Release(g);
     free(c->name);
@@ -648,23 +724,38 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 EXPORT fmi2Status fmi2Terminate(fmi2Component c) { return call(c, "fmi2Terminate", "terminate", "()"); }
 EXPORT fmi2Status fmi2Reset(fmi2Component c) { return call(c, "fmi2Reset", "reset", "()"); }
 
-#define GETSET(Type, ctype, method)                                                                 \
+#define GET(Type, ctype, method)                                                                    \
     EXPORT fmi2Status fmi2Get##Type(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,     \
                                     ctype value[])                                                  \
     {                                                                                               \
         return call(c, "fmi2Get" #Type, "get_" method, "(KKK)", ADDR(vr), (unsigned long long)nvr, \
                     ADDR(value));                                                                   \
-    }                                                                                               \
+    }
+/* fmi2GetReal and fmi2GetBoolean answer published values without Python when they can */
+#define GET_PUBLISHED(Type, ctype, method, published)                                               \
+    EXPORT fmi2Status fmi2Get##Type(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,     \
+                                    ctype value[])                                                  \
+    {                                                                                               \
+        if (c != NULL && published((const Instance *)c, vr, nvr, value))                           \
+            return fmi2OK;                                                                          \
+        return call(c, "fmi2Get" #Type, "get_" method, "(KKK)", ADDR(vr), (unsigned long long)nvr, \
+                    ADDR(value));                                                                   \
+    }
+#define SET(Type, ctype, method)                                                                    \
     EXPORT fmi2Status fmi2Set##Type(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,     \
                                     const ctype value[])                                            \
     {                                                                                               \
         return call(c, "fmi2Set" #Type, "set_" method, "(KKK)", ADDR(vr), (unsigned long long)nvr, \
                     ADDR(value));                                                                   \
     }
-GETSET(Real, fmi2Real, "real")
-GETSET(Integer, fmi2Integer, "integer")
-GETSET(Boolean, fmi2Boolean, "boolean")
-GETSET(String, fmi2String, "string")
+GET_PUBLISHED(Real, fmi2Real, "real", published_reals)
+GET(Integer, fmi2Integer, "integer")
+GET_PUBLISHED(Boolean, fmi2Boolean, "boolean", published_booleans)
+GET(String, fmi2String, "string")
+SET(Real, fmi2Real, "real")
+SET(Integer, fmi2Integer, "integer")
+SET(Boolean, fmi2Boolean, "boolean")
+SET(String, fmi2String, "string")
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {

@@ -260,49 +260,63 @@ def reference(scene_path: Path, stop: float):
 
 # ------------------------------------------------------------------------------------ overhead
 
-TRIVIAL_SRC = '''from pythonfmu import Fmi2Causality, Fmi2Slave, Real
-class Trivial(Fmi2Slave):
+TRIVIAL_SRC = '''from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+class {cls}(Fmi2Slave):
     def __init__(self, **kw):
         super().__init__(**kw)
         for i in range({n}):
             setattr(self, f"y{{i}}", 0.0); self.register_variable(Real(f"y{{i}}", causality=Fmi2Causality.output))
+        for i in range({nb}):
+            setattr(self, f"b{{i}}", True)
+            self.register_variable(Boolean(f"b{{i}}", causality=Fmi2Causality.output,
+                                           variability=Fmi2Variability.constant))
     def do_step(self, t, dt): return True
 '''
 
 
-def build_trivial(tmp: Path, n_out: int) -> Path:
+def build_trivial(tmp: Path, n_out: int, n_bool: int = 0) -> Path:
+    """A pythonfmu FMU with an empty do_step and n_out Real outputs (and n_bool constant Boolean
+    outputs, as our FMUs' motion_unique and <joint>.reaction_unique)."""
     from pythonfmu.builder import FmuBuilder
 
-    src = tmp / "trivial" / "Trivial.py"
+    cls = f"Trivial{n_bool}"
+    src = tmp / cls / f"{cls}.py"
     src.parent.mkdir()
-    src.write_text(TRIVIAL_SRC.format(n=n_out))
+    src.write_text(TRIVIAL_SRC.format(cls=cls, n=n_out, nb=n_bool))
     with contextlib.redirect_stdout(io.StringIO()):
-        return Path(FmuBuilder.build_FMU(src, dest=tmp / "trivial"))
+        return Path(FmuBuilder.build_FMU(src, dest=tmp / cls))
 
 
-def overhead(fmu: FMU, trivial: Path, repeat: int, tmp: Path) -> dict:
-    """Per-communication-point cost outside the engine: our FMU vs the trivial one (slopes between
-    4000 and 400 points, medians of ``repeat`` runs)."""
+def overhead(fmu: FMU, trivial: Path, trivial_same: Path, repeat: int, tmp: Path) -> dict:
+    """Per-communication-point cost outside the engine: our FMU vs the trivial ones, with the
+    same Real outputs, and with the same Real and Boolean outputs (slopes between 4000 and 400
+    points, medians of ``repeat`` runs, the three FMUs alternating)."""
     import fmpy
 
-    unz_t = fmpy.extract(str(trivial), str(tmp / "unz_trivial"))
-    md_t = fmpy.read_model_description(unz_t)
+    unz = {k: fmpy.extract(str(p), str(tmp / f"unz_{k}")) for k, p in (("real", trivial), ("same", trivial_same))}
+    md = {k: fmpy.read_model_description(u) for k, u in unz.items()}
     n_hi, n_lo = round(fmu.stop / INTERVAL), round(fmu.stop / (10 * INTERVAL))
-    ours, triv = {}, {}
+    ours, triv = {}, {"real": {}, "same": {}}
     sv = start_values(*DECLARE_SETTING["planar"])
     for n, interval in ((n_hi, INTERVAL), (n_lo, 10 * INTERVAL)):
-        o, t = [], []
+        o, t = [], {"real": [], "same": []}
         for _ in range(repeat):
             with engine_timer(fmu) as acc:
                 wall, _, _ = fmu_run(fmu, sv, interval)
             o.append(wall - acc[0])
-            t0 = time.perf_counter()
-            fmpy.simulate_fmu(unz_t, stop_time=fmu.stop, output_interval=interval, model_description=md_t)
-            t.append(time.perf_counter() - t0)
-        ours[n], triv[n] = statistics.median(o), statistics.median(t)
+            for k in t:
+                t0 = time.perf_counter()
+                fmpy.simulate_fmu(unz[k], stop_time=fmu.stop, output_interval=interval, model_description=md[k])
+                t[k].append(time.perf_counter() - t0)
+        ours[n] = statistics.median(o)
+        for k in t:
+            triv[k][n] = statistics.median(t[k])
     per = lambda d: (d[n_hi] - d[n_lo]) / (n_hi - n_lo)  # noqa: E731
-    return {"ours_us": 1e6 * per(ours), "trivial_us": 1e6 * per(triv), "n_outputs": len(fmu.outputs),
-            "ours_fixed_s": ours[n_lo] - n_lo * per(ours), "trivial_fixed_s": triv[n_lo] - n_lo * per(triv)}
+    n_bool = sum(v.causality == "output" and v.type == "Boolean" for v in fmu.md.modelVariables)
+    return {"ours_us": 1e6 * per(ours), "trivial_us": 1e6 * per(triv["real"]), "same_us": 1e6 * per(triv["same"]),
+            "n_outputs": len(fmu.outputs), "n_bool": n_bool,
+            "ours_fixed_s": ours[n_lo] - n_lo * per(ours), "trivial_fixed_s": triv["real"][n_lo] - n_lo * per(triv["real"]),
+            "same_fixed_s": triv["same"][n_lo] - n_lo * per(triv["same"])}
 
 
 # ------------------------------------------------------------------------------------ stiff case
@@ -668,9 +682,12 @@ def main(argv=None) -> int:
 
         stiff = [] if args.quick else stiff_rows(fmus[STIFF], paths[STIFF], repeat)
 
-        ovh = overhead(fmus["planar_none_wo4_pos"], build_trivial(tmp, len(fmus["planar_none_wo4_pos"].outputs)),
+        f_ovh = fmus["planar_none_wo4_pos"]
+        n_bool = sum(v.causality == "output" and v.type == "Boolean" for v in f_ovh.md.modelVariables)
+        ovh = overhead(f_ovh, build_trivial(tmp, len(f_ovh.outputs)), build_trivial(tmp, len(f_ovh.outputs), n_bool),
                        repeat, tmp)
-        log(f"FMI overhead per point: ours {ovh['ours_us']:.1f} us, trivial {ovh['trivial_us']:.1f} us")
+        log(f"FMI overhead per point: ours {ovh['ours_us']:.1f} us, trivial {ovh['trivial_us']:.1f} us, "
+            f"trivial with the same Boolean outputs {ovh['same_us']:.1f} us")
 
         exu, exu_note = (None, "not run (--no-exudyn)") if args.no_exudyn else exudyn_rows(refs["planar_none_wo4_pos"], repeat)
         if exu:
@@ -773,12 +790,16 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
                      f"{fmt(r.error)} | {r.note} |")
     L += ["", "## FMI overhead per communication point", "",
           f"Slope of (wall time - time in `Simulation.advance/outputs`) between 4000 and 400 points, median of "
-          f"{repeat}; trivial = a pythonfmu `Fmi2Slave` with {ovh['n_outputs']} Real outputs and an empty "
-          "`do_step`.", "",
-          "| FMU | per point (us) | fixed cost per run (s) |", "|---|---:|---:|",
-          f"| overcon planar_none_wo4_pos ({ovh['n_outputs']} Real outputs) | {ovh['ours_us']:.1f} | {ovh['ours_fixed_s']:.3f} |",
-          f"| trivial pythonfmu | {ovh['trivial_us']:.1f} | {ovh['trivial_fixed_s']:.3f} |",
-          f"| ratio | {ovh['ours_us'] / ovh['trivial_us']:.2f} | |", ""]
+          f"{repeat}; trivial = a pythonfmu `Fmi2Slave` with an empty `do_step` and {ovh['n_outputs']} Real outputs, "
+          f"and the same with also our FMU's {ovh['n_bool']} constant Boolean outputs (`motion_unique`, "
+          "`<joint>.reaction_unique`), which fmpy reads at every point too (one more call per point).", "",
+          "| FMU | per point (us) | fixed cost per run (s) | ratio overcon / this |", "|---|---:|---:|---:|",
+          f"| overcon planar_none_wo4_pos ({ovh['n_outputs']} Real, {ovh['n_bool']} Boolean outputs) | {ovh['ours_us']:.1f} | "
+          f"{ovh['ours_fixed_s']:.3f} | |",
+          f"| trivial pythonfmu, {ovh['n_outputs']} Real outputs | {ovh['trivial_us']:.1f} | {ovh['trivial_fixed_s']:.3f} | "
+          f"{ovh['ours_us'] / ovh['trivial_us']:.2f} |",
+          f"| trivial pythonfmu, the same Real and Boolean outputs | {ovh['same_us']:.1f} | {ovh['same_fixed_s']:.3f} | "
+          f"{ovh['ours_us'] / ovh['same_us']:.2f} |", ""]
     if limits:
         L += ["## The limit: time per evaluation against the linear algebra", "",
               "In process (no FMI), positions only: CPU time inside `Simulation._rhs` per right-hand-side "
@@ -818,9 +839,12 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
         ok = all(" at " in x and float(x.split()[0]) <= PEER_RATIO for x in ratios)
         L.append(f"- Planar frictionless against Exudyn at matched accuracy, target <= {PEER_RATIO:g}x at every "
                  f"accuracy: {'; '.join(ratios)} -> {'met' if ok else 'NOT met'}")
-    ratio = ovh['ours_us'] / ovh['trivial_us']
+    ratio, same = ovh['ours_us'] / ovh['trivial_us'], ovh['ours_us'] / ovh['same_us']
     L.append(f"- FMI overhead per point, target <= {OVERHEAD_RATIO:g}x the trivial FMU: {ovh['ours_us']:.1f} us vs "
-             f"{ovh['trivial_us']:.1f} us: ratio {ratio:.2f} -> {'met' if ratio <= OVERHEAD_RATIO else 'NOT met'}")
+             f"{ovh['trivial_us']:.1f} us (Real outputs only, as the issue measured): ratio {ratio:.2f} -> "
+             f"{'met' if ratio <= OVERHEAD_RATIO else 'NOT met'}; against the trivial FMU with the same Real and "
+             f"Boolean outputs ({ovh['same_us']:.1f} us): ratio {same:.2f} -> "
+             f"{'met' if same <= OVERHEAD_RATIO else 'NOT met'}")
     L.append("- Compiled kernel: the optional C kernel (`overcon/kernel.c`, `solver.kernel`) ran every run above "
              "unless the table says numpy; the FMUs run with numpy and scipy alone too (`solver.kernel = \"numpy\"`, "
              "\"Both paths\"), equal per evaluation to 1e-12 (tests/test_kernel.py).")
@@ -831,7 +855,9 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
           "vectors of 12-84 entries), the dense output at every 1 ms output point, the singularity monitor "
           "(an SVD of the kept Jacobian after every step), the friction solve's fixed-point fallback where the "
           "Newton solve gives up (spatial sticking; it exists in numpy only: the \"handed back\" column), and "
-          "the FMI calls per output point (FMI overhead above).",
+          "the FMI calls per output point (FMI overhead above: fmi2GetReal and fmi2GetBoolean of the outputs are "
+          "answered by the FMU's C binary from values the slave publishes after each step, without entering "
+          "Python; fmi2DoStep enters Python, as it must to integrate).",
           "- As shipped, every 1 ms output point with reactions needs one evaluation of Eq. 18 at the "
           "interpolated state (taking lam from the step is exact only at a step end, where it is reused) and the "
           "reactions from it (both in the kernel): 4001 (planar) or 10001 (spatial) extra evaluations, more than "

@@ -250,3 +250,26 @@ def test_kernel_outputs_equal_numpy(name):
         assert rel(got, ref) <= 1e-14
     zero = np.zeros(model.m)  # no reaction: zero friction (the spherical joint has no contact point)
     assert not np.any(sims["c"]._derived.values_from_kernel(*sims["c"]._kernel.outputs(y, zero)))
+
+
+def test_cli_kernel_flag_and_scene_field(tmp_path, capsys):
+    """overcon simulate --kernel: the summary names the path; c where the kernel cannot run is bad
+    input (exit 2) naming the flag and why; a scene's [solver] kernel outside auto|c|numpy is
+    refused naming the field."""
+    from overcon.cli import main
+
+    out = tmp_path / "o.csv"
+    assert main(["simulate", str(MECH / "planar_f45_wo4.toml"), "--stop-time", "0.2", "--out", str(out),
+                 "--kernel", "numpy"]) == 0
+    assert "right-hand side: numpy (solver.kernel = 'numpy')" in capsys.readouterr().out
+    assert main(["simulate", str(MECH / "planar_f45_wo4.toml"), "--stop-time", "0.2", "--out", str(out)]) == 0
+    assert "right-hand side: compiled kernel" in capsys.readouterr().out
+    assert main(["simulate", str(EXAMPLES / "door_h1_wo_hinge2.toml"), "--stop-time", "0.1", "--out", str(out),
+                 "--kernel", "c"]) == 2
+    assert "--kernel c: the compiled kernel cannot run: rotation 'quaternion'" in capsys.readouterr().err
+    text = (MECH / "planar_f45_wo4.toml").read_text()
+    assert "[solver]" in text
+    (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
+    (tmp_path / "bad.toml").write_text(text.replace("[solver]", '[solver]\nkernel = "fortran"', 1))
+    with pytest.raises(scene_mod.SceneError, match=r"solver\.kernel.*fortran"):
+        scene_mod.load(tmp_path / "bad.toml")

@@ -7,7 +7,7 @@ friction on a joint whose reaction is not unique (or the three tests disagree); 
 when the work budget ``--max-steps``/``--max-wall-time`` ran out); 130 interrupted (Ctrl-C).
 
 Solver flags of ``simulate`` (``--tolerance``, ``--step``, ``--max-step``, ``--output-interval``,
-``--method``) override the scene's [solver] table and are checked by the one rules table
+``--method``, ``--kernel``) override the scene's [solver] table and are checked by the one rules table
 :mod:`overcon.params` (envelope and bounded-work relations), reported with the flag's name.
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ import sys
 import time
 
 from .simulate import MAX_STEPS, MAX_WALL_TIME
-from .spec import METHODS
+from .spec import KERNELS, METHODS
 from .verdict import LOCKSTEP_STEP
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
@@ -55,6 +55,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--tolerance", type=_number, metavar="TOL",
                    help=f"accuracy target, rtol = atol of the adaptive methods ({_range('solver.tolerance')})")
     s.add_argument("--method", choices=METHODS, help="integrator")
+    s.add_argument("--kernel", choices=KERNELS,
+                   help="right-hand side: auto (the compiled kernel where it covers the model), c, numpy")
     s.add_argument("--step", type=_number, metavar="H", help=f"rk4 step ({_range('solver.step')})")
     s.add_argument("--max-step", type=_number, metavar="H",
                    help=f"largest step of the adaptive methods ({_range('solver.max_step')})")
@@ -205,7 +207,7 @@ def _load(args):
     return spec, compile_model(spec, eliminate_field="scene.eliminate" if args.eliminate is None else "--eliminate")
 
 
-SOLVER_FLAGS = ("method", "tolerance", "step", "max_step", "output_interval")
+SOLVER_FLAGS = ("method", "tolerance", "step", "max_step", "output_interval", "kernel")
 """``simulate`` flags that override the scene's [solver] table (checked by overcon.params)."""
 
 
@@ -241,6 +243,13 @@ def cmd_simulate(args) -> int:
     spec, model = _load(args)
     for w in friction_warnings(model):
         print(f"overcon: warning: {w}", file=sys.stderr)
+    if spec.solver.kernel == "c":  # asked for a kernel that cannot run here: bad input, not a failed run
+        from .kernel import KernelUnavailable, select
+        try:
+            select(model, spec.solver)
+        except KernelUnavailable as exc:
+            where = "--kernel c" if args.kernel else f"{args.file}: solver.kernel = 'c'"
+            return _input_error(f"{where}: the compiled kernel cannot run: {exc.reason}")
     start = time.perf_counter()
     try:
         res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS, max_wall_time=args.max_wall_time or MAX_WALL_TIME)
@@ -252,7 +261,8 @@ def cmd_simulate(args) -> int:
     print(f"{args.out}: {len(res.time)} rows x {len(res.names)} outputs, t = {res.time[0]:g}..{res.time[-1]:g} s; "
           f"eliminated {', '.join('Phi%d' % i for i in model.eliminated) or 'none'} ({model.elimination_mode}); "
           f"{res.steps} steps, {res.evaluations} evaluations, {res.friction_iterations} friction iterations; "
-          f"max constraint drift {res.max_drift:.3g}; wall {wall:.2f} s")
+          f"max constraint drift {res.max_drift:.3g}; wall {wall:.2f} s; {res.kernel_note}"
+          + (f" ({res.kernel_repeats} evaluations handed back to numpy)" if res.kernel_repeats else ""))
     if res.stiff_steps:
         print(f"note: {res.stiff_steps} steps were limited by stability (stiff: friction sticking inside the "
               "regularisation band); a larger v_reg or a looser tolerance is cheaper")

@@ -64,7 +64,12 @@ NJC, NLP, NLD = 12, 5, 11  # doubles per joint, per friction law, per load (kern
 
 
 class KernelUnavailable(RuntimeError):
-    """``kernel = "c"`` was asked for and the kernel cannot run (the message says why)."""
+    """``kernel = "c"`` was asked for and the kernel cannot run (the message says why; ``reason``
+    is the why alone)."""
+
+    def __init__(self, reason: str):
+        super().__init__(f"solver.kernel = 'c': {reason}")
+        self.reason = reason
 
 
 # ----------------------------------------------------------------------------- the library
@@ -351,6 +356,6 @@ def select(model, solver):
     if why or lib is None:
         why = why or f"no compiled kernel: {reason}"
         if choice == "c":
-            raise KernelUnavailable(f"solver.kernel = 'c': {why}")
+            raise KernelUnavailable(why)
         return None, f"right-hand side: numpy (solver.kernel = 'auto': {why})"
     return Kernel(lib, model, solver), f"right-hand side: compiled kernel ({_state['path']})"

@@ -440,6 +440,8 @@ class Result:
     friction_iterations: int
     steps: int
     stiff_steps: int = 0  # dopri5 steps whose size was limited by stability (Hairer's test)
+    kernel_note: str = ""  # which right-hand side ran (Simulation.kernel_note)
+    kernel_repeats: int = 0  # evaluations the compiled kernel handed back to the numpy path
 
     def column(self, name: str) -> np.ndarray:
         return self.values[:, self.names.index(name)]
@@ -478,7 +480,8 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
         rows.append(sim.outputs(t, y))
     itg = sim._integrator
     return Result(model.output_names(), grid, np.array(rows), sim.max_drift, sim.evaluations,
-                  sim.friction_iterations, itg.nsteps, getattr(itg, "stiff_steps", 0))
+                  sim.friction_iterations, itg.nsteps, getattr(itg, "stiff_steps", 0), sim.kernel_note,
+                  sim.kernel_repeats)
 
 
 def run_scene(scene: SceneSpec, **kw) -> Result:

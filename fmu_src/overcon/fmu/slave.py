@@ -485,17 +485,13 @@ class OverconSlave:
         if self._pub_flags[0]:  # published positions are current: add the reactions
             self._publish()
 
-    def _advance(self, sim: Simulation, t_new: float) -> np.ndarray:
-        """sim.advance(t_new) within the doStep work budget (see the module docstring)."""
+    def _budget_exhausted(self, exc: BudgetExceeded) -> BudgetExhausted:
+        """The fmi2DoStep error of a used-up doStep work budget (see the module docstring)."""
         p = self._params
-        max_steps, max_wall = int(p["solver.max_internal_steps"]), float(p["solver.max_wall_time"])
-        try:
-            return sim.advance(t_new, max_steps=max_steps, max_wall_time=max_wall)
-        except BudgetExceeded as exc:
-            raise BudgetExhausted(
-                f"work budget exhausted in this doStep (solver.max_internal_steps = {max_steps}, "
-                f"solver.max_wall_time = {max_wall!r} s): {str(exc).removeprefix('integration stopped: ')}; "
-                "raise them or use shorter communication steps") from None
+        return BudgetExhausted(
+            f"work budget exhausted in this doStep (solver.max_internal_steps = {p['solver.max_internal_steps']}, "
+            f"solver.max_wall_time = {p['solver.max_wall_time']!r} s): "
+            f"{str(exc).removeprefix('integration stopped: ')}; raise them or use shorter communication steps")
 
     # -- FMI calls ---------------------------------------------------------------------------
     @fmi_call("fmi2SetupExperiment", {Mode.INSTANTIATED})
@@ -558,7 +554,12 @@ class OverconSlave:
             # while stepping, no parameter that builds the Simulation can change: no key check
             sim = self._sim if self._sim is not None else self._ensure_sim()
             t_new = current_time + step_size
-            y = self._advance(sim, t_new)
+            p = self._params  # the doStep work budget (typed when set: _set_param)
+            try:
+                y = sim.advance(t_new, max_steps=p["solver.max_internal_steps"],
+                                max_wall_time=p["solver.max_wall_time"])
+            except BudgetExceeded as exc:
+                raise self._budget_exhausted(exc) from None
             if self._derived_read or len(self._outputs) == self._n_positions:
                 out = sim.outputs(t_new, y)
             else:  # reactions and friction forces only once the host reads one (_read_derived)

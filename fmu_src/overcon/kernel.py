@@ -152,7 +152,7 @@ def library():
             if not path.exists():
                 compile_library(path, cc)
             _state["lib"], _state["path"] = _bind(path), str(path)
-        except OSError as exc:
+        except (OSError, RuntimeError) as exc:  # RuntimeError: no home directory for the default cache
             _state["reason"] = str(exc)
     return _state["lib"], _state["reason"]
 

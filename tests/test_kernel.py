@@ -4,6 +4,7 @@ carry it and still run with numpy alone."""
 from __future__ import annotations
 
 import dataclasses
+import os
 import zipfile
 from pathlib import Path
 
@@ -351,3 +352,96 @@ def test_random_mechanisms_equal_numpy(tmp_path, kind, seed):
         assert rel(b, a) <= 1e-14
         compared += 1
     assert compared >= 12  # at least half the states (the others: no solution of the friction solve)
+
+
+def test_spring_of_zero_free_length_at_coinciding_points(tmp_path):
+    """A spring of free length 0 pulls with -k d, defined where its points coincide (both paths);
+    with a positive free length coinciding points are refused naming the spring and its bodies."""
+    from overcon.evaluation import applied_forces, frames
+
+    text = (MECH / "planar_sliders.toml").read_text()
+    assert "free_length = 3.0" in text
+    for free, ok in (("0.0", True), ("0.5", False)):
+        (tmp_path / "m.toml").write_text(text.replace("free_length = 3.0", f"free_length = {free}"))
+        spec = scene_mod.as_scene(scene_mod.load(tmp_path / "m.toml"), friction=["joint4"])
+        model = compile_model(spec, check_initial=False)
+        n = next(i for i, ld in enumerate(model.loads) if ld.type == "spring")
+        ld = model.loads[n]
+        q = model.q0.copy()
+        q[3 * ld.bi: 3 * ld.bi + 2] = 0.0  # slider2 at the base point of its spring (s_i = s_j = 0)
+        y = np.concatenate([q, model.h0])
+        k = kernel_for(model, spec.solver)
+        if ok:
+            Q = applied_forces(model, frames(model, q))
+            assert np.all(np.isfinite(Q))
+            ref, ev = numpy_eval(model, spec.solver, 0.0, y)
+            got = k.evaluate(0.0, y)
+            assert got is not None and rel(got[0], ref) <= REL_OTHER_COUNT
+        else:
+            assert k.evaluate(0.0, y) is None and kernel.STATUS[k.last_status] == "spring points coincide"
+            with pytest.raises(SingularConfiguration, match=rf"spring loads\[{n}\] \(slider2 - base\): its "
+                                                            r"attachment points coincide while its free length is 0.5 m"):
+                numpy_eval(model, spec.solver, 0.0, y)
+
+
+def test_check_and_build_refuse_a_kernel_that_cannot_run(tmp_path, capsys):
+    """[solver] kernel = "c" on a model the kernel does not cover: check and build refuse the scene
+    (exit 2, file and field named) instead of an FMU that could never start."""
+    from overcon.cli import main
+
+    for f in EXAMPLES.glob("door*.toml"):
+        (tmp_path / f.name).write_text(f.read_text())
+    scene_file = tmp_path / "door_h1_wo_hinge2.toml"
+    text = scene_file.read_text()
+    scene_file.write_text(text.replace("[solver]", '[solver]\nkernel = "c"', 1) if "[solver]" in text
+                          else text + '\n[solver]\nkernel = "c"\n')
+    assert main(["check", str(scene_file)]) == 2
+    err = capsys.readouterr().err
+    assert "solver.kernel = 'c': the compiled kernel cannot run: rotation 'quaternion'" in err
+    assert main(["build", str(scene_file), "--out", str(tmp_path / "out"), "--no-ref"]) == 2
+    assert "solver.kernel = 'c': the compiled kernel cannot run" in capsys.readouterr().err
+    assert not list((tmp_path / "out").glob("*.fmu"))
+
+
+def test_damaged_cached_library_is_compiled_again(tmp_path):
+    """A cached library that does not load (an empty file, as an interrupted copy leaves) is
+    compiled again, once, by the next process; a cache directory that cannot be made is named."""
+    import subprocess
+    import sys
+
+    probe = ("from overcon import kernel; lib, why = kernel.library(); "
+             "print('PATH', kernel._state['path']); print('WHY', why)")
+
+    def run(cache):
+        env = {**os.environ, "OVERCON_CACHE_DIR": str(cache)}
+        return subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env,
+                              timeout=120).stdout
+
+    out = run(tmp_path)
+    path = Path(out.split("PATH ")[1].split()[0])
+    assert path.is_relative_to(tmp_path) and "WHY None" in out
+    path.write_bytes(b"")  # damaged (no process has it loaded now)
+    out = run(tmp_path)
+    assert "WHY None" in out and path.stat().st_size > 0, out
+    out = run("/proc/no/such/dir")
+    assert "PATH None" in out and "OVERCON_CACHE_DIR = /proc/no/such/dir" in out, out
+
+
+def test_fmu_warns_when_its_library_cannot_be_used(tmp_path):
+    """An FMU whose kernel library is missing runs on numpy and says so as a warning (the model is
+    covered: a silent slow-down would surprise)."""
+    import fmpy
+
+    from overcon.fmu.build import build_scene
+    from test_fmu import Instance, Logs
+
+    r = build_scene(MECH / "planar_none_wo4.toml", tmp_path, echo=lambda *a: None)
+    unz = Path(fmpy.extract(str(r.fmu), str(tmp_path / "unz")))
+    for lib in unz.glob(f"binaries/*/{kernel.library_name()}"):
+        lib.unlink()
+    logs = Logs()
+    inst = Instance(unz, logs=logs).init()
+    inst.steps(3)
+    inst.free()
+    warnings = [m for status, _, m in logs.records if status == 1]
+    assert any("the compiled kernel this FMU carries cannot be used" in m and "cannot load" in m for m in warnings)

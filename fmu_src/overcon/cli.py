@@ -223,7 +223,11 @@ def _input_error(exc, args=None) -> int:
 def cmd_check(args) -> int:
     from .precheck import format_table, precheck
 
-    _, model = _load(args)  # refuses an inconsistent q0/h0 (exit 2), as simulate and build do
+    spec, model = _load(args)  # refuses an inconsistent q0/h0 (exit 2), as simulate and build do
+    from .kernel import refusal
+    why = refusal(model, spec.solver)
+    if why is not None:
+        return _input_error(f"{args.file}: solver.kernel = 'c': the compiled kernel cannot run: {why}", args)
     report = precheck(model, args.file)
     print(json.dumps(report.to_json(), indent=2) if args.json else format_table(report))
     return EXIT_NONUNIQUE if report.friction_on_nonunique or not report.methods_agree else EXIT_OK
@@ -254,7 +258,12 @@ def cmd_simulate(args) -> int:
     try:
         res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS, max_wall_time=args.max_wall_time or MAX_WALL_TIME)
     except SimulationError as exc:
-        print(f"overcon: {args.file}: {exc}", file=sys.stderr)
+        from .kernel import KernelUnavailable, select
+        try:
+            note = select(model, spec.solver)[1]
+        except KernelUnavailable:
+            note = "right-hand side: numpy"
+        print(f"overcon: {args.file}: {exc} [{note}]", file=sys.stderr)
         return EXIT_RUNTIME
     wall = time.perf_counter() - start
     write_csv(res, args.out)

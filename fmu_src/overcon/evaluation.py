@@ -21,7 +21,8 @@ if TYPE_CHECKING:  # model imports this module (check_initial_state, resolve_eli
 
 
 class SingularConfiguration(ArithmeticError):
-    """The retained constraint Jacobian lost rank (singular position), or a spring has zero length."""
+    """The retained constraint Jacobian lost rank (singular position), or the attachment points of a
+    spring with a positive free length coincide (its force has no direction)."""
 
 
 @dataclass
@@ -165,7 +166,7 @@ def applied_forces(model: Model, f: Frames) -> np.ndarray:
     if model.kind == "spatial":
         Jw = model.inertia * f.w[:nb]
         Q[:, 3:] -= cross3_rows(f.w[:nb], Jw)
-    for ld in model.loads:
+    for n, ld in enumerate(model.loads):
         if ld.type == "force":
             Q[ld.bi, :d] += ld.value
         elif ld.type == "torque":
@@ -174,14 +175,24 @@ def applied_forces(model: Model, f: Frames) -> np.ndarray:
             pi = f.r[ld.bi] + f.R[ld.bi] @ ld.s_i
             pj = f.r[ld.bj] + f.R[ld.bj] @ ld.s_j
             dvec = pi - pj
-            length = float(np.linalg.norm(dvec))
-            if length < 1e-12 * max(1.0, ld.free_length):
-                raise SingularConfiguration("spring attachment points coincide: direction undefined")
-            F = -ld.stiffness * (length - ld.free_length) * dvec / length
+            if ld.free_length == 0.0:  # -k (|d| - 0) d / |d| = -k d: defined at coinciding points too
+                F = -ld.stiffness * dvec
+            else:
+                length = float(np.linalg.norm(dvec))
+                if length < 1e-12 * ld.free_length:
+                    raise SingularConfiguration(
+                        f"spring loads[{n}] ({_body_name(model, ld.bi)} - {_body_name(model, ld.bj)}): its "
+                        f"attachment points coincide while its free length is {ld.free_length:g} m: the "
+                        "direction of its force is undefined")
+                F = -ld.stiffness * (length - ld.free_length) * dvec / length
             for b, point, sign in ((ld.bi, pi, 1.0), (ld.bj, pj, -1.0)):
                 if b >= 0:
                     Q[b] += generalized_force(model, f, b, point, sign * F)
     return Q.reshape(-1)
+
+
+def _body_name(model: Model, b: int) -> str:
+    return "base" if b < 0 else model.body_names[b]
 
 
 def normalized_coordinates(model: Model, q: np.ndarray) -> np.ndarray:

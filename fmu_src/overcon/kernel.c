@@ -845,9 +845,13 @@ int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, 
             double len2 = 0.0;
             for (int i = 0; i < d; i++) { dv[i] = pi[i] - pj[i]; len2 += dv[i] * dv[i]; }
             double len = sqrt(len2), L0 = lp[10];
-            if (len < 1e-12 * (L0 > 1.0 ? L0 : 1.0)) { status = OVK_SPRING; goto done; }
             double F[3] = {0};
-            for (int i = 0; i < d; i++) F[i] = -lp[9] * (len - L0) * dv[i] / len;
+            if (L0 == 0.0) { /* -k d: defined at coinciding points too */
+                for (int i = 0; i < d; i++) F[i] = -lp[9] * dv[i];
+            } else {
+                if (len < 1e-12 * L0) { status = OVK_SPRING; goto done; }
+                for (int i = 0; i < d; i++) F[i] = -lp[9] * (len - L0) * dv[i] / len;
+            }
             for (int side = 0; side < 2; side++) {
                 int b = side ? bj : bi, sl = side ? sj : si;
                 double sign = side ? -1.0 : 1.0, *pt = side ? pj : pi;

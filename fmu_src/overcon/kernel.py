@@ -11,7 +11,7 @@ built from these joints); gravity, forces, torques, springs; friction laws ``reg
 ``stribeck``; up to :data:`MAX_FRICTION` friction joints. Anything else runs on the numpy path
 (the reason is logged). Within an evaluation, whatever the numpy path reports or falls back on
 (a singular position, the friction solve's fixed-point fallback, an Euler singularity, a spring
-of zero length, a non-finite number) makes the kernel return a status, and that evaluation is
+of positive free length whose points coincide, a non-finite number) makes the kernel return a status, and that evaluation is
 repeated on the numpy path, which raises or falls back exactly as without the kernel: the kernel
 never changes what fails or how, and the robust friction fallback exists once, in
 :mod:`overcon.dynamics`.
@@ -130,13 +130,21 @@ def compile_library(out: Path, cc: list[str] | None = None) -> Path:
         cmd = [*cc, *CFLAGS, "-o", str(tmp_out), str(SOURCE), *LIBS]
         run = subprocess.run(cmd, capture_output=True, text=True)
         if run.returncode != 0:
-            raise OSError(f"compiling the kernel failed ({shlex.join(cmd)}): {run.stderr.strip()[-2000:]}")
+            said = (run.stderr.strip() or run.stdout.strip())[-2000:] or "no output"
+            raise OSError(f"compiling the kernel failed ({shlex.join(cmd)}): exit status {run.returncode}: {said}")
         os.replace(tmp_out, out)  # atomic: concurrent processes never load a half-written file
     return out
 
 
+def _cache_base() -> tuple[Path, str]:
+    """(the cache directory, where it comes from)."""
+    if os.environ.get("OVERCON_CACHE_DIR"):
+        return Path(os.environ["OVERCON_CACHE_DIR"]), "OVERCON_CACHE_DIR"
+    return Path.home() / ".cache" / "overcon", "the default cache"
+
+
 def _cache_path(cc: list[str]) -> Path:
-    base = Path(os.environ.get("OVERCON_CACHE_DIR") or Path.home() / ".cache" / "overcon")
+    base = _cache_base()[0]
     key = hashlib.sha256(SOURCE.read_bytes() + "\0".join([*cc, *CFLAGS, platform.machine()]).encode()).hexdigest()
     return base / f"kernel-{key[:16]}" / library_name()
 
@@ -149,9 +157,16 @@ def library():
         cc = compiler()
         try:
             path = _cache_path(cc)
-            if not path.exists():
-                compile_library(path, cc)
-            _state["lib"], _state["path"] = _bind(path), str(path)
+            try:
+                if not path.exists():
+                    compile_library(path, cc)
+                lib = _bind(path)
+            except OSError as exc:
+                if not path.exists() or not SOURCE.exists():
+                    raise OSError(f"{exc} (cache: {_cache_base()[1]} = {_cache_base()[0]})") from exc
+                compile_library(path, cc)  # a damaged or foreign file in the cache: compiled again, once
+                lib = _bind(path)
+            _state["lib"], _state["path"] = lib, str(path)
         except (OSError, RuntimeError) as exc:  # RuntimeError: no home directory for the default cache
             _state["reason"] = str(exc)
     return _state["lib"], _state["reason"]
@@ -161,13 +176,17 @@ def library():
 
 def support(model) -> str | None:
     """None if the kernel covers ``model``, else the reason it does not."""
+    from .joints import TYPES
+
     if model.kind == "spatial" and model.rotation != "euler_zxz":
         return f"rotation {model.rotation!r} (the kernel has z-x-z Euler angles only)"
     for c in model.joints:
         if (model.kind, c.type) not in _JOINTS:
-            return f"joint {c.name}: type {c.type!r} in a {model.kind} mechanism"
+            covered = "revolute, translational" if model.kind == "planar" else "spherical"
+            return (f"joint {c.name}: {model.kind} {TYPES[c.type].name} joints are not covered by the compiled "
+                    f"kernel (it has {model.kind} {covered})")
         if c.law is not None and c.law.name not in _LAWS:
-            return f"joint {c.name}: friction law {c.law.name!r}"
+            return f"joint {c.name}: friction law {c.law.name!r} (the kernel has regularised and stribeck)"
     for ld in model.loads:
         if ld.type not in _LOADS:
             return f"load type {ld.type!r}"
@@ -343,6 +362,12 @@ class Kernel:
         self._lam_in[:] = lam
         self._out_fn(self._pm, self._ptrs[0], plam, preac, pfric)
         return self._reac, self._fric
+
+
+def refusal(model, solver) -> str | None:
+    """Why a scene whose solver asks for ``kernel = "c"`` cannot run it in an FMU of this build
+    (the model is not covered), or None (``check`` and ``build`` refuse such a scene)."""
+    return support(model) if getattr(solver, "kernel", "auto") == "c" else None
 
 
 def select(model, solver):

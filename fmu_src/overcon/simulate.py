@@ -152,6 +152,9 @@ class Simulation:
         except kernel_mod.KernelUnavailable as exc:
             raise SimulationError(f"cannot start: {exc}") from exc
         self.kernel_repeats = 0  # evaluations the kernel handed back to the numpy path
+        # auto, a model the kernel covers, and yet no library (none compiled, or it cannot be loaded)
+        self.kernel_missing = (self._kernel is None and self.solver.kernel == "auto"
+                               and kernel_mod.support(model) is None)
         self.lam = None  # last converged multipliers (friction warm start)
         self._warm = _ForcesHistory()  # friction forces of the integration's solves (warm start)
         self._step_warm = _ForcesHistory()  # the latest ones at the last two step ends (outputs' warm start)

@@ -238,6 +238,9 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
     except (ModelError, ValueError, OSError) as exc:
         return done("invalid", f"{path}: {exc}")
     res.name = spec.name
+    why = kernel_mod.refusal(model, spec.solver)
+    if why is not None:  # the FMU could never start with its own solver settings
+        return done("invalid", f"{path}: solver.kernel = 'c': the compiled kernel cannot run: {why}")
     report = precheck(model, str(path))
     res.motion_unique = bool(report.motion_unique)
     echo(f"{spec.name}: pre-check: {_verdict(report)}")

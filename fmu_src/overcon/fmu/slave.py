@@ -529,6 +529,9 @@ class OverconSlave:
         self._mode = Mode.STEPPING
         self.log(f"initialized at t = {self._t!r} s: method {self._params['solver.method']}, tolerance "
                  f"{self._params['solver.tolerance']!r}; {self._sim.kernel_note}", Status.OK)
+        if self._sim.kernel_missing:  # the FMU's own library should run this model: say it is slower
+            self.log(f"the compiled kernel this FMU carries cannot be used ({self._sim.kernel_note}); it runs "
+                     "on numpy and scipy alone, the same results, several times slower", Status.WARNING)
         self._publish()
 
     def do_step(self, current_time: float, step_size: float, no_set_fmu_state_prior: int = 0):

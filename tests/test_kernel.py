@@ -445,3 +445,19 @@ def test_fmu_warns_when_its_library_cannot_be_used(tmp_path):
     inst.free()
     warnings = [m for status, _, m in logs.records if status == 1]
     assert any("the compiled kernel this FMU carries cannot be used" in m and "cannot load" in m for m in warnings)
+
+
+def test_set_values_outside_their_rule_refused_before_running(tmp_path, capsys):
+    """overcon run/compare --set on an overcon FMU: a value outside the parameter's rule (an
+    unknown solver.kernel, a tolerance out of range) is bad input (exit 2) before any run."""
+    from overcon.cli import main
+    from overcon.fmu.build import build_scene
+
+    r = build_scene(MECH / "planar_none_wo4.toml", tmp_path, echo=lambda *a: None)
+    for setting, why in (("solver.kernel=fast", "must be one of auto, c, numpy"),
+                         ("solver.tolerance=5", "must be in [1e-14, 0.01]")):
+        assert main(["run", str(r.fmu), "--set", setting, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert f"--set {setting}: {why}" in err and "FAILED" not in err
+        assert not (tmp_path / "o" / "planar_none_wo4.csv").exists()
+    assert main(["run", str(r.fmu), "--set", "solver.kernel=numpy", "--stop-time", "0.1", "--out", str(tmp_path / "o")]) == 0

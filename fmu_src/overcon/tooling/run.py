@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..params import MAX_OUTPUT_POINTS
+from ..params import MAX_OUTPUT_POINTS, check_param
 from . import InputError, SimulationFailed
 from .fmus import FmuInfo
 
@@ -94,8 +94,10 @@ _CONVERT = {"Real": float, "Integer": int, "String": str,
 
 def start_values_for(info: FmuInfo, settings: dict[str, str]) -> dict:
     """The ``--set`` values typed for ``info``'s parameters; :class:`InputError` naming the FMU and
-    the parameter when it has no such parameter or the value does not fit its type (the FMU
-    itself then checks the range, and a refused value fails the run with the FMU's reason)."""
+    the parameter when it has no such parameter, the value does not fit its type, or (an overcon
+    FMU) the value is outside the parameter's rule in :mod:`overcon.params` (the same rule the FMU
+    applies, so the run is refused before anything starts rather than failing in it; another
+    tool's FMU checks its ranges itself)."""
     out = {}
     for name, text in settings.items():
         typ = info.parameters.get(name)
@@ -107,6 +109,13 @@ def start_values_for(info: FmuInfo, settings: dict[str, str]) -> dict:
             out[name] = _CONVERT[typ](text)
         except (ValueError, KeyError) as exc:
             raise InputError(f"{info.path}: --set {name}={text}: not a valid {typ} value") from exc
+        if info.motion_unique is not None:  # an overcon FMU: its parameters obey overcon.params
+            try:
+                reason = check_param(name, out[name])
+            except KeyError:  # a parameter without a rule (none today)
+                reason = None
+            if reason is not None:
+                raise InputError(f"{info.path}: --set {name}={text}: {reason}")
     return out
 
 

@@ -11,16 +11,17 @@ built from these joints); gravity, forces, torques, springs; friction laws ``reg
 ``stribeck``; up to :data:`MAX_FRICTION` friction joints. Anything else runs on the numpy path
 (the reason is logged). Within an evaluation, whatever the numpy path reports or falls back on
 (a singular position, the friction solve's fixed-point fallback, an Euler singularity, a spring
-of positive free length whose points coincide, a non-finite number) makes the kernel return a status, and that evaluation is
-repeated on the numpy path, which raises or falls back exactly as without the kernel: the kernel
-never changes what fails or how, and the robust friction fallback exists once, in
-:mod:`overcon.dynamics`.
+of positive free length whose points coincide, a non-finite number) makes the kernel return a
+status, and that evaluation is repeated on the numpy path, which raises or falls back exactly as
+without the kernel: the kernel never changes what fails or how, and the robust friction fallback
+exists once, in :mod:`overcon.dynamics`.
 
 Selection (decided here): the solver setting ``kernel`` (scene ``[solver] kernel``, FMU parameter
 ``solver.kernel``): ``"auto"`` (default) uses the kernel where it covers the model and a compiled
 library is at hand, else numpy; ``"c"`` requires it (a clear error otherwise); ``"numpy"`` never
 uses it. Both paths implement the same formulas in the same order; they agree to round-off
-(tests/test_kernel.py checks <= 1e-12 relative per evaluation and whole runs). A run says which
+(tests/test_kernel.py: <= 1e-12 relative per evaluation, and fixed-step runs without friction;
+adaptive runs differ by the integration error, as on another CPU). A run says which
 path it took (:attr:`overcon.simulate.Simulation.kernel_note`, logged by the FMU at
 instantiation).
 
@@ -349,7 +350,6 @@ class Kernel:
             return None
         return self._ydot.copy(), self._lam.copy(), self._qf[: self._ncols].copy(), self._its.value
 
-
     def outputs(self, y: np.ndarray, lam: np.ndarray):
         """(reactions (nj, 6), friction outputs (nj,)) at y and the multipliers lam (m,), every
         joint in model order: the reaction components of the joint type (3: planar Fx, Fy, T;
@@ -360,7 +360,8 @@ class Kernel:
         plam, preac, pfric = self._out_ptrs
         self._y[:] = y
         self._lam_in[:] = lam
-        self._out_fn(self._pm, self._ptrs[0], plam, preac, pfric)
+        if self._out_fn(self._pm, self._ptrs[0], plam, preac, pfric):
+            raise MemoryError("the compiled kernel could not allocate its work space for the outputs")
         return self._reac, self._fric
 
 

@@ -626,6 +626,30 @@ static double maxabs(const double *a, int n) { /* max |a_i|, NaN if any is NaN (
     return m;
 }
 
+/* r = lam0x + Wx qf - x: the residual of the friction fixed point (nx). */
+static void residual(int nx, int nc, const double *lam0x, const double *Wx, const double *qf, const double *x,
+                     double *r) {
+    for (int a = 0; a < nx; a++) {
+        double t = 0.0;
+        for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * qf[c];
+        r[a] = lam0x[a] + t - x[a];
+    }
+}
+
+/* The Newton matrix I - Wx dqf/dx at the multipliers of the last force evaluation, LU-factored in
+ * Mx (nx x nx) with piv; Dq (ncols x nx) is work space. Returns nonzero on an exact zero pivot. */
+static int newton_matrix(fsolve_t *s, const double *Wx, double *Dq, double *Mx, int *piv) {
+    int nx = s->M->nx, nc = s->M->ncols;
+    jacobian_reduced(s, Dq);
+    for (int a = 0; a < nx; a++)
+        for (int b = 0; b < nx; b++) {
+            double t = 0.0;
+            for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * Dq[c * nx + b];
+            Mx[a * nx + b] = (a == b ? 1.0 : 0.0) - t;
+        }
+    return lu_factor(Mx, nx, piv);
+}
+
 /* Newton on x = lam0x + Wx qf(x) (dynamics._newton_reduced). Returns 1 when converged. */
 static int newton_reduced(fsolve_t *s, const double *lam0x, const double *Wx /* nx x ncols */, double *x,
                           double *qf, int *iters, double *work) {
@@ -638,25 +662,14 @@ static int newton_reduced(fsolve_t *s, const double *lam0x, const double *Wx /* 
     for (int it = 1; it <= n_max; it++) {
         *iters = it;
         forces_reduced(s, x, qf);
-        for (int a = 0; a < nx; a++) {
-            double t = 0.0;
-            for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * qf[c];
-            r[a] = lam0x[a] + t - x[a];
-        }
+        residual(nx, nc, lam0x, Wx, qf, x, r);
         double res = maxabs(r, nx);
         if (!isfinite(res)) return 0;
         if (res <= M->tol * (1.0 + maxabs(x, nx))) return 1;
         growth = res >= prev ? growth + 1 : 0;
         if (growth >= 2 || it == n_max) return 0;
         if (!have_lu || res > NEWTON_REFRESH * prev) {
-            jacobian_reduced(s, Dq);
-            for (int a = 0; a < nx; a++)
-                for (int b = 0; b < nx; b++) {
-                    double t = 0.0;
-                    for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * Dq[c * nx + b];
-                    Mx[a * nx + b] = (a == b ? 1.0 : 0.0) - t;
-                }
-            if (lu_factor(Mx, nx, piv)) return 0;
+            if (newton_matrix(s, Wx, Dq, Mx, piv)) return 0;
             have_lu = 1;
         }
         prev = res;
@@ -682,11 +695,7 @@ static int damped_newton_reduced(fsolve_t *s, const double *lam0x, const double 
     int piv[OVK_MAX_FRICTION * 3];
     forces_reduced(s, x, qf);
     int evals = 1;
-    for (int a = 0; a < nx; a++) {
-        double t = 0.0;
-        for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * qf[c];
-        r[a] = lam0x[a] + t - x[a];
-    }
+    residual(nx, nc, lam0x, Wx, qf, x, r);
     for (;;) {
         *iters = evals;
         double res = maxabs(r, nx);
@@ -694,14 +703,7 @@ static int damped_newton_reduced(fsolve_t *s, const double *lam0x, const double 
         if (res <= M->tol * (1.0 + maxabs(x, nx))) return 1;
         if (evals >= n_max) return 0;
         /* the Jacobian at x: s->flam holds x's multipliers (the last forces_reduced was at x) */
-        jacobian_reduced(s, Dq);
-        for (int a = 0; a < nx; a++)
-            for (int b = 0; b < nx; b++) {
-                double t = 0.0;
-                for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * Dq[c * nx + b];
-                Mx[a * nx + b] = (a == b ? 1.0 : 0.0) - t;
-            }
-        if (lu_factor(Mx, nx, piv)) return 0;
+        if (newton_matrix(s, Wx, Dq, Mx, piv)) return 0;
         memcpy(dx, r, sizeof(double) * nx);
         lu_solve(Mx, nx, piv, dx);
         double step = 1.0;
@@ -710,11 +712,7 @@ static int damped_newton_reduced(fsolve_t *s, const double *lam0x, const double 
             forces_reduced(s, xn, qn);
             evals++;
             *iters = evals;
-            for (int a = 0; a < nx; a++) {
-                double t = 0.0;
-                for (int c = 0; c < nc; c++) t += Wx[a * nc + c] * qn[c];
-                rn[a] = lam0x[a] + t - xn[a];
-            }
+            residual(nx, nc, lam0x, Wx, qn, xn, rn);
             if (maxabs(rn, nx) < (1.0 - ARMIJO * step) * res) break;
             step *= 0.5;
             if (step < ARMIJO || evals >= n_max) return 0;

@@ -28,7 +28,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define OVK_ABI 2
+#define OVK_ABI 3
 
 enum { OVK_OK = 0, OVK_SINGULAR = 1, OVK_FRICTION = 2, OVK_EULER = 3, OVK_NONFINITE = 4, OVK_SPRING = 5,
        OVK_NOMEM = 6 };
@@ -67,6 +67,7 @@ typedef struct {
     const int *fgroup;     /* nfg + 1: start of each friction group in fj */
     const int *fx;         /* nfj * 3: x index per equation (nx = eliminated) */
     const int *fci, *fcj;  /* nfj * 6: index into cols per coordinate of body i, j (ncols = base) */
+    const int *rbody;      /* nR * 2: the bodies (-1 base) of each retained row: Phi_h is zero elsewhere */
 } ovk_model;
 
 int ovk_abi(void) { return OVK_ABI; }
@@ -737,7 +738,7 @@ int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, 
     size_t need = (size_t)(nb + 1) * (2 * d + d * d + wd) + 4 * (size_t)nb /* frames */
                   + (size_t)m * (nh + 2) /* J, phi, gamma */ + (size_t)nR * (nR + 2) /* S, g, lamR */
                   + (size_t)nh /* Q */ + (size_t)nR * nc /* W */ + (size_t)nx * (nc + 3)
-                  + (size_t)nc * nx + (size_t)nx * nx + (size_t)nR + 5 * (size_t)nx + 2 * (size_t)nc + 64;
+                  + (size_t)nc * nx + (size_t)nx * nx + 18 * (size_t)M->nj + 5 * (size_t)nx + 2 * (size_t)nc + 64;
     double *mem = malloc(need * sizeof(double));
     fctx_t *ctx = M->nfj ? malloc(sizeof(fctx_t) * M->nfj) : NULL;
     if (!mem || (M->nfj && !ctx)) { free(mem); free(ctx); return OVK_NOMEM; }
@@ -757,15 +758,17 @@ int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, 
     double *lamR = p; p += nR;
     double *Q = p; p += nh;
     double *W = p; p += (size_t)nR * nc;
-    int *rb = (int *)p; p += nR; /* 2 nR ints: the (at most two) bodies of each retained row */
+    double *Jblk = p; p += 18 * (size_t)M->nj; /* every joint's (J_X)_i block, for the friction setup */
+    const int *rb = M->rbody;
     double *work = p;
 
     build_frames(M, q, h, &f);
     /* Phi, Phi_h, gamma */
     memset(J, 0, sizeof(double) * m * nh);
-    double blkI[18], blkJ[18], ph[3], gm[3];
+    double blkJ[18], ph[3], gm[3];
     for (int j = 0; j < M->nj; j++) {
         int ne = M->jneq[j];
+        double *blkI = Jblk + 18 * j;
         joint_rows(M, &f, j, ph, blkI, blkJ, gm);
         if (M->jtype[j] == J_TRANSLATIONAL) {
             double pi = M->jbi[j] >= 0 ? q[M->jbi[j] * M->nq_b + 2] : 0.0;
@@ -782,13 +785,6 @@ int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, 
                 for (int k = 0; k < kh; k++) J[(size_t)row * nh + M->jbj[j] * kh + k] += blkJ[e * kh + k];
         }
     }
-    /* the bodies of each retained row: Phi_h is zero elsewhere */
-    for (int j = 0; j < M->nj; j++)
-        for (int e = 0; e < M->jneq[j]; e++) {
-            int row = M->jrows[3 * j + e];
-            for (int i = 0; i < nR; i++)
-                if (M->retained[i] == row) { rb[2 * i] = M->jbi[j]; rb[2 * i + 1] = M->jbj[j]; }
-        }
     double a = M->baumgarte;
     for (int i = 0; i < nR; i++) {
         int row = M->retained[i];
@@ -929,11 +925,8 @@ int ovk_evaluate(const ovk_model *M, double t, const double *y, int guess_mode, 
             }
         }
         double flam[3 * OVK_MAX_FRICTION], Qib[6 * OVK_MAX_FRICTION], Qjb[6 * OVK_MAX_FRICTION];
-        for (int nfr = 0; nfr < M->nfj; nfr++) { /* the planar setup needs the joint's (J_X)_i block */
-            int j = M->fj[nfr];
-            if (M->jtype[j] != J_SPHERICAL) joint_rows(M, &f, j, ph, blkI, blkJ, gm);
-            friction_setup(M, &f, j, blkI, ctx + nfr);
-        }
+        for (int nfr = 0; nfr < M->nfj; nfr++) /* the planar setup needs the joint's (J_X)_i block */
+            friction_setup(M, &f, M->fj[nfr], Jblk + 18 * M->fj[nfr], ctx + nfr);
         fsolve_t s = {M, ctx, flam, Qib, Qjb};
         double *x0 = nwork; /* the start, kept for the damped solve */
         nwork += nx;

@@ -47,12 +47,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .spec import KERNELS  # noqa: F401  (the values of the solver setting ``kernel``)
-
 SOURCE = Path(__file__).with_name("kernel.c")
 CFLAGS = ["-shared", "-fPIC", "-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"]
 LIBS = ["-lm"]
-ABI = 2  # OVK_ABI in kernel.c: the layout of _CModel
+ABI = 3  # OVK_ABI in kernel.c: the layout of _CModel
 MAX_FRICTION = 32  # OVK_MAX_FRICTION in kernel.c
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
@@ -203,7 +201,8 @@ class _CModel(ctypes.Structure):
                 + [("baumgarte", ctypes.c_double), ("tol", ctypes.c_double)]
                 + [(n, ctypes.c_void_p) for n in ("retained", "Minv", "mass", "inertia", "gravity", "jtype", "jbi",
                                                   "jbj", "jneq", "jrows", "jconst", "jlaw", "jlawp", "ltype", "lbi",
-                                                  "lbj", "lp", "xrows", "cols", "fj", "fgroup", "fx", "fci", "fcj")])
+                                                  "lbj", "lp", "xrows", "cols", "fj", "fgroup", "fx", "fci", "fcj",
+                                                  "rbody")])
 
 
 def _joint_constants(model, c) -> np.ndarray:
@@ -298,6 +297,8 @@ class Kernel:
         m.xrows, m.cols = arr(plan.friction_xrows, I32), arr(plan.friction_cols, I32)
         m.fj, m.fgroup = arr(fj, I32), arr(fgroup, I32)
         m.fx, m.fci, m.fcj = arr(fx, I32), arr(fci, I32), arr(fcj, I32)
+        bodies_of_row = {r: (c.bi, c.bj) for c in joints for r in c.rows}
+        m.rbody = arr([bodies_of_row[int(r)] for r in model.retained], I32)
         self._cmodel = m
         self._pm = ctypes.addressof(m)
         n_y = model.n + model.nh

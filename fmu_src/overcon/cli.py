@@ -247,13 +247,11 @@ def cmd_simulate(args) -> int:
     spec, model = _load(args)
     for w in friction_warnings(model):
         print(f"overcon: warning: {w}", file=sys.stderr)
-    if spec.solver.kernel == "c":  # asked for a kernel that cannot run here: bad input, not a failed run
-        from .kernel import KernelUnavailable, select
-        try:
-            select(model, spec.solver)
-        except KernelUnavailable as exc:
-            where = "--kernel c" if args.kernel else f"{args.file}: solver.kernel = 'c'"
-            return _input_error(f"{where}: the compiled kernel cannot run: {exc.reason}")
+    from .kernel import refusal
+    why = refusal(model, spec.solver, here=True)  # a kernel that cannot run here: bad input, not a failed run
+    if why is not None:
+        where = "--kernel c" if args.kernel else f"{args.file}: solver.kernel = 'c'"
+        return _input_error(f"{where}: the compiled kernel cannot run: {why}")
     start = time.perf_counter()
     try:
         res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS, max_wall_time=args.max_wall_time or MAX_WALL_TIME)

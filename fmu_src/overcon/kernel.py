@@ -63,12 +63,10 @@ NJC, NLP, NLD = 12, 5, 11  # doubles per joint, per friction law, per load (kern
 
 
 class KernelUnavailable(RuntimeError):
-    """``kernel = "c"`` was asked for and the kernel cannot run (the message says why; ``reason``
-    is the why alone)."""
+    """``kernel = "c"`` was asked for and the kernel cannot run (the message says why)."""
 
     def __init__(self, reason: str):
         super().__init__(f"solver.kernel = 'c': {reason}")
-        self.reason = reason
 
 
 # ----------------------------------------------------------------------------- the library
@@ -366,10 +364,24 @@ class Kernel:
         return self._reac, self._fric
 
 
-def refusal(model, solver) -> str | None:
-    """Why a scene whose solver asks for ``kernel = "c"`` cannot run it in an FMU of this build
-    (the model is not covered), or None (``check`` and ``build`` refuse such a scene)."""
-    return support(model) if getattr(solver, "kernel", "auto") == "c" else None
+def _unavailable(model) -> str | None:
+    """Why the kernel cannot run ``model`` in this process (not covered, or no library), or None."""
+    why = support(model)
+    if why is None:
+        lib, reason = library()
+        if lib is None:
+            why = f"no compiled kernel: {reason}"
+    return why
+
+
+def refusal(model, solver, *, here: bool = False) -> str | None:
+    """Why a solver that asks for ``kernel = "c"`` cannot have it, or None (also for another
+    choice): the model is not covered, and with ``here`` (a run in this process) no library is at
+    hand either. ``check`` and ``build`` ask without ``here`` (an FMU carries its own library),
+    ``simulate`` with it: all three refuse such a scene as bad input."""
+    if getattr(solver, "kernel", "auto") != "c":
+        return None
+    return _unavailable(model) if here else support(model)
 
 
 def select(model, solver):
@@ -378,11 +390,9 @@ def select(model, solver):
     choice = getattr(solver, "kernel", "auto")
     if choice == "numpy":
         return None, "right-hand side: numpy (solver.kernel = 'numpy')"
-    why = support(model)
-    lib, reason = (None, None) if why else library()
-    if why or lib is None:
-        why = why or f"no compiled kernel: {reason}"
+    why = _unavailable(model)
+    if why is not None:
         if choice == "c":
             raise KernelUnavailable(why)
         return None, f"right-hand side: numpy (solver.kernel = 'auto': {why})"
-    return Kernel(lib, model, solver), f"right-hand side: compiled kernel ({_state['path']})"
+    return Kernel(_state["lib"], model, solver), f"right-hand side: compiled kernel ({_state['path']})"

@@ -174,21 +174,30 @@ class Simulation:
             raise SimulationError(f"cannot start: {where}{exc}") from exc
 
     # -- right-hand side -------------------------------------------------------------------
-    def _evaluate(self, t: float, y: np.ndarray, lam_guess, qf_guess):
-        """(y', lam, qf, friction iterations) at (t, y): the compiled kernel's when this run has
-        one and it succeeds, else (and for every evaluation it hands back: a singular position, the
-        friction solve's fallback, ...) :func:`overcon.dynamics.evaluate` and the coordinate rates.
-        Warm start as :func:`overcon.dynamics.evaluate` (``qf_guess``, then ``lam_guess``)."""
+    def _solve(self, t: float, y: np.ndarray, lam_guess, qf_guess):
+        """One evaluation of Eq. 18 at (t, y): (the compiled kernel's (y', lam, qf, friction
+        iterations), None) when this run has one and it succeeds, else (None, the
+        :func:`overcon.dynamics.evaluate` Evaluation), also for every evaluation the kernel hands
+        back (a singular position, the friction solve's fallback, ...). Warm start as
+        :func:`overcon.dynamics.evaluate` (``qf_guess``, then ``lam_guess``)."""
         failed = 0
         if self._kernel is not None:
             r = self._kernel.evaluate(t, y, lam_guess, qf_guess)
             if r is not None:
-                return r
+                return r, None
             self.kernel_repeats += 1
             failed = self._kernel.newton_failed()
-        q, h = y[: self.n], y[self.n:]
-        ev = evaluate(self.model, t, q, h, lam_guess, solver=self.solver, qf_guess=qf_guess, newton_failed=failed)
-        return np.concatenate([coordinate_rates(self.model, q, h, ev.frames), ev.hdot]), ev.lam, ev.qf, ev.iterations
+        return None, evaluate(self.model, t, y[: self.n], y[self.n:], lam_guess, solver=self.solver,
+                              qf_guess=qf_guess, newton_failed=failed)
+
+    def _evaluate(self, t: float, y: np.ndarray, lam_guess, qf_guess):
+        """(y', lam, qf, friction iterations) at (t, y) (:meth:`_solve`; the numpy path adds the
+        coordinate rates)."""
+        r, ev = self._solve(t, y, lam_guess, qf_guess)
+        if r is not None:
+            return r
+        rates = coordinate_rates(self.model, y[: self.n], y[self.n:], ev.frames)
+        return np.concatenate([rates, ev.hdot]), ev.lam, ev.qf, ev.iterations
 
     def _rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         out, lam, qf, iterations = self._evaluate(t, y, self.lam, self._warm.guess(t))
@@ -296,24 +305,16 @@ class Simulation:
         if not plan.size:
             return np.zeros(0)
         last = self._last_eval
-        q, h = y[: self.n], y[self.n:]
         f = None
         if last is not None and last[0] == t and np.array_equal(last[1], y):
             lam = last[2]
         else:
             warm = self._step_warm if self._step_warm.items else self._warm
-            lam_guess = None if self.lam is None else self.lam.copy()
-            r = None if self._kernel is None else self._kernel.evaluate(t, y, lam_guess, warm.guess(t))
-            if r is not None:
-                lam = r[1]
-            else:
-                failed = 0 if self._kernel is None else self._kernel.newton_failed()
-                ev = evaluate(model, t, q, h, lam_guess, solver=self.solver, qf_guess=warm.guess(t),
-                              newton_failed=failed)
-                f, lam = ev.frames, ev.lam
+            r, ev = self._solve(t, y, None if self.lam is None else self.lam.copy(), warm.guess(t))
+            f, lam = (None, r[1]) if r is not None else (ev.frames, ev.lam)
         if self._kernel is not None:
             return plan.values_from_kernel(*self._kernel.outputs(y, lam))
-        return plan.values(model, frames(model, q, h) if f is None else f, lam)
+        return plan.values(model, frames(model, y[: self.n], y[self.n:]) if f is None else f, lam)
     # -- state -----------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {"integrator": self._integrator.get_state(),
@@ -390,13 +391,9 @@ class _DerivedPlan:
             slot += width
         self.reactions = {n: (np.array(p, np.intp), np.array(s, np.intp)) for n, (p, s) in self.reactions.items()}
         # the same outputs from the compiled kernel's per-joint table (overcon.kernel.Kernel.outputs):
-        # (joint, component, output slot) as flat index arrays
-        kj, kc, ks = [], [], []
-        for j in model.reaction_joints:
-            for comp in range(len(model.joints[j].components)):
-                kj.append(j)
-                kc.append(comp)
-        ks = list(range(len(kj)))
+        # (joint, component) of every reaction output, in output order (slots 0, 1, ...)
+        pairs = [(j, comp) for j in model.reaction_joints for comp in range(len(model.joints[j].components))]
+        n_reac = len(pairs)
         self.friction = []  # (module, stacked constants, multiplier rows (k, n_eq), output slots (k,))
         by_type: dict[str, list] = {}
         for j in model.friction_outputs:
@@ -407,17 +404,16 @@ class _DerivedPlan:
             self.friction.append((js[0].module, js[0].module.stack(js), np.array([c.rows for c in js], np.intp),
                                   np.array([s for _, s in items], np.intp)))
         self.size = slot
-        self.kernel_reactions = (np.array(kj, np.intp), np.array(kc, np.intp), np.array(ks, np.intp))
-        self.kernel_friction = (np.array([j for j in model.friction_outputs], np.intp),
-                                np.arange(len(ks), slot, dtype=np.intp))
+        self.kernel_reactions = np.array(pairs, np.intp).reshape(-1, 2).T  # (joints, components)
+        self.kernel_friction = np.array(model.friction_outputs, np.intp)  # slots n_reac, n_reac + 1, ...
+        self.n_reactions = n_reac
 
     def values_from_kernel(self, reac: np.ndarray, fric: np.ndarray) -> np.ndarray:
         """The derived outputs from the kernel's table (:meth:`overcon.kernel.Kernel.outputs`)."""
         out = np.empty(self.size)
-        j, c, s = self.kernel_reactions
-        out[s] = reac[j, c]
-        j, s = self.kernel_friction
-        out[s] = fric[j]
+        j, c = self.kernel_reactions
+        out[: self.n_reactions] = reac[j, c]
+        out[self.n_reactions:] = fric[self.kernel_friction]
         return out
 
     def values(self, model: Model, f, lam: np.ndarray) -> np.ndarray:

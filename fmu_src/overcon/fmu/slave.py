@@ -40,8 +40,8 @@ Behaviour
   once the host has read one of them (fmpy's ``simulate_fmu`` reads every output, so for it
   nothing changes). A first read after steps that skipped them computes them at the current
   point (the same values the step would have stored); if that fails, that ``fmi2GetReal``
-  returns fmi2Error with the reason. ``fmi2GetReal``/``fmi2GetBoolean`` answer a list of value
-  references seen before (outputs, constants) with one copy.
+  returns fmi2Error with the reason. Repeated ``fmi2GetReal``/``fmi2GetBoolean`` of outputs are
+  answered by the binary (published values, below).
 * Published values: in an FMU the slave registers arrays it owns with the binary (once, at
   fmi2Instantiate, through the binary's ``register_published``): per value reference the slot of
   a Real output (or -1) and the value of a constant Boolean output (or -1), the published outputs
@@ -205,7 +205,6 @@ class OverconSlave:
         self._next_state = 1
         self._strings: list[bytes] = []  # fmi2GetString's results, valid until the next call
         self._ref_cache: dict[tuple[str, bytes], list] = {}
-        self._fast_get: dict[tuple[str, bytes], tuple] = {}  # see _remember_get
         self._n_positions = len(self._model0.position_outputs)  # outputs before the reactions
         # published values (see the module docstring); fixed arrays: the binary keeps their addresses
         self._publishing = False
@@ -301,7 +300,6 @@ class OverconSlave:
         refs = self._refs(vr_address, n, typ)
         if n and not values_address:
             raise CallRefused(f"value is NULL but nvr = {n}")
-        self._remember_get(typ, vr_address, refs)
         if typ == "Real" and refs and all(v.key[0] == "output" for _, v in refs):
             if not self._have_outputs:
                 self._ensure_sim()
@@ -319,22 +317,6 @@ class OverconSlave:
         else:
             for i, x in enumerate(vals):
                 out[i] = int(bool(x)) if typ == "Boolean" else x
-
-    def _remember_get(self, typ: str, vr_address: int, refs) -> None:
-        """Cache how to answer this list of value references again (hosts read the same list every
-        step): Real outputs as an index array into the outputs, Real/Integer/Boolean constants as
-        their values. Parameters and strings always take the general path."""
-        n = len(refs)
-        if not n or len(self._fast_get) >= 256 or typ == "String":
-            return
-        raw = ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint))
-        kinds = {v.key[0] for _, v in refs}
-        if kinds == {"output"} and typ == "Real":
-            idx = np.array([v.key[1] for _, v in refs], np.intp)
-            self._fast_get[(typ, raw)] = (True, idx, ctypes.c_double * n, bool(idx.max() >= self._n_positions))
-        elif kinds == {"constant"}:
-            vals = [int(bool(v.key[1])) if typ == "Boolean" else v.key[1] for _, v in refs]
-            self._fast_get[(typ, raw)] = (False, vals, _C_TYPES[typ] * n, False)
 
     def _set(self, typ: str, vr_address: int, n: int, values_address: int) -> None:
         refs = self._refs(vr_address, n, typ)
@@ -356,39 +338,15 @@ class OverconSlave:
         return fmi_call(function, modes)(
             lambda self, vr_address, n, values_address: impl(self, typ, vr_address, n, values_address))
 
-    _get_real_checked = _accessor("fmi2GetReal", READABLE, _get, "Real")
+    get_real = _accessor("fmi2GetReal", READABLE, _get, "Real")
     get_integer = _accessor("fmi2GetInteger", READABLE, _get, "Integer")
-    _get_boolean_checked = _accessor("fmi2GetBoolean", READABLE, _get, "Boolean")
+    get_boolean = _accessor("fmi2GetBoolean", READABLE, _get, "Boolean")
     get_string = _accessor("fmi2GetString", READABLE, _get, "String")
     set_real = _accessor("fmi2SetReal", WRITABLE, _set, "Real")
     set_integer = _accessor("fmi2SetInteger", WRITABLE, _set, "Integer")
     set_boolean = _accessor("fmi2SetBoolean", WRITABLE, _set, "Boolean")
     set_string = _accessor("fmi2SetString", WRITABLE, _set, "String")
     del _accessor
-
-    def _get_cached(self, typ: str, vr_address: int, n: int, values_address: int) -> bool:
-        """Answer a get of a list seen before (see _remember_get) while the values are readable
-        and current, without the checked call's layers; False: take the checked call."""
-        if not (n and vr_address and values_address and self._have_outputs and self._mode in READABLE):
-            return False
-        fast = self._fast_get.get((typ, ctypes.string_at(vr_address, n * ctypes.sizeof(ctypes.c_uint))))
-        if fast is None or (fast[3] and self._derived_stale):
-            return False
-        outputs, arg, array_type, _ = fast
-        array_type.from_address(values_address)[:] = self._outputs[arg].tolist() if outputs else arg
-        return True
-
-    def get_real(self, vr_address: int, n: int, values_address: int):
-        """fmi2GetReal (the checked call, or the cached answer of :meth:`_get_cached`)."""
-        if self._get_cached("Real", vr_address, n, values_address):
-            return Status.OK
-        return self._get_real_checked(vr_address, n, values_address)
-
-    def get_boolean(self, vr_address: int, n: int, values_address: int):
-        """fmi2GetBoolean (the checked call, or the cached answer of :meth:`_get_cached`)."""
-        if self._get_cached("Boolean", vr_address, n, values_address):
-            return Status.OK
-        return self._get_boolean_checked(vr_address, n, values_address)
 
     def _set_param(self, name: str, value) -> None:
         tunable = name in self._tunable

@@ -246,11 +246,11 @@ def measure(fmu: FMU, method: str, setting: float, ref: np.ndarray | None, repea
 def reference(scene_path: Path, stop: float):
     """Positions (length columns) on the 1 ms grid: dop853 at 1e-13, and its check at 1e-11."""
     from overcon import scene as scene_mod
-    from overcon.model import compile_model
+    from overcon.checks import compile_checked
     from overcon.simulate import run
 
     spec = scene_mod.load(scene_path)
-    model = compile_model(spec)
+    model = compile_checked(spec)
     out = []
     for tol in (1e-13, 1e-11):
         r = run(model, spec.solver, stop_time=stop, output_interval=INTERVAL, method="dop853", tolerance=tol)
@@ -329,7 +329,7 @@ def stiff_rows(fmu: FMU, scene_path: Path, repeat: int) -> list[tuple[float, Row
 
     import fmpy
     from overcon import scene as scene_mod
-    from overcon.model import compile_model
+    from overcon.checks import compile_checked
     from overcon.simulate import run
 
     rows = []
@@ -338,7 +338,7 @@ def stiff_rows(fmu: FMU, scene_path: Path, repeat: int) -> list[tuple[float, Row
         sc = scene_mod.load(scene_path)
         sc = dataclasses.replace(sc, friction_params={k: dataclasses.replace(v, mu=1.0, v_reg=v_reg)
                                                       for k, v in sc.friction_params.items()})
-        r = run(compile_model(sc), sc.solver, stop_time=fmu.stop, output_interval=INTERVAL, method="radau", tolerance=1e-11)
+        r = run(compile_checked(sc), sc.solver, stop_time=fmu.stop, output_interval=INTERVAL, method="radau", tolerance=1e-11)
         ref = np.column_stack([r.column(c) for c in length_columns(r.names)])
         for method, tol in STIFF_RUNS:
             sv = {**start_values(method, tol), **params}
@@ -469,10 +469,10 @@ def limit_row(scene_path: Path, stop: float, method: str, tol: float, repeat: in
     from overcon import scene as scene_mod
     from overcon import simulate
     from overcon.evaluation import frames, jacobian_h
-    from overcon.model import compile_model
+    from overcon.checks import compile_checked
 
     spec = scene_mod.load(scene_path)
-    model = compile_model(spec)
+    model = compile_checked(spec)
     per_eval, res = {"c": [], "numpy": []}, None
     orig = simulate.Simulation._rhs
     for kernel in ("c", "numpy"):

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from overcon import scene as scene_mod
-from overcon.model import compile_model
+from overcon.checks import compile_checked
 from overcon import simulate
 from overcon.simulate import run
 
@@ -54,7 +54,7 @@ class _RhsTimer:
 
 def bench(path: Path, stop: float, repeat: int):
     spec = scene_mod.as_scene(scene_mod.load(path), stop_time=stop, tolerance=1e-8, source=str(path))
-    model = compile_model(spec)
+    model = compile_checked(spec)
     walls, rhs, res = [], [], None
     for _ in range(repeat):
         with _RhsTimer() as timer:

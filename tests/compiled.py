@@ -6,7 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-from overcon.model import Model, compile_model
+from overcon.model import Model
+from overcon.checks import compile_checked
 from overcon.scene import as_scene, load
 
 
@@ -16,7 +17,7 @@ def compiled_models(tmp: Path, write: Callable[[Path, str, int], Path]) -> Calla
 
     def get(jtype: str, seed: int) -> Model:
         if (jtype, seed) not in cache:
-            cache[jtype, seed] = compile_model(as_scene(load(write(tmp, jtype, seed))), check_initial=False)
+            cache[jtype, seed] = compile_checked(as_scene(load(write(tmp, jtype, seed))), check_initial=False)
         return cache[jtype, seed]
 
     return get

@@ -132,7 +132,7 @@ def test_check_json_is_the_typed_precheck_result_in_its_key_order(capsys):
     """``check --json`` is PrecheckResult.to_json(): the keys (and their order) users' scripts
     read, unchanged by the typed result."""
     from overcon import scene
-    from overcon.model import compile_model
+    from overcon.checks import compile_checked
     from overcon.precheck import PrecheckResult, precheck
 
     code, rep = check_json(capsys, MECH / "planar_f45_wo4.toml")
@@ -140,6 +140,6 @@ def test_check_json_is_the_typed_precheck_result_in_its_key_order(capsys):
                          "kind", "methods_agree", "friction", "friction_on_nonunique", "friction_set_unique",
                          "motion_unique", "eliminated", "elimination_mode", "problems", "warnings"]
     assert list(rep["joints"][0]) == ["name", "unique", "methods", "rank_defect", "agree", "type"]
-    result = precheck(compile_model(scene.load(MECH / "planar_f45_wo4.toml")), str(MECH / "planar_f45_wo4.toml"))
+    result = precheck(compile_checked(scene.load(MECH / "planar_f45_wo4.toml")), str(MECH / "planar_f45_wo4.toml"))
     assert isinstance(result, PrecheckResult) and result.to_json() == rep
     assert result.motion_unique is rep["motion_unique"] and result.reaction_unique["joint4"] is True

@@ -10,7 +10,8 @@ import pytest
 from overcon import scene
 from overcon.dynamics import evaluate
 from overcon.evaluation import applied_forces, constraints, frames, jacobian_h, physical_reaction
-from overcon.model import ModelError, compile_model
+from overcon.model import ModelError
+from overcon.checks import compile_checked
 from overcon.spec import SolverSpec
 from overcon.precheck import analyse_model
 from overcon.simulate import SimulationError, run_scene
@@ -23,7 +24,7 @@ def scene_of(name, **overrides):
 
 
 def model_of(name, **overrides):
-    return compile_model(scene_of(name, **overrides))
+    return compile_checked(scene_of(name, **overrides))
 
 
 @pytest.fixture(scope="module")
@@ -156,7 +157,7 @@ def test_bad_elimination_names_the_field_and_file(tmp_path, capsys):
 
 def test_auto_elimination_reports_choice_and_gives_same_motion(planar_runs):
     sc = scene_of("planar_sliders.toml", friction=[], eliminate="auto", stop_time=4.0, tolerance=1e-10)
-    m = compile_model(sc)
+    m = compile_checked(sc)
     assert m.elimination_mode == "auto" and len(m.eliminated) == 1
     r = run_scene(sc)
     assert max_diff(r, planar_runs[4], "slider1.x") <= 1e-9
@@ -195,7 +196,7 @@ def test_model_carries_no_solver_options():
     from overcon.simulate import Simulation
 
     sc = scene_of("planar_sliders.toml", eliminate=[4], stop_time=0.1)
-    m = compile_model(sc)
+    m = compile_checked(sc)
     assert m.scene.solver is None
     with pytest.raises(dataclasses.FrozenInstanceError):
         sc.solver.tolerance = 1e-6

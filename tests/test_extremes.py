@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from overcon import scene
-from overcon.model import compile_model
+from overcon.checks import compile_checked
 from overcon.precheck import precheck
 from overcon.joints import TYPES
 from overcon.simulate import InconsistentInitialState, Simulation, SimulationError, run_scene
@@ -83,7 +83,7 @@ def to_millimetres(sc: SceneSpec) -> SceneSpec:
                                         ("spatial_MN_wo9.toml", 0.5)])
 def test_unit_rescaling_same_verdicts_scaled_results(name, stop):
     sc = dataclasses.replace(with_solver(load(name, stop_time=stop), tolerance=1e-10), friction_outputs="all")
-    m_si, m_mm = compile_model(sc), compile_model(to_millimetres(sc))
+    m_si, m_mm = compile_checked(sc), compile_checked(to_millimetres(sc))
     r_si, r_mm = precheck(m_si), precheck(m_mm)
     for key in ("rank", "dof", "redundant", "friction_on_nonunique", "motion_unique"):
         assert getattr(r_si, key) == getattr(r_mm, key)
@@ -109,9 +109,9 @@ def test_inconsistent_q0_refused_naming_equations():
     bodies[2] = dataclasses.replace(bodies[2], q0=(2.0, 1.01, 0.0))  # link3 moved 1 cm off joint 4/6
     bad = dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies)))
     with pytest.raises(InconsistentInitialState, match=r"Phi8.*Phi12|Phi8"):
-        compile_model(bad)  # refused when compiled (check, simulate and build alike) ...
+        compile_checked(bad)  # refused when compiled (check, simulate and build alike) ...
     with pytest.raises(InconsistentInitialState, match=r"Phi8.*Phi12|Phi8"):
-        Simulation(compile_model(bad, check_initial=False), bad.solver)  # ... and by the Simulation itself
+        Simulation(compile_checked(bad, check_initial=False), bad.solver)  # ... and by the Simulation itself
 
 
 def test_inconsistent_h0_refused():
@@ -120,9 +120,9 @@ def test_inconsistent_h0_refused():
     bodies[0] = dataclasses.replace(bodies[0], h0=(0.0, 0.5, 0.0))  # slider1 moving off its guide
     bad = dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies)))
     with pytest.raises(InconsistentInitialState, match="velocit"):
-        compile_model(bad)
+        compile_checked(bad)
     with pytest.raises(InconsistentInitialState, match="velocit"):
-        Simulation(compile_model(bad, check_initial=False), bad.solver)
+        Simulation(compile_checked(bad, check_initial=False), bad.solver)
 
 
 # ------------------------------------------------------------------------------ singular positions

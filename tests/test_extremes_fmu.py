@@ -17,7 +17,7 @@ from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from overcon import scene as scene_mod  # noqa: E402
 from overcon.fmu.build import build_all  # noqa: E402
-from overcon.model import compile_model  # noqa: E402
+from overcon.checks import compile_checked  # noqa: E402
 from overcon.simulate import Simulation  # noqa: E402
 
 pytestmark = pytest.mark.integration
@@ -80,7 +80,7 @@ def in_process(name: str, times, method=None, mu=None):
     if mu is not None:
         sc = dataclasses.replace(sc, friction_params={k: dataclasses.replace(v, mu=mu)
                                                       for k, v in sc.friction_params.items()})
-    sim = Simulation(compile_model(sc), sc.solver, method=method)
+    sim = Simulation(compile_checked(sc), sc.solver, method=method)
     return np.array([sim.outputs(t, sim.advance(t)) for t in times])
 
 
@@ -121,7 +121,7 @@ def tight_reference():
     if not _TIGHT:
         sc = scene_mod.load(MECH / "planar_f45_wo4.toml")
         sc = dataclasses.replace(sc, solver=dataclasses.replace(sc.solver, tolerance=1e-11))
-        sim = Simulation(compile_model(sc), sc.solver, method="dop853")
+        sim = Simulation(compile_checked(sc), sc.solver, method="dop853")
         _TIGHT.append(np.array([sim.outputs(t, sim.advance(t)) for t in 0.5 * np.arange(1, 9)]))
     return _TIGHT[0]
 

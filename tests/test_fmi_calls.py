@@ -23,7 +23,7 @@ from overcon import scene as scene_mod  # noqa: E402
 from overcon.fmu import build as fmu_build  # noqa: E402
 from overcon.fmu.description import LOG_CATEGORIES  # noqa: E402
 from overcon.precheck import friction_warnings  # noqa: E402
-from overcon.model import compile_model  # noqa: E402
+from overcon.checks import compile_checked  # noqa: E402
 from overcon.simulate import run_scene  # noqa: E402
 
 from test_fmu import Logs  # noqa: E402
@@ -327,9 +327,9 @@ def test_friction_on_a_joint_whose_equations_are_all_eliminated_is_reported(tmp_
     scene = scene.replace('friction = ["joint4", "joint5"]', 'friction = ["joint7"]')
     scene = scene.replace("eliminate = [4]", "eliminate = [4, 13, 14]")
     (tmp_path / "planar_dup.toml").write_text(scene)
-    model = compile_model(scene_mod.load(tmp_path / "planar_dup.toml"))
+    model = compile_checked(scene_mod.load(tmp_path / "planar_dup.toml"))
     assert [w.split(",")[0] for w in friction_warnings(model)] == ["friction on joint joint7"]
-    assert friction_warnings(compile_model(scene_mod.load(MECH / "planar_f45_wo4.toml"))) == []
+    assert friction_warnings(compile_checked(scene_mod.load(MECH / "planar_f45_wo4.toml"))) == []
     res = fmu_build.build_scene(tmp_path / "planar_dup.toml", tmp_path / "out", allow_nonunique=True,
                                 echo=lambda s: None)
     assert res.status == "built", res.messages
@@ -362,7 +362,7 @@ def test_setting_solver_tolerance_runs_no_rank_analysis(unz, monkeypatch):
 
     for name in ("analyse", "numerical_rank", "auto_eliminate"):
         counted(analysis, name)
-    counted(slave_mod, "compile_model")
+    counted(slave_mod, "compile_checked")
 
     def set_real(inst, name, value):
         vr = next(k for k, v in enumerate(inst._vars) if v.name == name)
@@ -389,7 +389,7 @@ def test_setting_solver_tolerance_runs_no_rank_analysis(unz, monkeypatch):
     other = OverconSlave(resources)
     calls.clear()
     initialise(other, **{"joint4.mu": 0.2})
-    assert "compile_model" in calls and "numerical_rank" in calls
+    assert "compile_checked" in calls and "numerical_rank" in calls
 
 
 def test_switching_friction_off_by_a_parameter_is_logged(unz):

@@ -28,7 +28,7 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 from overcon import scene as scene_mod  # noqa: E402
 from overcon.fmu import build as fmu_build  # noqa: E402
-from overcon.model import compile_model  # noqa: E402
+from overcon.checks import compile_checked  # noqa: E402
 from overcon.simulate import run_scene  # noqa: E402
 
 pytestmark = pytest.mark.integration
@@ -80,7 +80,7 @@ def scene_of(name: str, **changes):
 
 
 def model_of(name: str, **changes):
-    return compile_model(scene_of(name, **changes))
+    return compile_checked(scene_of(name, **changes))
 
 
 def fmpy_matrix(result, names):

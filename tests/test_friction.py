@@ -12,7 +12,8 @@ from overcon import scene
 from overcon.dynamics import FrictionSolveError, evaluate
 from overcon.friction_laws import make_law
 from overcon.evaluation import frames, jacobian_h
-from overcon.model import ModelError, compile_model
+from overcon.model import ModelError
+from overcon.checks import compile_checked
 from overcon.simulate import Simulation, SimulationError, run_scene
 from overcon.spec import FrictionSpec
 
@@ -62,7 +63,7 @@ def test_coulomb_values_and_refused_for_integration():
         a.mu_over_speed(0.0)
     sc = scene.load(MECH / "planar_f45_wo4.toml")
     fp = {k: dataclasses.replace(v, law="coulomb") for k, v in sc.friction_params.items()}
-    model = compile_model(dataclasses.replace(sc, friction_params=fp))
+    model = compile_checked(dataclasses.replace(sc, friction_params=fp))
     with pytest.raises(ModelError, match="analysis only"):
         Simulation(model, sc.solver)
 
@@ -114,8 +115,8 @@ def test_friction_never_adds_energy(tmp_path, scene_name):
     """Without the drive torques the mechanism is conservative: with friction its mechanical
     energy never increases (beyond the integration error) and ends below the frictionless one."""
     sc = scene_with(f"{scene_name}.toml", tolerance=1e-10, stop_time=4.0, text_edit=NO_DRIVE, tmp_path=tmp_path)
-    model = compile_model(sc)
-    free = compile_model(dataclasses.replace(sc, friction=(), friction_params={}))
+    model = compile_checked(sc)
+    free = compile_checked(dataclasses.replace(sc, friction=(), friction_params={}))
     sim, sim_free = Simulation(model, sc.solver), Simulation(free, sc.solver)
     e0 = mechanical_energy(model, sim.advance(0.0))
     energies, free_energies = [], []
@@ -168,7 +169,7 @@ def test_tiny_regularisation_velocity_is_accurate_not_garbage():
 
 def test_friction_solve_failure_names_time_joints_residual():
     sc = scene_with("planar_f45_wo4.toml", mu=1.0)
-    model = compile_model(sc)
+    model = compile_checked(sc)
     h = 0.5 * np.linalg.svd(jacobian_h(model, frames(model, model.q0)))[2][-1]  # a consistent velocity
     with pytest.raises(FrictionSolveError) as info:
         evaluate(model, 1.25, model.q0, h, solver=dataclasses.replace(sc.solver, friction_max_iter=1))

@@ -17,7 +17,7 @@ from overcon import dynamics
 from overcon import scene as scene_mod
 from overcon.evaluation import applied_forces, frames
 from overcon.friction_laws import make_law
-from overcon.model import compile_model
+from overcon.checks import compile_checked
 from overcon.spec import FrictionSpec
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
@@ -38,7 +38,7 @@ def random_states(model, n, seed, scale):
 def test_friction_jacobian_matches_central_differences(name):
     """d(Qi, Qj)/d lam of every friction joint type with a friction_jacobian, at random states
     and multipliers: central differences (step 1e-6 max(1, |lam|) N) agree to 1e-7 relative."""
-    model = compile_model(scene_of(name))
+    model = compile_checked(scene_of(name))
     rng = np.random.default_rng(11)
     checked = 0
     for q, h in random_states(model, 8, 12, 0.3):
@@ -119,7 +119,7 @@ def agree(ev, expected, model, solver):
 
 def cases(name, n=6):
     sc = scene_of(name)
-    model = compile_model(sc)
+    model = compile_checked(sc)
     out = []
     for q, h in random_states(model, n, 6, 0.02):
         expected = reference_solution(model, sc.solver, q, h)

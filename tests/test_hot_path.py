@@ -18,7 +18,8 @@ from overcon.evaluation import (applied_forces, constraints, coordinate_rates, f
                                 generalized_force, jacobian_h, physical_reaction)
 from overcon.joints import TYPES
 from overcon.kinematics import cross3, cross3_rows, euler_H, euler_H_rows, euler_R, euler_R_rows
-from overcon.model import build_plan, compile_model
+from overcon.model import build_plan
+from overcon.checks import compile_checked
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
 SCENES = ["planar_f145_wo4", "planar_f45_wo6", "spatial_GHMN_wo5", "spatial_MN_wo18"]
@@ -36,7 +37,7 @@ def model_of(name, **scene_changes):
     spec = scene_mod.as_scene(scene_mod.load(MECH / f"{name}.toml"))
     if scene_changes:
         spec = dataclasses.replace(spec, **scene_changes)
-    return compile_model(spec)
+    return compile_checked(spec)
 
 
 def random_states(model, n=25, seed=0, scale=0.4):

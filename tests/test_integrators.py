@@ -12,7 +12,7 @@ import pytest
 from overcon import integrators, scene, spec
 from overcon.fmu import statecodec
 from overcon.fmu.variables import rule
-from overcon.model import compile_model
+from overcon.checks import compile_checked
 from overcon.simulate import Simulation, SimulationError, run_scene
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
@@ -49,7 +49,7 @@ def test_state_round_trip_bit_for_bit(method):
     """get_state at t1, continue to t2; set_state (through the FMU state codec) and continue
     again: identical bits, also for the counters."""
     sc = scene_of("planar_f45_wo4", step=2e-3)
-    model = compile_model(sc)
+    model = compile_checked(sc)
     sim = Simulation(model, sc.solver, method=method)
     sim.advance(0.3)
     saved = statecodec.loads(statecodec.dumps(sim.get_state()))

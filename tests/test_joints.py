@@ -15,7 +15,8 @@ from compiled import compiled_models
 import reference_joints as ref
 from overcon import evaluation as M
 from overcon.joints import TYPES as JOINT_TYPES
-from overcon.model import Model, compile_model
+from overcon.model import Model
+from overcon.checks import compile_checked
 from overcon.friction_laws import make_law
 from overcon.kinematics import OMEGA, EulerSingularity, cross2, cross3, euler_H, euler_R, rot2
 from overcon.scene import as_scene, load
@@ -37,7 +38,7 @@ _CACHE: dict = {}
 def compiled(path) -> Model:
     key = str(path)
     if key not in _CACHE:
-        _CACHE[key] = compile_model(as_scene(load(path)))
+        _CACHE[key] = compile_checked(as_scene(load(path)))
     return _CACHE[key]
 
 

@@ -15,7 +15,7 @@ from overcon import kernel, scene as scene_mod
 from overcon.dynamics import FrictionSolveError, evaluate
 from overcon.evaluation import SingularConfiguration, coordinate_rates
 from overcon.kinematics import EulerSingularity
-from overcon.model import compile_model
+from overcon.checks import compile_checked
 from overcon.simulate import Simulation, SimulationError, _DerivedPlan, run
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
@@ -69,7 +69,7 @@ def test_kernel_equals_numpy_per_evaluation(name, baumgarte):
     and warm-started (from lam and from friction forces, as the integration does), and the kernel
     hands back exactly the evaluations where the numpy Newton gives up (its fallback decides)."""
     spec = spec_of(name, baumgarte=baumgarte)
-    model = compile_model(spec)
+    model = compile_checked(spec)
     k = kernel_for(model, spec.solver)
     compared = 0
     for y in states(model):
@@ -97,13 +97,13 @@ def test_kernel_covers_loads_and_friction_laws():
     """The Stribeck law on a revolute and a translational joint, in the planar mechanism with its
     spring and torque (the spatial one's force and torque: test_kernel_equals_numpy_per_evaluation):
     per evaluation as the numpy path."""
-    spatial = compile_model(spec_of("spatial_MN_wo5"))
+    spatial = compile_checked(spec_of("spatial_MN_wo5"))
     assert {ld.type for ld in spatial.loads} == {"force", "torque"}
     spec = scene_mod.as_scene(scene_mod.load(MECH / "planar_f145_wo6.toml"))
     laws = {j: dataclasses.replace(fp, law="stribeck", mu_static=1.5 * fp.mu, v_stribeck=0.05)
             for j, fp in spec.friction_params.items()}
     spec = dataclasses.replace(spec, friction_params=laws)
-    model = compile_model(spec)
+    model = compile_checked(spec)
     assert {ld.type for ld in model.loads} == {"torque", "spring"}
     assert {model.joints[j].type for j in model.friction_joints} == {"revolute", "translational"}
     k = kernel_for(model, spec.solver)
@@ -121,7 +121,7 @@ def test_kernel_hands_back_what_numpy_reports():
     """A non-finite state and an Euler singularity: the kernel returns a status and the numpy
     path raises its own error, so a run fails as it would without the kernel."""
     spec = spec_of("spatial_MN_wo5")
-    model = compile_model(spec)
+    model = compile_checked(spec)
     k = kernel_for(model, spec.solver)
     y = np.concatenate([model.q0, model.h0])
     bad = y.copy()
@@ -142,7 +142,7 @@ def test_singular_position_stops_both_paths_alike(tmp_path):
     (tmp_path / "planar_sliders.toml").write_text(text)
     (tmp_path / "s.toml").write_text((MECH / "planar_none_wo4.toml").read_text())
     spec = scene_mod.as_scene(scene_mod.load(tmp_path / "s.toml"), stop_time=2.0)
-    model = compile_model(spec)
+    model = compile_checked(spec)
     errors = []
     for choice in ("numpy", "c"):
         with pytest.raises(SimulationError, match="singular position") as exc:
@@ -156,7 +156,7 @@ def test_fixed_step_runs_equal(name, stop):
     """Without friction, a fixed-step rk4 run takes the same steps on both paths: the outputs
     (positions, reactions) agree to round-off (1e-12 relative to their scale) over the run."""
     spec = spec_of(name, method="rk4", step=2e-3)
-    model = compile_model(spec)
+    model = compile_checked(spec)
     out = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=stop).values for c in ("numpy", "c")]
     assert rel(out[1], out[0]) <= 1e-12
 
@@ -166,7 +166,7 @@ def test_adaptive_friction_runs_agree_within_accuracy():
     the runs differ by the integration error, not by round-off: both stay within 1e-6 m of each
     other in the positions (the integrator's tolerance is 1e-9; measured 8.2e-10 m)."""
     spec = spec_of("planar_f45_wo4")
-    model = compile_model(spec)
+    model = compile_checked(spec)
     res = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=2.0) for c in ("numpy", "c")]
     cols = [i for i, n in enumerate(res[0].names) if n.rsplit(".", 1)[1] in ("x", "y")]
     assert np.max(np.abs(res[1].values[:, cols] - res[0].values[:, cols])) < 1e-6
@@ -176,11 +176,11 @@ def test_selection_and_note(monkeypatch):
     """auto takes the kernel where it covers the model, else numpy with the reason; c refuses to
     start without it (naming why); numpy never uses it. The note names the path."""
     spec = spec_of("planar_f45_wo4")
-    model = compile_model(spec)
+    model = compile_checked(spec)
     assert "compiled kernel" in Simulation(model, spec.solver).kernel_note
     assert Simulation(model, dataclasses.replace(spec.solver, kernel="numpy")).kernel_note == \
         "right-hand side: numpy (solver.kernel = 'numpy')"
-    door = compile_model(scene_mod.as_scene(scene_mod.load(EXAMPLES / "door_h1_wo_hinge2.toml")))
+    door = compile_checked(scene_mod.as_scene(scene_mod.load(EXAMPLES / "door_h1_wo_hinge2.toml")))
     note = Simulation(door, spec.solver).kernel_note
     assert note.startswith("right-hand side: numpy (solver.kernel = 'auto': ") and "quaternion" in note
     with pytest.raises(SimulationError, match=r"solver.kernel = 'c': rotation 'quaternion'"):
@@ -240,7 +240,7 @@ def test_kernel_outputs_equal_numpy(name):
     spec = spec_of(name)
     joints = tuple(j.name for j in spec.mechanism.joints)
     spec = dataclasses.replace(spec, reactions=joints, friction_outputs="all")
-    model = compile_model(spec)
+    model = compile_checked(spec)
     assert model.friction_outputs and len(model.reaction_joints) == len(joints)
     sims = {c: Simulation(model, dataclasses.replace(spec.solver, kernel=c)) for c in ("numpy", "c")}
     rng = np.random.default_rng(5)
@@ -329,7 +329,7 @@ def test_random_mechanisms_equal_numpy(tmp_path, kind, seed):
 
     names = _random_mechanism(tmp_path / "m.toml", kind, seed)
     spec = scene_mod.as_scene(scene_mod.load(tmp_path / "m.toml"), friction=names, friction_outputs="all")
-    model = compile_model(spec, check_initial=False)
+    model = compile_checked(spec, check_initial=False)
     assert {ld.type for ld in model.loads} == {"force", "torque", "spring"} and len(model.friction_joints) == 3
     assert any(c.bi < 0 for c in model.joints) or any(c.bj < 0 for c in model.joints)
     k = kernel_for(model, spec.solver)
@@ -364,7 +364,7 @@ def test_spring_of_zero_free_length_at_coinciding_points(tmp_path):
     for free, ok in (("0.0", True), ("0.5", False)):
         (tmp_path / "m.toml").write_text(text.replace("free_length = 3.0", f"free_length = {free}"))
         spec = scene_mod.as_scene(scene_mod.load(tmp_path / "m.toml"), friction=["joint4"])
-        model = compile_model(spec, check_initial=False)
+        model = compile_checked(spec, check_initial=False)
         n = next(i for i, ld in enumerate(model.loads) if ld.type == "spring")
         ld = model.loads[n]
         q = model.q0.copy()

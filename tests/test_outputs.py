@@ -12,7 +12,7 @@ import pytest
 from overcon import scene as scene_mod
 from overcon.dynamics import evaluate
 from overcon.evaluation import frames, friction_output, physical_reaction
-from overcon.model import compile_model
+from overcon.checks import compile_checked
 from overcon.simulate import Simulation
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
@@ -20,7 +20,7 @@ MECH = Path(__file__).resolve().parent.parent / "mechanisms"
 
 def setup(name, **changes):
     spec = scene_mod.as_scene(scene_mod.load(MECH / f"{name}.toml"), **changes)
-    return compile_model(spec), spec
+    return compile_checked(spec), spec
 
 
 @pytest.mark.parametrize("name", ["planar_f145_wo4", "planar_none_wo6", "spatial_GHMN_wo5", "spatial_MN_wo18"])

@@ -15,7 +15,8 @@ from overcon.cli import main
 from overcon.evaluation import constraints, coordinate_rates, frames, jacobian_h
 from overcon.kinematics import (QUAT_NORM_RATE, euler_R, euler_to_quat, quat_mul, quat_R_rows,
                                 quat_rates_rows, skew)
-from overcon.model import InconsistentInitialState, compile_model
+from overcon.model import InconsistentInitialState
+from overcon.checks import compile_checked
 from overcon.scene import SceneError, as_scene, load
 from overcon.simulate import Simulation, run, run_scene
 from overcon.spec import BodySpec, JointSpec, LoadSpec, MechanismSpec, SolverSpec
@@ -114,7 +115,7 @@ def test_jacobian_times_h_is_the_rate_of_phi_along_the_quaternion_flow():
     """Phi_h h = d/dt Phi(q) with q' = coordinate_rates(q, h) (finite differences), at a
     configuration off the constraints too."""
     rng = np.random.default_rng(6)
-    model = compile_model(as_scene(pendulum_mech("quaternion", random_angles(rng), rng.normal(size=3))),
+    model = compile_checked(as_scene(pendulum_mech("quaternion", random_angles(rng), rng.normal(size=3))),
                           check_initial=False)
     for _ in range(5):
         q = model.q0 + 0.1 * rng.normal(size=model.n)
@@ -127,11 +128,11 @@ def test_jacobian_times_h_is_the_rate_of_phi_along_the_quaternion_flow():
 
 
 def test_model_splits_coordinates_and_velocities():
-    model = compile_model(load(PENDULUM_SCENE))
+    model = compile_checked(load(PENDULUM_SCENE))
     assert (model.nq_b, model.nh_b, model.n, model.nh) == (7, 6, 7, 6)
     assert model.output_names()[:7] == ["rod.x", "rod.y", "rod.z", "rod.e0", "rod.e1", "rod.e2", "rod.e3"]
     assert [i for _, i in model.position_outputs] == list(range(7))
-    euler = compile_model(as_scene(pendulum_mech("euler_zxz", [0.1, 0.8, 0.2], [0.0, 0.0, 0.0])))
+    euler = compile_checked(as_scene(pendulum_mech("euler_zxz", [0.1, 0.8, 0.2], [0.0, 0.0, 0.0])))
     assert (euler.nq_b, euler.nh_b, euler.n, euler.nh) == (6, 6, 6, 6)
 
 
@@ -144,7 +145,7 @@ def test_identity_orientation_simulates_with_quaternions_and_conserves_energy():
         run_scene(euler)
     mech = load(PENDULUM)
     assert mech.rotation == "quaternion" and mech.bodies[0].q0[3:] == (1.0, 0.0, 0.0, 0.0)
-    model = compile_model(as_scene(mech, eliminate=[], stop_time=2.0))
+    model = compile_checked(as_scene(mech, eliminate=[], stop_time=2.0))
     tol = 1e-10
     sim = Simulation(model, SolverSpec(tolerance=tol))
     J = np.array(mech.bodies[0].inertia)
@@ -174,7 +175,7 @@ def test_euler_and_quaternion_give_the_same_motion():
     out = {}
     for rotation in ("euler_zxz", "quaternion"):
         scene = as_scene(pendulum_mech(rotation, angles, w), eliminate=[], stop_time=1.0)
-        model = compile_model(scene)
+        model = compile_checked(scene)
         res = run(model, SolverSpec(tolerance=tol), output_interval=0.05)
         out[rotation] = res
     xyz = ["rod.x", "rod.y", "rod.z"]
@@ -201,7 +202,7 @@ def test_torque_free_asymmetric_body_conserves_energy_momentum_and_quaternion_no
     body = BodySpec("top", 1.0, tuple(J), (0.0, 0.0, 0.0, *euler_to_quat([0.2, 1.0, 0.3])), (0.0, 0.0, 0.0, *w0))
     joint = JointSpec("C", "spherical", "top", "base", {"s_i": (0.0, 0.0, 0.0), "s_j": (0.0, 0.0, 0.0)})
     mech = MechanismSpec("top", "spatial", (0.0, 0.0, -9.81), (body,), (joint,), (), rotation="quaternion")
-    model = compile_model(as_scene(mech, eliminate=[], stop_time=20.0))
+    model = compile_checked(as_scene(mech, eliminate=[], stop_time=20.0))
     sim = Simulation(model, SolverSpec(tolerance=tol))
 
     def invariants(y):

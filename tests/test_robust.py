@@ -23,7 +23,8 @@ from overcon import params, scene
 from overcon.cli import main
 from overcon.fmu import variables
 from overcon.integrators import Radau5
-from overcon.model import InconsistentInitialState, compile_model
+from overcon.model import InconsistentInitialState
+from overcon.checks import compile_checked
 from overcon.simulate import BudgetExceeded, Simulation, run, run_scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -233,7 +234,7 @@ def test_step_budget_ends_the_run_with_a_clear_message(tmp_path):
 
 def test_wall_time_budget_ends_the_run(tmp_path):
     sc = scene.load(MECH / "planar_f45_wo4.toml")
-    model = compile_model(sc)
+    model = compile_checked(sc)
     sim = Simulation(model, sc.solver, max_wall_time=1e-9)
     with pytest.raises(BudgetExceeded, match=r"wall time .* \(max_wall_time = 1e-09 s\) reached t = .*--max-wall-time"):
         sim.advance(1.0)
@@ -243,7 +244,7 @@ def test_wall_time_budget_ends_the_run(tmp_path):
 
 def test_budget_defaults_documented():
     sc = scene.load(MECH / "planar_none_wo4.toml")
-    sim = Simulation(compile_model(sc), sc.solver)
+    sim = Simulation(compile_checked(sc), sc.solver)
     assert sim.max_steps == 1_000_000 and sim.max_wall_time == 3600.0
 
 
@@ -252,7 +253,7 @@ def test_time_that_does_not_advance_is_an_error():
     sc = scene.load(MECH / "planar_none_wo4.toml")
     sc = dataclasses.replace(sc, start_time=1e12, stop_time=1e12 + 10.0,
                              solver=dataclasses.replace(sc.solver, method="rk4", step=1e-5))
-    sim = Simulation(compile_model(sc), sc.solver)
+    sim = Simulation(compile_checked(sc), sc.solver)
     with pytest.raises(Exception, match="time does not advance"):
         sim.advance(1e12 + 10.0)
 
@@ -348,7 +349,7 @@ def test_nan_constraint_value_is_inconsistent():
     bodies[0] = dataclasses.replace(bodies[0], q0=(1e308, 0.0, 1e308))
     bad = dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies)))
     with pytest.raises(InconsistentInitialState):
-        compile_model(bad)
+        compile_checked(bad)
 
 
 # ------------------------------------------------------------------ bug 6: friction on an eliminated joint
@@ -406,7 +407,7 @@ def test_bug10_friction_output_translational(tmp_path):
 
 def test_friction_outputs_every_friction_joint_after_the_reactions(tmp_path):
     sc = scene.as_scene(scene.load(MECH / "spatial_GHMN_wo5.toml"), friction_outputs="all")
-    model = compile_model(sc)
+    model = compile_checked(sc)
     names = model.output_names()
     assert names[-4:] == ["G.friction", "H.friction", "M.friction", "N.friction"]
     res = run(model, sc.solver, stop_time=0.2)
@@ -417,7 +418,7 @@ def test_friction_outputs_every_friction_joint_after_the_reactions(tmp_path):
     assert [v.name for v in outs] == names  # the FMU's outputs are Simulation.outputs, in order
     assert {v.unit for v in outs if v.name.endswith(".friction")} == {"N"}
     planar_sc = scene.as_scene(scene.load(MECH / "planar_f45_wo4.toml"), friction_outputs="joint4,joint5")
-    fr = [v for v in variables.table(compile_model(planar_sc), planar_sc.solver, {f"joint{k}": True for k in range(1, 7)}, True)
+    fr = [v for v in variables.table(compile_checked(planar_sc), planar_sc.solver, {f"joint{k}": True for k in range(1, 7)}, True)
           if v.name.endswith(".friction")]
     assert [(v.name, v.unit) for v in fr] == [("joint4.friction", "N.m"), ("joint5.friction", "N.m")]
 
@@ -427,15 +428,15 @@ def test_friction_outputs_opt_in_for_scenes_listing_outputs_and_columns_unchange
     baselines); outputs.friction = "all" adds the friction forces after them, the other columns
     bit-identical. A bare mechanism run with friction has them by default."""
     plain_sc = scene.load(MECH / "planar_f45_wo4.toml")
-    plain = compile_model(plain_sc)
+    plain = compile_checked(plain_sc)
     assert not any(n.endswith(".friction") for n in plain.output_names())
     path = scene_copy(tmp_path, edit=lambda t: t.replace("[outputs]\n", '[outputs]\nfriction = "all"\n', 1))
     with_fr_sc = scene.load(path)
-    with_fr = compile_model(with_fr_sc)
+    with_fr = compile_checked(with_fr_sc)
     assert with_fr.output_names() == plain.output_names() + ["joint4.friction", "joint5.friction"]
     a, b = run(with_fr, with_fr_sc.solver, stop_time=0.3), run(plain, plain_sc.solver, stop_time=0.3)
     assert np.array_equal(a.values[:, : len(b.names)], b.values)
-    mech = compile_model(scene.as_scene(scene.load(MECH / "planar_sliders.toml"), friction="joint4"))
+    mech = compile_checked(scene.as_scene(scene.load(MECH / "planar_sliders.toml"), friction="joint4"))
     assert mech.output_names()[-1] == "joint4.friction"
     (tmp_path / "x").mkdir()
     bad = scene_copy(tmp_path / "x", edit=lambda t: t.replace("[outputs]\n", '[outputs]\nfriction = ["joint1"]\n', 1))
@@ -464,7 +465,7 @@ def test_ctrl_c_ends_a_run_cleanly(tmp_path):
 
 def test_library_arguments_obey_the_same_rules():
     sc = scene.load(MECH / "planar_none_wo4.toml")
-    model = compile_model(sc)
+    model = compile_checked(sc)
     with pytest.raises(ValueError, match=r"Simulation\(tolerance=1e-300\): must be in \[1e-14, 0.01\]"):
         Simulation(model, sc.solver, tolerance=1e-300)
     with pytest.raises(ValueError, match=r"Simulation\(tolerance=0\)"):
@@ -567,6 +568,6 @@ def test_inconsistent_q0_names_the_joint_and_the_mechanism_file(tmp_path):
     (tmp_path / "planar_sliders.toml").write_text(mech)
     (tmp_path / "s.toml").write_text((ROOT / "mechanisms" / "planar_f45_wo4.toml").read_text())
     with pytest.raises(InconsistentInitialState) as exc:
-        compile_model(scene.load(tmp_path / "s.toml"))
+        compile_checked(scene.load(tmp_path / "s.toml"))
     text = str(exc.value)
     assert "Phi1 (joint joint1)" in text and str(tmp_path / "planar_sliders.toml") in text

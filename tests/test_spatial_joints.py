@@ -21,7 +21,8 @@ from overcon.friction_laws import make_law
 from overcon.joints import TYPES, names, resolve
 from overcon.joints.spatial_rows import completion
 from overcon.kinematics import SIN_BETA_MIN, euler_R
-from overcon.model import InconsistentInitialState, compile_model
+from overcon.model import InconsistentInitialState
+from overcon.checks import compile_checked
 from overcon.scene import SceneError, as_scene, load
 from overcon.simulate import run
 from overcon.spec import FrictionSpec
@@ -204,7 +205,7 @@ def test_rows_in_the_contract_order(tmp_path, seed):
     joints = [joint_lines("S", "spherical", "b1", "b2", s_i, s_j)]
     joints += [joint_lines(t[0].upper(), t, "b1", "b2", s_i, s_j, a_i, a_j) for t in AXIS_TYPES]
     (tmp_path / "all.toml").write_text(mechanism_text("all", [("b1", random_q0(rng)), ("b2", random_q0(rng))], joints))
-    model = compile_model(as_scene(load(tmp_path / "all.toml")), check_initial=False)
+    model = compile_checked(as_scene(load(tmp_path / "all.toml")), check_initial=False)
     rows = {TYPES[c.type].name: list(c.rows) for c in model.joints}
     assert {k: len(v) for k, v in rows.items()} == N_ROWS
     for _ in range(3):
@@ -288,7 +289,7 @@ def test_reaction_components(tmp_path, jtype, seed):
     text = mechanism_text("pair", [("b1", q[0]), ("b2", q[1])],
                           [joint_lines("X", jtype, "b1", "b2", s_i, s_j, a_i, a_j)])
     (tmp_path / "pair.toml").write_text(text)
-    model = compile_model(as_scene(load(tmp_path / "pair.toml")))  # assembled: q0 accepted
+    model = compile_checked(as_scene(load(tmp_path / "pair.toml")))  # assembled: q0 accepted
     c = model.joints[0]
     comps = TYPES[c.type].reaction_components
     f = ev.frames(model, model.q0, model.h0)
@@ -317,7 +318,7 @@ def test_fixed_joint_axes_optional(tmp_path):
     s_i, s_j, a_i, a_j, q, _ = assembled_pair(rng, "fixed")
     (tmp_path / "f.toml").write_text(mechanism_text("f", [("b1", q[0]), ("b2", q[1])],
                                                     [joint_lines("X", "fixed", "b1", "b2", s_i, s_j)]))
-    model = compile_model(as_scene(load(tmp_path / "f.toml")))
+    model = compile_checked(as_scene(load(tmp_path / "f.toml")))
     p = model.joints[0].p
     np.testing.assert_array_equal(p["a_i"], [0.0, 0.0, 1.0])
     np.testing.assert_array_equal(p["E"], np.eye(3))  # the joint frame is body i's axes
@@ -331,7 +332,7 @@ def test_fixed_joint_axes_optional(tmp_path):
     (tmp_path / "bad.toml").write_text(bad)
     with pytest.raises(InconsistentInitialState, match=r"joint X \(joints\[0\]\): axis_i and axis_j are not "
                                                        r"parallel at q0 \(angle [0-9.]+ deg\): Phi4"):
-        compile_model(as_scene(load(tmp_path / "bad.toml")))
+        compile_checked(as_scene(load(tmp_path / "bad.toml")))
 
 
 # ----------------------------------------------------------------------------- initial consistency
@@ -343,7 +344,7 @@ def test_door_with_hinge_axes_not_parallel_refused(tmp_path):
     lines[k] = "axis_j = [0.35, 0.1, 1.0]"
     (tmp_path / "door.toml").write_text("\n".join(lines))
     with pytest.raises(InconsistentInitialState) as e:
-        compile_model(as_scene(load(tmp_path / "door.toml")))
+        compile_checked(as_scene(load(tmp_path / "door.toml")))
     msg = str(e.value)
     assert "joint upper (joints[0]): axis_i and axis_j are not parallel at q0" in msg and "lower" not in msg
     assert "door.toml" in msg
@@ -356,7 +357,7 @@ def test_universal_axes_must_be_perpendicular_at_q0(tmp_path):
     (tmp_path / "us.toml").write_text(text)
     with pytest.raises(InconsistentInitialState, match=r"joint U \(joints\[0\]\): axis_i and axis_j are not "
                                                        r"perpendicular at q0 \(angle [0-9.]+ deg\): Phi4"):
-        compile_model(as_scene(load(tmp_path / "us.toml")))
+        compile_checked(as_scene(load(tmp_path / "us.toml")))
 
 
 # the axis rows of each type, 1-based equation numbers of a single joint (joints[0])
@@ -378,7 +379,7 @@ def one_joint_file(tmp_path, jtype, a_i, a_j_body, s_j_shift=(0.0, 0.0, 0.0)) ->
 
 def refusal(path) -> str:
     with pytest.raises(InconsistentInitialState) as e:
-        compile_model(as_scene(load(path)))
+        compile_checked(as_scene(load(path)))
     return str(e.value)
 
 
@@ -399,7 +400,7 @@ def test_axis_rows_violated_name_the_axis_fields(tmp_path, jtype, a_i, a_j, rela
     assert listed and listed <= set(AXIS_ROWS[jtype])
     assert "initial coordinates q0 violate" not in msg
     # the same joint with axes that hold at q0 compiles
-    compile_model(as_scene(load(one_joint_file(tmp_path, jtype, a_i, good))))
+    compile_checked(as_scene(load(one_joint_file(tmp_path, jtype, a_i, good))))
 
 
 def test_point_rows_keep_their_wording_and_mix_with_axis_rows(tmp_path):
@@ -485,7 +486,7 @@ def test_bennett_moves_with_one_dof():
     """The Bennett linkage is mobile: its velocity null space at q0 is one-dimensional and the
     gravity run keeps the constraints."""
     scene = as_scene(load(DATA / "bennett.toml"), stop_time=0.5, solver={"tolerance": 1e-10})
-    model = compile_model(scene)
+    model = compile_checked(scene)
     res = run(model, scene.solver)
     assert res.max_drift <= 1e-8
     moved_by = np.abs(res.values[-1] - res.values[0])[:9].max()  # positions of the three links
@@ -496,7 +497,7 @@ def test_bennett_moves_with_one_dof():
 
 def test_door_swings_and_stays_on_its_constraints():
     scene = as_scene(load(DATA / "door.toml"), stop_time=1.0, solver={"tolerance": 1e-10})
-    model = compile_model(scene)
+    model = compile_checked(scene)
     assert model.eliminated  # auto elimination of the 5 redundant equations
     assert len(model.eliminated) == 5
     res = run(model, scene.solver, output_interval=0.05)
@@ -509,7 +510,7 @@ def test_door_swings_and_stays_on_its_constraints():
 
 def test_pendulum_period_matches_small_angle_formula():
     scene = as_scene(load(DATA / "pendulum.toml"), stop_time=3.2, solver={"tolerance": 1e-11})
-    model = compile_model(scene)
+    model = compile_checked(scene)
     res = run(model, scene.solver, output_interval=0.005)
     assert res.max_drift <= 1e-8
     y = res.column("bob.y")
@@ -530,7 +531,7 @@ def test_flywheel_friction_decelerates_uniformly():
     """Revolute friction in a simulation: the radial load is m g (centre of mass on the axis), so
     the spin decreases at mu a m g / Jz and gamma(t) = w0 t - mu a m g t^2 / (2 Jz)."""
     scene = as_scene(load(DATA / "flywheel.toml"), friction=["axle"], stop_time=1.0, solver={"tolerance": 1e-10})
-    model = compile_model(scene)
+    model = compile_checked(scene)
     res = run(model, scene.solver, output_interval=0.1)
     decel = 0.2 * 0.05 * 2.0 * 9.81 / 0.1
     t = res.time
@@ -544,7 +545,7 @@ def test_incline_friction_gives_the_textbook_acceleration():
     acceleration g (sin 30 - mu cos 30) (normal load m g cos 30, no moment: the joint point is
     the centre of mass)."""
     scene = as_scene(load(DATA / "incline.toml"), friction=["guide"], stop_time=0.5, solver={"tolerance": 1e-10})
-    model = compile_model(scene)
+    model = compile_checked(scene)
     res = run(model, scene.solver, output_interval=0.05)
     th = math.radians(30)
     a = 9.81 * (math.sin(th) - 0.2 * math.cos(th))
@@ -618,7 +619,7 @@ def pair_model(tmp_path, jtype, seed):
               joint_lines("Y", jtype, "b2", "b1", s_j, s_i, a_j, a_i, fr)]
     (tmp_path / "pair.toml").write_text(mechanism_text("pair", [("b1", q[0]), ("b2", q[1])], joints))
     scene = as_scene(load(tmp_path / "pair.toml"), friction=["X", "Y"])
-    model = compile_model(scene, check_initial=False)
+    model = compile_checked(scene, check_initial=False)
     return model, rng
 
 
@@ -808,7 +809,7 @@ def test_friction_size_keys(tmp_path):
         '[scene]\nname = "s"\nmechanism = "m.toml"\nfriction = ["X"]\neliminate = "auto"\nstop_time = 1.0\n'
         "[scene.friction_params.X]\ncollar_radius = 0.03\n")
     scene = load(tmp_path / "s.toml")
-    law = compile_model(scene).joints[0].law
+    law = compile_checked(scene).joints[0].law
     assert dict(law.sizes) == {"radius": 0.01, "length": 0.2, "collar_radius": 0.03}
 
 

@@ -18,6 +18,7 @@ import json
 import sys
 import time
 
+from .argtypes import count as _jobs
 from .simulate import MAX_STEPS, MAX_WALL_TIME
 from .spec import KERNELS, METHODS
 from .verdict import LOCKSTEP_STEP
@@ -104,16 +105,6 @@ def _positive(text: str) -> float:
     return val
 
 
-def _jobs(text: str) -> int:
-    try:
-        val = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if val < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
-    return val
-
-
 def _tooling_parsers(sub) -> None:
     """``run``, ``compare``, ``reproduce``: fmpy drives the FMUs (overcon.tooling)."""
     r = sub.add_parser("run", help="simulate FMUs with fmpy, one CSV per FMU")
@@ -194,7 +185,7 @@ def _load(args):
     """(scene with the command-line overrides applied, its compiled model). Raises
     SceneError/ModelError."""
     from . import scene as scene_mod
-    from .model import compile_model
+    from .checks import compile_checked
 
     spec = scene_mod.load(args.file)
     solver = {key: getattr(args, key) for key in SOLVER_FLAGS if getattr(args, key, None) is not None}
@@ -204,7 +195,7 @@ def _load(args):
         stop_time=args.stop_time, solver=solver, friction_outputs=getattr(args, "friction_outputs", None),
         source=args.file)
     spec = scene_mod.as_scene(spec, **overrides)
-    return spec, compile_model(spec, eliminate_field="scene.eliminate" if args.eliminate is None else "--eliminate")
+    return spec, compile_checked(spec, eliminate_field="scene.eliminate" if args.eliminate is None else "--eliminate")
 
 
 SOLVER_FLAGS = ("method", "tolerance", "step", "max_step", "output_interval", "kernel")

@@ -1,4 +1,6 @@
-"""Compile a scene into an immutable :class:`Model` (evaluating it: :mod:`overcon.evaluation`).
+"""Compile a scene into an immutable :class:`Model` without evaluating it (evaluation:
+:mod:`overcon.evaluation`; the checks of the compiled model at its initial state and the
+elimination: :mod:`overcon.checks`).
 
 Glossary (paper symbols spelled for code; shapes for b moving bodies, m equations)
 -----------------------------------------------------------------------------------
@@ -49,12 +51,9 @@ from typing import Mapping
 
 import numpy as np
 
-from . import analysis
-from .evaluation import constraints, frames, jacobian_h
 from .friction_laws import Law, make_law
 from .joints import TYPES, InitialFrames
-from .joints.spatial_rows import POINT_ROW
-from .kinematics import SIN_BETA_MIN, euler_singular
+from .kinematics import cos_sin, euler_R_rows, quat_R_rows
 from .spec import BASE, VELOCITIES_PER_BODY, MechanismSpec, SceneSpec, coordinates
 
 
@@ -67,7 +66,7 @@ class ModelError(ValueError):
 
 
 class InconsistentInitialState(ModelError):
-    """q0 or h0 off the constraint manifold (refused by :func:`compile_model`, so ``check``,
+    """q0 or h0 off the constraint manifold (refused by :func:`overcon.checks.compile_checked`, so ``check``,
     ``simulate`` and ``build`` all refuse it with the same message)."""
 
 
@@ -124,7 +123,7 @@ class Model:
     m: int
     retained: np.ndarray  # 0-based indices of the equations kept
     eliminated: tuple[int, ...]  # 1-based paper indices removed
-    elimination_mode: str  # "given" or "auto"
+    elimination_mode: str  # "given", "auto", or "pending" (compiled, not admitted: overcon.checks)
     friction_joints: tuple[int, ...]
     position_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into q)
     reaction_joints: tuple[int, ...] = field(default=())
@@ -286,16 +285,12 @@ def build_plan(model: Model) -> AssemblyPlan:
 
 # ----------------------------------------------------------------------------- compile
 
-def compile_model(scene: SceneSpec, *, check_initial: bool = True,
-                  eliminate_field: str = "scene.eliminate") -> Model:
-    """Compile a validated scene. Raises ModelError for an elimination the mechanism does not
-    admit (removing an independent equation, or leaving dependent ones), naming the equations
-    and the field that gave them, ``eliminate_field`` (``scene.eliminate``, or the command line's
-    ``--eliminate`` when it overrides the scene; the callers name the file), and
-    :class:`InconsistentInitialState` for q0/h0 off the constraints (before the elimination
-    is checked: a rank at an inconsistent q0 means nothing). ``check_initial=False`` skips that
-    check: only for evaluating kinematics at arbitrary configurations (tests); a Simulation
-    checks again."""
+def compile_model(scene: SceneSpec) -> Model:
+    """Compile a validated scene: sizes, index maps, joint constants (from the bodies' rotation
+    matrices at q0), loads, outputs. Nothing is evaluated: every equation is retained and the
+    elimination is pending (``elimination_mode = "pending"``); :func:`overcon.checks.admit`
+    checks q0/h0 and resolves ``scene.eliminate`` on the result, and
+    :func:`overcon.checks.compile_checked` does both steps."""
     mech: MechanismSpec = scene.mechanism
     kind = mech.kind
     dim = 2 if kind == "planar" else 3
@@ -334,9 +329,9 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True,
         body_names=names, mass=mass, rotation=rotation,
         inertia=inertia, M=M, Minv=1.0 / M, gravity=np.asarray(mech.gravity, float),
         joints=(), loads=tuple(loads), q0=q0, h0=h0, m=0, retained=np.arange(0), eliminated=(),
-        elimination_mode="given", friction_joints=(),
+        elimination_mode="pending", friction_joints=(),
         position_outputs=tuple((p, coord_index[p]) for p in scene.positions))
-    R0 = frames(bodies, q0).R
+    R0 = _rotations(bodies, q0)
     friction_on = set(scene.friction)
     joints = []
     row = 0
@@ -361,111 +356,26 @@ def compile_model(scene: SceneSpec, *, check_initial: bool = True,
         friction_outputs=tuple(joint_index[j] for j in
                                (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
     )
-    if check_initial:
-        check_initial_state(base)
-    eliminated, mode = resolve_elimination(base, scene.eliminate, eliminate_field)
-    retained = np.array([i for i in range(row) if i + 1 not in set(eliminated)], int)
-    return replace(base, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
+    return base
 
 
-def check_initial_state(model: Model, tol: float = 1e-9) -> None:
-    """Refuse q0/h0 off the constraint manifold: |Phi| or |Phi_h h0| above tol (m or rad; m/s
-    or rad/s), scaled by max(1, max |q0|) (max(1, max |h0|)); a non-finite value is refused too.
-    Raises :class:`InconsistentInitialState` naming the violated equations, their joints and
-    the mechanism file that holds q0/h0; first, for z-x-z Euler bodies, a q0 at the Euler
-    singularity (:func:`check_euler_q0`)."""
-    check_euler_q0(model)
-    f = frames(model, model.q0, model.h0)
-    joint_of = {r + 1: c.name for c in model.joints for r in c.rows}
-    mech = model.scene.mechanism
-    where = f" (bodies' q0/h0 in {mech.source or mech.name})"
-
-    def eqs(numbers) -> str:
-        return ", ".join(f"Phi{i} (joint {joint_of.get(i, '?')})" for i in numbers)
-
-    with np.errstate(all="ignore"):
-        Phi = constraints(model, f)
-        scale = max(1.0, float(np.max(np.abs(model.q0))))
-        bad = [i + 1 for i in np.flatnonzero(~(np.abs(Phi) <= tol * scale))]
-        if bad:
-            point, axes = _split_violations(model, Phi, bad)
-            parts = []
-            if point:
-                absphi = np.where(np.isfinite(Phi), np.abs(Phi), np.inf)
-                worst = max(point, key=lambda i: absphi[i - 1])
-                parts.append(f"initial coordinates q0 violate the constraints {eqs(point)}: largest "
-                             f"|Phi{worst}| = {abs(Phi[worst - 1]):.3g}")
-            for (j, meaning), rows in axes.items():
-                c = model.joints[j]
-                text = TYPES[c.type].violation_text(meaning, c.p, InitialFrames(f.R[c.bi], f.R[c.bj]))
-                parts.append(f"joint {c.name} (joints[{j}]): {text}: {', '.join(f'Phi{i}' for i in rows)} "
-                             f"(joints[{j}].axis_i, joints[{j}].axis_j or the bodies' q0 are wrong)")
-            raise InconsistentInitialState("; ".join(parts) + where)
-        vel = jacobian_h(model, f) @ model.h0
-        hscale = max(1.0, float(np.max(np.abs(model.h0))))
-        bad = [i + 1 for i in np.flatnonzero(~(np.abs(vel) <= tol * hscale))]
-    if bad:
-        raise InconsistentInitialState(f"initial velocities h0 violate the velocity constraints {eqs(bad)}{where}")
-
-
-def _split_violations(model: Model, Phi: np.ndarray, bad: list[int]):
-    """The violated equations ``bad`` (1-based) split by their meaning
-    (:attr:`overcon.joints.JointType.row_meanings`): (point rows and non-finite values, in order;
-    {(joint index, meaning): its axis rows} in joint order)."""
-    point, axes, bad = [], {}, set(bad)
-    for c in model.joints:
-        meanings = TYPES[c.type].row_meanings
-        for k, r in enumerate(c.rows):
-            if r + 1 not in bad:
-                continue
-            if meanings[k] == POINT_ROW or not np.isfinite(Phi[r]):
-                point.append(r + 1)
-            else:
-                axes.setdefault((c.index, meanings[k]), []).append(r + 1)
-    return sorted(point), axes
-
-
-def check_euler_q0(model: Model) -> None:
-    """Refuse a spatial body with z-x-z Euler angles whose q0 has |sin(beta)| below
-    :data:`overcon.kinematics.SIN_BETA_MIN` (beta = q0[4], rad): the parametrisation is singular
-    there, so the run could not start (:func:`overcon.kinematics.euler_H`). Raises
-    :class:`InconsistentInitialState` naming the mechanism file, the body and its field q0, and
-    the quaternion rotation that has no singularity."""
-    if model.kind != "spatial" or model.rotation != "euler_zxz":
-        return
-    beta = np.asarray(model.q0, float).reshape(model.nb, model.nq_b)[:, 4]
-    with np.errstate(invalid="ignore"):
-        bad = np.flatnonzero(euler_singular(np.sin(beta)))
-    if len(bad):
-        k = int(bad[0])
-        mech = model.scene.mechanism
-        raise InconsistentInitialState(
-            f"body {model.body_names[k]!r}: bodies[{k}].q0 has beta = q0[4] = {beta[k]:.6g} rad, at the "
-            f"z-x-z Euler angle singularity (|sin(beta)| = {abs(np.sin(beta[k])):.3g} < {SIN_BETA_MIN:g}) "
-            "where the run cannot start; give beta away from 0 and pi, or set rotation = \"quaternion\" "
-            f"in [mechanism] (no singularity) (bodies' q0 in {mech.source or mech.name})")
-
-
-def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate") -> tuple[list[int], str]:
-    """Check (or choose, for "auto") the eliminated equations at q0. Returns 1-based indices.
-    Raises ModelError naming ``field`` (where ``eliminate`` was given) for an elimination the
-    mechanism does not admit."""
-    f = frames(model, model.q0, model.h0)
-    J = jacobian_h(model, f).T
-    r = analysis.numerical_rank(J)
-    if eliminate == "auto":
-        removed = sorted(i + 1 for i in analysis.auto_eliminate(J))
-        return removed, "auto"
-    removed = sorted(eliminate)
-    kept = [i for i in range(model.m) if i + 1 not in set(removed)]
-    r_kept = analysis.numerical_rank(J[:, kept]) if kept else 0
-    listed = ", ".join(f"Phi{i}" for i in removed) or "nothing"
-    if r_kept < r:
-        raise ModelError(
-            f"{field}: eliminating {listed} removes an independent equation: rank of the kept equations is "
-            f"{r_kept} < rank {r} of all {model.m}; the mechanism would gain {r - r_kept} DOF")
-    if r_kept < len(kept):
-        raise ModelError(
-            f"{field}: eliminating {listed} leaves {len(kept)} equations of rank {r_kept}: "
-            f"{len(kept) - r_kept} more must be eliminated (the mechanism has {model.m - r} redundant)")
-    return removed, "given"
+def _rotations(model: Model, q: np.ndarray) -> np.ndarray:
+    """Rotation matrices body -> global of every body at q, (nb + 1, d, d), slot -1 the base
+    (identity): the same operations as :func:`overcon.evaluation.frames`, so the same bits."""
+    nb, k = model.nb, model.nq_b
+    Q = q.reshape(nb, k)
+    if model.kind == "planar":
+        phi = np.zeros(nb + 1)
+        phi[:nb] = Q[:, 2]
+        c, s = np.cos(phi), np.sin(phi)
+        R = np.empty((nb + 1, 2, 2))
+        R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = c, -s, s, c
+        return R
+    if model.rotation == "quaternion":
+        quat = np.zeros((nb + 1, 4))
+        quat[:nb] = Q[:, 3:]
+        quat[nb, 0] = 1.0
+        return quat_R_rows(quat)
+    angles = np.zeros((nb + 1, 3))
+    angles[:nb] = Q[:, 3:]
+    return euler_R_rows(angles, cos_sin(angles))

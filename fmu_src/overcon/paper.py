@@ -14,37 +14,13 @@ from pathlib import Path
 import numpy as np
 
 from . import scene
-from .model import compile_model
+from .figures import FIGURES, Figure  # noqa: F401  (the figures are defined without the engine)
+from .checks import compile_checked
 from .precheck import precheck
 from .simulate import Result, SimulationError, run_scene
 from .spec import SceneSpec
 from .verdict import (LOCKSTEP_METHOD, LOCKSTEP_RETRIES, LOCKSTEP_STEP, lockstep_tolerance, next_lockstep_step,
                       variant_label)
-
-
-@dataclass(frozen=True)
-class Figure:
-    name: str
-    groups: tuple[str, ...]
-    output: str
-    ylabel: str
-    title: str
-
-
-FIGURES = (
-    Figure("fig3", ("planar_none", "planar_f45"), "slider1.x", "displacement x1 (m)",
-           "Fig. 3: slider 1 x, without friction and with friction in revolute joints 4, 5"),
-    Figure("fig4", ("planar_f1",), "slider1.x", "displacement x1 (m)",
-           "Fig. 4: slider 1 x, friction in translational joint 1"),
-    Figure("fig5", ("planar_f145",), "slider1.x", "displacement x1 (m)",
-           "Fig. 5: slider 1 x, friction in joints 1, 4, 5"),
-    Figure("fig7", ("spatial_none",), "G.Fy0", "force (N)",
-           "Fig. 7: joint G reaction, y component (global frame), no friction"),
-    Figure("fig8", ("spatial_GH",), "platform.x", "displacement x7 (m)",
-           "Fig. 8: platform x, friction in joints G, H"),
-    Figure("fig9", ("spatial_GHMN",), "platform.x", "displacement x7 (m)",
-           "Fig. 9: platform x, friction in joints G, H, M, N"),
-)
 
 
 def scene_files(directory: Path) -> list[Path]:
@@ -129,7 +105,7 @@ def run_group(items: list[tuple[Path, SceneSpec]], *, tolerance: float | None = 
         if stop_time is not None:
             spec = dataclasses.replace(spec, stop_time=stop_time)
         specs.append(spec)
-        predicted.append(precheck(compile_model(scene.as_scene(spec)), str(path)).motion_unique)
+        predicted.append(precheck(compile_checked(scene.as_scene(spec)), str(path)).motion_unique)
         labels.append(variant_label(spec.eliminate))
         if adaptive:
             results.append(run_scene(scene.as_scene(spec, tolerance=tolerance)))

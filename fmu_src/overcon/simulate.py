@@ -39,7 +39,8 @@ from .evaluation import (SingularConfiguration, constraints, coordinate_rates, f
                          friction_output, jacobian_h, normalized_coordinates, physical_reaction,
                          physical_reactions)
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
-from .model import InconsistentInitialState, Model, ModelError, check_initial_state  # noqa: F401
+from .checks import check_initial_state
+from .model import InconsistentInitialState, Model, ModelError  # noqa: F401
 from .spec import SceneSpec, SolverSpec
 
 
@@ -140,6 +141,9 @@ class Simulation:
         self.solver = dataclasses.replace(solver, **{k: v for k, v in given.items() if v is not None})
         self.method = self.solver.method
         self.settings = {k: getattr(self.solver, k) for k in ("tolerance", "step", "max_step")}
+        if model.elimination_mode == "pending":
+            raise ModelError("Simulation: the model's elimination is pending: admit the compiled model first "
+                             "(overcon.checks.admit, or overcon.checks.compile_checked)")
         check_initial_state(model)
         for c in model.joints:
             if c.law is not None and c.law.name == "coulomb":
@@ -485,8 +489,8 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
 
 def run_scene(scene: SceneSpec, **kw) -> Result:
     """Compile ``scene`` and :func:`run` it with its own solver options ``scene.solver``."""
-    from .model import compile_model
-    return run(compile_model(scene), scene.solver, **kw)
+    from .checks import compile_checked
+    return run(compile_checked(scene), scene.solver, **kw)
 
 
 def write_csv(result: Result, path) -> None:

@@ -45,7 +45,7 @@ def huge_step(unz: str) -> str:
 
 def overhead(unz: str, scene: str, n: int = 20000, h: float = 1e-5) -> str:
     from overcon import scene as scene_mod
-    from overcon.model import compile_model
+    from overcon.checks import compile_checked
     from overcon.simulate import Simulation
 
     md = fmpy.read_model_description(unz)
@@ -66,7 +66,7 @@ def overhead(unz: str, scene: str, n: int = 20000, h: float = 1e-5) -> str:
     s.terminate()
     s.freeInstance()
     spec = scene_mod.load(ROOT / "mechanisms" / f"{scene}.toml")
-    sim = Simulation(compile_model(spec), spec.solver)
+    sim = Simulation(compile_checked(spec), spec.solver)
     t0 = time.perf_counter()
     for k in range(n):
         t_next = (k + 1) * h

@@ -57,8 +57,10 @@ import zipfile
 from pathlib import Path
 
 from .. import kernel as kernel_mod
+from ..argtypes import count as _jobs
 from .. import scene as scene_mod
-from ..model import ModelError, compile_model
+from ..model import ModelError
+from ..checks import compile_checked
 from ..precheck import PrecheckResult, precheck
 from ..spec import SceneSpec
 from . import description, pyinfo, variables
@@ -232,7 +234,7 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         spec = scene_mod.load(path)
         if not isinstance(spec, SceneSpec):
             return done("skipped", f"{path}: mechanism file, skipped")
-        model = compile_model(spec)
+        model = compile_checked(spec)
     except scene_mod.SceneError as exc:
         return done("invalid", *(str(p) for p in exc.problems))
     except (ModelError, ValueError, OSError) as exc:
@@ -502,8 +504,6 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..cli import _jobs  # one parser of a job count for every command
-
     p.add_argument("paths", nargs="+", metavar="PATH",
                    help="scene files or directories of them (mechanism files are skipped)")
     p.add_argument("--out", default="dist/fmus", metavar="DIR", help="output directory (default dist/fmus)")

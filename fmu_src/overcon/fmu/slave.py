@@ -79,7 +79,7 @@ import numpy as np
 
 from .. import kernel
 from .. import scene as scene_mod
-from ..model import compile_model
+from ..checks import compile_checked
 from ..params import apply_overrides, check_mu_static
 from ..precheck import friction_warnings, frictionless
 from ..simulate import BudgetExceeded, Simulation
@@ -195,7 +195,7 @@ class OverconSlave:
         self._log_sink = log
         spec = scene_mod.load(res / self._manifest["scene"])
         self._scene = spec
-        self._model0 = compile_model(spec)
+        self._model0 = compile_checked(spec)
         self._model, self._model_friction = self._model0, spec.friction_params  # compiled for these
         self._vars = variables.table(self._model0, spec.solver, self._manifest["reaction_unique"],
                                      self._manifest["motion_unique"])
@@ -395,7 +395,7 @@ class OverconSlave:
         friction parameters changed. Solver options are not part of a Model (they go to the
         Simulation), so a new ``solver.*`` value never recompiles."""
         if spec.friction_params != self._model_friction:
-            self._model = self._model0 if spec.friction_params == self._scene.friction_params else compile_model(spec)
+            self._model = self._model0 if spec.friction_params == self._scene.friction_params else compile_checked(spec)
             self._model_friction = spec.friction_params
             switched = [self._model.joints[j].name for j in self._model.friction_joints
                         if frictionless(self._model.joints[j].law) != frictionless(self._model0.joints[j].law)]

@@ -326,8 +326,8 @@ class ReproduceOutcome(_Verdicts):
 
 
 def _figures(comparisons: list[Comparison], out_dir: Path, echo) -> list[tuple[str, Path]]:
-    """The paper's Figs. 3-5, 7-9 (:data:`overcon.paper.FIGURES`) from the FMU results."""
-    from ..paper import FIGURES
+    """The paper's Figs. 3-5, 7-9 (:data:`overcon.figures.FIGURES`) from the FMU results."""
+    from ..figures import FIGURES
     from ..plots import plot_series
 
     by_group = {c.group: c for c in comparisons if c.failure is None}

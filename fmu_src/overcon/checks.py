@@ -1,0 +1,147 @@
+"""Admit a compiled :class:`overcon.model.Model` at its initial state: the checks that evaluate it
+(:mod:`overcon.evaluation`), run after :func:`overcon.model.compile_model` and before any run.
+
+- :func:`check_initial_state` (with :func:`check_euler_q0`): q0/h0 on the constraint manifold;
+- :func:`resolve_elimination`: the eliminated equations checked (or chosen, ``"auto"``) from the
+  rank of the Jacobian at q0;
+- :func:`admit`: both, returning the model with its elimination applied;
+- :func:`compile_checked`: compile, then admit (what ``check``, ``simulate`` and ``build`` use).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from . import analysis
+from .evaluation import constraints, frames, jacobian_h
+from .joints import TYPES, InitialFrames
+from .joints.spatial_rows import POINT_ROW
+from .kinematics import SIN_BETA_MIN, euler_singular
+from .model import InconsistentInitialState, Model, ModelError, compile_model
+from .spec import SceneSpec
+
+
+def compile_checked(scene: SceneSpec, *, check_initial: bool = True,
+                    eliminate_field: str = "scene.eliminate") -> Model:
+    """:func:`overcon.model.compile_model`, then :func:`admit`."""
+    return admit(compile_model(scene), check_initial=check_initial, eliminate_field=eliminate_field)
+
+
+def admit(model: Model, *, check_initial: bool = True, eliminate_field: str = "scene.eliminate") -> Model:
+    """The compiled ``model`` with ``scene.eliminate`` applied. Raises ModelError for an
+    elimination the mechanism does not admit (removing an independent equation, or leaving
+    dependent ones), naming the equations and the field that gave them, ``eliminate_field``
+    (``scene.eliminate``, or the command line's ``--eliminate`` when it overrides the scene; the
+    callers name the file), and :class:`InconsistentInitialState` for q0/h0 off the constraints
+    (before the elimination is checked: a rank at an inconsistent q0 means nothing).
+    ``check_initial=False`` skips that check: only for evaluating kinematics at arbitrary
+    configurations (tests); a Simulation checks again."""
+    if check_initial:
+        check_initial_state(model)
+    eliminated, mode = resolve_elimination(model, model.scene.eliminate, eliminate_field)
+    retained = np.array([i for i in range(model.m) if i + 1 not in set(eliminated)], int)
+    return replace(model, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
+
+
+def check_initial_state(model: Model, tol: float = 1e-9) -> None:
+    """Refuse q0/h0 off the constraint manifold: |Phi| or |Phi_h h0| above tol (m or rad; m/s
+    or rad/s), scaled by max(1, max |q0|) (max(1, max |h0|)); a non-finite value is refused too.
+    Raises :class:`InconsistentInitialState` naming the violated equations, their joints and
+    the mechanism file that holds q0/h0; first, for z-x-z Euler bodies, a q0 at the Euler
+    singularity (:func:`check_euler_q0`)."""
+    check_euler_q0(model)
+    f = frames(model, model.q0, model.h0)
+    joint_of = {r + 1: c.name for c in model.joints for r in c.rows}
+    mech = model.scene.mechanism
+    where = f" (bodies' q0/h0 in {mech.source or mech.name})"
+
+    def eqs(numbers) -> str:
+        return ", ".join(f"Phi{i} (joint {joint_of.get(i, '?')})" for i in numbers)
+
+    with np.errstate(all="ignore"):
+        Phi = constraints(model, f)
+        scale = max(1.0, float(np.max(np.abs(model.q0))))
+        bad = [i + 1 for i in np.flatnonzero(~(np.abs(Phi) <= tol * scale))]
+        if bad:
+            point, axes = _split_violations(model, Phi, bad)
+            parts = []
+            if point:
+                absphi = np.where(np.isfinite(Phi), np.abs(Phi), np.inf)
+                worst = max(point, key=lambda i: absphi[i - 1])
+                parts.append(f"initial coordinates q0 violate the constraints {eqs(point)}: largest "
+                             f"|Phi{worst}| = {abs(Phi[worst - 1]):.3g}")
+            for (j, meaning), rows in axes.items():
+                c = model.joints[j]
+                text = TYPES[c.type].violation_text(meaning, c.p, InitialFrames(f.R[c.bi], f.R[c.bj]))
+                parts.append(f"joint {c.name} (joints[{j}]): {text}: {', '.join(f'Phi{i}' for i in rows)} "
+                             f"(joints[{j}].axis_i, joints[{j}].axis_j or the bodies' q0 are wrong)")
+            raise InconsistentInitialState("; ".join(parts) + where)
+        vel = jacobian_h(model, f) @ model.h0
+        hscale = max(1.0, float(np.max(np.abs(model.h0))))
+        bad = [i + 1 for i in np.flatnonzero(~(np.abs(vel) <= tol * hscale))]
+    if bad:
+        raise InconsistentInitialState(f"initial velocities h0 violate the velocity constraints {eqs(bad)}{where}")
+
+
+def _split_violations(model: Model, Phi: np.ndarray, bad: list[int]):
+    """The violated equations ``bad`` (1-based) split by their meaning
+    (:attr:`overcon.joints.JointType.row_meanings`): (point rows and non-finite values, in order;
+    {(joint index, meaning): its axis rows} in joint order)."""
+    point, axes, bad = [], {}, set(bad)
+    for c in model.joints:
+        meanings = TYPES[c.type].row_meanings
+        for k, r in enumerate(c.rows):
+            if r + 1 not in bad:
+                continue
+            if meanings[k] == POINT_ROW or not np.isfinite(Phi[r]):
+                point.append(r + 1)
+            else:
+                axes.setdefault((c.index, meanings[k]), []).append(r + 1)
+    return sorted(point), axes
+
+
+def check_euler_q0(model: Model) -> None:
+    """Refuse a spatial body with z-x-z Euler angles whose q0 has |sin(beta)| below
+    :data:`overcon.kinematics.SIN_BETA_MIN` (beta = q0[4], rad): the parametrisation is singular
+    there, so the run could not start (:func:`overcon.kinematics.euler_H`). Raises
+    :class:`InconsistentInitialState` naming the mechanism file, the body and its field q0, and
+    the quaternion rotation that has no singularity."""
+    if model.kind != "spatial" or model.rotation != "euler_zxz":
+        return
+    beta = np.asarray(model.q0, float).reshape(model.nb, model.nq_b)[:, 4]
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero(euler_singular(np.sin(beta)))
+    if len(bad):
+        k = int(bad[0])
+        mech = model.scene.mechanism
+        raise InconsistentInitialState(
+            f"body {model.body_names[k]!r}: bodies[{k}].q0 has beta = q0[4] = {beta[k]:.6g} rad, at the "
+            f"z-x-z Euler angle singularity (|sin(beta)| = {abs(np.sin(beta[k])):.3g} < {SIN_BETA_MIN:g}) "
+            "where the run cannot start; give beta away from 0 and pi, or set rotation = \"quaternion\" "
+            f"in [mechanism] (no singularity) (bodies' q0 in {mech.source or mech.name})")
+
+
+def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate") -> tuple[list[int], str]:
+    """Check (or choose, for "auto") the eliminated equations at q0. Returns 1-based indices.
+    Raises ModelError naming ``field`` (where ``eliminate`` was given) for an elimination the
+    mechanism does not admit."""
+    f = frames(model, model.q0, model.h0)
+    J = jacobian_h(model, f).T
+    r = analysis.numerical_rank(J)
+    if eliminate == "auto":
+        removed = sorted(i + 1 for i in analysis.auto_eliminate(J))
+        return removed, "auto"
+    removed = sorted(eliminate)
+    kept = [i for i in range(model.m) if i + 1 not in set(removed)]
+    r_kept = analysis.numerical_rank(J[:, kept]) if kept else 0
+    listed = ", ".join(f"Phi{i}" for i in removed) or "nothing"
+    if r_kept < r:
+        raise ModelError(
+            f"{field}: eliminating {listed} removes an independent equation: rank of the kept equations is "
+            f"{r_kept} < rank {r} of all {model.m}; the mechanism would gain {r - r_kept} DOF")
+    if r_kept < len(kept):
+        raise ModelError(
+            f"{field}: eliminating {listed} leaves {len(kept)} equations of rank {r_kept}: "
+            f"{len(kept) - r_kept} more must be eliminated (the mechanism has {model.m - r} redundant)")
+    return removed, "given"

@@ -438,6 +438,74 @@ def test_tooling_does_not_import_the_engine():
     assert not engine & loaded, engine & loaded
 
 
+
+# ------------------------------------------------------------------------------- the FMU's facts record
+
+def _rewritten(src: Path, dst: Path, drop=(), replace=None) -> Path:
+    """Copy of the FMU ``src`` without the entries ``drop``, with ``replace`` {name: bytes}."""
+    replace = replace or {}
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for item in zin.infolist():
+            if item.filename not in drop:
+                zout.writestr(item, replace.get(item.filename, zin.read(item.filename)))
+    return dst
+
+
+def test_facts_record_gives_what_the_bundled_scene_says(f45):
+    """The tooling's facts of an overcon FMU (read from resources/overcon_facts.json) are those the
+    scene file and the pre-check give: group, label, friction set, elimination, mechanism,
+    predictions; the record's outputs are the modelDescription's Real outputs."""
+    from overcon import scene as scene_mod
+    from overcon.checks import compile_checked
+    from overcon.fmu import facts as facts_mod
+    from overcon.precheck import precheck
+    from overcon.verdict import variant_label
+
+    for name, fmu in f45.items():
+        spec = scene_mod.load(MECH / f"{name}.toml")
+        report = precheck(compile_checked(spec), name)
+        info = inspect_fmu(fmu)
+        assert (info.group, info.label, info.friction, info.eliminate, info.mechanism) == (
+            spec.group, variant_label(spec.eliminate), tuple(spec.friction), spec.eliminate, spec.mechanism.name)
+        assert info.motion_unique is report.motion_unique and info.reaction_unique == report.reaction_unique
+        with zipfile.ZipFile(fmu) as zf:
+            facts = facts_mod.decode(zf.read(facts_mod.PATH), str(fmu))
+        assert facts["outputs"] == tuple(info.output_names)
+        assert facts["solver"]["method"] == spec.solver.method and facts["solver"]["stop_time"] == spec.stop_time
+
+
+def test_overcon_fmu_without_facts_record_is_refused(f45, tmp_path):
+    old = _rewritten(f45["planar_f45_wo4"], tmp_path / "old.fmu", drop={"resources/overcon_facts.json"})
+    with pytest.raises(InputError, match=r"old\.fmu: an overcon FMU without its facts record "
+                                         r"resources/overcon_facts\.json .*rebuild it"):
+        inspect_fmu(old)
+
+
+def test_facts_record_of_another_format_is_refused(f45, tmp_path):
+    src = f45["planar_f45_wo4"]
+    with zipfile.ZipFile(src) as zf:
+        data = zf.read("resources/overcon_facts.json").replace(b'"format": 1', b'"format": 2')
+    newer = _rewritten(src, tmp_path / "newer.fmu", replace={"resources/overcon_facts.json": data})
+    with pytest.raises(InputError, match=r"newer\.fmu: resources/overcon_facts\.json has format 2; "
+                                         r"this overcon reads format 1"):
+        inspect_fmu(newer)
+    broken = _rewritten(src, tmp_path / "broken.fmu",
+                        replace={"resources/overcon_facts.json": data.replace(b'"format": 2', b'"format": 1')
+                                 .replace(b'"group"', b'"grup"')})
+    with pytest.raises(InputError, match=r"broken\.fmu: resources/overcon_facts\.json: key 'group' missing"):
+        inspect_fmu(broken)
+
+
+def test_fmu_of_another_tool_joins_the_fmus_group_without_prediction(f45, tmp_path):
+    """Without resources/overcon_fmu.json an FMU is another tool's: group ``fmus``, labelled with its
+    model name; its predictions come only from constant outputs it declares (overcon's do)."""
+    foreign = _rewritten(f45["planar_f45_wo4"], tmp_path / "foreign.fmu",
+                         drop={"resources/overcon_facts.json", "resources/overcon_fmu.json"})
+    info = inspect_fmu(foreign)
+    assert (info.group, info.label, info.friction, info.eliminate, info.mechanism) == (
+        "fmus", "planar_f45_wo4", (), None, "")
+
+
 # ------------------------------------------------------------------------------- lockstep stability
 
 STICKING = ROOT / "tests" / "data" / "sticking"

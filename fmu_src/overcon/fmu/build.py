@@ -17,6 +17,7 @@ refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each F
     resources/overcon_<hash>/         copy of the overcon package source (relative imports)
     resources/scene/...               the scene file and its mechanism file
     resources/overcon_fmu.json        GUID, scene path, pre-check verdicts and warnings, binary facts
+    resources/overcon_facts.json      the versioned facts the tooling reads (overcon.fmu.facts)
 
 At run time it needs only a Python with numpy and scipy (the binary finds one: see
 ``native/overcon_fmi2.c`` and the README). ``<hash>`` (and the GUID) is a SHA-256 over the scene
@@ -63,7 +64,7 @@ from ..model import ModelError
 from ..checks import compile_checked
 from ..precheck import PrecheckResult, precheck
 from ..spec import SceneSpec
-from . import description, pyinfo, variables
+from . import description, facts, pyinfo, variables
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
@@ -297,6 +298,7 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
             _zip_write(zf, "resources/overcon_package.txt", f"{pkg}\n".encode())
             _zip_write(zf, "resources/overcon_python.txt", pyinfo.text().encode())
             _zip_write(zf, "resources/overcon_fmu.json", json.dumps(manifest, indent=1).encode())
+            _zip_write(zf, facts.PATH, facts.encode(facts.record(spec, model, report)))
             _zip_write(zf, f"resources/{scene_zip}", scene_bytes)
             _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
             for rel, data in sources:

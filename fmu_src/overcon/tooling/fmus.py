@@ -3,16 +3,14 @@
 From ``modelDescription.xml`` (fmpy's reader): model identifier, DefaultExperiment, the Real
 outputs with their units, and the constant Boolean outputs an overcon FMU carries
 (``motion_unique``, ``<joint>.reaction_unique``: the pre-check's predictions). From an overcon
-FMU's ``resources/`` (``overcon_fmu.json`` and the bundled scene file, loaded with
-:func:`overcon.scene.load`): group, friction set, eliminated equations and the paper-style label
-(:func:`overcon.verdict.variant_label`). FMUs of other tools form one group, :data:`OTHER_GROUP`,
-are labelled with their model name and carry no prediction.
+FMU's facts record ``resources/overcon_facts.json`` (:mod:`overcon.fmu.facts`, versioned): group,
+friction set, eliminated equations, mechanism and predictions, and the paper-style label
+(:func:`overcon.verdict.variant_label`). FMUs of other tools (no ``resources/overcon_fmu.json``)
+form one group, :data:`OTHER_GROUP`, are labelled with their model name and carry no prediction;
+an overcon FMU without a readable facts record of this format is refused, naming the file.
 """
 from __future__ import annotations
 
-import json
-import posixpath
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -92,38 +90,25 @@ def _bool(text) -> bool | None:
     return str(text).strip().lower() in ("true", "1")
 
 
-def _scene_facts(path: Path, zf: zipfile.ZipFile) -> dict:
-    """Group, label, friction, eliminate, mechanism from the FMU's bundled scene (overcon FMUs)."""
-    try:
-        manifest = json.loads(zf.read("resources/overcon_fmu.json"))
-    except KeyError:
-        return {}
-    except (ValueError, zipfile.BadZipFile, OSError) as exc:
-        raise InputError(f"{path}: resources/overcon_fmu.json unreadable: {exc}") from exc
-    facts = {"motion_unique": manifest.get("motion_unique"),
-             "reaction_unique": dict(manifest.get("reaction_unique") or {})}
-    scene_rel = manifest.get("scene")
-    if not scene_rel:
-        return facts
-    from .. import scene as scene_mod
+def _overcon_facts(path: Path, zf: zipfile.ZipFile) -> dict:
+    """Group, label, friction, eliminate, mechanism and the predictions from an overcon FMU's facts
+    record (:mod:`overcon.fmu.facts`); ``{}`` for an FMU of another tool (no ``resources/overcon_fmu.json``).
+    An overcon FMU without the record (built by an older overcon) or with a record of another
+    format is refused with :class:`InputError`: its facts cannot be read."""
+    from ..fmu import facts as facts_mod
     from ..verdict import variant_label
 
-    with tempfile.TemporaryDirectory(prefix="overcon-scene-") as tmp:
-        for name in zf.namelist():
-            if name.startswith("resources/scene/") and not name.endswith("/"):
-                rel = posixpath.normpath(name[len("resources/"):])
-                if rel.startswith(".."):
-                    continue
-                dest = Path(tmp, *rel.split("/"))
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                dest.write_bytes(zf.read(name))
-        try:
-            spec = scene_mod.load(Path(tmp, *scene_rel.split("/")))
-        except (scene_mod.SceneError, OSError) as exc:
-            raise InputError(f"{path}: bundled scene file {scene_rel} invalid: {exc}") from exc
-    facts.update(group=spec.group or spec.name, label=variant_label(spec.eliminate), friction=tuple(spec.friction),
-                 eliminate=spec.eliminate, mechanism=spec.mechanism.name)
-    return facts
+    names = set(zf.namelist())
+    if facts_mod.PATH not in names:
+        if facts_mod.MANIFEST in names:
+            raise InputError(f"{path}: an overcon FMU without its facts record {facts_mod.PATH} (built by an "
+                             "older overcon): rebuild it with this overcon (overcon build)")
+        return {}
+    try:
+        facts = facts_mod.decode(zf.read(facts_mod.PATH), str(path))
+    except facts_mod.FactsError as exc:
+        raise InputError(str(exc)) from exc
+    return dict(facts, label=variant_label(facts["eliminate"]))
 
 
 def inspect_fmu(path) -> FmuInfo:
@@ -166,7 +151,7 @@ def inspect_fmu(path) -> FmuInfo:
     tol = float(ex.tolerance) if ex is not None and ex.tolerance is not None else None
     try:
         with zipfile.ZipFile(path) as zf:
-            facts = _scene_facts(path, zf)
+            facts = _overcon_facts(path, zf)
     except zipfile.BadZipFile as exc:
         raise InputError(f"{path}: corrupt FMU archive: {exc}") from exc
     model = md.coSimulation.modelIdentifier

@@ -135,6 +135,7 @@ def test_bad_elimination_refused(elim, message):
         model_of("planar_sliders.toml", eliminate=elim)
 
 
+@pytest.mark.integration
 def test_bad_elimination_names_the_field_and_file(tmp_path, capsys):
     """Too few equations eliminated: the scene file and scene.eliminate are named (or --eliminate
     when the command line gave them), by check and build alike."""
@@ -198,7 +199,7 @@ def test_model_carries_no_solver_options():
     sc = scene_of("planar_sliders.toml", eliminate=[4], stop_time=0.1)
     m = compile_checked(sc)
     assert m.scene.solver is None
-    with pytest.raises(dataclasses.FrozenInstanceError):
+    with pytest.raises(dataclasses.FrozenInstanceError, match="cannot assign to field 'tolerance'"):
         sc.solver.tolerance = 1e-6
     a = Simulation(m, sc.solver)
     b = Simulation(m, dataclasses.replace(sc.solver, tolerance=1e-6, method="dop853"))

@@ -182,7 +182,7 @@ def _run_logged(unz, logging_on, categories=None, off=None, tolerance=1e-3):
     s.fmu.setupExperiment(tolerance=tolerance, startTime=0.0)
     s.fmu.enterInitializationMode()
     s.fmu.exitInitializationMode()
-    with pytest.raises(FMICallException):
+    with pytest.raises(FMICallException, match=r"fmi2DoStep failed with status 3 \(error\)"):
         s.fmu.doStep(1.0, 0.01)  # wrong communication point: an error
     s.free()
     return {(status, cat) for status, cat, _ in s.logs.records}

@@ -29,7 +29,7 @@ from fmpy.validation import validate_fmu  # noqa: E402
 from overcon import scene as scene_mod  # noqa: E402
 from overcon.fmu import build as fmu_build  # noqa: E402
 from overcon.checks import compile_checked  # noqa: E402
-from overcon.simulate import run_scene  # noqa: E402
+from overcon.simulate import SimulationError, run_scene  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
@@ -358,7 +358,7 @@ def test_bad_parameter_values_refused_and_host_survives(unzip, var, value):
     inst.k = 0
     out = inst.steps(10)
     assert np.all(np.isfinite(out))
-    with pytest.raises(FMICallException):  # fixed parameters cannot change after initialization
+    with pytest.raises(FMICallException, match=r"fmi2SetReal failed with status 3 \(error\)"):  # fixed after init.
         inst.fmu.setReal([inst.vr["joint4.mu"]], [0.2])
     assert "cannot change after initialization" in logs.text()
     inst.free()
@@ -374,7 +374,8 @@ def test_failed_step_returns_error_and_keeps_finite_outputs(tmp_path, unzip):
     (tmp_path / "planar_singular.toml").write_text(scene_text)
     res = fmu_build.build_scene(tmp_path / "planar_singular.toml", tmp_path / "out", echo=lambda s: None)
     assert res.status == "built", res.messages
-    with pytest.raises(Exception):
+    with pytest.raises(SimulationError, match=r"integration stopped: t = [\d.]+ s: the motion passed a singular "
+                                              r"position"):
         run_scene(scene_mod.load(tmp_path / "planar_singular.toml"))  # the engine stops too
     logs = Logs()
     unz = Path(fmpy.extract(str(res.fmu), str(tmp_path / "unz")))
@@ -392,7 +393,7 @@ def test_failed_step_returns_error_and_keeps_finite_outputs(tmp_path, unzip):
     assert any(s == 3 for s, _, m in logs.records if "singular" in m)
     out = inst.fmu.getReal(inst.out_vrs)
     assert np.all(np.isfinite(out)) and out == last  # last good values, never NaN
-    with pytest.raises(FMICallException):  # later steps are refused until the state is set back
+    with pytest.raises(FMICallException, match=r"fmi2DoStep failed with status 3 \(error\)"):  # refused until reset
         inst.fmu.doStep(currentCommunicationPoint=inst.t, communicationStepSize=0.01)
     inst.free()
 

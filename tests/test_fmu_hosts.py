@@ -4,8 +4,8 @@ loaded with dlopen RTLD_LOCAL and starts its own interpreter), and libcosim (lib
 
 Runtime: the C host runs each friction FMU (planar_f45_wo4, spatial_MN_wo5) once over its whole
 default experiment (compared with fmpy from the same empty environment: equal to 1e-12), then
-100 processes in a row alternating between the two on 0-0.05 s (every second one exits without
-fmi2Terminate/fmi2FreeInstance), about 0.8 s each.
+10 processes in a row alternating between the two on 0-0.05 s (every second one exits without
+fmi2Terminate/fmi2FreeInstance); the 100-process version is a ``stress`` test (``-m stress``).
 """
 from __future__ import annotations
 
@@ -127,13 +127,15 @@ def test_c_host_whole_default_experiment_matches_fmpy(fmus, host, name):
     assert np.max(np.abs(c_values - py_values)) <= 1e-12
 
 
-def test_c_host_100_runs_in_a_row(fmus, host):
-    """100 host processes, alternating planar and spatial FMU on 0-0.05 s; every second one exits
-    right after the last step (no fmi2Terminate/fmi2FreeInstance/dlclose): exit code 0 and every
-    row each time, the same numbers each time."""
+@pytest.mark.parametrize("runs", [10, pytest.param(100, marks=pytest.mark.stress)])
+def test_c_host_runs_in_a_row(fmus, host, runs):
+    """``runs`` host processes (10 in the default run, 100 as the stress test of ``.ci/run``),
+    alternating planar and spatial FMU on 0-0.05 s; every second one exits right after the last
+    step (no fmi2Terminate/fmi2FreeInstance/dlclose): exit code 0 and every row each time, the
+    same numbers each time."""
     first: dict[str, np.ndarray] = {}
     failures = []
-    for k in range(100):
+    for k in range(runs):
         f = fmus[FRICTION[k % 2]]
         flags = ("-q", "-x") if k % 4 >= 2 else ("-q",)
         proc = run_host(host, f.host_args(0.05, *flags))

@@ -132,7 +132,7 @@ def test_unknown_option_is_an_error(method):
     options = {"tolerance": 1e-8, "max_step": 0.1, "step": 1e-2}
     good = {k: v for k, v in options.items() if k in cls.OPTIONS}
     cls(_decay, 0.0, np.ones(2), **good)  # the declared options are accepted
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="tolerence"):
         cls(_decay, 0.0, np.ones(2), **good, tolerence=1e-8)
     with pytest.raises(TypeError, match="tolerence"):
         integrators.create(method, _decay, 0.0, np.ones(2), **options, tolerence=1e-8)

@@ -132,7 +132,7 @@ def test_kernel_hands_back_what_numpy_reports():
     flat = y.copy()
     flat[4] = 1e-4  # beta of the first body: |sin beta| < SIN_BETA_MIN
     assert k.evaluate(0.0, flat) is None and kernel.STATUS[k.last_status] == "Euler angles singular"
-    with pytest.raises(EulerSingularity):
+    with pytest.raises(EulerSingularity, match=r"Euler angle singularity of body 'link1': beta = 0\.0001 rad"):
         numpy_eval(model, spec.solver, 0.0, flat)
 
 
@@ -203,6 +203,7 @@ def test_compile_failure_is_named(tmp_path):
         kernel.compile_library(tmp_path / "k.so", ["false"])
 
 
+@pytest.mark.integration
 def test_kernel_in_fmu_and_numpy_alone(tmp_path):
     """An FMU carries the kernel next to its binary and logs the path it runs; with the parameter
     solver.kernel = 'numpy' the same FMU runs on numpy and scipy alone, to round-off the same
@@ -384,6 +385,7 @@ def test_spring_of_zero_free_length_at_coinciding_points(tmp_path):
                 numpy_eval(model, spec.solver, 0.0, y)
 
 
+@pytest.mark.integration
 def test_check_and_build_refuse_a_kernel_that_cannot_run(tmp_path, capsys):
     """[solver] kernel = "c" on a model the kernel does not cover: check and build refuse the scene
     (exit 2, file and field named) instead of an FMU that could never start."""
@@ -427,6 +429,7 @@ def test_damaged_cached_library_is_compiled_again(tmp_path):
     assert "PATH None" in out and "OVERCON_CACHE_DIR = /proc/no/such/dir" in out, out
 
 
+@pytest.mark.integration
 def test_fmu_warns_when_its_library_cannot_be_used(tmp_path):
     """An FMU whose kernel library is missing runs on numpy and says so as a warning (the model is
     covered: a silent slow-down would surprise)."""
@@ -447,6 +450,7 @@ def test_fmu_warns_when_its_library_cannot_be_used(tmp_path):
     assert any("the compiled kernel this FMU carries cannot be used" in m and "cannot load" in m for m in warnings)
 
 
+@pytest.mark.integration
 def test_set_values_outside_their_rule_refused_before_running(tmp_path, capsys):
     """overcon run/compare --set on an overcon FMU: a value outside the parameter's rule (an
     unknown solver.kernel, a tolerance out of range) is bad input (exit 2) before any run."""

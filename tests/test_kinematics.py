@@ -155,7 +155,7 @@ def test_euler_H_singularity_raised_with_body_name(beta):
     with pytest.raises(EulerSingularity) as exc:
         euler_H([0.3, beta, -1.2], "link7")
     assert "link7" in str(exc.value)
-    with pytest.raises(ArithmeticError):  # EulerSingularity is an ArithmeticError
+    with pytest.raises(ArithmeticError, match="Euler angle singularity"):  # EulerSingularity is an ArithmeticError
         euler_H([0.3, beta, -1.2])
 
 

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.integration  # every test here builds or runs FMUs, or shares a fixture that does
+
 ROOT = Path(__file__).resolve().parent.parent
 MECH = ROOT / "mechanisms"
 SCRIPT = ROOT / "ci" / "regress.py"

@@ -326,6 +326,7 @@ def test_bug1_radau_with_zero_error_estimate(tmp_path):
 
 # ------------------------------------------------------------------ bug 4: inconsistent q0 in check
 
+@pytest.mark.integration
 def test_bug4_check_refuses_inconsistent_q0_like_simulate_and_build(tmp_path):
     text = (MECH / "planar_sliders.toml").read_text()
     assert "q0 = [2.0, 1.0, 0.0]" in text
@@ -348,7 +349,8 @@ def test_nan_constraint_value_is_inconsistent():
     bodies = list(sc.mechanism.bodies)
     bodies[0] = dataclasses.replace(bodies[0], q0=(1e308, 0.0, 1e308))
     bad = dataclasses.replace(sc, mechanism=dataclasses.replace(sc.mechanism, bodies=tuple(bodies)))
-    with pytest.raises(InconsistentInitialState):
+    with pytest.raises(InconsistentInitialState, match=r"initial coordinates q0 violate the constraints Phi2 "
+                                                       r"\(joint joint1\).*largest \|Phi2\| = 1e\+308"):
         compile_checked(bad)
 
 
@@ -474,6 +476,7 @@ def test_library_arguments_obey_the_same_rules():
         run(model, sc.solver, output_interval=1e-12)
 
 
+@pytest.mark.integration
 def test_friction_output_through_the_fmu(tmp_path):
     """A scene with outputs.friction = "all" built as an FMU: fmpy reads <joint>.friction (unit
     N.m for the revolute joints 4, 5) with the in-process values."""

@@ -426,6 +426,7 @@ def test_row_meanings_declared_once_per_type():
     assert set(TYPES["revolute"].row_meanings) == {"point"}  # planar: today's wording
 
 
+@pytest.mark.integration
 def test_euler_beta_zero_refused_at_compile_time_everywhere(tmp_path, capsys):
     """A body at beta = 0 with Euler angles: check, simulate and build refuse it (exit 2) with
     one message naming the file, the body, its field q0 and the quaternion alternative."""
@@ -815,6 +816,7 @@ def test_friction_size_keys(tmp_path):
 
 # ----------------------------------------------------------------------------- FMU description
 
+@pytest.mark.integration
 def test_fmu_description_of_spatial_joints(tmp_path):
     """A small FMU with a spatial revolute joint with friction: the outputs, units and texts of
     its modelDescription.xml come from the joint type's table and name the file's type name."""

@@ -26,6 +26,8 @@ from overcon.tooling import InputError  # noqa: E402
 from overcon.tooling import sweep  # noqa: E402
 from overcon.verdict import lockstep_start_values  # noqa: E402
 
+pytestmark = pytest.mark.integration  # every test here builds or runs FMUs, or shares a fixture that does
+
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = [ROOT / "mechanisms" / "planar_f1_wo4.toml", ROOT / "mechanisms" / "planar_f1_wo6.toml"]
 QUIET = dict(echo=lambda s: None)

@@ -21,6 +21,8 @@ from overcon.tooling.compare import check_grids, compare_group
 from overcon.tooling.fmus import inspect_fmu
 from overcon.tooling.run import Series, read_series
 
+pytestmark = pytest.mark.integration  # every test here builds or runs FMUs, or shares a fixture that does
+
 ROOT = Path(__file__).resolve().parent.parent
 MECH = ROOT / "mechanisms"
 QUIET = dict(echo=lambda s: None, echo_err=lambda s: None)

@@ -914,3 +914,23 @@ def test_cli_eliminate_by_joint_name():
         as_scene(mech, eliminate="joint9")
     [p] = err.value.problems
     assert p.field == "--eliminate" and "unknown joint 'joint9'" in p.message
+
+
+def test_problems_name_the_body_and_joint_the_file_names(tmp_path):
+    """A problem inside a named body or joint shows its name after the index,
+    ``joints[0] (joint1).psi``; the field itself stays the path; an item without a name shows the
+    index alone."""
+    doc = read(PLANAR)
+    doc["bodies"][0]["mass"] = -1.0
+    doc["joints"][0]["psi"] = "ninety"
+    del doc["joints"][1]["name"]
+    path = tmp_path / "mech.toml"
+    path.write_text(dump(doc), encoding="utf-8")
+    body, joint = doc["bodies"][0]["name"], doc["joints"][0]["name"]
+    with pytest.raises(SceneError, match=rf"mech\.toml: bodies\[0\] \({body}\)\.mass: ") as err:
+        load(path)
+    text = str(err.value)
+    assert f"mech.toml: joints[0] ({joint}).psi: " in text
+    assert "mech.toml: joints[1].name: " in text and "joints[1] (" not in text
+    assert {(p.field, p.name) for p in err.value.problems} >= {
+        ("bodies[0].mass", body), ("joints[0].psi", joint), ("joints[1].name", "")}

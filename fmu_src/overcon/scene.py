@@ -113,14 +113,24 @@ _MISSING = object()
 
 @dataclass(frozen=True)
 class Problem:
-    """One validation problem: the file it is in, the field (``bodies[2].mass``) and a message."""
+    """One validation problem: the file it is in, the field (``bodies[2].mass``) and a message;
+    ``name`` is the name the file gives the body, joint or load the field is in (``""``: none),
+    shown after its index: ``joints[0] (hinge1).axis_i``."""
 
     file: str
     field: str
     message: str
+    name: str = ""
+
+    def where(self) -> str:
+        """The field as shown: with the item's name after its index when the file names it."""
+        if not self.name:
+            return self.field
+        item, dot, rest = self.field.partition(".")
+        return f"{item} ({self.name}){dot}{rest}"
 
     def __str__(self) -> str:
-        return f"{self.file}: {self.field}: {self.message}"
+        return f"{self.file}: {self.where()}: {self.message}"
 
 
 class SceneError(Exception):
@@ -491,209 +501,300 @@ def _unit_quaternion(ctx: _Ctx, q0: tuple[float, ...], field: str, body: str | N
     return q0[:3] + tuple(x / norm for x in e)
 
 
+@dataclass
+class _MechHeader:
+    """The ``[mechanism]`` table's values (None: missing or invalid, reported)."""
+
+    name: str | None = None
+    kind: str | None = None
+    gravity: tuple | None = None
+    rotation: str | None = "euler_zxz"
+    description: str = ""
+
+    @property
+    def dim(self) -> int | None:
+        return _DIM.get(self.kind)
+
+
 def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
+    """The mechanism file's document checked section by section; None if it has problems (all
+    in ``ctx``, those of a named body, joint or load carrying its name)."""
     n_problems = len(ctx.problems)
     _unknown_keys(ctx, doc, "", ("mechanism", "bodies", "joints", "loads"))
-
-    name = kind = gravity = None
-    rotation = "euler_zxz"
-    description = ""
-    mt = _get(ctx, doc, "mechanism", "")
-    if mt is not _MISSING and _table(ctx, mt, "mechanism") is not None:
-        _unknown_keys(ctx, mt, "mechanism", ("name", "kind", "gravity", "description", "rotation"))
-        v = _get(ctx, mt, "name", "mechanism")
-        if v is not _MISSING:
-            name = _ident(ctx, v, "mechanism.name")
-        v = _get(ctx, mt, "kind", "mechanism")
-        if v is not _MISSING:
-            kind = _choice(ctx, v, "mechanism.kind", S.KINDS)
-        v = _get(ctx, mt, "description", "mechanism", required=False)
-        if v is not _MISSING:
-            description = _str(ctx, v, "mechanism.description") or ""
-        v = _get(ctx, mt, "gravity", "mechanism")
-        if v is not _MISSING:
-            gravity = _vec(ctx, v, "mechanism.gravity", _DIM.get(kind))
-        rotation = _rotation(ctx, mt, kind)
-    dim = _DIM.get(kind)
-    ncoord = len(S.coordinates(kind, rotation)) if kind and rotation else None
-    nvel = S.VELOCITIES_PER_BODY.get(kind)
-
-    # --- bodies
-    bodies: list[BodySpec] = []
+    head = _check_header(doc, ctx)
     body_names: dict[str, str] = {}  # name -> field where first defined
+    bodies = _check_bodies(doc, ctx, head, body_names)
+    joints = _check_joints(doc, ctx, head, body_names)
+    loads = _check_loads(doc, ctx, head, body_names)
+    if len(ctx.problems) > n_problems:
+        _name_items(doc, ctx, n_problems)
+        return None
+    return MechanismSpec(name=head.name, kind=head.kind, gravity=head.gravity, bodies=tuple(bodies),
+                         joints=tuple(joints), loads=tuple(loads), source=ctx.file,
+                         description=head.description, rotation=head.rotation or "euler_zxz")
+
+
+def _name_items(doc: dict, ctx: _Ctx, since: int) -> None:
+    """Problems (from ``since`` on) in a body, joint or load that the file names carry that name,
+    shown as ``joints[0] (hinge1)`` (:class:`Problem`)."""
+    names = {}
+    for section in ("bodies", "joints", "loads"):
+        entries = doc.get(section)
+        if not isinstance(entries, list):
+            continue
+        for k, entry in enumerate(entries):
+            name = entry.get("name") if isinstance(entry, dict) else None
+            if isinstance(name, str) and name:
+                names[f"{section}[{k}]"] = name
+    for i in range(since, len(ctx.problems)):
+        p = ctx.problems[i]
+        item = p.field.split(".", 1)[0]
+        if item in names and not p.name:
+            ctx.problems[i] = dataclasses.replace(p, name=names[item])
+
+
+def _check_header(doc: dict, ctx: _Ctx) -> _MechHeader:
+    head = _MechHeader()
+    mt = _get(ctx, doc, "mechanism", "")
+    if mt is _MISSING or _table(ctx, mt, "mechanism") is None:
+        return head
+    _unknown_keys(ctx, mt, "mechanism", ("name", "kind", "gravity", "description", "rotation"))
+    v = _get(ctx, mt, "name", "mechanism")
+    if v is not _MISSING:
+        head.name = _ident(ctx, v, "mechanism.name")
+    v = _get(ctx, mt, "kind", "mechanism")
+    if v is not _MISSING:
+        head.kind = _choice(ctx, v, "mechanism.kind", S.KINDS)
+    v = _get(ctx, mt, "description", "mechanism", required=False)
+    if v is not _MISSING:
+        head.description = _str(ctx, v, "mechanism.description") or ""
+    v = _get(ctx, mt, "gravity", "mechanism")
+    if v is not _MISSING:
+        head.gravity = _vec(ctx, v, "mechanism.gravity", head.dim)
+    head.rotation = _rotation(ctx, mt, head.kind)
+    return head
+
+
+def _check_bodies(doc: dict, ctx: _Ctx, head: _MechHeader, body_names: dict) -> list[BodySpec]:
+    bodies: list[BodySpec] = []
     body_entries = _array_of_tables(ctx, doc, "bodies", required=True, limit=MAX_BODIES)
     if "bodies" in doc and isinstance(doc["bodies"], list) and not doc["bodies"]:
         ctx.add("bodies", "at least one body is required")
     for k, bt in body_entries:
-        p = f"bodies[{k}]"
-        _unknown_keys(ctx, bt, p, ("name", "mass", "inertia", "q0", "h0"))
-        bname = mass = inertia = q0 = None
-        h0 = tuple(0.0 for _ in range(nvel)) if nvel else None
-        v = _get(ctx, bt, "name", p)
-        if v is not _MISSING:
-            bname = _ident(ctx, v, f"{p}.name")
-            if bname == BASE:
-                ctx.add(f"{p}.name", f"'{BASE}' is reserved for the fixed ground")
-                bname = None
-            bname = _register_name(ctx, bname, f"{p}.name", body_names, p, "body")
-        v = _get(ctx, bt, "mass", p)
-        if v is not _MISSING:
-            mass = _num(ctx, v, f"{p}.mass", _POSITIVE)
-        v = _get(ctx, bt, "inertia", p)
-        if v is not _MISSING:
-            if kind == "planar":
-                if isinstance(v, list):
-                    ctx.add(f"{p}.inertia", "expected a number (planar moment of inertia J), "
-                                            "got an array")
-                else:
-                    j = _num(ctx, v, f"{p}.inertia", _POSITIVE)
-                    inertia = None if j is None else (j,)
-            elif kind == "spatial":
-                inertia = _vec(ctx, v, f"{p}.inertia", 3, _POSITIVE)
-        v = _get(ctx, bt, "q0", p)
-        if v is not _MISSING:
-            q0 = _vec(ctx, v, f"{p}.q0", ncoord)
-            if q0 is not None and kind == "spatial" and rotation == "quaternion":
-                q0 = _unit_quaternion(ctx, q0, f"{p}.q0", bname)
-        v = _get(ctx, bt, "h0", p, required=False)
-        if v is not _MISSING:
-            h0 = _vec(ctx, v, f"{p}.h0", nvel)
-        if None not in (bname, mass, inertia, q0, h0):
-            bodies.append(BodySpec(bname, mass, inertia, q0, h0))
+        body = _check_body(bt, f"bodies[{k}]", ctx, head, body_names)
+        if body is not None:
+            bodies.append(body)
+    return bodies
 
-    def body_ref(value, field, allow_base=True):
-        s = _str(ctx, value, field)
-        if s is None:
-            return None
-        if s == BASE:
-            if allow_base:
-                return s
-            ctx.add(field, f"cannot act on '{BASE}' (the fixed ground)")
-            return None
-        if s not in body_names:
-            ctx.add(field, f"unknown body {_short(s)}")
-            return None
-        return s
 
-    # --- joints
+def _check_body(bt: dict, p: str, ctx: _Ctx, head: _MechHeader, body_names: dict) -> BodySpec | None:
+    kind, rotation = head.kind, head.rotation
+    ncoord = len(S.coordinates(kind, rotation)) if kind and rotation else None
+    nvel = S.VELOCITIES_PER_BODY.get(kind)
+    _unknown_keys(ctx, bt, p, ("name", "mass", "inertia", "q0", "h0"))
+    bname = mass = inertia = q0 = None
+    h0 = tuple(0.0 for _ in range(nvel)) if nvel else None
+    v = _get(ctx, bt, "name", p)
+    if v is not _MISSING:
+        bname = _ident(ctx, v, f"{p}.name")
+        if bname == BASE:
+            ctx.add(f"{p}.name", f"'{BASE}' is reserved for the fixed ground")
+            bname = None
+        bname = _register_name(ctx, bname, f"{p}.name", body_names, p, "body")
+    v = _get(ctx, bt, "mass", p)
+    if v is not _MISSING:
+        mass = _num(ctx, v, f"{p}.mass", _POSITIVE)
+    v = _get(ctx, bt, "inertia", p)
+    if v is not _MISSING:
+        inertia = _inertia(ctx, v, f"{p}.inertia", kind)
+    v = _get(ctx, bt, "q0", p)
+    if v is not _MISSING:
+        q0 = _vec(ctx, v, f"{p}.q0", ncoord)
+        if q0 is not None and kind == "spatial" and rotation == "quaternion":
+            q0 = _unit_quaternion(ctx, q0, f"{p}.q0", bname)
+    v = _get(ctx, bt, "h0", p, required=False)
+    if v is not _MISSING:
+        h0 = _vec(ctx, v, f"{p}.h0", nvel)
+    if None in (bname, mass, inertia, q0, h0):
+        return None
+    return BodySpec(bname, mass, inertia, q0, h0)
+
+
+def _inertia(ctx: _Ctx, v, field: str, kind: str | None):
+    """Planar: one positive number J, as a 1-tuple; spatial: three positive principal inertias."""
+    if kind == "planar":
+        if isinstance(v, list):
+            ctx.add(field, "expected a number (planar moment of inertia J), got an array")
+            return None
+        j = _num(ctx, v, field, _POSITIVE)
+        return None if j is None else (j,)
+    if kind == "spatial":
+        return _vec(ctx, v, field, 3, _POSITIVE)
+    return None
+
+
+def _body_ref(ctx: _Ctx, body_names: dict, value, field: str, allow_base: bool = True) -> str | None:
+    """A body name given in ``field``: a body of the file, or the base where ``allow_base``."""
+    s = _str(ctx, value, field)
+    if s is None:
+        return None
+    if s == BASE:
+        if allow_base:
+            return s
+        ctx.add(field, f"cannot act on '{BASE}' (the fixed ground)")
+        return None
+    if s not in body_names:
+        ctx.add(field, f"unknown body {_short(s)}")
+        return None
+    return s
+
+
+_JOINT_COMMON = ("name", "type", "body_i", "body_j", "friction")
+
+
+def _check_joints(doc: dict, ctx: _Ctx, head: _MechHeader, body_names: dict) -> list[JointSpec]:
     joints: list[JointSpec] = []
     joint_names: dict[str, str] = {}
-    common = ("name", "type", "body_i", "body_j", "friction")
-    all_joint_fields = tuple(dict.fromkeys(
-        f for d in JOINT_TYPES.values()
-        for f in (*d.required, *d.optional, *_deg_keys(d.required), *_deg_keys(d.optional))))
     for k, jt in _array_of_tables(ctx, doc, "joints", required=False, limit=MAX_JOINTS):
-        p = f"joints[{k}]"
-        jname = jtype = bi = bj = None
-        ok = True
-        v = _get(ctx, jt, "type", p)
-        if v is not _MISSING:
-            tname = _choice(ctx, v, f"{p}.type", joint_type_names())
-            if tname is not None:
-                # kind unknown (reported): check the fields of the first type of that name
-                jtype = resolve_joint_type(kind, tname) if kind is not None else next(
-                    key for key, d in JOINT_TYPES.items() if d.name == tname)
-                if jtype is None:
-                    ctx.add(f"{p}.type", f"joint type '{tname}' is not allowed in a {kind} mechanism "
-                                         f"(allowed: {', '.join(joint_type_names(kind))})")
-                    ok = False
-        # a type not allowed for the kind is reported once; its fields are then not checked
-        fields = JOINT_TYPES[jtype] if jtype and ok else None
-        if fields is not None:
-            _unknown_keys(ctx, jt, p, common + tuple(fields.required) + tuple(fields.optional)
-                          + _deg_keys(fields.required) + _deg_keys(fields.optional))
-        else:
-            _unknown_keys(ctx, jt, p, common + all_joint_fields)
-        v = _get(ctx, jt, "name", p)
-        if v is not _MISSING:
-            jname = _register_name(ctx, _ident(ctx, v, f"{p}.name"), f"{p}.name", joint_names, p, "joint")
-        v = _get(ctx, jt, "body_i", p)
-        if v is not _MISSING:
-            bi = body_ref(v, f"{p}.body_i")
-        v = _get(ctx, jt, "body_j", p)
-        if v is not _MISSING:
-            bj = body_ref(v, f"{p}.body_j")
-        if bi is not None and bi == bj:
-            ctx.add(f"{p}.body_j", f"body_j must differ from body_i ('{bi}')")
-            ok = False
-        params: dict = {}
-        if fields is not None and ok:
-            for fname, (shape, _doc) in fields.required.items():
-                val = _field(ctx, jt, fname, p, shape, kind, required=True)
-                if val is None or val is _MISSING:
-                    ok = False
-                else:
-                    params[fname] = val
-            for fname, (shape, _doc, default) in fields.optional.items():
-                val = _field(ctx, jt, fname, p, shape, kind, required=False)
-                if val is None:
-                    ok = False
-                else:
-                    params[fname] = default if val is _MISSING else val
-        friction = None
-        v = _get(ctx, jt, "friction", p, required=False)
-        if v is not _MISSING and _table(ctx, v, f"{p}.friction") is not None:
-            friction = _friction(ctx, v, f"{p}.friction", jtype if fields else None, None)
-        if ok and None not in (jname, jtype, bi, bj):
-            joints.append(JointSpec(jname, jtype, bi, bj, params, friction))
+        joint = _check_joint(jt, f"joints[{k}]", ctx, head.kind, body_names, joint_names)
+        if joint is not None:
+            joints.append(joint)
+    return joints
 
-    # --- loads
+
+def _joint_type(ctx: _Ctx, jt: dict, p: str, kind: str | None) -> tuple[str | None, bool]:
+    """(joint type key or None, whether it is allowed for the mechanism's kind)."""
+    v = _get(ctx, jt, "type", p)
+    if v is _MISSING:
+        return None, True
+    tname = _choice(ctx, v, f"{p}.type", joint_type_names())
+    if tname is None:
+        return None, True
+    # kind unknown (reported): check the fields of the first type of that name
+    jtype = resolve_joint_type(kind, tname) if kind is not None else next(
+        key for key, d in JOINT_TYPES.items() if d.name == tname)
+    if jtype is None:
+        ctx.add(f"{p}.type", f"joint type '{tname}' is not allowed in a {kind} mechanism "
+                             f"(allowed: {', '.join(joint_type_names(kind))})")
+        return None, False
+    return jtype, True
+
+
+def _joint_keys(fields) -> tuple[str, ...]:
+    """The keys a joint table of type ``fields`` may have (``None``: of any type)."""
+    types = JOINT_TYPES.values() if fields is None else (fields,)
+    return _JOINT_COMMON + tuple(dict.fromkeys(
+        f for d in types for f in (*d.required, *d.optional, *_deg_keys(d.required), *_deg_keys(d.optional))))
+
+
+def _joint_params(ctx: _Ctx, jt: dict, p: str, fields, kind: str | None) -> dict | None:
+    """The type's required and optional fields (defaults filled in), or None if one is bad."""
+    params: dict = {}
+    ok = True
+    for fname, (shape, _doc) in fields.required.items():
+        val = _field(ctx, jt, fname, p, shape, kind, required=True)
+        if val is None or val is _MISSING:
+            ok = False
+        else:
+            params[fname] = val
+    for fname, (shape, _doc, default) in fields.optional.items():
+        val = _field(ctx, jt, fname, p, shape, kind, required=False)
+        if val is None:
+            ok = False
+        else:
+            params[fname] = default if val is _MISSING else val
+    return params if ok else None
+
+
+def _check_joint(jt: dict, p: str, ctx: _Ctx, kind: str | None, body_names: dict,
+                 joint_names: dict) -> JointSpec | None:
+    jname = bi = bj = None
+    jtype, ok = _joint_type(ctx, jt, p, kind)
+    # a type not allowed for the kind is reported once; its fields are then not checked
+    fields = JOINT_TYPES[jtype] if jtype and ok else None
+    _unknown_keys(ctx, jt, p, _joint_keys(fields))
+    v = _get(ctx, jt, "name", p)
+    if v is not _MISSING:
+        jname = _register_name(ctx, _ident(ctx, v, f"{p}.name"), f"{p}.name", joint_names, p, "joint")
+    v = _get(ctx, jt, "body_i", p)
+    if v is not _MISSING:
+        bi = _body_ref(ctx, body_names, v, f"{p}.body_i")
+    v = _get(ctx, jt, "body_j", p)
+    if v is not _MISSING:
+        bj = _body_ref(ctx, body_names, v, f"{p}.body_j")
+    if bi is not None and bi == bj:
+        ctx.add(f"{p}.body_j", f"body_j must differ from body_i ('{bi}')")
+        ok = False
+    params = None
+    if fields is not None and ok:
+        params = _joint_params(ctx, jt, p, fields, kind)
+        ok = params is not None
+    friction = None
+    v = _get(ctx, jt, "friction", p, required=False)
+    if v is not _MISSING and _table(ctx, v, f"{p}.friction") is not None:
+        friction = _friction(ctx, v, f"{p}.friction", jtype if fields else None, None)
+    if ok and None not in (jname, jtype, bi, bj):
+        return JointSpec(jname, jtype, bi, bj, params, friction)
+    return None
+
+
+def _check_loads(doc: dict, ctx: _Ctx, head: _MechHeader, body_names: dict) -> list[LoadSpec]:
     loads: list[LoadSpec] = []
     for k, lt in _array_of_tables(ctx, doc, "loads", required=False, limit=MAX_LOADS):
-        p = f"loads[{k}]"
-        ltype = None
-        v = _get(ctx, lt, "type", p)
-        if v is not _MISSING:
-            ltype = _choice(ctx, v, f"{p}.type", tuple(S.LOAD_FIELDS))
-        if ltype is None:
-            allowed = ("type",) + tuple(dict.fromkeys(
-                f for d in S.LOAD_FIELDS.values()
-                for f in (*d["required"], *d.get("optional", {}))))
-            _unknown_keys(ctx, lt, p, allowed)
-            continue
-        lf = S.LOAD_FIELDS[ltype]
-        optional = lf.get("optional", {})
-        _unknown_keys(ctx, lt, p, ("type",) + tuple(lf["required"]) + tuple(optional))
-        ok = True
-        params = {}
-        for fname, (shape, _doc) in lf["required"].items():
-            v = _get(ctx, lt, fname, p)
-            if v is _MISSING:
-                ok = False
-                continue
-            f = f"{p}.{fname}"
-            if shape == "body":
-                val = body_ref(v, f, allow_base=(ltype == "spring"))
-            elif shape == "scalar":
-                val = _num(ctx, v, f, _NONNEG if ltype == "spring" else None)
-            else:
-                val = _shaped(ctx, v, f, shape, kind)
-            if val is None:
-                ok = False
-            else:
-                params[fname] = val
-        for fname, (shape, _doc, _default) in optional.items():
-            v = _get(ctx, lt, fname, p, required=False)
-            if v is _MISSING:
-                if dim is not None and shape == "vec":
-                    params[fname] = tuple(0.0 for _ in range(dim))  # body origin
-                continue
-            val = _shaped(ctx, v, f"{p}.{fname}", shape, kind)
-            if val is None:
-                ok = False
-            else:
-                params[fname] = val
-        if ltype == "spring" and "body_i" in params and params.get("body_i") == params.get("body_j"):
-            ctx.add(f"{p}.body_j", f"body_j must differ from body_i ('{params['body_i']}')")
-            ok = False
-        if ok:
-            loads.append(LoadSpec(ltype, params))
+        load = _check_load(lt, f"loads[{k}]", ctx, head, body_names)
+        if load is not None:
+            loads.append(load)
+    return loads
 
-    if len(ctx.problems) > n_problems:
+
+def _check_load(lt: dict, p: str, ctx: _Ctx, head: _MechHeader, body_names: dict) -> LoadSpec | None:
+    kind, dim = head.kind, head.dim
+    ltype = None
+    v = _get(ctx, lt, "type", p)
+    if v is not _MISSING:
+        ltype = _choice(ctx, v, f"{p}.type", tuple(S.LOAD_FIELDS))
+    if ltype is None:
+        allowed = ("type",) + tuple(dict.fromkeys(
+            f for d in S.LOAD_FIELDS.values()
+            for f in (*d["required"], *d.get("optional", {}))))
+        _unknown_keys(ctx, lt, p, allowed)
         return None
-    return MechanismSpec(name=name, kind=kind, gravity=gravity, bodies=tuple(bodies),
-                         joints=tuple(joints), loads=tuple(loads), source=ctx.file,
-                         description=description, rotation=rotation or "euler_zxz")
+    lf = S.LOAD_FIELDS[ltype]
+    optional = lf.get("optional", {})
+    _unknown_keys(ctx, lt, p, ("type",) + tuple(lf["required"]) + tuple(optional))
+    ok = True
+    params = {}
+    for fname, (shape, _doc) in lf["required"].items():
+        v = _get(ctx, lt, fname, p)
+        if v is _MISSING:
+            ok = False
+            continue
+        f = f"{p}.{fname}"
+        if shape == "body":
+            val = _body_ref(ctx, body_names, v, f, allow_base=(ltype == "spring"))
+        elif shape == "scalar":
+            val = _num(ctx, v, f, _NONNEG if ltype == "spring" else None)
+        else:
+            val = _shaped(ctx, v, f, shape, kind)
+        if val is None:
+            ok = False
+        else:
+            params[fname] = val
+    for fname, (shape, _doc, _default) in optional.items():
+        v = _get(ctx, lt, fname, p, required=False)
+        if v is _MISSING:
+            if dim is not None and shape == "vec":
+                params[fname] = tuple(0.0 for _ in range(dim))  # body origin
+            continue
+        val = _shaped(ctx, v, f"{p}.{fname}", shape, kind)
+        if val is None:
+            ok = False
+        else:
+            params[fname] = val
+    if ltype == "spring" and "body_i" in params and params.get("body_i") == params.get("body_j"):
+        ctx.add(f"{p}.body_j", f"body_j must differ from body_i ('{params['body_i']}')")
+        ok = False
+    return LoadSpec(ltype, params) if ok else None
 
 
 def _shaped(ctx: _Ctx, value, field: str, shape: str, kind: str | None):

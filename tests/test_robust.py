@@ -557,7 +557,7 @@ def test_direction_too_small_to_normalise_is_refused(tmp_path, capsys):
     (tmp_path / "planar_sliders.toml").write_text(mech)
     (tmp_path / "s.toml").write_text((ROOT / "mechanisms" / "planar_f45_wo4.toml").read_text())
     assert main(["check", str(tmp_path / "s.toml")]) == 2
-    assert "joints[0].v: a direction, normalised as v/|v|: |v| = 0" in capsys.readouterr().err
+    assert "joints[0] (joint1).v: a direction, normalised as v/|v|: |v| = 0" in capsys.readouterr().err
 
 
 def test_friction_coefficient_envelope():

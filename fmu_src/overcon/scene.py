@@ -381,59 +381,15 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
     if jtype is not None and JOINT_TYPES[jtype].friction_size is None:
         ctx.add(prefix, _no_friction_model(jtype))
         return None
-    if jtype is None:
-        size_keys = ("length", "radius")
-    else:
-        size_keys = JOINT_TYPES[jtype].friction_keys
-    allowed = _FRICTION_KEYS + size_keys
-    hint = {}
-    if jtype is not None:
-        for other in ("length", "radius"):
-            if other not in size_keys:
-                hint[other] = (f"unknown key: the friction size of a {JOINT_TYPES[jtype].name} joint is "
-                               f"'{size_keys[0]}', not '{other}'")
-    _unknown_keys(ctx, table, prefix, allowed, hint)
-
-    ok = True
-    given: dict = {}
-
-    def take(key, conv):
-        nonlocal ok
-        if key in table:
-            val = conv(table[key], _join(prefix, key))
-            if val is None:
-                ok = False
-            else:
-                given[key] = val
-
-    take("law", lambda v, f: _choice(ctx, v, f, S.FRICTION_LAWS))
-    for key in params.FRICTION_FIELDS:
-        take(key, lambda v, f, key=key: _param(ctx, v, f, key))
-    size = None
-    extra = {}
-    for key in size_keys:
-        if key in table:
-            val = _num(ctx, table[key], _join(prefix, key), _POSITIVE)
-            if val is None:
-                ok = False
-            elif jtype is None or key == size_keys[0]:
-                size = val
-            else:
-                extra[key] = val
+    size_keys = ("length", "radius") if jtype is None else JOINT_TYPES[jtype].friction_keys
+    _friction_keys(ctx, table, prefix, jtype, size_keys)
+    given = _friction_values(ctx, table, prefix, jtype, size_keys)
+    ok = given is not None
     if base is None and require:
-        if "mu" not in table:
-            ctx.add(_join(prefix, "mu"), "missing required field")
-            ok = False
-        required_sizes = () if jtype is None else (size_keys[0], *(
-            key for key, (_text, default) in JOINT_TYPES[jtype].friction_extra.items() if default is None))
-        for key in required_sizes:
-            if key not in table:
-                ctx.add(_join(prefix, key), "missing required field")
-                ok = False
+        ok = _friction_required(ctx, table, prefix, jtype, size_keys) and ok
     if not ok:
         return None
-    if size is not None:
-        given["size"] = size
+    extra = given.pop("extra", {})
     if extra:
         given["extra"] = tuple({**dict(base.extra if base is not None else ()), **extra}.items())
     if base is None:
@@ -442,7 +398,68 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
         result = FrictionSpec(**given)
     else:
         result = dataclasses.replace(base, **given)
+    return result if _friction_law_fields(ctx, table, prefix, result) else None
 
+
+def _friction_keys(ctx: _Ctx, table: dict, prefix: str, jtype: str | None, size_keys) -> None:
+    """Unknown keys of a friction table; the other type's size key gets a hint naming the right one."""
+    hint = {}
+    if jtype is not None:
+        for other in ("length", "radius"):
+            if other not in size_keys:
+                hint[other] = (f"unknown key: the friction size of a {JOINT_TYPES[jtype].name} joint is "
+                               f"'{size_keys[0]}', not '{other}'")
+    _unknown_keys(ctx, table, prefix, _FRICTION_KEYS + size_keys, hint)
+
+
+def _friction_values(ctx: _Ctx, table: dict, prefix: str, jtype: str | None, size_keys) -> dict | None:
+    """The given law, parameters, ``size`` and ``extra`` (a dict) of a friction table; None if one
+    is bad (reported)."""
+    ok = True
+    given: dict = {}
+    checks = {"law": lambda v, f: _choice(ctx, v, f, S.FRICTION_LAWS)}
+    for key in params.FRICTION_FIELDS:
+        checks[key] = lambda v, f, key=key: _param(ctx, v, f, key)
+    for key, conv in checks.items():
+        if key in table:
+            val = conv(table[key], _join(prefix, key))
+            if val is None:
+                ok = False
+            else:
+                given[key] = val
+    extra = {}
+    for key in size_keys:
+        if key in table:
+            val = _num(ctx, table[key], _join(prefix, key), _POSITIVE)
+            if val is None:
+                ok = False
+            elif jtype is None or key == size_keys[0]:
+                given["size"] = val
+            else:
+                extra[key] = val
+    if extra:
+        given["extra"] = extra
+    return given if ok else None
+
+
+def _friction_required(ctx: _Ctx, table: dict, prefix: str, jtype: str | None, size_keys) -> bool:
+    """mu and the type's size keys without a default must be given (a table without a base)."""
+    ok = True
+    if "mu" not in table:
+        ctx.add(_join(prefix, "mu"), "missing required field")
+        ok = False
+    required_sizes = () if jtype is None else (size_keys[0], *(
+        key for key, (_text, default) in JOINT_TYPES[jtype].friction_extra.items() if default is None))
+    for key in required_sizes:
+        if key not in table:
+            ctx.add(_join(prefix, key), "missing required field")
+            ok = False
+    return ok
+
+
+def _friction_law_fields(ctx: _Ctx, table: dict, prefix: str, result: FrictionSpec) -> bool:
+    """The Stribeck fields: required by law 'stribeck' (with mu_static >= mu), refused by the others."""
+    ok = True
     if result.law == "stribeck":
         for key in ("mu_static", "v_stribeck"):
             if getattr(result, key) is None:
@@ -457,7 +474,7 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
             if key in table:
                 ctx.add(_join(prefix, key), f"only used by law 'stribeck' (law is '{result.law}')")
                 ok = False
-    return result if ok else None
+    return ok
 
 
 def _no_friction_model(jtype: str) -> str:
@@ -960,68 +977,23 @@ def _check_friction_list(ctx: _Ctx, value, field: str, mech: MechanismSpec | Non
 
 
 def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | None:
+    """The scene file's document checked section by section (its mechanism file too); None if
+    either has problems (all in ``problems``)."""
     n_problems = len(problems)
     _unknown_keys(ctx, doc, "", ("scene", "outputs", "solver"))
     st = doc.get("scene")
     if _table(ctx, st, "scene") is None:
         return None
     _unknown_keys(ctx, st, "scene", _SCENE_KEYS)
-
     name = _MISSING
     v = _get(ctx, st, "name", "scene")
     if v is not _MISSING:
         name = _ident(ctx, v, "scene.name")
-    group = description = ""
-    v = _get(ctx, st, "group", "scene", required=False)
-    if v is not _MISSING:
-        group = _str(ctx, v, "scene.group") or ""
-    v = _get(ctx, st, "description", "scene", required=False)
-    if v is not _MISSING:
-        description = _str(ctx, v, "scene.description") or ""
-
-    # --- the mechanism
-    mech = None
-    mech_ok = False
-    v = _get(ctx, st, "mechanism", "scene")
-    if v is not _MISSING:
-        rel = _str(ctx, v, "scene.mechanism")
-        if rel is not None:
-            if not rel:
-                ctx.add("scene.mechanism", "empty path")
-            else:
-                mpath = Path(ctx.file).parent / rel
-                mfile = str(mpath)
-                if not _exists(mpath):
-                    ctx.add("scene.mechanism", f"mechanism file not found: {mfile}")
-                else:
-                    mctx = _Ctx(mfile, problems)
-                    mdoc = _read(mpath, mctx)
-                    if mdoc is not None:
-                        if isinstance(mdoc.get("scene"), dict) or "mechanism" not in mdoc:
-                            mctx.add(FILE_FIELD, "not a mechanism file (no [mechanism] table)")
-                        else:
-                            mech = _check_mechanism(mdoc, mctx)
-                            mech_ok = mech is not None
-
-    # --- friction parameters
-    friction_params: dict[str, FrictionSpec] = {}
-    fp_given: set[str] = set()
+    group = _optional_str(ctx, st, "group")
+    description = _optional_str(ctx, st, "description")
+    mech = _scene_mechanism(ctx, st, problems)
     joints = {j.name: j for j in mech.joints} if mech is not None else {}
-    v = _get(ctx, st, "friction_params", "scene", required=False)
-    if v is not _MISSING and _table(ctx, v, "scene.friction_params") is not None:
-        for jn, tab in v.items():
-            f = f"scene.friction_params.{jn}"
-            if mech is not None and jn not in joints:
-                ctx.add(f, f"unknown joint {_short(jn)}")
-                continue
-            if _table(ctx, tab, f) is None:
-                continue
-            fp_given.add(jn)
-            joint = joints.get(jn)
-            fs = _friction(ctx, tab, f, joint.type if joint else None,
-                           joint.friction if joint else None, require=mech is not None)
-            if fs is not None:
-                friction_params[jn] = fs
+    friction_params, fp_given = _scene_friction_params(ctx, st, mech, joints)
 
     def has_params(jn):
         return jn in fp_given or joints[jn].friction is not None
@@ -1031,12 +1003,84 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     if v is not _MISSING:
         friction = _check_friction_list(ctx, v, "scene.friction", mech, has_params,
                                         lambda k: f"scene.friction[{k}]")
-
     eliminate = None
     v = _get(ctx, st, "eliminate", "scene")
     if v is not _MISSING:
         eliminate = _check_eliminate(ctx, v, "scene.eliminate", mech, lambda k: f"scene.eliminate[{k}]")
+    start_time, stop_time = _scene_times(ctx, st)
+    positions, reactions, friction_out = _scene_outputs(ctx, doc, mech, joints, friction)
+    solver_kw = _scene_solver(ctx, doc, problems, start_time, stop_time)
+    if len(problems) > n_problems or mech is None:
+        return None
+    if positions == "all":
+        positions = _all_positions(mech)
+    if reactions == "all":
+        reactions = tuple(j.name for j in mech.joints)
+    fparams = {jn: friction_params.get(jn, joints[jn].friction) for jn in friction}
+    return SceneSpec(name=name, mechanism=mech, friction=friction, friction_params=fparams,
+                     eliminate=eliminate, positions=positions, reactions=reactions,
+                     friction_outputs=friction_out,
+                     start_time=start_time, stop_time=stop_time,
+                     solver=SolverSpec(**solver_kw), group=group, description=description,
+                     source=ctx.file)
 
+
+def _optional_str(ctx: _Ctx, st: dict, key: str) -> str:
+    v = _get(ctx, st, key, "scene", required=False)
+    return "" if v is _MISSING else _str(ctx, v, f"scene.{key}") or ""
+
+
+def _scene_mechanism(ctx: _Ctx, st: dict, problems: list[Problem]) -> MechanismSpec | None:
+    """The mechanism file ``scene.mechanism`` names, loaded and checked (its problems against it)."""
+    v = _get(ctx, st, "mechanism", "scene")
+    if v is _MISSING:
+        return None
+    rel = _str(ctx, v, "scene.mechanism")
+    if rel is None:
+        return None
+    if not rel:
+        ctx.add("scene.mechanism", "empty path")
+        return None
+    mpath = Path(ctx.file).parent / rel
+    mfile = str(mpath)
+    if not _exists(mpath):
+        ctx.add("scene.mechanism", f"mechanism file not found: {mfile}")
+        return None
+    mctx = _Ctx(mfile, problems)
+    mdoc = _read(mpath, mctx)
+    if mdoc is None:
+        return None
+    if isinstance(mdoc.get("scene"), dict) or "mechanism" not in mdoc:
+        mctx.add(FILE_FIELD, "not a mechanism file (no [mechanism] table)")
+        return None
+    return _check_mechanism(mdoc, mctx)
+
+
+def _scene_friction_params(ctx: _Ctx, st: dict, mech: MechanismSpec | None,
+                           joints: dict) -> tuple[dict[str, FrictionSpec], set[str]]:
+    """``[scene.friction_params]``: (the merged spec per joint, the joints given a table)."""
+    friction_params: dict[str, FrictionSpec] = {}
+    fp_given: set[str] = set()
+    v = _get(ctx, st, "friction_params", "scene", required=False)
+    if v is _MISSING or _table(ctx, v, "scene.friction_params") is None:
+        return friction_params, fp_given
+    for jn, tab in v.items():
+        f = f"scene.friction_params.{jn}"
+        if mech is not None and jn not in joints:
+            ctx.add(f, f"unknown joint {_short(jn)}")
+            continue
+        if _table(ctx, tab, f) is None:
+            continue
+        fp_given.add(jn)
+        joint = joints.get(jn)
+        fs = _friction(ctx, tab, f, joint.type if joint else None,
+                       joint.friction if joint else None, require=mech is not None)
+        if fs is not None:
+            friction_params[jn] = fs
+    return friction_params, fp_given
+
+
+def _scene_times(ctx: _Ctx, st: dict) -> tuple[float | None, float | None]:
     start_time = 0.0
     v = _get(ctx, st, "start_time", "scene", required=False)
     if v is not _MISSING:
@@ -1047,8 +1091,11 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
         stop_time = _num(ctx, v, "scene.stop_time")
         if stop_time is not None and start_time is not None and stop_time <= start_time:
             ctx.add("scene.stop_time", f"must be > start_time ({start_time!r}), got {stop_time!r}")
+    return start_time, stop_time
 
-    # --- outputs
+
+def _scene_outputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None, joints: dict, friction):
+    """The ``[outputs]`` table: (positions, reactions, friction outputs), each ``"all"`` or names."""
     positions = reactions = friction_out = "all"
     ot = doc.get("outputs", _MISSING)
     if ot is not _MISSING and _table(ctx, ot, "outputs") is not None:
@@ -1058,8 +1105,6 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
         friction_out = ot.get("friction", [])
         positions = ot.get("positions", "all")
         reactions = ot.get("reactions", "all")
-    else:
-        ot = None
     valid_pos = set(_all_positions(mech)) if mech is not None else None
     positions = _check_outputs(ctx, positions, "outputs.positions", valid_pos,
                                "'<body>.<coordinate>'", _pos_message(mech))
@@ -1070,8 +1115,12 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
                                   set(friction) if friction is not None else None, "friction joint name",
                                   lambda s: f"{_short(s)} is not in scene.friction (friction outputs are "
                                             "the friction forces of friction joints)")
+    return positions, reactions, friction_out
 
-    # --- solver
+
+def _scene_solver(ctx: _Ctx, doc: dict, problems: list[Problem], start_time, stop_time) -> dict:
+    """The ``[solver]`` table's values; then the bounded-work relations with the scene's times,
+    reported against the solver field if the file gives it, else the stop time."""
     solver_kw = {}
     n_before_solver = len(problems)
     sv = doc.get("solver", _MISSING)
@@ -1083,30 +1132,12 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
             val = _param(ctx, sv[key], f"solver.{key}", f"solver.{key}")
             if val is not None:
                 solver_kw[key] = val
-
     if len(problems) == n_before_solver and start_time is not None and stop_time is not None \
             and stop_time > start_time:
-        # bounded work: reported against the solver field if the file gives it, else the stop time
         for name, msg in params.check_relations(SolverSpec(**solver_kw), start_time, stop_time):
             key = name.split(".", 1)[1]
             ctx.add(name if isinstance(sv, dict) and key in sv else "scene.stop_time", msg)
-
-    if len(problems) > n_problems or not mech_ok:
-        return None
-    if positions == "all":
-        positions = _all_positions(mech)
-    if reactions == "all":
-        reactions = tuple(j.name for j in mech.joints)
-    fparams = {}
-    for jn in friction:
-        fs = friction_params.get(jn, joints[jn].friction)
-        fparams[jn] = fs
-    return SceneSpec(name=name, mechanism=mech, friction=friction, friction_params=fparams,
-                     eliminate=eliminate, positions=positions, reactions=reactions,
-                     friction_outputs=friction_out,
-                     start_time=start_time, stop_time=stop_time,
-                     solver=SolverSpec(**solver_kw), group=group, description=description,
-                     source=ctx.file)
+    return solver_kw
 
 
 def _pos_message(mech: MechanismSpec | None):
@@ -1293,88 +1324,103 @@ def as_scene(spec: MechanismSpec | SceneSpec, *, friction=None, eliminate=None, 
     raise :class:`SceneError` with ``source`` as the file and the option name as the field; the
     scene keeps the source file of ``spec``. Friction parameters of newly enabled joints come from
     the scene (if it had them) or the mechanism."""
-    if isinstance(spec, MechanismSpec):
-        mech = spec
-        scene = SceneSpec(name=mech.name, mechanism=mech, friction=(), friction_params={},
-                          eliminate="auto", positions=_all_positions(mech),
-                          reactions=tuple(j.name for j in mech.joints), start_time=0.0,
-                          stop_time=1.0, description=mech.description, source=mech.source)
-    elif isinstance(spec, SceneSpec):
-        scene = spec
-        mech = spec.mechanism
-    else:
-        raise TypeError(f"as_scene needs a MechanismSpec or SceneSpec, got {type(spec).__name__}")
-
+    scene = _base_scene(spec)
     problems: list[Problem] = []
     ctx = _Ctx(source, problems)
     changes: dict = {}
-    joints = {j.name: j for j in mech.joints}
-
     if friction is not None:
-        if isinstance(friction, str):
-            friction = parse_joint_list(friction)
-
-        def has_params(jn):
-            return jn in scene.friction_params or joints[jn].friction is not None
-
-        names = _check_friction_list(ctx, friction, "--friction", mech, has_params,
-                                     lambda k: "--friction")
-        listed = () if scene.friction_outputs == "all" or friction_outputs is not None else scene.friction_outputs
-        dropped = [jn for jn in listed if names is not None and jn not in names]
-        if dropped:
-            ctx.add("--friction", f"the scene's outputs.friction lists {', '.join(dropped)}, which would "
-                                  "have no friction: keep them in the friction set")
-        elif names is not None:
-            changes["friction"] = names
-            changes["friction_params"] = {
-                jn: scene.friction_params.get(jn) or joints[jn].friction for jn in names}
-
+        _override_friction(ctx, scene, friction, friction_outputs, changes)
     if eliminate is not None:
-        if isinstance(eliminate, str):
-            try:
-                eliminate = parse_eliminate(eliminate, source=source)
-            except SceneError as exc:
-                problems.extend(exc.problems)
-                eliminate = None
-        if eliminate is not None:
-            val = _check_eliminate(ctx, eliminate, "--eliminate", mech, lambda k: "--eliminate")
-            if val is not None:
-                changes["eliminate"] = val
-
+        _override_eliminate(ctx, scene, eliminate, source, changes)
     if stop_time is not None:
         val = _num(ctx, stop_time, "--stop-time")
         if val is not None and val <= scene.start_time:
             ctx.add("--stop-time", f"must be > start time ({scene.start_time!r}), got {val!r}")
         elif val is not None:
             changes["stop_time"] = val
-
     if friction_outputs is not None:
-        if isinstance(friction_outputs, str) and friction_outputs != "all":
-            friction_outputs = parse_joint_list(friction_outputs)
-        if isinstance(friction_outputs, tuple):
-            friction_outputs = list(friction_outputs)
-        on = changes.get("friction", scene.friction)
-        val = _check_outputs(ctx, friction_outputs, "--friction-outputs", set(on), "friction joint name",
-                             lambda s: f"{_short(s)} has no friction (friction joints: {', '.join(on) or 'none'})")
-        if val is not None:
-            changes["friction_outputs"] = val
-
+        _override_friction_outputs(ctx, scene, friction_outputs, changes)
     solver = dict(solver or {})
     if tolerance is not None:
         solver["tolerance"] = tolerance
     if solver or "stop_time" in changes:
-        timed = dataclasses.replace(scene, stop_time=changes.get("stop_time", scene.stop_time))
-        new, found = params.apply_overrides(timed, {f"solver.{k}": v for k, v in solver.items()})
-        for name, msg in found:
-            key = name.split(".", 1)[-1]
-            flag = "--stop-time" if key not in solver and "stop_time" in changes else _flag(key)
-            ctx.add(flag, msg)
-        if new is not None and solver:
-            changes["solver"] = new.solver
-
+        _override_solver(ctx, scene, solver, changes)
     if problems:
         raise SceneError(problems)
     return dataclasses.replace(scene, **changes) if changes else scene
+
+
+def _base_scene(spec) -> SceneSpec:
+    """``spec`` itself (a scene), or the default scene of a mechanism (see :func:`as_scene`)."""
+    if isinstance(spec, MechanismSpec):
+        mech = spec
+        return SceneSpec(name=mech.name, mechanism=mech, friction=(), friction_params={},
+                         eliminate="auto", positions=_all_positions(mech),
+                         reactions=tuple(j.name for j in mech.joints), start_time=0.0,
+                         stop_time=1.0, description=mech.description, source=mech.source)
+    if isinstance(spec, SceneSpec):
+        return spec
+    raise TypeError(f"as_scene needs a MechanismSpec or SceneSpec, got {type(spec).__name__}")
+
+
+def _override_friction(ctx: _Ctx, scene: SceneSpec, friction, friction_outputs, changes: dict) -> None:
+    """``--friction``: the new friction set and its parameters into ``changes``; refused if it
+    drops a joint the scene's outputs.friction lists (unless those outputs are overridden too)."""
+    mech = scene.mechanism
+    joints = {j.name: j for j in mech.joints}
+    if isinstance(friction, str):
+        friction = parse_joint_list(friction)
+
+    def has_params(jn):
+        return jn in scene.friction_params or joints[jn].friction is not None
+
+    names = _check_friction_list(ctx, friction, "--friction", mech, has_params, lambda k: "--friction")
+    listed = () if scene.friction_outputs == "all" or friction_outputs is not None else scene.friction_outputs
+    dropped = [jn for jn in listed if names is not None and jn not in names]
+    if dropped:
+        ctx.add("--friction", f"the scene's outputs.friction lists {', '.join(dropped)}, which would "
+                              "have no friction: keep them in the friction set")
+    elif names is not None:
+        changes["friction"] = names
+        changes["friction_params"] = {jn: scene.friction_params.get(jn) or joints[jn].friction for jn in names}
+
+
+def _override_eliminate(ctx: _Ctx, scene: SceneSpec, eliminate, source: str, changes: dict) -> None:
+    if isinstance(eliminate, str):
+        try:
+            eliminate = parse_eliminate(eliminate, source=source)
+        except SceneError as exc:
+            ctx.problems.extend(exc.problems)
+            return
+    val = _check_eliminate(ctx, eliminate, "--eliminate", scene.mechanism, lambda k: "--eliminate")
+    if val is not None:
+        changes["eliminate"] = val
+
+
+def _override_friction_outputs(ctx: _Ctx, scene: SceneSpec, friction_outputs, changes: dict) -> None:
+    if isinstance(friction_outputs, str) and friction_outputs != "all":
+        friction_outputs = parse_joint_list(friction_outputs)
+    if isinstance(friction_outputs, tuple):
+        friction_outputs = list(friction_outputs)
+    on = changes.get("friction", scene.friction)
+    val = _check_outputs(ctx, friction_outputs, "--friction-outputs", set(on), "friction joint name",
+                         lambda s: f"{_short(s)} has no friction (friction joints: {', '.join(on) or 'none'})")
+    if val is not None:
+        changes["friction_outputs"] = val
+
+
+def _override_solver(ctx: _Ctx, scene: SceneSpec, solver: dict, changes: dict) -> None:
+    """Solver overrides and the new stop time, checked by :func:`overcon.params.apply_overrides`
+    (each problem against its flag, the bounded-work ones against ``--stop-time`` when only the
+    stop time changed)."""
+    timed = dataclasses.replace(scene, stop_time=changes.get("stop_time", scene.stop_time))
+    new, found = params.apply_overrides(timed, {f"solver.{k}": v for k, v in solver.items()})
+    for name, msg in found:
+        key = name.split(".", 1)[-1]
+        flag = "--stop-time" if key not in solver and "stop_time" in changes else _flag(key)
+        ctx.add(flag, msg)
+    if new is not None and solver:
+        changes["solver"] = new.solver
 
 
 def _flag(solver_field: str) -> str:

@@ -216,44 +216,80 @@ def _zip_write(zf: zipfile.ZipFile, name: str, data: bytes, mode: int = 0o644) -
     zf.writestr(info, data)
 
 
+class _NotBuilt(Exception):
+    """A scene whose FMU is not built: its status ("skipped", "invalid", "refused", "failed") and
+    messages for the :class:`BuildResult`."""
+
+    def __init__(self, status: str, *messages: str):
+        super().__init__(status)
+        self.status, self.messages = status, messages
+
+
 def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, validate: bool = True,
                 echo=print, sources=None, binary: NativeBinary | None = None) -> BuildResult:
     """Build the FMU of one scene file (see the module docstring); never raises for bad input."""
     t0 = time.perf_counter()
     res = BuildResult(source=str(path), status="invalid")
-
-    def done(status, *msgs):
-        res.status = status
-        res.messages.extend(msgs)
+    try:
+        spec, model = _load_scene(path)
+        res.name = spec.name
+        report = _precheck_scene(path, spec, model, allow_nonunique, echo)
+        res.motion_unique = bool(report.motion_unique)
+        if report.friction_on_nonunique and not allow_nonunique:
+            raise _NotBuilt("refused", f"{path}: refused: friction on a joint whose reaction is not unique "
+                                       f"({', '.join(report.friction_on_nonunique)}); the simulated motion "
+                                       "would depend on the eliminated equations (--allow-nonunique builds it "
+                                       "anyway)")
+        fmu, guid, table = _write_fmu(path, out_dir, spec, model, report, sources=sources, binary=binary,
+                                      validate=validate)
+    except _NotBuilt as exc:
+        res.status = exc.status
+        res.messages.extend(exc.messages)
         res.seconds = time.perf_counter() - t0
         return res
+    res.fmu, res.guid, res.status = fmu, guid, "built"
+    res.seconds = time.perf_counter() - t0
+    n_out = len(model.output_names())
+    n_par = sum(v.causality == "parameter" for v in table)
+    echo(f"{spec.name}: built {fmu} ({n_out} outputs, {n_par} parameters, "
+         f"{fmu.stat().st_size // 1024} KiB) in {res.seconds:.2f} s")
+    return res
 
+
+def _load_scene(path: Path):
+    """(scene, admitted model) of a scene file; :class:`_NotBuilt` for a mechanism file (skipped),
+    an invalid scene, or solver settings the FMU could never start with."""
     kind = scene_mod.is_scene_file(path)
     if kind is False:
-        return done("skipped", f"{path}: mechanism file, skipped")
+        raise _NotBuilt("skipped", f"{path}: mechanism file, skipped")
     try:
         spec = scene_mod.load(path)
         if not isinstance(spec, SceneSpec):
-            return done("skipped", f"{path}: mechanism file, skipped")
+            raise _NotBuilt("skipped", f"{path}: mechanism file, skipped")
         model = compile_checked(spec)
     except scene_mod.SceneError as exc:
-        return done("invalid", *(str(p) for p in exc.problems))
+        raise _NotBuilt("invalid", *(str(p) for p in exc.problems)) from exc
     except (ModelError, ValueError, OSError) as exc:
-        return done("invalid", f"{path}: {exc}")
-    res.name = spec.name
+        raise _NotBuilt("invalid", f"{path}: {exc}") from exc
     why = kernel_mod.refusal(model, spec.solver)
-    if why is not None:  # the FMU could never start with its own solver settings
-        return done("invalid", f"{path}: solver.kernel = 'c': the compiled kernel cannot run: {why}")
+    if why is not None:
+        raise _NotBuilt("invalid", f"{path}: solver.kernel = 'c': the compiled kernel cannot run: {why}")
+    return spec, model
+
+
+def _precheck_scene(path: Path, spec: SceneSpec, model, allow_nonunique: bool, echo) -> PrecheckResult:
     report = precheck(model, str(path))
-    res.motion_unique = bool(report.motion_unique)
     echo(f"{spec.name}: pre-check: {_verdict(report)}")
     for problem in report.problems:
         echo(f"{spec.name}:   {problem}")
-    if report.friction_on_nonunique and not allow_nonunique:
-        return done("refused", f"{path}: refused: friction on a joint whose reaction is not unique "
-                               f"({', '.join(report.friction_on_nonunique)}); the simulated motion "
-                               "would depend on the eliminated equations (--allow-nonunique builds it "
-                               "anyway)")
+    return report
+
+
+def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: PrecheckResult, *, sources, binary,
+               validate: bool):
+    """Write ``<out_dir>/<scene>.fmu`` (through a ``.fmu.part`` file, validated with fmpy unless
+    ``validate`` is false). Returns (FMU path, GUID, variable table); :class:`_NotBuilt`
+    ("failed") naming the scene file otherwise."""
     try:
         mech_ref = tomllib.loads(path.read_text(encoding="utf-8"))["scene"]["mechanism"]
         scene_zip, mech_zip = _scene_layout(path, mech_ref)
@@ -274,14 +310,14 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         guid = "{" + str(uuid.UUID(digest[:32])) + "}"
         pkg = f"{_PKG_NAME}_{digest[:16]}"
         reaction_unique = report.reaction_unique
-        table = variables.table(model, spec.solver, reaction_unique, res.motion_unique)
+        table = variables.table(model, spec.solver, reaction_unique, bool(report.motion_unique))
         overcon_version = _overcon_version()
         xml = description.model_description(
             spec, table, guid=guid, version=overcon_version,
             generation_tool=f"overcon {overcon_version} build_fmu (native binary, Python "
                             f"{platform.python_version()})")
         manifest = {"scene": scene_zip, "guid": guid, "package": pkg, "model_identifier": spec.name,
-                    "reaction_unique": reaction_unique, "motion_unique": res.motion_unique,
+                    "reaction_unique": reaction_unique, "motion_unique": bool(report.motion_unique),
                     "precheck_problems": list(report.problems),
                     "precheck_warnings": list(report.warnings),
                     "binary": {"platform": binary.platform, "compiler": binary.compiler,
@@ -309,19 +345,13 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
             problems = validate_fmu(str(tmp))
             if problems:
                 tmp.unlink()
-                return done("failed", *(f"{path}: modelDescription.xml: {p}" for p in problems))
+                raise _NotBuilt("failed", *(f"{path}: modelDescription.xml: {p}" for p in problems))
         os.replace(tmp, fmu)
     except BuildError as exc:
-        return done("failed", f"{path}: build failed: {exc}")
+        raise _NotBuilt("failed", f"{path}: build failed: {exc}") from exc
     except (OSError, ValueError, KeyError, RuntimeError) as exc:
-        return done("failed", f"{path}: build failed: {type(exc).__name__}: {exc}")
-    res.fmu, res.guid = fmu, guid
-    n_out = len(model.output_names())
-    n_par = sum(v.causality == "parameter" for v in table)
-    r = done("built")
-    echo(f"{spec.name}: built {fmu} ({n_out} outputs, {n_par} parameters, "
-         f"{fmu.stat().st_size // 1024} KiB) in {r.seconds:.2f} s")
-    return r
+        raise _NotBuilt("failed", f"{path}: build failed: {type(exc).__name__}: {exc}") from exc
+    return fmu, guid, table
 
 
 # ---------------------------------------------------------------------------------------------
@@ -464,26 +494,7 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
     t_ref = 0.0
     if refs and built:
         t1 = time.perf_counter()
-        n = max(1, min(jobs or os.cpu_count() or 1, len(built)))
-        echo(f"reference results (fmpy.simulate_fmu at the default experiment, {n} process(es)) ...")
-        by_fmu = {str(r.fmu): r for r in built}
-        if n == 1:
-            outcomes = map(_reference_job, by_fmu)
-        else:
-            import multiprocessing  # noqa: PLC0415
-
-            pool = concurrent.futures.ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"))
-            outcomes = pool.map(_reference_job, by_fmu)
-        for fmu, err, secs in outcomes:
-            r = by_fmu[fmu]
-            if err:
-                r.ref_status = "failed"
-                echo_err(f"{r.name}: reference simulation failed: {err}")
-            else:
-                r.ref_status = "written"
-                echo(f"{r.name}: wrote {r.name}_ref.csv and {r.name}_ref.opt ({secs:.1f} s)")
-        if n > 1:
-            pool.shutdown()
+        _write_references(built, jobs, echo, echo_err)
         t_ref = time.perf_counter() - t1
     counts = {s: sum(r.status == s for r in results) for s in ("built", "refused", "skipped", "invalid", "failed")}
     ref_failed = sum(r.ref_status == "failed" for r in results)
@@ -495,14 +506,35 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
         summary += f", reference results in {t_ref:.1f} s"
     echo(summary + f" (total {time.perf_counter() - t0:.1f} s)")
     if counts["invalid"] or counts["failed"]:
-        code = EXIT_INPUT
-    elif ref_failed:
-        code = EXIT_RUNTIME
-    elif counts["refused"]:
-        code = EXIT_NONUNIQUE
+        return EXIT_INPUT, results
+    if ref_failed:
+        return EXIT_RUNTIME, results
+    return (EXIT_NONUNIQUE if counts["refused"] else EXIT_OK), results
+
+
+def _write_references(built: list[BuildResult], jobs: int | None, echo, echo_err) -> None:
+    """The compatibility files of every built FMU, in ``jobs`` processes (default: one per CPU);
+    each result's ``ref_status`` set, each outcome printed."""
+    n = max(1, min(jobs or os.cpu_count() or 1, len(built)))
+    echo(f"reference results (fmpy.simulate_fmu at the default experiment, {n} process(es)) ...")
+    by_fmu = {str(r.fmu): r for r in built}
+    if n == 1:
+        outcomes = map(_reference_job, by_fmu)
     else:
-        code = EXIT_OK
-    return code, results
+        import multiprocessing  # noqa: PLC0415
+
+        pool = concurrent.futures.ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"))
+        outcomes = pool.map(_reference_job, by_fmu)
+    for fmu, err, secs in outcomes:
+        r = by_fmu[fmu]
+        if err:
+            r.ref_status = "failed"
+            echo_err(f"{r.name}: reference simulation failed: {err}")
+        else:
+            r.ref_status = "written"
+            echo(f"{r.name}: wrote {r.name}_ref.csv and {r.name}_ref.opt ({secs:.1f} s)")
+    if n > 1:
+        pool.shutdown()
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

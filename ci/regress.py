@@ -567,173 +567,216 @@ def _report(outcome: Outcome, out: Path, title: str) -> Path:
 # ---------------------------------------------------------------------------------------------
 # the check
 
+@dataclass
+class _Regress:
+    """One regression check's settings and its growing :class:`Outcome` (the stages below share it)."""
+
+    mechanisms: Path
+    baselines: Path
+    out: Path
+    jobs: int
+    tier: str | None
+    echo: object
+    outcome: Outcome
+    table: ToleranceTable | None = None
+    scenes: dict = field(default_factory=dict)  # all scenes found: name -> scene file
+    provenance: dict = field(default_factory=dict)
+    here: str = ""
+
+    def bad(self, msg: str) -> None:
+        self.outcome.problems.append(msg)
+        self.echo(f"BAD INPUT {msg}")
+
+    def fail(self, check: SceneCheck, status: str, msg: str, label: str) -> None:
+        check.status = status
+        check.messages.append(msg)
+        self.echo(f"{label} {msg}")
+
+
 def regress(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS, baselines=DEFAULT_BASELINES,
             tolerances=DEFAULT_TOLERANCES, out=DEFAULT_OUT, jobs: int | None = None, tier: str | None = None,
             echo=_echo) -> Outcome:
     """Build, validate, run and compare the selected scenes (all when None) against their
     baselines; every message goes through ``echo``. ``tier`` forces a tolerance tier (default: per
-    scene from the platform fingerprint). Never raises for bad input: see ``Outcome.code``."""
+    scene from the platform fingerprint). Never raises for bad input: see ``Outcome.code``.
+    Stages: inputs, baselines present, build and validate, run and compare, summary."""
+    t0 = time.perf_counter()
+    r = _Regress(Path(mechanisms), Path(baselines), Path(out), jobs or os.cpu_count() or 2, tier, echo,
+                 Outcome(EXIT_OK, {}))
+    names = _regress_inputs(r, scenes, Path(tolerances))
+    if names is None:
+        return r.outcome
+    ready = _baselines_present(r, names, full_set=not scenes)
+    t_build = time.perf_counter()
+    fmus, build_problems = _build(ready, r.scenes, r.out / "fmus") if ready else ({}, {})
+    todo = [item for item in (_prepare_scene(r, n, fmus, build_problems) for n in ready) if item is not None]
+    t_build = time.perf_counter() - t_build
+    t_run = time.perf_counter()
+    todo.sort(key=lambda x: (-(x[4].stop - x[4].start), -len(x[1].friction)))  # longest first
+    csvs = _run([(x[1], x[4]) for x in todo], r.out / "results", r.jobs) if todo else {}
+    t_run = time.perf_counter() - t_run
+    for item in todo:
+        _compare_run(r, item, csvs[item[1].model])
+    r.outcome.seconds = {"build_validate": t_build, "run_compare": t_run, "total": time.perf_counter() - t0}
+    _regress_summary(r)
+    return r.outcome
+
+
+def _regress_inputs(r: _Regress, scenes, tolerances: Path) -> list[str] | None:
+    """Tolerances, scenes, the selection and the provenance; None (exit 2) if one is unreadable."""
+    try:
+        r.table = load_tolerances(tolerances)
+        r.scenes, problems = discover_scenes(r.mechanisms)
+        names = select_scenes(r.scenes, scenes)
+        r.provenance = load_provenance(r.baselines)
+    except BadInput as exc:
+        r.bad(str(exc))
+        r.outcome.code = EXIT_INPUT
+        return None
+    for p in problems:
+        r.bad(p)
+    if not r.scenes and not problems:
+        r.bad(f"{r.mechanisms}: no scene files (*.toml with a [scene] table)")
+    r.here = fingerprint_id(platform_fingerprint())
+    return names
+
+
+def _baselines_present(r: _Regress, names: list[str], full_set: bool) -> list[str]:
+    """The scenes of ``names`` that have a baseline (a missing one is reported at once, before any
+    build); for the full set, every baseline must belong to a scene."""
+    ready: list[str] = []
+    for n in names:
+        csv, opt = baseline_files(r.baselines, n)
+        lacking = [p.name for p in (csv, opt) if not p.is_file()]
+        if not lacking:
+            ready.append(n)
+            continue
+        check = SceneCheck(n, "input")
+        msg = (f"{n}: no baseline ({', '.join(_rel(r.baselines / x) for x in lacking)} missing): scene "
+               f"{_rel(r.scenes[n])} has never been baselined; create it deliberately with\n"
+               f"    {regenerate_command([n], r.mechanisms, r.baselines)}\n"
+               f"  then review and commit {_rel(r.baselines)}/{n}_ref.csv, {n}_ref.opt and {PROVENANCE}")
+        check.messages.append(msg)
+        r.outcome.checks[n] = check
+        r.echo(f"MISSING BASELINE {msg}")
+    if full_set:
+        for f in sorted(r.baselines.glob("*_ref.csv")):
+            n = f.name[: -len("_ref.csv")]
+            if n not in r.scenes:
+                r.bad(f"{_rel(f)}: baseline of scene {n}, which is not in {_rel(r.mechanisms)} (renamed or removed?): "
+                      f"delete {n}_ref.csv/{n}_ref.opt (git rm) or restore the scene")
+    return ready
+
+
+def _prepare_scene(r: _Regress, n: str, fmus: dict, build_problems: dict):
+    """One built scene: its FMU validated, its baseline read and checked against the FMU's outputs
+    and tolerance, its tier chosen. Returns (scene, FmuInfo, baseline, baseline csv, experiment)
+    to run, or None (the problem is in its check)."""
     from overcon.tooling import InputError
     from overcon.tooling.fmus import inspect_fmu
     from overcon.tooling.run import read_series
 
-    t0 = time.perf_counter()
-    mechanisms, baselines, out = Path(mechanisms), Path(baselines), Path(out)
-    jobs = jobs or os.cpu_count() or 2
-    outcome = Outcome(EXIT_OK, {})
-
-    def bad(msg: str) -> None:
-        outcome.problems.append(msg)
-        echo(f"BAD INPUT {msg}")
-
+    check = r.outcome.checks.setdefault(n, SceneCheck(n, "ok"))
+    if n in build_problems:
+        check.status = "input"
+        check.messages += build_problems[n]
+        r.echo("BAD INPUT " + "\n  ".join(build_problems[n]))
+        return None
+    problems_v = _validate(fmus[n])
+    if problems_v:
+        r.fail(check, "regression", f"{n}: fmpy validate found {len(problems_v)} problem(s) in {fmus[n].name}: "
+               + "; ".join(problems_v), "REGRESSION")
+        return None
+    csv, opt_path = baseline_files(r.baselines, n)
     try:
-        table = load_tolerances(Path(tolerances))
-        all_scenes, problems = discover_scenes(mechanisms)
-        names = select_scenes(all_scenes, scenes)
-        provenance = load_provenance(baselines)
-    except BadInput as exc:
-        bad(str(exc))
-        outcome.code = EXIT_INPUT
-        return outcome
-    for p in problems:
-        bad(p)
-    if not all_scenes and not problems:
-        bad(f"{mechanisms}: no scene files (*.toml with a [scene] table)")
-    fp = platform_fingerprint()
-    here = fingerprint_id(fp)
+        opt = read_opt(opt_path)
+        ref = read_series(csv)
+        _check_baseline_grid(ref, opt, csv)
+        info = inspect_fmu(fmus[n])
+    except (BadInput, InputError) as exc:
+        r.fail(check, "input", f"{n}: {exc}", "BAD INPUT")
+        return None
+    new = [o for o in info.output_names if o not in ref.values]
+    gone = [o for o in ref.names if o not in info.output_names]
+    if new or gone:
+        parts = ([f"outputs not in the baseline: {', '.join(new)}"] if new else []) + \
+                ([f"baseline outputs the FMU no longer has: {', '.join(gone)}"] if gone else [])
+        r.fail(check, "regression", f"{n}: the FMU's outputs changed ({'; '.join(parts)}); if intended, "
+               f"regenerate: {regenerate_command([n], r.mechanisms, r.baselines)}", "REGRESSION")
+    if "RelTol" in opt and info.tolerance is not None and not math.isclose(opt["RelTol"], info.tolerance):
+        check.messages.append(f"{n}: note: the FMU's solver tolerance is {info.tolerance:g}, the baseline's "
+                              f"RelTol {opt['RelTol']:g}")
+        r.echo(check.messages[-1])
+    prov = r.provenance["scenes"].get(n, {})
+    check.tier = r.tier or ("same_platform" if prov.get("platform") == r.here else "cross_platform")
+    return n, info, ref, csv, _experiment(opt["StartTime"], opt["StopTime"], opt["StepSize"])
 
-    # baselines present? (before any build: a missing one is reported at once)
-    ready: list[str] = []
-    missing = []
-    for n in names:
-        csv, opt = baseline_files(baselines, n)
-        lacking = [p.name for p in (csv, opt) if not p.is_file()]
-        if lacking:
-            missing.append(n)
-            check = SceneCheck(n, "input")
-            msg = (f"{n}: no baseline ({', '.join(_rel(baselines / x) for x in lacking)} missing): scene "
-                   f"{_rel(all_scenes[n])} has never been baselined; create it deliberately with\n"
-                   f"    {regenerate_command([n], mechanisms, baselines)}\n"
-                   f"  then review and commit {_rel(baselines)}/{n}_ref.csv, {n}_ref.opt and {PROVENANCE}")
-            check.messages.append(msg)
-            outcome.checks[n] = check
-            echo(f"MISSING BASELINE {msg}")
-        else:
-            ready.append(n)
-    if not scenes:  # the full set: every baseline must belong to a scene
-        for f in sorted(baselines.glob("*_ref.csv")):
-            n = f.name[: -len("_ref.csv")]
-            if n not in all_scenes:
-                bad(f"{_rel(f)}: baseline of scene {n}, which is not in {_rel(mechanisms)} (renamed or removed?): "
-                    f"delete {n}_ref.csv/{n}_ref.opt (git rm) or restore the scene")
 
-    # build and validate
-    t_build = time.perf_counter()
-    fmus, build_problems = _build(ready, all_scenes, out / "fmus") if ready else ({}, {})
-    todo = []
-    for n in ready:
-        check = outcome.checks.setdefault(n, SceneCheck(n, "ok"))
-        if n in build_problems:
-            check.status = "input"
-            check.messages += build_problems[n]
-            echo("BAD INPUT " + "\n  ".join(build_problems[n]))
-            continue
-        problems_v = _validate(fmus[n])
-        if problems_v:
-            check.status = "regression"
-            check.messages.append(f"{n}: fmpy validate found {len(problems_v)} problem(s) in {fmus[n].name}: "
-                                  + "; ".join(problems_v))
-            echo("REGRESSION " + check.messages[-1])
-            continue
-        csv, opt_path = baseline_files(baselines, n)
-        try:
-            opt = read_opt(opt_path)
-            ref = read_series(csv)
-            _check_baseline_grid(ref, opt, csv)
-            info = inspect_fmu(fmus[n])
-        except (BadInput, InputError) as exc:
-            check.status = "input"
-            check.messages.append(f"{n}: {exc}")
-            echo(f"BAD INPUT {check.messages[-1]}")
-            continue
-        new = [o for o in info.output_names if o not in ref.values]
-        gone = [o for o in ref.names if o not in info.output_names]
-        if new or gone:
-            check.status = "regression"
-            parts = ([f"outputs not in the baseline: {', '.join(new)}"] if new else []) + \
-                    ([f"baseline outputs the FMU no longer has: {', '.join(gone)}"] if gone else [])
-            check.messages.append(f"{n}: the FMU's outputs changed ({'; '.join(parts)}); if intended, "
-                                  f"regenerate: {regenerate_command([n], mechanisms, baselines)}")
-            echo("REGRESSION " + check.messages[-1])
-        if "RelTol" in opt and info.tolerance is not None and not math.isclose(opt["RelTol"], info.tolerance):
-            check.messages.append(f"{n}: note: the FMU's solver tolerance is {info.tolerance:g}, the baseline's "
-                                  f"RelTol {opt['RelTol']:g}")
-            echo(check.messages[-1])
-        prov = provenance["scenes"].get(n, {})
-        check.tier = tier or ("same_platform" if prov.get("platform") == here else "cross_platform")
-        todo.append((n, info, ref, csv, _experiment(opt["StartTime"], opt["StopTime"], opt["StepSize"])))
-    t_build = time.perf_counter() - t_build
+def _compare_run(r: _Regress, item, got) -> None:
+    """One scene's run (its CSV and seconds, or the failure text) compared with its baseline."""
+    from overcon.tooling import InputError
+    from overcon.tooling.run import read_series
 
-    # run (longest first) and compare
-    t_run = time.perf_counter()
-    todo.sort(key=lambda x: (-(x[4].stop - x[4].start), -len(x[1].friction)))
-    csvs = _run([(x[1], x[4]) for x in todo], out / "results", jobs) if todo else {}
-    t_run = time.perf_counter() - t_run
-    for n, info, ref, csv, ex in todo:
-        check = outcome.checks[n]
-        got = csvs[info.model]
-        if isinstance(got, str):
-            check.status = "regression"
-            check.messages.append(f"{n}: the simulation failed (the baseline ran to t = {ex.stop:g} s): {got}")
-            echo("REGRESSION " + check.messages[-1])
-            continue
-        got, check.seconds = got
-        try:
-            res = read_series(got)
-            cmp = compare_scene(n, info, res, ref, csv, table, check.tier)
-        except (BadInput, InputError) as exc:
-            check.status = "input"
-            check.messages.append(f"{n}: {exc}")
-            echo(f"BAD INPUT {check.messages[-1]}")
-            continue
-        check.comparison, check.findings, check.bit_identical = cmp.comparison, cmp.findings, cmp.bit_identical
-        if check.findings:
-            check.status = "regression"
-            shown = 0
-            per_class: dict[int, int] = {}
-            for f in check.findings:  # positions first, then unique, then non-unique reactions
-                check.messages.append(f.describe())
-                k = f.output_class()
-                per_class[k] = per_class.get(k, 0) + 1
-                if per_class[k] <= MAX_LINES_PER_CLASS:
-                    echo("REGRESSION " + check.messages[-1])
-                    shown += 1
-            if len(check.findings) > shown:
-                echo(f"REGRESSION {n}: ... and {len(check.findings) - shown} more output(s) over tolerance "
-                     f"(all in {_rel(out / 'report.md')})")
-        elif check.status == "ok":
-            echo(_ok_line(check))
+    n, info, ref, csv, ex = item
+    check = r.outcome.checks[n]
+    if isinstance(got, str):
+        r.fail(check, "regression", f"{n}: the simulation failed (the baseline ran to t = {ex.stop:g} s): {got}",
+               "REGRESSION")
+        return
+    got, check.seconds = got
+    try:
+        res = read_series(got)
+        cmp = compare_scene(n, info, res, ref, csv, r.table, check.tier)
+    except (BadInput, InputError) as exc:
+        r.fail(check, "input", f"{n}: {exc}", "BAD INPUT")
+        return
+    check.comparison, check.findings, check.bit_identical = cmp.comparison, cmp.findings, cmp.bit_identical
+    if check.findings:
+        _report_findings(r, check)
+    elif check.status == "ok":
+        r.echo(_ok_line(check))
 
+
+def _report_findings(r: _Regress, check: SceneCheck) -> None:
+    """A scene's outputs over tolerance: every one into its messages, at most
+    MAX_LINES_PER_CLASS per output class echoed (positions first, then unique, then non-unique
+    reactions)."""
+    check.status = "regression"
+    shown = 0
+    per_class: dict[int, int] = {}
+    for f in check.findings:
+        check.messages.append(f.describe())
+        k = f.output_class()
+        per_class[k] = per_class.get(k, 0) + 1
+        if per_class[k] <= MAX_LINES_PER_CLASS:
+            r.echo("REGRESSION " + check.messages[-1])
+            shown += 1
+    if len(check.findings) > shown:
+        r.echo(f"REGRESSION {check.scene}: ... and {len(check.findings) - shown} more output(s) over tolerance "
+               f"(all in {_rel(r.out / 'report.md')})")
+
+
+def _regress_summary(r: _Regress) -> None:
+    """The exit code, the report and the summary lines."""
+    outcome, echo = r.outcome, r.echo
     statuses = [c.status for c in outcome.checks.values()]
     if outcome.problems or "input" in statuses:
         outcome.code = EXIT_INPUT
     elif "regression" in statuses:
         outcome.code = EXIT_REGRESSION
-    outcome.seconds = {"build_validate": t_build, "run_compare": t_run, "total": time.perf_counter() - t0}
-    outcome.report = _report(outcome, out, "overcon regression check")
+    outcome.report = _report(outcome, r.out, "overcon regression check")
     n_ok = statuses.count("ok")
     n_reg = statuses.count("regression")
     n_bad = statuses.count("input") + len(outcome.problems)
     tiers = sorted({c.tier for c in outcome.checks.values() if c.tier})
     echo(f"regress: {n_ok} scene(s) match their baselines, {n_reg} regression(s), {n_bad} bad input(s) "
-         f"[tolerance tier: {', '.join(tiers) or '—'}; platform {here}]; build+validate "
+         f"[tolerance tier: {', '.join(tiers) or '—'}; platform {r.here}]; build+validate "
          f"{outcome.seconds['build_validate']:.1f} s, runs {outcome.seconds['run_compare']:.1f} s "
-         f"({jobs} process(es)), total {outcome.seconds['total']:.1f} s; report {_rel(outcome.report)}")
+         f"({r.jobs} process(es)), total {outcome.seconds['total']:.1f} s; report {_rel(outcome.report)}")
     if outcome.code == EXIT_REGRESSION:
         echo("regress: FAILED. If the change is intended, regenerate deliberately: "
              + regenerate_command(sorted(n for n, c in outcome.checks.items() if c.status == "regression"),
-                                  mechanisms, baselines))
-    return outcome
+                                  r.mechanisms, r.baselines))
 
 
 # ---------------------------------------------------------------------------------------------

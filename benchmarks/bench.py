@@ -605,6 +605,18 @@ def machine() -> str:
 
 # ------------------------------------------------------------------------------------ main
 
+KEEP_MARKER = "<!-- kept by bench.py"
+
+
+def _kept_section(path: Path) -> str:
+    """The hand-written end of an existing benchmarks.md, from the line holding KEEP_MARKER on."""
+    if not path.is_file():
+        return ""
+    text = path.read_text()
+    k = text.find(KEEP_MARKER)
+    return "" if k < 0 else "\n" + text[k:]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3, help="runs per setting (median wall time), default 3")
@@ -699,7 +711,7 @@ def main(argv=None) -> int:
         pareto_plot(ladders, exu, out / "pareto.png")
         md = report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, args,
                     time.perf_counter() - t_start, shipped, limits, both)
-        (out / "benchmarks.md").write_text(md)
+        (out / "benchmarks.md").write_text(md + _kept_section(out / "benchmarks.md"))
         print(md)
         log(f"wrote {out / 'benchmarks.md'} and {out / 'pareto.png'} ({time.perf_counter() - t_start:.0f} s)")
     finally:

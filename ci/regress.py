@@ -44,8 +44,8 @@ Baseline size: the grid is the FMU's full default experiment (what users run) sa
 ``repr`` of every double (bit-exact), 1.7 MB for the 20 scenes. The trajectory does not depend on
 the output grid (the integrator takes its own steps and reads the solution by dense output; the
 0.05 s and 0.01 s runs agree to 2e-12 at common times), so nothing is lost but resolution, and
-the check costs the same as the full default experiment: 36 s on this 2-core machine (65 s
-when other jobs load it), of which building and validating the 20 FMUs take 2.5 s.
+the check costs the same as the full default experiment (its wall time: docs/benchmarks.md,
+"Input limits and the regression check").
 """
 from __future__ import annotations
 

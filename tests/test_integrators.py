@@ -126,8 +126,8 @@ def _decay(t, y):
 
 @pytest.mark.parametrize("method", ALL)
 def test_unknown_option_is_an_error(method):
-    """Strict contract: a misspelled option is refused by the class and by ``create`` (it used to
-    be swallowed by ``**_``)."""
+    """Strict contract: a misspelled option is refused by the class and by ``create``, never
+    swallowed."""
     cls = integrators.METHODS[method]
     options = {"tolerance": 1e-8, "max_step": 0.1, "step": 1e-2}
     good = {k: v for k, v in options.items() if k in cls.OPTIONS}

@@ -8,12 +8,12 @@ rules that tie parameters to the simulated interval (bounded work); :func:`check
 one cross-field friction rule; :func:`apply_overrides` applies named values to a scene and
 returns the new scene or every problem.
 
-Envelopes (why each bound; measured on this machine, 2 cores, numpy/OpenBLAS)
-------------------------------------------------------------------------------
+Envelopes (why each bound; the costs behind them: docs/benchmarks.md, "Input limits")
+-----------------------------------------------------------------------------------------
 ``solver.tolerance`` in [1e-14, 1e-2] (1): rtol = atol of the adaptive methods. dop853 and dopri5
 at 1e-14 still run the paper scenes (0.1 s of planar_f45_wo4: 25 and 47 steps); below it the error
 test asks for less than the double-precision round-off of the stages, the step collapses and the
-run crawls (the issue's 1e-300 hung). Above 1e-2 the global error (20-100 x tolerance x scale,
+run crawls (at 1e-300 it would never finish). Above 1e-2 the global error (20-100 x tolerance x scale,
 README "uniqueness tolerance") exceeds 1 m on the paper mechanisms: no usable result.
 
 ``solver.step`` (rk4) and ``solver.max_step`` (adaptive) in [1e-8, 1] s: 1e-8 s keeps t + h
@@ -34,8 +34,8 @@ forces are off by more than 0.1 %.
 
 ``solver.friction_max_iter`` integer in [1, 1000]: force evaluations of each stage of the friction
 solve per evaluation (Newton, at most min(this, 12); then the fixed point; then the Newton
-fallback); each costs one evaluation of the friction forces and one back-substitution (~40 us),
-so 1000 bounds one evaluation to well under a second.
+fallback); each costs one evaluation of the friction forces and one back-substitution, so 1000
+bounds the work of one evaluation.
 
 ``solver.method`` one of :data:`overcon.spec.METHODS`.
 ``solver.kernel`` one of :data:`overcon.spec.KERNELS` (:mod:`overcon.kernel`).
@@ -49,10 +49,9 @@ stiff: dopri5 stops with "stiff", radau takes small steps inside the work budget
 Relations (bounded work, :func:`check_relations`): the number of output points
 (stop - start) / output_interval + 1 <= :data:`MAX_OUTPUT_POINTS` = 1e6 (the result array is
 1e6 x outputs x 8 bytes, 0.3 GB for 40 outputs; each point with reactions costs one friction
-solve, 0.25-0.7 ms); the fewest internal steps the run can take, (stop - start) / step for rk4 or
-(stop - start) / max_step for the adaptive methods, <= :data:`MAX_MIN_STEPS` = 1e6 (one step costs
-1-3 ms with friction here (rk4: planar 1.6 ms, spatial 3.2 ms), so 1e6 steps are already 0.5-1 h;
-the paper scenes need 80-200).
+solve); the fewest internal steps the run can take, (stop - start) / step for rk4 or
+(stop - start) / max_step for the adaptive methods, <= :data:`MAX_MIN_STEPS` = 1e6 (the paper
+scenes need 80-200; at the measured cost of a step with friction, 1e6 steps take most of an hour).
 """
 from __future__ import annotations
 

@@ -1184,11 +1184,9 @@ MAX_JOINTS = 200
 MAX_LOADS = 1000
 """Largest numbers of bodies, joints and loads of a mechanism (bounded work). The pre-check
 (:mod:`overcon.analysis`) takes SVDs of the whole constraint Jacobian once per joint, so its
-cost grows like joints x coordinates^3. Measured here (``overcon check`` of a chain of revolute
-(planar) or spherical (spatial) joints, 2 cores): planar 100 bodies 4.3 s, 200 bodies 23 s,
-1000 bodies > 10 min; spatial 100 bodies 7.7 s, 200 bodies 18 s. 200 keeps the check under half
-a minute; the paper's mechanisms have 4 and 7 bodies. Loads cost one short loop each per
-evaluation, hence the larger limit."""
+cost grows like joints x coordinates^3; 200 keeps ``overcon check`` of a chain at the limit a
+short wait (measurements: docs/benchmarks.md, "Input limits"); the paper's mechanisms have 4 and
+7 bodies. Loads cost one short loop each per evaluation, hence the larger limit."""
 
 _FILE_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
                (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),

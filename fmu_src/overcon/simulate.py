@@ -105,8 +105,8 @@ class SimulationError(RuntimeError):
 
 MAX_STEPS = 1_000_000
 """Default work budget of a :class:`Simulation`: accepted internal steps over its life (the
-integrator's step count, part of the saved state). The paper scenes take 80-5000; 1e6 steps cost
-0.3-1 h here (1-3 ms each with friction)."""
+integrator's step count, part of the saved state). The paper scenes take 80-5000 (the cost of a
+step: docs/benchmarks.md)."""
 MAX_WALL_TIME = 3600.0
 """Default wall-time budget (s) of a :class:`Simulation`: time spent inside :meth:`Simulation.advance`
 over its life (not part of the saved state)."""

@@ -74,7 +74,7 @@ def test_friction_flag_override_unique(capsys):
     (["check"], "file"),
 ])
 def test_bad_input_exit_2(capsys, args, needle):
-    with pytest.raises(SystemExit) if args == ["check"] else contextlib.nullcontext():
+    with pytest.raises(SystemExit, match="^2$") if args == ["check"] else contextlib.nullcontext():
         code = main(args)
         assert code == 2
     assert needle in capsys.readouterr().err

@@ -78,7 +78,7 @@ class Slave:
     def error(self, call, *args) -> str:
         """Call; it must return fmi2Error (status 3). Returns the messages it logged."""
         before = len(self.logs.records)
-        with pytest.raises(FMICallException) as exc:
+        with pytest.raises(FMICallException, match=r"failed with status 3 \(error\)") as exc:
             call(*args)
         assert exc.value.status == 3, exc.value
         new = self.logs.records[before:]

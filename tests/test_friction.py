@@ -171,7 +171,7 @@ def test_friction_solve_failure_names_time_joints_residual():
     sc = scene_with("planar_f45_wo4.toml", mu=1.0)
     model = compile_checked(sc)
     h = 0.5 * np.linalg.svd(jacobian_h(model, frames(model, model.q0)))[2][-1]  # a consistent velocity
-    with pytest.raises(FrictionSolveError) as info:
+    with pytest.raises(FrictionSolveError, match=r"t = 1\.25 s") as info:
         evaluate(model, 1.25, model.q0, h, solver=dataclasses.replace(sc.solver, friction_max_iter=1))
     msg = str(info.value)
     assert "t = 1.25 s" in msg and "joint4, joint5" in msg and "residual" in msg

@@ -152,7 +152,7 @@ def test_euler_H_rates_from_body_omega(seed):
                                   2 * math.pi])
 def test_euler_H_singularity_raised_with_body_name(beta):
     assert abs(math.sin(beta)) < SIN_BETA_MIN
-    with pytest.raises(EulerSingularity) as exc:
+    with pytest.raises(EulerSingularity, match="Euler angle singularity of body 'link7'") as exc:
         euler_H([0.3, beta, -1.2], "link7")
     assert "link7" in str(exc.value)
     with pytest.raises(ArithmeticError, match="Euler angle singularity"):  # EulerSingularity is an ArithmeticError

@@ -4,6 +4,7 @@ parametrisations, a torque-free rigid body, scene loading, the pre-check and the
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -246,7 +247,7 @@ def _mech_text(rotation: str | None = "quaternion", kind="spatial", q0="[0.0, 0.
 
 
 def _problems(path: Path) -> list:
-    with pytest.raises(SceneError) as err:
+    with pytest.raises(SceneError, match=re.escape(str(path))) as err:
         load(path)
     return err.value.problems
 

@@ -528,7 +528,7 @@ def test_closed_output_pipe_exits_141_without_a_traceback():
 
 @pytest.mark.parametrize("value", ["0", "-2", "x"])
 def test_build_jobs_must_be_a_positive_integer(tmp_path, capsys, value):
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^2$") as exc:  # the exit code is the message
         main(["build", str(ROOT / "mechanisms" / "planar_f45_wo4.toml"), "--jobs", value, "--out", str(tmp_path)])
     assert exc.value.code == 2
     assert "--jobs" in capsys.readouterr().err
@@ -570,7 +570,7 @@ def test_inconsistent_q0_names_the_joint_and_the_mechanism_file(tmp_path):
     mech = (ROOT / "mechanisms" / "planar_sliders.toml").read_text().replace("q0 = [2.0, 0.0, 0.0]", "q0 = [2.0, 0.5, 0.0]", 1)
     (tmp_path / "planar_sliders.toml").write_text(mech)
     (tmp_path / "s.toml").write_text((ROOT / "mechanisms" / "planar_f45_wo4.toml").read_text())
-    with pytest.raises(InconsistentInitialState) as exc:
+    with pytest.raises(InconsistentInitialState, match=r"Phi1 \(joint joint1\)") as exc:
         compile_checked(scene.load(tmp_path / "s.toml"))
     text = str(exc.value)
     assert "Phi1 (joint joint1)" in text and str(tmp_path / "planar_sliders.toml") in text

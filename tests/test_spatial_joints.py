@@ -344,7 +344,8 @@ def test_door_with_hinge_axes_not_parallel_refused(tmp_path):
     k = next(i for i, ln in enumerate(lines) if ln.startswith("axis_j"))  # the upper hinge's
     lines[k] = "axis_j = [0.35, 0.1, 1.0]"
     (tmp_path / "door.toml").write_text("\n".join(lines))
-    with pytest.raises(InconsistentInitialState) as e:
+    with pytest.raises(InconsistentInitialState, match=r"joint upper \(joints\[0\]\): axis_i and axis_j are not "
+                                                       r"parallel at q0") as e:
         compile_checked(as_scene(load(tmp_path / "door.toml")))
     msg = str(e.value)
     assert "joint upper (joints[0]): axis_i and axis_j are not parallel at q0" in msg and "lower" not in msg
@@ -379,7 +380,7 @@ def one_joint_file(tmp_path, jtype, a_i, a_j_body, s_j_shift=(0.0, 0.0, 0.0)) ->
 
 
 def refusal(path) -> str:
-    with pytest.raises(InconsistentInitialState) as e:
+    with pytest.raises(InconsistentInitialState, match=r"\(bodies' q0/h0 in .*\.toml\)") as e:
         compile_checked(as_scene(load(path)))
     return str(e.value)
 
@@ -770,7 +771,7 @@ def test_friction_switched_on_for_a_type_without_friction_says_so(tmp_path, caps
     (tmp_path / "s.toml").write_text('[scene]\nname = "s"\nmechanism = "m.toml"\nfriction = ["X"]\n'
                                      'eliminate = "auto"\nstop_time = 1.0\n')
     expect = f"joint 'X': a {jtype} joint has no friction model (joint friction: "
-    with pytest.raises(SceneError) as e:
+    with pytest.raises(SceneError, match=re.escape(f"s.toml: scene.friction[0]: {expect}")) as e:
         load(tmp_path / "s.toml")
     assert f"s.toml: scene.friction[0]: {expect}" in str(e.value)
     assert "no friction parameters" not in str(e.value)
@@ -784,9 +785,9 @@ def test_friction_params_refused_on_a_universal_joint(tmp_path):
     (tmp_path / "s.toml").write_text(
         '[scene]\nname = "s"\nmechanism = "us.toml"\nfriction = []\neliminate = "auto"\nstop_time = 1.0\n'
         "[scene.friction_params.U]\nmu = 0.1\nradius = 0.01\n")
-    with pytest.raises(SceneError) as e:
+    with pytest.raises(SceneError, match=r"s\.toml: scene\.friction_params\.U: a universal joint has no "
+                                         r"friction model"):
         load(tmp_path / "s.toml")
-    assert "s.toml: scene.friction_params.U: a universal joint has no friction model" in str(e.value)
 
 
 def test_friction_size_keys(tmp_path):

@@ -592,16 +592,18 @@ def _check_header(doc: dict, ctx: _Ctx) -> _MechHeader:
     return head
 
 
+def _check_items(ctx: _Ctx, doc: dict, section: str, limit: int, required: bool, check) -> list:
+    """``check(table, "section[k]")`` of every table of the array ``section``; the valid items."""
+    entries = _array_of_tables(ctx, doc, section, required=required, limit=limit)
+    items = (check(entry, f"{section}[{k}]") for k, entry in entries)
+    return [item for item in items if item is not None]
+
+
 def _check_bodies(doc: dict, ctx: _Ctx, head: _MechHeader, body_names: dict) -> list[BodySpec]:
-    bodies: list[BodySpec] = []
-    body_entries = _array_of_tables(ctx, doc, "bodies", required=True, limit=MAX_BODIES)
     if "bodies" in doc and isinstance(doc["bodies"], list) and not doc["bodies"]:
         ctx.add("bodies", "at least one body is required")
-    for k, bt in body_entries:
-        body = _check_body(bt, f"bodies[{k}]", ctx, head, body_names)
-        if body is not None:
-            bodies.append(body)
-    return bodies
+    return _check_items(ctx, doc, "bodies", MAX_BODIES, True,
+                        lambda bt, p: _check_body(bt, p, ctx, head, body_names))
 
 
 def _check_body(bt: dict, p: str, ctx: _Ctx, head: _MechHeader, body_names: dict) -> BodySpec | None:
@@ -670,13 +672,9 @@ _JOINT_COMMON = ("name", "type", "body_i", "body_j", "friction")
 
 
 def _check_joints(doc: dict, ctx: _Ctx, head: _MechHeader, body_names: dict) -> list[JointSpec]:
-    joints: list[JointSpec] = []
     joint_names: dict[str, str] = {}
-    for k, jt in _array_of_tables(ctx, doc, "joints", required=False, limit=MAX_JOINTS):
-        joint = _check_joint(jt, f"joints[{k}]", ctx, head.kind, body_names, joint_names)
-        if joint is not None:
-            joints.append(joint)
-    return joints
+    return _check_items(ctx, doc, "joints", MAX_JOINTS, False,
+                        lambda jt, p: _check_joint(jt, p, ctx, head.kind, body_names, joint_names))
 
 
 def _joint_type(ctx: _Ctx, jt: dict, p: str, kind: str | None) -> tuple[str | None, bool]:
@@ -756,12 +754,8 @@ def _check_joint(jt: dict, p: str, ctx: _Ctx, kind: str | None, body_names: dict
 
 
 def _check_loads(doc: dict, ctx: _Ctx, head: _MechHeader, body_names: dict) -> list[LoadSpec]:
-    loads: list[LoadSpec] = []
-    for k, lt in _array_of_tables(ctx, doc, "loads", required=False, limit=MAX_LOADS):
-        load = _check_load(lt, f"loads[{k}]", ctx, head, body_names)
-        if load is not None:
-            loads.append(load)
-    return loads
+    return _check_items(ctx, doc, "loads", MAX_LOADS, False,
+                        lambda lt, p: _check_load(lt, p, ctx, head, body_names))
 
 
 def _check_load(lt: dict, p: str, ctx: _Ctx, head: _MechHeader, body_names: dict) -> LoadSpec | None:

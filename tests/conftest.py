@@ -11,5 +11,5 @@ def pytest_collection_modifyitems(config, items):
         return
     skip = pytest.mark.skip(reason="stress test: run with -m stress (.ci/run does)")
     for item in items:
-        if "stress" in item.keywords:
+        if item.get_closest_marker("stress") is not None:
             item.add_marker(skip)

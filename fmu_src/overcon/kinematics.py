@@ -41,7 +41,7 @@ class EulerSingularity(ArithmeticError):
 def euler_singular(sin_beta):
     """Whether the z-x-z angles are refused at sin(beta) = ``sin_beta`` (a float or an array):
     ``|sin beta| < SIN_BETA_MIN``. The one test of the singularity: :func:`euler_H` (integration)
-    and the compile-time check of q0 (:func:`overcon.checks.check_initial_state`) use it."""
+    and the check of q0 after compiling (:func:`overcon.checks.check_initial_state`) use it."""
     return np.abs(sin_beta) < SIN_BETA_MIN
 
 

@@ -13,10 +13,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .kinematics import (cos_sin, cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec, quat_R_rows, rowdot,
+from .kinematics import (cos_sin, cross2, cross3, cross3_rows, euler_H_rows, euler_R_rows, matvec, quat_R_rows, rot2_rows, rowdot,
                          quat_rates_rows)
 
-if TYPE_CHECKING:  # model imports this module (check_initial_state, resolve_elimination)
+if TYPE_CHECKING:  # type names only: model stays below this module in the import order
     from .model import CompiledJoint, Model
 
 
@@ -65,9 +65,7 @@ def frames(model: Model, q: np.ndarray, h: np.ndarray | None = None) -> Frames:
     if model.kind == "planar":
         phi = np.zeros(nb + 1)
         phi[:nb] = Q[:, 2]
-        c, s = np.cos(phi), np.sin(phi)
-        R = np.empty((nb + 1, 2, 2))
-        R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = c, -s, s, c
+        R = rot2_rows(phi)
         w = np.zeros(nb + 1)
         w[:nb] = H[:, 2]
         return Frames(r=r, R=R, v=v, w=w, phi=phi)

@@ -167,6 +167,14 @@ def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.matmul(A, x[..., None])[..., 0]
 
 
+def rot2_rows(phi: np.ndarray) -> np.ndarray:
+    """Planar rotation matrices (len(phi), 2, 2) of the angles phi (rad), body -> global."""
+    c, s = np.cos(phi), np.sin(phi)
+    R = np.empty((len(phi), 2, 2))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = c, -s, s, c
+    return R
+
+
 def cos_sin(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(cos, sin) of every entry (math.cos/math.sin, the single-item functions' numbers)."""
     flat = values.ravel().tolist()

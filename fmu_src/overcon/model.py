@@ -53,7 +53,7 @@ import numpy as np
 
 from .friction_laws import Law, make_law
 from .joints import TYPES, InitialFrames
-from .kinematics import cos_sin, euler_R_rows, quat_R_rows
+from .kinematics import cos_sin, euler_R_rows, quat_R_rows, rot2_rows
 from .spec import BASE, VELOCITIES_PER_BODY, MechanismSpec, SceneSpec, coordinates
 
 
@@ -367,10 +367,7 @@ def _rotations(model: Model, q: np.ndarray) -> np.ndarray:
     if model.kind == "planar":
         phi = np.zeros(nb + 1)
         phi[:nb] = Q[:, 2]
-        c, s = np.cos(phi), np.sin(phi)
-        R = np.empty((nb + 1, 2, 2))
-        R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = c, -s, s, c
-        return R
+        return rot2_rows(phi)
     if model.rotation == "quaternion":
         quat = np.zeros((nb + 1, 4))
         quat[:nb] = Q[:, 3:]

@@ -173,7 +173,9 @@ def test_log_categories_match_the_binary(unz):
     s.free()
 
 
-def _run_logged(unz, logging_on, categories=None, off=None, tolerance=1e-3):
+def _run_logged(unz, logging_on, categories=None, off=None, tolerance=0.5):
+    """One run that logs each level: info (initialization), a warning (the host tolerance 0.5 is
+    outside solver.tolerance's range), an error (a wrong communication point)."""
     s = Slave(unz("planar_none_wo4"), logging_on=logging_on)
     if categories is not None:
         s.fmu.setDebugLogging(True, categories)
@@ -199,22 +201,34 @@ def test_debug_logging_honours_categories(unz):
 
 # ------------------------------------------------------------------------------- tolerance
 
-def test_setup_experiment_tolerance_is_reported_and_ignored(unz):
-    """The scene's solver.tolerance wins; a different fmi2SetupExperiment tolerance is reported as
-    a warning; only the parameter changes the integrator."""
+def test_setup_experiment_tolerance_rule(unz):
+    """The rule (slave docstring, README "Tolerance"): the parameter solver.tolerance if the host
+    set it, else fmi2SetupExperiment's tolerance, else the scene's; a host tolerance outside the
+    parameter's range is not used (fmi2Warning naming the range)."""
     fmu = str(unz.out / "planar_f45_wo4.fmu")
-    a = fmpy.simulate_fmu(fmu, stop_time=0.5, relative_tolerance=1e-3)
-    b = fmpy.simulate_fmu(fmu, stop_time=0.5)
     names = [v.name for v in fmpy.read_model_description(fmu).modelVariables
              if v.causality == "output" and v.type == "Real"]
-    assert all(np.array_equal(a[n], b[n]) for n in names)
-    s = Slave(unz("planar_f45_wo4"))
-    s.fmu.setupExperiment(tolerance=1e-3, startTime=0.0)
-    assert any(st == 1 and "tolerance 0.001 ignored: the integrator uses the parameter solver.tolerance = 1e-09" in m
+    host = fmpy.simulate_fmu(fmu, stop_time=0.5, relative_tolerance=1e-6)
+    param = fmpy.simulate_fmu(fmu, stop_time=0.5, start_values={"solver.tolerance": 1e-6})
+    scene = fmpy.simulate_fmu(fmu, stop_time=0.5)  # fmpy passes the DefaultExperiment's 1e-9
+    both = fmpy.simulate_fmu(fmu, stop_time=0.5, relative_tolerance=1e-6, start_values={"solver.tolerance": 1e-9})
+    assert all(np.array_equal(host[n], param[n]) for n in names)
+    assert all(np.array_equal(both[n], scene[n]) for n in names)
+    assert max(np.max(np.abs(host[n] - scene[n])) for n in names) > 1e-9
+    s = Slave(unz("planar_f45_wo4"), logging_on=True)
+    assert s.fmu.fmi2SetupExperiment(s.fmu.component, 1, 1e-6, 0.0, 0, 0.0) == 0
+    assert any(st == 0 and "fmi2SetupExperiment: tolerance 1e-06 used as solver.tolerance" in m
                for st, _, m in s.logs.records)
+    s.fmu.enterInitializationMode()
+    assert s.fmu.getReal([s.vr("solver.tolerance")]) == [1e-6]
     s.free()
-    c = fmpy.simulate_fmu(fmu, stop_time=0.5, start_values={"solver.tolerance": 1e-6})
-    assert max(np.max(np.abs(c[n] - b[n])) for n in names) > 1e-9  # the parameter does reach the integrator
+    s = Slave(unz("planar_f45_wo4"), logging_on=True)
+    assert s.fmu.fmi2SetupExperiment(s.fmu.component, 1, 0.5, 0.0, 0, 0.0) == 1  # fmi2Warning
+    assert any(st == 1 and "fmi2SetupExperiment: tolerance 0.5 not used (" in m and "1e-09" in m
+               for st, _, m in s.logs.records)
+    s.fmu.enterInitializationMode()
+    assert s.fmu.getReal([s.vr("solver.tolerance")]) == [1e-9]
+    s.free()
 
 
 # ------------------------------------------------------------------------------- work budget

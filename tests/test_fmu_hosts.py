@@ -41,9 +41,11 @@ class Fmu:
         self.start, self.stop, self.step, self.tol = (float(ex.startTime), float(ex.stopTime),
                                                       float(ex.stepSize), float(ex.tolerance))
 
-    def host_args(self, stop=None, *flags):
+    def host_args(self, stop=None, *flags, tol=None):
+        """The host's arguments; ``tol``: the fmi2SetupExperiment tolerance (default the
+        DefaultExperiment's; <= 0: none passed)."""
         return [*flags, str(self.unz), self.id, self.md.guid, repr(self.start),
-                repr(self.stop if stop is None else stop), repr(self.step), repr(self.tol),
+                repr(self.stop if stop is None else stop), repr(self.step), repr(self.tol if tol is None else tol),
                 *(f"{v.valueReference}:{v.name}" for v in self.outputs)]
 
 
@@ -158,6 +160,31 @@ def test_c_host_failed_run_exits_nonzero_with_the_reason(fmus, host):
     assert proc.returncode == 3, proc.stdout + proc.stderr
     assert "fmu_host: fmi2DoStep returned error" in proc.stderr
     assert "[error]" in proc.stderr and "fmi2DoStep(" in proc.stderr and "did not converge" in proc.stderr
+
+
+def test_c_host_strict_uses_the_setup_experiment_tolerance(fmus, host):
+    """A host as strict as OMSimulator (-w: any status but fmi2OK fails) passes tolerances 1e-4,
+    1e-6 and 1e-9 to fmi2SetupExperiment: every call returns fmi2OK, the log says which tolerance
+    the run uses, and the run equals the run with that tolerance set as the parameter
+    solver.tolerance (no host tolerance), bit for bit. The parameter wins over the host's."""
+    f = fmus["planar_f45_wo4"]
+    tol_vr = f.vr["solver.tolerance"]
+    runs = {}
+    for tol in (1e-4, 1e-6, 1e-9):
+        proc = run_host(host, f.host_args(0.3, "-w", tol=tol))
+        assert proc.returncode == 0, proc.stderr
+        assert f"fmi2SetupExperiment: tolerance {tol!r} used as solver.tolerance" in proc.stderr
+        assert f"tolerance {tol!r} (from fmi2SetupExperiment)" in proc.stderr
+        runs[tol] = parse_csv(proc.stdout)[1]
+        by_param = run_host(host, f.host_args(0.3, "-w", "-s", f"{tol_vr}={tol!r}", tol=0))
+        assert by_param.returncode == 0, by_param.stderr
+        assert f"tolerance {tol!r} (from the parameter solver.tolerance)" in by_param.stderr
+        assert np.array_equal(parse_csv(by_param.stdout)[1], runs[tol])
+    assert np.max(np.abs(runs[1e-4] - runs[1e-9])) > 1e-7  # the host's tolerance does reach the integrator
+    both = run_host(host, f.host_args(0.3, "-w", "-s", f"{tol_vr}=1e-9", tol=1e-4))
+    assert both.returncode == 0, both.stderr
+    assert "tolerance 1e-09 (from the parameter solver.tolerance)" in both.stderr
+    assert np.array_equal(parse_csv(both.stdout)[1], runs[1e-9])
 
 
 def test_overcon_python_overrides_the_recorded_interpreter(fmus, host):

@@ -9,10 +9,11 @@
  * STOP, as fmpy.simulate_fmu does) and prints time and the requested Real variables as CSV (FMI
  * cross-check style header, values with 17 significant digits).
  *
- *   fmu_host [-q] [-x] [-s NAME=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL VR:NAME [VR:NAME ...]
+ *   fmu_host [-q] [-x] [-w] [-s NAME=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL VR:NAME [VR:NAME ...]
  *
  *   -q            debug logging off (the FMU still logs warnings and errors)
  *   -x            exit right after the last step: no fmi2Terminate, fmi2FreeInstance or dlclose
+ *   -w            strict, as OMSimulator: any status but fmi2OK is a failure (exit 3)
  *   -s VR=VALUE   fmi2SetReal of value reference VR before initialization (repeatable)
  *   TOL <= 0      no tolerance passed to fmi2SetupExperiment
  *
@@ -90,9 +91,10 @@ static void *sym(void *lib, const char *name)
     return f;
 }
 
-static void check(fmi2Status s, const char *what)
+/* worst: the worst status accepted (fmi2Warning; fmi2OK with -w) */
+static void check(fmi2Status worst, fmi2Status s, const char *what)
 {
-    if (s > fmi2Warning) {
+    if (s > worst) {
         fprintf(stderr, "fmu_host: %s returned %s\n", what, status_name(s));
         exit(3);
     }
@@ -108,12 +110,16 @@ static int isclose(double a, double b) /* Python's math.isclose with its default
 int main(int argc, char **argv)
 {
     int logging = fmi2True, quick_exit = 0, nset = 0, i = 1;
+    fmi2Status worst = fmi2Warning;
     fmi2ValueReference set_vr[MAX_SETS];
     fmi2Real set_value[MAX_SETS];
     while (i < argc && argv[i][0] == '-') {
         if (!strcmp(argv[i], "-q")) {
             logging = fmi2False;
             i += 1;
+        } else if (!strcmp(argv[i], "-w")) {
+            worst = fmi2OK;
+            i++;
         } else if (!strcmp(argv[i], "-x")) {
             quick_exit = 1;
             i += 1;
@@ -126,7 +132,7 @@ int main(int argc, char **argv)
         }
     }
     if (argc - i < 8) {
-        fprintf(stderr, "usage: %s [-q] [-x] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
+        fprintf(stderr, "usage: %s [-q] [-x] [-w] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
                         "VR:NAME [VR:NAME ...]\n", argv[0]);
         return 1;
     }
@@ -180,12 +186,12 @@ int main(int argc, char **argv)
         fprintf(stderr, "fmu_host: fmi2Instantiate failed\n");
         return 3;
     }
-    check(setup(c, tol > 0 ? fmi2True : fmi2False, tol > 0 ? tol : 0.0, start, fmi2True, stop),
+    check(worst, setup(c, tol > 0 ? fmi2True : fmi2False, tol > 0 ? tol : 0.0, start, fmi2True, stop),
           "fmi2SetupExperiment");
     for (int k = 0; k < nset; k++)
-        check(set_real(c, &set_vr[k], 1, &set_value[k]), "fmi2SetReal");
-    check(enter_init(c), "fmi2EnterInitializationMode");
-    check(exit_init(c), "fmi2ExitInitializationMode");
+        check(worst, set_real(c, &set_vr[k], 1, &set_value[k]), "fmi2SetReal");
+    check(worst, enter_init(c), "fmi2EnterInitializationMode");
+    check(worst, exit_init(c), "fmi2ExitInitializationMode");
 
     printf("\"time\"");
     for (int k = 0; k < nvr; k++)
@@ -193,7 +199,7 @@ int main(int argc, char **argv)
     printf("\n");
     double time = start;
     for (long n = 0;; n++) {
-        check(get_real(c, vr, nvr, values), "fmi2GetReal");
+        check(worst, get_real(c, vr, nvr, values), "fmi2GetReal");
         printf("%.17g", time);
         for (int k = 0; k < nvr; k++)
             printf(",%.17g", values[k]);
@@ -203,13 +209,13 @@ int main(int argc, char **argv)
         double next = start + (n + 1) * step;
         if (next > stop && !isclose(next, stop))
             next = stop;
-        check(do_step(c, time, next - time, fmi2True), "fmi2DoStep");
+        check(worst, do_step(c, time, next - time, fmi2True), "fmi2DoStep");
         time = next;
     }
     fflush(stdout);
     if (quick_exit)
         return 0; /* the FMU must survive a host that just exits */
-    check(terminate(c), "fmi2Terminate");
+    check(worst, terminate(c), "fmi2Terminate");
     free_instance(c);
     dlclose(lib);
     free(vr);

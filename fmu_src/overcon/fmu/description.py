@@ -18,7 +18,7 @@ from .variables import UNITS, Var
 
 LOG_CATEGORIES = {
     "logEvents": "Information (fmi2OK): initialization, tolerance used. Only with debug logging on.",
-    "logStatusWarning": "Warnings (fmi2Warning): an ignored fmi2SetupExperiment tolerance, friction on a "
+    "logStatusWarning": "Warnings (fmi2Warning): an fmi2SetupExperiment tolerance out of range, friction on a "
                         "joint without equations. Also with debug logging off, unless switched off.",
     "logStatusError": "Errors (fmi2Error): wrong-state calls, bad value references, refused values, a "
                       "step that cannot continue (with its reason). Always logged.",

@@ -21,10 +21,15 @@ Behaviour
   budget ``solver.max_internal_steps``/``solver.max_wall_time`` is tunable: also while stepping).
   A value that is non-finite or out of range is refused with fmi2Error and the reason; the
   instance keeps its previous value.
-* Tolerance: the integrator uses the parameter ``solver.tolerance`` (the scene's value unless the
-  host sets the parameter). A tolerance given to ``fmi2SetupExperiment`` is ignored: it is reported
-  as a warning when it differs from ``solver.tolerance`` (an info message when equal), so the
-  scene's accuracy never changes silently.
+* Tolerance (the rule, also in the README): the integrator's tolerance is, first, the parameter
+  ``solver.tolerance`` if the host set it (fmi2SetReal, before or after fmi2SetupExperiment);
+  else the tolerance the host gave to ``fmi2SetupExperiment`` (``toleranceDefined``), as the FMI
+  2.0 standard suggests for a slave with an error-controlled integrator; else the scene's
+  ``solver.tolerance`` (also the modelDescription's DefaultExperiment tolerance). The choice is
+  logged at info level (fmi2OK, category logEvents) by fmi2SetupExperiment and again at
+  fmi2ExitInitializationMode ("from the ..."), and fmi2GetReal of ``solver.tolerance`` returns the
+  tolerance used. A host tolerance outside the parameter's range [1e-14, 1e-2] is not used: that
+  call returns fmi2Warning with the range (nothing is clamped); rk4 (fixed step) uses no tolerance.
 * The model and the :class:`Simulation` are (re)built from the scene with the current parameters
   when first needed (outputs read in initialization mode, or ``fmi2ExitInitializationMode``). The
   start time comes from ``fmi2SetupExperiment``.
@@ -225,6 +230,7 @@ class OverconSlave:
         """The state after fmi2Instantiate (and fmi2Reset)."""
         self._params = dict(self._defaults)
         self._explicit: set[str] = set()
+        self._tolerance_source = "the scene"  # who chose solver.tolerance (module docstring, "Tolerance")
         self._start_time = self._scene.start_time
         self._mode = Mode.INSTANTIATED
         self._sim: Simulation | None = None
@@ -363,6 +369,8 @@ class OverconSlave:
             self._refuse(name, value, reason)
         self._params[name] = value if isinstance(value, str) else type(self._defaults[name])(value)
         self._explicit.add(name)
+        if name == "solver.tolerance":
+            self._tolerance_source = "the parameter solver.tolerance"
         if not tunable:
             self._drop_sim()
 
@@ -463,14 +471,27 @@ class OverconSlave:
         self._start_time = start
         self._drop_sim()
         if tolerance_defined:
-            used = self._params["solver.tolerance"]
-            if tolerance == used:
-                self.log(f"fmi2SetupExperiment: tolerance {tolerance!r} = solver.tolerance", Status.OK)
-            else:
-                self.log(f"fmi2SetupExperiment: tolerance {tolerance!r} ignored: the integrator uses the "
-                         f"parameter solver.tolerance = {used!r} (set that parameter to change it)",
-                         Status.WARNING)
-                return Status.WARNING
+            return self._host_tolerance(tolerance)
+        return Status.OK
+
+    def _host_tolerance(self, tolerance: float):
+        """fmi2SetupExperiment's tolerance (see the module docstring, "Tolerance"): used unless the
+        host set the parameter ``solver.tolerance``; one outside that parameter's range is not used
+        (fmi2Warning, the message names the range)."""
+        rule = variables.rule("solver.tolerance")
+        if "solver.tolerance" in self._explicit:
+            self.log(f"fmi2SetupExperiment: tolerance {tolerance!r} not used: the host set the parameter "
+                     f"solver.tolerance = {self._params['solver.tolerance']!r}, which wins", Status.OK)
+            return Status.OK
+        reason = rule.check(tolerance)
+        if reason is not None:
+            self.log(f"fmi2SetupExperiment: tolerance {tolerance!r} not used ({reason}); the integrator uses "
+                     f"solver.tolerance = {self._params['solver.tolerance']!r}", Status.WARNING)
+            return Status.WARNING
+        self._params["solver.tolerance"] = float(tolerance)
+        self._tolerance_source = "fmi2SetupExperiment"
+        fixed = " (the fixed-step method rk4 does not use it)" if self._params["solver.method"] == "rk4" else ""
+        self.log(f"fmi2SetupExperiment: tolerance {tolerance!r} used as solver.tolerance{fixed}", Status.OK)
         return Status.OK
 
     @fmi_call("fmi2EnterInitializationMode", {Mode.INSTANTIATED})
@@ -486,7 +507,8 @@ class OverconSlave:
             raise CallRefused(f"initialization failed: {type(exc).__name__}: {exc}") from exc
         self._mode = Mode.STEPPING
         self.log(f"initialized at t = {self._t!r} s: method {self._params['solver.method']}, tolerance "
-                 f"{self._params['solver.tolerance']!r}; {self._sim.kernel_note}", Status.OK)
+                 f"{self._params['solver.tolerance']!r} (from {self._tolerance_source}); {self._sim.kernel_note}",
+                 Status.OK)
         if self._sim.kernel_missing:  # the FMU's own library should run this model: say it is slower
             self.log(f"the compiled kernel this FMU carries cannot be used ({self._sim.kernel_note}); it runs "
                      "on numpy and scipy alone, the same results, several times slower", Status.WARNING)
@@ -587,7 +609,7 @@ class OverconSlave:
         return {
             "guid": self._manifest["guid"],
             "params": dict(self._params), "explicit": sorted(self._explicit),
-            "start_time": self._start_time, "mode": self._mode.value, "t": self._t,
+            "start_time": self._start_time, "tolerance_source": self._tolerance_source, "mode": self._mode.value, "t": self._t,
             "outputs": self._outputs.copy(), "have_outputs": self._have_outputs, "failed": self._failed,
             "y": None if self._y is None else self._y.copy(), "derived_stale": self._derived_stale,
             "sim": None if self._sim is None else copy.deepcopy(self._sim.get_state()),
@@ -599,6 +621,7 @@ class OverconSlave:
         self._params = dict(state["params"])
         self._explicit = set(state["explicit"])
         self._start_time = state["start_time"]
+        self._tolerance_source = state.get("tolerance_source", "the scene")
         if state["sim"] is None:
             self._drop_sim()
         else:

@@ -187,6 +187,21 @@ def test_c_host_strict_uses_the_setup_experiment_tolerance(fmus, host):
     assert np.array_equal(parse_csv(both.stdout)[1], runs[1e-9])
 
 
+def test_python_host_frees_the_instance_after_the_interpreter_shut_down(fmus, host):
+    """A Python host that shuts its interpreter down before fmi2FreeInstance (OMSimulator's Python
+    API at exit): the FMU joins the host's interpreter, a call after the shutdown returns
+    fmi2Error with the reason, and fmi2FreeInstance returns without entering Python (exit 0, not
+    a segmentation fault)."""
+    lib, _ = pyinfo.libpython()
+    f = fmus["planar_f45_wo4"]
+    proc = run_host(host, f.host_args(0.02, "-P", lib), env={"PYTHONHOME": sys.base_prefix})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert parse_csv(proc.stdout)[1].shape[0] == round(0.02 / f.step) + 1
+    assert ("fmi2DoStep: the Python interpreter of this process has shut down (or is shutting down); this FMU "
+            "runs in it and cannot be called any more") in proc.stderr
+    assert "fmi2FreeInstance: the Python interpreter has shut down" in proc.stderr
+
+
 def test_overcon_python_overrides_the_recorded_interpreter(fmus, host):
     f = fmus["planar_f45_wo4"]
     proc = run_host(host, f.host_args(0.02, "-q"), env={"OVERCON_PYTHON": sys.executable})

@@ -13,6 +13,10 @@
  *
  *   -q            debug logging off (the FMU still logs warnings and errors)
  *   -x            exit right after the last step: no fmi2Terminate, fmi2FreeInstance or dlclose
+ *   -P LIBPYTHON  a Python host: load LIBPYTHON (RTLD_GLOBAL) and start it before fmi2Instantiate
+ *                 (the FMU joins it), shut it down (Py_FinalizeEx) before fmi2FreeInstance, as
+ *                 OMSimulator's Python API does at exit; then call fmi2DoStep once more (it must
+ *                 return fmi2Error, not crash)
  *   -w            strict, as OMSimulator: any status but fmi2OK is a failure (exit 3)
  *   -s VR=VALUE   fmi2SetReal of value reference VR before initialization (repeatable)
  *   TOL <= 0      no tolerance passed to fmi2SetupExperiment
@@ -111,12 +115,16 @@ int main(int argc, char **argv)
 {
     int logging = fmi2True, quick_exit = 0, nset = 0, i = 1;
     fmi2Status worst = fmi2Warning;
+    const char *libpython = NULL;
     fmi2ValueReference set_vr[MAX_SETS];
     fmi2Real set_value[MAX_SETS];
     while (i < argc && argv[i][0] == '-') {
         if (!strcmp(argv[i], "-q")) {
             logging = fmi2False;
             i += 1;
+        } else if (!strcmp(argv[i], "-P") && i + 1 < argc) {
+            libpython = argv[i + 1];
+            i += 2;
         } else if (!strcmp(argv[i], "-w")) {
             worst = fmi2OK;
             i++;
@@ -132,7 +140,7 @@ int main(int argc, char **argv)
         }
     }
     if (argc - i < 8) {
-        fprintf(stderr, "usage: %s [-q] [-x] [-w] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
+        fprintf(stderr, "usage: %s [-q] [-x] [-w] [-P LIBPYTHON] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
                         "VR:NAME [VR:NAME ...]\n", argv[0]);
         return 1;
     }
@@ -180,6 +188,15 @@ int main(int argc, char **argv)
     fmi2SetRealTYPE set_real = (fmi2SetRealTYPE)sym(lib, "fmi2SetReal");
     fmi2DoStepTYPE do_step = (fmi2DoStepTYPE)sym(lib, "fmi2DoStep");
 
+    void *pylib = NULL;
+    if (libpython) {
+        pylib = dlopen(libpython, RTLD_NOW | RTLD_GLOBAL);
+        if (!pylib) {
+            fprintf(stderr, "fmu_host: cannot load %s: %s\n", libpython, dlerror());
+            return 2;
+        }
+        ((void (*)(int))sym(pylib, "Py_InitializeEx"))(0);
+    }
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
     fmi2Component c = instantiate("c_host", fmi2CoSimulation, guid, uri, &callbacks, fmi2False, logging);
     if (!c) {
@@ -216,6 +233,14 @@ int main(int argc, char **argv)
     if (quick_exit)
         return 0; /* the FMU must survive a host that just exits */
     check(worst, terminate(c), "fmi2Terminate");
+    if (pylib) {
+        if (((int (*)(void))sym(pylib, "Py_FinalizeEx"))() != 0)
+            fprintf(stderr, "fmu_host: Py_FinalizeEx reported an error\n");
+        if (do_step(c, time, step, fmi2True) != fmi2Error) {
+            fprintf(stderr, "fmu_host: fmi2DoStep after the interpreter's shutdown did not return fmi2Error\n");
+            return 3;
+        }
+    }
     free_instance(c);
     dlclose(lib);
     free(vr);

@@ -106,6 +106,8 @@ static struct PythonApi {
     void (*Py_DecRef)(PyObject *);
     void (*Py_SetPythonHome)(const wchar_t *); /* optional: gone from Python 3.13 */
     wchar_t *(*Py_DecodeLocale)(const char *, size_t *);
+    int (*Py_IsFinalizing)(void);     /* optional: public from Python 3.13 */
+    int (*Py_IsFinalizing_old)(void); /* optional: _Py_IsFinalizing, Python 3.7-3.12 */
 } py;
 
 static const struct {
@@ -120,6 +122,7 @@ static const struct {
     SYM(PyLong_AsLong, 0),          SYM(PyErr_Occurred, 0),    SYM(PyErr_Fetch, 0),
     SYM(PyErr_Clear, 0),            SYM(PyObject_Str, 0),      SYM(PyUnicode_AsUTF8, 0),
     SYM(Py_DecRef, 0),              SYM(Py_SetPythonHome, 1),  SYM(Py_DecodeLocale, 0),
+    SYM(Py_IsFinalizing, 1),        {"_Py_IsFinalizing", offsetof(struct PythonApi, Py_IsFinalizing_old), 1},
 #undef SYM
 };
 
@@ -498,6 +501,19 @@ static Instance *checked(fmi2Component comp, const char *fn)
     return (Instance *)comp;
 }
 
+/* The interpreter has shut down, or is shutting down. A Python host may free its FMU instances
+ * after that (OMSimulator's Python API does, at exit); PyGILState_Ensure would then crash the
+ * process, so no call enters Python any more: fmi2FreeInstance frees the C side only (the slave
+ * went with the interpreter) and every other call returns fmi2Error with the reason. */
+static int python_gone(void)
+{
+    return !py.Py_IsInitialized() || (py.Py_IsFinalizing && py.Py_IsFinalizing()) ||
+           (!py.Py_IsFinalizing && py.Py_IsFinalizing_old && py.Py_IsFinalizing_old());
+}
+
+static const char gone_message[] = "%s: the Python interpreter of this process has shut down (or is "
+                                   "shutting down); this FMU runs in it and cannot be called any more";
+
 /* every slave method returns an fmi2Status */
 static fmi2Status call(fmi2Component comp, const char *fn, const char *method, const char *fmt, ...)
 {
@@ -506,6 +522,10 @@ static fmi2Status call(fmi2Component comp, const char *fn, const char *method, c
         return fmi2Error;
     if (c->pub_flags && strncmp(method, "get_", 4) != 0)
         c->pub_flags[0] = c->pub_flags[1] = 0; /* published values invalid until published again */
+    if (python_gone()) {
+        host_log(c, fmi2Error, CAT_ERROR, gone_message, fn);
+        return fmi2Error;
+    }
     PyGILState_STATE g = py.PyGILState_Ensure();
     va_list ap;
     va_start(ap, fmt);
@@ -606,6 +626,10 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         host_log(&tmp, fmi2Fatal, CAT_FATAL, "fmi2Instantiate: cannot start Python: %s", boot_error);
         return NULL;
     }
+    if (python_gone()) {
+        host_log(&tmp, fmi2Fatal, CAT_FATAL, gone_message, "fmi2Instantiate");
+        return NULL;
+    }
     Instance *c = calloc(1, sizeof *c);
     if (!c || !(c->name = strdup(tmp.name))) {
         free(c);
@@ -659,6 +683,13 @@ EXPORT void fmi2FreeInstance(fmi2Component comp)
     Instance *c = checked(comp, "fmi2FreeInstance");
     if (!c)
         return;
+    if (python_gone()) {
+        host_log(c, fmi2OK, CAT_EVENTS, "fmi2FreeInstance: the Python interpreter has shut down; its "
+                 "objects of this instance went with it, the C side is freed");
+        free(c->name);
+        free(c);
+        return;
+    }
     PyGILState_STATE g = py.PyGILState_Ensure();
     PyObject *r = py_method(c, "fmi2FreeInstance", c->slave, "free_instance", "()");
     if (r)

@@ -42,6 +42,25 @@ def _borrow_recorded_site_dirs(resources: str) -> None:
                 site.addsitedir(d)
 
 
+def missing_packages_message(exc: Exception, *, joined_host: bool, resources: str) -> str:
+    """The reason fmi2Instantiate gives when the slave cannot be imported (numpy or scipy
+    missing). The advice depends on whose interpreter the FMU runs in: ``OVERCON_PYTHON`` chooses
+    the interpreter only in a host process without Python; in a Python host (``joined_host``) the
+    FMU runs in the host's own interpreter, so the packages must be installed there, or the
+    recorded interpreter's lent, which works for its Python version only."""
+    here = f"{sys.version.split()[0]} at {sys.executable or '(unknown executable)'}"
+    if not joined_host:
+        return (f"{exc}: the FMU needs numpy and scipy in the interpreter it started (Python {here}); set "
+                "OVERCON_PYTHON to a Python executable that has them")
+    path = Path(resources) / "overcon_python.txt"
+    facts = pyinfo.parse(path.read_text(encoding="utf-8")) if path.is_file() else {}
+    recorded = ".".join(facts.get("version", [])) or "unknown"
+    return (f"{exc}: the FMU runs inside this host's own Python ({here}), which lacks numpy or scipy: "
+            f"install them there (python -m pip install numpy scipy). The Python recorded at build time "
+            f"(version {recorded}) lends its packages only to a host of the same version; OVERCON_PYTHON "
+            "has no effect in a host that already runs Python")
+
+
 def instantiate(instance_name: str, guid: str, resources: str, log_address: int, component: int,
                 logging_on: int, site_dirs: str, publish_address: int = 0):
     """Called by fmi2Instantiate; returns the slave (an exception is logged by the binary and
@@ -57,7 +76,5 @@ def instantiate(instance_name: str, guid: str, resources: str, log_address: int,
     try:
         from .slave import instantiate as make
     except ImportError as exc:
-        raise ImportError(f"{exc}: the FMU needs numpy and scipy in the interpreter it runs in "
-                          f"({sys.version.split()[0]}, sys.path = {sys.path}); set OVERCON_PYTHON to "
-                          "a Python executable that has them") from exc
+        raise ImportError(missing_packages_message(exc, joined_host=not site_dirs, resources=resources)) from exc
     return make(instance_name, guid, resources, log_address, component, bool(logging_on), publish_address)

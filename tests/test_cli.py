@@ -119,6 +119,26 @@ def test_simulate_spatial_scene_headers(tmp_path, capsys):
     assert "G.Fy" in header and "N.Fz" in header and "G.Fy0" in header
 
 
+@pytest.mark.parametrize("scene", ["planar_f1_wo4.toml", "examples/door_h1_wo_hinge2.toml"])
+def test_simulate_warns_about_non_unique_motion_and_exits_0(tmp_path, capsys, scene):
+    """The run goes ahead (exit 0, the CSV written), and stderr says what check says: the motion
+    is not unique, with the elimination this run uses and the joint at fault."""
+    out = tmp_path / "o.csv"
+    assert main(["simulate", str(MECH / scene), "--stop-time", "0.05", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert out.is_file()
+    assert "overcon: warning: motion with friction in " in err
+    assert ": NOT UNIQUE (depends on the elimination): this run shows the motion with Phi" in err
+    assert "another elimination can give another motion" in err
+    assert "overcon: warning: friction on joint " in err and ", whose reaction is not unique" in err
+
+
+def test_simulate_is_quiet_about_unique_motion(tmp_path, capsys):
+    assert main(["simulate", str(MECH / "planar_f45_wo4.toml"), "--stop-time", "0.05", "--out",
+                 str(tmp_path / "o.csv")]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
 def test_simulation_failure_exit_3(tmp_path, capsys):
     text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
     path = tmp_path / "l0.toml"

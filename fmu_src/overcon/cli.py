@@ -229,14 +229,14 @@ def cmd_simulate(args) -> int:
 
     from .simulate import SimulationError, run, write_csv
 
-    from .precheck import friction_warnings
+    from .precheck import precheck, run_warnings
 
     out = Path(args.out)
     if out.is_dir() or not out.parent.is_dir():
         return _input_error(f"--out {args.out}: " + ("is a directory (give a CSV file name)" if out.is_dir()
                                                      else f"the directory {out.parent} does not exist"))
     spec, model = _load(args)
-    for w in friction_warnings(model):
+    for w in run_warnings(precheck(model, args.file)):
         print(f"overcon: warning: {w}", file=sys.stderr)
     from .kernel import refusal
     why = refusal(model, spec.solver, here=True)  # a kernel that cannot run here: bad input, not a failed run

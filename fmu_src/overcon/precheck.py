@@ -145,6 +145,28 @@ def precheck(model: Model, source: str = "") -> PrecheckResult:
         problems=tuple(problems), warnings=tuple(friction_warnings(model)))
 
 
+def motion_verdict(result: PrecheckResult) -> str:
+    """The verdict line of ``check`` (also the first warning of ``simulate`` when not unique)."""
+    if not result.friction:
+        return "no friction: motion unique (reactions of non-unique joints depend on the elimination)"
+    verdict = "UNIQUE" if result.motion_unique else "NOT UNIQUE (depends on the elimination)"
+    return f"motion with friction in {', '.join(result.friction)}: {verdict}"
+
+
+def run_warnings(result: PrecheckResult) -> list[str]:
+    """What ``overcon simulate`` says on stderr before a run (decided: the run still goes ahead,
+    exit 0, because a non-unique motion is one legitimate motion of the scene): the verdict and
+    the problems when the motion is not unique or the tests disagree (the same text as
+    ``check``), naming the elimination the run uses, then the pre-check's warnings."""
+    out = []
+    if not result.motion_unique or not result.methods_agree:
+        eliminated = ", ".join("Phi%d" % i for i in result.eliminated) or "none"
+        out.append(f"{motion_verdict(result)}: this run shows the motion with {eliminated} eliminated "
+                   f"({result.elimination_mode}); another elimination can give another motion")
+        out += list(result.problems)
+    return out + list(result.warnings)
+
+
 def format_table(result: PrecheckResult) -> str:
     """The human-readable table of ``check`` (from the JSON document of ``result``)."""
     report = result.to_json()
@@ -165,11 +187,7 @@ def format_table(result: PrecheckResult) -> str:
         lines.append(f"{j['name']:<{w}} {j['type']:<14} {yn[j['unique']]:<7} {yn[m['rank']]:<6} "
                      f"{yn[m['svd']]:<6} {yn[m['qr']]:<6} {fr}{flag}")
     lines.append("")
-    if report["friction"]:
-        verdict = "UNIQUE" if report["motion_unique"] else "NOT UNIQUE (depends on the elimination)"
-        lines.append(f"motion with friction in {', '.join(report['friction'])}: {verdict}")
-    else:
-        lines.append("no friction: motion unique (reactions of non-unique joints depend on the elimination)")
+    lines.append(motion_verdict(result))
     lines += [f"problem: {p}" for p in report["problems"]]
     lines += [f"warning: {p}" for p in report.get("warnings", [])]
     return "\n".join(lines)

@@ -139,6 +139,22 @@ def test_simulate_is_quiet_about_unique_motion(tmp_path, capsys):
     assert "warning" not in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("name, what", [("door.fmu", "an FMU"), ("door.toml", r"a ZIP archive \(an FMU\?\)")])
+@pytest.mark.parametrize("command", ["check", "simulate"])
+def test_an_fmu_given_to_check_or_simulate_is_named_as_such(tmp_path, capsys, name, what, command):
+    import re
+    import zipfile
+    path = tmp_path / name
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("modelDescription.xml", "<fmiModelDescription/>")
+    args = [command, str(path)] + (["--out", str(tmp_path / "o.csv")] if command == "simulate" else [])
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert re.search(rf"{re.escape(str(path))}: \(file\): is {what}, not a mechanism or scene file: overcon check, "
+                     r"simulate and build take the TOML files an FMU is built from; overcon run simulates an FMU", err)
+    assert "UTF-8" not in err and "TOML:" not in err
+
+
 def test_simulation_failure_exit_3(tmp_path, capsys):
     text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
     path = tmp_path / "l0.toml"

@@ -1211,8 +1211,19 @@ def _read_bytes(path: Path) -> tuple[bytes | None, str]:
     return data, ""
 
 
+NOT_AN_FMU = ("is {what}, not a mechanism or scene file: overcon check, simulate and build take the TOML "
+              "files an FMU is built from; overcon run simulates an FMU, and overcon compare reports its "
+              "pre-check verdict (the FMU's constant output motion_unique)")
+
+
 def _read(path: Path, ctx: _Ctx) -> dict | None:
+    if path.suffix.lower() == ".fmu" and path.is_file():
+        ctx.add(FILE_FIELD, NOT_AN_FMU.format(what="an FMU"))
+        return None
     data, why = _read_bytes(path)
+    if data is not None and data.startswith(b"PK\x03\x04"):
+        ctx.add(FILE_FIELD, NOT_AN_FMU.format(what="a ZIP archive (an FMU?)"))
+        return None
     if data is None:
         ctx.add(FILE_FIELD, why)
         return None

@@ -202,6 +202,16 @@ def test_python_host_frees_the_instance_after_the_interpreter_shut_down(fmus, ho
     assert "fmi2FreeInstance: the Python interpreter has shut down" in proc.stderr
 
 
+def test_paths_in_messages_have_one_leading_slash_with_a_four_slash_uri(fmus, host):
+    """A host that writes the resource URI as "file:///" + an absolute path (four slashes): the
+    paths the FMU names in its messages (here the compiled kernel it loaded) start with one slash."""
+    f = fmus["planar_f45_wo4"]
+    proc = run_host(host, f.host_args(0.02, "-4"))
+    assert proc.returncode == 0, proc.stderr
+    assert f"compiled kernel ({f.unz}/binaries/" in proc.stderr
+    assert "//" not in proc.stderr.replace("file://", "")
+
+
 def test_overcon_python_overrides_the_recorded_interpreter(fmus, host):
     f = fmus["planar_f45_wo4"]
     proc = run_host(host, f.host_args(0.02, "-q"), env={"OVERCON_PYTHON": sys.executable})

@@ -17,6 +17,8 @@
  *                 (the FMU joins it), shut it down (Py_FinalizeEx) before fmi2FreeInstance, as
  *                 OMSimulator's Python API does at exit; then call fmi2DoStep once more (it must
  *                 return fmi2Error, not crash)
+ *   -4            write the resource URI as "file:///" + the absolute path (four slashes), as some
+ *                 hosts do, instead of "file://" + the path
  *   -w            strict, as OMSimulator: any status but fmi2OK is a failure (exit 3)
  *   -s VR=VALUE   fmi2SetReal of value reference VR before initialization (repeatable)
  *   TOL <= 0      no tolerance passed to fmi2SetupExperiment
@@ -116,6 +118,7 @@ int main(int argc, char **argv)
     int logging = fmi2True, quick_exit = 0, nset = 0, i = 1;
     fmi2Status worst = fmi2Warning;
     const char *libpython = NULL;
+    int four_slashes = 0;
     fmi2ValueReference set_vr[MAX_SETS];
     fmi2Real set_value[MAX_SETS];
     while (i < argc && argv[i][0] == '-') {
@@ -125,6 +128,9 @@ int main(int argc, char **argv)
         } else if (!strcmp(argv[i], "-P") && i + 1 < argc) {
             libpython = argv[i + 1];
             i += 2;
+        } else if (!strcmp(argv[i], "-4")) {
+            four_slashes = 1;
+            i++;
         } else if (!strcmp(argv[i], "-w")) {
             worst = fmi2OK;
             i++;
@@ -140,7 +146,7 @@ int main(int argc, char **argv)
         }
     }
     if (argc - i < 8) {
-        fprintf(stderr, "usage: %s [-q] [-x] [-w] [-P LIBPYTHON] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
+        fprintf(stderr, "usage: %s [-q] [-x] [-w] [-4] [-P LIBPYTHON] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
                         "VR:NAME [VR:NAME ...]\n", argv[0]);
         return 1;
     }
@@ -173,7 +179,7 @@ int main(int argc, char **argv)
         return 2;
     }
     /* file:// URI of the resources folder; spaces percent-encoded */
-    char *u = uri + sprintf(uri, "file://");
+    char *u = uri + sprintf(uri, four_slashes ? "file:///" : "file://");
     for (const char *c = absdir; *c; c++)
         u += (*c == ' ') ? sprintf(u, "%%20") : sprintf(u, "%c", *c);
     sprintf(u, "/resources");

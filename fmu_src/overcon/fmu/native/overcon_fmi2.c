@@ -565,6 +565,9 @@ static int resource_dir(const char *uri, char *out, size_t size)
         p += 5;
     else if (p[0] != '/')
         return 0;
+    /* hosts that write "file:///" + an absolute path give four slashes; one is the path's root */
+    while (p[0] == '/' && p[1] == '/')
+        p++;
     size_t j = 0;
     for (; *p && j + 1 < size; p++) {
         if (*p == '%' && hexval(p[1]) >= 0 && hexval(p[2]) >= 0) {

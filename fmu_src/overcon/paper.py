@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from . import scene
-from .figures import FIGURES, Figure  # noqa: F401  (the figures are defined without the engine)
+from .figures import ADAPTIVE_RUNS, FIGURES, Figure, figure_series  # noqa: F401  (the figures are defined without the engine)
 from .checks import compile_checked
 from .precheck import precheck
 from .simulate import Result, SimulationError, run_scene
@@ -125,8 +125,6 @@ def make_figures(directory: Path, out: Path, *, tolerance: float | None = None, 
     cache: dict[str, GroupRun] = {}
     written = []
     for fig in FIGURES:
-        series = {}
-        time = None
         for g in fig.groups:
             if g not in groups:
                 raise FileNotFoundError(f"{directory}: no scenes of group {g!r} (needed for {fig.name})")
@@ -135,11 +133,10 @@ def make_figures(directory: Path, out: Path, *, tolerance: float | None = None, 
                 log(f"{g}: predicted {'unique' if cache[g].predicted_unique else 'not unique'}; "
                     f"max position difference between eliminations {max(cache[g].max_diff.values()):.3g} "
                     f"(lockstep), {max(cache[g].adaptive_diff.values()):.3g} (adaptive)")
-            gr = cache[g]
-            for label, res in zip(gr.labels, gr.results):
-                prefix = "" if len(fig.groups) == 1 else ("without friction, " if g.endswith("none") else "with friction, ")
-                series[prefix + label] = res.column(fig.output)
-                time = res.time
-        written.append(plot_series(out / f"{fig.name}.png", time, series, title=fig.title, ylabel=fig.ylabel))
+        series, reference = figure_series(fig, {g: [(lab, res.column(fig.output)) for lab, res in
+                                                    zip(cache[g].labels, cache[g].results)] for g in fig.groups})
+        time = cache[fig.groups[0]].results[0].time
+        written.append(plot_series(out / f"{fig.name}.png", time, series, title=fig.title, ylabel=fig.ylabel,
+                                   reference=reference, runs=ADAPTIVE_RUNS))
         log(f"wrote {written[-1]}")
     return written

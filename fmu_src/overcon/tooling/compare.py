@@ -86,6 +86,7 @@ class Comparison:
     invalid: bool = False  # the group was not run: its FMUs do not form a group (``failure`` says why)
     adaptive_failure: str | None = None  # the adaptive runs failed, the lockstep runs gave the verdict
     lockstep_note: str | None = None  # why the lockstep step differs from the one asked for (unstable rk4)
+    lockstep_series: list[Series] | None = None  # the lockstep runs (mode "lockstep"): they decide, plots show them
 
     @property
     def observed(self) -> bool:
@@ -252,7 +253,7 @@ def compare_group(group: str, infos: list[FmuInfo], series: list[Series] | None,
         n: float(np.max(np.abs(np.stack([s.values[n] - series[0].values[n] for s in series[1:]])))) for n in deciding}
     return Comparison(group, [i.label for i in infos], infos, series, diffs, predicted, solver_tol, tolerance,
                       mode="lockstep" if lockstep is not None else "adaptive", lockstep_step=lockstep_step,
-                      adaptive_diff=adaptive, adaptive_failure=adaptive_failure)
+                      adaptive_diff=adaptive, adaptive_failure=adaptive_failure, lockstep_series=lockstep)
 
 
 def failed_group(group: str, infos: list[FmuInfo], reason: str) -> Comparison:

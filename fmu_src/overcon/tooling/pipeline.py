@@ -327,8 +327,9 @@ class ReproduceOutcome(_Verdicts):
 
 def _figures(comparisons: list[Comparison], out_dir: Path, echo) -> list[tuple[str, Path]]:
     """The paper's Figs. 3-5, 7-9 (:data:`overcon.figures.FIGURES`) from the FMU results."""
-    from ..figures import FIGURES
+    from ..figures import FIGURES, figure_series
     from ..plots import plot_series
+    from .report import shown_runs
 
     by_group = {c.group: c for c in comparisons if c.failure is None}
     out = []
@@ -337,16 +338,14 @@ def _figures(comparisons: list[Comparison], out_dir: Path, echo) -> list[tuple[s
         if missing:
             echo(f"{fig.name}: skipped (group {', '.join(missing)} not in this set, or its runs failed)")
             continue
-        series, t = {}, None
         for g in fig.groups:
-            c = by_group[g]
-            if fig.output not in c.series[0].values:
+            if fig.output not in by_group[g].series[0].values:
                 raise InputError(f"{fig.name}: group {g} has no output {fig.output}")
-            for lab, s in zip(c.labels, c.series):
-                prefix = "" if len(fig.groups) == 1 else ("without friction, " if g.endswith("none") else "with friction, ")
-                series[prefix + lab] = s.values[fig.output]
-                t = s.time
-        p = plot_series(out_dir / f"{fig.name}.png", t, series, title=fig.title, ylabel=fig.ylabel)
+        series, reference = figure_series(fig, {g: [(lab, s.values[fig.output]) for lab, s in
+                                                    zip(by_group[g].labels, by_group[g].series)] for g in fig.groups})
+        shown = {shown_runs(by_group[g]) for g in fig.groups}
+        p = plot_series(out_dir / f"{fig.name}.png", by_group[fig.groups[0]].series[0].time, series, title=fig.title,
+                        ylabel=fig.ylabel, reference=reference, runs="; ".join(sorted(shown)))
         out.append((fig.title, p))
     return out
 

@@ -78,10 +78,20 @@ def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_-]+", "_", name)
 
 
+def shown_runs(c: Comparison, *, deciding: bool = False) -> str:
+    """Which runs of ``c`` a plot shows: the adaptive runs (``c.series``), or, when those failed
+    or with ``deciding`` in lockstep mode, the lockstep runs."""
+    if c.mode == "lockstep" and (deciding or c.adaptive_failure is not None):
+        return f"lockstep runs (rk4, step {c.lockstep_step:g} s, identical steps for every variant)"
+    return "adaptive runs (each FMU's own solver settings)"
+
+
 def plot_comparison(c: Comparison, out_dir: Path, outputs: str | list[str] = "worst") -> list[Path]:
     """PNG per selected output (``"worst"``: the deciding output with the largest difference
-    relative to its tolerance; ``"all"``: every deciding output; or a list of names): one line per
-    variant, labelled like the paper, and a panel of differences to the first one."""
+    relative to its tolerance; ``"all"``: every deciding output; or a list of names): the runs
+    that decide the verdict (the lockstep runs in lockstep mode, the title's second line says
+    which, and gives the adaptive runs' difference beside it), one line per variant labelled like
+    the paper, and a panel of differences to the first one."""
     from ..plots import plot_series
 
     by_name = {d.name: d for d in c.diffs}
@@ -94,14 +104,18 @@ def plot_comparison(c: Comparison, out_dir: Path, outputs: str | list[str] = "wo
         names = [d.name for d in c.diffs if d.decides]
     else:
         names = [n for n in outputs if n in by_name]
+    runs = c.lockstep_series if c.mode == "lockstep" and c.lockstep_series else c.series
+    shown = shown_runs(c, deciding=True)
     paths = []
     for n in names:
         d = by_name[n]
-        series = {lab: s.values[n] for lab, s in zip(c.labels, c.series)}
+        series = {lab: s.values[n] for lab, s in zip(c.labels, runs)}
         kind = "reference comparison" if c.reference is not None else c.verdict_text()
-        paths.append(plot_series(Path(out_dir) / f"{_safe(c.group)}_{_safe(n)}.png", c.series[0].time, series,
+        second = (f"\nthe adaptive runs (not shown) differ by {c.adaptive_diff[n]:.3g} {_unit(d)}"
+                  if runs is not c.series and n in c.adaptive_diff else "")
+        paths.append(plot_series(Path(out_dir) / f"{_safe(c.group)}_{_safe(n)}.png", runs[0].time, series,
                                  title=f"{c.group}: {n} ({kind}; max difference {d.max_abs:.3g} {_unit(d)})",
-                                 ylabel=f"{n} ({_unit(d)})" if d.unit else n))
+                                 ylabel=f"{n} ({_unit(d)})" if d.unit else n, runs=shown + second))
     return paths
 
 

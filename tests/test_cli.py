@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from overcon.cli import main
@@ -161,7 +162,24 @@ def test_simulation_failure_exit_3(tmp_path, capsys):
     path.write_text(text)
     code = main(["simulate", str(path), "--eliminate", "4", "--stop-time", "2", "--out", str(tmp_path / "o.csv")])
     assert code == 3
-    assert "singular position" in capsys.readouterr().err
+    captured = capsys.readouterr()
+    assert "singular position" in captured.err
+    rows = list(csv.reader((tmp_path / "o.csv").open()))  # the file is written, the header at least
+    assert rows[0][0] == "time" and "evaluations" in captured.out
+    assert (f"{tmp_path / 'o.csv'} ends early" in captured.err or "has the header only" in captured.err)
+
+
+def test_a_run_stopped_by_its_budget_keeps_its_rows_and_prints_its_stats(tmp_path, capsys):
+    out = tmp_path / "o.csv"
+    assert main(["simulate", str(MECH / "planar_f45_wo4.toml"), "--max-steps", "100", "--out", str(out)]) == 3
+    captured = capsys.readouterr()
+    rows = list(csv.reader(out.open()))
+    times = [float(r[0]) for r in rows[1:]]
+    assert len(times) > 10 and times == sorted(times) and times[-1] < 4.0  # every point up to the stop
+    assert np.allclose(np.diff(times), 0.01, rtol=0, atol=1e-12)  # the scene's output grid, no gap
+    assert f"{out}: {len(times)} rows x " in captured.out and "100 steps, " in captured.out
+    assert "work budget exhausted: 100 internal steps" in captured.err
+    assert f"overcon: {out} ends early at t = {times[-1]:.9g} s (its last output point before the stop)" in captured.err
 
 
 def test_check_json_is_the_typed_precheck_result_in_its_key_order(capsys):

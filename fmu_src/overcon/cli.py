@@ -247,24 +247,46 @@ def cmd_simulate(args) -> int:
     try:
         res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS, max_wall_time=args.max_wall_time or MAX_WALL_TIME)
     except SimulationError as exc:
-        from .kernel import KernelUnavailable, select
-        try:
-            note = select(model, spec.solver)[1]
-        except KernelUnavailable:
-            note = "right-hand side: numpy"
-        print(f"overcon: {args.file}: {exc} [{note}]", file=sys.stderr)
-        return EXIT_RUNTIME
+        return _failed_run(args, model, spec, exc, time.perf_counter() - start)
     wall = time.perf_counter() - start
     write_csv(res, args.out)
-    print(f"{args.out}: {len(res.time)} rows x {len(res.names)} outputs, t = {res.time[0]:g}..{res.time[-1]:g} s; "
-          f"eliminated {', '.join('Phi%d' % i for i in model.eliminated) or 'none'} ({model.elimination_mode}); "
-          f"{res.steps} steps, {res.evaluations} evaluations, {res.friction_iterations} friction iterations; "
-          f"max constraint drift {res.max_drift:.3g}; wall {wall:.2f} s; {res.kernel_note}"
-          + (f" ({res.kernel_repeats} evaluations handed back to numpy)" if res.kernel_repeats else ""))
+    print(_run_stats(args.out, model, res, wall))
     if res.stiff_steps:
         print(f"note: {res.stiff_steps} steps were limited by stability (stiff: friction sticking inside the "
               "regularisation band); a larger v_reg or a looser tolerance is cheaper")
     return EXIT_OK
+
+
+def _run_stats(out, model, res, wall: float) -> str:
+    """The line ``simulate`` prints after a run (also after a failed one, for the rows it kept)."""
+    span = f"t = {res.time[0]:g}..{res.time[-1]:g} s" if len(res.time) else "no output point"
+    return (f"{out}: {len(res.time)} rows x {len(res.names)} outputs, {span}; "
+            f"eliminated {', '.join('Phi%d' % i for i in model.eliminated) or 'none'} ({model.elimination_mode}); "
+            f"{res.steps} steps, {res.evaluations} evaluations, {res.friction_iterations} friction iterations; "
+            f"max constraint drift {res.max_drift:.3g}; wall {wall:.2f} s; {res.kernel_note}"
+            + (f" ({res.kernel_repeats} evaluations handed back to numpy)" if res.kernel_repeats else ""))
+
+
+def _failed_run(args, model, spec, exc, wall: float) -> int:
+    """A run that stopped (exit 3): the CSV keeps every output point computed before the stop,
+    the stats are printed, then the reason, then where the file ends (decided: the file is written
+    even when it has no data row, so a script always finds it)."""
+    from .kernel import KernelUnavailable, select
+    from .simulate import write_csv
+    try:
+        note = select(model, spec.solver)[1]
+    except KernelUnavailable:
+        note = "right-hand side: numpy"
+    partial = exc.partial
+    if partial is not None:
+        write_csv(partial, args.out)
+        print(_run_stats(args.out, model, partial, wall))
+    print(f"overcon: {args.file}: {exc} [{note}]", file=sys.stderr)
+    if partial is not None:
+        end = (f"ends early at t = {partial.time[-1]:.9g} s (its last output point before the stop)" if len(partial.time)
+               else "has the header only (the run stopped before its first output point)")
+        print(f"overcon: {args.out} {end}", file=sys.stderr)
+    return EXIT_RUNTIME
 
 
 def cmd_figures(args) -> int:

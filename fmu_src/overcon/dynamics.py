@@ -196,33 +196,43 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
         if ok:
             qf_out = qf
             lam_R = lam0 + W @ qf
-        else:  # the robust path: Anderson-accelerated fixed point, then Newton with FD Jacobian
+        else:
             fallback = True
-
-            def G(lr):
-                return lam0 + W @ _friction_forces_reduced(plan, ctx, lr[xrows])[0]
-
-            lr = lam0.copy() if lam_guess is None else lam_guess[R].copy()
-            lr, more, ok = _fixed_point(G, lr, xrows, tol, max_iter)
-            iterations += more
-            if not ok:
-                lr, more, ok = _newton(G, lr, xrows, tol, max_iter)
-                iterations += more
-            if not ok:
-                res = np.max(np.abs(G(lr)[xrows] - lr[xrows]))
-                names = ", ".join(model.joints[j].name for j in model.friction_joints)
-                raise FrictionSolveError(
-                    f"t = {t:.9g} s: friction solve in joints {names} did not converge "
-                    f"(residual {res:.3g} N after {iterations} iterations: Newton, fixed point, "
-                    "then Newton with a finite-difference Jacobian)")
-            lam_R = lr
-            qf = _friction_forces_reduced(plan, ctx, lr[xrows])[0]
+            start = lam0.copy() if lam_guess is None else lam_guess[R].copy()
+            lam_R, qf, iterations = _robust_friction(model, ctx, lam0, W, start, t, solver, iterations)
         Q = Q.copy()
         Q[cols] += qf
     lam[R] = lam_R
     hdot = model.Minv * (Q - JR @ lam_R)
     return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S, qf=qf_out,
                       damped=damped or (newton_failed > 0))
+
+
+def _robust_friction(model: Model, ctx: list, lam0: np.ndarray, W: np.ndarray, start: np.ndarray, t: float,
+                     solver: SolverSpec, iterations: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The robust path of the friction solve, after Newton and damped Newton gave up: the
+    Anderson-accelerated fixed point lam_R = lam0 + W qf(lam_R) from ``start``, then Newton with a
+    finite-difference Jacobian. Returns (lam_R, the friction forces, ``iterations`` plus its own);
+    raises :class:`FrictionSolveError` (time, joints, residual) when neither converges."""
+    plan, tol, max_iter = model.plan, solver.friction_tol, solver.friction_max_iter
+    xrows = plan.friction_xrows
+
+    def G(lr):
+        return lam0 + W @ _friction_forces_reduced(plan, ctx, lr[xrows])[0]
+
+    lr, more, ok = _fixed_point(G, start, xrows, tol, max_iter)
+    iterations += more
+    if not ok:
+        lr, more, ok = _newton(G, lr, xrows, tol, max_iter)
+        iterations += more
+    if not ok:
+        res = np.max(np.abs(G(lr)[xrows] - lr[xrows]))
+        names = ", ".join(model.joints[j].name for j in model.friction_joints)
+        raise FrictionSolveError(
+            f"t = {t:.9g} s: friction solve in joints {names} did not converge "
+            f"(residual {res:.3g} N after {iterations} iterations: Newton, fixed point, "
+            "then Newton with a finite-difference Jacobian)")
+    return lr, _friction_forces_reduced(plan, ctx, lr[xrows])[0], iterations
 
 
 def _cho_solve_many(factor, B: np.ndarray) -> np.ndarray:

@@ -100,7 +100,11 @@ class SingularityMonitor:
 
 
 class SimulationError(RuntimeError):
-    """Integration stopped: names the time and the cause."""
+    """Integration stopped: names the time and the cause. Raised by :func:`run`, it carries
+    ``partial``: the :class:`Result` of the output points computed before the stop (possibly
+    none), so that a failed run keeps what it computed."""
+
+    partial: "Result | None" = None
 
 
 MAX_STEPS = 1_000_000
@@ -478,11 +482,22 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
     sim = Simulation(model, solver, **settings)
     grid = output_grid(scene.start_time, stop, interval)
     rows = []
-    for t in grid:
-        y = sim.advance(t)
-        rows.append(sim.outputs(t, y))
+    try:
+        for t in grid:
+            y = sim.advance(t)
+            rows.append(sim.outputs(t, y))
+    except SimulationError as exc:
+        exc.partial = _result(model, sim, grid[:len(rows)], rows)
+        raise
+    return _result(model, sim, grid, rows)
+
+
+def _result(model: Model, sim: Simulation, time: np.ndarray, rows: list) -> Result:
+    """The :class:`Result` of the output points ``time`` and their ``rows`` so far, with the
+    run's counters."""
     itg = sim._integrator
-    return Result(model.output_names(), grid, np.array(rows), sim.max_drift, sim.evaluations,
+    values = np.array(rows) if rows else np.zeros((0, len(model.output_names())))
+    return Result(model.output_names(), np.asarray(time), values, sim.max_drift, sim.evaluations,
                   sim.friction_iterations, itg.nsteps, getattr(itg, "stiff_steps", 0), sim.kernel_note,
                   sim.kernel_repeats)
 

@@ -572,3 +572,33 @@ def test_degenerate_shapes():
     v = joint_uniqueness(np.eye(3), [])
     assert v.unique and v.agree
     assert independent_columns(np.zeros((2, 2))) == [] and auto_eliminate(np.zeros((2, 2))) == [0, 1]
+
+
+# --------------------------------------------------------------------------- one factorisation
+
+
+def test_one_factorisation_equals_the_three_tests_on_random_structures():
+    """methods="svd" (one SVD of J, B_P = J_P N per joint) gives the verdicts and rank defects of
+    the three tests (rank_defect from B: rank(J_P N) = rank(J_P) + rank(J_-P) - rank(J)), per
+    joint and per set, and computes no raw bases."""
+    rng = np.random.default_rng(7)
+    for trial in range(25):
+        n, m = 9, 14
+        J = rng.standard_normal((n, 6)) @ rng.standard_normal((6, m))  # rank 6
+        J[6:, :] = 0.0
+        J[6, 0] = J[7, 1] = J[8, 2] = 1.0  # private coordinates: some joints unique
+        if trial % 2:
+            J[:, 13] = J[:, 12]  # a dependency inside joint "g"
+        groups = {"a": [0, 1], "b": [2, 3], "c": [4, 5], "d": [6, 7], "e": [8, 9], "f": [10, 11], "g": [12, 13]}
+        full, one = analyse(J, groups), analyse(J, groups, methods="svd")
+        assert full.rank == one.rank
+        for name in groups:
+            f, o = full.joints[name], one.joints[name]
+            assert o.methods == {"svd": f.methods["svd"]}
+            assert (o.unique, o.rank_defect) == (f.unique, f.rank_defect), (trial, name)
+            assert o.B_svd is None and o.B_qr is None
+        for names in itertools.combinations(groups, 3):
+            s, t = full.set_unique(names), one.set_unique(names)
+            assert (t.unique, t.rank_defect) == (s.unique, s.rank_defect), (trial, names)
+    with pytest.raises(ValueError, match=r"methods must be one of \['all', 'svd'\], got 'fast'"):
+        analyse(np.eye(2), {"a": [0]}, methods="fast")

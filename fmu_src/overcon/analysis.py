@@ -121,6 +121,10 @@ B_NOISE_FACTOR = 100.0
 NOISE_FACTOR = 100.0
 
 _METHODS = ("rank", "svd", "qr")
+#: The tests a pre-check runs: ``"svd"``, the one-factorisation test (B.11: one SVD of J gives
+#: null(J); a joint is unique iff J_P N_P = 0), or ``"all"``, with the rank comparison (B.10: two
+#: SVDs per joint) and the QR test (B.12) as a cross-check.
+METHOD_SETS = {"svd": ("svd",), "all": _METHODS}
 _RUIZ_SWEEPS = 50
 _RUIZ_TOL = 1e-3
 
@@ -298,11 +302,15 @@ def auto_eliminate(J, rtol: float | None = None, *, equilibrate: bool = True) ->
 class JointVerdict:
     """Uniqueness of one joint's generalized reaction ``f_P = J_P lam_P``.
 
-    unique        agreed verdict; follows the rank method if the methods disagree
-    methods       {"rank": bool, "svd": bool, "qr": bool} (True = unique)
-    rank_defect   rank(J_P) + rank(J_-P) - rank(J) (B.10); > 0 means not unique
-    B_svd         (n, m - r) ``J_P V_P[:, r:]`` from the raw J (B.11), in J's units
-    B_qr          (n, m - r) ``J_P Q_P[:, r:]`` from the raw J (B.12)
+    unique        agreed verdict; follows the rank method if the methods disagree (the SVD test
+                  when it ran alone)
+    methods       {"rank": bool, "svd": bool, "qr": bool} (True = unique): the tests that ran
+                  (``methods="svd"``: the SVD test only)
+    rank_defect   rank(J_P) + rank(J_-P) - rank(J) (B.10); > 0 means not unique (without the
+                  rank test: the same number from the one factorisation, :func:`_b_defect`)
+    B_svd         (n, m - r) ``J_P V_P[:, r:]`` from the raw J (B.11), in J's units (None
+                  unless ``methods="all"``: it needs a second SVD)
+    B_qr          (n, m - r) ``J_P Q_P[:, r:]`` from the raw J (B.12) (None unless "all")
     agree         all three methods give the same answer
     columns       the joint's columns, as given
     rank_P        rank(J_P); ``lam_P`` itself is unique only if unique and rank_P == len(columns)
@@ -313,8 +321,8 @@ class JointVerdict:
     unique: bool
     methods: dict
     rank_defect: int
-    B_svd: np.ndarray = field(repr=False)
-    B_qr: np.ndarray = field(repr=False)
+    B_svd: np.ndarray | None = field(repr=False)
+    B_qr: np.ndarray | None = field(repr=False)
     agree: bool
     columns: tuple = ()
     rank_P: int = 0
@@ -348,10 +356,21 @@ class _Context:
     tol: float  # absolute rank threshold on A
     r: int
     b_rtol: float
-    N_svd: np.ndarray  # null bases of A (decisions)
-    N_qr: np.ndarray
-    N_svd_raw: np.ndarray  # null bases of J (reports)
-    N_qr_raw: np.ndarray
+    N_svd: np.ndarray  # null basis of A (decisions): the one factorisation every method needs
+    methods: tuple = _METHODS  # the tests run (METHOD_SETS)
+    _lazy: dict = field(default_factory=dict)  # the other bases, computed once when a method needs them
+
+    @property
+    def cross_check(self) -> bool:
+        """The rank and QR tests run too (``methods="all"``)."""
+        return "rank" in self.methods
+
+    def basis(self, key: str) -> np.ndarray:
+        """``"qr"``: the QR null basis of A; ``"svd_raw"``/``"qr_raw"``: those of the raw J (reports)."""
+        if key not in self._lazy:
+            matrix = self.A if key == "qr" else self.J
+            self._lazy[key] = _null_basis(matrix, self.r, key.removesuffix("_raw"))
+        return self._lazy[key]
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -359,11 +378,17 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def _context(J, rtol, b_rtol, use_equilibration: bool) -> _Context:
+def _method_set(methods: str) -> tuple:
+    if methods not in METHOD_SETS:
+        raise ValueError(f"methods must be one of {sorted(METHOD_SETS)}, got {methods!r}")
+    return METHOD_SETS[methods]
+
+
+def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> _Context:
     J = _readonly(_as_matrix(J).copy())
     rt = _rtol(rtol)
     A = _readonly(_decision_matrix(J, use_equilibration).copy())
-    s = _svdvals(A)
+    s, vh = _svd_full(A)
     tol = _tol_from(s, A.shape, rt)
     r = int(np.count_nonzero(s > tol))
     if b_rtol is None:
@@ -371,18 +396,18 @@ def _context(J, rtol, b_rtol, use_equilibration: bool) -> _Context:
         brt = max(rt, B_NOISE_FACTOR * max(A.shape) * EPS * kappa)
     else:
         brt = _rtol(b_rtol, "b_rtol")
-    return _Context(
-        J=J,
-        A=A,
-        sigma=_readonly(s),
-        tol=tol,
-        r=r,
-        b_rtol=brt,
-        N_svd=_null_basis(A, r, "svd"),
-        N_qr=_null_basis(A, r, "qr"),
-        N_svd_raw=_null_basis(J, r, "svd"),
-        N_qr_raw=_null_basis(J, r, "qr"),
-    )
+    m = A.shape[1]
+    N = np.eye(m) if r <= 0 else np.zeros((m, 0)) if r >= m else vh.T[:, r:].copy()
+    return _Context(J=J, A=A, sigma=_readonly(s), tol=tol, r=r, b_rtol=brt, N_svd=N, methods=_method_set(methods))
+
+
+def _svd_full(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Singular values and V^T (m, m) of A from one SVD: the one factorisation of the analysis."""
+    n, m = A.shape
+    if A.size == 0:
+        return np.zeros(0), np.eye(m)
+    _, s, vh = np.linalg.svd(A, full_matrices=m > n)  # V is complete either way; U only as wide as needed
+    return s, vh
 
 
 def _check_columns(columns: Iterable[int], m: int, what: str = "columns") -> tuple[int, ...]:
@@ -429,18 +454,33 @@ def _rank_defect(ctx: _Context, member_columns: Sequence[tuple[int, ...]]) -> in
     return total + _rank_abs(ctx.A[:, ~in_k], ctx.tol) - ctx.r
 
 
+def _b_defect(ctx: _Context, B: np.ndarray, unique: bool) -> int:
+    """rank_defect from the one factorisation: rank(A_P N) = rank(A_P) + rank(A_-P) - rank(A) in
+    exact arithmetic (both are dim(span(A_P) & span(A_-P)): a null vector nu gives A_P nu_P in
+    it, and one whose A_P nu_P = 0 also has A_-P nu_-P = 0). Numerically: 0 when the B test
+    says unique, else the count of B's singular values above its threshold (at least 1)."""
+    if unique:
+        return 0
+    limit = ctx.b_rtol * (float(ctx.sigma[0]) if ctx.sigma.size else 0.0)
+    return max(1, int(np.count_nonzero(_svdvals(B) > limit)))
+
+
 def _joint(ctx: _Context, cols: tuple[int, ...]) -> JointVerdict:
-    defect = _rank_defect(ctx, [cols])
-    ratio_svd = _b_ratio(ctx, _B(ctx.A, ctx.N_svd, cols))
-    ratio_qr = _b_ratio(ctx, _B(ctx.A, ctx.N_qr, cols))
-    methods = {"rank": defect <= 0, "svd": ratio_svd <= 1.0, "qr": ratio_qr <= 1.0}
+    B = _B(ctx.A, ctx.N_svd, cols)
+    ratio_svd = _b_ratio(ctx, B)
+    methods = {"svd": ratio_svd <= 1.0}
+    ratio_qr, defect = 0.0, _b_defect(ctx, B, ratio_svd <= 1.0)
+    if ctx.cross_check:
+        defect = _rank_defect(ctx, [cols])
+        ratio_qr = _b_ratio(ctx, _B(ctx.A, ctx.basis("qr"), cols))
+        methods = {"rank": defect <= 0, "svd": methods["svd"], "qr": ratio_qr <= 1.0}
     methods = {k: bool(v) for k, v in methods.items()}
     return JointVerdict(
-        unique=methods["rank"],
+        unique=methods["rank"] if ctx.cross_check else methods["svd"],
         methods=methods,
         rank_defect=int(defect),
-        B_svd=_B(ctx.J, ctx.N_svd_raw, cols),
-        B_qr=_B(ctx.J, ctx.N_qr_raw, cols),
+        B_svd=_B(ctx.J, ctx.basis("svd_raw"), cols) if ctx.cross_check else None,
+        B_qr=_B(ctx.J, ctx.basis("qr_raw"), cols) if ctx.cross_check else None,
         agree=len(set(methods.values())) == 1,
         columns=cols,
         rank_P=_rank_abs(ctx.A[:, list(cols)], ctx.tol),
@@ -515,10 +555,16 @@ class Analysis:
             raise KeyError(f"unknown joint name(s) {unknown}; known: {list(self._groups)}")
         if len(set(names)) != len(names):
             raise ValueError(f"duplicate joint names in {names}")
+        svd = all(self.joints[nm].methods["svd"] for nm in names)
+        if not self._ctx.cross_check:
+            cols = tuple(c for nm in names for c in self._groups[nm])
+            B = _B(self._ctx.A, self._ctx.N_svd, cols)  # rank(stacked A_Pi N) is Eq. 17's defect too
+            defect = _b_defect(self._ctx, B, svd)
+            return SetVerdict(unique=svd, methods={"svd": svd}, rank_defect=int(defect), agree=True, names=names)
         defect = _rank_defect(self._ctx, [self._groups[nm] for nm in names])
         methods = {
             "rank": bool(defect <= 0),
-            "svd": all(self.joints[nm].methods["svd"] for nm in names),
+            "svd": svd,
             "qr": all(self.joints[nm].methods["qr"] for nm in names),
         }
         return SetVerdict(
@@ -537,14 +583,17 @@ def analyse(
     rtol: float | None = None,
     b_rtol: float | None = None,
     equilibrate: bool = True,
+    methods: str = "all",
 ) -> Analysis:
     """Rank, DOF, redundancy and per-joint reaction uniqueness of ``J`` (n, m) = ``Phi_q.T``.
 
     ``groups`` maps joint name -> its 0-based columns of J.  Groups must not overlap; columns in
     no group (e.g. driving constraints) are part of every ``J_-P`` and of Y in ``set_unique``.
-    Tolerances and equilibration: see the module docstring.
+    Tolerances and equilibration: see the module docstring. ``methods`` (:data:`METHOD_SETS`):
+    ``"all"`` runs the three tests; ``"svd"`` only the one-factorisation test (one SVD of J in
+    all, then O(n * len(columns) * (m - r)) per joint instead of two SVDs of J per joint).
     """
-    ctx = _context(J, rtol, b_rtol, equilibrate)
+    ctx = _context(J, rtol, b_rtol, equilibrate, methods)
     n, m = ctx.J.shape
     checked: dict[str, tuple[int, ...]] = {}
     owner: dict[int, str] = {}
@@ -582,7 +631,7 @@ def to_json(analysis: Analysis) -> dict:
             {
                 "name": str(name),
                 "unique": bool(v.unique),
-                "methods": {k: bool(v.methods[k]) for k in _METHODS},
+                "methods": {k: bool(v.methods[k]) for k in _METHODS if k in v.methods},
                 "rank_defect": int(v.rank_defect),
                 "agree": bool(v.agree),
             }

@@ -50,6 +50,10 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="reaction-uniqueness pre-check of a mechanism or scene")
     _scene_flags(c)
     c.add_argument("--json", action="store_true", help="print the report as JSON")
+    c.add_argument("--methods", choices=("auto", "svd", "all"), default="auto",
+                   help="svd: the one-factorisation test, one SVD of the Jacobian; all: also the rank comparison "
+                        "and QR tests as a cross-check (two SVDs per joint); auto (default): all up to 50 joints, "
+                        "svd above")
     s = sub.add_parser("simulate", help="integrate a scene (or a bare mechanism) in process, write CSV")
     _scene_flags(s)
     s.add_argument("--out", required=True, metavar="OUT.csv", help="CSV file: time, then the outputs")
@@ -219,7 +223,7 @@ def cmd_check(args) -> int:
     why = refusal(model, spec.solver)
     if why is not None:
         return _input_error(f"{args.file}: solver.kernel = 'c': the compiled kernel cannot run: {why}", args)
-    report = precheck(model, args.file)
+    report = precheck(model, args.file, args.methods)
     print(json.dumps(report.to_json(), indent=2) if args.json else format_table(report))
     return EXIT_NONUNIQUE if report.friction_on_nonunique or not report.methods_agree else EXIT_OK
 

@@ -20,10 +20,26 @@ def joint_groups(model: Model) -> dict[str, list[int]]:
     return {c.name: list(c.rows) for c in model.joints}
 
 
-def analyse_model(model: Model):
+AUTO_ALL_JOINTS = 50
+"""``methods = "auto"`` runs every test up to this many joints, the one-factorisation test alone
+above (decided: the three tests' verdicts and JSON keys stay as they were for the mechanisms of a
+usual size, where the cross-check costs well under a second; docs/benchmarks.md, "Input limits")."""
+
+
+def resolve_methods(model: Model, methods: str = "auto") -> str:
+    """``"svd"`` or ``"all"`` for ``methods`` ``"auto"`` (:data:`AUTO_ALL_JOINTS`), else ``methods``."""
+    if methods == "auto":
+        return "all" if len(model.joints) <= AUTO_ALL_JOINTS else "svd"
+    return methods
+
+
+def analyse_model(model: Model, methods: str = "auto"):
+    """The analysis at q0. ``methods``: ``"svd"``, the one-factorisation test (one SVD of the
+    Jacobian, whatever the number of joints), ``"all"``, with the rank and QR tests as a
+    cross-check (two SVDs of the Jacobian per joint), or ``"auto"`` (:func:`resolve_methods`)."""
     f = frames(model, model.q0, model.h0)
     J = jacobian_h(model, f).T
-    return analysis.analyse(J, joint_groups(model))
+    return analysis.analyse(J, joint_groups(model), methods=resolve_methods(model, methods))
 
 
 def frictionless(law) -> bool:
@@ -94,6 +110,7 @@ class PrecheckResult:
     elimination_mode: str
     problems: tuple[str, ...]
     warnings: tuple[str, ...]
+    methods_run: tuple[str, ...] = ("rank", "svd", "qr")  # the tests that ran (each joint's ``methods`` keys)
 
     def to_json(self) -> dict:
         """JSON-ready dict (lists, plain types), keys in field order."""
@@ -114,9 +131,10 @@ def _lists(x):
     return x
 
 
-def precheck(model: Model, source: str = "") -> PrecheckResult:
-    """The pre-check of ``model`` (``source``: the file name reported)."""
-    res = analyse_model(model)
+def precheck(model: Model, source: str = "", methods: str = "auto") -> PrecheckResult:
+    """The pre-check of ``model`` (``source``: the file name reported; ``methods``: see
+    :func:`analyse_model`)."""
+    res = analyse_model(model, methods)
     summary = analysis.to_json(res)
     types = {c.name: TYPES[c.type].name for c in model.joints}  # the files' type names
     joints = tuple(JointVerdict(type=types[j["name"]], **j) for j in summary.pop("joints"))
@@ -142,7 +160,8 @@ def precheck(model: Model, source: str = "") -> PrecheckResult:
         methods_agree=not disagree, friction=tuple(friction), friction_on_nonunique=tuple(nonunique),
         friction_set_unique=set_unique, motion_unique=not nonunique and set_unique,
         eliminated=tuple(model.eliminated), elimination_mode=model.elimination_mode,
-        problems=tuple(problems), warnings=tuple(friction_warnings(model)))
+        problems=tuple(problems), warnings=tuple(friction_warnings(model)),
+        methods_run=analysis.METHOD_SETS[resolve_methods(model, methods)])
 
 
 def motion_verdict(result: PrecheckResult) -> str:
@@ -181,11 +200,11 @@ def format_table(result: PrecheckResult) -> str:
     lines.append(f"{'joint':<{w}} {'type':<14} {'unique':<7} {'rank':<6} {'svd':<6} {'qr':<6} friction")
     yn = {True: "yes", False: "no"}
     for j in report["joints"]:
-        m = j["methods"]
+        m = {k: yn[v] for k, v in j["methods"].items()}  # a test that did not run: "-"
         fr = "ON" if j["name"] in report["friction"] else ""
         flag = "  <-- friction on a non-unique reaction" if j["name"] in report["friction_on_nonunique"] else ""
-        lines.append(f"{j['name']:<{w}} {j['type']:<14} {yn[j['unique']]:<7} {yn[m['rank']]:<6} "
-                     f"{yn[m['svd']]:<6} {yn[m['qr']]:<6} {fr}{flag}")
+        lines.append(f"{j['name']:<{w}} {j['type']:<14} {yn[j['unique']]:<7} {m.get('rank', '-'):<6} "
+                     f"{m.get('svd', '-'):<6} {m.get('qr', '-'):<6} {fr}{flag}")
     lines.append("")
     lines.append(motion_verdict(result))
     lines += [f"problem: {p}" for p in report["problems"]]

@@ -1173,14 +1173,18 @@ def _exists(path: Path) -> bool:
 MAX_FILE_BYTES = 1 << 20
 """Largest mechanism or scene file (1 MiB). The paper's files are 1.5-6 KB; a mechanism at the
 body and joint limits below is ~40 KB."""
-MAX_BODIES = 200
-MAX_JOINTS = 200
+MAX_BODIES = 1000
+MAX_JOINTS = 1000
 MAX_LOADS = 1000
-"""Largest numbers of bodies, joints and loads of a mechanism (bounded work). The pre-check
-(:mod:`overcon.analysis`) takes SVDs of the whole constraint Jacobian once per joint, so its
-cost grows like joints x coordinates^3; 200 keeps ``overcon check`` of a chain at the limit a
-short wait (measurements: docs/benchmarks.md, "Input limits"); the paper's mechanisms have 4 and
-7 bodies. Loads cost one short loop each per evaluation, hence the larger limit."""
+"""Largest numbers of bodies, joints and loads of a mechanism (bounded work and memory). The
+pre-check's one factorisation (:mod:`overcon.analysis`, ``methods="svd"``) is one dense SVD of
+the constraint Jacobian (n coordinates x m equations) and holds its V (m x m) and U (n x
+min(n, m)): about 8 (n m + m^2 + n min(n, m)) bytes and O(n m min(n, m)) time; at 1000 bodies
+that is where a small machine's memory and a user's patience end (measured: docs/benchmarks.md,
+"Input limits"). The three tests'
+cross-check (``--methods all``) costs two SVDs per joint and is the default only up to
+:data:`overcon.precheck.AUTO_ALL_JOINTS` joints. The paper's mechanisms have 4 and 7 bodies.
+Loads cost one short loop each per evaluation."""
 
 _FILE_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
                (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),

@@ -156,6 +156,31 @@ def generalized_force(model: Model, f: Frames, b: int, point: np.ndarray, F: np.
     return np.concatenate([F, cross3(f.R[b].T @ arm, f.R[b].T @ F)])
 
 
+def spring_points(f: Frames, ld) -> tuple[np.ndarray, np.ndarray]:
+    """The global attachment points (m) of spring load ``ld`` on its bodies i and j."""
+    return f.r[ld.bi] + f.R[ld.bi] @ ld.s_i, f.r[ld.bj] + f.R[ld.bj] @ ld.s_j
+
+
+def kinetic_energy(model: Model, h: np.ndarray) -> float:
+    """1/2 h^T M h (J): M is diagonal in h (mass for the translational entries, the principal
+    inertias for the angular velocities in body axes)."""
+    return 0.5 * float(np.dot(model.M * h, h))
+
+
+def potential_energy(model: Model, f: Frames) -> float:
+    """Potential energy (J) of gravity, -sum m_b g . r_b (zero at the global origin), and of the
+    springs, 1/2 k (|d| - l0)^2. Constant forces and torques are not counted (their work is not
+    part of this output)."""
+    nb = model.nb
+    energy = -float(np.dot(model.mass, f.r[:nb] @ model.gravity))
+    for ld in model.loads:
+        if ld.type == "spring":
+            pi, pj = spring_points(f, ld)
+            stretch = float(np.linalg.norm(pi - pj)) - ld.free_length
+            energy += 0.5 * ld.stiffness * stretch * stretch
+    return energy
+
+
 def applied_forces(model: Model, f: Frames) -> np.ndarray:
     """Q (nh,): gravity, constant forces and torques, springs, gyroscopic terms -omega x J omega."""
     nb, d, k = model.nb, model.dim, model.nh_b
@@ -170,8 +195,7 @@ def applied_forces(model: Model, f: Frames) -> np.ndarray:
         elif ld.type == "torque":
             Q[ld.bi, d:] += ld.value if model.kind == "planar" else f.R[ld.bi].T @ ld.value
         else:  # spring between two body points
-            pi = f.r[ld.bi] + f.R[ld.bi] @ ld.s_i
-            pj = f.r[ld.bj] + f.R[ld.bj] @ ld.s_j
+            pi, pj = spring_points(f, ld)
             dvec = pi - pj
             if ld.free_length == 0.0:  # -k (|d| - 0) d / |d| = -k d: defined at coinciding points too
                 F = -ld.stiffness * dvec

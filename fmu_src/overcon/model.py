@@ -54,7 +54,7 @@ import numpy as np
 from .friction_laws import Law, make_law
 from .joints import TYPES, InitialFrames
 from .kinematics import cos_sin, euler_R_rows, quat_R_rows, rot2_rows
-from .spec import BASE, VELOCITIES_PER_BODY, MechanismSpec, SceneSpec, coordinates
+from .spec import BASE, ENERGY_OUTPUTS, VELOCITIES_PER_BODY, VELOCITY_OUTPUTS, MechanismSpec, SceneSpec, coordinates
 
 
 GLOBAL_COMPONENTS = {"planar": ("Fx0", "Fy0"), "spatial": ("Fx0", "Fy0", "Fz0")}
@@ -126,6 +126,8 @@ class Model:
     elimination_mode: str  # "given", "auto", or "pending" (compiled, not admitted: overcon.checks)
     friction_joints: tuple[int, ...]
     position_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into q)
+    velocity_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into h)
+    energy_outputs: bool = False  # energy.kinetic, energy.potential (spec.ENERGY_OUTPUTS)
     reaction_joints: tuple[int, ...] = field(default=())
     friction_outputs: tuple[int, ...] = field(default=())  # joints with a <joint>.friction output
     rotation: str = "euler_zxz"  # spatial orientation coordinates (spec.ROTATIONS)
@@ -148,8 +150,14 @@ class Model:
         """Body slot b's entries of h (and of Q, the Jacobian's columns)."""
         return slice(b * self.nh_b, (b + 1) * self.nh_b)
 
+    def state_output_names(self) -> list[str]:
+        """The outputs that need the state only (no evaluation of Eq. 18): positions, velocities,
+        energies; they come first in :meth:`output_names`."""
+        names = [name for name, _ in self.position_outputs] + [name for name, _ in self.velocity_outputs]
+        return names + ([name for name, _ in ENERGY_OUTPUTS] if self.energy_outputs else [])
+
     def output_names(self) -> list[str]:
-        names = [name for name, _ in self.position_outputs]
+        names = self.state_output_names()
         for j in self.reaction_joints:
             c = self.joints[j]
             names += [f"{c.name}.{comp}" for comp in c.components]
@@ -330,7 +338,10 @@ def compile_model(scene: SceneSpec) -> Model:
         inertia=inertia, M=M, Minv=1.0 / M, gravity=np.asarray(mech.gravity, float),
         joints=(), loads=tuple(loads), q0=q0, h0=h0, m=0, retained=np.arange(0), eliminated=(),
         elimination_mode="pending", friction_joints=(),
-        position_outputs=tuple((p, coord_index[p]) for p in scene.positions))
+        position_outputs=tuple((p, coord_index[p]) for p in scene.positions),
+        velocity_outputs=tuple((f"{b}.{v}", slot[b] * VELOCITIES_PER_BODY[kind] + i) for b in scene.velocities
+                               for i, (v, _) in enumerate(VELOCITY_OUTPUTS[kind])),
+        energy_outputs=scene.energy)
     R0 = _rotations(bodies, q0)
     friction_on = set(scene.friction)
     joints = []

@@ -1002,7 +1002,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     if v is not _MISSING:
         eliminate = _check_eliminate(ctx, v, "scene.eliminate", mech, lambda k: f"scene.eliminate[{k}]")
     start_time, stop_time = _scene_times(ctx, st)
-    positions, reactions, friction_out = _scene_outputs(ctx, doc, mech, joints, friction)
+    positions, reactions, friction_out, velocities, energy = _scene_outputs(ctx, doc, mech, joints, friction)
     solver_kw = _scene_solver(ctx, doc, problems, start_time, stop_time)
     if len(problems) > n_problems or mech is None:
         return None
@@ -1010,10 +1010,12 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
         positions = _all_positions(mech)
     if reactions == "all":
         reactions = tuple(j.name for j in mech.joints)
+    if velocities == "all":
+        velocities = tuple(b.name for b in mech.bodies)
     fparams = {jn: friction_params.get(jn, joints[jn].friction) for jn in friction}
     return SceneSpec(name=name, mechanism=mech, friction=friction, friction_params=fparams,
                      eliminate=eliminate, positions=positions, reactions=reactions,
-                     friction_outputs=friction_out,
+                     friction_outputs=friction_out, velocities=velocities, energy=energy,
                      start_time=start_time, stop_time=stop_time,
                      solver=SolverSpec(**solver_kw), group=group, description=description,
                      source=ctx.file)
@@ -1089,16 +1091,23 @@ def _scene_times(ctx: _Ctx, st: dict) -> tuple[float | None, float | None]:
 
 
 def _scene_outputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None, joints: dict, friction):
-    """The ``[outputs]`` table: (positions, reactions, friction outputs), each ``"all"`` or names."""
+    """The ``[outputs]`` table: (positions, reactions, friction outputs, velocities, energy); the
+    first four ``"all"`` or names, ``velocities`` () unless the table lists them, ``energy`` a bool
+    (default false: existing scenes keep their outputs)."""
     positions = reactions = friction_out = "all"
+    velocities, energy = [], False
     ot = doc.get("outputs", _MISSING)
     if ot is not _MISSING and _table(ctx, ot, "outputs") is not None:
-        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions", "friction"))
+        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions", "friction", "velocities", "energy"))
         # an [outputs] table is the scene's output set: friction outputs only if it lists them
         # (existing scenes keep their outputs, which their FMUs' regression baselines fix)
         friction_out = ot.get("friction", [])
         positions = ot.get("positions", "all")
         reactions = ot.get("reactions", "all")
+        velocities = ot.get("velocities", [])
+        energy = ot.get("energy", False)
+        if not isinstance(energy, bool):
+            ctx.add("outputs.energy", f"expected true or false, got {_desc(energy)}")
     valid_pos = set(_all_positions(mech)) if mech is not None else None
     positions = _check_outputs(ctx, positions, "outputs.positions", valid_pos,
                                "'<body>.<coordinate>'", _pos_message(mech))
@@ -1109,7 +1118,10 @@ def _scene_outputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None, joints: dic
                                   set(friction) if friction is not None else None, "friction joint name",
                                   lambda s: f"{_short(s)} is not in scene.friction (friction outputs are "
                                             "the friction forces of friction joints)")
-    return positions, reactions, friction_out
+    valid_bodies = {b.name for b in mech.bodies} if mech is not None else None
+    velocities = _check_outputs(ctx, velocities, "outputs.velocities", valid_bodies, "body name",
+                                lambda s: f"unknown body {_short(s)} (the base does not move)")
+    return positions, reactions, friction_out, velocities, energy is True
 
 
 def _scene_solver(ctx: _Ctx, doc: dict, problems: list[Problem], start_time, stop_time) -> dict:

@@ -36,8 +36,8 @@ from . import kernel as kernel_mod
 from .dynamics import evaluate
 from . import integrators
 from .evaluation import (SingularConfiguration, constraints, coordinate_rates, frames,  # noqa: F401
-                         friction_output, jacobian_h, normalized_coordinates, physical_reaction,
-                         physical_reactions)
+                         friction_output, jacobian_h, kinetic_energy, normalized_coordinates,
+                         physical_reaction, physical_reactions, potential_energy)
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
 from .checks import check_initial_state
 from .model import InconsistentInitialState, Model, ModelError  # noqa: F401
@@ -285,12 +285,26 @@ class Simulation:
                 "looser tolerance")
 
     def outputs(self, t: float, y: np.ndarray) -> np.ndarray:
-        """Output vector (model.output_names() order) at (t, y): positions, then
+        """Output vector (model.output_names() order) at (t, y): :meth:`state_outputs`, then
         :meth:`derived_outputs` (reactions, friction forces)."""
-        pos = self.position_outputs(y)
+        pos = self.state_outputs(y)
         if not self._derived.size:
             return pos
         return np.concatenate((pos, self.derived_outputs(t, y)))
+
+    def state_outputs(self, y: np.ndarray) -> np.ndarray:
+        """The outputs of the state alone (Model.state_output_names): positions, velocities (m/s,
+        rad/s: entries of h), energies (J)."""
+        pos = self.position_outputs(y)
+        model = self.model
+        if not model.velocity_outputs and not model.energy_outputs:
+            return pos
+        h = y[self.n:]
+        parts = [pos, h[self._derived.velocity_index]]
+        if model.energy_outputs:
+            q = normalized_coordinates(model, y[: self.n]) if model.rotation == "quaternion" else y[: self.n]
+            parts.append(np.array([kinetic_energy(model, h), potential_energy(model, frames(model, q))]))
+        return np.concatenate(parts)
 
     def position_outputs(self, y: np.ndarray) -> np.ndarray:
         """The position outputs (m, rad; quaternions as e / |e|, the orientation the dynamics use)
@@ -387,6 +401,7 @@ class _DerivedPlan:
 
     def __init__(self, model: Model):
         self.position_index = np.array([i for _, i in model.position_outputs], np.intp)
+        self.velocity_index = np.array([i for _, i in model.velocity_outputs], np.intp)
         where = {j: (n, pos) for n, g in enumerate(model.plan.groups) for pos, j in enumerate(g.joints)}
         self.reactions = {}  # group number -> (positions in the group, output slots (k, n_components))
         slot = 0

@@ -49,6 +49,18 @@ VELOCITIES_PER_BODY = {"planar": 3, "spatial": 6}
 [v (global), omega (body axes)], whatever the rotation coordinates."""
 
 
+VELOCITY_OUTPUTS = {"planar": (("vx", "m/s"), ("vy", "m/s"), ("omega", "rad/s")),
+                    "spatial": (("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"),
+                                ("wx", "rad/s"), ("wy", "rad/s"), ("wz", "rad/s"))}
+"""Velocity outputs ``<body>.<name>`` (``[outputs] velocities``) and units, in the order of h_i:
+planar x', y' (global frame) and the angular velocity phi'; spatial the velocity of the origin
+(global frame) and the angular velocity in the body's axes."""
+
+ENERGY_OUTPUTS = (("energy.kinetic", "J"), ("energy.potential", "J"))
+"""Energy outputs (``[outputs] energy = true``): the kinetic energy 1/2 h^T M h and the potential
+energy of gravity and springs (J), both of the whole mechanism."""
+
+
 def coordinates(kind: str, rotation: str = "euler_zxz") -> tuple[str, ...]:
     """Coordinate names of one body, in the order of q_i: ``COORDINATES[kind]``, or
     ``QUATERNION_COORDINATES`` for a spatial mechanism with ``rotation = "quaternion"``."""
@@ -206,6 +218,8 @@ class SceneSpec:
     positions: tuple[str, ...] = ()
     reactions: tuple[str, ...] = ()
     friction_outputs: tuple[str, ...] | str = "all"
+    velocities: tuple[str, ...] = ()  # bodies whose velocities are outputs (spec.VELOCITY_OUTPUTS)
+    energy: bool = False  # the outputs spec.ENERGY_OUTPUTS
     start_time: float = 0.0
     stop_time: float = 1.0
     solver: SolverSpec | None = field(default_factory=SolverSpec)

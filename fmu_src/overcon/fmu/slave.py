@@ -210,7 +210,7 @@ class OverconSlave:
         self._next_state = 1
         self._strings: list[bytes] = []  # fmi2GetString's results, valid until the next call
         self._ref_cache: dict[tuple[str, bytes], list] = {}
-        self._n_positions = len(self._model0.position_outputs)  # outputs before the reactions
+        self._n_positions = len(self._model0.state_output_names())  # outputs of the state alone, before the reactions
         # published values (see the module docstring); fixed arrays: the binary keeps their addresses
         self._publishing = False
         self._pub_flags = np.zeros(2, np.intc)
@@ -547,7 +547,7 @@ class OverconSlave:
                 out = sim.outputs(t_new, y)
             else:  # reactions and friction forces only once the host reads one (_read_derived)
                 out = self._outputs.copy()
-                out[: self._n_positions] = sim.position_outputs(y)
+                out[: self._n_positions] = sim.state_outputs(y)
             if not math.isfinite(sum(out.tolist())):  # cheaper than np.isfinite for a few outputs
                 bad = [n for n, v in zip(self._model0.output_names(), out) if not math.isfinite(v)]
                 if bad:  # (else the sum overflowed)

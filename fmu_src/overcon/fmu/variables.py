@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from ..joints import TYPES
 from ..params import check_param, rule_of
-from ..spec import COORDINATE_UNITS
+from ..spec import COORDINATE_UNITS, ENERGY_OUTPUTS, VELOCITY_OUTPUTS
 
 UNITS: dict[str, dict[str, int]] = {
     "1": {},
@@ -34,6 +34,7 @@ UNITS: dict[str, dict[str, int]] = {
     "rad/s": {"rad": 1, "s": -1},
     "N": {"kg": 1, "m": 1, "s": -2},
     "N.m": {"kg": 1, "m": 2, "s": -2},
+    "J": {"kg": 1, "m": 2, "s": -2},
 }
 """Units used by the variables, with the exponents of the SI base units (and rad)."""
 
@@ -52,6 +53,26 @@ COORDINATE_TEXT = {
     "e3": "orientation quaternion body -> global, vector part e3 (unit quaternion e / |e|)",
 }
 
+
+
+STATE_OUTPUT_TEXT = {
+    "vx": "velocity of the origin (centre of mass), x component, global frame",
+    "vy": "velocity of the origin (centre of mass), y component, global frame",
+    "vz": "velocity of the origin (centre of mass), z component, global frame",
+    "omega": "angular velocity (counter-clockwise)",
+    "wx": "angular velocity, x component, body frame",
+    "wy": "angular velocity, y component, body frame",
+    "wz": "angular velocity, z component, body frame",
+    "kinetic": "kinetic energy of the mechanism",
+    "potential": "potential energy of gravity (zero at the global origin) and of the springs",
+}
+
+
+def state_outputs_beyond_positions(model) -> list[tuple[str, str]]:
+    """(name, unit) of the velocity and energy outputs of ``model``, in output order."""
+    units = dict(VELOCITY_OUTPUTS[model.kind])
+    out = [(name, units[name.rsplit(".", 1)[1]]) for name, _ in model.velocity_outputs]
+    return out + (list(ENERGY_OUTPUTS) if model.energy_outputs else [])
 
 
 @dataclass(frozen=True)
@@ -134,6 +155,10 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool) 
         out.append(Var(name, "Real", "output", "continuous", "calculated",
                        f"{body}: {COORDINATE_TEXT[coord]}", unit=COORDINATE_UNITS[coord],
                        key=("output", k)))
+        k += 1
+    for name, unit in state_outputs_beyond_positions(model):
+        out.append(Var(name, "Real", "output", "continuous", "calculated", STATE_OUTPUT_TEXT[name.rsplit(".", 1)[1]],
+                       unit=unit, key=("output", k)))
         k += 1
     for j in model.reaction_joints:
         c = model.joints[j]

@@ -197,3 +197,26 @@ def test_check_json_is_the_typed_precheck_result_in_its_key_order(capsys):
     result = precheck(compile_checked(scene.load(MECH / "planar_f45_wo4.toml")), str(MECH / "planar_f45_wo4.toml"))
     assert isinstance(result, PrecheckResult) and result.to_json() == rep
     assert result.motion_unique is rep["motion_unique"] and result.reaction_unique["joint4"] is True
+
+
+def test_simulate_runs_blas_on_one_thread(tmp_path, monkeypatch):
+    """The run's small matrices gain nothing from BLAS threads (docs/benchmarks.md, "BLAS
+    threads"): simulate runs inside single_threaded_blas, and the thread count comes back after."""
+    from threadpoolctl import threadpool_info
+
+    import overcon.simulate as simulate_mod
+
+    def blas_threads():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    seen, real_run = [], simulate_mod.run
+
+    def spy(*args, **kw):
+        seen.append(blas_threads())
+        return real_run(*args, **kw)
+
+    monkeypatch.setattr(simulate_mod, "run", spy)
+    before = blas_threads()
+    assert main(["simulate", str(MECH / "planar_sliders.toml"), "--stop-time", "0.05", "--out",
+                 str(tmp_path / "o.csv")]) == 0
+    assert seen == [{1}] and blas_threads() == before

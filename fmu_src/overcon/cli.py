@@ -249,7 +249,9 @@ def cmd_simulate(args) -> int:
         return _input_error(f"{where}: the compiled kernel cannot run: {why}")
     start = time.perf_counter()
     try:
-        res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS, max_wall_time=args.max_wall_time or MAX_WALL_TIME)
+        with single_threaded_blas():
+            res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS,
+                      max_wall_time=args.max_wall_time or MAX_WALL_TIME)
     except SimulationError as exc:
         return _failed_run(args, model, spec, exc, time.perf_counter() - start)
     wall = time.perf_counter() - start
@@ -301,7 +303,8 @@ def cmd_figures(args) -> int:
 
     start = time.perf_counter()
     try:
-        make_figures(Path(args.mechanisms), Path(args.out), tolerance=args.tolerance)
+        with single_threaded_blas():
+            make_figures(Path(args.mechanisms), Path(args.out), tolerance=args.tolerance)
     except SimulationError as exc:
         print(f"overcon: {exc}", file=sys.stderr)
         return EXIT_RUNTIME
@@ -438,6 +441,15 @@ def cmd_sweep(args) -> int:
         return EXIT_OK
 
     return _tooling_call(go)
+
+
+def single_threaded_blas():
+    """A context in which BLAS runs one thread (threadpoolctl): a run's matrices have tens to
+    hundreds of rows, where threads only add synchronisation, and on a loaded machine they cost
+    more than the work (measured: docs/benchmarks.md, "BLAS threads"). The CLI owns its process,
+    so it may set this; FMUs in other hosts leave the host's setting alone."""
+    from threadpoolctl import threadpool_limits
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def main(argv=None) -> int:

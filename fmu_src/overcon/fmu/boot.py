@@ -7,6 +7,7 @@ and fmi2GetBoolean answer without entering Python; see :mod:`overcon.fmu.slave`)
 from __future__ import annotations
 
 import importlib.util
+import os
 import site
 import sys
 from pathlib import Path
@@ -68,6 +69,10 @@ def instantiate(instance_name: str, guid: str, resources: str, log_address: int,
     binary initialised the interpreter. ``publish_address``: the binary's ``register_published``
     (0: a binary without published values)."""
     if site_dirs:
+        # an interpreter the FMU started itself: its BLAS has not started yet, and one thread suits the
+        # small matrices of a run (overcon.cli.single_threaded_blas); the host's own setting wins
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")
         add_site_dirs([d for d in site_dirs.split("\n") if d])
     elif _missing():
         _borrow_recorded_site_dirs(resources)

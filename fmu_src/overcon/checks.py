@@ -39,6 +39,8 @@ def admit(model: Model, *, check_initial: bool = True, eliminate_field: str = "s
     configurations (tests); a Simulation checks again."""
     if check_initial:
         check_initial_state(model)
+    if model.scene.redundancy == "min-norm":  # every equation kept; the solve is rank-revealing
+        return replace(model, retained=np.arange(model.m), eliminated=(), elimination_mode="min-norm")
     eliminated, mode = resolve_elimination(model, model.scene.eliminate, eliminate_field)
     retained = np.array([i for i in range(model.m) if i + 1 not in set(eliminated)], int)
     return replace(model, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)

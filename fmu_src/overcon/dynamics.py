@@ -108,8 +108,36 @@ def _cho_factor(S: np.ndarray):
     return c, False
 
 
+MIN_NORM_RTOL = 1e-9
+"""Rank threshold of the min-norm solve, relative to the largest singular value of M^-1/2 J (as
+the pre-check's :data:`overcon.analysis.DEFAULT_RTOL`)."""
+
+
+@dataclass(frozen=True)
+class _PseudoInverse:
+    """S^+ (m, m): the "factor" of the min-norm solve."""
+
+    P: np.ndarray
+
+
+def _min_norm_inverse(J: np.ndarray, Minv: np.ndarray) -> _PseudoInverse:
+    """S^+ for S = J^T M^-1 J of every equation (redundancy "min-norm",
+    :data:`overcon.spec.REDUNDANCY_METHODS`): from the SVD M^-1/2 J = U s V^T,
+    S^+ = V_r s_r^-2 V_r^T over the singular values above :data:`MIN_NORM_RTOL` x s_1. S^+ b is
+    the multiplier vector of least norm among those that give the accelerations (all of them do,
+    the redundant directions are in null(J) and exert no force)."""
+    _chkfinite(J)
+    u, s, vt = np.linalg.svd(np.sqrt(Minv)[:, None] * J, full_matrices=False)
+    keep = s > max(MIN_NORM_RTOL, max(J.shape) * np.finfo(float).eps) * (s[0] if s.size else 0.0)
+    v = vt[keep]
+    return _PseudoInverse((v.T / (s[keep] ** 2)) @ v)
+
+
 def _cho_solve(factor, b: np.ndarray) -> np.ndarray:
-    """scipy.linalg.cho_solve(factor, b) for a 1-D b, same errors, less call overhead."""
+    """scipy.linalg.cho_solve(factor, b) for a 1-D b, same errors, less call overhead (or S^+ b
+    for the factor of :func:`_min_norm_inverse`)."""
+    if isinstance(factor, _PseudoInverse):
+        return factor.P @ b
     c, lower = factor
     _chkfinite(b)
     if c.shape[1] != b.shape[0] or b.size == 0:
@@ -165,12 +193,15 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     Q = applied_forces(model, f)
     MinvJ = model.Minv[:, None] * JR
     S = JR.T @ MinvJ
-    try:
-        factor = _cho_factor(S)
-    except LinAlgError as exc:
-        raise SingularConfiguration(
-            f"t = {t:.9g} s: the kept constraint equations became dependent (singular position); "
-            "the Jacobian lost rank") from exc
+    if model.elimination_mode == "min-norm":
+        factor = _min_norm_inverse(JR, model.Minv)
+    else:
+        try:
+            factor = _cho_factor(S)
+        except LinAlgError as exc:
+            raise SingularConfiguration(
+                f"t = {t:.9g} s: the kept constraint equations became dependent (singular position); "
+                "the Jacobian lost rank") from exc
     MinvJT = MinvJ.T
     lam_R = _cho_solve(factor, MinvJT @ Q - g)
     lam = np.zeros(model.m)
@@ -236,7 +267,10 @@ def _robust_friction(model: Model, ctx: list, lam0: np.ndarray, W: np.ndarray, s
 
 
 def _cho_solve_many(factor, B: np.ndarray) -> np.ndarray:
-    """S^-1 B for a 2-D B (columns solved at once) with the factor of :func:`_cho_factor`."""
+    """S^-1 B for a 2-D B (columns solved at once) with the factor of :func:`_cho_factor` (S^+ B
+    with that of :func:`_min_norm_inverse`)."""
+    if isinstance(factor, _PseudoInverse):
+        return factor.P @ B
     c, lower = factor
     if B.shape[1] == 0:
         return np.zeros((c.shape[0], 0))

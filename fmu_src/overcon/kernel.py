@@ -177,6 +177,8 @@ def support(model) -> str | None:
 
     if model.kind == "spatial" and model.rotation != "euler_zxz":
         return f"rotation {model.rotation!r} (the kernel has z-x-z Euler angles only)"
+    if model.elimination_mode == "min-norm":
+        return "redundancy 'min-norm' (the kernel solves the eliminated form, by Cholesky)"
     for c in model.joints:
         if (model.kind, c.type) not in _JOINTS:
             covered = "revolute, translational" if model.kind == "planar" else "spherical"

@@ -123,7 +123,7 @@ class Model:
     m: int
     retained: np.ndarray  # 0-based indices of the equations kept
     eliminated: tuple[int, ...]  # 1-based paper indices removed
-    elimination_mode: str  # "given", "auto", or "pending" (compiled, not admitted: overcon.checks)
+    elimination_mode: str  # "given", "auto", "min-norm" (none: spec.REDUNDANCY_METHODS), or "pending" (compiled, not admitted: overcon.checks)
     friction_joints: tuple[int, ...]
     position_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into q)
     velocity_outputs: tuple[tuple[str, int], ...] = field(default=())  # (name, index into h)

@@ -111,6 +111,7 @@ class PrecheckResult:
     problems: tuple[str, ...]
     warnings: tuple[str, ...]
     methods_run: tuple[str, ...] = ("rank", "svd", "qr")  # the tests that ran (each joint's ``methods`` keys)
+    redundancy: str = "eliminate"  # the scene's method (spec.REDUNDANCY_METHODS); the verdicts are the rigid theory's
 
     def to_json(self) -> dict:
         """JSON-ready dict (lists, plain types), keys in field order."""
@@ -161,7 +162,7 @@ def precheck(model: Model, source: str = "", methods: str = "auto") -> PrecheckR
         friction_set_unique=set_unique, motion_unique=not nonunique and set_unique,
         eliminated=tuple(model.eliminated), elimination_mode=model.elimination_mode,
         problems=tuple(problems), warnings=tuple(friction_warnings(model)),
-        methods_run=analysis.METHOD_SETS[resolve_methods(model, methods)])
+        methods_run=analysis.METHOD_SETS[resolve_methods(model, methods)], redundancy=model.scene.redundancy)
 
 
 def motion_verdict(result: PrecheckResult) -> str:
@@ -180,8 +181,12 @@ def run_warnings(result: PrecheckResult) -> list[str]:
     out = []
     if not result.motion_unique or not result.methods_agree:
         eliminated = ", ".join("Phi%d" % i for i in result.eliminated) or "none"
-        out.append(f"{motion_verdict(result)}: this run shows the motion with {eliminated} eliminated "
-                   f"({result.elimination_mode}); another elimination can give another motion")
+        if result.elimination_mode == "min-norm":
+            out.append(f"{motion_verdict(result)}: this run uses the minimum-norm multipliers (redundancy = "
+                       "'min-norm'): one motion, chosen without physical ground; the eliminations give others")
+        else:
+            out.append(f"{motion_verdict(result)}: this run shows the motion with {eliminated} eliminated "
+                       f"({result.elimination_mode}); another elimination can give another motion")
         out += list(result.problems)
     return out + list(result.warnings)
 
@@ -207,6 +212,9 @@ def format_table(result: PrecheckResult) -> str:
                      f"{m.get('svd', '-'):<6} {m.get('qr', '-'):<6} {fr}{flag}")
     lines.append("")
     lines.append(motion_verdict(result))
+    if result.redundancy == "min-norm" and result.friction:
+        lines.append("redundancy = 'min-norm': the runs use the minimum-norm multipliers, one motion chosen without "
+                     "physical ground (the verdict above is the rigid theory's)")
     lines += [f"problem: {p}" for p in report["problems"]]
     lines += [f"warning: {p}" for p in report.get("warnings", [])]
     return "\n".join(lines)

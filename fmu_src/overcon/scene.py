@@ -864,7 +864,7 @@ def _all_positions(mech: MechanismSpec) -> tuple[str, ...]:
 # Scene
 
 _SCENE_KEYS = ("name", "mechanism", "group", "description", "friction", "eliminate",
-               "start_time", "stop_time", "friction_params")
+               "start_time", "stop_time", "friction_params", "redundancy")
 
 
 def _joint_equations(mech: MechanismSpec) -> dict[str, tuple[int, ...]]:
@@ -997,10 +997,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     if v is not _MISSING:
         friction = _check_friction_list(ctx, v, "scene.friction", mech, has_params,
                                         lambda k: f"scene.friction[{k}]")
-    eliminate = None
-    v = _get(ctx, st, "eliminate", "scene")
-    if v is not _MISSING:
-        eliminate = _check_eliminate(ctx, v, "scene.eliminate", mech, lambda k: f"scene.eliminate[{k}]")
+    redundancy, eliminate = _scene_redundancy(ctx, st, mech)
     start_time, stop_time = _scene_times(ctx, st)
     positions, reactions, friction_out, velocities, energy = _scene_outputs(ctx, doc, mech, joints, friction)
     solver_kw = _scene_solver(ctx, doc, problems, start_time, stop_time)
@@ -1014,11 +1011,33 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
         velocities = tuple(b.name for b in mech.bodies)
     fparams = {jn: friction_params.get(jn, joints[jn].friction) for jn in friction}
     return SceneSpec(name=name, mechanism=mech, friction=friction, friction_params=fparams,
-                     eliminate=eliminate, positions=positions, reactions=reactions,
+                     eliminate=eliminate, redundancy=redundancy, positions=positions, reactions=reactions,
                      friction_outputs=friction_out, velocities=velocities, energy=energy,
                      start_time=start_time, stop_time=stop_time,
                      solver=SolverSpec(**solver_kw), group=group, description=description,
                      source=ctx.file)
+
+
+def _scene_redundancy(ctx: _Ctx, st: dict, mech: MechanismSpec | None):
+    """``scene.redundancy`` (:data:`overcon.spec.REDUNDANCY_METHODS`, default "eliminate") and
+    ``scene.eliminate``, which "eliminate" requires and "min-norm" refuses (it removes nothing)."""
+    redundancy = "eliminate"
+    v = _get(ctx, st, "redundancy", "scene", required=False)
+    if v is not _MISSING:
+        redundancy = _str(ctx, v, "scene.redundancy")
+        if redundancy is not None and redundancy not in S.REDUNDANCY_METHODS:
+            ctx.add("scene.redundancy", f"unknown method {_short(redundancy)} (known: "
+                                        f"{', '.join(repr(m) for m in S.REDUNDANCY_METHODS)})")
+    eliminate = None
+    v = _get(ctx, st, "eliminate", "scene", required=redundancy == "eliminate")
+    if v is not _MISSING and redundancy == "min-norm":
+        ctx.add("scene.eliminate", "does not apply with redundancy = 'min-norm', which eliminates no "
+                                   "equation: remove it")
+    elif v is not _MISSING:
+        eliminate = _check_eliminate(ctx, v, "scene.eliminate", mech, lambda k: f"scene.eliminate[{k}]")
+    elif redundancy == "min-norm":
+        eliminate = ()
+    return redundancy, eliminate
 
 
 def _optional_str(ctx: _Ctx, st: dict, key: str) -> str:
@@ -1405,6 +1424,9 @@ def _override_friction(ctx: _Ctx, scene: SceneSpec, friction, friction_outputs, 
 
 
 def _override_eliminate(ctx: _Ctx, scene: SceneSpec, eliminate, source: str, changes: dict) -> None:
+    if scene.redundancy == "min-norm":
+        ctx.add("--eliminate", f"does not apply: the scene's redundancy is 'min-norm', which eliminates no equation")
+        return
     if isinstance(eliminate, str):
         try:
             eliminate = parse_eliminate(eliminate, source=source)

@@ -58,6 +58,10 @@ class SingularityMonitor:
 
     def __init__(self, model: Model, y: np.ndarray, t0: float | None = None, ratio_tol: float = 1e-6):
         self.model, self.ratio_tol = model, ratio_tol
+        self.rows = model.retained
+        if model.elimination_mode == "min-norm":  # every equation kept: watch an independent set of them
+            from .analysis import independent_columns
+            self.rows = np.array(independent_columns(jacobian_h(model, frames(model, y[: model.n])).T), int)
         self.min_ratio = np.inf
         self.t_prev = model.scene.start_time if t0 is None else t0
         J = self._jac(y)
@@ -69,7 +73,7 @@ class SingularityMonitor:
         """Kept Jacobian, mass-weighted (J M^-1/2) with unit-norm rows: invariant to the choice
         of length unit and to the scaling of each equation."""
         m = self.model
-        J = jacobian_h(m, frames(m, y[: m.n]))[m.retained] * np.sqrt(m.Minv)[None, :]
+        J = jacobian_h(m, frames(m, y[: m.n]))[self.rows] * np.sqrt(m.Minv)[None, :]
         return J / np.linalg.norm(J, axis=1, keepdims=True)
 
     def _null(self, J, N_prev):

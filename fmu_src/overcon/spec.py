@@ -198,6 +198,14 @@ class SolverSpec:
     kernel: str = "auto"
 
 
+REDUNDANCY_METHODS = ("eliminate", "min-norm")
+"""``[scene] redundancy``: how the redundant constraints are handled. ``"eliminate"`` (default):
+the paper's method, the scene's ``eliminate`` equations are removed. ``"min-norm"``: no equation is
+removed; the multipliers are the minimum-norm solution of the rank-deficient Eq. 18 (a
+rank-revealing solve). It gives one motion where the paper's rigid theory has several, but that
+choice has no physical ground: real joints share their loads by their compliance."""
+
+
 @dataclass(frozen=True)
 class SceneSpec:
     """A mechanism plus what to simulate. ``friction``: joint names with friction switched on;
@@ -215,6 +223,7 @@ class SceneSpec:
     friction: tuple[str, ...] = ()
     friction_params: Mapping[str, FrictionSpec] = field(default_factory=dict)
     eliminate: tuple[int, ...] | str = "auto"
+    redundancy: str = "eliminate"  # REDUNDANCY_METHODS
     positions: tuple[str, ...] = ()
     reactions: tuple[str, ...] = ()
     friction_outputs: tuple[str, ...] | str = "all"

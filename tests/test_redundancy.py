@@ -13,6 +13,7 @@ from overcon import scene
 from overcon.checks import compile_checked
 from overcon.cli import main
 from overcon.kernel import support
+from overcon.precheck import precheck
 from overcon.simulate import run
 
 MECH = Path(__file__).resolve().parents[1] / "mechanisms"
@@ -72,13 +73,15 @@ def test_redundancy_setting_is_checked(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(text.replace("[scene]", '[scene]\nredundancy = "min_norm"', 1))
     with pytest.raises(scene.SceneError, match=r"scene.redundancy: unknown method 'min_norm' \(known: 'eliminate', "
-                                               r"'min-norm'\)"):
+                                               r"'min-norm', 'compliant'\)"):
         scene.load(bad)
-    both = tmp_path / "both.toml"
+    both = tmp_path / "both.toml"  # eliminate is kept and does not apply (a warning says so)
     both.write_text(text.replace("[scene]", '[scene]\nredundancy = "min-norm"', 1))
-    with pytest.raises(scene.SceneError, match=r"scene.eliminate: does not apply with redundancy = 'min-norm', "
-                                               r"which eliminates no equation: remove it"):
-        scene.load(both)
+    model = compile_checked(scene.load(both))
+    assert model.eliminated == () and model.elimination_mode == "min-norm"
+    assert "scene.eliminate (Phi4) does not apply under redundancy = 'min-norm', which chooses the equations " \
+           "itself" in precheck(model).warnings
     mn = _variant(tmp_path, "planar_f1_wo4", None)
-    with pytest.raises(scene.SceneError, match=r"--eliminate: does not apply: the scene's redundancy is 'min-norm'"):
+    with pytest.raises(scene.SceneError, match=r"--eliminate: does not apply: the scene's redundancy is 'min-norm', "
+                                               r"which chooses no elimination"):
         scene.as_scene(scene.load(mn), eliminate="4")

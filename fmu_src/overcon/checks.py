@@ -41,7 +41,10 @@ def admit(model: Model, *, check_initial: bool = True, eliminate_field: str = "s
         check_initial_state(model)
     if model.scene.redundancy == "min-norm":  # every equation kept; the solve is rank-revealing
         return replace(model, retained=np.arange(model.m), eliminated=(), elimination_mode="min-norm")
-    eliminated, mode = resolve_elimination(model, model.scene.eliminate, eliminate_field)
+    if model.scene.redundancy == "compliant":
+        eliminated, mode = rigid_elimination(model), "compliant"
+    else:
+        eliminated, mode = resolve_elimination(model, model.scene.eliminate, eliminate_field)
     retained = np.array([i for i in range(model.m) if i + 1 not in set(eliminated)], int)
     return replace(model, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
 
@@ -122,6 +125,19 @@ def check_euler_q0(model: Model) -> None:
             f"z-x-z Euler angle singularity (|sin(beta)| = {abs(np.sin(beta[k])):.3g} < {SIN_BETA_MIN:g}) "
             "where the run cannot start; give beta away from 0 and pi, or set rotation = \"quaternion\" "
             f"in [mechanism] (no singularity) (bodies' q0 in {mech.source or mech.name})")
+
+
+def rigid_elimination(model: Model) -> list[int]:
+    """Redundancy "compliant": the rigid equations (those of joints without compliance) that are
+    dependent among themselves at q0, chosen like ``"auto"`` (1-based). The compliant equations
+    are kept: they are forces, not constraints."""
+    f = frames(model, model.q0, model.h0)
+    J = jacobian_h(model, f).T
+    compliant = set(int(r) for r in model.compliant_rows)
+    rigid = [i for i in range(model.m) if i not in compliant]
+    if not rigid:
+        return []
+    return sorted(rigid[k] + 1 for k in analysis.auto_eliminate(J[:, rigid]))
 
 
 def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate") -> tuple[list[int], str]:

@@ -188,22 +188,21 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     PR = Phi_h[R]
     JR = PR.T
     g = gamma(model, f)[R]
+    Phi = constraints(model, f) if a > 0.0 or model.compliant_rows.size else None
     if a > 0.0:
-        g = g - 2.0 * a * (PR @ h) - a * a * constraints(model, f)[R]
+        g = g - 2.0 * a * (PR @ h) - a * a * Phi[R]
     Q = applied_forces(model, f)
-    MinvJ = model.Minv[:, None] * JR
-    S = JR.T @ MinvJ
-    if model.elimination_mode == "min-norm":
-        factor = _min_norm_inverse(JR, model.Minv)
+    if model.compliant_rows.size:
+        lam_R, S, solve_many = _compliant_solve(model, t, PR, g, Q, h, Phi)
     else:
-        try:
-            factor = _cho_factor(S)
-        except LinAlgError as exc:
-            raise SingularConfiguration(
-                f"t = {t:.9g} s: the kept constraint equations became dependent (singular position); "
-                "the Jacobian lost rank") from exc
-    MinvJT = MinvJ.T
-    lam_R = _cho_solve(factor, MinvJT @ Q - g)
+        MinvJ = model.Minv[:, None] * JR
+        S = JR.T @ MinvJ
+        factor = _factor(model, t, S, JR)
+        MinvJT = MinvJ.T
+        lam_R = _cho_solve(factor, MinvJT @ Q - g)
+
+        def solve_many(cols):
+            return _cho_solve_many(factor, MinvJT[:, cols])
     lam = np.zeros(model.m)
     iterations, fallback, damped, qf_out = 0, False, False, None
     if model.friction_joints:
@@ -211,7 +210,7 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
         lam0 = lam_R
         xrows = plan.friction_xrows
         cols = plan.friction_cols
-        W = _cho_solve_many(factor, MinvJT[:, cols])  # lam_R = lam0 + W qf(x)
+        W = solve_many(cols)  # lam_R = lam0 + W qf(x)
         if qf_guess is not None:
             x0 = lam0[xrows] + W[xrows] @ qf_guess
         else:
@@ -237,6 +236,47 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     hdot = model.Minv * (Q - JR @ lam_R)
     return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S, qf=qf_out,
                       damped=damped or (newton_failed > 0))
+
+
+def _factor(model: Model, t: float, S: np.ndarray, JR: np.ndarray):
+    """The factor of S that :func:`_cho_solve` uses: Cholesky (a singular S is a singular
+    position), or the pseudo-inverse of the min-norm method."""
+    if model.elimination_mode == "min-norm":
+        return _min_norm_inverse(JR, model.Minv)
+    try:
+        return _cho_factor(S)
+    except LinAlgError as exc:
+        raise SingularConfiguration(
+            f"t = {t:.9g} s: the kept constraint equations became dependent (singular position); "
+            "the Jacobian lost rank") from exc
+
+
+def _compliant_solve(model: Model, t: float, PR: np.ndarray, g: np.ndarray, Q: np.ndarray, h: np.ndarray,
+                     Phi: np.ndarray):
+    """Eq. 18 with compliant joints (redundancy "compliant"): the multipliers of their equations
+    are the spring-damper forces on the violation, lam_c = k Phi + d Phi_h h (so -J_c lam_c pulls
+    the joint together, as a constraint's reaction would), known from the state; the rigid kept
+    equations are solved with those forces applied. Returns (lam over the kept equations, the
+    rigid S, the solve of friction columns: lam = lam(qf = 0) + W qf with W = 0 on compliant rows)."""
+    R = model.retained
+    c = np.isin(R, model.compliant_rows)
+    r = ~c
+    lam_c = model.row_stiffness[R[c]] * Phi[R[c]] + model.row_damping[R[c]] * (PR[c] @ h)
+    Jr = PR[r].T
+    MinvJr = model.Minv[:, None] * Jr
+    S = Jr.T @ MinvJr
+    factor = _factor(model, t, S, Jr) if S.size else None
+    lam_R = np.empty(len(R))
+    lam_R[c] = lam_c
+    if factor is not None:
+        lam_R[r] = _cho_solve(factor, MinvJr.T @ (Q - PR[c].T @ lam_c) - g[r])
+
+    def solve_many(cols):
+        W = np.zeros((len(R), len(cols)))
+        if factor is not None:
+            W[r] = _cho_solve_many(factor, MinvJr.T[:, cols])
+        return W
+    return lam_R, S, solve_many
 
 
 def _robust_friction(model: Model, ctx: list, lam0: np.ndarray, W: np.ndarray, start: np.ndarray, t: float,

@@ -179,6 +179,8 @@ def support(model) -> str | None:
         return f"rotation {model.rotation!r} (the kernel has z-x-z Euler angles only)"
     if model.elimination_mode == "min-norm":
         return "redundancy 'min-norm' (the kernel solves the eliminated form, by Cholesky)"
+    if model.compliant_rows.size:
+        return "compliant joints (the kernel solves rigid joints only)"
     for c in model.joints:
         if (model.kind, c.type) not in _JOINTS:
             covered = "revolute, translational" if model.kind == "planar" else "spherical"

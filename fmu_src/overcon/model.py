@@ -131,10 +131,16 @@ class Model:
     reaction_joints: tuple[int, ...] = field(default=())
     friction_outputs: tuple[int, ...] = field(default=())  # joints with a <joint>.friction output
     rotation: str = "euler_zxz"  # spatial orientation coordinates (spec.ROTATIONS)
+    # redundancy "compliant": the equations of compliant joints (0-based) and per equation (m,) the
+    # stiffness and damping of the spring-damper on its violation (N/m, N.s/m or N.m/rad, N.m.s/rad)
+    compliant_rows: np.ndarray = field(default_factory=lambda: np.arange(0))
+    row_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    row_damping: np.ndarray = field(default_factory=lambda: np.zeros(0))
     plan: "AssemblyPlan" = field(init=False, repr=False, compare=False)  # built by __post_init__
 
     def __post_init__(self):
-        for name in ("mass", "inertia", "M", "Minv", "gravity", "q0", "h0", "retained"):
+        for name in ("mass", "inertia", "M", "Minv", "gravity", "q0", "h0", "retained", "compliant_rows",
+                     "row_stiffness", "row_damping"):
             _read_only(getattr(self, name))
         object.__setattr__(self, "plan", build_plan(self))
 
@@ -361,13 +367,31 @@ def compile_model(scene: SceneSpec) -> Model:
         row += ne
     joint_index = {c.name: c.index for c in joints}
     base = replace(
-        bodies, joints=tuple(joints), m=row, retained=np.arange(row),
+        bodies, joints=tuple(joints), m=row, retained=np.arange(row), **_compliance(scene, joints, row),
         friction_joints=tuple(c.index for c in joints if c.law is not None),
         reaction_joints=tuple(joint_index[j] for j in scene.reactions),
         friction_outputs=tuple(joint_index[j] for j in
                                (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
     )
     return base
+
+
+def _compliance(scene: SceneSpec, joints, m: int) -> dict:
+    """The compliant equations and their per-equation stiffness and damping (redundancy
+    "compliant": the joints with a compliance table; otherwise none)."""
+    k, d = np.zeros(m), np.zeros(m)
+    rows = []
+    if scene.redundancy == "compliant":
+        for c, js in zip(joints, scene.mechanism.joints):
+            if js.compliance is None:
+                continue
+            cs = js.compliance
+            for r, kind in zip(c.rows, TYPES[c.type].row_kinds):
+                rot = kind == "rotational"
+                k[r] = cs.rotational_stiffness if rot else cs.stiffness
+                d[r] = cs.rotational_damping if rot else cs.damping
+                rows.append(r)
+    return {"compliant_rows": np.array(rows, int), "row_stiffness": k, "row_damping": d}
 
 
 def _rotations(model: Model, q: np.ndarray) -> np.ndarray:

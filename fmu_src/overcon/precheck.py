@@ -72,6 +72,17 @@ def friction_warnings(model: Model) -> list[str]:
     return out
 
 
+def redundancy_warnings(model: Model) -> list[str]:
+    """Under a redundancy method other than "eliminate", a scene's ``eliminate`` does not apply:
+    said, not refused (a scene group switches method by one line)."""
+    sc = model.scene
+    if sc.redundancy == "eliminate" or sc.eliminate in ((), "auto"):
+        return []
+    listed = ", ".join(f"Phi{i}" if isinstance(i, int) else str(i) for i in sc.eliminate)
+    return [f"scene.eliminate ({listed}) does not apply under redundancy = {sc.redundancy!r}, which chooses "
+            "the equations itself"]
+
+
 @dataclass(frozen=True)
 class JointVerdict:
     """Pre-check verdict of one joint: its reaction is ``unique`` (all three tests ``methods``
@@ -161,7 +172,7 @@ def precheck(model: Model, source: str = "", methods: str = "auto") -> PrecheckR
         methods_agree=not disagree, friction=tuple(friction), friction_on_nonunique=tuple(nonunique),
         friction_set_unique=set_unique, motion_unique=not nonunique and set_unique,
         eliminated=tuple(model.eliminated), elimination_mode=model.elimination_mode,
-        problems=tuple(problems), warnings=tuple(friction_warnings(model)),
+        problems=tuple(problems), warnings=tuple(friction_warnings(model) + redundancy_warnings(model)),
         methods_run=analysis.METHOD_SETS[resolve_methods(model, methods)], redundancy=model.scene.redundancy)
 
 

@@ -668,7 +668,8 @@ def _body_ref(ctx: _Ctx, body_names: dict, value, field: str, allow_base: bool =
     return s
 
 
-_JOINT_COMMON = ("name", "type", "body_i", "body_j", "friction")
+_JOINT_COMMON = ("name", "type", "body_i", "body_j", "friction", "compliance")
+_COMPLIANCE_KEYS = ("stiffness", "rotational_stiffness", "damping", "rotational_damping")
 
 
 def _check_joints(doc: dict, ctx: _Ctx, head: _MechHeader, body_names: dict) -> list[JointSpec]:
@@ -748,9 +749,37 @@ def _check_joint(jt: dict, p: str, ctx: _Ctx, kind: str | None, body_names: dict
     v = _get(ctx, jt, "friction", p, required=False)
     if v is not _MISSING and _table(ctx, v, f"{p}.friction") is not None:
         friction = _friction(ctx, v, f"{p}.friction", jtype if fields else None, None)
-    if ok and None not in (jname, jtype, bi, bj):
-        return JointSpec(jname, jtype, bi, bj, params, friction)
+    compliance, good = _compliance(ctx, jt, p)
+    if ok and good and None not in (jname, jtype, bi, bj):
+        return JointSpec(jname, jtype, bi, bj, params, friction, compliance)
     return None
+
+
+def _compliance(ctx: _Ctx, jt: dict, p: str) -> tuple[S.ComplianceSpec | None, bool]:
+    """``[joints.compliance]``: (the spec or None, whether it is valid). Stiffnesses required and
+    > 0, dampings optional (default 0) and >= 0, all scalars."""
+    v = _get(ctx, jt, "compliance", p, required=False)
+    if v is _MISSING:
+        return None, True
+    f = f"{p}.compliance"
+    if _table(ctx, v, f) is None:
+        return None, False
+    _unknown_keys(ctx, v, f, _COMPLIANCE_KEYS)
+    values = {}
+    for key in _COMPLIANCE_KEYS:
+        x = _get(ctx, v, key, f, required=key.endswith("stiffness"))
+        if x is _MISSING:
+            continue
+        if isinstance(x, list):
+            ctx.add(f"{f}.{key}", "per-axis values (a 3-vector along the joint frame's axes) are not supported: "
+                                  "give one scalar (isotropic)")
+            continue
+        check = (lambda y: y > 0, "must be > 0") if key.endswith("stiffness") else _NONNEG
+        values[key] = _num(ctx, x, f"{f}.{key}", check)
+    if len(values) < sum(1 for k in _COMPLIANCE_KEYS if k in v) or None in values.values() \
+            or not {"stiffness", "rotational_stiffness"} <= set(values):
+        return None, False
+    return S.ComplianceSpec(**values), True
 
 
 def _check_loads(doc: dict, ctx: _Ctx, head: _MechHeader, body_names: dict) -> list[LoadSpec]:
@@ -1020,7 +1049,9 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
 
 def _scene_redundancy(ctx: _Ctx, st: dict, mech: MechanismSpec | None):
     """``scene.redundancy`` (:data:`overcon.spec.REDUNDANCY_METHODS`, default "eliminate") and
-    ``scene.eliminate``, which "eliminate" requires and "min-norm" refuses (it removes nothing)."""
+    ``scene.eliminate``, which "eliminate" requires; under the other methods it is optional and
+    does not apply (decided: kept, so that a scene group switches method by one line; check and
+    simulate warn about it)."""
     redundancy = "eliminate"
     v = _get(ctx, st, "redundancy", "scene", required=False)
     if v is not _MISSING:
@@ -1028,15 +1059,10 @@ def _scene_redundancy(ctx: _Ctx, st: dict, mech: MechanismSpec | None):
         if redundancy is not None and redundancy not in S.REDUNDANCY_METHODS:
             ctx.add("scene.redundancy", f"unknown method {_short(redundancy)} (known: "
                                         f"{', '.join(repr(m) for m in S.REDUNDANCY_METHODS)})")
-    eliminate = None
+    eliminate = None if redundancy == "eliminate" else ()
     v = _get(ctx, st, "eliminate", "scene", required=redundancy == "eliminate")
-    if v is not _MISSING and redundancy == "min-norm":
-        ctx.add("scene.eliminate", "does not apply with redundancy = 'min-norm', which eliminates no "
-                                   "equation: remove it")
-    elif v is not _MISSING:
+    if v is not _MISSING:
         eliminate = _check_eliminate(ctx, v, "scene.eliminate", mech, lambda k: f"scene.eliminate[{k}]")
-    elif redundancy == "min-norm":
-        eliminate = ()
     return redundancy, eliminate
 
 
@@ -1424,8 +1450,9 @@ def _override_friction(ctx: _Ctx, scene: SceneSpec, friction, friction_outputs, 
 
 
 def _override_eliminate(ctx: _Ctx, scene: SceneSpec, eliminate, source: str, changes: dict) -> None:
-    if scene.redundancy == "min-norm":
-        ctx.add("--eliminate", f"does not apply: the scene's redundancy is 'min-norm', which eliminates no equation")
+    if scene.redundancy != "eliminate":
+        ctx.add("--eliminate", f"does not apply: the scene's redundancy is {scene.redundancy!r}, which chooses no "
+                               "elimination")
         return
     if isinstance(eliminate, str):
         try:

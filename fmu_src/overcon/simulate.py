@@ -62,8 +62,13 @@ class SingularityMonitor:
         if model.elimination_mode == "min-norm":  # every equation kept: watch an independent set of them
             from .analysis import independent_columns
             self.rows = np.array(independent_columns(jacobian_h(model, frames(model, y[: model.n])).T), int)
+        elif model.compliant_rows.size:  # compliant equations are forces: watch the rigid ones
+            self.rows = np.setdiff1d(model.retained, model.compliant_rows)
         self.min_ratio = np.inf
         self.t_prev = model.scene.start_time if t0 is None else t0
+        self.sign, self.N = 1.0, np.zeros((model.nh, 0))
+        if not self.rows.size:  # nothing rigid to lose rank
+            return
         J = self._jac(y)
         self.N, ratio = self._null(J, None)
         self._check_ratio(self.t_prev, ratio)
@@ -92,6 +97,8 @@ class SingularityMonitor:
                 f"(sigma_min/sigma_max = {ratio:.3g} < {self.ratio_tol:g})")
 
     def check(self, t: float, y: np.ndarray) -> None:
+        if not self.rows.size:
+            return
         J = self._jac(y)
         if self.N.size and np.sign(np.linalg.det(np.vstack([J, self.N.T]))) != self.sign:
             raise SingularConfiguration(

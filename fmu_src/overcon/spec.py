@@ -143,6 +143,21 @@ class BodySpec:
 
 
 @dataclass(frozen=True)
+class ComplianceSpec:
+    """A joint's compliance (``[joints.compliance]``; used under ``redundancy = "compliant"``):
+    its equations become a spring-damper on their violation. ``stiffness`` (N/m) and ``damping``
+    (N.s/m) act on the equations that hold points together (``"point"`` rows, and the distance
+    row of a planar translational joint), ``rotational_stiffness`` (N.m/rad) and
+    ``rotational_damping`` (N.m.s/rad) on those that hold axes or angles (a small violation of
+    those is an angle in rad). Isotropic (scalars)."""
+
+    stiffness: float
+    rotational_stiffness: float
+    damping: float = 0.0
+    rotational_damping: float = 0.0
+
+
+@dataclass(frozen=True)
 class JointSpec:
     """A joint between body i and body j (either may be ``base``). ``type`` is the key in
     ``overcon.joints.TYPES`` (the file's name resolved for the mechanism kind:
@@ -156,6 +171,7 @@ class JointSpec:
     body_j: str
     params: Mapping[str, object]
     friction: FrictionSpec | None = None
+    compliance: ComplianceSpec | None = None
 
 
 @dataclass(frozen=True)
@@ -198,12 +214,14 @@ class SolverSpec:
     kernel: str = "auto"
 
 
-REDUNDANCY_METHODS = ("eliminate", "min-norm")
+REDUNDANCY_METHODS = ("eliminate", "min-norm", "compliant")
 """``[scene] redundancy``: how the redundant constraints are handled. ``"eliminate"`` (default):
 the paper's method, the scene's ``eliminate`` equations are removed. ``"min-norm"``: no equation is
 removed; the multipliers are the minimum-norm solution of the rank-deficient Eq. 18 (a
 rank-revealing solve). It gives one motion where the paper's rigid theory has several, but that
-choice has no physical ground: real joints share their loads by their compliance."""
+choice has no physical ground: real joints share their loads by their compliance. ``"compliant"``:
+the joints with a ``[joints.compliance]`` table are spring-dampers on their equations' violation
+(:class:`ComplianceSpec`), the others rigid; their reactions, friction and motion are unique."""
 
 
 @dataclass(frozen=True)

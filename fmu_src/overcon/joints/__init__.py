@@ -117,6 +117,17 @@ class JointType:
         rows = getattr(self.module, "ROWS", None)
         return spatial_rows.row_meanings(rows) if rows is not None else (spatial_rows.POINT_ROW,) * self.n_equations
 
+    @property
+    def row_kinds(self) -> tuple[str, ...]:
+        """Per equation: ``"translational"`` (its violation is a length, m) or ``"rotational"``
+        (an angle, rad, for small violations): the module's ``ROW_KINDS``, else from
+        :attr:`row_meanings` (point rows translational, axis rows rotational). Compliant joints
+        (:class:`overcon.spec.ComplianceSpec`) take their stiffness per equation from it."""
+        kinds = getattr(self.module, "ROW_KINDS", None)
+        if kinds is not None:
+            return kinds
+        return tuple("translational" if m == spatial_rows.POINT_ROW else "rotational" for m in self.row_meanings)
+
     @staticmethod
     def violation_text(meaning: str, p, init: InitialFrames) -> str:
         """What violated equations of a non-point ``meaning`` of one joint (constants ``p``,

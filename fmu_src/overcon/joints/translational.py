@@ -19,6 +19,10 @@ import numpy as np
 from ..kinematics import OMEGA, matvec, rot2, rowdot
 
 
+ROW_KINDS = ("translational", "rotational")
+"""Phi1 is the distance from the guide line (m), Phi2 the relative angle (rad)."""
+
+
 def constants(params, init=None) -> dict:
     """One joint's constants: s_A, s_B, v, psi and the auxiliary frame B_i (in body i axes)
     (``init``, the initial frames, is not needed: psi fixes the relative angle)."""

@@ -1,8 +1,8 @@
-"""The optional compiled kernel: one evaluation of Eq. 18 and the coordinate rates in C
-(``kernel.c`` next to this file), called through ctypes.
+"""The compiled core: one evaluation of Eq. 18, the coordinate rates and the reported outputs in C
+(the stage files in ``core/`` next to this file, see ``core/core.h``), called through ctypes.
 
 Why: an evaluation in numpy costs 20-30 times its linear algebra (docs/benchmarks.md, "The
-limit"): about a hundred numpy calls on arrays of 2 to 35 entries. The kernel does the same
+limit"): about a hundred numpy calls on arrays of 2 to 35 entries. The core does the same
 arithmetic in one call.
 
 What it covers (:func:`support`): planar mechanisms of revolute and translational joints, spatial
@@ -11,13 +11,14 @@ built from these joints); gravity, forces, torques, springs; friction laws ``reg
 ``stribeck``; up to :data:`MAX_FRICTION` friction joints. Anything else runs on the numpy path
 (the reason is logged). Within an evaluation, whatever the numpy path reports or falls back on
 (a singular position, the friction solve's fixed-point fallback, an Euler singularity, a spring
-of positive free length whose points coincide, a non-finite number) makes the kernel return a
-status, and that evaluation is repeated on the numpy path, which raises or falls back exactly as
-without the kernel: the kernel never changes what fails or how, and the robust friction fallback
-exists once, in :mod:`overcon.dynamics`.
+of positive free length whose points coincide, a non-finite number) makes the core return a
+status (:data:`STATUS`) with a message (:attr:`Kernel.last_message`), and that evaluation is
+repeated on the numpy path, which raises or falls back exactly as without the core: the core
+never changes what fails or how, and the robust friction fallback exists once, in
+:mod:`overcon.dynamics`.
 
 Selection (decided here): the solver setting ``kernel`` (scene ``[solver] kernel``, FMU parameter
-``solver.kernel``): ``"auto"`` (default) uses the kernel where it covers the model and a compiled
+``solver.kernel``): ``"auto"`` (default) uses the core where it covers the model and the compiled
 library is at hand, else numpy; ``"c"`` requires it (a clear error otherwise); ``"numpy"`` never
 uses it. Both paths implement the same formulas in the same order; they agree to round-off
 (tests/test_kernel.py: <= 1e-12 relative per evaluation, and fixed-step runs without friction;
@@ -25,13 +26,18 @@ adaptive runs differ by the integration error, as on another CPU). A run says wh
 path it took (:attr:`overcon.simulate.Simulation.kernel_note`, logged by the FMU at
 instantiation).
 
-Where the library comes from: an FMU carries it (compiled by ``overcon build`` with the FMU's own
-binary, ``binaries/<platform>/overcon_kernel.<ext>``; the FMU calls :func:`use_library`). In
-process it is compiled on first use with ``$CC`` (default ``cc``) into
-``$OVERCON_CACHE_DIR`` (default ``~/.cache/overcon``), named by a hash of the source and the
-compiler, about 0.3 s once; without a compiler, ``auto`` runs numpy. Compiler flags
-(:data:`CFLAGS`): ``-O2 -ffp-contract=off``: no fused multiply-add contraction, so the numbers do
-not depend on the CPU's FMA support.
+Where the library comes from: the package installation compiles it (``setup.py``: ``pip install
+-e .`` or ``pip install .``, about 0.5 s of the install) into :data:`LIBRARY`,
+``overcon/core/libovercore.so`` (``.dylib``, ``.dll``), with ``$CC`` (default: the compiler Python
+was built with) and the flags ``-O2 -ffp-contract=off -fno-fast-math -std=c11 -Wall -Wextra
+-Werror``: no fused multiply-add contraction and no reassociation, so the numbers do not depend
+on the CPU's FMA support. Nothing is compiled at run time. A source tree that was never installed
+has no library: ``auto`` then runs numpy and ``c`` refuses, both naming the fix (``pip install -e
+.``). An FMU carries a copy (``binaries/<platform>/overcon_kernel.so``, copied by ``overcon
+build``; the FMU calls :func:`use_library`).
+
+One :class:`Kernel` per model and instance: it owns the core's workspace (``ovk_data``), so two
+instances in one process, or in two threads, never share memory.
 """
 from __future__ import annotations
 

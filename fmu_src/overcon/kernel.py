@@ -27,7 +27,7 @@ path it took (:attr:`overcon.simulate.Simulation.kernel_note`, logged by the FMU
 instantiation).
 
 Where the library comes from: the package installation compiles it (``setup.py``: ``pip install
--e .`` or ``pip install .``, about 0.5 s of the install) into :data:`LIBRARY`,
+-e .`` or ``pip install .``, about 1 s of the install) into :data:`LIBRARY`,
 ``overcon/core/libovercore.so`` (``.dylib``, ``.dll``), with ``$CC`` (default: the compiler Python
 was built with) and the flags ``-O2 -ffp-contract=off -fno-fast-math -std=c11 -Wall -Wextra
 -Werror``: no fused multiply-add contraction and no reassociation, so the numbers do not depend

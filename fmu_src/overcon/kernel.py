@@ -266,15 +266,7 @@ class Kernel:
         m.rbody = arr([bodies_of_row[int(r)] for r in model.retained], I32)
         self._cmodel = m
         self._pm = ctypes.addressof(m)
-        data = lib.ovk_make_data(self._pm)
-        if not data:
-            raise MemoryError("the compiled core could not allocate its workspace")
-        self._finalize = weakref.finalize(self, lib.ovk_free_data, data)
-        self._data = data
-        status = lib.ovk_data_status(data)
-        if status:
-            raise RuntimeError(f"the compiled core refused the packed model ({STATUS.get(status, status)}): "
-                               f"{self._message()}")
+        self._data = self._workspace(lib)
         n_y = model.n + model.nh
         self._y = np.zeros(n_y)
         self._ydot = np.zeros(n_y)
@@ -293,6 +285,20 @@ class Kernel:
         self._fric = np.zeros(len(joints))
         self._lam_in = np.zeros(model.m)
         self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
+
+    def _workspace(self, lib) -> int:
+        """The core's workspace for the packed model, freed with this object; raises when the
+        core refuses the model (its message says why) or cannot allocate it."""
+        data = lib.ovk_make_data(self._pm)
+        if not data:
+            raise MemoryError("the compiled core could not allocate its workspace")
+        self._finalize = weakref.finalize(self, lib.ovk_free_data, data)
+        self._data = data
+        status = lib.ovk_data_status(data)
+        if status:
+            raise RuntimeError(f"the compiled core refused the packed model ({STATUS.get(status, status)}): "
+                               f"{self._message()}")
+        return data
 
     def _message(self) -> str:
         return self._msg_fn(self._data).decode("utf-8", "replace")

@@ -21,41 +21,15 @@ from overcon.kinematics import EulerSingularity
 
 from test_kernel import MECH, REL, REL_OTHER_COUNT, kernel_for, numpy_eval, rel, spec_of, states
 
-TWO_PINS = """[mechanism]
-name = "two_pins"
-kind = "planar"
-gravity = [0.0, -9.81]
-[[bodies]]
-name = "bar"
-mass = 1.0
-inertia = 0.5
-q0 = [0.0, 0.0, 0.3]
-[[joints]]
-name = "pin1"
-type = "revolute"
-body_i = "bar"
-body_j = "base"
-s_i = [0.0, 1.0]
-s_j = [0.0, 1.0]
-[[joints]]
-name = "pin2"
-type = "revolute"
-body_i = "bar"
-body_j = "base"
-s_i = [0.0, -1.0]
-s_j = [0.0, -1.0]
-"""
+TWO_PINS = Path(__file__).resolve().parent / "data" / "two_pins" / "two_pins_wo3.toml"
 
 
-def test_singular_position(tmp_path):
+def test_singular_position():
     """A bar on two pins with Phi3 (pin2's x row) eliminated: the kept y rows of both pins are
     [0, 1, -+sin phi], so at phi = 0 (unit mass) S has two equal rows of exact numbers and its
     Cholesky pivot is exactly 0. The core returns OVK_SINGULAR naming the pivot and the row; the
     numpy path raises SingularConfiguration; at phi = 0.3 both evaluate."""
-    (tmp_path / "two_pins.toml").write_text(TWO_PINS)
-    (tmp_path / "s.toml").write_text('[scene]\nname = "two_pins_wo3"\nmechanism = "two_pins.toml"\n'
-                                     'friction = []\neliminate = [3]\nstop_time = 1.0\n')
-    spec = scene_mod.as_scene(scene_mod.load(tmp_path / "s.toml"))
+    spec = scene_mod.as_scene(scene_mod.load(TWO_PINS))
     model = compile_checked(spec, check_initial=False)
     assert list(model.retained) == [0, 1, 3]
     k = kernel_for(model, spec.solver)

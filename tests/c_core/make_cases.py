@@ -8,7 +8,7 @@ without fast-math, so the compiler may not change any floating-point result.
 The cases: the paper's planar mechanism (friction in two revolute and one translational joint) and
 its spatial mechanism (friction in two spherical joints) at random states, cold and warm-started;
 spatial states where Newton gives up and damped Newton finishes; and every failure status: a
-singular position (two pins on one bar, rows exactly dependent), the friction solve giving up
+singular position (tests/data/two_pins: two pins on one bar, rows exactly dependent), the friction solve giving up
 (friction_max_iter = 2), a non-finite state, an Euler singularity, a spring whose points coincide.
 The script refuses to write a file that lacks any of these.
 
@@ -36,40 +36,7 @@ MECH = Path(__file__).resolve().parents[2] / "mechanisms"
 COUNTS = ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols", "nfj", "nfg", "max_iter")
 FLOATS = ("baumgarte", "tol")
 DOUBLE_FIELDS = {"Minv", "mass", "inertia", "gravity", "jconst", "jlawp", "lp"}
-TWO_PINS = """[mechanism]
-name = "two_pins"
-kind = "planar"
-gravity = [0.0, -9.81]
-[[bodies]]
-name = "bar"
-mass = 1.0
-inertia = 0.5
-q0 = [0.0, 0.0, 0.3]
-[[joints]]
-name = "pin1"
-type = "revolute"
-body_i = "bar"
-body_j = "base"
-s_i = [0.0, 1.0]
-s_j = [0.0, 1.0]
-[[joints]]
-name = "pin2"
-type = "revolute"
-body_i = "bar"
-body_j = "base"
-s_i = [0.0, -1.0]
-s_j = [0.0, -1.0]
-"""
-TWO_PINS_SCENE = """[scene]
-name = "two_pins_wo3"
-mechanism = "two_pins.toml"
-friction = []
-eliminate = [3]
-stop_time = 1.0
-"""
-"""A bar held by two pins: with Phi3 (pin2's x row) eliminated, the kept rows of pin1 and pin2 in
-y are both exactly [0, 1, -+sin phi], so at phi = 0 with unit mass S has two equal rows of exact
-numbers and its Cholesky pivot is exactly 0: a singular position independent of round-off."""
+TWO_PINS = Path(__file__).resolve().parents[1] / "data" / "two_pins" / "two_pins_wo3.toml"
 
 
 class Writer:
@@ -187,9 +154,7 @@ def build(tmp: Path) -> Writer:
     q[3 * ld.bi: 3 * ld.bi + 2] = 0.0
     w.evaluation(np.concatenate([q, model.h0]))
     # a singular position
-    (tmp / "two_pins.toml").write_text(TWO_PINS)
-    (tmp / "two_pins_wo3.toml").write_text(TWO_PINS_SCENE)
-    spec = scene_mod.as_scene(scene_mod.load(tmp / "two_pins_wo3.toml"))
+    spec = scene_mod.as_scene(scene_mod.load(TWO_PINS))
     model = compile_checked(spec, check_initial=False)
     w.model(model, spec.solver)
     w.evaluation(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0]))

@@ -9,7 +9,8 @@ sources) but compiled by :class:`BuildCore` with exactly the core's flags (:data
 none of the interpreter's own build flags (sysconfig's ``-O3 -g``, rpaths, libpython), and named
 without a CPython tag: the same bytes work for every interpreter and outside Python.
 
-Compiler: ``$CC``, else the compiler this Python was built with (sysconfig ``CC``), else ``cc``;
+Compiler: ``$CC``, else the compiler this Python was built with (sysconfig ``CC``) when it is on
+PATH, else ``cc``;
 it must take gcc-style flags (gcc, clang). ``CFLAGS`` from the environment is not used: the flags
 are part of the numbers (``-ffp-contract=off -fno-fast-math``: no fused multiply-add, no
 reassociation, so the results do not depend on the CPU's FMA support).
@@ -39,8 +40,11 @@ def shared_suffix() -> str:
 
 
 def compiler() -> list:
-    cc = os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc"
-    return shlex.split(cc)
+    """``$CC``; else the compiler Python was built with, when it is on PATH; else ``cc``."""
+    if os.environ.get("CC"):
+        return shlex.split(os.environ["CC"])
+    built_with = shlex.split(sysconfig.get_config_var("CC") or "")
+    return built_with if built_with and shutil.which(built_with[0]) else ["cc"]
 
 
 class BuildCore(build_ext):

@@ -857,7 +857,7 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
              f"{'met' if ratio <= OVERHEAD_RATIO else 'NOT met'}; against the trivial FMU with the same Real and "
              f"Boolean outputs ({ovh['same_us']:.1f} us): ratio {same:.2f} -> "
              f"{'met' if same <= OVERHEAD_RATIO else 'NOT met'}")
-    L.append("- Compiled kernel: the optional C kernel (`overcon/kernel.c`, `solver.kernel`) ran every run above "
+    L.append("- Compiled kernel: the C core (`overcon/core/`, compiled at install; `solver.kernel`) ran every run above "
              "unless the table says numpy; the FMUs run with numpy and scipy alone too (`solver.kernel = \"numpy\"`, "
              "\"Both paths\"), equal per evaluation to 1e-12 (tests/test_kernel.py).")
     L += ["", "### Where the time goes", "",

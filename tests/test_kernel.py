@@ -1,4 +1,4 @@
-"""The optional compiled kernel (overcon/kernel.c through overcon.kernel) against the numpy path:
+"""The compiled core (overcon/core through overcon.kernel) against the numpy path:
 the same numbers per evaluation, the same failures, the selection and its note, and FMUs that
 carry it and still run with numpy alone."""
 from __future__ import annotations
@@ -187,20 +187,51 @@ def test_selection_and_note(monkeypatch):
         Simulation(door, dataclasses.replace(spec.solver, kernel="c"))
     saved = dict(kernel._state)
     try:
-        kernel.disable("no compiler here (test)")
-        assert "no compiled kernel: no compiler here (test)" in Simulation(model, spec.solver).kernel_note
-        with pytest.raises(SimulationError, match="no compiler here"):
+        kernel.disable("no library here (test)")
+        assert "no compiled kernel: no library here (test)" in Simulation(model, spec.solver).kernel_note
+        with pytest.raises(SimulationError, match="no library here"):
             Simulation(model, dataclasses.replace(spec.solver, kernel="c"))
     finally:
         kernel._state.update(saved)
 
 
-def test_compile_failure_is_named(tmp_path):
-    """A compiler that fails: the error names the command (auto then runs numpy)."""
-    with pytest.raises(OSError, match="no C compiler: /nonexistent/cc not found"):
-        kernel.compile_library(tmp_path / "k.so", ["/nonexistent/cc"])
-    with pytest.raises(OSError, match="compiling the kernel failed"):
-        kernel.compile_library(tmp_path / "k.so", ["false"])
+def test_missing_library_names_the_fix(monkeypatch, tmp_path):
+    """A source tree whose core was never compiled: auto runs numpy and says why, c refuses, and
+    both name the fix (pip install -e .); overcon build refuses naming it too."""
+    from overcon.fmu.build import BuildError, kernel_library
+
+    spec = spec_of("planar_f45_wo4")
+    model = compile_checked(spec)
+    saved = dict(kernel._state)
+    missing = tmp_path / "core" / "libovercore.so"
+    monkeypatch.setattr(kernel, "LIBRARY", missing)
+    try:
+        kernel._state.update(lib=None, reason=None, path=None, tried=False)
+        note = Simulation(model, spec.solver).kernel_note
+        assert note.startswith("right-hand side: numpy (solver.kernel = 'auto': no compiled kernel: ")
+        assert f"the compiled core {missing} is missing" in note and "run `pip install -e .`" in note
+        with pytest.raises(SimulationError, match=r"is missing .*pip install -e \."):
+            Simulation(model, dataclasses.replace(spec.solver, kernel="c"))
+        with pytest.raises(BuildError, match=r"libovercore\.so cannot be read .*pip install -e \."):
+            kernel_library()
+    finally:
+        kernel._state.update(saved)
+
+
+def test_installed_library_is_the_package_core():
+    """In process the library is the one the installation compiled inside the package
+    (overcon/core/libovercore.*), and nothing else is compiled or cached at run time (a process
+    fresh for the kernel: an in-process FMU instance earlier in the session may have chosen its own
+    copy with use_library)."""
+    saved = dict(kernel._state)
+    try:
+        kernel._state.update(lib=None, reason=None, path=None, tried=False)
+        lib, why = kernel.library()
+        assert lib is not None, why
+        assert kernel._state["path"] == str(kernel.LIBRARY) and kernel.LIBRARY.parent.name == "core"
+        assert kernel.LIBRARY.parent.parent == Path(kernel.__file__).resolve().parent
+    finally:
+        kernel._state.update(saved)
 
 
 @pytest.mark.integration
@@ -403,30 +434,6 @@ def test_check_and_build_refuse_a_kernel_that_cannot_run(tmp_path, capsys):
     assert main(["build", str(scene_file), "--out", str(tmp_path / "out"), "--no-ref"]) == 2
     assert "solver.kernel = 'c': the compiled kernel cannot run" in capsys.readouterr().err
     assert not list((tmp_path / "out").glob("*.fmu"))
-
-
-def test_damaged_cached_library_is_compiled_again(tmp_path):
-    """A cached library that does not load (an empty file, as an interrupted copy leaves) is
-    compiled again, once, by the next process; a cache directory that cannot be made is named."""
-    import subprocess
-    import sys
-
-    probe = ("from overcon import kernel; lib, why = kernel.library(); "
-             "print('PATH', kernel._state['path']); print('WHY', why)")
-
-    def run(cache):
-        env = {**os.environ, "OVERCON_CACHE_DIR": str(cache)}
-        return subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env,
-                              timeout=120).stdout
-
-    out = run(tmp_path)
-    path = Path(out.split("PATH ")[1].split()[0])
-    assert path.is_relative_to(tmp_path) and "WHY None" in out
-    path.write_bytes(b"")  # damaged (no process has it loaded now)
-    out = run(tmp_path)
-    assert "WHY None" in out and path.stat().st_size > 0, out
-    out = run("/proc/no/such/dir")
-    assert "PATH None" in out and "OVERCON_CACHE_DIR = /proc/no/such/dir" in out, out
 
 
 @pytest.mark.integration

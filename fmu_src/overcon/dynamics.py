@@ -40,7 +40,7 @@ Solver options: :func:`evaluate` reads ``baumgarte``, ``friction_tol`` and ``fri
 from the :class:`overcon.spec.SolverSpec` it is given (the Model carries none).
 
 This module is the reference implementation. :mod:`overcon.kernel` has the same evaluation in C
-(``kernel.c``, selected by the solver setting ``kernel``); every evaluation it cannot finish the
+(``core/``, selected by the solver setting ``kernel``); every evaluation it cannot finish the
 way this module would (a singular position, the fallback of the friction solve, ...) is repeated
 here (``newton_failed`` skips a Newton solve the kernel already tried at that state).
 """

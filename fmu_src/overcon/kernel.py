@@ -1,8 +1,8 @@
-"""The optional compiled kernel: one evaluation of Eq. 18 and the coordinate rates in C
-(``kernel.c`` next to this file), called through ctypes.
+"""The compiled core: one evaluation of Eq. 18, the coordinate rates and the reported outputs in C
+(the stage files in ``core/`` next to this file, see ``core/core.h``), called through ctypes.
 
 Why: an evaluation in numpy costs 20-30 times its linear algebra (docs/benchmarks.md, "The
-limit"): about a hundred numpy calls on arrays of 2 to 35 entries. The kernel does the same
+limit"): about a hundred numpy calls on arrays of 2 to 35 entries. The core does the same
 arithmetic in one call.
 
 What it covers (:func:`support`): planar mechanisms of revolute and translational joints, spatial
@@ -11,13 +11,14 @@ built from these joints); gravity, forces, torques, springs; friction laws ``reg
 ``stribeck``; up to :data:`MAX_FRICTION` friction joints. Anything else runs on the numpy path
 (the reason is logged). Within an evaluation, whatever the numpy path reports or falls back on
 (a singular position, the friction solve's fixed-point fallback, an Euler singularity, a spring
-of positive free length whose points coincide, a non-finite number) makes the kernel return a
-status, and that evaluation is repeated on the numpy path, which raises or falls back exactly as
-without the kernel: the kernel never changes what fails or how, and the robust friction fallback
-exists once, in :mod:`overcon.dynamics`.
+of positive free length whose points coincide, a non-finite number) makes the core return a
+status (:data:`STATUS`) with a message (:attr:`Kernel.last_message`), and that evaluation is
+repeated on the numpy path, which raises or falls back exactly as without the core: the core
+never changes what fails or how, and the robust friction fallback exists once, in
+:mod:`overcon.dynamics`.
 
 Selection (decided here): the solver setting ``kernel`` (scene ``[solver] kernel``, FMU parameter
-``solver.kernel``): ``"auto"`` (default) uses the kernel where it covers the model and a compiled
+``solver.kernel``): ``"auto"`` (default) uses the core where it covers the model and the compiled
 library is at hand, else numpy; ``"c"`` requires it (a clear error otherwise); ``"numpy"`` never
 uses it. Both paths implement the same formulas in the same order; they agree to round-off
 (tests/test_kernel.py: <= 1e-12 relative per evaluation, and fixed-step runs without friction;
@@ -25,41 +26,47 @@ adaptive runs differ by the integration error, as on another CPU). A run says wh
 path it took (:attr:`overcon.simulate.Simulation.kernel_note`, logged by the FMU at
 instantiation).
 
-Where the library comes from: an FMU carries it (compiled by ``overcon build`` with the FMU's own
-binary, ``binaries/<platform>/overcon_kernel.<ext>``; the FMU calls :func:`use_library`). In
-process it is compiled on first use with ``$CC`` (default ``cc``) into
-``$OVERCON_CACHE_DIR`` (default ``~/.cache/overcon``), named by a hash of the source and the
-compiler, about 0.3 s once; without a compiler, ``auto`` runs numpy. Compiler flags
-(:data:`CFLAGS`): ``-O2 -ffp-contract=off``: no fused multiply-add contraction, so the numbers do
-not depend on the CPU's FMA support.
+Where the library comes from: the package installation compiles it (``setup.py``: ``pip install
+-e .`` or ``pip install .``, about 1 s of the install) into :data:`LIBRARY`,
+``overcon/core/libovercore.so`` (``.dylib``, ``.dll``), with ``$CC`` (default: the compiler Python
+was built with) and the flags ``-O2 -ffp-contract=off -fno-fast-math -std=c11 -Wall -Wextra
+-Werror``: no fused multiply-add contraction and no reassociation, so the numbers do not depend
+on the CPU's FMA support. Nothing is compiled at run time. A source tree that was never installed
+has no library: ``auto`` then runs numpy and ``c`` refuses, both naming the fix (``pip install -e
+.``). An FMU carries a copy (``binaries/<platform>/overcon_kernel.so``, copied by ``overcon
+build``; the FMU calls :func:`use_library`).
+
+One :class:`Kernel` per model and instance: it owns the core's workspace (``ovk_data``), so two
+instances in one process, or in two threads, never share memory.
 """
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
 import platform
-import shlex
-import shutil
-import subprocess
-import tempfile
+import weakref
 from pathlib import Path
 
 import numpy as np
 
-SOURCE = Path(__file__).with_name("kernel.c")
-CFLAGS = ["-shared", "-fPIC", "-O2", "-ffp-contract=off", "-fno-fast-math", "-Wall"]
-LIBS = ["-lm"]
-ABI = 3  # OVK_ABI in kernel.c: the layout of _CModel
-MAX_FRICTION = 32  # OVK_MAX_FRICTION in kernel.c
+ABI = 4  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
+MAX_FRICTION = 32  # OVK_MAX_FRICTION in core/core.h
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
-          3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory"}
+          3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
+          7: "invalid model or argument"}
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3}
 _LAWS = {"regularised": 1, "stribeck": 2}
 _LOADS = {"force": 1, "torque": 2, "spring": 3}
-NJC, NLP, NLD = 12, 5, 11  # doubles per joint, per friction law, per load (kernel.c)
+NJC, NLP, NLD = 12, 5, 11  # doubles per joint, per friction law, per load (core/core.h)
+
+
+def _shared_suffix() -> str:
+    return ".dll" if platform.system() == "Windows" else ".dylib" if platform.system() == "Darwin" else ".so"
+
+
+LIBRARY = Path(__file__).resolve().parent / "core" / f"libovercore{_shared_suffix()}"
+"""The compiled core, built by the package installation (setup.py) next to its sources."""
 
 
 class KernelUnavailable(RuntimeError):
@@ -77,21 +84,21 @@ _state: dict = {"lib": None, "reason": None, "path": None, "tried": False}
 def _bind(path: Path) -> ctypes.CDLL:
     lib = ctypes.CDLL(str(path))
     if lib.ovk_abi() != ABI:
-        raise OSError(f"{path}: kernel ABI {lib.ovk_abi()}, expected {ABI} (a library of another overcon version)")
+        raise OSError(f"{path}: core ABI {lib.ovk_abi()}, expected {ABI} (a library of another overcon version)")
     if lib.ovk_max_friction() != MAX_FRICTION:
-        raise OSError(f"{path}: kernel built for {lib.ovk_max_friction()} friction joints, expected {MAX_FRICTION}")
-    f = lib.ovk_evaluate
-    f.restype = ctypes.c_int
-    f.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p,
-                  ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
-    g = lib.ovk_outputs
-    g.restype = ctypes.c_int
-    g.argtypes = [ctypes.c_void_p] * 5
+        raise OSError(f"{path}: core built for {lib.ovk_max_friction()} friction joints, expected {MAX_FRICTION}")
+    vp, i = ctypes.c_void_p, ctypes.c_int
+    for name, res, args in (("ovk_make_data", vp, [vp]), ("ovk_free_data", None, [vp]),
+                            ("ovk_message", ctypes.c_char_p, [vp]), ("ovk_data_status", i, [vp]),
+                            ("ovk_evaluate", i, [vp, vp, ctypes.c_double, vp, i, vp, vp, vp, vp, vp, vp]),
+                            ("ovk_outputs", i, [vp] * 6)):
+        f = getattr(lib, name)
+        f.restype, f.argtypes = res, args
     return lib
 
 
 def use_library(path) -> None:
-    """Use the compiled kernel at ``path`` (an FMU's shipped library). A library that cannot be
+    """Use the compiled core at ``path`` (an FMU's shipped library). A library that cannot be
     loaded is recorded as the reason the kernel is unavailable (``auto`` then runs numpy)."""
     _state.update(lib=None, reason=None, path=str(path), tried=True)
     try:
@@ -105,67 +112,25 @@ def disable(reason: str) -> None:
     _state.update(lib=None, reason=reason, path=None, tried=True)
 
 
-def compiler() -> list[str]:
-    """The C compiler command: ``$CC`` or ``cc``."""
-    return shlex.split(os.environ.get("CC") or "cc")
-
-
 def library_name() -> str:
-    return "overcon_kernel" + (".dll" if platform.system() == "Windows" else
-                               ".dylib" if platform.system() == "Darwin" else ".so")
-
-
-def compile_library(out: Path, cc: list[str] | None = None) -> Path:
-    """Compile ``kernel.c`` into the shared library ``out`` (raises OSError naming the command and
-    the compiler's message)."""
-    cc = cc or compiler()
-    if not cc or shutil.which(cc[0]) is None:
-        raise OSError(f"no C compiler: {' '.join(cc) or 'cc'} not found (set CC or install one, e.g. gcc)")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
-        tmp_out = Path(tmp) / out.name
-        cmd = [*cc, *CFLAGS, "-o", str(tmp_out), str(SOURCE), *LIBS]
-        run = subprocess.run(cmd, capture_output=True, text=True)
-        if run.returncode != 0:
-            said = (run.stderr.strip() or run.stdout.strip())[-2000:] or "no output"
-            raise OSError(f"compiling the kernel failed ({shlex.join(cmd)}): exit status {run.returncode}: {said}")
-        os.replace(tmp_out, out)  # atomic: concurrent processes never load a half-written file
-    return out
-
-
-def _cache_base() -> tuple[Path, str]:
-    """(the cache directory, where it comes from)."""
-    if os.environ.get("OVERCON_CACHE_DIR"):
-        return Path(os.environ["OVERCON_CACHE_DIR"]), "OVERCON_CACHE_DIR"
-    return Path.home() / ".cache" / "overcon", "the default cache"
-
-
-def _cache_path(cc: list[str]) -> Path:
-    base = _cache_base()[0]
-    key = hashlib.sha256(SOURCE.read_bytes() + "\0".join([*cc, *CFLAGS, platform.machine()]).encode()).hexdigest()
-    return base / f"kernel-{key[:16]}" / library_name()
+    """The library's file name inside an FMU (``binaries/<platform>/``)."""
+    return "overcon_kernel" + _shared_suffix()
 
 
 def library():
-    """(the loaded kernel library or None, the reason it is None). Compiled into the cache on
-    first use in a process that was not given one by :func:`use_library`."""
+    """(the loaded core library or None, the reason it is None): :data:`LIBRARY`, the one the
+    package installation compiled, in a process that was not given one by :func:`use_library`."""
     if not _state["tried"]:
         _state["tried"] = True
-        cc = compiler()
-        try:
-            path = _cache_path(cc)
+        if not LIBRARY.exists():
+            _state["reason"] = (f"the compiled core {LIBRARY} is missing (a source tree that was never built): "
+                                "run `pip install -e .` in the project directory, which compiles it")
+        else:
             try:
-                if not path.exists():
-                    compile_library(path, cc)
-                lib = _bind(path)
+                _state["lib"], _state["path"] = _bind(LIBRARY), str(LIBRARY)
             except OSError as exc:
-                if not path.exists() or not SOURCE.exists():
-                    raise OSError(f"{exc} (cache: {_cache_base()[1]} = {_cache_base()[0]})") from exc
-                compile_library(path, cc)  # a damaged or foreign file in the cache: compiled again, once
-                lib = _bind(path)
-            _state["lib"], _state["path"] = lib, str(path)
-        except (OSError, RuntimeError) as exc:  # RuntimeError: no home directory for the default cache
-            _state["reason"] = str(exc)
+                _state["reason"] = (f"cannot load {LIBRARY}: {exc}; `pip install -e .` in the project directory "
+                                    "compiles it again")
     return _state["lib"], _state["reason"]
 
 
@@ -197,7 +162,7 @@ def support(model) -> str | None:
 
 
 class _CModel(ctypes.Structure):
-    """``ovk_model`` of kernel.c (same order)."""
+    """``ovk_model`` of core/core.h (same order)."""
     _fields_ = ([(n, ctypes.c_int) for n in ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols",
                                              "nfj", "nfg", "max_iter")]
                 + [("baumgarte", ctypes.c_double), ("tol", ctypes.c_double)]
@@ -241,12 +206,14 @@ def _load_constants(ld) -> np.ndarray:
 
 
 class Kernel:
-    """The kernel bound to one model and solver settings: packed arrays and output buffers made
+    """The kernel bound to one model and solver settings: packed arrays, the core's workspace
+    (``ovk_data``: one per instance, so instances never share memory) and output buffers made
     once. :meth:`evaluate` returns (y', lam, qf, friction iterations) or None when the evaluation
-    must be done on the numpy path (the status is kept in :attr:`last_status`)."""
+    must be done on the numpy path (the status is kept in :attr:`last_status`, the core's message in
+    :attr:`last_message`)."""
 
     def __init__(self, lib, model, solver):
-        self.model, self._fn, self._out_fn = model, lib.ovk_evaluate, lib.ovk_outputs
+        self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
         plan = model.plan
         I32 = np.int32
         keep = self._keep = []
@@ -303,6 +270,7 @@ class Kernel:
         m.rbody = arr([bodies_of_row[int(r)] for r in model.retained], I32)
         self._cmodel = m
         self._pm = ctypes.addressof(m)
+        self._data = self._workspace(lib)
         n_y = model.n + model.nh
         self._y = np.zeros(n_y)
         self._ydot = np.zeros(n_y)
@@ -321,6 +289,29 @@ class Kernel:
         self._fric = np.zeros(len(joints))
         self._lam_in = np.zeros(model.m)
         self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
+
+    def _workspace(self, lib) -> int:
+        """The core's workspace for the packed model, freed with this object; raises when the
+        core refuses the model (its message says why) or cannot allocate it."""
+        data = lib.ovk_make_data(self._pm)
+        if not data:
+            raise MemoryError("the compiled core could not allocate its workspace")
+        self._finalize = weakref.finalize(self, lib.ovk_free_data, data)
+        self._data = data
+        status = lib.ovk_data_status(data)
+        if status:
+            raise RuntimeError(f"the compiled core refused the packed model ({STATUS.get(status, status)}): "
+                               f"{self._message()}")
+        return data
+
+    def _message(self) -> str:
+        return self._msg_fn(self._data).decode("utf-8", "replace")
+
+    @property
+    def last_message(self) -> str:
+        """The core's message for the last call's status (empty after a success), e.g. which
+        body's Euler angles are singular or how many force evaluations the friction solve took."""
+        return self._message() if self.last_status else ""
 
     @property
     def damped(self) -> bool:
@@ -347,7 +338,7 @@ class Kernel:
             mode, pg = 2, pgl
         else:
             mode, pg = 0, pgq
-        status = self._fn(self._pm, t, py, mode, pg, pyd, plam, pqf, pits, pdamped)
+        status = self._fn(self._pm, self._data, t, py, mode, pg, pyd, plam, pqf, pits, pdamped)
         self.last_status = status
         if status:
             return None
@@ -363,8 +354,9 @@ class Kernel:
         plam, preac, pfric = self._out_ptrs
         self._y[:] = y
         self._lam_in[:] = lam
-        if self._out_fn(self._pm, self._ptrs[0], plam, preac, pfric):
-            raise MemoryError("the compiled kernel could not allocate its work space for the outputs")
+        status = self._out_fn(self._pm, self._data, self._ptrs[0], plam, preac, pfric)
+        if status:
+            raise RuntimeError(f"the compiled core's outputs failed ({STATUS.get(status, status)}): {self._message()}")
         return self._reac, self._fric
 
 

@@ -9,8 +9,9 @@ refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each F
     modelDescription.xml              overcon.fmu.description (validated with fmpy after writing)
     binaries/<platform>/<scene>.so    native/overcon_fmi2.c compiled here (C compiler: $CC or cc)
     binaries/<platform>/overcon_kernel.so
-                                      the optional compiled kernel (overcon/kernel.c, see
-                                      overcon.kernel), same compiler; loaded by the FMU's Python
+                                      the compiled core (overcon/core, compiled when the package
+                                      was installed: overcon.kernel.LIBRARY), copied; loaded by
+                                      the FMU's Python
     resources/overcon_package.txt     name of the package copy below, for the binary
     resources/overcon_python.txt      the building Python (libpython, home, site-packages),
                                       written by overcon.fmu.pyinfo, read by the binary
@@ -21,7 +22,7 @@ refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each F
 
 At run time it needs only a Python with numpy and scipy (the binary finds one: see
 ``native/overcon_fmi2.c`` and the README). ``<hash>`` (and the GUID) is a SHA-256 over the scene
-file, the mechanism file, the overcon source (Python and C), so FMUs of different scenes (or of
+file, the mechanism file, the overcon source (Python, the binary's C) and the compiled core, so FMUs of different scenes (or of
 one scene from different sources) never share module names in one process, and rebuilding
 unchanged inputs gives the same GUID and, with the same compiler and Python, the same bytes. The
 binary is compiled once per source and compiler (:func:`native_binary`); without a C compiler the
@@ -154,23 +155,16 @@ def native_binary() -> NativeBinary:
     return nb
 
 
-_KERNEL_CACHE: dict[tuple, bytes] = {}
-
-
 def kernel_library() -> bytes:
-    """The compiled kernel (:mod:`overcon.kernel`, ``kernel.c``) the FMU carries next to its binary,
-    compiled with the same compiler once per process, source and compiler. Raises
-    :class:`BuildError`."""
-    cc = shlex.split(os.environ.get("CC") or "cc")
-    key = (tuple(cc), hashlib.sha256(kernel_mod.SOURCE.read_bytes()).hexdigest())
-    if key not in _KERNEL_CACHE:
-        with tempfile.TemporaryDirectory() as tmp:
-            try:
-                out = kernel_mod.compile_library(Path(tmp) / kernel_mod.library_name(), cc)
-            except OSError as exc:
-                raise BuildError(str(exc)) from exc
-            _KERNEL_CACHE[key] = out.read_bytes()
-    return _KERNEL_CACHE[key]
+    """The compiled core the FMU carries next to its binary: the library the package installation
+    compiled (:data:`overcon.kernel.LIBRARY`), copied as it is. Raises :class:`BuildError` naming
+    the fix when it is missing (a source tree that was never built)."""
+    path = kernel_mod.LIBRARY
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise BuildError(f"the compiled core {path} cannot be read ({exc.strerror or exc}): run `pip install -e .` "
+                         "in the project directory, which compiles it") from exc
 
 
 def _overcon_version() -> str:
@@ -301,7 +295,7 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
         h = hashlib.sha256()
         kernel_bytes = kernel_library()
         kernel_zip = f"binaries/{binary.platform}/{kernel_mod.library_name()}"
-        for part in (FORMAT_VERSION.encode(), NATIVE_SOURCE.read_bytes(), kernel_mod.SOURCE.read_bytes(), scene_zip.encode(),
+        for part in (FORMAT_VERSION.encode(), NATIVE_SOURCE.read_bytes(), kernel_bytes, scene_zip.encode(),
                      scene_bytes, mech_zip.encode(), mech_bytes):
             h.update(len(part).to_bytes(8, "little") + part)
         for rel, data in sources:
@@ -322,7 +316,7 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
                     "precheck_warnings": list(report.warnings),
                     "binary": {"platform": binary.platform, "compiler": binary.compiler,
                                "source": NATIVE_SOURCE.name},
-                    "kernel": {"library": kernel_zip, "source": kernel_mod.SOURCE.name}}
+                    "kernel": {"library": kernel_zip, "source": "overcon/core"}}
 
         out_dir.mkdir(parents=True, exist_ok=True)
         fmu = out_dir / f"{spec.name}.fmu"

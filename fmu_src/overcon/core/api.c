@@ -1,0 +1,172 @@
+/* The library's entry points: the ABI number, the workspace (made from a model, checked on the
+ * way), one evaluation (the stages in order) and the reported outputs. Only these symbols are
+ * exported; every failure is a status with its message in the workspace (ovk_message). */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "core.h"
+
+int ovk_abi(void) { return OVK_ABI; }
+int ovk_max_friction(void) { return OVK_MAX_FRICTION; }
+
+int ovk_fail(ovk_data *d, int status, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(d->msg, sizeof d->msg, fmt, ap);
+    va_end(ap);
+    return status;
+}
+
+#define OVK_MAX_COUNT (1 << 20) /* any count of the model: far above any mechanism, far below overflow */
+
+static int in_range(const int *a, int n, int lo, int hi) { /* every a[i] in [lo, hi) */
+    for (int i = 0; i < n; i++)
+        if (a[i] < lo || a[i] >= hi) return 0;
+    return 1;
+}
+
+/* The model's counts, types and indices, checked before anything is sized from them: a model that
+ * is not what overcon.kernel packs is refused with a message instead of read out of bounds. */
+static int check_model(const ovk_model *M, ovk_data *d) {
+    const int counts[] = {M->nb, M->m, M->nR, M->nj, M->nl, M->nx, M->ncols, M->nfj, M->nfg};
+    const char *names[] = {"nb", "m", "nR", "nj", "nl", "nx", "ncols", "nfj", "nfg"};
+    for (size_t i = 0; i < sizeof counts / sizeof counts[0]; i++)
+        if (counts[i] < 0 || counts[i] > OVK_MAX_COUNT)
+            return ovk_fail(d, OVK_INVALID, "model: %s = %d is out of range [0, %d]", names[i], counts[i],
+                            OVK_MAX_COUNT);
+    if (!((M->dim == 2 && M->nq_b == 3 && M->nh_b == 3) || (M->dim == 3 && M->nq_b == 6 && M->nh_b == 6)))
+        return ovk_fail(d, OVK_INVALID, "model: dim %d with %d coordinates and %d velocities per body "
+                        "(planar: 2, 3, 3; spatial: 3, 6, 6)", M->dim, M->nq_b, M->nh_b);
+    if (M->nfj > OVK_MAX_FRICTION || M->nx > 3 * M->nfj)
+        return ovk_fail(d, OVK_INVALID, "model: %d friction joints with %d multipliers (the core takes at most %d "
+                        "joints, 3 multipliers each)", M->nfj, M->nx, OVK_MAX_FRICTION);
+    if (M->nR > M->m || M->ncols > M->nb * M->nh_b || M->max_iter < 1 || !(M->tol > 0.0) ||
+        !(M->baumgarte >= 0.0))
+        return ovk_fail(d, OVK_INVALID, "model: nR %d of m %d rows, %d friction columns of %d velocities, "
+                        "max_iter %d, tol %g, baumgarte %g", M->nR, M->m, M->ncols, M->nb * M->nh_b, M->max_iter,
+                        M->tol, M->baumgarte);
+    int nh = M->nb * M->nh_b;
+    for (int j = 0; j < M->nj; j++) {
+        int t = M->jtype[j], planar = t == J_REVOLUTE || t == J_TRANSLATIONAL;
+        if (!((M->dim == 2 && planar) || (M->dim == 3 && t == J_SPHERICAL)) || M->jneq[j] < 1 || M->jneq[j] > 3 ||
+            M->jbi[j] < -1 || M->jbi[j] >= M->nb || M->jbj[j] < -1 || M->jbj[j] >= M->nb ||
+            !in_range(M->jrows + 3 * j, M->jneq[j], 0, M->m) || M->jlaw[j] < LAW_NONE || M->jlaw[j] > LAW_STRIBECK)
+            return ovk_fail(d, OVK_INVALID, "model: joint %d (type %d, %d rows, bodies %d and %d, law %d) is not "
+                            "one the core takes in dimension %d", j, t, M->jneq[j], M->jbi[j], M->jbj[j], M->jlaw[j],
+                            M->dim);
+    }
+    for (int l = 0; l < M->nl; l++) {
+        int t = M->ltype[l];
+        if (t < LD_FORCE || t > LD_SPRING || M->lbi[l] < (t == LD_SPRING ? -1 : 0) || M->lbi[l] >= M->nb ||
+            (t == LD_SPRING && (M->lbj[l] < -1 || M->lbj[l] >= M->nb)))
+            return ovk_fail(d, OVK_INVALID, "model: load %d (type %d, bodies %d and %d) is not one the core takes",
+                            l, t, M->lbi[l], M->lbj[l]);
+    }
+    if (!in_range(M->retained, M->nR, 0, M->m) || !in_range(M->rbody, 2 * M->nR, -1, M->nb) ||
+        !in_range(M->xrows, M->nx, 0, M->nR) || !in_range(M->cols, M->ncols, 0, nh) ||
+        !in_range(M->fj, M->nfj, 0, M->nj) || !in_range(M->fgroup, M->nfg + 1, 0, M->nfj + 1) ||
+        (M->nfg >= 0 && M->fgroup[M->nfg] != M->nfj) || !in_range(M->fx, 3 * M->nfj, 0, M->nx + 1) ||
+        !in_range(M->fci, 6 * M->nfj, 0, M->ncols + 1) || !in_range(M->fcj, 6 * M->nfj, 0, M->ncols + 1))
+        return ovk_fail(d, OVK_INVALID, "model: an index of the elimination or the friction plan is out of range");
+    for (int g = 0; g < M->nfg; g++)
+        if (M->fgroup[g] > M->fgroup[g + 1])
+            return ovk_fail(d, OVK_INVALID, "model: friction group %d starts after the next one", g);
+    return OVK_OK;
+}
+
+ovk_data *ovk_make_data(const ovk_model *M) {
+    ovk_data *d = calloc(1, sizeof(ovk_data));
+    if (!d) return NULL;
+    if (!M) { d->status = ovk_fail(d, OVK_INVALID, "model: a null pointer"); return d; }
+    if ((d->status = check_model(M, d))) return d;
+    size_t nb = (size_t)M->nb, dim = (size_t)M->dim, wd = dim == 2 ? 1 : 3, m = (size_t)M->m, nR = (size_t)M->nR;
+    size_t nh = nb * (size_t)M->nh_b, nc = (size_t)M->ncols, nx = (size_t)M->nx, nj = (size_t)M->nj;
+    size_t nfj = (size_t)M->nfj;
+    size_t n_frames = (nb + 1) * (2 * dim + dim * dim + wd) + 4 * nb;
+    size_t n_work = 4 * nx + nx * nc                          /* lam0x, x, x0, Wx */
+                    + 4 * nx + nc * nx + nx * nx + nc + nx;   /* r, Dq, Mx, dx, xn, qn, rn (damped Newton) */
+    size_t need = n_frames + m * nh + 2 * m + nR * nR + 2 * nR + nh + nR * nc + 18 * nj + n_work + 15 * nfj;
+    d->mem = calloc(need ? need : 1, sizeof(double));
+    d->ctx = calloc(nfj ? nfj : 1, sizeof(ovk_fctx));
+    if (!d->mem || !d->ctx) {
+        free(d->mem);
+        free(d->ctx);
+        d->mem = NULL;
+        d->ctx = NULL;
+        d->status = ovk_fail(d, OVK_NOMEM, "out of memory: the workspace needs %zu bytes",
+                             need * sizeof(double) + nfj * sizeof(ovk_fctx));
+        return d;
+    }
+    double *p = d->mem;
+    d->f.r = p; p += (nb + 1) * dim;
+    d->f.v = p; p += (nb + 1) * dim;
+    d->f.R = p; p += (nb + 1) * dim * dim;
+    d->f.w = p; p += (nb + 1) * wd;
+    d->f.sb = p; p += nb; d->f.cb = p; p += nb; d->f.sg = p; p += nb; d->f.cg = p; p += nb;
+    d->J = p; p += m * nh;
+    d->phi = p; p += m;
+    d->gam = p; p += m;
+    d->S = p; p += nR * nR;
+    d->g = p; p += nR;
+    d->lamR = p; p += nR;
+    d->Q = p; p += nh;
+    d->W = p; p += nR * nc;
+    d->Jblk = p; p += 18 * nj;
+    d->flam = p; p += 3 * nfj;
+    d->Qi = p; p += 6 * nfj;
+    d->Qj = p; p += 6 * nfj;
+    d->work = p;
+    return d;
+}
+
+void ovk_free_data(ovk_data *d) {
+    if (!d) return;
+    free(d->mem);
+    free(d->ctx);
+    free(d);
+}
+
+const char *ovk_message(const ovk_data *d) { return d ? d->msg : "no workspace (out of memory)"; }
+int ovk_data_status(const ovk_data *d) { return d ? d->status : OVK_NOMEM; }
+
+/* y = [q (nb nq_b), h (nb nh_b)] -> ydot, lam (m; zeros at eliminated rows), qf (ncols; friction
+ * forces, the next evaluation's warm start), *iterations (friction force evaluations), *damped
+ * (the damped Newton ran). guess_mode: 0 none (x0 = lam0), 1 guess = qf of a nearby evaluation
+ * (ncols), 2 guess = lam (m). t is unused (no load depends on time). */
+int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int guess_mode, const double *guess,
+                 double *ydot, double *lam, double *qf, int *iterations, int *damped) {
+    (void)t;
+    if (!d) return OVK_NOMEM;
+    if (d->status) return d->status;
+    d->msg[0] = '\0';
+    *iterations = 0;
+    *damped = 0;
+    if (guess_mode < 0 || guess_mode > 2 || (guess_mode && !guess))
+        return ovk_fail(d, OVK_INVALID, "evaluate: guess_mode %d %s", guess_mode,
+                        guess ? "is not 0, 1 or 2" : "without a guess");
+    int n = M->nb * M->nq_b, nh = M->nb * M->nh_b;
+    const double *q = y, *h = y + n;
+    int status;
+    ovk_frames_build(M, q, h, &d->f);
+    ovk_constraint_rows(M, d, q);
+    ovk_kkt_rhs(M, d, h);
+    if ((status = ovk_loads(M, d))) return status;
+    if ((status = ovk_kkt_solve(M, d))) return status;
+    if (M->nfj && (status = ovk_friction(M, d, guess_mode, guess, qf, iterations, damped))) return status;
+    ovk_kkt_accelerations(M, d, lam, ydot + n);
+    if ((status = ovk_rates(M, d, h, ydot))) return status;
+    for (int k = 0; k < n + nh; k++)
+        if (!isfinite(ydot[k])) return ovk_fail(d, OVK_NONFINITE, "non-finite number in y' (entry %d)", k);
+    return OVK_OK;
+}
+
+/* The reported reactions (reac, nj x 6) and friction outputs (fric, nj) at y and lam (outputs.c). */
+int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac, double *fric) {
+    if (!d) return OVK_NOMEM;
+    if (d->status) return d->status;
+    d->msg[0] = '\0';
+    ovk_reported(M, d, y, lam, reac, fric);
+    return OVK_OK;
+}

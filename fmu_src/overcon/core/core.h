@@ -1,0 +1,218 @@
+/* overcon core: one evaluation of Eq. 18 (direct dynamics with the scene's elimination and Coulomb
+ * joint friction), the coordinate rates and the reported reactions, in C11 and libm.
+ *
+ * Shaped like MuJoCo's engine: a packed, read-only model (ovk_model, packed by overcon.kernel) and
+ * a workspace per instance (ovk_data: every buffer of an evaluation, sized once from the model,
+ * and the message of the last failure); stage functions that each do one job, one file each:
+ *   frames.c            positions, rotations and velocities of the bodies (and the base)
+ *   joints.c            the joint table: dispatch by type, and the assembly of Phi, Phi_h, gamma
+ *   joints_planar.c     planar revolute and translational joints: rows, friction setup and forces
+ *   joints_spherical.c  spatial spherical joints (z-x-z Euler angles): the same
+ *   loads.c             applied forces: gravity, gyroscopic, force, torque, spring
+ *   kkt.c               the KKT solve with the scene's elimination (Cholesky of S) and h'
+ *   friction.c          friction laws, the reduced friction fixed point, Newton and damped Newton
+ *   linalg.c            dense Cholesky and LU (fixed summation order, no BLAS)
+ *   outputs.c           reported reactions and friction forces
+ *   rates.c             coordinate rates q' from h
+ *   api.c               the exported entry points (ovk_*), the only symbols of the library
+ * Units and signs: SI, the paper's conventions (those of overcon.evaluation and overcon.joints).
+ *
+ * Every failure is a status (OVK_*) plus a message kept in the workspace (ovk_message); the core
+ * never aborts or exits, and has no global mutable state (two workspaces never share memory).
+ * The caller (overcon.kernel) repeats on the numpy path any evaluation that returns a status, so
+ * the robust friction fallback and the errors users read exist once, in Python.
+ *
+ * Arithmetic: a fixed summation order, no BLAS; compiled with -ffp-contract=off -fno-fast-math so
+ * the results do not depend on the CPU's FMA support or the BLAS dispatch.
+ */
+#ifndef OVERCON_CORE_H
+#define OVERCON_CORE_H
+
+#include <stddef.h>
+
+#define OVK_ABI 4 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+
+enum {
+    OVK_OK = 0,
+    OVK_SINGULAR = 1,  /* S not positive definite: a singular position */
+    OVK_FRICTION = 2,  /* Newton and damped Newton on the friction multipliers gave up */
+    OVK_EULER = 3,     /* |sin beta| < SIN_BETA_MIN: z-x-z Euler angles singular */
+    OVK_NONFINITE = 4, /* a non-finite number on the way */
+    OVK_SPRING = 5,    /* a spring of positive free length whose points coincide */
+    OVK_NOMEM = 6,     /* the workspace could not be allocated */
+    OVK_INVALID = 7    /* a model or argument outside what the core takes */
+};
+enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 };
+enum { LAW_NONE = 0, LAW_REGULARISED = 1, LAW_STRIBECK = 2 };
+enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
+
+#define NJC 12  /* doubles of constants per joint */
+#define NLP 5   /* doubles of friction law per joint: mu, v_reg, size, mu_static, v_stribeck */
+#define NLD 11  /* doubles per load: value[3], s_i[3], s_j[3], stiffness, free_length */
+#define NEWTON_MAX_ITER 12
+#define NEWTON_REFRESH 1e-3
+#define DAMPED_MAX_ITER 30
+#define ARMIJO 1e-4
+#define SIN_BETA_MIN 1e-3
+#define OVK_MAX_FRICTION 32 /* friction joints (and 3 x that multipliers): overcon.kernel.support checks */
+#define OVK_MSG 256         /* bytes of the failure message, with its terminating zero */
+
+#if defined(__GNUC__)
+#define OVK_EXPORT __attribute__((visibility("default")))
+#define OVK_HIDDEN __attribute__((visibility("hidden")))
+#else
+#define OVK_EXPORT
+#define OVK_HIDDEN
+#endif
+
+/* The model, packed by overcon.kernel.Kernel (field order and types mirrored there). Read only. */
+typedef struct {
+    int dim, nb, nq_b, nh_b, m, nR, nj, nl;
+    int nx, ncols, nfj, nfg;
+    int max_iter;
+    double baumgarte, tol;
+    const int *retained;   /* nR */
+    const double *Minv;    /* nb * nh_b */
+    const double *mass;    /* nb */
+    const double *inertia; /* nb * 3 (spatial) */
+    const double *gravity; /* dim */
+    const int *jtype, *jbi, *jbj, *jneq, *jrows; /* nj; jrows nj * 3 (equation indices) */
+    const double *jconst;  /* nj * NJC */
+    const int *jlaw;       /* nj */
+    const double *jlawp;   /* nj * NLP */
+    const int *ltype, *lbi, *lbj; /* nl */
+    const double *lp;      /* nl * NLD */
+    const int *xrows;      /* nx: positions in lam_R of the friction rows */
+    const int *cols;       /* ncols: velocity indices the friction forces act on */
+    const int *fj;         /* nfj: friction joints, plan order (group by group) */
+    const int *fgroup;     /* nfg + 1: start of each friction group in fj */
+    const int *fx;         /* nfj * 3: x index per equation (nx = eliminated) */
+    const int *fci, *fcj;  /* nfj * 6: index into cols per coordinate of body i, j (ncols = base) */
+    const int *rbody;      /* nR * 2: the bodies (-1 base) of each retained row: Phi_h is zero elsewhere */
+} ovk_model;
+
+/* Frames of the bodies, slot nb = the base. */
+typedef struct {
+    double *r, *R, *v, *w; /* (nb + 1) slots: r, v dim; R dim*dim; w 1 (planar) or 3 */
+    double *sb, *cb, *sg, *cg; /* spatial: sin/cos of beta and gamma per body (rates) */
+} ovk_frames;
+
+/* Per-evaluation constants of one friction joint (the friction setup of its type). */
+typedef struct {
+    double A[9], JiT[6]; /* planar: A_i (3 x 3), (J_X)_i^T (3 x 2) */
+    double e[2], arm_i[2], arm_j[2], coef; /* translational: guide, arms, mu(v); revolute: size*mu */
+    double Ri[9], RiT[9], omega[3], Rji[9]; /* spherical */
+} ovk_fctx;
+
+/* The workspace of one instance: every buffer of an evaluation, sized from the model by
+ * ovk_make_data, and the last failure's message. */
+typedef struct {
+    ovk_frames f;
+    double *J;     /* m x nh: Phi_h */
+    double *phi;   /* m */
+    double *gam;   /* m */
+    double *S;     /* nR x nR: S = J_R M^-1 J_R^T, then its Cholesky factor */
+    double *g;     /* nR: gamma_R (with Baumgarte) */
+    double *lamR;  /* nR: retained multipliers */
+    double *Q;     /* nh: applied (and friction) forces */
+    double *W;     /* nR x ncols: S^-1 J_R M^-1 [:, cols] */
+    double *Jblk;  /* nj x 18: every joint's (J_X)_i block, for the friction setup */
+    double *work;  /* the friction solve's vectors and matrices */
+    ovk_fctx *ctx; /* nfj */
+    double *flam, *Qi, *Qj; /* nfj x 3, nfj x 6, nfj x 6: the last friction force evaluation */
+    double *mem;   /* the one allocation behind the double buffers above */
+    int status;    /* nonzero: the workspace could not be made (every call returns it) */
+    char msg[OVK_MSG];
+} ovk_data;
+
+/* failures: the status, with its message written into d->msg (printf format) */
+OVK_HIDDEN int ovk_fail(ovk_data *d, int status, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+
+/* frames.c */
+OVK_HIDDEN int ovk_slot(const ovk_model *M, int b);
+OVK_HIDDEN void ovk_frames_build(const ovk_model *M, const double *q, const double *h, ovk_frames *f);
+
+/* joints.c: the joint table */
+OVK_HIDDEN void ovk_joint_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji, double *Jj,
+                               double *gam);
+OVK_HIDDEN void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q);
+OVK_HIDDEN void ovk_joint_friction_setup(const ovk_model *M, const ovk_frames *f, int j, const double *Ji,
+                                         ovk_fctx *cx);
+OVK_HIDDEN void ovk_joint_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
+                                          double *Qi, double *Qj);
+OVK_HIDDEN void ovk_joint_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
+                                       double *dQi, double *dQj);
+OVK_HIDDEN double ovk_joint_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
+
+/* joints_planar.c */
+OVK_HIDDEN void ovk_revolute_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji,
+                                  double *Jj, double *gam);
+OVK_HIDDEN void ovk_translational_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji,
+                                       double *Jj, double *gam);
+OVK_HIDDEN void ovk_planar_friction_setup(const ovk_model *M, const ovk_frames *f, int j, const double *Ji,
+                                          ovk_fctx *cx);
+OVK_HIDDEN void ovk_planar_paux(const ovk_fctx *cx, const double *lam, double *p);
+OVK_HIDDEN void ovk_planar_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
+                                           double *Qi, double *Qj);
+OVK_HIDDEN void ovk_planar_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
+                                        double *dQi, double *dQj);
+OVK_HIDDEN double ovk_planar_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
+
+/* joints_spherical.c */
+OVK_HIDDEN void ovk_spherical_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji,
+                                   double *Jj, double *gam);
+OVK_HIDDEN void ovk_spherical_friction_setup(const ovk_model *M, const ovk_frames *f, int j, ovk_fctx *cx);
+OVK_HIDDEN void ovk_spherical_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
+                                              double *Qi, double *Qj);
+OVK_HIDDEN void ovk_spherical_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
+                                           double *dQi, double *dQj);
+OVK_HIDDEN double ovk_spherical_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
+
+/* loads.c */
+OVK_HIDDEN int ovk_loads(const ovk_model *M, ovk_data *d);
+
+/* kkt.c */
+OVK_HIDDEN void ovk_kkt_rhs(const ovk_model *M, ovk_data *d, const double *h);
+OVK_HIDDEN int ovk_kkt_solve(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN void ovk_kkt_friction_columns(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN void ovk_kkt_accelerations(const ovk_model *M, ovk_data *d, double *lam, double *hdot);
+
+/* friction.c */
+OVK_HIDDEN double ovk_law_magnitude(const double *lp, int law, double speed);
+OVK_HIDDEN double ovk_law_coefficient(const double *lp, int law, double v);
+OVK_HIDDEN double ovk_law_mu_over_speed(const double *lp, int law, double s);
+OVK_HIDDEN double ovk_law_mu_over_speed_slope(const double *lp, int law, double s);
+OVK_HIDDEN int ovk_friction(const ovk_model *M, ovk_data *d, int guess_mode, const double *guess, double *qf,
+                            int *iterations, int *damped);
+
+/* linalg.c */
+OVK_HIDDEN int ovk_cholesky(double *S, int n);
+OVK_HIDDEN void ovk_cho_solve(const double *U, int n, double *b);
+OVK_HIDDEN void ovk_cho_solve_many(const double *U, int n, double *B, int nc);
+OVK_HIDDEN int ovk_lu_factor(double *A, int n, int *piv);
+OVK_HIDDEN void ovk_lu_solve(const double *A, int n, const int *piv, double *b);
+
+/* outputs.c */
+OVK_HIDDEN void ovk_reported(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,
+                             double *fric);
+
+/* rates.c */
+OVK_HIDDEN int ovk_rates(const ovk_model *M, ovk_data *d, const double *h, double *qdot);
+
+/* api.c: the library's entry points */
+OVK_EXPORT int ovk_abi(void);
+OVK_EXPORT int ovk_max_friction(void);
+OVK_EXPORT ovk_data *ovk_make_data(const ovk_model *M);
+OVK_EXPORT void ovk_free_data(ovk_data *d);
+OVK_EXPORT const char *ovk_message(const ovk_data *d);
+OVK_EXPORT int ovk_data_status(const ovk_data *d);
+OVK_EXPORT int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int guess_mode,
+                            const double *guess, double *ydot, double *lam, double *qf, int *iterations, int *damped);
+OVK_EXPORT int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,
+                           double *fric);
+
+#endif

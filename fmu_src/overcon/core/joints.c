@@ -1,0 +1,65 @@
+/* Stage: the joint table. Dispatch by joint type to joints_planar.c and joints_spherical.c, and the
+ * assembly of every joint's rows into Phi (m), Phi_h (m x nh) and gamma (m). */
+#include <string.h>
+
+#include "core.h"
+
+/* Phi, Jacobian blocks and gamma of joint j; Ji, Jj are (neq, nh_b) row-major. */
+void ovk_joint_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji, double *Jj,
+                    double *gam) {
+    switch (M->jtype[j]) {
+    case J_REVOLUTE: ovk_revolute_rows(M, f, j, phi, Ji, Jj, gam); break;
+    case J_TRANSLATIONAL: ovk_translational_rows(M, f, j, phi, Ji, Jj, gam); break;
+    default: ovk_spherical_rows(M, f, j, phi, Ji, Jj, gam); break;
+    }
+}
+
+/* d->phi, d->J (Phi_h), d->gam from the frames in d->f, and every joint's (J_X)_i block in
+ * d->Jblk (the friction setup needs it). */
+void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
+    int nh = M->nb * M->nh_b, kh = M->nh_b;
+    double *J = d->J;
+    memset(J, 0, sizeof(double) * M->m * nh);
+    double blkJ[18], ph[3], gm[3];
+    for (int j = 0; j < M->nj; j++) {
+        int ne = M->jneq[j];
+        double *blkI = d->Jblk + 18 * j;
+        ovk_joint_rows(M, &d->f, j, ph, blkI, blkJ, gm);
+        if (M->jtype[j] == J_TRANSLATIONAL) {
+            double pi = M->jbi[j] >= 0 ? q[M->jbi[j] * M->nq_b + 2] : 0.0;
+            double pj = M->jbj[j] >= 0 ? q[M->jbj[j] * M->nq_b + 2] : 0.0;
+            ph[1] = pi - pj - M->jconst[NJC * j + 6];
+        }
+        for (int e = 0; e < ne; e++) {
+            int row = M->jrows[3 * j + e];
+            d->phi[row] = ph[e];
+            d->gam[row] = gm[e];
+            if (M->jbi[j] >= 0)
+                for (int k = 0; k < kh; k++) J[(size_t)row * nh + M->jbi[j] * kh + k] += blkI[e * kh + k];
+            if (M->jbj[j] >= 0)
+                for (int k = 0; k < kh; k++) J[(size_t)row * nh + M->jbj[j] * kh + k] += blkJ[e * kh + k];
+        }
+    }
+}
+
+void ovk_joint_friction_setup(const ovk_model *M, const ovk_frames *f, int j, const double *Ji, ovk_fctx *cx) {
+    if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_setup(M, f, j, cx);
+    else ovk_planar_friction_setup(M, f, j, Ji, cx);
+}
+
+void ovk_joint_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *Qi,
+                               double *Qj) {
+    if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_forces(M, j, cx, lam, Qi, Qj);
+    else ovk_planar_friction_forces(M, j, cx, lam, Qi, Qj);
+}
+
+void ovk_joint_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *dQi,
+                            double *dQj) {
+    if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_jac(M, j, cx, lam, dQi, dQj);
+    else ovk_planar_friction_jac(M, j, cx, lam, dQi, dQj);
+}
+
+double ovk_joint_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam) {
+    if (M->jtype[j] == J_SPHERICAL) return ovk_spherical_friction_output(M, j, cx, lam);
+    return ovk_planar_friction_output(M, j, cx, lam);
+}

@@ -1,0 +1,78 @@
+"""Compiles overcon's C core (fmu_src/overcon/core/*.c) into overcon/core/libovercore.<so|dylib|dll>
+when the package is installed (``pip install .``, ``pip install -e .``); everything else about the
+package is in pyproject.toml.
+
+The core is a plain C library (C11 and libm, no Python API), loaded through ctypes by
+overcon.kernel and copied into every FMU by ``overcon build``. So it is declared as an Extension
+(the wheel is platform-specific, an editable install builds it in place, the sdist carries its
+sources) but compiled by :class:`BuildCore` with exactly the core's flags (:data:`CFLAGS`) and
+none of the interpreter's own build flags (sysconfig's ``-O3 -g``, rpaths, libpython), and named
+without a CPython tag: the same bytes work for every interpreter and outside Python.
+
+Compiler: ``$CC``, else the compiler this Python was built with (sysconfig ``CC``) when it is on
+PATH, else ``cc``;
+it must take gcc-style flags (gcc, clang). ``CFLAGS`` from the environment is not used: the flags
+are part of the numbers (``-ffp-contract=off -fno-fast-math``: no fused multiply-add, no
+reassociation, so the results do not depend on the CPU's FMA support).
+"""
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import sysconfig
+from pathlib import Path
+
+from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
+from setuptools.errors import CompileError
+
+CORE = Path("fmu_src") / "overcon" / "core"
+SOURCES = sorted(str(p.as_posix()) for p in CORE.glob("*.c"))
+HEADERS = sorted(str(p.as_posix()) for p in CORE.glob("*.h"))
+CFLAGS = ["-O2", "-ffp-contract=off", "-fno-fast-math", "-std=c11", "-Wall", "-Wextra", "-Werror"]
+SHARED = ["-shared", "-fPIC"]
+LIBS = ["-lm"]
+
+
+def shared_suffix() -> str:
+    return ".dll" if sys.platform == "win32" else ".dylib" if sys.platform == "darwin" else ".so"
+
+
+def compiler() -> list:
+    """``$CC``; else the compiler Python was built with, when it is on PATH; else ``cc``."""
+    if os.environ.get("CC"):
+        return shlex.split(os.environ["CC"])
+    built_with = shlex.split(sysconfig.get_config_var("CC") or "")
+    return built_with if built_with and shutil.which(built_with[0]) else ["cc"]
+
+
+class BuildCore(build_ext):
+    """build_ext for the core: one shared library, compiled and linked in one command."""
+
+    def get_ext_filename(self, fullname):
+        return os.path.join(*fullname.split(".")) + shared_suffix()
+
+    def get_export_symbols(self, ext):
+        return []  # a plain C library: no PyInit_ function
+
+    def build_extension(self, ext):
+        out = Path(self.get_ext_fullpath(ext.name))
+        out.parent.mkdir(parents=True, exist_ok=True)
+        cc = compiler()
+        if not cc or shutil.which(cc[0]) is None:
+            raise CompileError(f"overcon's C core needs a C compiler: {' '.join(cc) or 'cc'} not found "
+                               "(install gcc or clang, or set CC)")
+        cmd = [*cc, *CFLAGS, *SHARED, "-o", str(out), *ext.sources, *LIBS]
+        print(shlex.join(cmd))
+        run = subprocess.run(cmd, capture_output=True, text=True)
+        if run.returncode != 0:
+            said = (run.stderr.strip() or run.stdout.strip())[-4000:] or "no output"
+            raise CompileError(f"compiling overcon's C core failed ({shlex.join(cmd)}): exit status "
+                               f"{run.returncode}:\n{said}")
+
+
+setup(
+    ext_modules=[Extension("overcon.core.libovercore", sources=SOURCES, depends=HEADERS)],
+    cmdclass={"build_ext": BuildCore},
+)

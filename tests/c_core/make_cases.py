@@ -1,0 +1,184 @@
+"""Writes the C core's test cases for driver.c (``python tests/c_core/make_cases.py OUT``): packed
+models, exactly as overcon.kernel packs them, and evaluations with what the installed core returns
+for each (status, friction force evaluations, damped flag, y', lam, qf, reactions, friction
+outputs). ci/sanitize.sh then runs the same cases through the core compiled with AddressSanitizer
+and UndefinedBehaviorSanitizer and requires the same bits: both builds use -ffp-contract=off
+without fast-math, so the compiler may not change any floating-point result.
+
+The cases: the paper's planar mechanism (friction in two revolute and one translational joint) and
+its spatial mechanism (friction in two spherical joints) at random states, cold and warm-started;
+spatial states where Newton gives up and damped Newton finishes; and every failure status: a
+singular position (tests/data/two_pins: two pins on one bar, rows exactly dependent), the friction solve giving up
+(friction_max_iter = 2), a non-finite state, an Euler singularity, a spring whose points coincide.
+The script refuses to write a file that lacks any of these.
+
+File layout (native byte order): b"OVKCASE1", then records. 'M' a model: 13 int32 counts (ovk_model
+order), baumgarte and tol (float64), then per array field of ovk_model an int32 length and its
+items (int32 or float64). 'E' an evaluation of the last model: guess mode, y, guess, expected
+status, iterations, damped, and for status 0 y', lam, qf, reactions, friction outputs (each an
+int32 length and float64 items).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import struct
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from overcon import kernel, scene as scene_mod
+from overcon.checks import compile_checked
+
+MECH = Path(__file__).resolve().parents[2] / "mechanisms"
+COUNTS = ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols", "nfj", "nfg", "max_iter")
+FLOATS = ("baumgarte", "tol")
+DOUBLE_FIELDS = {"Minv", "mass", "inertia", "gravity", "jconst", "jlawp", "lp"}
+TWO_PINS = Path(__file__).resolve().parents[1] / "data" / "two_pins" / "two_pins_wo3.toml"
+
+
+class Writer:
+    def __init__(self):
+        self.parts = [b"OVKCASE1"]
+        self.counts = {"models": 0, "evaluations": 0, "statuses": {}, "damped_ok": 0}
+        self.kernel = None
+
+    def ints(self, a):
+        a = np.ascontiguousarray(a, dtype=np.int32).reshape(-1)
+        self.parts.append(struct.pack("=i", a.size) + a.tobytes())
+
+    def doubles(self, a):
+        a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1)
+        self.parts.append(struct.pack("=i", a.size) + a.tobytes())
+
+    def model(self, model, solver):
+        k, note = kernel.select(model, dataclasses.replace(solver, kernel="c"))
+        assert k is not None, note
+        cm = k._cmodel
+        by_address = {a.ctypes.data: a for a in k._keep}
+        self.parts.append(b"M" + struct.pack("=13i", *(getattr(cm, n) for n in COUNTS))
+                          + struct.pack("=2d", *(getattr(cm, n) for n in FLOATS)))
+        for name, ctype in cm._fields_:
+            if name in COUNTS or name in FLOATS:
+                continue
+            (self.doubles if name in DOUBLE_FIELDS else self.ints)(by_address[getattr(cm, name)])
+        self.kernel = k
+        self.counts["models"] += 1
+        return k
+
+    def evaluation(self, y, lam_guess=None, qf_guess=None):
+        k = self.kernel
+        got = k.evaluate(0.0, y, lam_guess, qf_guess)
+        if qf_guess is not None and k._ncols:
+            mode, guess = 1, qf_guess
+        elif lam_guess is not None:
+            mode, guess = 2, lam_guess
+        else:
+            mode, guess = 0, np.zeros(0)
+        status = k.last_status
+        self.parts.append(b"E" + struct.pack("=i", mode))
+        self.doubles(y)
+        self.doubles(guess)
+        self.parts.append(struct.pack("=3i", status, k._its.value, k._damped.value))
+        if status == 0:
+            ydot, lam, qf, _ = got
+            reac, fric = k.outputs(y, lam)
+            for a in (ydot, lam, qf, reac, fric):
+                self.doubles(a)
+            self.counts["damped_ok"] += int(k.damped)
+        st = self.counts["statuses"]
+        st[status] = st.get(status, 0) + 1
+        self.counts["evaluations"] += 1
+        return status
+
+    def write(self, path: Path):
+        path.write_bytes(b"".join(self.parts))
+
+
+def spec_of(path: Path, **solver):
+    spec = scene_mod.as_scene(scene_mod.load(path))
+    return dataclasses.replace(spec, solver=dataclasses.replace(spec.solver, **solver)) if solver else spec
+
+
+def states(model, n, seed):
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        q = model.q0 + (0.02 * rng.standard_normal(model.n) if i else 0.0)
+        h = model.h0 + (0.5 * rng.standard_normal(model.nh) if i else 0.0)
+        yield np.concatenate([q, h])
+
+
+def random_states(w: Writer, model, n, seed):
+    """n states around the initial one, each cold and warm-started from lam and from qf."""
+    rng = np.random.default_rng(seed + 100)
+    for y in states(model, n, seed):
+        w.evaluation(y)
+        w.evaluation(y, lam_guess=rng.standard_normal(model.m))
+        if w.kernel._ncols:
+            w.evaluation(y, qf_guess=rng.standard_normal(w.kernel._ncols))
+
+
+def build(tmp: Path) -> Writer:
+    w = Writer()
+    for name, n in (("planar_f145_wo6", 12), ("spatial_MN_wo5", 12), ("spatial_GH_wo9", 30), ("spatial_GHMN_wo18", 30)):
+        spec = spec_of(MECH / f"{name}.toml")
+        model = compile_checked(spec)
+        w.model(model, spec.solver)
+        random_states(w, model, n, seed=7)
+    # the friction solve gives up: two force evaluations are not enough for either Newton
+    spec = spec_of(MECH / "planar_f45_wo4.toml", friction_max_iter=2)
+    model = compile_checked(spec)
+    w.model(model, spec.solver)
+    random_states(w, model, 3, seed=1)
+    # a non-finite state, an Euler singularity (beta of the first body 1e-4 rad)
+    spec = spec_of(MECH / "spatial_MN_wo5.toml")
+    model = compile_checked(spec)
+    w.model(model, spec.solver)
+    y = np.concatenate([model.q0, model.h0])
+    bad, flat = y.copy(), y.copy()
+    bad[0] = np.nan
+    flat[4] = 1e-4
+    w.evaluation(bad)
+    w.evaluation(flat)
+    # a spring of free length 0.5 m whose points coincide (slider2 at its base point)
+    (tmp / "planar_sliders.toml").write_text(
+        (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.5"))
+    (tmp / "s.toml").write_text((MECH / "planar_f45_wo4.toml").read_text())
+    spec = scene_mod.as_scene(scene_mod.load(tmp / "s.toml"))
+    model = compile_checked(spec, check_initial=False)
+    w.model(model, spec.solver)
+    ld = next(ld for ld in model.loads if ld.type == "spring")
+    q = model.q0.copy()
+    q[3 * ld.bi: 3 * ld.bi + 2] = 0.0
+    w.evaluation(np.concatenate([q, model.h0]))
+    # a singular position
+    spec = scene_mod.as_scene(scene_mod.load(TWO_PINS))
+    model = compile_checked(spec, check_initial=False)
+    w.model(model, spec.solver)
+    w.evaluation(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    w.evaluation(np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0]))
+    return w
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("out", type=Path)
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        w = build(Path(tmp))
+    st = w.counts["statuses"]
+    missing = [s for s in (0, 1, 2, 3, 4, 5) if not st.get(s)]  # every status but out of memory
+    if missing or not w.counts["damped_ok"]:
+        print(f"make_cases: the cases lack statuses {missing} or a damped Newton that finished "
+              f"({w.counts['damped_ok']}): {w.counts}", file=sys.stderr)
+        return 1
+    w.write(args.out)
+    print(f"make_cases: {w.counts['models']} models, {w.counts['evaluations']} evaluations, statuses "
+          f"{dict(sorted(st.items()))}, damped Newton finished {w.counts['damped_ok']} times -> {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

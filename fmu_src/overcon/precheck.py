@@ -39,7 +39,21 @@ def analyse_model(model: Model, methods: str = "auto"):
     cross-check (two SVDs of the Jacobian per joint), or ``"auto"`` (:func:`resolve_methods`)."""
     f = frames(model, model.q0, model.h0)
     J = jacobian_h(model, f).T
-    return analysis.analyse(J, joint_groups(model), methods=resolve_methods(model, methods))
+    compliant = compliant_joints(model)
+    if not compliant:
+        return analysis.analyse(J, joint_groups(model), methods=resolve_methods(model, methods))
+    # redundancy "compliant": the compliant joints' equations are forces; the rigid rest is analysed
+    rigid = [i for i in range(model.m) if i not in set(int(r) for r in model.compliant_rows)]
+    position = {row: k for k, row in enumerate(rigid)}
+    groups = {c.name: [position[r] for r in c.rows] for c in model.joints if c.name not in compliant}
+    return analysis.analyse(J[:, rigid], groups, methods=resolve_methods(model, methods))
+
+
+def compliant_joints(model: Model) -> set[str]:
+    """Names of the joints whose equations are compliant (redundancy "compliant"): their
+    reactions come from their deformation, so they are unique."""
+    rows = set(int(r) for r in model.compliant_rows)
+    return {c.name for c in model.joints if rows.intersection(c.rows)}
 
 
 def frictionless(law) -> bool:
@@ -149,10 +163,16 @@ def precheck(model: Model, source: str = "", methods: str = "auto") -> PrecheckR
     res = analyse_model(model, methods)
     summary = analysis.to_json(res)
     types = {c.name: TYPES[c.type].name for c in model.joints}  # the files' type names
-    joints = tuple(JointVerdict(type=types[j["name"]], **j) for j in summary.pop("joints"))
+    verdicts = {j["name"]: JointVerdict(type=types[j["name"]], **j) for j in summary.pop("joints")}
+    # under redundancy "compliant" the numbers and verdicts are the rigid joints' (the compliant
+    # joints' equations are forces there); a compliant joint's reaction is unique (no tests run)
+    compliant = compliant_joints(model)
+    joints = tuple(verdicts.get(c.name) or JointVerdict(c.name, True, {}, 0, True, types[c.name])
+                   for c in model.joints)
     friction = [model.joints[j].name for j in model.friction_joints]
     acting = [model.joints[j].name for j in model.friction_joints if not frictionless(model.joints[j].law)]
-    nonunique = [name for name in acting if not res.joints[name].unique]
+    nonunique = [name for name in acting if name not in compliant and not res.joints[name].unique]
+    acting = [name for name in acting if name not in compliant]
     problems = []
     for name in nonunique:
         v = res.joints[name]
@@ -219,6 +239,8 @@ def format_table(result: PrecheckResult) -> str:
         m = {k: yn[v] for k, v in j["methods"].items()}  # a test that did not run: "-"
         fr = "ON" if j["name"] in report["friction"] else ""
         flag = "  <-- friction on a non-unique reaction" if j["name"] in report["friction_on_nonunique"] else ""
+        if report["redundancy"] == "compliant" and not j["methods"]:
+            flag += "  (compliant: its reaction comes from its deformation)"
         lines.append(f"{j['name']:<{w}} {j['type']:<14} {yn[j['unique']]:<7} {m.get('rank', '-'):<6} "
                      f"{m.get('svd', '-'):<6} {m.get('qr', '-'):<6} {fr}{flag}")
     lines.append("")

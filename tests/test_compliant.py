@@ -1,0 +1,106 @@
+"""Compliant joints (``redundancy = "compliant"``, ``[joints.compliance]``): a joint's equations
+become a spring-damper on their violation. Without friction the motion converges to the rigid one
+as 1/stiffness; with friction on a joint whose rigid reaction is not unique, the compliant
+motion is one motion, whatever elimination the scene names, and it lies apart from the rigid
+eliminations' motions."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from overcon import scene
+from overcon.checks import compile_checked
+from overcon.cli import main
+from overcon.kernel import support
+from overcon.precheck import precheck
+from overcon.simulate import run
+
+MECH = Path(__file__).resolve().parents[1] / "mechanisms"
+SLIDERS = (MECH / "planar_sliders.toml").read_text()
+
+
+def compliant_sliders(tmp_path: Path, k: float, *, friction: str = "[]", eliminate: str = "", stop: float = 0.5,
+                      table: str | None = None) -> Path:
+    """The paper's planar mechanism with joint1 compliant (stiffness k in N/m and N.m/rad,
+    damping 2 sqrt(k) in N.s/m and N.m.s/rad), run with radau."""
+    d = 2.0 * math.sqrt(k)
+    table = table or (f"stiffness = {k}\nrotational_stiffness = {k}\ndamping = {d}\nrotational_damping = {d}\n")
+    i = SLIDERS.index('name = "joint1"')
+    nxt = SLIDERS.find("\n[", i)
+    (tmp_path / "mech.toml").write_text(SLIDERS[:nxt] + "\n\n[joints.compliance]\n" + table + SLIDERS[nxt:])
+    path = tmp_path / f"compliant_{k:.0e}{eliminate.strip('[]')}.toml"
+    path.write_text(f'[scene]\nname = "compliant"\nmechanism = "mech.toml"\nfriction = {friction}\n'
+                    f'redundancy = "compliant"\n{"eliminate = " + eliminate if eliminate else ""}\n'
+                    f'stop_time = {stop}\n\n[solver]\nmethod = "radau"\ntolerance = 1e-10\n')
+    return path
+
+
+def rigid_sliders(tmp_path: Path, eliminate: int, friction: str = "[]", stop: float = 0.5) -> Path:
+    path = tmp_path / f"rigid_{eliminate}.toml"
+    path.write_text(f'[scene]\nname = "rigid"\nmechanism = "{MECH / "planar_sliders.toml"}"\nfriction = {friction}\n'
+                    f'eliminate = [{eliminate}]\nstop_time = {stop}\n\n[solver]\ntolerance = 1e-12\n')
+    return path
+
+
+def positions(path: Path) -> np.ndarray:
+    spec = scene.load(path)
+    res = run(compile_checked(spec), spec.solver)
+    return res.values[:, [i for i, n in enumerate(res.names) if n.rsplit(".", 1)[1] in ("x", "y", "phi")]]
+
+
+def test_compiled_compliant_model(tmp_path):
+    model = compile_checked(scene.load(compliant_sliders(tmp_path, 1e6)))
+    assert model.elimination_mode == "compliant" and model.eliminated == ()
+    assert list(model.compliant_rows) == [0, 1]  # joint1: distance (N/m) and angle (N.m/rad) rows
+    assert support(model) == "compliant joints (the kernel solves rigid joints only)"
+    report = precheck(model)
+    assert report.redundancy == "compliant" and report.motion_unique
+    assert (report.n_equations, report.rank, report.dof, report.redundant) == (10, 10, 2, 0)
+
+
+def test_without_friction_the_motion_converges_to_the_rigid_one_as_one_over_k(tmp_path):
+    """Measured: max position difference 1.07e-2, 1.08e-3, 1.08e-4 m at k = 1e4, 1e5, 1e6 over
+    1 s: order 1.00."""
+    rigid = positions(rigid_sliders(tmp_path, 4))
+    errors = [np.max(np.abs(positions(compliant_sliders(tmp_path, k)) - rigid)) for k in (1e4, 1e5, 1e6)]
+    orders = [math.log10(errors[i] / errors[i + 1]) for i in range(2)]
+    assert all(0.8 <= p <= 1.2 for p in orders), (errors, orders)
+
+
+def test_friction_on_a_non_unique_joint_gives_one_motion(tmp_path, capsys):
+    """Friction in joint1 (rigidly its reaction is not unique: the eliminations of Phi4 and Phi6
+    give motions 0.4 m apart): compliant, the scene's elimination no longer applies, and the
+    motion lies apart from both rigid ones (0.09 m and 0.58 m at 2 s, measured)."""
+    wo4 = compliant_sliders(tmp_path, 1e6, friction='["joint1"]', eliminate="[4]", stop=2.0)
+    wo6 = compliant_sliders(tmp_path, 1e6, friction='["joint1"]', eliminate="[6]", stop=2.0)
+    a, b = positions(wo4), positions(wo6)
+    assert np.array_equal(a, b)
+    r4 = positions(rigid_sliders(tmp_path, 4, '["joint1"]', 2.0))
+    r6 = positions(rigid_sliders(tmp_path, 6, '["joint1"]', 2.0))
+    assert np.max(np.abs(r4 - r6)) > 0.3
+    assert min(np.max(np.abs(a - r4)), np.max(np.abs(a - r6))) > 0.05
+    assert main(["check", str(wo4)]) == 0
+    out = capsys.readouterr().out
+    assert "motion with friction in joint1: UNIQUE" in out
+    assert "joint1     translational  yes     -      -      -      ON  (compliant: its reaction comes from its " \
+           "deformation)" in out
+    assert "warning: scene.eliminate (Phi4) does not apply under redundancy = 'compliant'" in out
+
+
+@pytest.mark.parametrize("table, message", [
+    ("stiffness = 1e6\n", r"joints\[0\] \(joint1\).compliance.rotational_stiffness: missing required field"),
+    ("stiffness = [1e6, 1e6, 1e6]\nrotational_stiffness = 1e6\n",
+     r"joints\[0\] \(joint1\).compliance.stiffness: per-axis values \(a 3-vector along the joint frame's axes\) are not "
+     r"supported: give one scalar \(isotropic\)"),
+    ("stiffness = 0.0\nrotational_stiffness = 1e6\n", r"joints\[0\] \(joint1\).compliance.stiffness: must be > 0, got 0.0"),
+    ("stiffness = 1e6\nrotational_stiffness = 1e6\ndamping = -1.0\n",
+     r"joints\[0\] \(joint1\).compliance.damping: must be >= 0, got -1.0"),
+    ("stiffness = 1e6\nrotational_stiffness = 1e6\nspring = 1.0\n", r"joints\[0\] \(joint1\).compliance.spring: unknown key \(allowed: stiffness, rotational_stiffness, "
+                                                     r"damping, rotational_damping\)"),
+])
+def test_compliance_table_is_checked(tmp_path, table, message):
+    with pytest.raises(scene.SceneError, match=message):
+        scene.load(compliant_sliders(tmp_path, 1e6, table=table))

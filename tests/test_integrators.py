@@ -173,16 +173,33 @@ def test_rk4_refuses_a_step_beyond_its_stability_boundary(h_lambda, stable):
     with pytest.raises(integrators.UnstableStep, match=r"t = 0 s: rk4 is unstable with the fixed step") as exc:
         itg.step()
     assert itg.t == 0.0 and itg.nsteps == 0  # the step is refused, the state kept
-    assert next_lockstep_step(h, [str(exc.value)]) == pytest.approx(min(h / 4, 0.002), rel=0.5)
-    assert next_lockstep_step(h, [str(exc.value)]) <= 2.0 / lam
+    assert exc.value.stable_step == pytest.approx(2.0 / lam, rel=1e-9)  # data: rho is exact here
+    assert f"a step of at most {2.0 / lam:.2g} s is stable" in str(exc.value)  # and said to people
+    assert next_lockstep_step(h, [exc.value.stable_step]) == pytest.approx(min(h / 4, 0.002), rel=0.5)
+    assert next_lockstep_step(h, [exc.value.stable_step]) <= 2.0 / lam
 
 
-def test_next_lockstep_step_reads_only_unstable_failures():
+def test_next_lockstep_step_takes_only_unstable_failures():
     from overcon.verdict import LOCKSTEP_MIN_STEP, next_lockstep_step
 
-    unstable = "t = 0.1 s: rk4 is unstable with the fixed step 0.005 s (...): a step of at most 0.00087 s is stable; or"
-    assert next_lockstep_step(5e-3, [unstable]) == pytest.approx(8e-4)
-    assert next_lockstep_step(5e-3, [unstable, "the problem is stiff for dopri5"]) is None
-    assert next_lockstep_step(5e-3, [unstable.replace("0.00087", "0.004")]) == pytest.approx(1e-3)  # at most h/4
-    assert next_lockstep_step(2e-6, [unstable.replace("0.00087", "5e-7")]) is None  # below LOCKSTEP_MIN_STEP
+    assert next_lockstep_step(5e-3, [0.00087]) == pytest.approx(8e-4)
+    assert next_lockstep_step(5e-3, [0.00087, None]) is None  # another failure: no retry
+    assert next_lockstep_step(5e-3, [0.004]) == pytest.approx(1e-3)  # at most h/4
+    assert next_lockstep_step(2e-6, [5e-7]) is None  # below LOCKSTEP_MIN_STEP
+    assert next_lockstep_step(5e-3, []) is None
     assert LOCKSTEP_MIN_STEP == 1e-6
+
+
+def test_lockstep_grid_is_the_one_retry_procedure():
+    """Every variant on one grid; repeated at the step the failures name, at most
+    LOCKSTEP_RETRIES times; a failure that is not an unstable step ends it; the note says why."""
+    from overcon.verdict import LOCKSTEP_RETRIES, LockstepGrid
+
+    grid = LockstepGrid(5e-3)
+    assert grid.note is None
+    assert grid.retry([3.3e-3, 3.4e-3]) and grid.step == pytest.approx(1e-3)
+    assert grid.note == ("rk4 unstable at the lockstep step 0.005 s (a step of at most 0.0033 s is stable); "
+                         "lockstep runs repeated at 0.001 s")
+    assert not grid.retry([7e-4, None]) and grid.step == pytest.approx(1e-3)
+    grid = LockstepGrid(1.0)
+    assert [grid.retry([0.9]) for _ in range(LOCKSTEP_RETRIES + 1)] == [True] * LOCKSTEP_RETRIES + [False]

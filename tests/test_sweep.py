@@ -341,3 +341,40 @@ def test_external_scheduler_gives_the_same_rows(accepted, tmp_path):
         ref = local[r["key"]]
         assert {k: v for k, v in r.items() if k not in NOT_COMPARED} == \
                {k: v for k, v in ref.items() if k not in NOT_COMPARED}
+
+
+def test_sweep_and_compare_follow_one_lockstep_procedure(fmus, cluster_client, tmp_path, monkeypatch):
+    """At joint1.mu = 0.016 rk4 is unstable at 5 ms (it names 0.0033 s): sweep and compare both
+    repeat the group's lockstep runs through LockstepGrid.retry with the same stable steps, end on
+    the same grid (0.0002 s) with the same positions, and give the same verdict; the sweep keeps
+    the set (rows ok, the step recorded)."""
+    from overcon import verdict
+    from overcon.tooling.pipeline import compare_paths
+    from overcon.tooling.run import read_series
+
+    calls = []
+    real = verdict.LockstepGrid.retry
+
+    def spy(self, stable_steps):
+        before = self.step
+        again = real(self, stable_steps)
+        calls.append((before, tuple(sorted(round(h, 9) for h in stable_steps)), again, self.step))
+        return again
+
+    monkeypatch.setattr(verdict.LockstepGrid, "retry", spy)
+    sw = sweep.prepare(tmp_path / "sw", inputs=[str(f) for f in fmus], params=["joint1.mu=0.016"], stop_time=2, **QUIET)
+    out = sweep.run(sw, client=cluster_client, progress=False, **QUIET)
+    swept, calls[:] = list(calls), []
+    res = compare_paths(fmus, tmp_path / "cmp", stop_time=2, settings={"joint1.mu": 0.016}, echo=lambda s: None)
+    compared = list(calls)
+    assert swept == compared and len(swept) == 2 and swept[0][0] == 5e-3 and swept[-1][-1] == pytest.approx(2e-4)
+    assert all(again for _, _, again, _ in swept)
+    rows = _rows(out.csv)
+    assert [r["status"] for r in rows] == ["ok", "ok"] and {r["lockstep_step [s]"] for r in rows} == {"0.0002"}
+    (c,) = res.comparisons
+    assert c.lockstep_step == pytest.approx(2e-4) and {r["verdict"] for r in rows} == {c.verdict_text()} == {"not unique"}
+    for r in rows:
+        lock = read_series(tmp_path / "cmp" / "lockstep" / f"{r['scene']}.csv")
+        assert float(r["final slider1.x [m]"]) == lock.values["slider1.x"][-1]  # the same runs, bit for bit
+    assert "sweep: 1 (group, parameter set) pair(s): 1 decided, 0 failed" in sweep.summary(sw, rows)[0]
+

@@ -259,7 +259,13 @@ them."""
 
 
 class UnstableStep(ArithmeticError):
-    """A fixed step beyond the method's stability boundary (see :meth:`RK4.step`)."""
+    """A fixed step beyond the method's stability boundary (see :meth:`RK4.step`);
+    ``stable_step`` (s) is the largest step the estimate calls stable, as data for the lockstep
+    comparison (:class:`overcon.verdict.LockstepGrid`)."""
+
+    def __init__(self, message: str, stable_step: float):
+        super().__init__(message)
+        self.stable_step = float(stable_step)
 
 
 class RK4:
@@ -320,7 +326,7 @@ class RK4:
                 f"t = {self.t:.9g} s: {LOCKSTEP_UNSTABLE} with the fixed step {h:g} s (h*rho = {h_rho:.3g} > "
                 f"{RK4_STABILITY}, rho = {rho:.3g} 1/s the fastest rate of the right-hand side, e.g. friction "
                 f"sticking inside its regularisation band): a step of at most {2.0 / rho:.2g} s is stable; "
-                "or use the method for stiff problems, radau")
+                "or use the method for stiff problems, radau", 2.0 / rho)
 
     def dense(self, t: float) -> np.ndarray:
         if t == self.t:

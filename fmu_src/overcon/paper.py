@@ -19,8 +19,7 @@ from .checks import compile_checked
 from .precheck import precheck
 from .simulate import Result, SimulationError, run_scene
 from .spec import SceneSpec
-from .verdict import (LOCKSTEP_METHOD, LOCKSTEP_RETRIES, LOCKSTEP_STEP, lockstep_tolerance, next_lockstep_step,
-                      variant_label)
+from .verdict import LOCKSTEP_METHOD, LOCKSTEP_STEP, LockstepGrid, lockstep_tolerance, variant_label
 
 
 def scene_files(directory: Path) -> list[Path]:
@@ -75,23 +74,20 @@ def _with_solver(spec: SceneSpec, **changes) -> SceneSpec:
 
 def _lockstep_runs(specs: list[SceneSpec], step: float, outputs) -> tuple[list[Result], float]:
     """Every variant on one rk4 grid (positions only); an unstable step (the rk4 integrator's
-    refusal) repeats all of them at :func:`overcon.verdict.next_lockstep_step`, at most
-    :data:`overcon.verdict.LOCKSTEP_RETRIES` times, as the FMU comparison does. Returns the runs
-    and the step used."""
+    refusal) repeats all of them as :class:`overcon.verdict.LockstepGrid` decides, the procedure
+    of the FMU comparison and the sweep. Returns the runs and the step used."""
     def runs(h: float) -> list[Result]:
         return [run_scene(scene.as_scene(dataclasses.replace(
             _with_solver(spec, method=LOCKSTEP_METHOD, step=h), reactions=(),
             positions=outputs or spec.positions))) for spec in specs]
 
-    for _ in range(LOCKSTEP_RETRIES):
+    grid = LockstepGrid(step)
+    while True:
         try:
-            return runs(step), step
+            return runs(grid.step), grid.step
         except SimulationError as exc:
-            smaller = next_lockstep_step(step, [str(exc)])
-            if smaller is None:
+            if not grid.retry([exc.stable_step]):
                 raise
-            step = smaller
-    return runs(step), step
 
 
 def run_group(items: list[tuple[Path, SceneSpec]], *, tolerance: float | None = None,

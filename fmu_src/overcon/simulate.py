@@ -116,6 +116,7 @@ class SimulationError(RuntimeError):
     none), so that a failed run keeps what it computed."""
 
     partial: "Result | None" = None
+    stable_step: float | None = None  # s: rk4 refused a step as unstable and named this one stable
 
 
 MAX_STEPS = 1_000_000
@@ -264,7 +265,9 @@ class Simulation:
                 self._check_budget(itg, started, call)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             where = "" if str(exc).startswith("t = ") else f"t = {itg.t:.9g} s: "
-            raise SimulationError(f"integration stopped: {where}{exc}") from exc
+            err = SimulationError(f"integration stopped: {where}{exc}")
+            err.stable_step = getattr(exc, "stable_step", None)
+            raise err from exc
         finally:
             self.wall_time += time.perf_counter() - started
         if itg.t - t_target < -eps:

@@ -32,9 +32,12 @@ truncation error, and whether their functions f agree does not depend on the ste
 *stable*, though: beyond rk4's stability boundary (e.g. sticking friction inside a small
 regularisation band) the fixed-step solution chatters, and the chatter amplifies round-off like a
 chaotic map, so a unique group would look non-unique. The rk4 integrator refuses such a step
-(:class:`overcon.integrators.UnstableStep`, message with :data:`LOCKSTEP_UNSTABLE` and a stable
-step); the comparison then repeats the group's lockstep runs at :func:`next_lockstep_step`, at
-most :data:`LOCKSTEP_RETRIES` times, and reports the step it used. Its remaining
+(:class:`overcon.integrators.UnstableStep`, whose ``stable_step`` names a stable step, as data: in
+process on the ``SimulationError``, from an FMU as its variable ``solver.stable_step`` read after
+the failed run). :class:`LockstepGrid` is the one procedure every comparison follows (``compare``,
+``reproduce``, ``sweep``, ``figures``): it repeats the group's lockstep runs at
+:func:`next_lockstep_step`, at most :data:`LOCKSTEP_RETRIES` times, every variant on the same new
+grid, and reports the step it used. Its remaining
 error against the adaptive runs is reported, not hidden (rk4 at 5 ms on the paper scenes: 1e-5 m
 for planar friction 4, 5; up to 6e-4 m for friction 1, 4, 5, where sticking makes the
 right-hand side kink). The adaptive runs (the FMUs' own settings, used for the figures) are
@@ -47,7 +50,6 @@ says so.
 """
 from __future__ import annotations
 
-import re
 
 LOCKSTEP_METHOD = "rk4"
 """Fixed-step method of the verdict runs (see the module docstring)."""
@@ -57,8 +59,8 @@ LOCKSTEP_STEP = 5e-3
 sticking included), 2 to 4 times the cost of an adaptive run at tolerance 1e-9."""
 
 LOCKSTEP_UNSTABLE = "rk4 is unstable"
-"""Marker of an unstable-step failure in a run's reason (raised by the rk4 integrator, read by the
-comparison, which then repeats the group's lockstep runs with a smaller step)."""
+"""The words that open the rk4 integrator's unstable-step message (for people; the comparison
+reads the stable step as data, :class:`LockstepGrid`)."""
 
 LOCKSTEP_RETRIES = 3
 """How many times a group's lockstep runs are repeated with a smaller step after an unstable step."""
@@ -98,33 +100,55 @@ def variant_label(eliminate) -> str:
     return "without eq. " + ", ".join(str(k) for k in eliminate) if eliminate else "no elimination"
 
 
-_UNSTABLE = re.compile(r"t = [^:]*: " + LOCKSTEP_UNSTABLE + r".*?a step of at most ([0-9.eE+-]+) s is stable", re.S)
-
-
-def unstable_message(reason: str) -> str | None:
-    """The rk4 integrator's unstable-step message inside a run's failure text, or None."""
-    m = _UNSTABLE.search(reason)
-    return None if m is None else " ".join(m.group(0).split())
-
-
-def next_lockstep_step(step: float, reasons: list[str]) -> float | None:
-    """The step of the repeated lockstep runs after ``reasons`` (failure texts of the group's
-    lockstep runs at ``step``), or None when a failure is not an unstable step (or the step would
-    fall below :data:`LOCKSTEP_MIN_STEP`): the smallest stable step the failures name, and at most
-    a quarter of ``step``, rounded down to one significant digit (so every variant gets the same
-    grid)."""
-    hints = []
-    for r in reasons:
-        m = _UNSTABLE.search(r)
-        if m is None:
-            return None
-        hints.append(float(m.group(1)))
-    h = min([step / 4.0, *hints])
+def next_lockstep_step(step: float, stable_steps: list[float | None]) -> float | None:
+    """The step of the repeated lockstep runs after runs at ``step`` failed, given per failed run
+    the stable step rk4 named (None: the run failed for another reason): None when a failure is
+    not an unstable step (or the step would fall below :data:`LOCKSTEP_MIN_STEP`), else the
+    smallest stable step named, and at most a quarter of ``step``, rounded down to one significant
+    digit (so every variant gets the same grid)."""
+    if not stable_steps or any(h is None or not h > 0.0 for h in stable_steps):
+        return None
+    h = min([step / 4.0, *stable_steps])
     if not h > 0.0:
         return None
     e = 10.0 ** int(f"{h:e}".split("e")[1])
     h = int(h / e) * e
     return h if h >= LOCKSTEP_MIN_STEP else None
+
+
+class LockstepGrid:
+    """The lockstep procedure of one group at one set of parameters: the step every variant runs
+    with (``step``, s), and the retry. After the variants' runs at ``step``, :meth:`retry` with
+    the stable steps their failures named decides whether all of them run again at a smaller
+    common step (:func:`next_lockstep_step`, at most :data:`LOCKSTEP_RETRIES` times). The one
+    definition used by the in-process figures (:mod:`overcon.paper`), compare and reproduce
+    (:mod:`overcon.tooling.pipeline`) and sweep (:mod:`overcon.tooling.sweep`)."""
+
+    def __init__(self, step: float):
+        self.asked = float(step)
+        self.step = float(step)
+        self.retries = 0
+        self.named: float | None = None  # the smallest stable step the last failures named
+
+    def retry(self, stable_steps: list[float | None]) -> bool:
+        """True when the runs must be repeated: then ``step`` is the new common step."""
+        if self.retries >= LOCKSTEP_RETRIES:
+            return False
+        h = next_lockstep_step(self.step, stable_steps)
+        if h is None:
+            return False
+        self.named = min(stable_steps)
+        self.retries += 1
+        self.step = h
+        return True
+
+    @property
+    def note(self) -> str | None:
+        """Why the step used differs from the one asked for (None if it does not)."""
+        if self.step == self.asked:
+            return None
+        return (f"rk4 unstable at the lockstep step {self.asked:g} s (a step of at most {self.named:.2g} s is "
+                f"stable); lockstep runs repeated at {self.step:g} s")
 
 
 def lockstep_start_values(step: float) -> dict:

@@ -239,6 +239,7 @@ class OverconSlave:
         self._outputs = np.zeros(len(self._model0.output_names()))
         self._have_outputs = False
         self._failed: str | None = None
+        self._stable_step = 0.0  # solver.stable_step: set when rk4 refuses a step as unstable
         self._y = None  # the state at self._t (for outputs computed when first read)
         self._derived_stale = False  # reactions/friction outputs not yet computed at self._t
         self._derived_read = False  # the host has read a reaction or friction output
@@ -300,6 +301,8 @@ class OverconSlave:
             return float(self._outputs[arg])
         if kind == "constant":
             return arg
+        if kind == "stable_step":
+            return self._stable_step
         return self._params[arg]
 
     def _get(self, typ: str, vr_address: int, n: int, values_address: int) -> None:
@@ -554,6 +557,8 @@ class OverconSlave:
                     raise ArithmeticError(f"t = {t_new:.9g} s: non-finite outputs {', '.join(bad)}")
         except Exception as exc:  # the run cannot continue: fmi2Error, never NaN, never a crash
             what = str(exc) if isinstance(exc, CallRefused) else f"{type(exc).__name__}: {exc}"
+            if getattr(exc, "stable_step", None):
+                self._stable_step = float(exc.stable_step)
             self._failed = f"fmi2DoStep({current_time!r}, {step_size!r}): {what}"
             self._mode = Mode.ERROR
             self.log(f"{self._failed}; the run stopped at t = {self._t!r} s (the outputs keep their values "
@@ -611,6 +616,7 @@ class OverconSlave:
             "params": dict(self._params), "explicit": sorted(self._explicit),
             "start_time": self._start_time, "tolerance_source": self._tolerance_source, "mode": self._mode.value, "t": self._t,
             "outputs": self._outputs.copy(), "have_outputs": self._have_outputs, "failed": self._failed,
+            "stable_step": self._stable_step,
             "y": None if self._y is None else self._y.copy(), "derived_stale": self._derived_stale,
             "sim": None if self._sim is None else copy.deepcopy(self._sim.get_state()),
         }
@@ -629,6 +635,7 @@ class OverconSlave:
         self._mode, self._t = Mode(state["mode"]), state["t"]
         self._outputs = np.array(state["outputs"], float)
         self._have_outputs, self._failed = state["have_outputs"], state["failed"]
+        self._stable_step = float(state.get("stable_step", 0.0))
         self._y = state.get("y")  # states of earlier versions: outputs complete
         self._derived_stale = bool(state.get("derived_stale", False)) and self._y is not None
 

@@ -79,7 +79,7 @@ def state_outputs_beyond_positions(model) -> list[tuple[str, str]]:
 class Var:
     """One scalar variable. ``type`` Real/Integer/Boolean/String; ``unit`` for Real only;
     ``start`` None where FMI forbids one (initial calculated); ``key`` what the slave reads or
-    writes: ``("output", k)``, ``("constant", value)``, ``("param", name)``."""
+    writes: ``("output", k)``, ``("constant", value)``, ``("param", name)``, ``("stable_step", None)``."""
 
     name: str
     type: str
@@ -207,6 +207,10 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool) 
         rng = rule(f"solver.{p}").range_text()
         out.append(Var(f"solver.{p}", typ, "parameter", "tunable", "exact", f"{text} ({rng})", unit=unit,
                        start=value, key=("param", f"solver.{p}")))
+    out.append(Var("solver.stable_step", "Real", "local", "discrete", "calculated",
+                   "the largest stable fixed step that rk4 named when it refused a step as unstable (s); 0 until it "
+                   "does. Readable after the failed fmi2DoStep: the lockstep comparison repeats its runs with it",
+                   unit="s", key=("stable_step", None)))
     return out
 
 

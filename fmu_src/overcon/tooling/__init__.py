@@ -21,4 +21,10 @@ class InputError(ValueError):
 
 class SimulationFailed(RuntimeError):
     """An FMU simulation failed or stopped before its stop time; the message names the FMU, the
-    time and the FMU's own reason where it logged one."""
+    time and the FMU's own reason where it logged one. ``stable_step`` (s): the FMU's variable
+    ``solver.stable_step`` after the failure when rk4 refused a step as unstable (data for the
+    lockstep comparison, :class:`overcon.verdict.LockstepGrid`), else None."""
+
+    def __init__(self, message: str, stable_step: float | None = None):
+        super().__init__(message)
+        self.stable_step = stable_step

@@ -17,8 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import InputError
-from ..verdict import (LOCKSTEP_MIN_STEP, LOCKSTEP_RETRIES, LOCKSTEP_STEP, lockstep_start_values, next_lockstep_step,
-                       unstable_message)
+from ..verdict import LOCKSTEP_MIN_STEP, LOCKSTEP_STEP, LockstepGrid, lockstep_start_values
 from .compare import (Comparison, compare_group, compare_reference, failed_group, group_fmus, invalid_group,
                       order_groups, validate_group)
 from .fmus import FmuInfo, inspect_all, inspect_fmu
@@ -118,8 +117,8 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
     comparison with the reason; a failed adaptive run beside successful lockstep runs keeps the
     verdict and is reported (``Comparison.adaptive_failure``). The other groups are still compared.
     A group whose lockstep runs failed on an unstable rk4 step has all its lockstep runs repeated at
-    a smaller common step (:func:`overcon.verdict.next_lockstep_step`, at most
-    :data:`overcon.verdict.LOCKSTEP_RETRIES` times); the step used is reported."""
+    a smaller common step, as :class:`overcon.verdict.LockstepGrid` (the one procedure) decides;
+    the step used is reported."""
     user = {i.model: start_values_for(i, settings or {}) for items in groups.values() for i in items}
     check_unique_models([i for items in groups.values() for i in items], out_dir)
     todo, lock_groups = [], set()
@@ -133,50 +132,50 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
         for i in items:
             ex = dataclasses.replace(exps[i.model], start_values=tuple(user[i.model].items()))
             todo.append(Job(i.model, i, ex, out_dir / f"{i.model}.csv"))
-    steps = {g: lockstep_step for g in lock_groups}
-    todo += _lockstep_jobs({g: groups[g] for g in lock_groups}, steps, todo, user, out_dir)
+    grids = {g: LockstepGrid(lockstep_step) for g in lock_groups}
+    todo += _lockstep_jobs({g: groups[g] for g in lock_groups}, grids, todo, user, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     results, failures = run_jobs(_longest_first(todo), workers=jobs, echo=echo)
-    notes: dict[str, str] = {}
-    for _ in range(LOCKSTEP_RETRIES):
-        retry = {}
-        for g in lock_groups:
-            failed = [failures[k] for k in (f"lockstep/{i.model}" for i in groups[g]) if k in failures]
-            h = next_lockstep_step(steps[g], failed) if failed else None
-            if h is not None:
-                notes[g] = (f"rk4 unstable at the lockstep step {lockstep_step:g} s ({unstable_message(failed[0])}); "
-                            f"lockstep runs repeated at {h:g} s")
-                echo(f"{g}: {notes[g]}")
-                steps[g] = retry[g] = h
+    while True:
+        retry = {g: groups[g] for g in lock_groups if _lockstep_retry(grids[g], groups[g], failures, echo, g)}
         if not retry:
             break
-        for g in retry:
-            for i in groups[g]:
+        for items in retry.values():
+            for i in items:
                 failures.pop(f"lockstep/{i.model}", None)
                 results.pop(f"lockstep/{i.model}", None)
-        more, more_failures = run_jobs(_longest_first(_lockstep_jobs({g: groups[g] for g in retry}, steps, todo, user,
-                                                                     out_dir)), workers=jobs, echo=echo)
+        more, more_failures = run_jobs(_longest_first(_lockstep_jobs(retry, grids, todo, user, out_dir)),
+                                       workers=jobs, echo=echo)
         results.update(more)
         failures.update(more_failures)
     comparisons = []
     for g, items in groups.items():
-        adaptive_failed = [failures[i.model] for i in items if i.model in failures]
-        lock_failed = [failures[k] for k in (f"lockstep/{i.model}" for i in items) if k in failures]
+        adaptive_failed = [str(failures[i.model]) for i in items if i.model in failures]
+        lock_failed = [str(failures[k]) for k in (f"lockstep/{i.model}" for i in items) if k in failures]
         if lock_failed or (adaptive_failed and g not in lock_groups):
             comparisons.append(failed_group(g, items, "\n".join(lock_failed + adaptive_failed)))
             continue
         series = None if adaptive_failed else [read_series(results[i.model].csv) for i in items]
         lock = [read_series(results[f"lockstep/{i.model}"].csv) for i in items] if g in lock_groups else None
         c = compare_group(g, items, series, tolerance=tolerance, lockstep=lock,
-                          lockstep_step=steps[g] if lock is not None else None,
+                          lockstep_step=grids[g].step if lock is not None else None,
                           adaptive_failure="\n".join(adaptive_failed) or None)
-        c.lockstep_note = notes.get(g)
+        c.lockstep_note = grids[g].note if g in grids else None
         c.wall_seconds = [] if adaptive_failed else [results[i.model].sim_seconds for i in items]
         comparisons.append(c)
     return comparisons, results
 
 
-def _lockstep_jobs(groups: dict[str, list[FmuInfo]], steps: dict[str, float], adaptive: list[Job], user: dict,
+def _lockstep_retry(grid: LockstepGrid, items: list[FmuInfo], failures: dict, echo, group: str) -> bool:
+    """The group's lockstep runs failed and ``grid`` (the one procedure) repeats them."""
+    failed = [failures[k] for k in (f"lockstep/{i.model}" for i in items) if k in failures]
+    if not failed or not grid.retry([f.stable_step for f in failed]):
+        return False
+    echo(f"{group}: {grid.note}")
+    return True
+
+
+def _lockstep_jobs(groups: dict[str, list[FmuInfo]], grids: dict[str, LockstepGrid], adaptive: list[Job], user: dict,
                    out_dir: Path) -> list[Job]:
     """The lockstep runs of ``groups``: each FMU's adaptive experiment (from ``adaptive``) with the
     lockstep parameters at its group's step (the user's ``--set`` values kept otherwise)."""
@@ -184,7 +183,7 @@ def _lockstep_jobs(groups: dict[str, list[FmuInfo]], steps: dict[str, float], ad
     out = []
     for g, items in groups.items():
         for i in items:
-            values = {**user[i.model], **lockstep_start_values(steps[g])}
+            values = {**user[i.model], **lockstep_start_values(grids[g].step)}
             lex = dataclasses.replace(exp_of[i.model], start_values=tuple(values.items()))
             out.append(Job(f"lockstep/{i.model}", i, lex, out_dir / "lockstep" / f"{i.model}.csv"))
     return out

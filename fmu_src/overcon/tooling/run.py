@@ -20,10 +20,13 @@ reason.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import shutil
 import subprocess
+import tempfile
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -144,6 +147,41 @@ class RunResult:
 # ---------------------------------------------------------------------------------------------
 # in process (the worker's body)
 
+STABLE_STEP = "solver.stable_step"
+"""The overcon FMU's variable that holds, after a failed fmi2DoStep, the stable step rk4 named."""
+
+
+@contextlib.contextmanager
+def _instance(fmu, logger):
+    """(path for simulate_fmu, model description, FMU instance or None, a function returning
+    ``solver.stable_step`` or None). An FMU with that variable is extracted and instantiated here,
+    so that after a failed run the variable can still be read from the instance (as data, not
+    from the log's prose); any other FMU is left to simulate_fmu."""
+    import fmpy
+
+    md = fmpy.read_model_description(str(fmu))
+    vr = next((v.valueReference for v in md.modelVariables if v.name == STABLE_STEP), None)
+    if vr is None:
+        yield str(fmu), None, None, lambda: None
+        return
+    tmp = None if Path(fmu).is_dir() else tempfile.mkdtemp(prefix="overcon-run-")
+    where = str(fmu) if tmp is None else fmpy.extract(str(fmu), tmp)
+    instance = fmpy.instantiate_fmu(where, md, "CoSimulation", debug_logging=True, logger=logger)
+
+    def stable_step():
+        try:
+            value = float(instance.getReal([vr])[0])
+        except Exception:  # noqa: BLE001 -- the instance may be unusable after the failure
+            return None
+        return value if value > 0.0 else None
+
+    try:
+        yield where, md, instance, stable_step
+    finally:
+        instance.freeInstance()
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+
 def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, step: float,
              outputs: list[str], progress: bool = True, label: str = "", start_values: dict | None = None) -> dict:
     """One ``fmpy.simulate_fmu`` run; writes ``csv``. Returns {rows, sim_seconds, last_time}.
@@ -172,15 +210,21 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
             print(f"  {label}: {pct:5.1f}% (t = {t:.4g} of {stop:g} s, {now - t0:.0f} s)", file=sys.stderr, flush=True)
         return True
 
+    kw = dict(start_time=start, stop_time=stop, output_interval=step, output=outputs, step_finished=step_finished,
+              start_values=dict(start_values or {}))
+    stable = None
     try:
-        result = fmpy.simulate_fmu(str(fmu), start_time=start, stop_time=stop, output_interval=step,
-                                   output=outputs, step_finished=step_finished, logger=logger,
-                                   start_values=dict(start_values or {}),
-                                   debug_logging=True)
+        with _instance(fmu, logger) as (where, md, instance, stable_step):
+            try:
+                result = fmpy.simulate_fmu(where, model_description=md, fmu_instance=instance, **kw) \
+                    if instance is not None else fmpy.simulate_fmu(where, logger=logger, debug_logging=True, **kw)
+            except Exception:
+                stable = stable_step()
+                raise
     except Exception as exc:
         why = "; ".join(messages[-3:])
         raise SimulationFailed(f"{fmu}: fmpy.simulate_fmu failed: {type(exc).__name__}: {exc}"
-                               + (f" (FMU log: {why})" if why else "")) from exc
+                               + (f" (FMU log: {why})" if why else ""), stable_step=stable) from exc
     sim_seconds = time.perf_counter() - t0
     last_time = float(result["time"][-1]) if len(result) else start
     if last_time < stop - 1e-9 * max(1.0, abs(stop)):
@@ -204,7 +248,7 @@ def _worker(argv: list[str]) -> None:
                        start_values=job.get("start_values"))
         out["error"] = ""
     except SimulationFailed as exc:
-        out = {"error": str(exc)}
+        out = {"error": str(exc), "stable_step": exc.stable_step}
     except Exception as exc:  # noqa: BLE001 -- reported by the parent
         out = {"error": f"{job['fmu']}: {type(exc).__name__}: {exc}"}
     sys.stdout.write(RESULT_TAG + json.dumps(out) + "\n")
@@ -246,7 +290,7 @@ def run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: f
                                "without a result (crashed while running the FMU?)")
     out = json.loads(lines[-1][len(RESULT_TAG):])
     if out["error"]:
-        raise SimulationFailed(out["error"])
+        raise SimulationFailed(out["error"], stable_step=out.get("stable_step"))
     return RunResult(info, csv, out["rows"], out["sim_seconds"], wall)
 
 
@@ -261,19 +305,20 @@ class Job:
 
 
 def run_jobs(jobs: list[Job], *, workers: int = 2, progress: bool = True, timeout: float | None = None,
-             echo=None) -> tuple[dict[str, RunResult], dict[str, str]]:
+             echo=None) -> tuple[dict[str, RunResult], dict[str, SimulationFailed]]:
     """Run every job (``workers`` processes at a time, in the order given) and return
-    (results by key, failure reasons by key): a failed run never stops the others."""
+    (results by key, failures by key: the reason and, as data, an unstable step's stable step):
+    a failed run never stops the others."""
     echo = echo or (lambda s: print(s, flush=True))
     results: dict[str, RunResult] = {}
-    failures: dict[str, str] = {}
+    failures: dict[str, SimulationFailed] = {}
 
     def one(job: Job):
         ex = job.experiment
         try:
             r = run_one(job.info, ex, job.csv, progress, timeout, label=job.key)
         except SimulationFailed as exc:
-            failures[job.key] = str(exc)
+            failures[job.key] = exc
             echo(f"{job.key}: FAILED (reason below)")
             return
         results[job.key] = r
@@ -310,7 +355,7 @@ def run_fmus(infos: list[FmuInfo], out_dir, *, stop_time: float | None = None, s
     results, failures = run_jobs([Job(i.model, i, exps[i.model], out_dir / f"{i.model}.csv") for i in infos],
                                  workers=jobs, progress=progress, timeout=timeout, echo=echo)
     if failures:
-        raise SimulationFailed("\n".join(failures[i.model] for i in infos if i.model in failures))
+        raise SimulationFailed("\n".join(str(failures[i.model]) for i in infos if i.model in failures))
     return [results[i.model] for i in infos]
 
 

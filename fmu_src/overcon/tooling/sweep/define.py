@@ -1,0 +1,82 @@
+"""A sweep's definition: ``DIR/sweep.json``, the FMUs it resolves to, new or resumed."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from ...verdict import LOCKSTEP_STEP
+from .. import InputError
+from ..compare import group_fmus, validate_group
+from ..run import check_unique_models
+from .grid import grid, parse_param, set_ids
+from .inputs import _check_params, _load_fmu, _resolve_inputs
+from .rows import CSV_NAME, JSON_NAME, Sweep, _columns
+
+def _lockstep_step(h) -> float | None:
+    if h is None or h == 0:
+        return None
+    if not (math.isfinite(h) and 1e-6 <= h <= 1.0):
+        raise InputError(f"--lockstep-step {h!r}: must be a step in s between 1e-6 and 1 (0: no lockstep)")
+    return float(h)
+
+
+def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_time=None,
+            lockstep_step: float | None = LOCKSTEP_STEP, resume: bool = False, echo=print) -> Sweep:
+    """Resolve a sweep: a new one from the arguments (``out_dir`` must not hold one), or with
+    ``resume`` the one defined by ``out_dir/sweep.json`` (arguments must then be None)."""
+    from ..pipeline import _group_experiments
+
+    out_dir = Path(out_dir)
+    jpath = out_dir / JSON_NAME
+    if resume:
+        if inputs or params or samples is not None or seed is not None or stop_time is not None:
+            raise InputError("--resume DIR continues the sweep defined in DIR/sweep.json: give no scenes, "
+                             "--param, --samples, --seed or --stop-time with it")
+        if not jpath.is_file():
+            raise InputError(f"{jpath}: no such file: {out_dir} holds no sweep to resume")
+        try:
+            definition = json.loads(jpath.read_text(encoding="utf-8"))
+        except ValueError as exc:
+            raise InputError(f"{jpath}: unreadable sweep definition: {exc}") from exc
+    else:
+        if (out_dir / CSV_NAME).exists() or jpath.exists():
+            raise InputError(f"{out_dir}: already holds a sweep ({CSV_NAME}/{JSON_NAME}); continue it with "
+                             f"--resume {out_dir} or choose another --out")
+        if not inputs:
+            raise InputError("no scene file or FMU given")
+        if not params:
+            raise InputError("no --param given: nothing to sweep")
+        if seed is not None and samples is None:
+            raise InputError(f"--seed {seed}: seeds the random parameter sets of --samples, which is not given")
+        definition = {"inputs": [str(Path(p).resolve()) for p in inputs], "params": list(params),
+                      "samples": samples, "seed": (0 if seed is None else seed) if samples is not None else None,
+                      "stop_time": stop_time, "lockstep_step": _lockstep_step(lockstep_step)}
+    specs = [parse_param(t) for t in definition["params"]]
+    lstep = definition["lockstep_step"]
+    paths = _resolve_inputs(definition["inputs"], out_dir, echo)
+    fmus = [_load_fmu(p) for p in paths]
+    check_unique_models([f.info for f in fmus], out_dir)
+    types = _check_params(specs, fmus, lstep is not None)
+    values = grid(specs, types, samples=definition["samples"], seed=definition["seed"])
+    sets = list(zip(set_ids(values, definition["samples"] is not None), values))
+    guids = {f.info.model: f.guid for f in fmus}
+    if resume:
+        changed = [m for m, g in definition.get("guids", {}).items() if guids.get(m) != g]
+        if changed or set(guids) != set(definition.get("guids", {})):
+            raise InputError(f"{jpath}: the FMU(s) {', '.join(changed or sorted(set(guids) ^ set(definition['guids'])))} "
+                             "changed since the sweep started (GUID differs): the rows would mix two models; "
+                             "start a new sweep")
+    else:
+        definition["guids"] = guids
+    by_model = {f.info.model: f for f in fmus}
+    groups = {g: [by_model[i.model] for i in items] for g, items in group_fmus([f.info for f in fmus]).items()}
+    for g, members in groups.items():  # before any run: common outputs, one prediction per group
+        if len(members) >= 2:
+            validate_group(g, [f.info for f in members])
+    exps = _group_experiments({g: [f.info for f in v] for g, v in groups.items()}, definition["stop_time"], None)
+    columns = _columns([s.name for s in specs], fmus)
+    if not resume:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        jpath.write_text(json.dumps(definition, indent=1) + "\n", encoding="utf-8")
+    return Sweep(out_dir, definition, fmus, groups, sets, exps, columns, lstep)

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The C core under AddressSanitizer and UndefinedBehaviorSanitizer (and LeakSanitizer, part of
 # ASan on Linux): tests/c_core/make_cases.py writes packed models and the results the installed
-# core gives (the paper's planar and spatial mechanisms, damped-Newton states and every failure
+# core gives (the paper's planar and spatial mechanisms, the quaternion examples with spatial revolute,
+# prismatic, cylindrical and spherical joints, a chain of every spatial joint type, damped-Newton states and every failure
 # status), then tests/c_core/driver.c, compiled with the core's sources and the sanitizers, runs
 # every case 20 times in two workspaces and requires the same bits, statuses and messages. Any
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.

@@ -209,3 +209,46 @@ def test_instances_share_nothing():
             assert (got is None) == (w is None)
             if w is not None:
                 assert all(np.array_equal(g, x) for g, x in zip(got[:3], w[:3]))
+
+
+def _fd_models(tmp_path):
+    """Frictionless models of every spatial joint type under both rotations: the example
+    mechanisms (quaternions), the paper's spatial mechanism in quaternions, random chains of all
+    six spatial types in Euler angles and in quaternions."""
+    from test_kernel import example_spec, quaternion_spec, random_axis_model
+
+    for name in ("door_none_wo_hinge2", "carriage_none_wo_rod", "fourbar_none_wo3_4_5", "loop_D_wo_A2"):
+        spec = scene_mod.as_scene(example_spec(name), friction=[])
+        yield name, spec, compile_checked(spec)
+    spec = quaternion_spec(spec_of("spatial_none_wo5"))
+    yield "spatial_none_wo5 (quaternions)", spec, compile_checked(spec)
+    for rotation in ("euler_zxz", "quaternion"):
+        spec, model = random_axis_model(tmp_path, rotation, 1, friction=False)
+        yield f"random chain ({rotation})", spec, model
+
+
+def test_core_rows_match_finite_differences(tmp_path):
+    """The core's Phi_h and gamma (Kernel.rows) are the derivatives of its Phi: along q(t) with
+    q'(0) the core's coordinate rates (ovk_evaluate's y'[:n]; quaternions with the norm
+    stabilisation, which leaves e / |e| and so Phi unchanged to first order), central differences
+    (step 1e-6) give d Phi/dt = Phi_h h and d(Phi_h h)/dt = -gamma (h held fixed) to 1e-7
+    relative: the truncation error (1e-12) and round-off (1e-10) are far below that, a wrong
+    entry of Phi_h or gamma (a sign, a term) far above."""
+    eps = 1e-6
+    for name, spec, model in _fd_models(tmp_path):
+        k = kernel_for(model, spec.solver)
+        n = model.n
+        for y in states(model, 6, seed=11):
+            got = k.evaluate(0.0, y)
+            assert got is not None, (name, k.last_message)
+            qd, h = got[0][:n], y[n:]
+            phi, J, gam = k.rows(y)
+            shifted = []
+            for sign in (1.0, -1.0):
+                z = y.copy()
+                z[:n] += sign * eps * qd
+                shifted.append(k.rows(z))
+            dphi = (shifted[0][0] - shifted[1][0]) / (2 * eps)
+            dJh = (shifted[0][1] @ h - shifted[1][1] @ h) / (2 * eps)
+            assert rel(dphi, J @ h) <= 1e-7, (name, rel(dphi, J @ h))
+            assert rel(dJh, -gam) <= 1e-7, (name, rel(dJh, -gam))

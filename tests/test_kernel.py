@@ -172,7 +172,19 @@ def test_adaptive_friction_runs_agree_within_accuracy():
     assert np.max(np.abs(res[1].values[:, cols] - res[0].values[:, cols])) < 1e-6
 
 
-def test_selection_and_note(monkeypatch):
+def uncovered_door(tmp_path: Path) -> Path:
+    """The example door scene with redundancy = "min-norm" instead of its elimination: a model the
+    kernel does not cover (it solves the eliminated form)."""
+    for f in EXAMPLES.glob("door*.toml"):
+        (tmp_path / f.name).write_text(f.read_text())
+    scene_file = tmp_path / "door_h1_wo_hinge2.toml"
+    text = scene_file.read_text()
+    assert 'eliminate = ["hinge2"]' in text
+    scene_file.write_text(text.replace('eliminate = ["hinge2"]', 'redundancy = "min-norm"'))
+    return scene_file
+
+
+def test_selection_and_note(monkeypatch, tmp_path):
     """auto takes the kernel where it covers the model, else numpy with the reason; c refuses to
     start without it (naming why); numpy never uses it. The note names the path."""
     spec = spec_of("planar_f45_wo4")
@@ -180,10 +192,10 @@ def test_selection_and_note(monkeypatch):
     assert "compiled kernel" in Simulation(model, spec.solver).kernel_note
     assert Simulation(model, dataclasses.replace(spec.solver, kernel="numpy")).kernel_note == \
         "right-hand side: numpy (solver.kernel = 'numpy')"
-    door = compile_checked(scene_mod.as_scene(scene_mod.load(EXAMPLES / "door_h1_wo_hinge2.toml")))
+    door = compile_checked(scene_mod.as_scene(scene_mod.load(uncovered_door(tmp_path))))
     note = Simulation(door, spec.solver).kernel_note
-    assert note.startswith("right-hand side: numpy (solver.kernel = 'auto': ") and "quaternion" in note
-    with pytest.raises(SimulationError, match=r"solver.kernel = 'c': rotation 'quaternion'"):
+    assert note.startswith("right-hand side: numpy (solver.kernel = 'auto': ") and "'min-norm'" in note
+    with pytest.raises(SimulationError, match=r"solver.kernel = 'c': redundancy 'min-norm'"):
         Simulation(door, dataclasses.replace(spec.solver, kernel="c"))
     saved = dict(kernel._state)
     try:
@@ -297,9 +309,9 @@ def test_cli_kernel_flag_and_scene_field(tmp_path, capsys):
     assert "right-hand side: numpy (solver.kernel = 'numpy')" in capsys.readouterr().out
     assert main(["simulate", str(MECH / "planar_f45_wo4.toml"), "--stop-time", "0.2", "--out", str(out)]) == 0
     assert "right-hand side: compiled kernel" in capsys.readouterr().out
-    assert main(["simulate", str(EXAMPLES / "door_h1_wo_hinge2.toml"), "--stop-time", "0.1", "--out", str(out),
+    assert main(["simulate", str(uncovered_door(tmp_path)), "--stop-time", "0.1", "--out", str(out),
                  "--kernel", "c"]) == 2
-    assert "--kernel c: the compiled kernel cannot run: rotation 'quaternion'" in capsys.readouterr().err
+    assert "--kernel c: the compiled kernel cannot run: redundancy 'min-norm'" in capsys.readouterr().err
     text = (MECH / "planar_f45_wo4.toml").read_text()
     assert "[solver]" in text
     (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
@@ -422,15 +434,13 @@ def test_check_and_build_refuse_a_kernel_that_cannot_run(tmp_path, capsys):
     (exit 2, file and field named) instead of an FMU that could never start."""
     from overcon.cli import main
 
-    for f in EXAMPLES.glob("door*.toml"):
-        (tmp_path / f.name).write_text(f.read_text())
-    scene_file = tmp_path / "door_h1_wo_hinge2.toml"
+    scene_file = uncovered_door(tmp_path)
     text = scene_file.read_text()
     scene_file.write_text(text.replace("[solver]", '[solver]\nkernel = "c"', 1) if "[solver]" in text
                           else text + '\n[solver]\nkernel = "c"\n')
     assert main(["check", str(scene_file)]) == 2
     err = capsys.readouterr().err
-    assert "solver.kernel = 'c': the compiled kernel cannot run: rotation 'quaternion'" in err
+    assert "solver.kernel = 'c': the compiled kernel cannot run: redundancy 'min-norm'" in err
     assert main(["build", str(scene_file), "--out", str(tmp_path / "out"), "--no-ref"]) == 2
     assert "solver.kernel = 'c': the compiled kernel cannot run" in capsys.readouterr().err
     assert not list((tmp_path / "out").glob("*.fmu"))
@@ -472,3 +482,249 @@ def test_set_values_outside_their_rule_refused_before_running(tmp_path, capsys):
         assert f"--set {setting}: {why}" in err and "FAILED" not in err
         assert not (tmp_path / "o" / "planar_none_wo4.csv").exists()
     assert main(["run", str(r.fmu), "--set", "solver.kernel=numpy", "--stop-time", "0.1", "--out", str(tmp_path / "o")]) == 0
+
+
+# ----------------------------------------------------------------------------- quaternions and the spatial axis joints
+
+EXAMPLE_SCENES = ["door_h1_wo_hinge2", "door_none_wo3_4_5_9_10", "carriage_guide_wo_rod", "carriage_none_wo1_2_3_4",
+                  "fourbar_A_wo3_4_5", "fourbar_none_wo18_19_20", "loop_A1_wo_A2", "loop_D_wo3_4_5_9_10"]
+EPS = float(np.finfo(float).eps)
+
+
+def example_spec(name: str, **solver):
+    spec = scene_mod.as_scene(scene_mod.load(EXAMPLES / f"{name}.toml"))
+    return dataclasses.replace(spec, solver=dataclasses.replace(spec.solver, **solver)) if solver else spec
+
+
+def quaternion_spec(spec):
+    """The scene with its spatial mechanism in quaternions: each body's z-x-z angles in q0 turned
+    into the same rotation's unit quaternion (h0, body axes, unchanged)."""
+    from overcon.kinematics import euler_to_quat
+
+    mech = spec.mechanism
+    assert mech.kind == "spatial" and mech.rotation == "euler_zxz"
+    bodies = tuple(dataclasses.replace(b, q0=tuple(b.q0[:3]) + tuple(float(x) for x in euler_to_quat(b.q0[3:])))
+                   for b in mech.bodies)
+    return dataclasses.replace(spec, mechanism=dataclasses.replace(mech, rotation="quaternion", bodies=bodies))
+
+
+def conditioned_tolerance(model, y) -> float:
+    """REL, or eps cond(S) where S = Phi_hR M^-1 Phi_hR^T is worse conditioned than REL / eps
+    (4.5e3): both paths solve with S (the kernel by its own Cholesky, numpy by LAPACK and BLAS),
+    whose round-off bound on the solution is eps cond(S); the rows themselves agree to a few ulp
+    (test_kernel_rows_equal_numpy). The example four-bar (cond 1.6e5) and loop (2.4e4) need it."""
+    from overcon.evaluation import frames, jacobian_h
+
+    JR = jacobian_h(model, frames(model, y[: model.n], y[model.n:]))[model.retained]
+    return max(REL, EPS * float(np.linalg.cond(JR @ (model.Minv[:, None] * JR.T))))
+
+
+def compare_evaluations(model, solver, ys, tol_of=lambda model, y: REL) -> int:
+    """Per state: cold, warm from lam and warm from qf, the kernel's y', lam and qf against the
+    numpy path's (as test_kernel_equals_numpy_per_evaluation); the count compared."""
+    k = kernel_for(model, solver)
+    compared = 0
+    for y in ys:
+        ref, ev = numpy_eval(model, solver, 0.3, y)
+        guesses = [(None, None), (ev.lam * 1.01, None)] + ([(None, ev.qf * 0.99)] if ev.qf is not None else [])
+        base = tol_of(model, y)
+        for lam_guess, qf_guess in guesses:
+            ref, ev = numpy_eval(model, solver, 0.3, y, lam_guess, qf_guess)
+            got = k.evaluate(0.3, y, lam_guess, qf_guess)
+            if got is None:
+                assert k.last_status == 2 and ev.fallback, kernel.STATUS[k.last_status]
+                continue
+            assert not ev.fallback
+            ydot, lam, qf, iterations = got
+            tol = base if iterations == ev.iterations else max(base, REL_OTHER_COUNT)
+            assert rel(ydot, ref) <= tol and rel(lam, ev.lam) <= tol, (rel(ydot, ref), rel(lam, ev.lam), tol)
+            if ev.qf is not None:
+                assert rel(qf, ev.qf) <= tol
+            compared += 1
+    return compared
+
+
+def test_kernel_covers_the_examples_and_their_joint_types():
+    """Every example mechanism (quaternions; revolute, prismatic, cylindrical and spherical joints)
+    is covered by the kernel, and so is each spatial joint type under each rotation."""
+    from overcon.joints import TYPES
+
+    kinds = set()
+    for name in EXAMPLE_SCENES:
+        model = compile_checked(example_spec(name))
+        assert model.rotation == "quaternion" and kernel.support(model) is None, name
+        kinds |= {c.type for c in model.joints}
+    assert kinds == {"spatial_revolute", "spatial_prismatic", "spatial_cylindrical", "spherical"}
+    assert {t for t, jt in TYPES.items() if jt.kind == "spatial"} <= {t for (_, t) in kernel._JOINTS}
+
+
+@pytest.mark.parametrize("name", EXAMPLE_SCENES)
+def test_examples_equal_numpy_per_evaluation(name):
+    """The example mechanisms (quaternions; friction in revolute, prismatic and cylindrical
+    joints and a spherical one): per evaluation as the numpy path, to REL or, where S is ill
+    conditioned, to its round-off bound eps cond(S) (:func:`conditioned_tolerance`)."""
+    spec = example_spec(name)
+    model = compile_checked(spec)
+    assert compare_evaluations(model, spec.solver, states(model), conditioned_tolerance) >= 20
+
+
+@pytest.mark.parametrize("name", ["spatial_none_wo5", "spatial_GH_wo9", "spatial_GHMN_wo18"])
+def test_spherical_joints_in_quaternions_equal_numpy(name):
+    """The paper's spatial mechanism (spherical joints, friction in G, H, M, N) written in
+    quaternions: per evaluation as the numpy path to REL."""
+    spec = quaternion_spec(spec_of(name))
+    model = compile_checked(spec)
+    assert model.rotation == "quaternion" and kernel.support(model) is None
+    assert compare_evaluations(model, spec.solver, states(model)) >= 20
+
+
+@pytest.mark.parametrize("name,stop", [("door_none_wo_hinge2", 1.0), ("carriage_none_wo_rod", 1.0),
+                                       ("loop_D_wo3_4_5_9_10", 0.5)])
+def test_fixed_step_runs_equal_examples(name, stop):
+    """Without friction, a fixed-step rk4 run of the quaternion examples takes the same steps on
+    both paths: the outputs agree to round-off (1e-12 relative to their scale) over the run."""
+    spec = scene_mod.as_scene(example_spec(name, method="rk4", step=2e-3), friction=[])
+    model = compile_checked(spec)
+    assert not model.friction_joints
+    out = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=stop).values for c in ("numpy", "c")]
+    assert rel(out[1], out[0]) <= 1e-12
+
+
+def test_fixed_step_run_equal_spherical_quaternions():
+    """The paper's spatial mechanism without friction in quaternions: rk4 runs agree to 1e-12."""
+    spec = quaternion_spec(spec_of("spatial_none_wo5", method="rk4", step=2e-3))
+    model = compile_checked(spec)
+    out = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=1.0).values for c in ("numpy", "c")]
+    assert rel(out[1], out[0]) <= 1e-12
+
+
+@pytest.mark.parametrize("name", ["door_h1_wo_hinge2", "carriage_guide_wo_rod", "loop_A1_wo_A2"])
+def test_example_outputs_equal_numpy(name):
+    """The reported reactions (every joint: the axis joints' components in their joint frame) and
+    friction outputs of the examples from the kernel's table equal the numpy path's to 1e-14."""
+    from overcon.evaluation import frames
+
+    spec = example_spec(name)
+    joints = tuple(j.name for j in spec.mechanism.joints)
+    spec = dataclasses.replace(spec, reactions=joints, friction_outputs="all")
+    model = compile_checked(spec)
+    assert model.friction_outputs and len(model.reaction_joints) == len(joints)
+    sims = {c: Simulation(model, dataclasses.replace(spec.solver, kernel=c)) for c in ("numpy", "c")}
+    rng = np.random.default_rng(5)
+    for y in states(model, 10, seed=5):
+        lam = 100.0 * rng.standard_normal(model.m)
+        ref = sims["numpy"]._derived.values(model, frames(model, y[: model.n], y[model.n:]), lam)
+        got = sims["c"]._derived.values_from_kernel(*sims["c"]._kernel.outputs(y, lam))
+        assert rel(got, ref) <= 1e-14
+
+
+def _random_axis_mechanism(path: Path, rotation: str, seed: int) -> list[str]:
+    """A random open chain of six bodies, one joint of every spatial type (revolute, prismatic,
+    cylindrical, universal, fixed, spherical; in a random order, the base as body i or j), friction
+    of both laws in the four types that have it, every load type; in ``rotation``. Returns the
+    names of the joints with a friction table."""
+    from overcon.kinematics import euler_to_quat
+
+    rng = np.random.default_rng(seed)
+    vec = (lambda k: ", ".join(f"{x:.6f}" for x in rng.uniform(-0.5, 0.5, k)))
+    types = ["revolute", "prismatic", "cylindrical", "universal", "fixed", "spherical"]
+    rng.shuffle(types)
+    lines = ['[mechanism]', f'name = "axes_{rotation}_{seed}"', 'kind = "spatial"', f'rotation = "{rotation}"',
+             'gravity = [0.0, 0.0, -9.81]']
+    for b in range(len(types)):
+        angles = [rng.uniform(-3, 3), rng.uniform(0.4, 2.7), rng.uniform(-3, 3)]
+        orient = euler_to_quat(angles) if rotation == "quaternion" else angles
+        lines += ['[[bodies]]', f'name = "b{b}"', f'mass = {rng.uniform(0.5, 3):.6f}',
+                  f'inertia = [{rng.uniform(0.5, 2):.6f}, {rng.uniform(0.5, 2):.6f}, {rng.uniform(0.5, 2):.6f}]',
+                  f'q0 = [{vec(3)}, {", ".join(repr(float(x)) for x in orient)}]']
+    names = []
+    sizes = {"revolute": ("radius", "length", "collar_radius"), "prismatic": ("length", "radius"),
+             "cylindrical": ("length", "radius"), "spherical": ("radius",)}
+    for j, jtype in enumerate(types):
+        bodies = [f"b{j}", "base" if j == 0 else f"b{j - 1}"]
+        if rng.random() < 0.5:
+            bodies.reverse()
+        names.append(f"J{j}")
+        lines += ['[[joints]]', f'name = "J{j}"', f'type = "{jtype}"', f'body_i = "{bodies[0]}"',
+                  f'body_j = "{bodies[1]}"', f's_i = [{vec(3)}]', f's_j = [{vec(3)}]']
+        if jtype != "spherical":
+            lines += [f'axis_i = [{vec(3)}]', f'axis_j = [{vec(3)}]']
+        if jtype in sizes:
+            law = ['law = "regularised"'] if j % 2 == 0 else ['law = "stribeck"', 'mu_static = 0.5', 'v_stribeck = 0.02']
+            lines += ['[joints.friction]', *law, f'mu = {rng.uniform(0.02, 0.15):.6f}', 'v_reg = 1e-3']
+            lines += [f'{key} = {rng.uniform(0.05, 0.2):.6f}' for key in sizes[jtype]]
+    lines += ['[[loads]]', 'type = "force"', 'body = "b1"', f'value = [{vec(3)}]',
+              '[[loads]]', 'type = "torque"', 'body = "b2"', f'value = [{vec(3)}]',
+              '[[loads]]', 'type = "spring"', 'body_i = "b5"', 'body_j = "base"', 'stiffness = 20.0',
+              'free_length = 0.3', f's_i = [{vec(3)}]', f's_j = [{vec(3)}]']
+    path.write_text("\n".join(lines) + "\n")
+    return [n for n, t in zip(names, types) if t in sizes]
+
+
+def random_axis_model(tmp_path: Path, rotation: str, seed: int, friction: bool = True):
+    frictional = _random_axis_mechanism(tmp_path / "m.toml", rotation, seed)
+    spec = scene_mod.as_scene(scene_mod.load(tmp_path / "m.toml"), friction=frictional if friction else [],
+                              friction_outputs="all" if friction else "none")
+    return spec, compile_checked(spec, check_initial=False)
+
+
+@pytest.mark.parametrize("rotation", ["euler_zxz", "quaternion"])
+@pytest.mark.parametrize("seed", range(4))
+def test_random_axis_joints_equal_numpy(tmp_path, rotation, seed):
+    """Every spatial joint type in random geometry, both rotations, with friction of both laws in
+    the revolute, prismatic, cylindrical and spherical joints: per evaluation as the numpy path
+    (REL, or eps cond(S) at the random states where S is ill conditioned), and the reported
+    reactions and friction outputs to 1e-14."""
+    from overcon.evaluation import frames
+
+    spec, model = random_axis_model(tmp_path, rotation, seed)
+    assert len(model.friction_joints) == 4 and kernel.support(model) is None
+    assert {c.type for c in model.joints} == {"spatial_revolute", "spatial_prismatic", "spatial_cylindrical",
+                                               "spatial_universal", "spatial_fixed", "spherical"}
+    k = kernel_for(model, spec.solver)
+    plan = _DerivedPlan(model)
+    compared = 0
+    for y in states(model, 24, seed=seed):
+        got = k.evaluate(0.0, y)
+        try:
+            ref, ev = numpy_eval(model, spec.solver, 0.0, y)
+        except FrictionSolveError:
+            assert got is None and k.last_status == 2
+            continue
+        if got is None:
+            assert ev.fallback
+            continue
+        base = conditioned_tolerance(model, y)
+        tol = base if got[3] == ev.iterations else max(base, REL_OTHER_COUNT)
+        assert rel(got[0], ref) <= tol and rel(got[1], ev.lam) <= tol, (rel(got[0], ref), rel(got[1], ev.lam), tol)
+        a = plan.values(model, frames(model, y[: model.n], y[model.n:]), ev.lam)
+        b = plan.values_from_kernel(*k.outputs(y, ev.lam))
+        assert rel(b, a) <= 1e-14
+        compared += 1
+    assert compared >= 12
+
+
+@pytest.mark.parametrize("rotation", ["euler_zxz", "quaternion"])
+def test_random_axis_joints_without_friction_equal_numpy(tmp_path, rotation):
+    """The same chains without friction: y' and lam as the numpy path to REL at every state."""
+    for seed in range(3):
+        spec, model = random_axis_model(tmp_path, rotation, seed, friction=False)
+        assert not model.friction_joints
+        assert compare_evaluations(model, spec.solver, states(model, 10, seed=seed)) == 20
+
+
+@pytest.mark.parametrize("name", EXAMPLE_SCENES[::2] + ["spatial_GH_wo9"])
+def test_kernel_rows_equal_numpy(name):
+    """Phi, Phi_h and gamma of the core (overcon.kernel.Kernel.rows) equal the numpy path's to a
+    few ulp (1e-14 relative) at random states: the same formulas in the same order."""
+    from overcon.evaluation import constraints, frames, gamma, jacobian_h
+
+    spec = example_spec(name) if name in EXAMPLE_SCENES else quaternion_spec(spec_of(name))
+    model = compile_checked(spec)
+    k = kernel_for(model, spec.solver)
+    for y in states(model, 10, seed=2):
+        f = frames(model, y[: model.n], y[model.n:])
+        phi, J, gam = k.rows(y)
+        assert rel(phi, constraints(model, f)) <= 1e-14
+        assert rel(J, jacobian_h(model, f)) <= 1e-14
+        assert rel(gam, gamma(model, f)) <= 1e-14

@@ -6,8 +6,8 @@ limit"): about a hundred numpy calls on arrays of 2 to 35 entries. The core does
 arithmetic in one call.
 
 What it covers (:func:`support`): planar mechanisms of revolute and translational joints, spatial
-mechanisms with z-x-z Euler angles and spherical joints (the paper's two mechanisms and any other
-built from these joints); gravity, forces, torques, springs; friction laws ``regularised`` and
+mechanisms with z-x-z Euler angles or quaternions and every spatial joint type (spherical,
+revolute, prismatic, cylindrical, universal, fixed); gravity, forces, torques, springs; friction laws ``regularised`` and
 ``stribeck``; up to :data:`MAX_FRICTION` friction joints. Anything else runs on the numpy path
 (the reason is logged). Within an evaluation, whatever the numpy path reports or falls back on
 (a singular position, the friction solve's fixed-point fallback, an Euler singularity, a spring
@@ -48,17 +48,24 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 4  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
+ABI = 5  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
 MAX_FRICTION = 32  # OVK_MAX_FRICTION in core/core.h
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
           7: "invalid model or argument"}
 
-_JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3}
+_JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
+           ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
+           ("spatial", "spatial_cylindrical"): 6, ("spatial", "spatial_universal"): 7, ("spatial", "spatial_fixed"): 8}
+_ROTATIONS = ("euler_zxz", "quaternion")
+_AXIS_SIZES = {"spatial_revolute": ("radius", "length", "collar_radius"), "spatial_prismatic": ("length", "radius"),
+               "spatial_cylindrical": ("length", "radius")}
+"""Friction sizes of the spatial axis joints in jconst[30:33] (the order of their modules' ``stack``)."""
 _LAWS = {"regularised": 1, "stribeck": 2}
 _LOADS = {"force": 1, "torque": 2, "spring": 3}
-NJC, NLP, NLD = 12, 5, 11  # doubles per joint, per friction law, per load (core/core.h)
+NJC, NLP, NLD = 34, 5, 11  # doubles per joint, per friction law, per load (core/core.h)
+MAXEQ, NREAC = 6, 9  # OVK_MAXEQ (equations per joint), OVK_NREAC (reported reaction entries per joint)
 
 
 def _shared_suffix() -> str:
@@ -91,7 +98,7 @@ def _bind(path: Path) -> ctypes.CDLL:
     for name, res, args in (("ovk_make_data", vp, [vp]), ("ovk_free_data", None, [vp]),
                             ("ovk_message", ctypes.c_char_p, [vp]), ("ovk_data_status", i, [vp]),
                             ("ovk_evaluate", i, [vp, vp, ctypes.c_double, vp, i, vp, vp, vp, vp, vp, vp]),
-                            ("ovk_outputs", i, [vp] * 6)):
+                            ("ovk_outputs", i, [vp] * 6), ("ovk_rows", i, [vp] * 6)):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib
@@ -140,15 +147,15 @@ def support(model) -> str | None:
     """None if the kernel covers ``model``, else the reason it does not."""
     from .joints import TYPES
 
-    if model.kind == "spatial" and model.rotation != "euler_zxz":
-        return f"rotation {model.rotation!r} (the kernel has z-x-z Euler angles only)"
+    if model.kind == "spatial" and model.rotation not in _ROTATIONS:
+        return f"rotation {model.rotation!r} (the kernel has z-x-z Euler angles and quaternions)"
     if model.elimination_mode == "min-norm":
         return "redundancy 'min-norm' (the kernel solves the eliminated form, by Cholesky)"
     if model.compliant_rows.size:
         return "compliant joints (the kernel solves rigid joints only)"
     for c in model.joints:
         if (model.kind, c.type) not in _JOINTS:
-            covered = "revolute, translational" if model.kind == "planar" else "spherical"
+            covered = ", ".join(TYPES[t].name for k, t in _JOINTS if k == model.kind)
             return (f"joint {c.name}: {model.kind} {TYPES[c.type].name} joints are not covered by the compiled "
                     f"kernel (it has {model.kind} {covered})")
         if c.law is not None and c.law.name not in _LAWS:
@@ -179,6 +186,13 @@ def _joint_constants(model, c) -> np.ndarray:
         out[0:2], out[2:4], out[4:6] = p["s_A"], p["s_B"], p["v"]
         out[6] = p["psi"]
         out[7:11] = np.asarray(p["B"], float).reshape(-1)
+    elif c.type.startswith("spatial_"):  # core/joints_spatial.c: the layout
+        for n, key in enumerate(("s_i", "s_j", "a_i", "a_j", "b1_j", "b2_j", "c_i")):
+            out[3 * n:3 * n + 3] = p[key]
+        out[21:30] = np.asarray(p["E"], float).reshape(-1)
+        if c.law is not None:
+            for n, key in enumerate(_AXIS_SIZES.get(c.type, ())):
+                out[30 + n] = c.law.size_of(key)
     else:
         k = model.dim
         out[0:k], out[k:2 * k] = p["s_i"], p["s_j"]
@@ -214,6 +228,7 @@ class Kernel:
 
     def __init__(self, lib, model, solver):
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
+        self._rows_fn = lib.ovk_rows
         plan = model.plan
         I32 = np.int32
         keep = self._keep = []
@@ -226,7 +241,7 @@ class Kernel:
             return a.ctypes.data
 
         joints = model.joints
-        rows = np.full((len(joints), 3), -1)
+        rows = np.full((len(joints), MAXEQ), -1)
         for n, c in enumerate(joints):
             rows[n, :len(c.rows)] = c.rows
         fj = [j for g in plan.friction for j in g.joints]
@@ -239,11 +254,11 @@ class Kernel:
             return out
 
         def pad_x(a):
-            out = np.full((len(a), 3), len(plan.friction_xrows))
+            out = np.full((len(a), MAXEQ), len(plan.friction_xrows))
             out[:, :a.shape[1]] = a
             return out
 
-        fx = np.concatenate([pad_x(g.x_index) for g in plan.friction]) if plan.friction else np.zeros((0, 3))
+        fx = np.concatenate([pad_x(g.x_index) for g in plan.friction]) if plan.friction else np.zeros((0, MAXEQ))
         fci = np.concatenate([pad_cols(g.col_i) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
         fcj = np.concatenate([pad_cols(g.col_j) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
         m = _CModel(dim=model.dim, nb=model.nb, nq_b=model.nq_b, nh_b=nh_b, m=model.m, nR=len(model.retained),
@@ -285,7 +300,7 @@ class Kernel:
                       ctypes.addressof(self._damped))
         self._ncols = len(plan.friction_cols)
         self.last_status = 0
-        self._reac = np.zeros((len(joints), 6))
+        self._reac = np.zeros((len(joints), NREAC))
         self._fric = np.zeros(len(joints))
         self._lam_in = np.zeros(model.m)
         self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
@@ -345,9 +360,10 @@ class Kernel:
         return self._ydot.copy(), self._lam.copy(), self._qf[: self._ncols].copy(), self._its.value
 
     def outputs(self, y: np.ndarray, lam: np.ndarray):
-        """(reactions (nj, 6), friction outputs (nj,)) at y and the multipliers lam (m,), every
-        joint in model order: the reaction components of the joint type (3: planar Fx, Fy, T;
-        spherical Fx, Fy, Fz in the auxiliary frame) then the force in the global frame (dim),
+        """(reactions (nj, 9), friction outputs (nj,)) at y and the multipliers lam (m,), every
+        joint in model order: the reaction components of the joint type (planar Fx, Fy, T;
+        spherical Fx, Fy, Fz in the auxiliary frame; an axis joint its components in the joint
+        frame) then the force in the global frame (dim),
         zeros after; the friction output of a joint with friction (else 0). As
         :func:`overcon.evaluation.physical_reactions` and :func:`overcon.evaluation.friction_output`.
         Views of buffers overwritten by the next call."""
@@ -358,6 +374,19 @@ class Kernel:
         if status:
             raise RuntimeError(f"the compiled core's outputs failed ({STATUS.get(status, status)}): {self._message()}")
         return self._reac, self._fric
+
+
+    def rows(self, y: np.ndarray):
+        """(Phi (m,), Phi_h (m, nh), gamma (m,; without Baumgarte)) of the core at y: the joint rows
+        it solves with (:func:`overcon.evaluation.constraints`, ``jacobian_h``, ``gamma``), for
+        checks. New arrays."""
+        model = self.model
+        phi, J, gam = np.zeros(model.m), np.zeros((model.m, model.nh)), np.zeros(model.m)
+        self._y[:] = y
+        status = self._rows_fn(self._pm, self._data, self._ptrs[0], phi.ctypes.data, J.ctypes.data, gam.ctypes.data)
+        if status:
+            raise RuntimeError(f"the compiled core's rows failed ({STATUS.get(status, status)}): {self._message()}")
+        return phi, J, gam
 
 
 def _unavailable(model) -> str | None:

@@ -143,7 +143,7 @@ static int run_evaluation(reader *r, model_t *m, int reps, tally *t) {
     guess = rd_array(r, sizeof(double), &ng);
     int status = rd_i32(r), its = rd_i32(r), damped = rd_i32(r);
     int n = M->nb * M->nq_b, nh = M->nb * M->nh_b;
-    int sizes[5] = {n + nh, M->m, M->ncols, 6 * M->nj, M->nj};
+    int sizes[5] = {n + nh, M->m, M->ncols, OVK_NREAC * M->nj, M->nj};
     const char *names[5] = {"ydot", "lam", "qf", "reactions", "friction"};
     if (status == 0)
         for (int k = 0; k < 5; k++) exp[k] = rd_array(r, sizeof(double), &n_exp[k]);

@@ -7,6 +7,9 @@ without fast-math, so the compiler may not change any floating-point result.
 
 The cases: the paper's planar mechanism (friction in two revolute and one translational joint) and
 its spatial mechanism (friction in two spherical joints) at random states, cold and warm-started;
+the quaternion examples (door: spatial revolute joints; carriage: prismatic and cylindrical; loop:
+revolute and spherical, each with friction) and a random chain of every spatial joint type in
+Euler angles (universal and fixed joints too);
 spatial states where Newton gives up and damped Newton finishes; and every failure status: a
 singular position (tests/data/two_pins: two pins on one bar, rows exactly dependent), the friction solve giving up
 (friction_max_iter = 2), a non-finite state, an Euler singularity, a spring whose points coincide.
@@ -127,6 +130,18 @@ def build(tmp: Path) -> Writer:
         model = compile_checked(spec)
         w.model(model, spec.solver)
         random_states(w, model, n, seed=7)
+    # quaternions and the spatial axis joints, with friction
+    for name in ("door_h1_wo_hinge2", "carriage_guide_wo_rod", "loop_A1_wo_A2"):
+        spec = spec_of(MECH / "examples" / f"{name}.toml")
+        model = compile_checked(spec)
+        w.model(model, spec.solver)
+        random_states(w, model, 6, seed=3)
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from test_kernel import random_axis_model
+
+    spec, model = random_axis_model(tmp, "euler_zxz", 1)
+    w.model(model, spec.solver)
+    random_states(w, model, 6, seed=3)
     # the friction solve gives up: two force evaluations are not enough for either Newton
     spec = spec_of(MECH / "planar_f45_wo4.toml", friction_max_iter=2)
     model = compile_checked(spec)

@@ -27,6 +27,12 @@ static int in_range(const int *a, int n, int lo, int hi) { /* every a[i] in [lo,
     return 1;
 }
 
+/* The equations of a joint type (overcon.joints.TYPES n_equations), 0 for an unknown type. */
+static int joint_equations(int type) {
+    static const int n[] = {0, 2, 2, 3, 5, 5, 4, 4, 6}; /* by J_* */
+    return type >= 0 && type <= J_FIXED ? n[type] : 0;
+}
+
 /* The model's counts, types and indices, checked before anything is sized from them: a model that
  * is not what overcon.kernel packs is refused with a message instead of read out of bounds. */
 static int check_model(const ovk_model *M, ovk_data *d) {
@@ -36,12 +42,13 @@ static int check_model(const ovk_model *M, ovk_data *d) {
         if (counts[i] < 0 || counts[i] > OVK_MAX_COUNT)
             return ovk_fail(d, OVK_INVALID, "model: %s = %d is out of range [0, %d]", names[i], counts[i],
                             OVK_MAX_COUNT);
-    if (!((M->dim == 2 && M->nq_b == 3 && M->nh_b == 3) || (M->dim == 3 && M->nq_b == 6 && M->nh_b == 6)))
+    if (!((M->dim == 2 && M->nq_b == 3 && M->nh_b == 3) ||
+          (M->dim == 3 && (M->nq_b == 6 || M->nq_b == 7) && M->nh_b == 6)))
         return ovk_fail(d, OVK_INVALID, "model: dim %d with %d coordinates and %d velocities per body "
-                        "(planar: 2, 3, 3; spatial: 3, 6, 6)", M->dim, M->nq_b, M->nh_b);
-    if (M->nfj > OVK_MAX_FRICTION || M->nx > 3 * M->nfj)
+                        "(planar: 2, 3, 3; spatial: 3, 6 or 7, 6)", M->dim, M->nq_b, M->nh_b);
+    if (M->nfj > OVK_MAX_FRICTION || M->nx > OVK_MAXEQ * M->nfj)
         return ovk_fail(d, OVK_INVALID, "model: %d friction joints with %d multipliers (the core takes at most %d "
-                        "joints, 3 multipliers each)", M->nfj, M->nx, OVK_MAX_FRICTION);
+                        "joints, %d multipliers each)", M->nfj, M->nx, OVK_MAX_FRICTION, OVK_MAXEQ);
     if (M->nR > M->m || M->ncols > M->nb * M->nh_b || M->max_iter < 1 || !(M->tol > 0.0) ||
         !(M->baumgarte >= 0.0))
         return ovk_fail(d, OVK_INVALID, "model: nR %d of m %d rows, %d friction columns of %d velocities, "
@@ -50,9 +57,10 @@ static int check_model(const ovk_model *M, ovk_data *d) {
     int nh = M->nb * M->nh_b;
     for (int j = 0; j < M->nj; j++) {
         int t = M->jtype[j], planar = t == J_REVOLUTE || t == J_TRANSLATIONAL;
-        if (!((M->dim == 2 && planar) || (M->dim == 3 && t == J_SPHERICAL)) || M->jneq[j] < 1 || M->jneq[j] > 3 ||
+        int spatial = t == J_SPHERICAL || (t >= J_SREVOLUTE && t <= J_FIXED);
+        if (!((M->dim == 2 && planar) || (M->dim == 3 && spatial)) || M->jneq[j] != joint_equations(t) ||
             M->jbi[j] < -1 || M->jbi[j] >= M->nb || M->jbj[j] < -1 || M->jbj[j] >= M->nb ||
-            !in_range(M->jrows + 3 * j, M->jneq[j], 0, M->m) || M->jlaw[j] < LAW_NONE || M->jlaw[j] > LAW_STRIBECK)
+            !in_range(M->jrows + OVK_MAXEQ * j, M->jneq[j], 0, M->m) || M->jlaw[j] < LAW_NONE || M->jlaw[j] > LAW_STRIBECK)
             return ovk_fail(d, OVK_INVALID, "model: joint %d (type %d, %d rows, bodies %d and %d, law %d) is not "
                             "one the core takes in dimension %d", j, t, M->jneq[j], M->jbi[j], M->jbj[j], M->jlaw[j],
                             M->dim);
@@ -67,7 +75,7 @@ static int check_model(const ovk_model *M, ovk_data *d) {
     if (!in_range(M->retained, M->nR, 0, M->m) || !in_range(M->rbody, 2 * M->nR, -1, M->nb) ||
         !in_range(M->xrows, M->nx, 0, M->nR) || !in_range(M->cols, M->ncols, 0, nh) ||
         !in_range(M->fj, M->nfj, 0, M->nj) || !in_range(M->fgroup, M->nfg + 1, 0, M->nfj + 1) ||
-        (M->nfg >= 0 && M->fgroup[M->nfg] != M->nfj) || !in_range(M->fx, 3 * M->nfj, 0, M->nx + 1) ||
+        (M->nfg >= 0 && M->fgroup[M->nfg] != M->nfj) || !in_range(M->fx, OVK_MAXEQ * M->nfj, 0, M->nx + 1) ||
         !in_range(M->fci, 6 * M->nfj, 0, M->ncols + 1) || !in_range(M->fcj, 6 * M->nfj, 0, M->ncols + 1))
         return ovk_fail(d, OVK_INVALID, "model: an index of the elimination or the friction plan is out of range");
     for (int g = 0; g < M->nfg; g++)
@@ -87,7 +95,8 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     size_t n_frames = (nb + 1) * (2 * dim + dim * dim + wd) + 4 * nb;
     size_t n_work = 4 * nx + nx * nc                          /* lam0x, x, x0, Wx */
                     + 4 * nx + nc * nx + nx * nx + nc + nx;   /* r, Dq, Mx, dx, xn, qn, rn (damped Newton) */
-    size_t need = n_frames + m * nh + 2 * m + nR * nR + 2 * nR + nh + nR * nc + 18 * nj + n_work + 15 * nfj;
+    size_t need = n_frames + m * nh + 2 * m + nR * nR + 2 * nR + nh + nR * nc + 6 * OVK_MAXEQ * nj + n_work
+                  + (OVK_MAXEQ + 12) * nfj;
     d->mem = calloc(need ? need : 1, sizeof(double));
     d->ctx = calloc(nfj ? nfj : 1, sizeof(ovk_fctx));
     if (!d->mem || !d->ctx) {
@@ -113,8 +122,8 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->lamR = p; p += nR;
     d->Q = p; p += nh;
     d->W = p; p += nR * nc;
-    d->Jblk = p; p += 18 * nj;
-    d->flam = p; p += 3 * nfj;
+    d->Jblk = p; p += 6 * OVK_MAXEQ * nj;
+    d->flam = p; p += OVK_MAXEQ * nfj;
     d->Qi = p; p += 6 * nfj;
     d->Qj = p; p += 6 * nfj;
     d->work = p;
@@ -156,7 +165,7 @@ int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int
     if ((status = ovk_kkt_solve(M, d))) return status;
     if (M->nfj && (status = ovk_friction(M, d, guess_mode, guess, qf, iterations, damped))) return status;
     ovk_kkt_accelerations(M, d, lam, ydot + n);
-    if ((status = ovk_rates(M, d, h, ydot))) return status;
+    if ((status = ovk_rates(M, d, q, h, ydot))) return status;
     for (int k = 0; k < n + nh; k++)
         if (!isfinite(ydot[k])) return ovk_fail(d, OVK_NONFINITE, "non-finite number in y' (entry %d)", k);
     return OVK_OK;
@@ -168,5 +177,23 @@ int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *
     if (d->status) return d->status;
     d->msg[0] = '\0';
     ovk_reported(M, d, y, lam, reac, fric);
+    return OVK_OK;
+}
+
+/* Phi (m), Phi_h (m x nh, row-major) and gamma (m, without Baumgarte) at y (joints.c): the rows
+ * the evaluation solves with, for checks of the joint formulas against the numpy path and finite
+ * differences. */
+int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam) {
+    if (!d) return OVK_NOMEM;
+    if (d->status) return d->status;
+    d->msg[0] = '\0';
+    int n = M->nb * M->nq_b, nh = M->nb * M->nh_b;
+    ovk_frames_build(M, y, y + n, &d->f);
+    ovk_constraint_rows(M, d, y);
+    for (int r = 0; r < M->m; r++) {
+        phi[r] = d->phi[r];
+        gam[r] = d->gam[r];
+        for (int k = 0; k < nh; k++) J[(size_t)r * nh + k] = d->J[(size_t)r * nh + k];
+    }
     return OVK_OK;
 }

@@ -7,7 +7,9 @@
  *   frames.c            positions, rotations and velocities of the bodies (and the base)
  *   joints.c            the joint table: dispatch by type, and the assembly of Phi, Phi_h, gamma
  *   joints_planar.c     planar revolute and translational joints: rows, friction setup and forces
- *   joints_spherical.c  spatial spherical joints (z-x-z Euler angles): the same
+ *   joints_spherical.c  spatial spherical joints: the same
+ *   joints_spatial.c    spatial axis joints (revolute, prismatic, cylindrical, universal, fixed): the
+ *                       row primitives of overcon.joints.spatial_rows, reactions, friction
  *   loads.c             applied forces: gravity, gyroscopic, force, torque, spring
  *   kkt.c               the KKT solve with the scene's elimination (Cholesky of S) and h'
  *   friction.c          friction laws, the reduced friction fixed point, Newton and damped Newton
@@ -30,7 +32,7 @@
 
 #include <stddef.h>
 
-#define OVK_ABI 4 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+#define OVK_ABI 5 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
     OVK_OK = 0,
@@ -42,11 +44,14 @@ enum {
     OVK_NOMEM = 6,     /* the workspace could not be allocated */
     OVK_INVALID = 7    /* a model or argument outside what the core takes */
 };
-enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 };
+enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
+enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
 enum { LAW_NONE = 0, LAW_REGULARISED = 1, LAW_STRIBECK = 2 };
 enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 
-#define NJC 12  /* doubles of constants per joint */
+#define NJC 34  /* doubles of constants per joint (joints_spatial.c: the axis joints' layout) */
+#define OVK_MAXEQ 6 /* equations per joint at most (the fixed joint) */
+#define OVK_NREAC 9 /* reported reaction entries per joint at most: 6 in the joint frame + 3 global */
 #define NLP 5   /* doubles of friction law per joint: mu, v_reg, size, mu_static, v_stribeck */
 #define NLD 11  /* doubles per load: value[3], s_i[3], s_j[3], stiffness, free_length */
 #define NEWTON_MAX_ITER 12
@@ -54,7 +59,8 @@ enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 #define DAMPED_MAX_ITER 30
 #define ARMIJO 1e-4
 #define SIN_BETA_MIN 1e-3
-#define OVK_MAX_FRICTION 32 /* friction joints (and 3 x that multipliers): overcon.kernel.support checks */
+#define QUAT_NORM_RATE 1.0 /* overcon.kinematics.QUAT_NORM_RATE: the quaternion norm stabilisation (1/s) */
+#define OVK_MAX_FRICTION 32 /* friction joints (and OVK_MAXEQ x that multipliers): overcon.kernel.support checks */
 #define OVK_MSG 256         /* bytes of the failure message, with its terminating zero */
 
 #if defined(__GNUC__)
@@ -65,7 +71,8 @@ enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 #define OVK_HIDDEN
 #endif
 
-/* The model, packed by overcon.kernel.Kernel (field order and types mirrored there). Read only. */
+/* The model, packed by overcon.kernel.Kernel (field order and types mirrored there). Read only.
+ * Spatial orientation coordinates by nq_b: 6 = z-x-z Euler angles, 7 = a quaternion (scalar first). */
 typedef struct {
     int dim, nb, nq_b, nh_b, m, nR, nj, nl;
     int nx, ncols, nfj, nfg;
@@ -76,7 +83,7 @@ typedef struct {
     const double *mass;    /* nb */
     const double *inertia; /* nb * 3 (spatial) */
     const double *gravity; /* dim */
-    const int *jtype, *jbi, *jbj, *jneq, *jrows; /* nj; jrows nj * 3 (equation indices) */
+    const int *jtype, *jbi, *jbj, *jneq, *jrows; /* nj; jrows nj * OVK_MAXEQ (equation indices) */
     const double *jconst;  /* nj * NJC */
     const int *jlaw;       /* nj */
     const double *jlawp;   /* nj * NLP */
@@ -86,7 +93,7 @@ typedef struct {
     const int *cols;       /* ncols: velocity indices the friction forces act on */
     const int *fj;         /* nfj: friction joints, plan order (group by group) */
     const int *fgroup;     /* nfg + 1: start of each friction group in fj */
-    const int *fx;         /* nfj * 3: x index per equation (nx = eliminated) */
+    const int *fx;         /* nfj * OVK_MAXEQ: x index per equation (nx = eliminated) */
     const int *fci, *fcj;  /* nfj * 6: index into cols per coordinate of body i, j (ncols = base) */
     const int *rbody;      /* nR * 2: the bodies (-1 base) of each retained row: Phi_h is zero elsewhere */
 } ovk_model;
@@ -94,14 +101,17 @@ typedef struct {
 /* Frames of the bodies, slot nb = the base. */
 typedef struct {
     double *r, *R, *v, *w; /* (nb + 1) slots: r, v dim; R dim*dim; w 1 (planar) or 3 */
-    double *sb, *cb, *sg, *cg; /* spatial: sin/cos of beta and gamma per body (rates) */
+    double *sb, *cb, *sg, *cg; /* Euler angles: sin/cos of beta and gamma per body (rates) */
 } ovk_frames;
 
 /* Per-evaluation constants of one friction joint (the friction setup of its type). */
 typedef struct {
     double A[9], JiT[6]; /* planar: A_i (3 x 3), (J_X)_i^T (3 x 2) */
     double e[2], arm_i[2], arm_j[2], coef; /* translational: guide, arms, mu(v); revolute: size*mu */
-    double Ri[9], RiT[9], omega[3], Rji[9]; /* spherical */
+    double Ri[9], RiT[9], omega[3], Rji[9]; /* spherical (RiT also the axis joints') */
+    double JT[6 * OVK_MAXEQ]; /* axis joints: (J_X)_i^T (6 x neq) */
+    double u[3], RjT[9], armj[3]; /* axis joints: the global axis, R_j^T, R_j^T (P_i - r_j) */
+    double spin, slide, mu, mos; /* axis joints: omega_rel, v_rel, mu(v), mu(|s|)/|s| (cylindrical) */
 } ovk_fctx;
 
 /* The workspace of one instance: every buffer of an evaluation, sized from the model by
@@ -116,10 +126,10 @@ typedef struct {
     double *lamR;  /* nR: retained multipliers */
     double *Q;     /* nh: applied (and friction) forces */
     double *W;     /* nR x ncols: S^-1 J_R M^-1 [:, cols] */
-    double *Jblk;  /* nj x 18: every joint's (J_X)_i block, for the friction setup */
+    double *Jblk;  /* nj x 6 OVK_MAXEQ: every joint's (J_X)_i block, for the friction setup */
     double *work;  /* the friction solve's vectors and matrices */
     ovk_fctx *ctx; /* nfj */
-    double *flam, *Qi, *Qj; /* nfj x 3, nfj x 6, nfj x 6: the last friction force evaluation */
+    double *flam, *Qi, *Qj; /* nfj x OVK_MAXEQ, nfj x 6, nfj x 6: the last friction force evaluation */
     double *mem;   /* the one allocation behind the double buffers above */
     int status;    /* nonzero: the workspace could not be made (every call returns it) */
     char msg[OVK_MSG];
@@ -172,6 +182,18 @@ OVK_HIDDEN void ovk_spherical_friction_jac(const ovk_model *M, int j, const ovk_
                                            double *dQi, double *dQj);
 OVK_HIDDEN double ovk_spherical_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
 
+/* joints_spatial.c */
+OVK_HIDDEN void ovk_axis_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji, double *Jj,
+                              double *gam);
+OVK_HIDDEN int ovk_axis_reaction(const ovk_model *M, const ovk_frames *f, int j, const double *fi, double *out);
+OVK_HIDDEN void ovk_axis_friction_setup(const ovk_model *M, const ovk_frames *f, int j, const double *Ji,
+                                        ovk_fctx *cx);
+OVK_HIDDEN void ovk_axis_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
+                                         double *Qi, double *Qj);
+OVK_HIDDEN void ovk_axis_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
+                                      double *dQi, double *dQj);
+OVK_HIDDEN double ovk_axis_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
+
 /* loads.c */
 OVK_HIDDEN int ovk_loads(const ovk_model *M, ovk_data *d);
 
@@ -201,7 +223,7 @@ OVK_HIDDEN void ovk_reported(const ovk_model *M, ovk_data *d, const double *y, c
                              double *fric);
 
 /* rates.c */
-OVK_HIDDEN int ovk_rates(const ovk_model *M, ovk_data *d, const double *h, double *qdot);
+OVK_HIDDEN int ovk_rates(const ovk_model *M, ovk_data *d, const double *q, const double *h, double *qdot);
 
 /* api.c: the library's entry points */
 OVK_EXPORT int ovk_abi(void);
@@ -212,6 +234,7 @@ OVK_EXPORT const char *ovk_message(const ovk_data *d);
 OVK_EXPORT int ovk_data_status(const ovk_data *d);
 OVK_EXPORT int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int guess_mode,
                             const double *guess, double *ydot, double *lam, double *qf, int *iterations, int *damped);
+OVK_EXPORT int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam);
 OVK_EXPORT int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,
                            double *fric);
 

@@ -54,9 +54,9 @@ static void forces_reduced(const ovk_model *M, ovk_data *d, const double *x, dou
     for (int g = 0; g < M->nfg; g++) {
         for (int n = M->fgroup[g]; n < M->fgroup[g + 1]; n++) {
             int j = M->fj[n];
-            double *lam = d->flam + 3 * n;
+            double *lam = d->flam + OVK_MAXEQ * n;
             for (int e = 0; e < M->jneq[j]; e++) {
-                int xi = M->fx[3 * n + e];
+                int xi = M->fx[OVK_MAXEQ * n + e];
                 lam[e] = xi < nx ? x[xi] : 0.0;
             }
             ovk_joint_friction_forces(M, j, d->ctx + n, lam, d->Qi + 6 * n, d->Qj + 6 * n);
@@ -77,14 +77,14 @@ static void forces_reduced(const ovk_model *M, ovk_data *d, const double *x, dou
 /* Dq (ncols x nx) = d qf / d x at the multipliers of the last force evaluation. */
 static void jacobian_reduced(const ovk_model *M, ovk_data *d, double *Dq) {
     int nx = M->nx;
-    double dQi[18], dQj[18];
+    double dQi[6 * OVK_MAXEQ], dQj[6 * OVK_MAXEQ];
     memset(Dq, 0, sizeof(double) * M->ncols * nx);
     for (int n = 0; n < M->nfj; n++) {
         int j = M->fj[n], ne = M->jneq[j];
-        ovk_joint_friction_jac(M, j, d->ctx + n, d->flam + 3 * n, dQi, dQj);
+        ovk_joint_friction_jac(M, j, d->ctx + n, d->flam + OVK_MAXEQ * n, dQi, dQj);
         for (int k = 0; k < M->nh_b; k++)
             for (int e = 0; e < ne; e++) {
-                int xi = M->fx[3 * n + e];
+                int xi = M->fx[OVK_MAXEQ * n + e];
                 if (xi >= nx) continue;
                 int ci = M->fci[6 * n + k], cj = M->fcj[6 * n + k];
                 if (ci < M->ncols) Dq[ci * nx + xi] += dQi[k * ne + e];
@@ -133,7 +133,7 @@ static int newton_reduced(const ovk_model *M, ovk_data *d, const double *lam0x, 
     int nx = M->nx, nc = M->ncols;
     int n_max = M->max_iter < NEWTON_MAX_ITER ? M->max_iter : NEWTON_MAX_ITER;
     double *r = work, *Dq = r + nx, *Mx = Dq + nc * nx;
-    int piv[OVK_MAX_FRICTION * 3], have_lu = 0, growth = 0;
+    int piv[OVK_MAX_FRICTION * OVK_MAXEQ], have_lu = 0, growth = 0;
     double prev = INFINITY;
     for (int it = 1; it <= n_max; it++) {
         *iters = it;
@@ -163,7 +163,7 @@ static int damped_newton_reduced(const ovk_model *M, ovk_data *d, const double *
     int n_max = M->max_iter < DAMPED_MAX_ITER ? M->max_iter : DAMPED_MAX_ITER;
     double *r = work, *Dq = r + nx, *Mx = Dq + nc * nx, *dx = Mx + nx * nx, *xn = dx + nx, *qn = xn + nx,
            *rn = qn + nc;
-    int piv[OVK_MAX_FRICTION * 3];
+    int piv[OVK_MAX_FRICTION * OVK_MAXEQ];
     forces_reduced(M, d, x, qf);
     int evals = 1;
     residual(nx, nc, lam0x, Wx, qf, x, r);
@@ -219,7 +219,7 @@ int ovk_friction(const ovk_model *M, ovk_data *d, int guess_mode, const double *
         }
     }
     for (int n = 0; n < M->nfj; n++) /* the planar setup needs the joint's (J_X)_i block */
-        ovk_joint_friction_setup(M, &d->f, M->fj[n], d->Jblk + 18 * M->fj[n], d->ctx + n);
+        ovk_joint_friction_setup(M, &d->f, M->fj[n], d->Jblk + 6 * OVK_MAXEQ * M->fj[n], d->ctx + n);
     memcpy(x0, x, sizeof(double) * nx); /* the start, kept for the damped solve */
     if (!newton_reduced(M, d, lam0x, Wx, x, qf, iterations, nwork)) {
         int first = *iterations, more = 0;

@@ -1,4 +1,5 @@
-/* Stage: the joint table. Dispatch by joint type to joints_planar.c and joints_spherical.c, and the
+/* Stage: the joint table. Dispatch by joint type to joints_planar.c, joints_spherical.c and
+ * joints_spatial.c, and the
  * assembly of every joint's rows into Phi (m), Phi_h (m x nh) and gamma (m). */
 #include <string.h>
 
@@ -10,7 +11,8 @@ void ovk_joint_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi,
     switch (M->jtype[j]) {
     case J_REVOLUTE: ovk_revolute_rows(M, f, j, phi, Ji, Jj, gam); break;
     case J_TRANSLATIONAL: ovk_translational_rows(M, f, j, phi, Ji, Jj, gam); break;
-    default: ovk_spherical_rows(M, f, j, phi, Ji, Jj, gam); break;
+    case J_SPHERICAL: ovk_spherical_rows(M, f, j, phi, Ji, Jj, gam); break;
+    default: ovk_axis_rows(M, f, j, phi, Ji, Jj, gam); break;
     }
 }
 
@@ -20,10 +22,10 @@ void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
     int nh = M->nb * M->nh_b, kh = M->nh_b;
     double *J = d->J;
     memset(J, 0, sizeof(double) * M->m * nh);
-    double blkJ[18], ph[3], gm[3];
+    double blkJ[6 * OVK_MAXEQ], ph[OVK_MAXEQ], gm[OVK_MAXEQ];
     for (int j = 0; j < M->nj; j++) {
         int ne = M->jneq[j];
-        double *blkI = d->Jblk + 18 * j;
+        double *blkI = d->Jblk + 6 * OVK_MAXEQ * j;
         ovk_joint_rows(M, &d->f, j, ph, blkI, blkJ, gm);
         if (M->jtype[j] == J_TRANSLATIONAL) {
             double pi = M->jbi[j] >= 0 ? q[M->jbi[j] * M->nq_b + 2] : 0.0;
@@ -31,7 +33,7 @@ void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
             ph[1] = pi - pj - M->jconst[NJC * j + 6];
         }
         for (int e = 0; e < ne; e++) {
-            int row = M->jrows[3 * j + e];
+            int row = M->jrows[OVK_MAXEQ * j + e];
             d->phi[row] = ph[e];
             d->gam[row] = gm[e];
             if (M->jbi[j] >= 0)
@@ -44,22 +46,26 @@ void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
 
 void ovk_joint_friction_setup(const ovk_model *M, const ovk_frames *f, int j, const double *Ji, ovk_fctx *cx) {
     if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_setup(M, f, j, cx);
+    else if (M->jtype[j] >= J_SREVOLUTE) ovk_axis_friction_setup(M, f, j, Ji, cx);
     else ovk_planar_friction_setup(M, f, j, Ji, cx);
 }
 
 void ovk_joint_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *Qi,
                                double *Qj) {
     if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_forces(M, j, cx, lam, Qi, Qj);
+    else if (M->jtype[j] >= J_SREVOLUTE) ovk_axis_friction_forces(M, j, cx, lam, Qi, Qj);
     else ovk_planar_friction_forces(M, j, cx, lam, Qi, Qj);
 }
 
 void ovk_joint_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *dQi,
                             double *dQj) {
     if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_jac(M, j, cx, lam, dQi, dQj);
+    else if (M->jtype[j] >= J_SREVOLUTE) ovk_axis_friction_jac(M, j, cx, lam, dQi, dQj);
     else ovk_planar_friction_jac(M, j, cx, lam, dQi, dQj);
 }
 
 double ovk_joint_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam) {
     if (M->jtype[j] == J_SPHERICAL) return ovk_spherical_friction_output(M, j, cx, lam);
+    if (M->jtype[j] >= J_SREVOLUTE) return ovk_axis_friction_output(M, j, cx, lam);
     return ovk_planar_friction_output(M, j, cx, lam);
 }

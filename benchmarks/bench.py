@@ -2,6 +2,8 @@
 
     python benchmarks/bench.py                 # ~6-9 min on the 2-core reference machine
     python benchmarks/bench.py --quick         # 1 repetition, short ladders (a smoke test, ~1.5 min)
+    python benchmarks/bench.py --joints        # per joint type: one evaluation, core against numpy,
+                                               # and the example scenes in process (~1 min; printed only)
 
 Prints Markdown tables and writes ``docs/benchmarks.md`` and ``docs/pareto.png`` (``--out DIR``
 elsewhere). Figures are printed, never asserted.
@@ -603,6 +605,179 @@ def machine() -> str:
             f"load average at the end {load:.1f}")
 
 
+# ------------------------------------------------------------------------------------ per joint type
+
+
+def friction_keys(kind: str, jtype: str) -> tuple[str, ...]:
+    """The friction size keys of a joint type (() without friction)."""
+    from overcon.joints import TYPES, resolve
+
+    return TYPES[resolve(kind, jtype)].friction_keys
+
+JOINT_CASES = [("planar", "revolute", None), ("planar", "translational", None), ("spatial", "spherical", "euler_zxz"),
+               ("spatial", "spherical", "quaternion")] + [
+    ("spatial", t, r) for t in ("revolute", "prismatic", "cylindrical", "universal", "fixed")
+    for r in ("euler_zxz", "quaternion")]
+EXAMPLE_RUNS = ("door_h1_wo_hinge2", "fourbar_A_wo3_4_5", "loop_A1_wo_A2", "carriage_guide_wo_rod")
+
+
+def chain_text(kind: str, jtype: str, rotation: str | None, friction: bool) -> str:
+    """A chain of three bodies, each joined to the previous one (the first to the base) by a
+    ``jtype`` joint, friction (regularised, mu 0.1) in every joint where the type has it. Spatial:
+    every body in one orientation R0, the joints assembled at q0 (points coincide, axes parallel,
+    a universal joint's cross axes perpendicular); planar: random geometry."""
+    from overcon.kinematics import euler_R, euler_to_quat
+
+    rng = np.random.default_rng(1)
+    d = 2 if kind == "planar" else 3
+    vec = (lambda k: ", ".join(f"{x:.6f}" for x in rng.uniform(-0.5, 0.5, k)))
+    fmt3 = (lambda v: ", ".join(repeat_float(x) for x in v))
+    lines = ["[mechanism]", f'name = "chain_{jtype}"', f'kind = "{kind}"',
+             "gravity = [0.0, -9.81]" if d == 2 else "gravity = [0.0, 0.0, -9.81]"]
+    if rotation:
+        lines.append(f'rotation = "{rotation}"')
+    angles0 = [0.3, 1.0, 0.5]
+    R0 = euler_R(angles0)
+    orient = euler_to_quat(angles0) if rotation == "quaternion" else angles0
+    r = [np.array([0.3 * (b + 1), 0.1 * b, -0.2 * b]) for b in range(3)]
+    for b in range(3):
+        if d == 2:
+            q0, inertia = f"{vec(2)}, {rng.uniform(-3, 3):.6f}", "1.0"
+        else:
+            q0, inertia = f"{fmt3(r[b])}, {fmt3(orient)}", "[1.0, 1.5, 2.0]"
+        lines += ["[[bodies]]", f'name = "b{b}"', "mass = 1.0", f"inertia = {inertia}", f"q0 = [{q0}]"]
+    a = np.array([0.2, 0.3, 0.9]) / np.linalg.norm([0.2, 0.3, 0.9])
+    c = np.cross(a, [1.0, 0.0, 0.0])
+    c /= np.linalg.norm(c)
+    s_i = np.array([-0.15, 0.05, 0.0])
+    for j in range(3):
+        lines += ["[[joints]]", f'name = "J{j}"', f'type = "{jtype}"', f'body_i = "b{j}"',
+                  f'body_j = "{"base" if j == 0 else f"b{j - 1}"}"']
+        if jtype == "translational":
+            lines += [f"s_A = [{vec(2)}]", f"s_B = [{vec(2)}]", f"v = [{vec(2)}]"]
+        elif d == 2:
+            lines += [f"s_i = [{vec(d)}]", f"s_j = [{vec(d)}]"]
+        else:
+            P = r[j] + R0 @ s_i
+            s_j = P if j == 0 else R0.T @ (P - r[j - 1])
+            lines += [f"s_i = [{fmt3(s_i)}]", f"s_j = [{fmt3(s_j)}]"]
+            if jtype != "spherical":
+                b_axis = c if jtype == "universal" else a
+                lines += [f"axis_i = [{fmt3(a)}]", f"axis_j = [{fmt3(R0 @ b_axis if j == 0 else b_axis)}]"]
+        if friction and friction_keys(kind, jtype):
+            lines += ["[joints.friction]", 'law = "regularised"', "mu = 0.1", "v_reg = 1e-3"]
+            lines += [f"{key} = 0.05" for key in friction_keys(kind, jtype)]
+    return "\n".join(lines) + "\n"
+
+
+def repeat_float(x) -> str:
+    return repr(float(x))
+
+
+def per_evaluation(model, solver, y, n: int) -> tuple[float, float]:
+    """(core, numpy) microseconds of one evaluation (y' as the integrator asks for it), the best
+    of 5 medians of n calls each."""
+    from overcon import kernel
+    from overcon.dynamics import evaluate
+    from overcon.evaluation import coordinate_rates
+
+    k, _note = kernel.select(model, replace(solver, kernel="c"))
+    q, h = y[: model.n], y[model.n:]
+
+    def numpy_call():
+        ev = evaluate(model, 0.0, q, h, solver=solver)
+        coordinate_rates(model, q, h, ev.frames)
+
+    out = []
+    for call in (lambda: k.evaluate(0.0, y), numpy_call):
+        best = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            for _ in range(n):
+                call()
+            best.append((time.perf_counter() - t0) / n * 1e6)
+        out.append(min(best))
+    return out[0], out[1]
+
+
+def joint_rows(n: int) -> list[tuple]:
+    """Per joint type and rotation, with and without friction: (kind, type, rotation, friction,
+    core us, numpy us), at a state near q0 with velocities (so friction slides)."""
+    from overcon import scene as scene_mod
+    from overcon.checks import compile_checked
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind, jtype, rotation in JOINT_CASES:
+            for friction in (False, True):
+                if friction and not friction_keys(kind, jtype):
+                    continue
+                path = Path(tmp) / "chain.toml"
+                path.write_text(chain_text(kind, jtype, rotation, friction))
+                spec = scene_mod.as_scene(scene_mod.load(path), friction=["J0", "J1", "J2"] if friction else [])
+                model = compile_checked(spec, check_initial=False)
+                y = np.concatenate([model.q0 + 0.001, model.h0 + 0.3])
+                core, num = per_evaluation(model, spec.solver, y, n)
+                rows.append((kind, jtype, rotation or "", friction, model.m, core, num))
+                log(f"{kind} {jtype} {rotation or ''} friction={friction}: core {core:.1f} us, numpy {num:.1f} us")
+    return rows
+
+
+def example_runs(repeat: int) -> list[tuple]:
+    """The example scenes (quaternions) integrated in process as shipped (``overcon simulate``'s
+    path: overcon.simulate.run), solver.kernel = "c" and "numpy": (scene, path note, core s,
+    numpy s, evaluations), the median of ``repeat`` runs."""
+    from overcon import scene as scene_mod
+    from overcon.checks import compile_checked
+    from overcon.simulate import Simulation, run
+
+    rows = []
+    for name in EXAMPLE_RUNS:
+        spec = scene_mod.as_scene(scene_mod.load(MECH / "examples" / f"{name}.toml"))
+        model = compile_checked(spec)
+        note = Simulation(model, spec.solver).kernel_note
+        walls, evals = {}, 0
+        for choice in ("c", "numpy"):
+            times = []
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                res = run(model, replace(spec.solver, kernel=choice), stop_time=spec.stop_time)
+                times.append(time.perf_counter() - t0)
+            walls[choice] = statistics.median(times)
+            evals = res.evaluations
+        rows.append((name, spec.stop_time, short_path(note), walls["c"], walls["numpy"], evals))
+        log(f"{name}: core {walls['c']:.2f} s, numpy {walls['numpy']:.2f} s")
+    return rows
+
+
+def joints_report(rows, runs, n: int, repeat: int) -> str:
+    out = ["## Per joint type: one evaluation, compiled core and numpy (`python benchmarks/bench.py --joints`)", "",
+           f"{machine()}. A chain of three bodies joined by three joints of the type (the first to the base), "
+           "friction (regularised, mu 0.1) in all three where the type has it, at a state near q0 with "
+           f"velocities; one evaluation = y' (Eq. 18 with the elimination, the friction solve, the rates); best of 5 "
+           f"medians of {n} calls, in process (no FMI).", "",
+           "| kind | joint | rotation | friction | equations | core (us) | numpy (us) | numpy / core |",
+           "|---|---|---|---|---:|---:|---:|---:|"]
+    for kind, jtype, rot, fr, m, core, num in rows:
+        out.append(f"| {kind} | {jtype} | {rot} | {'yes' if fr else 'no'} | {m} | {core:.1f} | {num:.1f} | "
+                   f"{num / core:.0f} |")
+    out += ["", f"The example scenes as shipped, integrated in process (`overcon simulate`'s path, median of {repeat}):",
+            "", "| scene | stop (s) | path with auto | compiled (s) | numpy (s) | numpy / compiled | evaluations |",
+            "|---|---:|---|---:|---:|---:|---:|"]
+    for name, stop, note, c, num, ev in runs:
+        out.append(f"| {name} | {stop:g} | {note} | {c:.2f} | {num:.2f} | {num / c:.1f} | {ev} |")
+    return "\n".join(out) + "\n"
+
+
+def joints_main(repeat: int, quick: bool) -> int:
+    n = 50 if quick else 300
+    t0 = time.perf_counter()
+    md = joints_report(joint_rows(n), example_runs(repeat), n, repeat)
+    print(md)
+    log(f"per joint type and examples: {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
 # ------------------------------------------------------------------------------------ main
 
 KEEP_MARKER = "<!-- kept by bench.py"
@@ -623,8 +798,13 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="1 repetition and short ladders (smoke test)")
     ap.add_argument("--out", default=str(ROOT / "docs"), help="where benchmarks.md and pareto.png go")
     ap.add_argument("--no-exudyn", action="store_true")
+    ap.add_argument("--joints", action="store_true",
+                    help="only the per-joint-type evaluation cost (core and numpy) and the example scenes in "
+                         "process (printed, nothing written)")
     args = ap.parse_args(argv)
     repeat = 1 if args.quick else max(1, args.repeat)
+    if args.joints:
+        return joints_main(repeat, args.quick)
     ladders_def = QUICK if args.quick else LADDERS
     t_start = time.perf_counter()
     from overcon.fmu.build import build_all

@@ -67,6 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"largest step of the adaptive methods ({_range('solver.max_step')})")
     s.add_argument("--output-interval", type=_number, metavar="DT",
                    help=f"output grid interval ({_range('solver.output_interval')})")
+    s.add_argument("--events", metavar="EVENTS.csv",
+                   help="also write the run's events (time, kind, detail): singular positions, eliminations "
+                        "chosen again, the stop")
     s.add_argument("--friction-outputs", metavar="all|none|J1,J2",
                    help="friction force outputs <joint>.friction (overrides the scene's outputs.friction)")
     s.add_argument("--max-steps", type=_jobs, metavar="N",
@@ -239,6 +242,10 @@ def cmd_simulate(args) -> int:
     if out.is_dir() or not out.parent.is_dir():
         return _input_error(f"--out {args.out}: " + ("is a directory (give a CSV file name)" if out.is_dir()
                                                      else f"the directory {out.parent} does not exist"))
+    events = Path(args.events) if args.events else None
+    if events is not None and (events.is_dir() or not events.parent.is_dir()):
+        return _input_error(f"--events {args.events}: " + ("is a directory (give a CSV file name)" if events.is_dir()
+                                                           else f"the directory {events.parent} does not exist"))
     spec, model = _load(args)
     for w in run_warnings(precheck(model, args.file)):
         print(f"overcon: warning: {w}", file=sys.stderr)
@@ -256,11 +263,28 @@ def cmd_simulate(args) -> int:
         return _failed_run(args, model, spec, exc, time.perf_counter() - start)
     wall = time.perf_counter() - start
     write_csv(res, args.out)
+    _write_events(args, res)
     print(_run_stats(args.out, model, res, wall))
     if res.stiff_steps:
         print(f"note: {res.stiff_steps} steps were limited by stability (stiff: friction sticking inside the "
               "regularisation band); a larger v_reg or a looser tolerance is cheaper")
     return EXIT_OK
+
+
+def _write_events(args, res) -> None:
+    """``--events``: the run's events as CSV (overcon.simulate.write_events)."""
+    if args.events:
+        from .simulate import write_events
+        write_events(res.events, args.events)
+
+
+def _events_note(res) -> str:
+    """'; events: 1 elimination-reselected at t = 0.2 s' (nothing without events)."""
+    if not res.events:
+        return ""
+    shown = ", ".join(f"{kind} at t = {t:.6g} s" for t, kind, _ in res.events[:5])
+    more = f" and {len(res.events) - 5} more" if len(res.events) > 5 else ""
+    return f"; events: {shown}{more}"
 
 
 def _run_stats(out, model, res, wall: float) -> str:
@@ -270,7 +294,8 @@ def _run_stats(out, model, res, wall: float) -> str:
             f"eliminated {', '.join('Phi%d' % i for i in model.eliminated) or 'none'} ({model.elimination_mode}); "
             f"{res.steps} steps, {res.evaluations} evaluations, {res.friction_iterations} friction iterations; "
             f"max constraint drift {res.max_drift:.3g}; wall {wall:.2f} s; {res.kernel_note}"
-            + (f" ({res.kernel_repeats} evaluations handed back to numpy)" if res.kernel_repeats else ""))
+            + (f" ({res.kernel_repeats} evaluations handed back to numpy)" if res.kernel_repeats else "")
+            + _events_note(res))
 
 
 def _failed_run(args, model, spec, exc, wall: float) -> int:
@@ -286,6 +311,7 @@ def _failed_run(args, model, spec, exc, wall: float) -> int:
     partial = exc.partial
     if partial is not None:
         write_csv(partial, args.out)
+        _write_events(args, partial)
         print(_run_stats(args.out, model, partial, wall))
     print(f"overcon: {args.file}: {exc} [{note}]", file=sys.stderr)
     if partial is not None:

@@ -42,72 +42,16 @@ from .params import MAX_OUTPUT_POINTS, check_param, output_points
 from .checks import check_initial_state
 from .model import InconsistentInitialState, Model, ModelError  # noqa: F401
 from .spec import SceneSpec, SolverSpec
+from .watch import (EliminationExpired, SingularityMonitor, SingularPosition,  # noqa: F401
+                    friction_on_nonunique, reselected, valid_eliminations)
 
 
-class SingularityMonitor:
-    """Detects the motion reaching or passing a singular position, where the kept equations'
-    Jacobian J_R = Phi_h[R] loses rank (e.g. the planar sliders at K = L = O).
-
-    After every accepted step: (1) sigma_min/sigma_max of J_R (mass-weighted, rows normalised)
-    below ``ratio_tol`` (default 1e-6)
-    stops the run; (2) a *crossing* between two steps, which a finite step may jump over, is caught
-    by the sign of det([J_R; N^T]) with N the velocity null-space basis of the previous step
-    (nonzero while J_R keeps full rank, and it changes sign when J_R passes through rank loss).
-    The smallest ratio seen is reported as ``min_ratio``.
-    """
-
-    def __init__(self, model: Model, y: np.ndarray, t0: float | None = None, ratio_tol: float = 1e-6):
-        self.model, self.ratio_tol = model, ratio_tol
-        self.rows = model.retained
-        if model.elimination_mode == "min-norm":  # every equation kept: watch an independent set of them
-            from .analysis import independent_columns
-            self.rows = np.array(independent_columns(jacobian_h(model, frames(model, y[: model.n])).T), int)
-        elif model.compliant_rows.size:  # compliant equations are forces: watch the rigid ones
-            self.rows = np.setdiff1d(model.retained, model.compliant_rows)
-        self.min_ratio = np.inf
-        self.t_prev = model.scene.start_time if t0 is None else t0
-        self.sign, self.N = 1.0, np.zeros((model.nh, 0))
-        if not self.rows.size:  # nothing rigid to lose rank
-            return
-        J = self._jac(y)
-        self.N, ratio = self._null(J, None)
-        self._check_ratio(self.t_prev, ratio)
-        self.sign = np.sign(np.linalg.det(np.vstack([J, self.N.T])))
-
-    def _jac(self, y):
-        """Kept Jacobian, mass-weighted (J M^-1/2) with unit-norm rows: invariant to the choice
-        of length unit and to the scaling of each equation."""
-        m = self.model
-        J = jacobian_h(m, frames(m, y[: m.n]))[self.rows] * np.sqrt(m.Minv)[None, :]
-        return J / np.linalg.norm(J, axis=1, keepdims=True)
-
-    def _null(self, J, N_prev):
-        _, sv, Vt = np.linalg.svd(J)
-        N = Vt[J.shape[0]:].T
-        if N_prev is not None and N.size:  # keep the basis orientation continuous (polar alignment)
-            U, _, Wt = np.linalg.svd(N.T @ N_prev)
-            N = N @ (U @ Wt)
-        return N, (sv[-1] / sv[0] if sv.size else 1.0)
-
-    def _check_ratio(self, t, ratio):
-        self.min_ratio = min(self.min_ratio, ratio)
-        if ratio < self.ratio_tol:
-            raise SingularConfiguration(
-                f"t = {t:.9g} s: singular position: the kept constraint Jacobian is rank deficient "
-                f"(sigma_min/sigma_max = {ratio:.3g} < {self.ratio_tol:g})")
-
-    def check(self, t: float, y: np.ndarray) -> None:
-        if not self.rows.size:
-            return
-        J = self._jac(y)
-        if self.N.size and np.sign(np.linalg.det(np.vstack([J, self.N.T]))) != self.sign:
-            raise SingularConfiguration(
-                f"the motion passed a singular position between t = {self.t_prev:.9g} s and "
-                f"t = {t:.9g} s (the kept constraint Jacobian lost rank on the way)")
-        self.N, ratio = self._null(J, self.N)
-        self._check_ratio(t, ratio)
-        self.sign = np.sign(np.linalg.det(np.vstack([J, self.N.T])))
-        self.t_prev = t
+EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
+"""Kinds of :attr:`Simulation.events` (``overcon simulate --events``): a singular position passed,
+the kept equations chosen again, the rank or a friction joint's uniqueness changing along the
+motion, the run stopping (its reason). This version records ``elimination-reselected`` and
+``stopped`` (a singular position of the mechanism stops every method: no formulation here passes
+one and keeps the branch, see the README)."""
 
 
 class SimulationError(RuntimeError):
@@ -183,6 +127,7 @@ class Simulation:
         self.friction_iterations = 0
         self.evaluations = 0
         self.max_drift = 0.0
+        self.events: list[tuple[float, str, str]] = []  # (time s, kind, detail): see :data:`EVENT_KINDS`
         t0 = model.scene.start_time if start_time is None else start_time
         y0 = np.concatenate([model.q0, model.h0])
         try:
@@ -190,6 +135,7 @@ class Simulation:
                                                   **self.settings)
             self.monitor = SingularityMonitor(model, y0, t0)
         except (ArithmeticError, np.linalg.LinAlgError) as exc:
+            self.events.append((t0, "stopped", str(exc)))
             where = "" if str(exc).startswith("t = ") else f"t = {t0:.9g} s: "
             raise SimulationError(f"cannot start: {where}{exc}") from exc
 
@@ -252,19 +198,14 @@ class Simulation:
         call = (itg.nsteps, max_steps, max_wall_time)
         try:
             while itg.t < t_target - eps:
-                t_before = itg.t
-                itg.step()
-                if not itg.t > t_before:
-                    raise SimulationError(
-                        f"t = {t_before:.9g} s: time does not advance (step below the resolution of t)")
-                self.monitor.check(itg.t, itg.y)
-                if self._warm.items:
-                    self._step_warm.push(itg.t, self._warm.items[0][1])
-                f = frames(self.model, itg.y[: self.n])
-                self.max_drift = max(self.max_drift, float(np.max(np.abs(constraints(self.model, f)), initial=0.0)))
-                self._check_budget(itg, started, call)
+                try:
+                    self._step(itg, started, call)
+                except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+                    if not self._recover(itg, exc):
+                        raise
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             where = "" if str(exc).startswith("t = ") else f"t = {itg.t:.9g} s: "
+            self.events.append((getattr(exc, "t", itg.t), "stopped", f"{where}{exc}"))
             err = SimulationError(f"integration stopped: {where}{exc}")
             err.stable_step = getattr(exc, "stable_step", None)
             raise err from exc
@@ -273,6 +214,85 @@ class Simulation:
         if itg.t - t_target < -eps:
             raise SimulationError(f"could not reach t = {t_target}")
         return itg.dense(t_target) if abs(itg.t - t_target) > eps else itg.y.copy()
+
+    def _step(self, itg, started: float, call) -> None:
+        """One accepted step, watched (:meth:`_watch`), with the drift and the budget."""
+        t_before = itg.t
+        itg.step()
+        if not itg.t > t_before:
+            raise SimulationError(f"t = {t_before:.9g} s: time does not advance (step below the resolution of t)")
+        if not self._watch(itg):
+            return  # the step is taken again from its start, under another elimination
+        if self._warm.items:
+            self._step_warm.push(itg.t, self._warm.items[0][1])
+        f = frames(self.model, itg.y[: self.n])
+        self.max_drift = max(self.max_drift, float(np.max(np.abs(constraints(self.model, f)), initial=0.0)))
+        self._check_budget(itg, started, call)
+
+    def _recover(self, itg, exc) -> bool:
+        """After a step failed with ``exc``: True if the cause was the elimination expiring
+        (:meth:`overcon.watch.SingularityMonitor.expiring`) and the run goes on under another one
+        (:meth:`_expired`); raises the expiry (with ``exc``'s message) when it cannot; False
+        when the failure has another cause."""
+        if isinstance(exc, (SingularConfiguration, BudgetExceeded)) or not hasattr(itg, "t_old"):
+            return False
+        found = self.monitor.expiring(itg.t, itg.y, itg.t - itg.t_old)
+        if found is None:
+            return False
+        t_star, y_star = found
+        expired = EliminationExpired(
+            f"t = {t_star:.9g} s: the kept equations lose rank here while the mechanism stays regular: the elimination "
+            f"chosen at the start expires (the step from t = {itg.t:.9g} s failed: {exc})", t_star, 0.0, y_star, itg.t)
+        self._expired(expired, itg.t, itg.y.copy())
+        return True
+
+    def _watch(self, itg) -> bool:
+        """The singularity watch after an accepted step (:mod:`overcon.watch`). False when the
+        kept equations expired inside the step and the motion does not depend on the
+        elimination: the equations are then chosen again at that instant (pivoted QR), an
+        ``elimination-reselected`` event is recorded, and the integration restarts from the
+        step's start under the new elimination (the integrator is rebuilt; its counters go on).
+        With friction on a joint whose reaction is not unique the elimination decides the
+        motion: the run stops, naming the eliminations that stay valid."""
+        try:
+            self.monitor.check(itg.t, itg.y, itg.dense)
+            return True
+        except EliminationExpired as exc:
+            self._expired(exc, itg.t_old, itg.y_old.copy())
+            return False
+
+    def _expired(self, exc: EliminationExpired, t: float, y: np.ndarray) -> None:
+        """The kept equations expired at ``exc.t``: choose them again there and restart from
+        (t, y), or, with friction on a joint whose reaction is not unique, raise the stop."""
+        nonunique = friction_on_nonunique(self.model, exc.y)
+        if nonunique:
+            valid = valid_eliminations(self.model, exc.y)
+            raise EliminationExpired(
+                f"{exc}; with friction on {', '.join(nonunique)}, whose reaction is not unique, the elimination "
+                f"decides the motion, so the run stops (eliminated: "
+                f"{', '.join(f'Phi{i}' for i in self.model.eliminated) or 'none'}; other eliminations valid at the "
+                f"start and here: {', '.join(valid) or 'none found'})", exc.t, exc.ratio, exc.y, exc.t_step) from None
+        before = self.model.eliminated
+        model, eliminated = reselected(self.model, exc.y)
+        if list(before) == eliminated:
+            raise exc
+        self.events.append((exc.t, "elimination-reselected",
+                            f"eliminated {list(before)} -> {eliminated} (the kept equations lost rank at "
+                            f"t = {exc.t:.9g} s)"))
+        self._restart(model, t, y)
+
+    def _restart(self, model: Model, t: float, y: np.ndarray) -> None:
+        """Go on from (t, y) under ``model`` (another elimination of the same mechanism): a new
+        integrator with the same settings and counters, kernel, warm starts and watch."""
+        old = self._integrator
+        self.model = model
+        self._kernel, self.kernel_note = kernel_mod.select(model, self.solver)
+        self._derived = _DerivedPlan(model)
+        self.lam, self._warm, self._step_warm, self._last_eval = None, _ForcesHistory(), _ForcesHistory(), None
+        self._integrator = integrators.create(self.method, self._rhs, t, y, dense_fun=self._rhs_dense,
+                                              **self.settings)
+        self._integrator.nsteps, self._integrator.nfev = old.nsteps, old.nfev
+        self.monitor = SingularityMonitor(model, y, t)
 
     def _check_budget(self, itg, started: float, call=(0, None, None)) -> None:
         """Raise BudgetExceeded when the step count or the wall time is used up: the Simulation's
@@ -360,7 +380,8 @@ class Simulation:
                     x.copy() if isinstance(x, np.ndarray) else x for x in self._last_eval),
                 "friction_iterations": self.friction_iterations, "evaluations": self.evaluations,
                 "max_drift": self.max_drift,
-                "monitor": (self.monitor.N.copy(), self.monitor.sign, self.monitor.t_prev, self.monitor.min_ratio)}
+                "monitor": self.monitor.state(), "events": list(self.events),
+                "eliminated": self.model.eliminated}
 
     def set_state(self, state: dict) -> None:
         state = copy.deepcopy(state)
@@ -372,8 +393,18 @@ class Simulation:
         self.friction_iterations = state["friction_iterations"]
         self.evaluations = state["evaluations"]
         self.max_drift = state["max_drift"]
-        mon = self.monitor
-        mon.N, mon.sign, mon.t_prev, mon.min_ratio = state["monitor"]
+        self.events = list(state.get("events", ()))
+        if tuple(state.get("eliminated", self.model.eliminated)) != tuple(self.model.eliminated):
+            self._use_elimination(state["eliminated"])
+        self.monitor.set_state(state["monitor"])
+
+    def _use_elimination(self, eliminated) -> None:
+        """Take the elimination of a saved state (one chosen again during the run)."""
+        retained = np.array([i for i in range(self.model.m) if i + 1 not in set(eliminated)], int)
+        self.model = dataclasses.replace(self.model, retained=retained, eliminated=tuple(eliminated))
+        self._kernel, self.kernel_note = kernel_mod.select(self.model, self.solver)
+        self._derived = _DerivedPlan(self.model)
+        self.monitor = SingularityMonitor(self.model, self._integrator.y, self._integrator.t)
 
 
 class _ForcesHistory:
@@ -478,6 +509,7 @@ class Result:
     stiff_steps: int = 0  # dopri5 steps whose size was limited by stability (Hairer's test)
     kernel_note: str = ""  # which right-hand side ran (Simulation.kernel_note)
     kernel_repeats: int = 0  # evaluations the compiled kernel handed back to the numpy path
+    events: tuple = ()  # (time s, kind, detail) of Simulation.events (EVENT_KINDS)
 
     def column(self, name: str) -> np.ndarray:
         return self.values[:, self.names.index(name)]
@@ -528,13 +560,23 @@ def _result(model: Model, sim: Simulation, time: np.ndarray, rows: list) -> Resu
     values = np.array(rows) if rows else np.zeros((0, len(model.output_names())))
     return Result(model.output_names(), np.asarray(time), values, sim.max_drift, sim.evaluations,
                   sim.friction_iterations, itg.nsteps, getattr(itg, "stiff_steps", 0), sim.kernel_note,
-                  sim.kernel_repeats)
+                  sim.kernel_repeats, tuple(sim.events))
 
 
 def run_scene(scene: SceneSpec, **kw) -> Result:
     """Compile ``scene`` and :func:`run` it with its own solver options ``scene.solver``."""
     from .checks import compile_checked
     return run(compile_checked(scene), scene.solver, **kw)
+
+
+def write_events(events, path) -> None:
+    """The events of a run (:data:`EVENT_KINDS`) as CSV: ``time`` (s), ``kind``, ``detail``; the
+    header alone when there were none."""
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["time", "kind", "detail"])
+        for t, kind, detail in events:
+            w.writerow([repr(float(t)), kind, detail])
 
 
 def write_csv(result: Result, path) -> None:

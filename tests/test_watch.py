@@ -1,0 +1,190 @@
+"""The watch over singular positions (overcon.watch): every rank loss seen whatever its
+multiplicity, at a time that does not depend on the tolerance; the mechanism told apart from an
+elimination that expires; the kept equations chosen again when the motion does not depend on
+them, and a stop naming the valid eliminations when it does; the events of a run."""
+from __future__ import annotations
+
+import csv
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from overcon import scene as scene_mod
+from overcon.checks import compile_checked
+from overcon.cli import main
+from overcon.simulate import Simulation, SimulationError, output_grid, run
+from overcon.watch import ratio, ratio_and_rate, weighted_rows
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "mechanisms" / "examples"
+
+
+def _nfourbar():
+    spec = importlib.util.spec_from_file_location("nfourbar", EXAMPLES / "nfourbar.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _scene(path: Path, **kw):
+    return scene_mod.as_scene(scene_mod.load(path), **kw)
+
+
+def _first_flat_stop(tmp_path: Path, n: int, tolerance: float) -> float:
+    _, scene = _nfourbar().write(n, tmp_path / f"n{n}_{tolerance:g}", stop_time=2.0, tolerance=tolerance)
+    spec = _scene(scene)
+    with pytest.raises(SimulationError, match=r"the mechanism's constraint Jacobian is rank deficient") as exc:
+        run(compile_checked(spec), spec.solver)
+    return float(exc.value.partial.time[-1]), str(exc.value)
+
+
+@pytest.mark.parametrize("n", [2, 4])
+def test_nfourbar_stops_at_its_first_flat_position_whatever_the_tolerance(tmp_path, n):
+    """The N-four-bar loses N of its rank when it lies flat (every crank along x, first at about
+    0.714 s): an even loss for N = 2 and 4, which a determinant's sign cannot see. Both
+    tolerances stop there, at the same time (the message's), and keep the rows before it."""
+    times = []
+    for tol in (1e-9, 1e-12):
+        last_row, message = _first_flat_stop(tmp_path, n, tol)
+        t_stop = float(message.split("t = ")[1].split(" s")[0])
+        assert last_row <= t_stop < last_row + 0.05  # the file ends at an output point before the stop's step
+        times.append(t_stop)
+    assert abs(times[0] - times[1]) < 1e-3
+    # the flat position itself: crank0 horizontal, from the frictionless run's energy (upright, 1 m/s)
+    assert 0.70 < times[0] < 0.73
+
+
+def test_rate_of_the_ratio_is_its_derivative_along_the_motion(tmp_path):
+    """ratio_and_rate's dr/dt (singular vectors and J' along q') against a central difference
+    of r along q'."""
+    spec = _scene(_parallelogram(tmp_path, friction=None, eliminate="[11]"))
+    model = compile_checked(spec)
+    y = np.concatenate([model.q0, model.h0])
+    r, rate = ratio_and_rate(model, y, model.retained)
+    from overcon.evaluation import coordinate_rates
+    qdot = coordinate_rates(model, model.q0, model.h0)
+    d = 1e-5
+
+    def at(s):
+        z = y.copy()
+        z[: model.n] += s * qdot
+        return ratio(weighted_rows(model, z, model.retained))
+
+    central = (at(d) - at(-d)) / (2 * d)
+    assert r == pytest.approx(at(0.0), rel=1e-14)
+    assert rate < -0.01  # the kept set heads for its loss of rank
+    assert rate == pytest.approx(central, rel=1e-4)
+
+
+# ----------------------------------------------------------------------------- an expiring elimination
+
+def _parallelogram(tmp_path: Path, friction: str | None, eliminate: str, k: int = 3) -> Path:
+    """A coupler on k = 3 parallel cranks of 1 m, started at 60 deg and turning at 3 rad/s
+    counter-clockwise, so it passes the upright position at about 0.2 s. Equations: G0 1-2,
+    C0 3-4, G1 5-6, C1 7-8, G2 9-10, C2 11-12; one redundant (the cranks' axial self-stress).
+    Eliminating Phi11 (C2's x row) is valid while the cranks are not upright: at the upright
+    position the self-stress has no x component, so the other 11 equations lose rank there,
+    while all 12 keep rank 11."""
+    theta, omega = math.pi / 3, 3.0
+    c, s = math.cos(theta), math.sin(theta)
+    lines = ['[mechanism]', 'name = "pg3"', 'kind = "planar"', 'gravity = [0.0, -9.81]',
+             '[[bodies]]', 'name = "coupler"', f'mass = {k - 1.0}', 'inertia = 1.0',
+             f'q0 = [{(k - 1) / 2 + c!r}, {s!r}, 0.0]', f'h0 = [{-omega * s!r}, {omega * c!r}, 0.0]']
+    for i in range(k):
+        lines += ['[[bodies]]', f'name = "crank{i}"', 'mass = 1.0', 'inertia = 0.0833',
+                  f'q0 = [{i + 0.5 * c!r}, {0.5 * s!r}, {theta!r}]',
+                  f'h0 = [{-0.5 * omega * s!r}, {0.5 * omega * c!r}, {omega!r}]']
+    for i in range(k):
+        lines += ['[[joints]]', f'name = "G{i}"', 'type = "revolute"', f'body_i = "crank{i}"', 'body_j = "base"',
+                  's_i = [-0.5, 0.0]', f's_j = [{i}.0, 0.0]',
+                  '[joints.friction]', 'law = "regularised"', 'mu = 0.1', 'radius = 0.02', 'v_reg = 0.001',
+                  '[[joints]]', f'name = "C{i}"', 'type = "revolute"', f'body_i = "crank{i}"', 'body_j = "coupler"',
+                  's_i = [0.5, 0.0]', f's_j = [{i - (k - 1) / 2}, 0.0]']
+    (tmp_path / "pg3.toml").write_text("\n".join(lines) + "\n")
+    tag = "".join(ch for ch in eliminate if ch.isalnum())
+    name = f"pg_{'f' if friction else 'none'}_{tag}"
+    scene = tmp_path / f"{name}.toml"
+    scene.write_text("\n".join([
+        "[scene]", f'name = "{name}"', 'mechanism = "pg3.toml"', f"friction = {[friction] if friction else []}"
+        .replace("'", '"'), f"eliminate = {eliminate}", "stop_time = 0.6",
+        "[outputs]", 'positions = ["crank0.phi", "coupler.x", "coupler.y"]',
+        "[solver]", "tolerance = 1e-10", "output_interval = 0.01", ""]))
+    return scene
+
+
+def _upright_time(result) -> float:
+    """When crank0 stands upright (phi = pi/2), by linear interpolation of the output."""
+    phi = result.column("crank0.phi")
+    k = int(np.argmax(phi >= math.pi / 2))
+    t0, t1 = result.time[k - 1], result.time[k]
+    return float(t0 + (math.pi / 2 - phi[k - 1]) * (t1 - t0) / (phi[k] - phi[k - 1]))
+
+
+def test_an_expired_elimination_is_chosen_again_when_the_motion_does_not_depend_on_it(tmp_path):
+    given = _scene(_parallelogram(tmp_path, None, "[11]"))
+    auto = _scene(_parallelogram(tmp_path, None, '"auto"'))
+    res, ref = run(compile_checked(given), given.solver), run(compile_checked(auto), auto.solver)
+    assert compile_checked(auto).eliminated != (11,)  # the reference never held the expiring set
+    assert not ref.events
+    assert [kind for _, kind, _ in res.events] == ["elimination-reselected"]
+    t_event, _, detail = res.events[0]
+    assert abs(t_event - _upright_time(ref)) < 1e-3
+    assert detail.startswith("eliminated [11] -> [")
+    positions = [res.names.index(n) for n in ("crank0.phi", "coupler.x", "coupler.y")]
+    assert np.max(np.abs(res.values[:, positions] - ref.values[:, positions])) <= 1e-8  # the same motion (m, rad)
+
+
+def test_with_friction_on_a_nonunique_joint_an_expired_elimination_stops_the_run(tmp_path):
+    spec = _scene(_parallelogram(tmp_path, "G0", "[11]"))
+    model = compile_checked(spec)
+    with pytest.raises(SimulationError) as exc:
+        run(model, spec.solver)
+    msg = str(exc.value)
+    assert "while the mechanism stays regular: the elimination chosen at the start expires" in msg
+    assert "with friction on G0, whose reaction is not unique, the elimination decides the motion" in msg
+    assert "(eliminated: Phi11; other eliminations valid at the start and here: [2], [4]" in msg
+    t_stop = float(msg.split("integration stopped: t = ")[1].split(" s")[0])
+    frictionless = run(compile_checked(_scene(_parallelogram(tmp_path, None, '"auto"'))), spec.solver)
+    assert abs(t_stop - _upright_time(frictionless)) < 5e-3  # friction slows it a little
+    partial = exc.value.partial
+    assert len(partial.time) and partial.time[-1] <= t_stop  # the rows before the stop are kept
+    assert partial.events[-1][1] == "stopped"
+
+
+def test_a_reselected_run_saves_and_restores_its_elimination(tmp_path):
+    spec = _scene(_parallelogram(tmp_path, None, "[11]"))
+    model = compile_checked(spec)
+    sim = Simulation(model, spec.solver)
+    sim.advance(0.3)
+    assert sim.model.eliminated != (11,) and sim.events
+    state = sim.get_state()
+    after = sim.advance(0.5)
+    other = Simulation(model, spec.solver)
+    other.set_state(state)
+    assert other.model.eliminated == sim.model.eliminated and other.events == state["events"]
+    assert np.array_equal(other.advance(0.5), after)
+
+
+def test_simulate_writes_the_events(tmp_path, capsys):
+    scene = _parallelogram(tmp_path, None, "[11]")
+    events = tmp_path / "events.csv"
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o.csv"), "--events", str(events)]) == 0
+    assert "events: elimination-reselected at t = 0.19" in capsys.readouterr().out
+    rows = list(csv.reader(events.open()))
+    assert rows[0] == ["time", "kind", "detail"] and [r[1] for r in rows[1:]] == ["elimination-reselected"]
+    assert main(["simulate", str(scene), "--out", str(tmp_path / "o.csv"), "--events", str(tmp_path / "no" / "e.csv")]) == 2
+    assert "--events " in capsys.readouterr().err
+
+
+def test_output_grid_of_the_nfourbar_scene_is_the_benchmarks(tmp_path):
+    """The generator's files: 2N + 1 links of 1 kg, 3N + 1 revolute joints, 20 s by default,
+    and N < 1 refused."""
+    mod = _nfourbar()
+    mech, scene = mod.write(3, tmp_path)
+    model = compile_checked(_scene(scene))
+    assert model.nb == 7 and len(model.joints) == 10 and model.m == 20 and np.all(model.mass == 1.0)
+    assert model.scene.stop_time == 20.0 and len(output_grid(0.0, 20.0, 0.01)) == 2001
+    with pytest.raises(ValueError, match="N = 0: the N-four-bar needs N >= 1 loops"):
+        mod.write(0, tmp_path)

@@ -18,7 +18,7 @@ LAYERS = (
     ("scene", ("overcon.scene",)),
     ("model", ("overcon.model",)),
     ("core", ("overcon.evaluation", "overcon.dynamics", "overcon.kernel", "overcon.integrators")),
-    ("simulate/analysis", ("overcon.analysis", "overcon.checks", "overcon.precheck", "overcon.simulate", "overcon.watch",
+    ("simulate/analysis", ("overcon.analysis", "overcon.checks", "overcon.precheck", "overcon.simulate", "overcon.watch", "overcon.along",
                            "overcon.paper")),
     ("fmu", ("overcon.fmu",)),
     ("tooling", ("overcon.tooling",)),

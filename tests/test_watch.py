@@ -5,6 +5,7 @@ them, and a stop naming the valid eliminations when it does; the events of a run
 from __future__ import annotations
 
 import csv
+import json
 import importlib.util
 import math
 from pathlib import Path
@@ -188,3 +189,20 @@ def test_output_grid_of_the_nfourbar_scene_is_the_benchmarks(tmp_path):
     assert model.scene.stop_time == 20.0 and len(output_grid(0.0, 20.0, 0.01)) == 2001
     with pytest.raises(ValueError, match="N = 0: the N-four-bar needs N >= 1 loops"):
         mod.write(0, tmp_path)
+
+
+def test_check_along_reports_the_uniqueness_at_every_output_point(tmp_path, capsys):
+    """``check --along T``: segments of constant rank and non-unique friction joints over the
+    run's output points, the run's stop when it stops, in the table and the JSON."""
+    paper = Path(__file__).resolve().parents[1] / "mechanisms" / "planar_f45_wo4.toml"
+    assert main(["check", str(paper), "--along", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "along the motion (sampled every 0.01 s up to 0.5 s):\n  t = 0..0.5 s: rank 11; friction reactions unique" in out
+    scene = _parallelogram(tmp_path, "G0", "[11]")
+    assert main(["check", str(scene), "--along", "0.6", "--json"]) == 1
+    doc = json.loads(capsys.readouterr().out)["along"]
+    assert doc["segments"] == [{"from": 0.0, "to": 0.19, "rank": 11, "nonunique_friction_joints": ["G0"]}]
+    assert "the elimination decides the motion" in doc["stopped"] and doc["interval"] == 0.01
+    with pytest.raises(SystemExit) as exc:
+        main(["check", str(scene), "--along", "0"])
+    assert exc.value.code == 2 and "argument --along: must be a positive finite number, got 0" in capsys.readouterr().err

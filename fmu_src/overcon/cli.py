@@ -54,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="svd: the one-factorisation test, one SVD of the Jacobian; all: also the rank comparison "
                         "and QR tests as a cross-check (two SVDs per joint); auto (default): all up to 50 joints, "
                         "svd above")
+    c.add_argument("--along", type=_positive, metavar="T",
+                   help="also run the scene to T s and repeat the one-factorisation test at every output point: "
+                        "where the rank or a friction joint's uniqueness differs from t = 0")
     s = sub.add_parser("simulate", help="integrate a scene (or a bare mechanism) in process, write CSV")
     _scene_flags(s)
     s.add_argument("--out", required=True, metavar="OUT.csv", help="CSV file: time, then the outputs")
@@ -227,8 +230,31 @@ def cmd_check(args) -> int:
     if why is not None:
         return _input_error(f"{args.file}: solver.kernel = 'c': the compiled kernel cannot run: {why}", args)
     report = precheck(model, args.file, args.methods)
-    print(json.dumps(report.to_json(), indent=2) if args.json else format_table(report))
-    return EXIT_NONUNIQUE if report.friction_on_nonunique or not report.methods_agree else EXIT_OK
+    path = None if args.along is None else _along(args, spec, model)
+    if isinstance(path, int):
+        return path
+    if args.json:
+        doc = report.to_json()
+        if path is not None:
+            doc["along"] = path.to_json()
+        print(json.dumps(doc, indent=2))
+    else:
+        print(format_table(report))
+        if path is not None:
+            from .along import format_along
+            print(format_along(path))
+    nonunique = report.friction_on_nonunique or (path is not None and path.friction_on_nonunique)
+    return EXIT_NONUNIQUE if nonunique or not report.methods_agree else EXIT_OK
+
+
+def _along(args, spec, model):
+    """``check --along T``: the :class:`overcon.along.AlongReport`, or exit 2 for a bad T."""
+    from .along import along
+    try:
+        with single_threaded_blas():
+            return along(model, spec.solver, args.along)
+    except ValueError as exc:
+        return _input_error(f"{args.file}: {exc}", args)
 
 
 def cmd_simulate(args) -> int:

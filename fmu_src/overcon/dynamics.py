@@ -85,6 +85,7 @@ class Evaluation:
     S: np.ndarray | None = None  # Schur complement J_R^T M^-1 J_R (for conditioning checks)
     qf: np.ndarray | None = None  # friction forces on plan.friction_cols (Newton path; a warm start)
     damped: bool = False  # the undamped Newton solve gave up and the damped one ran
+    friction: np.ndarray | None = None  # friction forces on plan.friction_cols, whichever solve found them
 
 
 def _chkfinite(a: np.ndarray) -> np.ndarray:
@@ -235,7 +236,7 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
     lam[R] = lam_R
     hdot = model.Minv * (Q - JR @ lam_R)
     return Evaluation(hdot=hdot, lam=lam, frames=f, iterations=iterations, fallback=fallback, S=S, qf=qf_out,
-                      damped=damped or (newton_failed > 0))
+                      damped=damped or (newton_failed > 0), friction=qf if model.friction_joints else None)
 
 
 def _factor(model: Model, t: float, S: np.ndarray, JR: np.ndarray):

@@ -190,10 +190,8 @@ def applied_forces(model: Model, f: Frames) -> np.ndarray:
         Jw = model.inertia * f.w[:nb]
         Q[:, 3:] -= cross3_rows(f.w[:nb], Jw)
     for n, ld in enumerate(model.loads):
-        if ld.type == "force":
-            Q[ld.bi, :d] += ld.value
-        elif ld.type == "torque":
-            Q[ld.bi, d:] += ld.value if model.kind == "planar" else f.R[ld.bi].T @ ld.value
+        if ld.type in ("force", "torque"):
+            _add_constant_load(model, f, ld, Q)
         else:  # spring between two body points
             pi, pj = spring_points(f, ld)
             dvec = pi - pj
@@ -210,6 +208,26 @@ def applied_forces(model: Model, f: Frames) -> np.ndarray:
             for b, point, sign in ((ld.bi, pi, 1.0), (ld.bj, pj, -1.0)):
                 if b >= 0:
                     Q[b] += generalized_force(model, f, b, point, sign * F)
+    return Q.reshape(-1)
+
+
+def _add_constant_load(model: Model, f: Frames, ld, Q: np.ndarray) -> None:
+    """Add a constant force (global frame, at the centre of mass) or torque (planar; spatial: global
+    frame, to body axes) ``ld`` to Q (nb, nh_b)."""
+    d = model.dim
+    if ld.type == "force":
+        Q[ld.bi, :d] += ld.value
+    else:
+        Q[ld.bi, d:] += ld.value if model.kind == "planar" else f.R[ld.bi].T @ ld.value
+
+
+def constant_loads(model: Model, f: Frames) -> np.ndarray:
+    """Q (nh,) of the constant forces and torques alone: the loads whose work is
+    ``energy.applied`` (gravity and springs have a potential instead)."""
+    Q = np.zeros((model.nb, model.nh_b))
+    for ld in model.loads:
+        if ld.type in ("force", "torque"):
+            _add_constant_load(model, f, ld, Q)
     return Q.reshape(-1)
 
 

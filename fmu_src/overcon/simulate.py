@@ -35,7 +35,7 @@ import numpy as np
 from . import kernel as kernel_mod
 from .dynamics import evaluate
 from . import integrators
-from .evaluation import (SingularConfiguration, constraints, coordinate_rates, frames,  # noqa: F401
+from .evaluation import (SingularConfiguration, constant_loads, constraints, coordinate_rates, frames,  # noqa: F401
                          friction_output, jacobian_h, kinetic_energy, normalized_coordinates,
                          physical_reaction, physical_reactions, potential_energy)
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
@@ -129,11 +129,13 @@ class Simulation:
         self.max_drift = 0.0
         self.events: list[tuple[float, str, str]] = []  # (time s, kind, detail): see :data:`EVENT_KINDS`
         t0 = model.scene.start_time if start_time is None else start_time
+        self._target = t0  # the time of the last advance()
         y0 = np.concatenate([model.q0, model.h0])
         try:
             self._integrator = integrators.create(self.method, self._rhs, t0, y0, dense_fun=self._rhs_dense,
                                                   **self.settings)
-            self.monitor = SingularityMonitor(model, y0, t0)
+            self.monitor = SingularityMonitor(model, y0, t0, jac=self._jacobian_source())
+            self._work = _WorkLedger(t0, self._powers(t0, y0)) if model.energy_outputs else None
         except (ArithmeticError, np.linalg.LinAlgError) as exc:
             self.events.append((t0, "stopped", str(exc)))
             where = "" if str(exc).startswith("t = ") else f"t = {t0:.9g} s: "
@@ -193,6 +195,7 @@ class Simulation:
         ``max_steps``/``max_wall_time``: the budget of this call (internal steps, seconds; e.g. one
         FMU doStep), checked after every step like the Simulation's own life budget."""
         itg = self._integrator
+        self._target = t_target
         eps = 1e-12 * max(1.0, abs(t_target))
         started = time.perf_counter()
         call = (itg.nsteps, max_steps, max_wall_time)
@@ -223,6 +226,9 @@ class Simulation:
             raise SimulationError(f"t = {t_before:.9g} s: time does not advance (step below the resolution of t)")
         if not self._watch(itg):
             return  # the step is taken again from its start, under another elimination
+        if self._work is not None:
+            mid = 0.5 * (itg.t_old + itg.t)
+            self._work.step(itg.t, self._powers(mid, itg.dense(mid)), self._powers(itg.t, itg.y))
         if self._warm.items:
             self._step_warm.push(itg.t, self._warm.items[0][1])
         f = frames(self.model, itg.y[: self.n])
@@ -246,6 +252,30 @@ class Simulation:
         self._expired(expired, itg.t, itg.y.copy())
         return True
 
+    def _jacobian_source(self):
+        """Phi_h for the watch: the compiled core's rows when this run has the core (the same
+        joint rows, without numpy's per-call overhead), else None (the numpy path)."""
+        kernel = self._kernel
+        return None if kernel is None else (lambda model, y: kernel.rows(y)[1])
+
+    def _powers(self, t: float, y: np.ndarray) -> np.ndarray:
+        """[power dissipated by joint friction (W, >= 0), power of the constant forces and torques
+        (W)] at (t, y): one evaluation of Eq. 18 for the friction forces (warm-started like the
+        dense output, leaving the integration's warm start alone; counted in ``evaluations``)."""
+        h = y[self.n:]
+        applied = float(h @ constant_loads(self.model, frames(self.model, y[: self.n])))
+        if not self.model.friction_joints:
+            return np.array([0.0, applied])
+        r, ev = self._solve(t, y, None if self.lam is None else self.lam.copy(), self._warm.guess(t))
+        self.evaluations += 1
+        qf = r[2] if r is not None else ev.friction
+        return np.array([-float(h[self.model.plan.friction_cols] @ qf), applied])
+
+    def work(self, t: float) -> np.ndarray:
+        """[energy dissipated by friction, work of the constant loads] (J) from the start to t,
+        t inside the last step (:class:`_WorkLedger`)."""
+        return self._work.at(t)
+
     def _watch(self, itg) -> bool:
         """The singularity watch after an accepted step (:mod:`overcon.watch`). False when the
         kept equations expired inside the step and the motion does not depend on the
@@ -255,7 +285,8 @@ class Simulation:
         With friction on a joint whose reaction is not unique the elimination decides the
         motion: the run stops, naming the eliminations that stay valid."""
         try:
-            self.monitor.check(itg.t, itg.y, itg.dense)
+            f = getattr(itg, "f", None)
+            self.monitor.check(itg.t, itg.y, itg.dense, None if f is None else f[: self.n])
             return True
         except EliminationExpired as exc:
             self._expired(exc, itg.t_old, itg.y_old.copy())
@@ -292,7 +323,7 @@ class Simulation:
         self._integrator = integrators.create(self.method, self._rhs, t, y, dense_fun=self._rhs_dense,
                                               **self.settings)
         self._integrator.nsteps, self._integrator.nfev = old.nsteps, old.nfev
-        self.monitor = SingularityMonitor(model, y, t)
+        self.monitor = SingularityMonitor(model, y, t, jac=self._jacobian_source())
 
     def _check_budget(self, itg, started: float, call=(0, None, None)) -> None:
         """Raise BudgetExceeded when the step count or the wall time is used up: the Simulation's
@@ -321,14 +352,15 @@ class Simulation:
     def outputs(self, t: float, y: np.ndarray) -> np.ndarray:
         """Output vector (model.output_names() order) at (t, y): :meth:`state_outputs`, then
         :meth:`derived_outputs` (reactions, friction forces)."""
-        pos = self.state_outputs(y)
+        pos = self.state_outputs(y, t)
         if not self._derived.size:
             return pos
         return np.concatenate((pos, self.derived_outputs(t, y)))
 
-    def state_outputs(self, y: np.ndarray) -> np.ndarray:
-        """The outputs of the state alone (Model.state_output_names): positions, velocities (m/s,
-        rad/s: entries of h), energies (J)."""
+    def state_outputs(self, y: np.ndarray, t: float | None = None) -> np.ndarray:
+        """The outputs of the state (Model.state_output_names): positions, velocities (m/s,
+        rad/s: entries of h), energies (J; the dissipated and applied work at t, by default the
+        time of the last :meth:`advance`)."""
         pos = self.position_outputs(y)
         model = self.model
         if not model.velocity_outputs and not model.energy_outputs:
@@ -338,6 +370,7 @@ class Simulation:
         if model.energy_outputs:
             q = normalized_coordinates(model, y[: self.n]) if model.rotation == "quaternion" else y[: self.n]
             parts.append(np.array([kinetic_energy(model, h), potential_energy(model, frames(model, q))]))
+            parts.append(self.work(self._target if t is None else t))
         return np.concatenate(parts)
 
     def position_outputs(self, y: np.ndarray) -> np.ndarray:
@@ -380,7 +413,8 @@ class Simulation:
                     x.copy() if isinstance(x, np.ndarray) else x for x in self._last_eval),
                 "friction_iterations": self.friction_iterations, "evaluations": self.evaluations,
                 "max_drift": self.max_drift,
-                "monitor": self.monitor.state(), "events": list(self.events),
+                "monitor": self.monitor.state(), "events": list(self.events), "target": self._target,
+                "work": None if self._work is None else self._work.state(),
                 "eliminated": self.model.eliminated}
 
     def set_state(self, state: dict) -> None:
@@ -394,6 +428,9 @@ class Simulation:
         self.evaluations = state["evaluations"]
         self.max_drift = state["max_drift"]
         self.events = list(state.get("events", ()))
+        self._target = state.get("target", self._integrator.t)
+        if self._work is not None:
+            self._work.set_state(state["work"])
         if tuple(state.get("eliminated", self.model.eliminated)) != tuple(self.model.eliminated):
             self._use_elimination(state["eliminated"])
         self.monitor.set_state(state["monitor"])
@@ -404,7 +441,39 @@ class Simulation:
         self.model = dataclasses.replace(self.model, retained=retained, eliminated=tuple(eliminated))
         self._kernel, self.kernel_note = kernel_mod.select(self.model, self.solver)
         self._derived = _DerivedPlan(self.model)
-        self.monitor = SingularityMonitor(self.model, self._integrator.y, self._integrator.t)
+        self.monitor = SingularityMonitor(self.model, self._integrator.y, self._integrator.t,
+                                          jac=self._jacobian_source())
+
+
+class _WorkLedger:
+    """The work of friction and of the constant loads since the start (J), accumulated over the
+    accepted steps by Simpson's rule on the powers at each step's start, middle (dense output) and
+    end, and read inside the last step by the cubic Hermite interpolant of the work and its rate
+    (the powers) at the step's ends: O(h^4) per step, like the rule, with no extra evaluation per
+    output point (decided here: the integrator's own order is higher, so a tight tolerance keeps
+    the balance within the integration's accuracy, not better)."""
+
+    def __init__(self, t0: float, p0: np.ndarray):
+        self.prev = self.cur = (t0, np.zeros(2), p0)
+
+    def step(self, t: float, p_mid: np.ndarray, p_end: np.ndarray) -> None:
+        t0, w0, p0 = self.cur
+        self.prev = self.cur
+        self.cur = (t, w0 + (t - t0) / 6.0 * (p0 + 4.0 * p_mid + p_end), p_end)
+
+    def at(self, t: float) -> np.ndarray:
+        (t0, w0, p0), (t1, w1, p1) = self.prev, self.cur
+        if t1 <= t0 or t >= t1:
+            return w1.copy()
+        h, s = t1 - t0, (t - t0) / (t1 - t0)
+        return ((2 * s**3 - 3 * s**2 + 1) * w0 + (s**3 - 2 * s**2 + s) * h * p0
+                + (-2 * s**3 + 3 * s**2) * w1 + (s**3 - s**2) * h * p1)
+
+    def state(self) -> tuple:
+        return tuple((t, w.copy(), p.copy()) for t, w, p in (self.prev, self.cur))
+
+    def set_state(self, s: tuple) -> None:
+        self.prev, self.cur = ((t, w.copy(), p.copy()) for t, w, p in s)
 
 
 class _ForcesHistory:

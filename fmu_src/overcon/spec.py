@@ -56,9 +56,12 @@ VELOCITY_OUTPUTS = {"planar": (("vx", "m/s"), ("vy", "m/s"), ("omega", "rad/s"))
 planar x', y' (global frame) and the angular velocity phi'; spatial the velocity of the origin
 (global frame) and the angular velocity in the body's axes."""
 
-ENERGY_OUTPUTS = (("energy.kinetic", "J"), ("energy.potential", "J"))
-"""Energy outputs (``[outputs] energy = true``): the kinetic energy 1/2 h^T M h and the potential
-energy of gravity and springs (J), both of the whole mechanism."""
+ENERGY_OUTPUTS = (("energy.kinetic", "J"), ("energy.potential", "J"), ("energy.dissipated", "J"),
+                  ("energy.applied", "J"))
+"""Energy outputs (``[outputs] energy = true``), of the whole mechanism (J): the kinetic energy
+1/2 h^T M h, the potential energy of gravity and springs, the work dissipated by joint friction
+since the start (>= 0) and the work of the constant forces and torques since the start. kinetic +
+potential + dissipated - applied stays constant to the integration accuracy."""
 
 
 def coordinates(kind: str, rotation: str = "euler_zxz") -> tuple[str, ...]:

@@ -60,9 +60,15 @@ def shown_ratio(r: float) -> str:
     return f"{r:.2g}" if r >= 1e-9 else "< 1e-09"
 
 
-def weighted_rows(model, y: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Rows ``rows`` of Phi_h at state y, times M^-1/2, each scaled to unit norm."""
-    J = jacobian_h(model, frames(model, y[: model.n]))[rows] * np.sqrt(model.Minv)[None, :]
+def numpy_jacobian(model, y: np.ndarray) -> np.ndarray:
+    """Phi_h (m, nh) at the state y, on the numpy path."""
+    return jacobian_h(model, frames(model, y[: model.n]))
+
+
+def weighted_rows(model, y: np.ndarray, rows: np.ndarray, jac=None) -> np.ndarray:
+    """Rows ``rows`` of Phi_h at state y (``jac(model, y)``, default :func:`numpy_jacobian`),
+    times M^-1/2, each scaled to unit norm."""
+    J = (jac or numpy_jacobian)(model, y)[rows] * np.sqrt(model.Minv)[None, :]
     return J / np.linalg.norm(J, axis=1, keepdims=True)
 
 
@@ -82,17 +88,19 @@ def numerical_rank(J: np.ndarray, ratio_tol: float) -> int:
     return int(np.sum(sv >= ratio_tol * sv[0]))
 
 
-def ratio_and_rate(model, y: np.ndarray, rows: np.ndarray) -> tuple[float, float]:
+def ratio_and_rate(model, y: np.ndarray, rows: np.ndarray, jac=None, qdot=None) -> tuple[float, float]:
     """(r, dr/dt) at state y (see the module docstring): r = s_min / s_max; dr/dt from
-    ds_k/dt = u_k^T J' v_k with J' by a forward difference of J along q'."""
-    J = weighted_rows(model, y, rows)
+    ds_k/dt = u_k^T J' v_k with J' by a forward difference of J along q' (``qdot``, default
+    the coordinate rates at y). ``jac``: as :func:`weighted_rows`."""
+    J = weighted_rows(model, y, rows, jac)
     U, sv, Vt = np.linalg.svd(J, full_matrices=False)
     n = model.n
-    qdot = coordinate_rates(model, y[:n], y[n:])
+    if qdot is None:
+        qdot = coordinate_rates(model, y[:n], y[n:])
     dt = 1e-7 / max(1.0, float(np.max(np.abs(qdot), initial=0.0)))
     y2 = y.copy()
     y2[:n] = y[:n] + dt * qdot
-    Jdot = (weighted_rows(model, y2, rows) - J) / dt
+    Jdot = (weighted_rows(model, y2, rows, jac) - J) / dt
     ds_min = float(U[:, -1] @ Jdot @ Vt[-1])
     ds_max = float(U[:, 0] @ Jdot @ Vt[0])
     r = float(sv[-1] / sv[0])
@@ -103,15 +111,17 @@ class SingularityMonitor:
     """The watch (module docstring) over one run. :meth:`check` after every accepted step;
     ``min_ratio`` is the smallest r seen (step ends and located minima)."""
 
-    def __init__(self, model, y: np.ndarray, t0: float, ratio_tol: float = 1e-6):
-        self.model, self.ratio_tol = model, ratio_tol
+    def __init__(self, model, y: np.ndarray, t0: float, ratio_tol: float = 1e-6, jac=None):
+        """``jac(model, y)``: Phi_h at y (the compiled core's rows where a run has it; default
+        :func:`numpy_jacobian`)."""
+        self.model, self.ratio_tol, self.jac = model, ratio_tol, jac
         self.rows = self._watched_rows(model, y)
         self.full_rows = self._rigid_rows(model)
         self.kept_rank = len(self.rows)  # the kept equations are independent at the start
         self.min_ratio, self.t_prev, self.rate, self.ratio = np.inf, t0, 0.0, 1.0
         if not self.rows.size:  # nothing rigid to lose rank
             return
-        r, self.rate = ratio_and_rate(model, y, self.rows)
+        r, self.rate = ratio_and_rate(model, y, self.rows, jac)
         self.ratio = r
         self._judge(t0, r, y, t0)
 
@@ -137,13 +147,13 @@ class SingularityMonitor:
         rows, self.t_prev, self.rate, self.min_ratio, self.ratio = s
         self.rows = np.asarray(rows, int).copy()
 
-    def check(self, t: float, y: np.ndarray, dense=None) -> None:
+    def check(self, t: float, y: np.ndarray, dense=None, qdot=None) -> None:
         """After the step (t_prev, t]: raise :class:`SingularPosition` or
         :class:`EliminationExpired` if the kept Jacobian lost rank in it or at its end.
         ``dense(tau)``: the state inside the step (the integrator's dense output)."""
         if not self.rows.size:
             return
-        r, rate = ratio_and_rate(self.model, y, self.rows)
+        r, rate = ratio_and_rate(self.model, y, self.rows, self.jac, qdot)
         self.ratio = r
         if self.rate < 0.0 < rate and dense is not None and t > self.t_prev:
             t_min, r_min = self._minimum(dense, self.t_prev, t)
@@ -166,13 +176,13 @@ class SingularityMonitor:
         n = self.model.n
         y_star = y.copy()
         y_star[:n] = y[:n] + dt * coordinate_rates(self.model, y[:n], y[n:])
-        if numerical_rank(weighted_rows(self.model, y_star, self.full_rows), self.ratio_tol) < self.kept_rank:
+        if numerical_rank(weighted_rows(self.model, y_star, self.full_rows, self.jac), self.ratio_tol) < self.kept_rank:
             return None  # the mechanism itself is singular there
         return t + dt, y_star
 
     def _minimum(self, dense, a: float, b: float) -> tuple[float, float]:
         """(tau, r(tau)) at the minimum of r on [a, b] along ``dense`` (golden section)."""
-        f = lambda tau: ratio(weighted_rows(self.model, dense(tau), self.rows))  # noqa: E731
+        f = lambda tau: ratio(weighted_rows(self.model, dense(tau), self.rows, self.jac))  # noqa: E731
         c, d = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
         fc, fd = f(c), f(d)
         stop = max(SEARCH_REL * (b - a), 8.0 * np.finfo(float).eps * max(abs(a), abs(b)))  # within t's resolution
@@ -193,7 +203,7 @@ class SingularityMonitor:
             return
         where = (f"t = {t:.9g} s: the motion passed a singular position (between the steps at "
                  f"t = {passed[0]:.9g} s and {passed[1]:.9g} s)" if passed else f"t = {t:.9g} s: singular position")
-        full = numerical_rank(weighted_rows(self.model, y, self.full_rows), self.ratio_tol)
+        full = numerical_rank(weighted_rows(self.model, y, self.full_rows, self.jac), self.ratio_tol)
         if full < self.kept_rank:
             raise SingularPosition(
                 f"{where}: the mechanism's constraint Jacobian is rank deficient (rank {full} < {self.kept_rank}; "

@@ -65,6 +65,8 @@ STATE_OUTPUT_TEXT = {
     "wz": "angular velocity, z component, body frame",
     "kinetic": "kinetic energy of the mechanism",
     "potential": "potential energy of gravity (zero at the global origin) and of the springs",
+    "dissipated": "work dissipated by joint friction since the start (>= 0)",
+    "applied": "work of the constant forces and torques since the start",
 }
 
 

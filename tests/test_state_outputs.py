@@ -118,7 +118,7 @@ def test_spatial_velocities_global_and_angular_velocity_in_body_axes(tmp_path):
 
 def test_outputs_table_velocities_and_energy_are_checked(tmp_path):
     path = _scene(tmp_path, "planar_sliders.toml", "[4]", 1.0, 'velocities = ["nowhere", "base"]\nenergy = "yes"')
-    with pytest.raises(scene.SceneError) as info:
+    with pytest.raises(scene.SceneError, match=r"outputs\.velocities\[0\]: unknown body 'nowhere'") as info:
         scene.load(path)
     text = str(info.value)
     assert "outputs.velocities[0]: unknown body 'nowhere' (the base does not move)" in text

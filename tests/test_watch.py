@@ -140,7 +140,7 @@ def test_an_expired_elimination_is_chosen_again_when_the_motion_does_not_depend_
 def test_with_friction_on_a_nonunique_joint_an_expired_elimination_stops_the_run(tmp_path):
     spec = _scene(_parallelogram(tmp_path, "G0", "[11]"))
     model = compile_checked(spec)
-    with pytest.raises(SimulationError) as exc:
+    with pytest.raises(SimulationError, match="the elimination chosen at the start expires") as exc:
         run(model, spec.solver)
     msg = str(exc.value)
     assert "while the mechanism stays regular: the elimination chosen at the start expires" in msg
@@ -203,6 +203,6 @@ def test_check_along_reports_the_uniqueness_at_every_output_point(tmp_path, caps
     doc = json.loads(capsys.readouterr().out)["along"]
     assert doc["segments"] == [{"from": 0.0, "to": 0.19, "rank": 11, "nonunique_friction_joints": ["G0"]}]
     assert "the elimination decides the motion" in doc["stopped"] and doc["interval"] == 0.01
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^2$") as exc:
         main(["check", str(scene), "--along", "0"])
     assert exc.value.code == 2 and "argument --along: must be a positive finite number, got 0" in capsys.readouterr().err

@@ -454,22 +454,27 @@ def _rank_defect(ctx: _Context, member_columns: Sequence[tuple[int, ...]]) -> in
     return total + _rank_abs(ctx.A[:, ~in_k], ctx.tol) - ctx.r
 
 
-def _b_defect(ctx: _Context, B: np.ndarray, unique: bool) -> int:
+def _b_defect(ctx: _Context, cols: tuple[int, ...], unique: bool) -> int:
     """rank_defect from the one factorisation: rank(A_P N) = rank(A_P) + rank(A_-P) - rank(A) in
     exact arithmetic (both are dim(span(A_P) & span(A_-P)): a null vector nu gives A_P nu_P in
     it, and one whose A_P nu_P = 0 also has A_-P nu_-P = 0). Numerically: 0 when the B test
-    says unique, else the count of B's singular values above its threshold (at least 1)."""
+    says unique, else the count of B = A_P N_P's singular values above its threshold (at least
+    1), taken from R N_P with A_P = Q R (thin QR: Q has orthonormal columns, so the singular
+    values are B's; the SVD is of a |P| x (m - r) matrix, not of n x (m - r), which keeps the
+    pre-check one factorisation of J plus small work per joint)."""
     if unique:
         return 0
     limit = ctx.b_rtol * (float(ctx.sigma[0]) if ctx.sigma.size else 0.0)
-    return max(1, int(np.count_nonzero(_svdvals(B) > limit)))
+    idx = list(cols)
+    R = np.linalg.qr(ctx.A[:, idx], mode="r")
+    return max(1, int(np.count_nonzero(_svdvals(R @ ctx.N_svd[idx, :]) > limit)))
 
 
 def _joint(ctx: _Context, cols: tuple[int, ...]) -> JointVerdict:
     B = _B(ctx.A, ctx.N_svd, cols)
     ratio_svd = _b_ratio(ctx, B)
     methods = {"svd": ratio_svd <= 1.0}
-    ratio_qr, defect = 0.0, _b_defect(ctx, B, ratio_svd <= 1.0)
+    ratio_qr, defect = 0.0, _b_defect(ctx, cols, ratio_svd <= 1.0)
     if ctx.cross_check:
         defect = _rank_defect(ctx, [cols])
         ratio_qr = _b_ratio(ctx, _B(ctx.A, ctx.basis("qr"), cols))
@@ -558,8 +563,7 @@ class Analysis:
         svd = all(self.joints[nm].methods["svd"] for nm in names)
         if not self._ctx.cross_check:
             cols = tuple(c for nm in names for c in self._groups[nm])
-            B = _B(self._ctx.A, self._ctx.N_svd, cols)  # rank(stacked A_Pi N) is Eq. 17's defect too
-            defect = _b_defect(self._ctx, B, svd)
+            defect = _b_defect(self._ctx, cols, svd)  # rank(stacked A_Pi N) is Eq. 17's defect too
             return SetVerdict(unique=svd, methods={"svd": svd}, rank_defect=int(defect), agree=True, names=names)
         defect = _rank_defect(self._ctx, [self._groups[nm] for nm in names])
         methods = {

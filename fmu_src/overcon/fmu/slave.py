@@ -240,6 +240,7 @@ class OverconSlave:
         self._have_outputs = False
         self._failed: str | None = None
         self._stable_step = 0.0  # solver.stable_step: set when rk4 refuses a step as unstable
+        self._events_logged = 0  # events of the run already logged (_log_events)
         self._y = None  # the state at self._t (for outputs computed when first read)
         self._derived_stale = False  # reactions/friction outputs not yet computed at self._t
         self._derived_read = False  # the host has read a reaction or friction output
@@ -261,6 +262,13 @@ class OverconSlave:
         derived_ok = not self._derived_stale and (self._derived_read or len(self._outputs) == self._n_positions)
         self._pub_flags[1] = 1 if derived_ok else 0
         self._pub_flags[0] = 1
+
+    def _log_events(self, sim) -> None:
+        """Log the run's events (overcon.simulate.EVENT_KINDS: an elimination chosen again, ...)
+        not logged yet, at info level (category logEvents); a failed step logs its stop itself."""
+        for t, kind, detail in sim.events[self._events_logged:]:
+            self.log(f"t = {t:.9g} s: event {kind}: {detail}")
+        self._events_logged = len(sim.events)
 
     def log(self, message: str, status=Status.OK) -> None:
         if self._log_sink is None:
@@ -425,6 +433,7 @@ class OverconSlave:
             self._sim, self._sim_key = sim, key
             self._t = key[0]
             self._have_outputs = False
+            self._events_logged = 0
         if compute_outputs and not self._have_outputs:
             y = self._sim.advance(self._t)
             out = self._sim.outputs(self._t, y)
@@ -546,6 +555,7 @@ class OverconSlave:
                                 max_wall_time=p["solver.max_wall_time"])
             except BudgetExceeded as exc:
                 raise self._budget_exhausted(exc) from None
+            self._log_events(sim)
             if self._derived_read or len(self._outputs) == self._n_positions:
                 out = sim.outputs(t_new, y)
             else:  # reactions and friction forces only once the host reads one (_read_derived)
@@ -636,6 +646,7 @@ class OverconSlave:
         self._outputs = np.array(state["outputs"], float)
         self._have_outputs, self._failed = state["have_outputs"], state["failed"]
         self._stable_step = float(state.get("stable_step", 0.0))
+        self._events_logged = 0 if self._sim is None else len(self._sim.events)  # a restored run logs on from here
         self._y = state.get("y")  # states of earlier versions: outputs complete
         self._derived_stale = bool(state.get("derived_stale", False)) and self._y is not None
 

@@ -19,7 +19,7 @@ LAYERS = (
     ("model", ("overcon.model",)),
     ("core", ("overcon.evaluation", "overcon.dynamics", "overcon.kernel", "overcon.integrators")),
     ("simulate/analysis", ("overcon.analysis", "overcon.checks", "overcon.precheck", "overcon.simulate",
-                           "overcon.paper")),
+                           "overcon.paper", "overcon.converge")),
     ("fmu", ("overcon.fmu",)),
     ("tooling", ("overcon.tooling",)),
     ("cli", ("overcon.cli",)),

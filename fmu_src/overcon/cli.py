@@ -1,4 +1,4 @@
-"""Command line: ``overcon check | simulate | figures | build | run | compare | reproduce | sweep``
+"""Command line: ``overcon check | simulate | figures | build | run | compare | reproduce | sweep | converge``
 (argument parsing only; the work is done by the library).
 
 Exit codes: 0 success (``check``: no friction on a non-unique reaction); 1 ``check`` found
@@ -156,6 +156,49 @@ def _tooling_parsers(sub) -> None:
     p.add_argument("--stop-time", type=_positive, metavar="T", help="shorter runs (s; default: the scenes' stop times)")
     p.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H", help=LOCKSTEP_HELP)
     _sweep_parser(sub)
+    _converge_parser(sub)
+
+
+def _converge_parser(sub) -> None:
+    """``converge``: the rigid limit of a compliant scene (overcon.converge)."""
+    v = sub.add_parser("converge", help="run a compliant scene over a range of stiffnesses: convergence, measured "
+                                        "order, the limit against the rigid eliminations (converge.csv, converge.png)")
+    v.add_argument("file", help="scene TOML file with redundancy = \"compliant\"")
+    v.add_argument("--stiffness", required=True, metavar="START:STOP:COUNT",
+                   help="COUNT log-spaced stiffnesses k (N/m), e.g. 1e4:1e10:7. At k every compliant joint's "
+                        "stiffnesses (translational and rotational, every axis) are multiplied by k/k0 and its "
+                        "dampings by sqrt(k/k0), k0 the scene's largest translational stiffness: ratios and damping "
+                        "ratios stay the scene's")
+    v.add_argument("--accuracy", type=_number, default=1e-6, metavar="M",
+                   help="position accuracy (m) for the 'stiffness enough' answer (default 1e-6)")
+    v.add_argument("--stop-time", type=_number, metavar="T", help="stop time (s; default: the scene's)")
+    v.add_argument("--out", required=True, metavar="DIR", help="directory for converge.csv and converge.png")
+
+
+def cmd_converge(args) -> int:
+    from pathlib import Path
+
+    from . import converge as cv
+
+    out = Path(args.out)
+    try:
+        ks = cv.parse_range(args.stiffness)
+        if out.exists() and not out.is_dir():
+            raise cv.ConvergeInputError(f"--out {args.out}: exists and is not a directory")
+        print(f"{args.file}: {len(ks)} stiffnesses {ks[0]:.3g}..{ks[-1]:.3g} N/m")
+        with single_threaded_blas():
+            study = cv.converge(Path(args.file), ks, accuracy=args.accuracy, stop_time=args.stop_time)
+    except cv.ConvergeInputError as exc:
+        return _input_error(exc)
+    except cv.ConvergeRunError as exc:
+        print(f"overcon: {exc}", file=sys.stderr)
+        return EXIT_RUNTIME
+    out.mkdir(parents=True, exist_ok=True)
+    for line in cv.summary(study):
+        print(line)
+    print(f"wrote {cv.write_table(study, out / 'converge.csv')} and "
+          f"{cv.write_plot(study, out / 'converge.png', Path(args.file).stem)}")
+    return EXIT_OK
 
 
 def _sweep_parser(sub) -> None:
@@ -512,7 +555,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     handler = {"check": cmd_check, "simulate": cmd_simulate, "figures": cmd_figures,
                "build": cmd_build, "run": cmd_run, "compare": cmd_compare,
-               "reproduce": cmd_reproduce, "sweep": cmd_sweep}[args.command]
+               "reproduce": cmd_reproduce, "sweep": cmd_sweep, "converge": cmd_converge}[args.command]
     try:
         code = handler(args)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit

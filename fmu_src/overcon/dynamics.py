@@ -194,7 +194,7 @@ def evaluate(model: Model, t: float, q: np.ndarray, h: np.ndarray, lam_guess: np
         g = g - 2.0 * a * (PR @ h) - a * a * Phi[R]
     Q = applied_forces(model, f)
     if model.compliant_rows.size:
-        lam_R, S, solve_many = _compliant_solve(model, t, PR, g, Q, h, Phi)
+        lam_R, S, solve_many = _compliant_solve(model, t, PR, g, Q, h, Phi, f)
     else:
         MinvJ = model.Minv[:, None] * JR
         S = JR.T @ MinvJ
@@ -253,7 +253,7 @@ def _factor(model: Model, t: float, S: np.ndarray, JR: np.ndarray):
 
 
 def _compliant_solve(model: Model, t: float, PR: np.ndarray, g: np.ndarray, Q: np.ndarray, h: np.ndarray,
-                     Phi: np.ndarray):
+                     Phi: np.ndarray, f):
     """Eq. 18 with compliant joints (redundancy "compliant"): the multipliers of their equations
     are the spring-damper forces on the violation, lam_c = k Phi + d Phi_h h (so -J_c lam_c pulls
     the joint together, as a constraint's reaction would), known from the state; the rigid kept
@@ -263,6 +263,8 @@ def _compliant_solve(model: Model, t: float, PR: np.ndarray, g: np.ndarray, Q: n
     c = np.isin(R, model.compliant_rows)
     r = ~c
     lam_c = model.row_stiffness[R[c]] * Phi[R[c]] + model.row_damping[R[c]] * (PR[c] @ h)
+    if model.compliance_axes:
+        _axis_forces(model, f, PR, Phi, h, lam_c, np.flatnonzero(c))
     Jr = PR[r].T
     MinvJr = model.Minv[:, None] * Jr
     S = Jr.T @ MinvJr
@@ -278,6 +280,30 @@ def _compliant_solve(model: Model, t: float, PR: np.ndarray, g: np.ndarray, Q: n
             W[r] = _cho_solve_many(factor, MinvJr.T[:, cols])
         return W
     return lam_R, S, solve_many
+
+
+def _axis_forces(model: Model, f, PR: np.ndarray, Phi: np.ndarray, h: np.ndarray, lam_c: np.ndarray,
+                 cpos: np.ndarray) -> None:
+    """The multipliers of the per-axis compliant joints (:class:`overcon.model.AxisCompliance`),
+    written into ``lam_c`` (ordered as ``cpos``, the compliant rows' positions in ``PR``):
+    lam = U^T K U Phi + U^T D U Phi_h h per row group, K = F diag(k) F^T and D likewise, F the
+    joint frame in global axes (R_i frame), U the rows' directions in global axes."""
+    at = {int(model.retained[p]): i for i, p in enumerate(cpos)}
+    k = model.nh_b
+    for ax in model.compliance_axes:
+        F = f.R[ax.bi] @ ax.frame
+        b = ax.bi if ax.bi >= 0 else ax.bj  # a moving body: its columns give the directions
+        for rows, kv, dv, rot in ((ax.t_rows, ax.k_t, ax.d_t, False), (ax.r_rows, ax.k_r, ax.d_r, True)):
+            if not rows:
+                continue
+            pos = np.searchsorted(model.retained, rows)
+            if rot:  # angular columns are body axes: to global
+                U = f.R[b] @ PR[pos, b * k + 3:b * k + 6].T
+            else:
+                U = PR[pos, b * k:b * k + 3].T
+            FU = F.T @ U
+            i = [at[r] for r in rows]
+            lam_c[i] = FU.T @ (kv[:, None] * FU) @ Phi[list(rows)] + FU.T @ (dv[:, None] * FU) @ (PR[pos] @ h)
 
 
 def _robust_friction(model: Model, ctx: list, lam0: np.ndarray, W: np.ndarray, start: np.ndarray, t: float,

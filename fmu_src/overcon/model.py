@@ -88,6 +88,27 @@ class CompiledJoint:
 
 
 @dataclass(frozen=True)
+class AxisCompliance:
+    """A spatial compliant joint with per-axis values (:class:`overcon.spec.ComplianceSpec`):
+    the stiffness and damping tensors K = F diag(k) F^T along its joint frame F (global: R_i
+    ``frame``), restricted to its equations as U^T K U, U the equations' directions (translational
+    rows: the velocity columns of a moving body; rotational rows: the angular ones, in global
+    axes). Values per frame axis x, y, z: ``k_t``/``d_t`` (N/m, N.s/m) on the translational rows
+    ``t_rows``, ``k_r``/``d_r`` (N.m/rad, N.m.s/rad) on the rotational rows ``r_rows`` (0-based)."""
+
+    joint: int
+    bi: int
+    bj: int
+    frame: np.ndarray  # (3, 3) joint frame axes (columns) in body i axes
+    t_rows: tuple[int, ...]
+    r_rows: tuple[int, ...]
+    k_t: np.ndarray
+    d_t: np.ndarray
+    k_r: np.ndarray
+    d_r: np.ndarray
+
+
+@dataclass(frozen=True)
 class CompiledLoad:
     type: str
     bi: int
@@ -136,6 +157,9 @@ class Model:
     compliant_rows: np.ndarray = field(default_factory=lambda: np.arange(0))
     row_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
     row_damping: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # compliant joints with per-axis values: their rows take the tensor of AxisCompliance (their
+    # row_stiffness and row_damping are 0)
+    compliance_axes: tuple[AxisCompliance, ...] = ()
     plan: "AssemblyPlan" = field(init=False, repr=False, compare=False)  # built by __post_init__
 
     def __post_init__(self):
@@ -378,20 +402,39 @@ def compile_model(scene: SceneSpec) -> Model:
 
 def _compliance(scene: SceneSpec, joints, m: int) -> dict:
     """The compliant equations and their per-equation stiffness and damping (redundancy
-    "compliant": the joints with a compliance table; otherwise none)."""
+    "compliant": the joints with a compliance table; otherwise none); a joint with per-axis
+    values gets an :class:`AxisCompliance` instead of per-equation values."""
     k, d = np.zeros(m), np.zeros(m)
-    rows = []
+    rows, axes = [], []
     if scene.redundancy == "compliant":
         for c, js in zip(joints, scene.mechanism.joints):
             if js.compliance is None:
                 continue
             cs = js.compliance
-            for r, kind in zip(c.rows, TYPES[c.type].row_kinds):
+            kinds = TYPES[c.type].row_kinds
+            rows.extend(c.rows)
+            if cs.per_axis:
+                axes.append(_axis_compliance(c, cs, kinds))
+                continue
+            for r, kind in zip(c.rows, kinds):
                 rot = kind == "rotational"
                 k[r] = cs.rotational_stiffness if rot else cs.stiffness
                 d[r] = cs.rotational_damping if rot else cs.damping
-                rows.append(r)
-    return {"compliant_rows": np.array(rows, int), "row_stiffness": k, "row_damping": d}
+    return {"compliant_rows": np.array(rows, int), "row_stiffness": k, "row_damping": d,
+            "compliance_axes": tuple(axes)}
+
+
+def _axis_compliance(c: CompiledJoint, cs, kinds) -> AxisCompliance:
+    """The tensors of a per-axis compliant joint: a scalar value is the same on the three axes;
+    the frame is the joint's reaction frame ``E`` (axis types) or body i's axes (spherical)."""
+    def vec(x):
+        return _read_only(np.array(x if isinstance(x, tuple) else (x, x, x), float))
+    frame = np.asarray(c.p["E"], float) if "E" in c.p else np.eye(3)
+    return AxisCompliance(
+        joint=c.index, bi=c.bi, bj=c.bj, frame=_read_only(frame.copy()),
+        t_rows=tuple(r for r, kind in zip(c.rows, kinds) if kind != "rotational"),
+        r_rows=tuple(r for r, kind in zip(c.rows, kinds) if kind == "rotational"),
+        k_t=vec(cs.stiffness), d_t=vec(cs.damping), k_r=vec(cs.rotational_stiffness), d_r=vec(cs.rotational_damping))
 
 
 def _rotations(model: Model, q: np.ndarray) -> np.ndarray:

@@ -749,15 +749,16 @@ def _check_joint(jt: dict, p: str, ctx: _Ctx, kind: str | None, body_names: dict
     v = _get(ctx, jt, "friction", p, required=False)
     if v is not _MISSING and _table(ctx, v, f"{p}.friction") is not None:
         friction = _friction(ctx, v, f"{p}.friction", jtype if fields else None, None)
-    compliance, good = _compliance(ctx, jt, p)
+    compliance, good = _compliance(ctx, jt, p, kind)
     if ok and good and None not in (jname, jtype, bi, bj):
         return JointSpec(jname, jtype, bi, bj, params, friction, compliance)
     return None
 
 
-def _compliance(ctx: _Ctx, jt: dict, p: str) -> tuple[S.ComplianceSpec | None, bool]:
+def _compliance(ctx: _Ctx, jt: dict, p: str, kind: str | None) -> tuple[S.ComplianceSpec | None, bool]:
     """``[joints.compliance]``: (the spec or None, whether it is valid). Stiffnesses required and
-    > 0, dampings optional (default 0) and >= 0, all scalars."""
+    > 0, dampings optional (default 0) and >= 0; each a scalar (isotropic) or, in a spatial
+    mechanism, a 3-vector along the joint frame's axes."""
     v = _get(ctx, jt, "compliance", p, required=False)
     if v is _MISSING:
         return None, True
@@ -768,18 +769,28 @@ def _compliance(ctx: _Ctx, jt: dict, p: str) -> tuple[S.ComplianceSpec | None, b
     values = {}
     for key in _COMPLIANCE_KEYS:
         x = _get(ctx, v, key, f, required=key.endswith("stiffness"))
-        if x is _MISSING:
-            continue
-        if isinstance(x, list):
-            ctx.add(f"{f}.{key}", "per-axis values (a 3-vector along the joint frame's axes) are not supported: "
-                                  "give one scalar (isotropic)")
-            continue
-        check = (lambda y: y > 0, "must be > 0") if key.endswith("stiffness") else _NONNEG
-        values[key] = _num(ctx, x, f"{f}.{key}", check)
+        if x is not _MISSING:
+            values[key] = _compliance_value(ctx, x, f"{f}.{key}", key, kind)
     if len(values) < sum(1 for k in _COMPLIANCE_KEYS if k in v) or None in values.values() \
             or not {"stiffness", "rotational_stiffness"} <= set(values):
         return None, False
     return S.ComplianceSpec(**values), True
+
+
+def _compliance_value(ctx: _Ctx, x, field: str, key: str, kind: str | None):
+    """One compliance value: a number, or (spatial only) 3 numbers along the joint frame's x, y, z
+    axes; stiffnesses > 0, dampings >= 0, all finite."""
+    check = (lambda y: y > 0, "must be > 0") if key.endswith("stiffness") else _NONNEG
+    if not isinstance(x, list):
+        return _num(ctx, x, field, check)
+    if kind == "planar":
+        ctx.add(field, "per-axis values (a 3-vector) are for spatial joints: a planar joint takes one scalar")
+        return None
+    if len(x) != 3:
+        ctx.add(field, f"expected a scalar (isotropic) or an array of 3 numbers (along the joint frame's x, y, z "
+                       f"axes), got {len(x)} element(s)")
+        return None
+    return _vec(ctx, x, field, 3, check)
 
 
 def _check_loads(doc: dict, ctx: _Ctx, head: _MechHeader, body_names: dict) -> list[LoadSpec]:

@@ -152,12 +152,20 @@ class ComplianceSpec:
     (N.s/m) act on the equations that hold points together (``"point"`` rows, and the distance
     row of a planar translational joint), ``rotational_stiffness`` (N.m/rad) and
     ``rotational_damping`` (N.m.s/rad) on those that hold axes or angles (a small violation of
-    those is an angle in rad). Isotropic (scalars)."""
+    those is an angle in rad). Each is a scalar (isotropic) or, for a spatial joint, a 3-tuple
+    along the x, y, z axes of the joint frame (the reaction frame: z along axis_i; a spherical
+    joint's is body i's axes)."""
 
-    stiffness: float
-    rotational_stiffness: float
-    damping: float = 0.0
-    rotational_damping: float = 0.0
+    stiffness: float | tuple[float, float, float]
+    rotational_stiffness: float | tuple[float, float, float]
+    damping: float | tuple[float, float, float] = 0.0
+    rotational_damping: float | tuple[float, float, float] = 0.0
+
+    @property
+    def per_axis(self) -> bool:
+        """Whether any value is a 3-vector (not isotropic)."""
+        return any(isinstance(getattr(self, k), tuple) for k in
+                   ("stiffness", "rotational_stiffness", "damping", "rotational_damping"))
 
 
 @dataclass(frozen=True)

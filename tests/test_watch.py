@@ -227,3 +227,23 @@ def test_the_fmu_chooses_again_and_logs_the_event(tmp_path):
     assert len(events) == 1 and events[0].startswith("t = 0.19") and "eliminated [11] -> [" in events[0]
     ref = run(compile_checked(_scene(scene)), _scene(scene).solver)
     assert np.max(np.abs(out["crank0.phi"] - ref.column("crank0.phi"))) <= 1e-9
+
+
+def test_bricard_with_equation_2_eliminated_completes_with_one_reselection():
+    """Bricard's mechanism (benchmark A04, tests/data/bricard): with Phi2 eliminated the kept 29
+    equations lose rank near t = 1.25 s while all 30 keep rank 29. The run chooses them again
+    once they become ill-conditioned, completes 10 s, moves as the run under ``auto`` does
+    (<= 1e-8 m) and keeps its energy (<= 1e-7 J at tolerance 1e-10)."""
+    data = Path(__file__).resolve().parent / "data" / "bricard"
+    given, auto = _scene(data / "bricard_wo2.toml"), _scene(data / "bricard_auto.toml")
+    res, ref = run(compile_checked(given), given.solver), run(compile_checked(auto), auto.solver)
+    assert compile_checked(auto).eliminated != (2,) and not ref.events
+    assert [kind for _, kind, _ in res.events] == ["elimination-reselected"]
+    assert 1.15 < res.events[0][0] < 1.25 and res.events[0][2].startswith("eliminated [2] -> [")
+    assert res.time[-1] == 10.0
+    positions = [n for n in res.names if n.startswith("rod")]
+    cols = [res.names.index(n) for n in positions]
+    assert np.max(np.abs(res.values[:, cols] - ref.values[:, cols])) <= 1e-8
+    energy = res.column("energy.kinetic") + res.column("energy.potential")
+    assert np.max(np.abs(energy - energy[0])) <= 1e-7
+    assert np.ptp(res.column("energy.kinetic")) > 1.0  # it does move

@@ -43,7 +43,7 @@ from .checks import check_initial_state
 from .model import InconsistentInitialState, Model, ModelError  # noqa: F401
 from .spec import SceneSpec, SolverSpec
 from .watch import (EliminationExpired, SingularityMonitor, SingularPosition,  # noqa: F401
-                    friction_on_nonunique, reselected, valid_eliminations)
+                    friction_on_nonunique, reselected, shown_ratio, valid_eliminations)
 
 
 EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
@@ -286,11 +286,29 @@ class Simulation:
         motion: the run stops, naming the eliminations that stay valid."""
         try:
             f = getattr(itg, "f", None)
-            self.monitor.check(itg.t, itg.y, itg.dense, None if f is None else f[: self.n])
+            if self.monitor.check(itg.t, itg.y, itg.dense, None if f is None else f[: self.n]):
+                self._degraded(itg)
             return True
         except EliminationExpired as exc:
             self._expired(exc, itg.t_old, itg.y_old.copy())
             return False
+
+    def _degraded(self, itg) -> None:
+        """The kept equations are becoming ill-conditioned while the mechanism is not: when the
+        motion does not depend on the elimination, choose the equations again at the step's end
+        and go on from there (an ``elimination-reselected`` event), before the
+        ill-conditioning costs accuracy; else keep the elimination (it decides the motion), and
+        the run stops if it expires."""
+        if friction_on_nonunique(self.model, itg.y):
+            return
+        before = self.model.eliminated
+        model, eliminated = reselected(self.model, itg.y)
+        if list(before) == eliminated:
+            return
+        self.events.append((itg.t, "elimination-reselected",
+                            f"eliminated {list(before)} -> {eliminated} (the kept equations became ill-conditioned: "
+                            f"sigma_min/sigma_max {shown_ratio(self.monitor.ratio)})"))
+        self._restart(model, itg.t, itg.y.copy())
 
     def _expired(self, exc: EliminationExpired, t: float, y: np.ndarray) -> None:
         """The kept equations expired at ``exc.t``: choose them again there and restart from

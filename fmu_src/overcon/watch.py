@@ -34,6 +34,8 @@ import numpy as np
 from .evaluation import SingularConfiguration, coordinate_rates, frames, jacobian_h
 
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+DEGRADED_RATIO = 1e-3  # r of the kept equations below which the elimination counts as degrading ...
+DEGRADED_MARGIN = 100.0  # ... when the whole Jacobian is at least this much better conditioned
 SEARCH_REL = 1e-9  # golden-section search: stop when the bracket is below this fraction of the step
 
 
@@ -147,12 +149,13 @@ class SingularityMonitor:
         rows, self.t_prev, self.rate, self.min_ratio, self.ratio = s
         self.rows = np.asarray(rows, int).copy()
 
-    def check(self, t: float, y: np.ndarray, dense=None, qdot=None) -> None:
+    def check(self, t: float, y: np.ndarray, dense=None, qdot=None) -> bool:
         """After the step (t_prev, t]: raise :class:`SingularPosition` or
-        :class:`EliminationExpired` if the kept Jacobian lost rank in it or at its end.
-        ``dense(tau)``: the state inside the step (the integrator's dense output)."""
+        :class:`EliminationExpired` if the kept Jacobian lost rank in it or at its end; return
+        whether the elimination is degrading (:meth:`_degrading`). ``dense(tau)``: the state
+        inside the step (the integrator's dense output)."""
         if not self.rows.size:
-            return
+            return False
         r, rate = ratio_and_rate(self.model, y, self.rows, self.jac, qdot)
         self.ratio = r
         if self.rate < 0.0 < rate and dense is not None and t > self.t_prev:
@@ -161,6 +164,20 @@ class SingularityMonitor:
                 self._judge(t_min, r_min, dense(t_min), self.t_prev, passed=(self.t_prev, t))
         self._judge(t, r, y, self.t_prev)
         self.t_prev, self.rate = t, rate
+        return self._degrading(r, y)
+
+    def _degrading(self, r: float, y: np.ndarray) -> bool:
+        """True when the kept equations are ill-conditioned (r < :data:`DEGRADED_RATIO`) while the
+        whole Jacobian is much better conditioned there (its rank-th singular value ratio at least
+        :data:`DEGRADED_MARGIN` times r): the elimination is on its way to expiring, and its
+        ill-conditioning already costs accuracy (Baumgarte's correction and the multipliers are
+        amplified by 1/r). Min-norm keeps every equation: never."""
+        if r >= DEGRADED_RATIO or self.model.elimination_mode == "min-norm":
+            return False
+        J = weighted_rows(self.model, y, self.full_rows, self.jac)
+        sv = np.linalg.svd(J, compute_uv=False)
+        full = float(sv[self.kept_rank - 1] / sv[0]) if sv.size >= self.kept_rank else 0.0
+        return full >= DEGRADED_MARGIN * r
 
     def expiring(self, t: float, y: np.ndarray, h: float):
         """After a step failed (the friction solve, the step size, ...) from the accepted state

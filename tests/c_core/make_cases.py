@@ -19,7 +19,9 @@ File layout (native byte order): b"OVKCASE1", then records. 'M' a model: 13 int3
 order), baumgarte and tol (float64), then per array field of ovk_model an int32 length and its
 items (int32 or float64). 'E' an evaluation of the last model: guess mode, y, guess, expected
 status, iterations, damped, and for status 0 y', lam, qf, reactions, friction outputs (each an
-int32 length and float64 items).
+int32 length and float64 items). 'R' a run of the last model in C (core/sim.c): method, tolerance,
+max_step, step, end time, y0, then what the installed core's run gave: status, y at the end, the
+first 10 entries of ovk_sim_info (all but the wall time), reactions and friction outputs at the end.
 """
 from __future__ import annotations
 
@@ -96,6 +98,24 @@ class Writer:
         self.counts["evaluations"] += 1
         return status
 
+    def run(self, model, solver, method: str, t_end: float):
+        """A run of the model with ``method`` to t_end (the driver also saves and restores its
+        state half-way and requires the same bits)."""
+        solver = dataclasses.replace(solver, method=method)
+        run = kernel.Run(model, solver)
+        y0 = np.concatenate([model.q0, model.h0])
+        self.parts.append(b"R" + struct.pack("=i4d", kernel.C_METHODS[method], solver.tolerance, solver.max_step,
+                                             solver.step, t_end))
+        self.doubles(y0)
+        run.advance(t_end / 2)
+        y = run.advance(t_end)
+        reac, fric = run.outputs(t_end, y)
+        info = run.info
+        self.parts.append(struct.pack("=i", 0))
+        for a in (y, [info[k] for k in kernel.INFO[:10]], reac, fric):
+            self.doubles(a)
+        self.counts["runs"] = self.counts.get("runs", 0) + 1
+
     def write(self, path: Path):
         path.write_bytes(b"".join(self.parts))
 
@@ -130,12 +150,16 @@ def build(tmp: Path) -> Writer:
         model = compile_checked(spec)
         w.model(model, spec.solver)
         random_states(w, model, n, seed=7)
+        if name in ("planar_f145_wo6", "spatial_GH_wo9"):
+            w.run(model, spec.solver, "dopri5", 0.2)
+            w.run(model, spec.solver, "rk4", 0.05)
     # quaternions and the spatial axis joints, with friction
     for name in ("door_h1_wo_hinge2", "carriage_guide_wo_rod", "loop_A1_wo_A2"):
         spec = spec_of(MECH / "examples" / f"{name}.toml")
         model = compile_checked(spec)
         w.model(model, spec.solver)
         random_states(w, model, 6, seed=3)
+        w.run(model, spec.solver, "dopri5", 0.2)
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from test_kernel import random_axis_model
 
@@ -185,13 +209,13 @@ def main(argv=None) -> int:
         w = build(Path(tmp))
     st = w.counts["statuses"]
     missing = [s for s in (0, 1, 2, 3, 4, 5) if not st.get(s)]  # every status but out of memory
-    if missing or not w.counts["damped_ok"]:
+    if missing or not w.counts["damped_ok"] or not w.counts.get("runs"):
         print(f"make_cases: the cases lack statuses {missing} or a damped Newton that finished "
               f"({w.counts['damped_ok']}): {w.counts}", file=sys.stderr)
         return 1
     w.write(args.out)
     print(f"make_cases: {w.counts['models']} models, {w.counts['evaluations']} evaluations, statuses "
-          f"{dict(sorted(st.items()))}, damped Newton finished {w.counts['damped_ok']} times -> {args.out}")
+          f"{dict(sorted(st.items()))}, damped Newton finished {w.counts['damped_ok']} times, {w.counts.get('runs', 0)} runs -> {args.out}")
     return 0
 
 

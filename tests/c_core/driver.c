@@ -141,7 +141,12 @@ static int run_evaluation(reader *r, model_t *m, int reps, tally *t) {
     int mode = rd_i32(r);
     y = rd_array(r, sizeof(double), &ny);
     guess = rd_array(r, sizeof(double), &ng);
-    int status = rd_i32(r), its = rd_i32(r), damped = rd_i32(r);
+    int status = rd_i32(r), its = rd_i32(r), damped = rd_i32(r), rstatus = -1, n_r0 = 0, n_r1 = 0;
+    double *robust[2] = {NULL, NULL};
+    if (status == OVK_FRICTION) { /* the robust path's outcome */
+        rstatus = rd_i32(r);
+        if (rstatus == 0) robust[0] = rd_array(r, sizeof(double), &n_r0), robust[1] = rd_array(r, sizeof(double), &n_r1);
+    }
     int n = M->nb * M->nq_b, nh = M->nb * M->nh_b;
     int sizes[5] = {n + nh, M->m, M->ncols, OVK_NREAC * M->nj, M->nj};
     const char *names[5] = {"ydot", "lam", "qf", "reactions", "friction"};
@@ -183,6 +188,19 @@ static int run_evaluation(reader *r, model_t *m, int reps, tally *t) {
                 snprintf(line, sizeof line, "%s: status %d with message \"%s\"", where, status, msg);
                 fail(t, line);
             }
+            if (status == OVK_FRICTION) { /* finished by the robust path, or given up, as the installed core */
+                int more = 0, got_r = ovk_evaluate_robust(M, m->d[w], y, mode == 2 ? guess : NULL, out[0], out[1],
+                                                          out[2], &more);
+                t->calls++;
+                if (got_r != rstatus) {
+                    snprintf(line, sizeof line, "%s: robust path status %d, expected %d (%s)", where, got_r, rstatus,
+                             ovk_message(m->d[w]));
+                    fail(t, line);
+                } else if (got_r == 0 && n_r0 == sizes[0] && n_r1 == sizes[1]) {
+                    compare(t, where, "robust ydot", out[0], robust[0], sizes[0]);
+                    compare(t, where, "robust lam", out[1], robust[1], sizes[1]);
+                }
+            }
             if (status) continue;
             compare(t, where, names[0], out[0], exp[0], sizes[0]);
             compare(t, where, names[1], out[1], exp[1], sizes[1]);
@@ -198,6 +216,8 @@ static int run_evaluation(reader *r, model_t *m, int reps, tally *t) {
         }
     ok = 1;
 done:
+    free(robust[0]);
+    free(robust[1]);
     free(y);
     free(guess);
     for (int k = 0; k < 5; k++) { free(exp[k]); free(out[k]); }

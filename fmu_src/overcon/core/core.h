@@ -140,6 +140,8 @@ typedef struct {
     double *W;     /* nR x ncols: S^-1 J_R M^-1 [:, cols] */
     double *Jblk;  /* nj x 6 OVK_MAXEQ: every joint's (J_X)_i block, for the friction setup */
     double *work;  /* the friction solve's vectors and matrices */
+    double *robust; /* the robust friction path's vectors and matrices (friction_robust.c) */
+    int robust_ready; /* the last ovk_evaluate stopped at OVK_FRICTION: ovk_evaluate_robust may go on */
     ovk_fctx *ctx; /* nfj */
     double *flam, *Qi, *Qj; /* nfj x OVK_MAXEQ, nfj x 6, nfj x 6: the last friction force evaluation */
     double *mem;   /* the one allocation behind the double buffers above */
@@ -198,7 +200,7 @@ typedef struct {
     ovk_sim_opts o;
     ovk_rk rk;
     int n, ny, nh, m, ncols;
-    int has_lam, has_last;
+    int has_lam, has_last, robust; /* robust: the last solve needed the robust friction path */
     double *lam;                   /* m: the last solve's multipliers (friction warm start) */
     ovk_hist warm, step_warm;      /* the integration's solves; the latest ones at step ends */
     double last_t, *last_y, *last_lam; /* the last right-hand side's point and multipliers */
@@ -292,6 +294,11 @@ OVK_HIDDEN double ovk_law_mu_over_speed(const double *lp, int law, double s);
 OVK_HIDDEN double ovk_law_mu_over_speed_slope(const double *lp, int law, double s);
 OVK_HIDDEN int ovk_friction(const ovk_model *M, ovk_data *d, int guess_mode, const double *guess, double *qf,
                             int *iterations, int *damped);
+OVK_HIDDEN void ovk_forces_reduced(const ovk_model *M, ovk_data *d, const double *x, double *qf);
+
+/* friction_robust.c: the fixed point and finite-difference Newton after Newton gave up */
+OVK_HIDDEN size_t ovk_robust_doubles(int nx, int nc);
+OVK_HIDDEN int ovk_friction_robust(const ovk_model *M, ovk_data *d, const double *start, double *qf, int *iterations);
 
 /* linalg.c */
 OVK_HIDDEN int ovk_cholesky(double *S, int n);
@@ -317,6 +324,8 @@ OVK_EXPORT int ovk_data_status(const ovk_data *d);
 OVK_EXPORT int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int guess_mode,
                             const double *guess, double *ydot, double *lam, double *qf, int *iterations, int *damped);
 OVK_EXPORT int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam);
+OVK_EXPORT int ovk_evaluate_robust(const ovk_model *M, ovk_data *d, const double *y, const double *start, double *ydot,
+                                   double *lam, double *qf, int *iterations);
 OVK_EXPORT int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,
                            double *fric);
 

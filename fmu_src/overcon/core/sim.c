@@ -75,6 +75,13 @@ static int solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const
         g = lam;
     }
     int status = ovk_evaluate(s->M, s->d, t, y, mode, mode ? g : NULL, ydot, s->ev_lam, s->ev_qf, its, &damped);
+    s->robust = 0;
+    if (status == OVK_FRICTION) { /* the robust path, started from lam as the numpy path's */
+        int more = 0;
+        status = ovk_evaluate_robust(s->M, s->d, y, lam, ydot, s->ev_lam, s->ev_qf, &more);
+        *its += more;
+        s->robust = 1;
+    }
     if (status) snprintf(s->msg, sizeof s->msg, "t = %.9g s: %s", t, ovk_message(s->d));
     return status;
 }
@@ -87,7 +94,7 @@ static int sim_rhs(void *ctx, double t, const double *y, double *ydot) {
     if (s->M->nfj) {
         memcpy(s->lam, s->ev_lam, (size_t)s->m * sizeof(double));
         s->has_lam = 1;
-        hist_push(&s->warm, s->ncols, t, s->ev_qf);
+        if (!s->robust) hist_push(&s->warm, s->ncols, t, s->ev_qf); /* the robust path hands on no forces */
     }
     s->friction_iterations += its;
     s->evaluations++;

@@ -149,3 +149,35 @@ def test_singular_position_stops_both_runs_alike(tmp_path):
         run.advance(2.0)
     assert c.value.status == 12 and str(c.value) == str(py.value)
     assert run.info["min_ratio"] == pytest.approx(sim.monitor.min_ratio, rel=1e-9)
+
+
+def test_robust_friction_path_succeeds_and_fails_where_numpy_does():
+    """States where the core's Newton and damped Newton give up (spatial paper mechanism, mu up
+    to 3, fast random velocities), cold-started: the C robust path (fixed point, then finite-difference Newton)
+    converges exactly where the numpy path's does, to the same multipliers within what two
+    solves to the friction tolerance can differ by (1e-9 relative), and fails where it fails."""
+    from overcon.dynamics import FrictionSolveError, evaluate
+
+    outcomes = {"both": 0, "neither": 0}
+    for name in ("spatial_MN_wo5", "spatial_GHMN_wo18"):
+        for mu in (1.0, 3.0):
+            model, solver = setup(name, "dopri5", mu=mu)
+            k = kernel.Kernel(kernel.library()[0], model, solver)
+            rng = np.random.default_rng(1)
+            for _ in range(30):
+                y = np.concatenate([model.q0 + 0.05 * rng.standard_normal(model.n),
+                                    model.h0 + 3.0 * rng.standard_normal(model.nh)])
+                if k.evaluate(0.0, y) is not None or k.last_status != 2:
+                    continue
+                failed = k.newton_failed()
+                c = k.evaluate_robust(y)
+                try:
+                    ev = evaluate(model, 0.0, y[: model.n], y[model.n:], solver=solver, newton_failed=failed)
+                except FrictionSolveError:
+                    assert c is None and k.last_status == 2 and "did not converge" in k.last_message
+                    outcomes["neither"] += 1
+                    continue
+                assert c is not None, k.last_message
+                assert rel(c[1], ev.lam) <= 1e-9 and rel(c[0][model.n:], ev.hdot) <= 1e-9
+                outcomes["both"] += 1
+    assert outcomes["both"] >= 5 and outcomes["neither"] >= 5, outcomes

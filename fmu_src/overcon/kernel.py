@@ -101,6 +101,7 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_message", ctypes.c_char_p, [vp]), ("ovk_data_status", i, [vp]),
                             ("ovk_evaluate", i, [vp, vp, ctypes.c_double, vp, i, vp, vp, vp, vp, vp, vp]),
                             ("ovk_outputs", i, [vp] * 6), ("ovk_rows", i, [vp] * 6),
+                            ("ovk_evaluate_robust", i, [vp] * 8),
                             ("ovk_sim_new", vp, [vp, vp, ctypes.c_double, vp]), ("ovk_sim_free", None, [vp]),
                             ("ovk_sim_status", i, [vp]), ("ovk_sim_message", ctypes.c_char_p, [vp]),
                             ("ovk_sim_step", i, [vp]),
@@ -240,6 +241,7 @@ class Kernel:
     def __init__(self, lib, model, solver):
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
         self._rows_fn = lib.ovk_rows
+        self._lib_robust = lib.ovk_evaluate_robust
         plan = model.plan
         I32 = np.int32
         keep = self._keep = []
@@ -365,6 +367,24 @@ class Kernel:
         else:
             mode, pg = 0, pgq
         status = self._fn(self._pm, self._data, t, py, mode, pg, pyd, plam, pqf, pits, pdamped)
+        self.last_status = status
+        if status:
+            return None
+        return self._ydot.copy(), self._lam.copy(), self._qf[: self._ncols].copy(), self._its.value
+
+    def evaluate_robust(self, y: np.ndarray, lam_guess=None):
+        """The last :meth:`evaluate` at this ``y`` returned None with status 2 (Newton and damped
+        Newton gave up): finish it by the core's robust path (core/friction_robust.c: the fixed
+        point, then Newton with a finite-difference Jacobian, started from ``lam_guess`` as
+        :func:`overcon.dynamics.evaluate`'s robust path), as a run in C does. (y', lam, qf, its)
+        or None (status in :attr:`last_status`)."""
+        py, pyd, plam, pqf, pits = self._ptrs[:5]
+        self._y[:] = y
+        start = None
+        if lam_guess is not None:
+            self._guess_lam[:] = lam_guess
+            start = self._ptrs[6]
+        status = self._lib_robust(self._pm, self._data, py, start, pyd, plam, pqf, pits)
         self.last_status = status
         if status:
             return None

@@ -6,7 +6,11 @@
 # status), then tests/c_core/driver.c, compiled with the core's sources and the sanitizers, runs
 # every case 20 times in two workspaces and requires the same bits, statuses and messages. Any
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.
-# Also compiles the core with clang -Werror when clang is installed. About 10 s.
+# Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmi2_*.c over the core),
+# compiled with the sanitizers into C-runtime FMUs of a friction scene and a quaternion scene, run
+# by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
+# an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
+# Also compiles the core with clang -Werror when clang is installed. About 30 s.
 # Usage: bash ci/sanitize.sh   (PYTHON: the installed overcon's interpreter, default .venv/bin/python;
 #                               CC: the compiler, default cc)
 set -euo pipefail
@@ -25,6 +29,25 @@ $CC "${FLAGS[@]}" "${SAN[@]}" -I "$CORE" -o "$tmp/driver" tests/c_core/driver.c 
 ASAN_OPTIONS=detect_leaks=1:halt_on_error=1:detect_stack_use_after_return=1 \
 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     "$tmp/driver" "$tmp/cases.bin" 20
+FMI=fmu_src/overcon/fmu/native
+"$PY" - "$tmp/fmus" <<'PYEOF'
+import sys
+from overcon.fmu.build import build_all
+code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml"], sys.argv[1],
+                    refs=False, validate=False, runtime="c", allow_nonunique=True, echo=lambda s: None)
+sys.exit(code)
+PYEOF
+$CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host" tests/c_host/fmu_host.c -ldl -lm  # POSIX (dlopen, realpath): not -std=c11
+for id in planar_f45_wo4 door_h1_wo_hinge2; do
+    mkdir -p "$tmp/$id" && (cd "$tmp/$id" && unzip -q "../fmus/$id.fmu")
+    $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmi2_*.c "$CORE"/*.c -lm
+    guid=$(sed -n 's/.*guid="\([^"]*\)".*/\1/p' "$tmp/$id/modelDescription.xml" | head -n 1)
+    vrs=$("$PY" -c "import fmpy, sys; md = fmpy.read_model_description(sys.argv[1]); print(' '.join(f'{v.valueReference}:{v.name}' for v in md.modelVariables if v.causality == 'output' and v.type == 'Real'))" "$tmp/$id")
+    # shellcheck disable=SC2086
+    ASAN_OPTIONS=detect_leaks=1:halt_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+        "$tmp/fmu_host" -q -S -w "$tmp/$id" "$id" "$guid" 0 1 0.01 1e-9 $vrs > "$tmp/$id.csv"
+    echo "sanitize: C-runtime FMU $id: $(($(wc -l < "$tmp/$id.csv") - 1)) rows, FMU state restored bit for bit"
+done
 if command -v clang >/dev/null 2>&1; then
     clang "${FLAGS[@]}" -shared -fPIC -o "$tmp/libovercore_clang.so" "$CORE"/*.c -lm
     echo "sanitize: the core compiles with clang -Wall -Wextra -Werror"

@@ -48,12 +48,14 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 5  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
+ABI = 6  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
 MAX_FRICTION = 32  # OVK_MAX_FRICTION in core/core.h
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
-          7: "invalid model or argument"}
+          7: "invalid model or argument", 8: "step size too small", 9: "stiffness detected",
+          10: "rk4 step unstable", 11: "work budget exhausted", 12: "singular position (monitor)",
+          13: "time does not advance"}
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
@@ -98,7 +100,17 @@ def _bind(path: Path) -> ctypes.CDLL:
     for name, res, args in (("ovk_make_data", vp, [vp]), ("ovk_free_data", None, [vp]),
                             ("ovk_message", ctypes.c_char_p, [vp]), ("ovk_data_status", i, [vp]),
                             ("ovk_evaluate", i, [vp, vp, ctypes.c_double, vp, i, vp, vp, vp, vp, vp, vp]),
-                            ("ovk_outputs", i, [vp] * 6), ("ovk_rows", i, [vp] * 6)):
+                            ("ovk_outputs", i, [vp] * 6), ("ovk_rows", i, [vp] * 6),
+                            ("ovk_evaluate_robust", i, [vp] * 8),
+                            ("ovk_sim_new", vp, [vp, vp, ctypes.c_double, vp]), ("ovk_sim_free", None, [vp]),
+                            ("ovk_sim_status", i, [vp]), ("ovk_sim_message", ctypes.c_char_p, [vp]),
+                            ("ovk_sim_step", i, [vp]),
+                            ("ovk_sim_advance", i, [vp, ctypes.c_double, ctypes.c_longlong, ctypes.c_double, vp]),
+                            ("ovk_sim_state_vector", None, [vp, vp]), ("ovk_sim_info", None, [vp, vp]),
+                            ("ovk_sim_outputs", i, [vp, ctypes.c_double, vp, vp, vp]),
+                            ("ovk_sim_state_size", ctypes.c_size_t, [vp]),
+                            ("ovk_sim_get_state", i, [vp, vp, ctypes.c_size_t]),
+                            ("ovk_sim_set_state", i, [vp, vp, ctypes.c_size_t])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib
@@ -229,6 +241,7 @@ class Kernel:
     def __init__(self, lib, model, solver):
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
         self._rows_fn = lib.ovk_rows
+        self._lib_robust = lib.ovk_evaluate_robust
         plan = model.plan
         I32 = np.int32
         keep = self._keep = []
@@ -359,6 +372,24 @@ class Kernel:
             return None
         return self._ydot.copy(), self._lam.copy(), self._qf[: self._ncols].copy(), self._its.value
 
+    def evaluate_robust(self, y: np.ndarray, lam_guess=None):
+        """The last :meth:`evaluate` at this ``y`` returned None with status 2 (Newton and damped
+        Newton gave up): finish it by the core's robust path (core/friction_robust.c: the fixed
+        point, then Newton with a finite-difference Jacobian, started from ``lam_guess`` as
+        :func:`overcon.dynamics.evaluate`'s robust path), as a run in C does. (y', lam, qf, its)
+        or None (status in :attr:`last_status`)."""
+        py, pyd, plam, pqf, pits = self._ptrs[:5]
+        self._y[:] = y
+        start = None
+        if lam_guess is not None:
+            self._guess_lam[:] = lam_guess
+            start = self._ptrs[6]
+        status = self._lib_robust(self._pm, self._data, py, start, pyd, plam, pqf, pits)
+        self.last_status = status
+        if status:
+            return None
+        return self._ydot.copy(), self._lam.copy(), self._qf[: self._ncols].copy(), self._its.value
+
     def outputs(self, y: np.ndarray, lam: np.ndarray):
         """(reactions (nj, 9), friction outputs (nj,)) at y and the multipliers lam (m,), every
         joint in model order: the reaction components of the joint type (planar Fx, Fy, T;
@@ -421,3 +452,125 @@ def select(model, solver):
             raise KernelUnavailable(why)
         return None, f"right-hand side: numpy (solver.kernel = 'auto': {why})"
     return Kernel(_state["lib"], model, solver), f"right-hand side: compiled kernel ({_state['path']})"
+
+
+# ----------------------------------------------------------------------------- a run in C
+
+C_METHODS = {"dopri5": 0, "rk4": 1}
+"""The integrators of overcon.integrators that core/integrate_rk.c has (the same steps to round-off)."""
+INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_drift", "min_ratio", "stiff_steps",
+        "stable_step", "wall_time")
+"""The entries of ovk_sim_info, in order (core/sim.c)."""
+
+
+class _CRkOpts(ctypes.Structure):
+    """``ovk_rk_opts`` of core/core.h."""
+    _fields_ = [("method", ctypes.c_int), ("detect_stiffness", ctypes.c_int), ("tolerance", ctypes.c_double),
+                ("max_step", ctypes.c_double), ("first_step", ctypes.c_double), ("step", ctypes.c_double)]
+
+
+class _CSimOpts(ctypes.Structure):
+    """``ovk_sim_opts`` of core/core.h."""
+    _fields_ = [("rk", _CRkOpts), ("max_steps", ctypes.c_longlong), ("max_wall_time", ctypes.c_double),
+                ("ratio_tol", ctypes.c_double), ("stop_time", ctypes.c_double)]
+
+
+class RunStopped(RuntimeError):
+    """A run in C stopped: ``status`` (:data:`STATUS`), the message worded as the Python run's
+    :class:`overcon.simulate.SimulationError`, and rk4's ``stable_step`` when it refused a step."""
+
+    def __init__(self, status: int, message: str, stable_step: float | None = None):
+        super().__init__(message)
+        self.status, self.stable_step = status, stable_step
+
+
+class Run:
+    """A whole run in C (core/sim.c: the integrator of core/integrate_rk.c over the core's
+    right-hand side with :class:`overcon.simulate.Simulation`'s warm starts and step-end checks),
+    for the methods of :data:`C_METHODS`. The numpy path's fallbacks are not in it: an evaluation
+    the core hands back stops the run (:class:`RunStopped`). Used by the C FMU and by the tests
+    that hold it equal to the Python run."""
+
+    def __init__(self, model, solver, *, start_time: float | None = None, max_steps: int | None = None,
+                 max_wall_time: float | None = None, ratio_tol: float = 1e-6, detect_stiffness: bool = True):
+        lib, reason = library()
+        if lib is None:
+            raise KernelUnavailable(reason)
+        why = support(model)
+        if why is not None or solver.method not in C_METHODS:
+            raise KernelUnavailable(why or f"method {solver.method!r} (the C integrators: {', '.join(C_METHODS)})")
+        self._lib, self.kernel = lib, Kernel(lib, model, solver)
+        self.ny = model.n + model.nh
+        rk = _CRkOpts(method=C_METHODS[solver.method], detect_stiffness=int(detect_stiffness),
+                      tolerance=solver.tolerance, max_step=solver.max_step, first_step=0.0, step=solver.step)
+        self._opts = _CSimOpts(rk=rk, max_steps=max_steps or 0, max_wall_time=max_wall_time or 0.0,
+                               ratio_tol=ratio_tol, stop_time=model.scene.stop_time)
+        t0 = model.scene.start_time if start_time is None else start_time
+        y0 = np.ascontiguousarray(np.concatenate([model.q0, model.h0]), float)
+        sim = lib.ovk_sim_new(self.kernel._pm, ctypes.byref(self._opts), t0, y0.ctypes.data)
+        if not sim:
+            raise MemoryError("the compiled core could not allocate a run")
+        self._sim = sim
+        self._finalize = weakref.finalize(self, lib.ovk_sim_free, sim)
+        self._y = np.zeros(self.ny)
+        self._info = np.zeros(len(INFO))
+        status = lib.ovk_sim_status(sim)
+        if status:
+            raise RunStopped(status, self._message())
+
+    def _message(self) -> str:
+        return self._lib.ovk_sim_message(self._sim).decode("utf-8", "replace")
+
+    def _raise(self, status: int):
+        stable = self.info["stable_step"] if status == 10 else None
+        raise RunStopped(status, self._message(), stable)
+
+    @property
+    def info(self) -> dict:
+        """t, h, nsteps, nfev, evaluations, friction_iterations, max_drift, min_ratio, stiff_steps,
+        stable_step, wall_time (:data:`INFO`)."""
+        self._lib.ovk_sim_info(self._sim, self._info.ctypes.data)
+        return dict(zip(INFO, self._info.tolist()))
+
+    @property
+    def y(self) -> np.ndarray:
+        self._lib.ovk_sim_state_vector(self._sim, self._y.ctypes.data)
+        return self._y.copy()
+
+    def step(self) -> None:
+        status = self._lib.ovk_sim_step(self._sim)
+        if status:
+            self._raise(status)
+
+    def advance(self, t_target: float, *, max_steps: int | None = None, max_wall_time: float | None = None):
+        """y(t_target) (a new array), as :meth:`overcon.simulate.Simulation.advance`."""
+        out = np.zeros(self.ny)
+        status = self._lib.ovk_sim_advance(self._sim, t_target, -1 if max_steps is None else max_steps,
+                                           max_wall_time or 0.0, out.ctypes.data)
+        if status:
+            self._raise(status)
+        return out
+
+    def outputs(self, t: float, y: np.ndarray):
+        """(reactions (nj, 9), friction outputs (nj,)) at (t, y) of the last step, as
+        :meth:`Kernel.outputs` with the multipliers of :meth:`overcon.simulate.Simulation.derived_outputs`."""
+        k = self.kernel
+        yy = np.ascontiguousarray(y, float)
+        reac, fric = np.zeros_like(k._reac), np.zeros_like(k._fric)
+        status = self._lib.ovk_sim_outputs(self._sim, t, yy.ctypes.data, reac.ctypes.data, fric.ctypes.data)
+        if status:
+            self._raise(status)
+        return reac, fric
+
+    def get_state(self) -> bytes:
+        size = self._lib.ovk_sim_state_size(self._sim)
+        buf = ctypes.create_string_buffer(size)
+        status = self._lib.ovk_sim_get_state(self._sim, buf, size)
+        if status:
+            self._raise(status)
+        return buf.raw
+
+    def set_state(self, state: bytes) -> None:
+        status = self._lib.ovk_sim_set_state(self._sim, state, len(state))
+        if status:
+            self._raise(status)

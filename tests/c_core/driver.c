@@ -141,7 +141,12 @@ static int run_evaluation(reader *r, model_t *m, int reps, tally *t) {
     int mode = rd_i32(r);
     y = rd_array(r, sizeof(double), &ny);
     guess = rd_array(r, sizeof(double), &ng);
-    int status = rd_i32(r), its = rd_i32(r), damped = rd_i32(r);
+    int status = rd_i32(r), its = rd_i32(r), damped = rd_i32(r), rstatus = -1, n_r0 = 0, n_r1 = 0;
+    double *robust[2] = {NULL, NULL};
+    if (status == OVK_FRICTION) { /* the robust path's outcome */
+        rstatus = rd_i32(r);
+        if (rstatus == 0) robust[0] = rd_array(r, sizeof(double), &n_r0), robust[1] = rd_array(r, sizeof(double), &n_r1);
+    }
     int n = M->nb * M->nq_b, nh = M->nb * M->nh_b;
     int sizes[5] = {n + nh, M->m, M->ncols, OVK_NREAC * M->nj, M->nj};
     const char *names[5] = {"ydot", "lam", "qf", "reactions", "friction"};
@@ -183,6 +188,19 @@ static int run_evaluation(reader *r, model_t *m, int reps, tally *t) {
                 snprintf(line, sizeof line, "%s: status %d with message \"%s\"", where, status, msg);
                 fail(t, line);
             }
+            if (status == OVK_FRICTION) { /* finished by the robust path, or given up, as the installed core */
+                int more = 0, got_r = ovk_evaluate_robust(M, m->d[w], y, mode == 2 ? guess : NULL, out[0], out[1],
+                                                          out[2], &more);
+                t->calls++;
+                if (got_r != rstatus) {
+                    snprintf(line, sizeof line, "%s: robust path status %d, expected %d (%s)", where, got_r, rstatus,
+                             ovk_message(m->d[w]));
+                    fail(t, line);
+                } else if (got_r == 0 && n_r0 == sizes[0] && n_r1 == sizes[1]) {
+                    compare(t, where, "robust ydot", out[0], robust[0], sizes[0]);
+                    compare(t, where, "robust lam", out[1], robust[1], sizes[1]);
+                }
+            }
             if (status) continue;
             compare(t, where, names[0], out[0], exp[0], sizes[0]);
             compare(t, where, names[1], out[1], exp[1], sizes[1]);
@@ -198,6 +216,8 @@ static int run_evaluation(reader *r, model_t *m, int reps, tally *t) {
         }
     ok = 1;
 done:
+    free(robust[0]);
+    free(robust[1]);
     free(y);
     free(guess);
     for (int k = 0; k < 5; k++) { free(exp[k]); free(out[k]); }
@@ -247,6 +267,50 @@ static void refusals(model_t *m, tally *t) {
     free(qf);
 }
 
+/* An 'R' record: the run in C twice, each saving its state half-way, finishing, restoring the
+ * state and finishing again; every finish must give the installed core's bits. */
+static int run_sim(reader *r, model_t *m, tally *t) {
+    int method = rd_i32(r), n_y = 0, n_e = 0, n_i = 0, n_r = 0, n_f = 0;
+    double v[4];
+    rd(r, v, sizeof v);
+    double *y0 = rd_array(r, sizeof(double), &n_y);
+    int want_status = rd_i32(r);
+    double *want_y = rd_array(r, sizeof(double), &n_e), *want_info = rd_array(r, sizeof(double), &n_i);
+    double *want_reac = rd_array(r, sizeof(double), &n_r), *want_fric = rd_array(r, sizeof(double), &n_f);
+    double *y = calloc((size_t)(n_y ? n_y : 1), sizeof(double)), info[OVK_SIM_NINFO];
+    double *reac = calloc((size_t)(n_r ? n_r : 1), sizeof(double)), *fric = calloc((size_t)(n_f ? n_f : 1), sizeof(double));
+    ovk_sim_opts o = {{method, 1, v[0], v[1], 0.0, v[2]}, 0, 0.0, 1e-6, v[3]};
+    for (int rep = 0; rep < 2 && !r->bad && y && reac && fric; rep++) {
+        ovk_sim *s = ovk_sim_new(&m->M, &o, 0.0, y0);
+        if (!s) { r->bad = 2; break; }
+        int status = ovk_sim_status(s);
+        size_t size = ovk_sim_state_size(s);
+        unsigned char *saved = size ? malloc(size) : NULL;
+        if (!status) status = ovk_sim_advance(s, v[3] / 2, -1, 0.0, y);
+        if (!status && saved) status = ovk_sim_get_state(s, saved, size);
+        for (int again = 0; again < 2 && !status; again++) {
+            if (again) status = ovk_sim_set_state(s, saved, size);
+            if (!status) status = ovk_sim_advance(s, v[3], -1, 0.0, y);
+            if (!status) status = ovk_sim_outputs(s, v[3], y, reac, fric);
+            ovk_sim_info(s, info);
+            if (status != want_status) fail(t, ovk_sim_message(s));
+            if (!status) {
+                compare(t, "run", "y", y, want_y, n_e);
+                compare(t, "run", "info", info, want_info, n_i < OVK_SIM_NINFO ? n_i : OVK_SIM_NINFO);
+                compare(t, "run", "reactions", reac, want_reac, n_r);
+                compare(t, "run", "friction", fric, want_fric, n_f);
+            }
+        }
+        if (!saved) fail(t, "run: no state to save");
+        free(saved);
+        ovk_sim_free(s);
+        t->calls++;
+    }
+    free(y0); free(want_y); free(want_info); free(want_reac); free(want_fric);
+    free(y); free(reac); free(fric);
+    return !r->bad;
+}
+
 int main(int argc, char **argv) {
     if (argc < 2 || argc > 3) {
         fprintf(stderr, "usage: %s CASES [REPS]\n", argv[0]);
@@ -293,6 +357,8 @@ int main(int argc, char **argv) {
             }
         } else if (tag == 'E' && have_model) {
             run_evaluation(&r, &m, reps, &t);
+        } else if (tag == 'R' && have_model) {
+            run_sim(&r, &m, &t);
         } else {
             r.bad = 1;
         }

@@ -18,8 +18,11 @@ The script refuses to write a file that lacks any of these.
 File layout (native byte order): b"OVKCASE1", then records. 'M' a model: 13 int32 counts (ovk_model
 order), baumgarte and tol (float64), then per array field of ovk_model an int32 length and its
 items (int32 or float64). 'E' an evaluation of the last model: guess mode, y, guess, expected
-status, iterations, damped, and for status 0 y', lam, qf, reactions, friction outputs (each an
-int32 length and float64 items).
+status, iterations, damped, for status 2 the status of the robust path (ovk_evaluate_robust) and
+for its success y' and lam, and for status 0 y', lam, qf, reactions, friction outputs (each an
+int32 length and float64 items). 'R' a run of the last model in C (core/sim.c): method, tolerance,
+max_step, step, end time, y0, then what the installed core's run gave: status, y at the end, the
+first 10 entries of ovk_sim_info (all but the wall time), reactions and friction outputs at the end.
 """
 from __future__ import annotations
 
@@ -85,6 +88,14 @@ class Writer:
         self.doubles(y)
         self.doubles(guess)
         self.parts.append(struct.pack("=3i", status, k._its.value, k._damped.value))
+        if status == 2:  # the robust path (friction_robust.c) finishes it or gives up too
+            robust = k.evaluate_robust(y, guess if mode == 2 else None)
+            self.parts.append(struct.pack("=i", k.last_status))
+            if robust is not None:
+                self.doubles(robust[0])
+                self.doubles(robust[1])
+            key = "robust_ok" if robust is not None else "robust_failed"
+            self.counts[key] = self.counts.get(key, 0) + 1
         if status == 0:
             ydot, lam, qf, _ = got
             reac, fric = k.outputs(y, lam)
@@ -95,6 +106,24 @@ class Writer:
         st[status] = st.get(status, 0) + 1
         self.counts["evaluations"] += 1
         return status
+
+    def run(self, model, solver, method: str, t_end: float):
+        """A run of the model with ``method`` to t_end (the driver also saves and restores its
+        state half-way and requires the same bits)."""
+        solver = dataclasses.replace(solver, method=method)
+        run = kernel.Run(model, solver)
+        y0 = np.concatenate([model.q0, model.h0])
+        self.parts.append(b"R" + struct.pack("=i4d", kernel.C_METHODS[method], solver.tolerance, solver.max_step,
+                                             solver.step, t_end))
+        self.doubles(y0)
+        run.advance(t_end / 2)
+        y = run.advance(t_end)
+        reac, fric = run.outputs(t_end, y)
+        info = run.info
+        self.parts.append(struct.pack("=i", 0))
+        for a in (y, [info[k] for k in kernel.INFO[:10]], reac, fric):
+            self.doubles(a)
+        self.counts["runs"] = self.counts.get("runs", 0) + 1
 
     def write(self, path: Path):
         path.write_bytes(b"".join(self.parts))
@@ -130,18 +159,32 @@ def build(tmp: Path) -> Writer:
         model = compile_checked(spec)
         w.model(model, spec.solver)
         random_states(w, model, n, seed=7)
+        if name in ("planar_f145_wo6", "spatial_GH_wo9"):
+            w.run(model, spec.solver, "dopri5", 0.2)
+            w.run(model, spec.solver, "rk4", 0.05)
     # quaternions and the spatial axis joints, with friction
     for name in ("door_h1_wo_hinge2", "carriage_guide_wo_rod", "loop_A1_wo_A2"):
         spec = spec_of(MECH / "examples" / f"{name}.toml")
         model = compile_checked(spec)
         w.model(model, spec.solver)
         random_states(w, model, 6, seed=3)
+        w.run(model, spec.solver, "dopri5", 0.2)
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from test_kernel import random_axis_model
 
     spec, model = random_axis_model(tmp, "euler_zxz", 1)
     w.model(model, spec.solver)
     random_states(w, model, 6, seed=3)
+    # Newton and damped Newton give up, the robust path finishes (mu = 3, fast velocities)
+    spec = spec_of(MECH / "spatial_MN_wo5.toml")
+    spec = dataclasses.replace(spec, friction_params={n: dataclasses.replace(v, mu=3.0)
+                                                      for n, v in spec.friction_params.items()})
+    model = compile_checked(spec)
+    w.model(model, spec.solver)
+    rng = np.random.default_rng(1)
+    for _ in range(12):
+        w.evaluation(np.concatenate([model.q0 + 0.05 * rng.standard_normal(model.n),
+                                     model.h0 + 3.0 * rng.standard_normal(model.nh)]))
     # the friction solve gives up: two force evaluations are not enough for either Newton
     spec = spec_of(MECH / "planar_f45_wo4.toml", friction_max_iter=2)
     model = compile_checked(spec)
@@ -185,13 +228,15 @@ def main(argv=None) -> int:
         w = build(Path(tmp))
     st = w.counts["statuses"]
     missing = [s for s in (0, 1, 2, 3, 4, 5) if not st.get(s)]  # every status but out of memory
-    if missing or not w.counts["damped_ok"]:
+    if (missing or not w.counts["damped_ok"] or not w.counts.get("runs") or not w.counts.get("robust_ok")
+            or not w.counts.get("robust_failed")):
         print(f"make_cases: the cases lack statuses {missing} or a damped Newton that finished "
               f"({w.counts['damped_ok']}): {w.counts}", file=sys.stderr)
         return 1
     w.write(args.out)
     print(f"make_cases: {w.counts['models']} models, {w.counts['evaluations']} evaluations, statuses "
-          f"{dict(sorted(st.items()))}, damped Newton finished {w.counts['damped_ok']} times -> {args.out}")
+          f"{dict(sorted(st.items()))}, damped Newton finished {w.counts['damped_ok']} times, robust path finished {w.counts.get('robust_ok', 0)} and "
+          f"gave up {w.counts.get('robust_failed', 0)} times, {w.counts.get('runs', 0)} runs -> {args.out}")
     return 0
 
 

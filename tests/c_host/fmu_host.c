@@ -21,9 +21,15 @@
  *                 hosts do, instead of "file://" + the path
  *   -w            strict, as OMSimulator: any status but fmi2OK is a failure (exit 3)
  *   -s VR=VALUE   fmi2SetReal of value reference VR before initialization (repeatable)
+ *   -n            no Python: after the last step, /proc/self/maps must name no libpython (an FMU
+ *                 without Python); exit 4 naming the mapping otherwise
+ *   -S            FMU state: half-way, fmi2GetFMUstate, fmi2SerializeFMUstate, fmi2FreeFMUstate and
+ *                 fmi2DeSerializeFMUstate; after the last step fmi2SetFMUstate of that state and the
+ *                 second half again: the last values must be the same bits (exit 5 otherwise)
  *   TOL <= 0      no tolerance passed to fmi2SetupExperiment
  *
- * Exit status: 0 ok, 1 usage, 2 loading, 3 an FMI call returned an error status.
+ * Exit status: 0 ok, 1 usage, 2 loading, 3 an FMI call returned an error status, 4 a libpython
+ * mapped with -n, 5 a run from a restored state that differs (-S).
  * Build: cc -O2 -o fmu_host fmu_host.c -ldl -lm
  */
 #include <dlfcn.h>
@@ -67,6 +73,12 @@ typedef fmi2Status (*fmi2ComponentTYPE)(fmi2Component); /* enter/exit init, term
 typedef fmi2Status (*fmi2GetRealTYPE)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
 typedef fmi2Status (*fmi2SetRealTYPE)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
 typedef fmi2Status (*fmi2DoStepTYPE)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+typedef void *fmi2FMUstate;
+typedef fmi2Status (*fmi2GetFMUstateTYPE)(fmi2Component, fmi2FMUstate *);
+typedef fmi2Status (*fmi2SetFMUstateTYPE)(fmi2Component, fmi2FMUstate);
+typedef fmi2Status (*fmi2SerializedFMUstateSizeTYPE)(fmi2Component, fmi2FMUstate, size_t *);
+typedef fmi2Status (*fmi2SerializeFMUstateTYPE)(fmi2Component, fmi2FMUstate, char[], size_t);
+typedef fmi2Status (*fmi2DeSerializeFMUstateTYPE)(fmi2Component, const char[], size_t, fmi2FMUstate *);
 
 static const char *status_name(fmi2Status s)
 {
@@ -111,11 +123,51 @@ static int isclose(double a, double b) /* Python's math.isclose with its default
     return fabs(a - b) <= 1e-9 * fmax(fabs(a), fabs(b));
 }
 
+/* -S: the state of c through its bytes (get, serialize, free, deserialize): a state made from
+ * bytes only, as a host that stored it on disk would have. */
+static fmi2FMUstate state_through_bytes(void *lib, fmi2Component c, fmi2Status worst)
+{
+    fmi2FMUstate s = NULL, back = NULL;
+    size_t size = 0;
+    check(worst, ((fmi2GetFMUstateTYPE)sym(lib, "fmi2GetFMUstate"))(c, &s), "fmi2GetFMUstate");
+    check(worst, ((fmi2SerializedFMUstateSizeTYPE)sym(lib, "fmi2SerializedFMUstateSize"))(c, s, &size),
+          "fmi2SerializedFMUstateSize");
+    char *bytes = malloc(size ? size : 1);
+    if (!bytes) {
+        fprintf(stderr, "fmu_host: out of memory\n");
+        exit(3);
+    }
+    check(worst, ((fmi2SerializeFMUstateTYPE)sym(lib, "fmi2SerializeFMUstate"))(c, s, bytes, size),
+          "fmi2SerializeFMUstate");
+    check(worst, ((fmi2GetFMUstateTYPE)sym(lib, "fmi2FreeFMUstate"))(c, &s), "fmi2FreeFMUstate");
+    check(worst, ((fmi2DeSerializeFMUstateTYPE)sym(lib, "fmi2DeSerializeFMUstate"))(c, bytes, size, &back),
+          "fmi2DeSerializeFMUstate");
+    free(bytes);
+    return back;
+}
+
 #define MAX_SETS 64
+
+/* 1 if /proc/self/maps names a libpython (printed to stderr), 0 if not, -1 if unreadable. */
+static int python_mapped(void)
+{
+    FILE *f = fopen("/proc/self/maps", "r");
+    char line[PATH_MAX + 256];
+    int found = 0;
+    if (!f)
+        return -1;
+    while (fgets(line, sizeof line, f))
+        if (strstr(line, "libpython")) {
+            fprintf(stderr, "fmu_host: libpython mapped: %s", line);
+            found = 1;
+        }
+    fclose(f);
+    return found;
+}
 
 int main(int argc, char **argv)
 {
-    int logging = fmi2True, quick_exit = 0, nset = 0, i = 1;
+    int logging = fmi2True, quick_exit = 0, nset = 0, i = 1, no_python = 0, state_check = 0;
     fmi2Status worst = fmi2Warning;
     const char *libpython = NULL;
     int four_slashes = 0;
@@ -134,6 +186,12 @@ int main(int argc, char **argv)
         } else if (!strcmp(argv[i], "-w")) {
             worst = fmi2OK;
             i++;
+        } else if (!strcmp(argv[i], "-S")) {
+            state_check = 1;
+            i++;
+        } else if (!strcmp(argv[i], "-n")) {
+            no_python = 1;
+            i++;
         } else if (!strcmp(argv[i], "-x")) {
             quick_exit = 1;
             i += 1;
@@ -146,7 +204,7 @@ int main(int argc, char **argv)
         }
     }
     if (argc - i < 8) {
-        fprintf(stderr, "usage: %s [-q] [-x] [-w] [-4] [-P LIBPYTHON] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
+        fprintf(stderr, "usage: %s [-q] [-x] [-w] [-n] [-4] [-P LIBPYTHON] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
                         "VR:NAME [VR:NAME ...]\n", argv[0]);
         return 1;
     }
@@ -220,8 +278,14 @@ int main(int argc, char **argv)
     for (int k = 0; k < nvr; k++)
         printf(",\"%s\"", names[k]);
     printf("\n");
-    double time = start;
+    double time = start, saved_time = start;
+    long half = lround((stop - start) / step) / 2, saved_n = 0;
+    fmi2FMUstate saved = NULL;
     for (long n = 0;; n++) {
+        if (state_check && n == half) {
+            saved = state_through_bytes(lib, c, worst);
+            saved_time = time, saved_n = n;
+        }
         check(worst, get_real(c, vr, nvr, values), "fmi2GetReal");
         printf("%.17g", time);
         for (int k = 0; k < nvr; k++)
@@ -236,6 +300,29 @@ int main(int argc, char **argv)
         time = next;
     }
     fflush(stdout);
+    if (saved) { /* the second half again from the restored state: the same bits at the end */
+        fmi2Real *again = calloc(nvr ? nvr : 1, sizeof *again);
+        check(worst, ((fmi2SetFMUstateTYPE)sym(lib, "fmi2SetFMUstate"))(c, saved), "fmi2SetFMUstate");
+        double t = saved_time;
+        for (long n = saved_n; !(t > stop || isclose(t, stop)); n++) {
+            double next = start + (n + 1) * step;
+            if (next > stop && !isclose(next, stop))
+                next = stop;
+            check(worst, do_step(c, t, next - t, fmi2True), "fmi2DoStep (restored)");
+            t = next;
+        }
+        check(worst, get_real(c, vr, nvr, again), "fmi2GetReal (restored)");
+        check(worst, ((fmi2GetFMUstateTYPE)sym(lib, "fmi2FreeFMUstate"))(c, &saved), "fmi2FreeFMUstate");
+        if (t != time || memcmp(again, values, (size_t)nvr * sizeof *values)) {
+            fprintf(stderr, "fmu_host: -S: the run from the restored state ends elsewhere\n");
+            return 5;
+        }
+        free(again);
+    }
+    if (no_python && python_mapped() != 0) {
+        fprintf(stderr, "fmu_host: -n: a libpython is in the process (or /proc/self/maps unreadable)\n");
+        return 4;
+    }
     if (quick_exit)
         return 0; /* the FMU must survive a host that just exits */
     check(worst, terminate(c), "fmi2Terminate");

@@ -96,7 +96,7 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     size_t n_work = 4 * nx + nx * nc                          /* lam0x, x, x0, Wx */
                     + 4 * nx + nc * nx + nx * nx + nc + nx;   /* r, Dq, Mx, dx, xn, qn, rn (damped Newton) */
     size_t need = n_frames + m * nh + 2 * m + nR * nR + 2 * nR + nh + nR * nc + 6 * OVK_MAXEQ * nj + n_work
-                  + (OVK_MAXEQ + 12) * nfj;
+                  + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols);
     d->mem = calloc(need ? need : 1, sizeof(double));
     d->ctx = calloc(nfj ? nfj : 1, sizeof(ovk_fctx));
     if (!d->mem || !d->ctx) {
@@ -126,6 +126,8 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->flam = p; p += OVK_MAXEQ * nfj;
     d->Qi = p; p += 6 * nfj;
     d->Qj = p; p += 6 * nfj;
+    d->robust = p;
+    p += ovk_robust_doubles(M->nx, M->ncols);
     d->work = p;
     return d;
 }
@@ -140,6 +142,8 @@ void ovk_free_data(ovk_data *d) {
 const char *ovk_message(const ovk_data *d) { return d ? d->msg : "no workspace (out of memory)"; }
 int ovk_data_status(const ovk_data *d) { return d ? d->status : OVK_NOMEM; }
 
+static int finish(const ovk_model *M, ovk_data *d, const double *y, double *ydot, double *lam);
+
 /* y = [q (nb nq_b), h (nb nh_b)] -> ydot, lam (m; zeros at eliminated rows), qf (ncols; friction
  * forces, the next evaluation's warm start), *iterations (friction force evaluations), *damped
  * (the damped Newton ran). guess_mode: 0 none (x0 = lam0), 1 guess = qf of a nearby evaluation
@@ -150,25 +154,50 @@ int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int
     if (!d) return OVK_NOMEM;
     if (d->status) return d->status;
     d->msg[0] = '\0';
+    d->robust_ready = 0;
     *iterations = 0;
     *damped = 0;
     if (guess_mode < 0 || guess_mode > 2 || (guess_mode && !guess))
         return ovk_fail(d, OVK_INVALID, "evaluate: guess_mode %d %s", guess_mode,
                         guess ? "is not 0, 1 or 2" : "without a guess");
-    int n = M->nb * M->nq_b, nh = M->nb * M->nh_b;
-    const double *q = y, *h = y + n;
+    const double *q = y, *h = y + M->nb * M->nq_b;
     int status;
     ovk_frames_build(M, q, h, &d->f);
     ovk_constraint_rows(M, d, q);
     ovk_kkt_rhs(M, d, h);
     if ((status = ovk_loads(M, d))) return status;
     if ((status = ovk_kkt_solve(M, d))) return status;
-    if (M->nfj && (status = ovk_friction(M, d, guess_mode, guess, qf, iterations, damped))) return status;
+    if (M->nfj && (status = ovk_friction(M, d, guess_mode, guess, qf, iterations, damped))) {
+        d->robust_ready = status == OVK_FRICTION;
+        return status;
+    }
+    return finish(M, d, y, ydot, lam);
+}
+
+/* The tail of an evaluation after the friction stage: multipliers, accelerations, rates. */
+static int finish(const ovk_model *M, ovk_data *d, const double *y, double *ydot, double *lam) {
+    int n = M->nb * M->nq_b, nh = M->nb * M->nh_b, status;
     ovk_kkt_accelerations(M, d, lam, ydot + n);
-    if ((status = ovk_rates(M, d, q, h, ydot))) return status;
+    if ((status = ovk_rates(M, d, y, y + n, ydot))) return status;
     for (int k = 0; k < n + nh; k++)
         if (!isfinite(ydot[k])) return ovk_fail(d, OVK_NONFINITE, "non-finite number in y' (entry %d)", k);
     return OVK_OK;
+}
+
+/* The evaluation at y that ovk_evaluate left at OVK_FRICTION (Newton and damped Newton gave up),
+ * finished by the robust path (friction_robust.c; start: lam_guess (m) or NULL, as
+ * overcon.dynamics.evaluate's robust start). The same outputs as ovk_evaluate; qf: the friction
+ * forces, which overcon.dynamics does not hand on as a warm start after this path. */
+int ovk_evaluate_robust(const ovk_model *M, ovk_data *d, const double *y, const double *start, double *ydot,
+                        double *lam, double *qf, int *iterations) {
+    if (!d) return OVK_NOMEM;
+    if (d->status) return d->status;
+    if (!d->robust_ready)
+        return ovk_fail(d, OVK_INVALID, "evaluate_robust: the last evaluation did not stop in the friction solve");
+    d->robust_ready = 0;
+    d->msg[0] = '\0';
+    int status = ovk_friction_robust(M, d, start, qf, iterations);
+    return status ? status : finish(M, d, y, ydot, lam);
 }
 
 /* The reported reactions (reac, nj x 6) and friction outputs (fric, nj) at y and lam (outputs.c). */

@@ -16,13 +16,19 @@
  *   linalg.c            dense Cholesky and LU (fixed summation order, no BLAS)
  *   outputs.c           reported reactions and friction forces
  *   rates.c             coordinate rates q' from h
+ *   integrate_rk.c      the explicit integrators of overcon.integrators: dopri5 (dense output), rk4
+ *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
+ *                       work budgets, derived outputs at any point of the last step
+ *   svd.c               the singularity monitor: one-sided Jacobi SVD, null space, crossing test
+ *   sim_state.c         a run's state as plain bytes (FMI get/set/serialize FMU state)
  *   api.c               the exported entry points (ovk_*), the only symbols of the library
  * Units and signs: SI, the paper's conventions (those of overcon.evaluation and overcon.joints).
  *
  * Every failure is a status (OVK_*) plus a message kept in the workspace (ovk_message); the core
  * never aborts or exits, and has no global mutable state (two workspaces never share memory).
- * The caller (overcon.kernel) repeats on the numpy path any evaluation that returns a status, so
- * the robust friction fallback and the errors users read exist once, in Python.
+ * In a Python run the caller (overcon.kernel) repeats on the numpy path any evaluation that
+ * returns a status, so the robust friction fallback and the errors users read exist once, in
+ * Python; a run in C (sim.c) stops with that status instead.
  *
  * Arithmetic: a fixed summation order, no BLAS; compiled with -ffp-contract=off -fno-fast-math so
  * the results do not depend on the CPU's FMA support or the BLAS dispatch.
@@ -32,7 +38,7 @@
 
 #include <stddef.h>
 
-#define OVK_ABI 5 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+#define OVK_ABI 6 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
     OVK_OK = 0,
@@ -42,7 +48,13 @@ enum {
     OVK_NONFINITE = 4, /* a non-finite number on the way */
     OVK_SPRING = 5,    /* a spring of positive free length whose points coincide */
     OVK_NOMEM = 6,     /* the workspace could not be allocated */
-    OVK_INVALID = 7    /* a model or argument outside what the core takes */
+    OVK_INVALID = 7,   /* a model or argument outside what the core takes */
+    OVK_STEP_SMALL = 8, /* integrator: the step size fell below the resolution of t */
+    OVK_STIFF = 9,     /* integrator: dopri5's step limited by stability (stiffness detected) */
+    OVK_UNSTABLE = 10, /* integrator: rk4's fixed step beyond its stability boundary (stable_step) */
+    OVK_BUDGET = 11,   /* simulation: the work budget (steps or wall time) ran out */
+    OVK_SINGULAR_POSITION = 12, /* simulation: the kept Jacobian lost rank (singularity monitor) */
+    OVK_STALLED = 13   /* simulation: time does not advance, or the target was not reached */
 };
 enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
@@ -61,7 +73,7 @@ enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 #define SIN_BETA_MIN 1e-3
 #define QUAT_NORM_RATE 1.0 /* overcon.kinematics.QUAT_NORM_RATE: the quaternion norm stabilisation (1/s) */
 #define OVK_MAX_FRICTION 32 /* friction joints (and OVK_MAXEQ x that multipliers): overcon.kernel.support checks */
-#define OVK_MSG 256         /* bytes of the failure message, with its terminating zero */
+#define OVK_MSG 512         /* bytes of the failure message, with its terminating zero */
 
 #if defined(__GNUC__)
 #define OVK_EXPORT __attribute__((visibility("default")))
@@ -128,12 +140,84 @@ typedef struct {
     double *W;     /* nR x ncols: S^-1 J_R M^-1 [:, cols] */
     double *Jblk;  /* nj x 6 OVK_MAXEQ: every joint's (J_X)_i block, for the friction setup */
     double *work;  /* the friction solve's vectors and matrices */
+    double *robust; /* the robust friction path's vectors and matrices (friction_robust.c) */
+    int robust_ready; /* the last ovk_evaluate stopped at OVK_FRICTION: ovk_evaluate_robust may go on */
     ovk_fctx *ctx; /* nfj */
     double *flam, *Qi, *Qj; /* nfj x OVK_MAXEQ, nfj x 6, nfj x 6: the last friction force evaluation */
     double *mem;   /* the one allocation behind the double buffers above */
     int status;    /* nonzero: the workspace could not be made (every call returns it) */
     char msg[OVK_MSG];
 } ovk_data;
+
+/* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, rk4) */
+enum { OVK_METHOD_DOPRI5 = 0, OVK_METHOD_RK4 = 1 };
+/* The right-hand side y' = f(t, y) of an integrator: a status (its message written by the callee). */
+typedef int (*ovk_rhs_fn)(void *ctx, double t, const double *y, double *ydot);
+typedef struct {
+    int method;          /* OVK_METHOD_* */
+    int detect_stiffness; /* dopri5: stop with OVK_STIFF on a stability-limited crawl */
+    double tolerance, max_step, first_step; /* dopri5: rtol = atol; first_step <= 0: 1e-4 */
+    double step;         /* rk4: the fixed step */
+} ovk_rk_opts;
+/* The whole integrator state: the scalars here and the arrays in one block of ovk_rk_doubles(n). */
+typedef struct {
+    int method, n, detect_stiffness;
+    int has_K, dense_ready; /* a step was taken (K valid); Q = K^T P is current */
+    int n_stiff, n_nonstiff, n_limited;
+    long long k, nfev, nsteps, stiff_steps; /* k: rk4 steps (t = t0 + k step) */
+    double rtol, max_step, step;
+    double t, h, t0, t_old, h_old, stable_step;
+    double *y, *f, *y_old, *f_old; /* n each */
+    double *K;       /* 7 n: the stages of the last step (rk4: rows 0-3 scratch) */
+    double *ynew, *ystage; /* n each: scratch */
+    double *Q;       /* 4 n: dopri5 dense output coefficients */
+} ovk_rk;
+OVK_HIDDEN size_t ovk_rk_doubles(int n);
+OVK_HIDDEN int ovk_rk_start(ovk_rk *rk, const ovk_rk_opts *o, int n, double *mem, double t0, const double *y0,
+                            ovk_rhs_fn fun, void *ctx, char *msg);
+OVK_HIDDEN int ovk_rk_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg);
+OVK_HIDDEN void ovk_rk_dense(ovk_rk *rk, double t, double *out);
+
+/* sim.c: a run of the model (overcon.simulate.Simulation without the numpy path): the integrator
+ * over ovk_evaluate with the friction warm starts, the step-end checks (singularity monitor,
+ * constraint drift, work budgets) and the derived outputs at any point of the last step. */
+typedef struct {
+    ovk_rk_opts rk;
+    long long max_steps;  /* accepted steps over the run's life; <= 0: no limit */
+    double max_wall_time; /* s spent in ovk_sim_advance over the run's life; <= 0: no limit */
+    double ratio_tol;     /* singularity monitor: sigma_min / sigma_max below it stops the run */
+    double stop_time;     /* the scene's stop time (s), named by the budget messages */
+} ovk_sim_opts;
+/* Friction forces of the last two solves at distinct times, newest first (simulate._ForcesHistory). */
+typedef struct {
+    int count;
+    double t[2];
+    double *q[2]; /* ncols each */
+} ovk_hist;
+typedef struct {
+    const ovk_model *M;
+    ovk_data *d;
+    ovk_sim_opts o;
+    ovk_rk rk;
+    int n, ny, nh, m, ncols;
+    int has_lam, has_last, robust; /* robust: the last solve needed the robust friction path */
+    double *lam;                   /* m: the last solve's multipliers (friction warm start) */
+    ovk_hist warm, step_warm;      /* the integration's solves; the latest ones at step ends */
+    double last_t, *last_y, *last_lam; /* the last right-hand side's point and multipliers */
+    long long friction_iterations, evaluations;
+    double max_drift, min_ratio, t_prev, wall_time;
+    double *ev_lam, *ev_qf, *guess, *yout; /* scratch: m, ncols, max(m, ncols), ny */
+    double *phi, *J, *gam, *svd;   /* scratch: m, m nh, m, nR nh */
+    double *JR, *N, *N2, *sq;      /* monitor: J_R (nR nh), null-space basis and scratch (nh nh each) */
+    double sign;                   /* monitor: sign of det([J_R; N^T]) at the last check */
+    int *piv;                      /* nh: the monitor's LU pivots */
+    double *mem;                   /* the one allocation behind the arrays above and the integrator's */
+    int status;
+    char msg[OVK_MSG];
+} ovk_sim;
+#define OVK_SIM_NINFO 11
+OVK_HIDDEN int ovk_sim_monitor(ovk_sim *s, double t, const double *y, int first, char *msg);
+OVK_HIDDEN int ovk_sv_ratio(double *B, int c, int r, double *ratio);
 
 /* failures: the status, with its message written into d->msg (printf format) */
 OVK_HIDDEN int ovk_fail(ovk_data *d, int status, const char *fmt, ...)
@@ -210,6 +294,11 @@ OVK_HIDDEN double ovk_law_mu_over_speed(const double *lp, int law, double s);
 OVK_HIDDEN double ovk_law_mu_over_speed_slope(const double *lp, int law, double s);
 OVK_HIDDEN int ovk_friction(const ovk_model *M, ovk_data *d, int guess_mode, const double *guess, double *qf,
                             int *iterations, int *damped);
+OVK_HIDDEN void ovk_forces_reduced(const ovk_model *M, ovk_data *d, const double *x, double *qf);
+
+/* friction_robust.c: the fixed point and finite-difference Newton after Newton gave up */
+OVK_HIDDEN size_t ovk_robust_doubles(int nx, int nc);
+OVK_HIDDEN int ovk_friction_robust(const ovk_model *M, ovk_data *d, const double *start, double *qf, int *iterations);
 
 /* linalg.c */
 OVK_HIDDEN int ovk_cholesky(double *S, int n);
@@ -235,7 +324,23 @@ OVK_EXPORT int ovk_data_status(const ovk_data *d);
 OVK_EXPORT int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int guess_mode,
                             const double *guess, double *ydot, double *lam, double *qf, int *iterations, int *damped);
 OVK_EXPORT int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam);
+OVK_EXPORT int ovk_evaluate_robust(const ovk_model *M, ovk_data *d, const double *y, const double *start, double *ydot,
+                                   double *lam, double *qf, int *iterations);
 OVK_EXPORT int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,
                            double *fric);
+
+/* sim.c, sim_state.c: a run in C (see ovk_sim above) */
+OVK_EXPORT ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const double *y0);
+OVK_EXPORT void ovk_sim_free(ovk_sim *s);
+OVK_EXPORT int ovk_sim_status(const ovk_sim *s);
+OVK_EXPORT const char *ovk_sim_message(const ovk_sim *s);
+OVK_EXPORT int ovk_sim_step(ovk_sim *s);
+OVK_EXPORT int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max_wall_time, double *y);
+OVK_EXPORT void ovk_sim_state_vector(const ovk_sim *s, double *y);
+OVK_EXPORT void ovk_sim_info(const ovk_sim *s, double *info);
+OVK_EXPORT int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double *fric);
+OVK_EXPORT size_t ovk_sim_state_size(const ovk_sim *s);
+OVK_EXPORT int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size);
+OVK_EXPORT int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size);
 
 #endif

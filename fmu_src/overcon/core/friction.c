@@ -4,8 +4,8 @@
  * friction forces, find x = lam0x + Wx qf(x). Newton with the analytic Jacobian first (the LU kept
  * while the residual falls fast); if it gives up, damped Newton from the same start (a fresh
  * Jacobian every step, backtracking on the residual's max norm). If that gives up too the status
- * is OVK_FRICTION and the caller's fallbacks (the fixed point, the finite-difference Newton, in
- * overcon.dynamics) take over. */
+ * is OVK_FRICTION and a fallback takes over: the numpy path's (overcon.dynamics) in a Python run,
+ * friction_robust.c's (the same iteration) in a run in C (ovk_evaluate_robust). */
 #include <math.h>
 #include <string.h>
 
@@ -48,7 +48,7 @@ double ovk_law_mu_over_speed_slope(const double *lp, int law, double s) {
 
 /* qf (ncols): the friction forces at the friction multipliers x (nx), group by group; each joint's
  * multipliers and forces are kept in d->flam, d->Qi, d->Qj for the Jacobian. */
-static void forces_reduced(const ovk_model *M, ovk_data *d, const double *x, double *qf) {
+void ovk_forces_reduced(const ovk_model *M, ovk_data *d, const double *x, double *qf) {
     int nx = M->nx;
     memset(qf, 0, sizeof(double) * M->ncols);
     for (int g = 0; g < M->nfg; g++) {
@@ -137,7 +137,7 @@ static int newton_reduced(const ovk_model *M, ovk_data *d, const double *lam0x, 
     double prev = INFINITY;
     for (int it = 1; it <= n_max; it++) {
         *iters = it;
-        forces_reduced(M, d, x, qf);
+        ovk_forces_reduced(M, d, x, qf);
         residual(nx, nc, lam0x, Wx, qf, x, r);
         double res = maxabs(r, nx);
         if (!isfinite(res)) return 0;
@@ -164,7 +164,7 @@ static int damped_newton_reduced(const ovk_model *M, ovk_data *d, const double *
     double *r = work, *Dq = r + nx, *Mx = Dq + nc * nx, *dx = Mx + nx * nx, *xn = dx + nx, *qn = xn + nx,
            *rn = qn + nc;
     int piv[OVK_MAX_FRICTION * OVK_MAXEQ];
-    forces_reduced(M, d, x, qf);
+    ovk_forces_reduced(M, d, x, qf);
     int evals = 1;
     residual(nx, nc, lam0x, Wx, qf, x, r);
     for (;;) {
@@ -180,7 +180,7 @@ static int damped_newton_reduced(const ovk_model *M, ovk_data *d, const double *
         double step = 1.0;
         for (;;) {
             for (int a = 0; a < nx; a++) xn[a] = x[a] + step * dx[a];
-            forces_reduced(M, d, xn, qn);
+            ovk_forces_reduced(M, d, xn, qn);
             evals++;
             *iters = evals;
             residual(nx, nc, lam0x, Wx, qn, xn, rn);

@@ -21,7 +21,24 @@ refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each F
     resources/overcon_facts.json      the versioned facts the tooling reads (overcon.fmu.facts)
 
 At run time it needs only a Python with numpy and scipy (the binary finds one: see
-``native/overcon_fmi2.c`` and the README). ``<hash>`` (and the GUID) is a SHA-256 over the scene
+``native/overcon_fmi2.c`` and the README).
+
+``runtime="c"`` (``overcon build --runtime c``) builds an FMU without Python where the C FMI layer
+covers the model (:func:`overcon.fmu.cmodel.support`: the core's joints and rotations, no energy
+outputs)::
+
+    modelDescription.xml              the same variables
+    binaries/<platform>/<scene>.so    the FMI layer over the core (native/fmi2_*.c and core/*.c),
+                                      compiled once at the package installation (setup.py):
+                                      :data:`C_RUNTIME_LIBRARY`, copied; C11 and libm, no libpython
+    resources/overcon_model.bin       the packed model, output plan, variables and parameter rules
+                                      (overcon.fmu.cmodel)
+    resources/overcon_fmu.json, resources/overcon_facts.json, resources/scene/...  as above
+
+Its integrators are dopri5 and rk4 (core/integrate_rk.c); setting solver.method to dop853 or
+radau fails at initialization with the reason. A model the C layer does not cover (min-norm or
+compliant redundancy, energy outputs, ...) is built with the Python runtime, and the build output
+says so. ``<hash>`` (and the GUID) is a SHA-256 over the scene
 file, the mechanism file, the overcon source (Python, the binary's C) and the compiled core, so FMUs of different scenes (or of
 one scene from different sources) never share module names in one process, and rebuilding
 unchanged inputs gives the same GUID and, with the same compiler and Python, the same bytes. The
@@ -65,7 +82,8 @@ from ..model import ModelError
 from ..checks import compile_checked
 from ..precheck import PrecheckResult, precheck
 from ..spec import SceneSpec
-from . import description, facts, pyinfo, variables
+from ..precheck import friction_warnings
+from . import cmodel, description, facts, pyinfo, variables
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
@@ -73,6 +91,9 @@ NATIVE_SOURCE = Path(__file__).resolve().parent / "native" / "overcon_fmi2.c"
 CFLAGS = ["-shared", "-fPIC", "-O2", "-s", "-fvisibility=hidden", "-Wall", "-Wextra"]
 LIBS = ["-ldl", "-lpthread"]
 FORMAT_VERSION = "overcon-fmu-2"  # bump when the FMU layout changes (enters the GUID)
+RUNTIMES = ("python", "c")
+C_RUNTIME_LIBRARY = Path(__file__).resolve().parent / "native" / f"libovercon_fmi2{kernel_mod._shared_suffix()}"
+"""The binary of the FMUs without Python, compiled by the package installation (setup.py)."""
 _PKG_NAME = __name__.split(".")[0]  # "overcon"
 _DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip timestamps: reproducible FMU bytes
 
@@ -167,6 +188,16 @@ def kernel_library() -> bytes:
                          "in the project directory, which compiles it") from exc
 
 
+def c_runtime_library() -> bytes:
+    """The FMU binary without Python (:data:`C_RUNTIME_LIBRARY`). Raises :class:`BuildError` naming
+    the fix when it is missing (a source tree that was never built)."""
+    try:
+        return C_RUNTIME_LIBRARY.read_bytes()
+    except OSError as exc:
+        raise BuildError(f"the FMU binary without Python {C_RUNTIME_LIBRARY} cannot be read ({exc.strerror or exc}): "
+                         "run `pip install -e .` in the project directory, which compiles it") from exc
+
+
 def _overcon_version() -> str:
     try:
         from importlib.metadata import version  # noqa: PLC0415
@@ -220,7 +251,7 @@ class _NotBuilt(Exception):
 
 
 def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, validate: bool = True,
-                echo=print, sources=None, binary: NativeBinary | None = None) -> BuildResult:
+                echo=print, sources=None, binary: NativeBinary | None = None, runtime: str = "python") -> BuildResult:
     """Build the FMU of one scene file (see the module docstring); never raises for bad input."""
     t0 = time.perf_counter()
     res = BuildResult(source=str(path), status="invalid")
@@ -234,8 +265,17 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
                                        f"({', '.join(report.friction_on_nonunique)}); the simulated motion "
                                        "would depend on the eliminated equations (--allow-nonunique builds it "
                                        "anyway)")
-        fmu, guid, table = _write_fmu(path, out_dir, spec, model, report, sources=sources, binary=binary,
-                                      validate=validate)
+        used = runtime
+        if runtime == "c":
+            why = cmodel.support(model)
+            if why is not None:
+                used = "python"
+                echo(f"{spec.name}: runtime python (the FMU embeds Python): the C runtime does not cover {why}")
+        if used == "c":
+            fmu, guid, table = _write_c_fmu(path, out_dir, spec, model, report, sources=sources, validate=validate)
+        else:
+            fmu, guid, table = _write_fmu(path, out_dir, spec, model, report, sources=sources, binary=binary,
+                                          validate=validate)
     except _NotBuilt as exc:
         res.status = exc.status
         res.messages.extend(exc.messages)
@@ -246,7 +286,7 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
     n_out = len(model.output_names())
     n_par = sum(v.causality == "parameter" for v in table)
     echo(f"{spec.name}: built {fmu} ({n_out} outputs, {n_par} parameters, "
-         f"{fmu.stat().st_size // 1024} KiB) in {res.seconds:.2f} s")
+         f"{fmu.stat().st_size // 1024} KiB, runtime {used}) in {res.seconds:.2f} s")
     return res
 
 
@@ -333,6 +373,62 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
             _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
             for rel, data in sources:
                 _zip_write(zf, f"resources/{pkg}/{rel}", data)
+        if validate:
+            from fmpy.validation import validate_fmu  # noqa: PLC0415
+
+            problems = validate_fmu(str(tmp))
+            if problems:
+                tmp.unlink()
+                raise _NotBuilt("failed", *(f"{path}: modelDescription.xml: {p}" for p in problems))
+        os.replace(tmp, fmu)
+    except BuildError as exc:
+        raise _NotBuilt("failed", f"{path}: build failed: {exc}") from exc
+    except (OSError, ValueError, KeyError, RuntimeError) as exc:
+        raise _NotBuilt("failed", f"{path}: build failed: {type(exc).__name__}: {exc}") from exc
+    return fmu, guid, table
+
+
+def _write_c_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: PrecheckResult, *, sources,
+                 validate: bool):
+    """Write ``<out_dir>/<scene>.fmu`` with the C runtime (module docstring), as :func:`_write_fmu`."""
+    try:
+        mech_ref = tomllib.loads(path.read_text(encoding="utf-8"))["scene"]["mechanism"]
+        scene_zip, mech_zip = _scene_layout(path, mech_ref)
+        scene_bytes, mech_bytes = path.read_bytes(), (path.parent / mech_ref).read_bytes()
+        sources = _source_files() if sources is None else sources
+        plat, ext = _fmi_platform()
+        binary = c_runtime_library()
+        h = hashlib.sha256()
+        for part in (FORMAT_VERSION.encode(), b"runtime c", binary, scene_zip.encode(), scene_bytes,
+                     mech_zip.encode(), mech_bytes):
+            h.update(len(part).to_bytes(8, "little") + part)
+        for rel, data in sources:
+            h.update(len(rel).to_bytes(8, "little") + rel.encode() + len(data).to_bytes(8, "little") + data)
+        guid = "{" + str(uuid.UUID(h.hexdigest()[:32])) + "}"
+        table = variables.table(model, spec.solver, report.reaction_unique, bool(report.motion_unique))
+        overcon_version = _overcon_version()
+        xml = description.model_description(
+            spec, table, guid=guid, version=overcon_version,
+            generation_tool=f"overcon {overcon_version} build_fmu (C runtime: the compiled core, no Python)")
+        warnings = [(1, text) for text in friction_warnings(model)]
+        model_bin = cmodel.model_file(model, spec.solver, table, guid, warnings)
+        manifest = {"scene": scene_zip, "guid": guid, "runtime": "c", "model_identifier": spec.name,
+                    "reaction_unique": report.reaction_unique, "motion_unique": bool(report.motion_unique),
+                    "precheck_problems": list(report.problems), "precheck_warnings": list(report.warnings),
+                    "binary": {"platform": plat, "library": C_RUNTIME_LIBRARY.name,
+                               "source": "overcon/core, overcon/fmu/native/fmi2_*.c"},
+                    "model_file": {"path": "resources/overcon_model.bin", "format": cmodel.FORMAT}}
+        out_dir.mkdir(parents=True, exist_ok=True)
+        fmu = out_dir / f"{spec.name}.fmu"
+        tmp = fmu.with_suffix(".fmu.part")
+        with zipfile.ZipFile(tmp, "w") as zf:
+            _zip_write(zf, "modelDescription.xml", xml)
+            _zip_write(zf, f"binaries/{plat}/{spec.name}.{ext}", binary, 0o755)
+            _zip_write(zf, "resources/overcon_model.bin", model_bin)
+            _zip_write(zf, "resources/overcon_fmu.json", json.dumps(manifest, indent=1).encode())
+            _zip_write(zf, facts.PATH, facts.encode(facts.record(spec, model, report)))
+            _zip_write(zf, f"resources/{scene_zip}", scene_bytes)
+            _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
         if validate:
             from fmpy.validation import validate_fmu  # noqa: PLC0415
 
@@ -447,9 +543,14 @@ def _reference_job(fmu: str) -> tuple[str, str, float]:
 # many FMUs
 
 def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = True,
-              validate: bool = True, jobs: int | None = None, echo=None, echo_err=None) -> tuple[int, list[BuildResult]]:
+              validate: bool = True, jobs: int | None = None, echo=None, echo_err=None,
+              runtime: str = "python") -> tuple[int, list[BuildResult]]:
     """Build every scene in ``paths`` (files or directories) into ``out_dir``; print progress with
-    ``echo`` (problems with ``echo_err``). Returns (exit code, results)."""
+    ``echo`` (problems with ``echo_err``). ``runtime``: "python" (the FMU embeds Python) or "c"
+    (without Python where the C runtime covers the scene; module docstring). Returns (exit code,
+    results)."""
+    if runtime not in RUNTIMES:
+        raise ValueError(f"runtime {runtime!r}: one of {', '.join(RUNTIMES)}")
     echo = echo or (lambda s: print(s, flush=True))
     echo_err = echo_err or (lambda s: print(s, file=sys.stderr, flush=True))
     t0 = time.perf_counter()
@@ -473,7 +574,7 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
     names: dict[str, str] = {}
     for f in files:
         r = build_scene(f, out_dir, allow_nonunique=allow_nonunique, validate=validate, echo=echo,
-                        sources=sources, binary=binary)
+                        sources=sources, binary=binary, runtime=runtime)
         if r.status == "built" and r.name in names:
             r.status = "failed"
             r.messages.append(f"{f}: scene name {r.name} already built from {names[r.name]} "
@@ -542,12 +643,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-validate", action="store_true", help="skip fmpy's validation of each FMU")
     p.add_argument("--jobs", type=_jobs, metavar="N",
                    help="processes for the reference simulations (default: number of CPUs)")
+    p.add_argument("--runtime", choices=RUNTIMES, default="python",
+                   help="python: the FMU embeds the building Python (every model and method); c: the FMU runs "
+                        "the compiled core without Python (dopri5, rk4) where it covers the scene, else python "
+                        "(default python)")
 
 
 
 def run_args(args) -> int:
     code, _ = build_all(args.paths, args.out, allow_nonunique=args.allow_nonunique,
-                        refs=not args.no_ref, validate=not args.no_validate, jobs=args.jobs)
+                        refs=not args.no_ref, validate=not args.no_validate, jobs=args.jobs,
+                        runtime=getattr(args, "runtime", "python"))
     return code
 
 

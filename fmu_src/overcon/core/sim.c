@@ -1,0 +1,310 @@
+/* A run of the model in C: overcon.simulate.Simulation on the core's right-hand side, step for
+ * step. The right-hand side warm-starts the friction solve as Simulation._rhs does (the friction
+ * forces of the last two solves extrapolated to t, else the last multipliers); after every
+ * accepted step the run checks, in Simulation.advance's order, that time advanced, the singularity
+ * monitor's ratio (svd.c), records the step-end friction forces and the constraint drift, and the
+ * work budgets. The derived outputs at a point of the last step reuse the last evaluation when it
+ * was at exactly that point, else solve once warm-started from the step-end forces, without
+ * changing the run's state (Simulation.derived_outputs).
+ *
+ * A failure is a status with a message worded as the Python run's SimulationError; the numpy
+ * path's fallbacks are not here: a status of ovk_evaluate stops the run (the caller decides). */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "core.h"
+
+static double now(void) {
+    struct timespec ts;
+    if (timespec_get(&ts, TIME_UTC) != TIME_UTC) return 0.0;
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* The message of a stopped run: "<lead>: t = <t> s: <cause>" (the time added when the cause does
+ * not start with one), as Simulation's "integration stopped: ..." and "cannot start: ...". */
+static int stopped(ovk_sim *s, int status, const char *lead, double t) {
+    char cause[OVK_MSG], when[48] = "";
+    memcpy(cause, s->msg, sizeof cause);
+    cause[OVK_MSG - 1] = '\0';
+    if (strncmp(cause, "t = ", 4) != 0) snprintf(when, sizeof when, "t = %.9g s: ", t);
+    size_t n = 0, parts = 4;
+    const char *part[4] = {lead, ": ", when, cause};
+    for (size_t k = 0; k < parts; k++)
+        for (const char *c = part[k]; *c && n + 1 < sizeof s->msg; c++) s->msg[n++] = *c;
+    s->msg[n] = '\0';
+    return status;
+}
+
+static void hist_push(ovk_hist *h, int nc, double t, const double *q) {
+    if (!(h->count && h->t[0] == t)) { /* a new time: the newest becomes the older */
+        if (h->count) {
+            memcpy(h->q[1], h->q[0], (size_t)nc * sizeof(double));
+            h->t[1] = h->t[0];
+        }
+        h->count = h->count ? 2 : 1;
+    }
+    memcpy(h->q[0], q, (size_t)nc * sizeof(double));
+    h->t[0] = t;
+}
+
+/* The warm start at t (ncols), or 0 when the history is empty. */
+static int hist_guess(const ovk_hist *h, int nc, double t, double *out) {
+    if (!h->count) return 0;
+    double t1 = h->t[0];
+    if (h->count == 2 && fabs(t - t1) <= 2.0 * fabs(t1 - h->t[1])) {
+        double r = (t - t1) / (t1 - h->t[1]);
+        for (int i = 0; i < nc; i++) out[i] = h->q[0][i] + (h->q[0][i] - h->q[1][i]) * r;
+    } else {
+        memcpy(out, h->q[0], (size_t)nc * sizeof(double));
+    }
+    return 1;
+}
+
+/* One evaluation warm-started from the history h and the multipliers lam (Simulation._solve). */
+static int solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam, double *ydot,
+                 int *its) {
+    int mode = 0, damped = 0;
+    const double *g = s->guess;
+    if (s->ncols && hist_guess(h, s->ncols, t, s->guess)) {
+        mode = 1;
+    } else if (lam) {
+        mode = 2;
+        g = lam;
+    }
+    int status = ovk_evaluate(s->M, s->d, t, y, mode, mode ? g : NULL, ydot, s->ev_lam, s->ev_qf, its, &damped);
+    s->robust = 0;
+    if (status == OVK_FRICTION) { /* the robust path, started from lam as the numpy path's */
+        int more = 0;
+        status = ovk_evaluate_robust(s->M, s->d, y, lam, ydot, s->ev_lam, s->ev_qf, &more);
+        *its += more;
+        s->robust = 1;
+    }
+    if (status) snprintf(s->msg, sizeof s->msg, "t = %.9g s: %s", t, ovk_message(s->d));
+    return status;
+}
+
+/* The integrator's right-hand side (Simulation._rhs). */
+static int sim_rhs(void *ctx, double t, const double *y, double *ydot) {
+    ovk_sim *s = ctx;
+    int its = 0, status = solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, ydot, &its);
+    if (status) return status;
+    if (s->M->nfj) {
+        memcpy(s->lam, s->ev_lam, (size_t)s->m * sizeof(double));
+        s->has_lam = 1;
+        if (!s->robust) hist_push(&s->warm, s->ncols, t, s->ev_qf); /* the robust path hands on no forces */
+    }
+    s->friction_iterations += its;
+    s->evaluations++;
+    s->has_last = 1;
+    s->last_t = t;
+    memcpy(s->last_y, y, (size_t)s->ny * sizeof(double));
+    memcpy(s->last_lam, s->ev_lam, (size_t)s->m * sizeof(double));
+    return OVK_OK;
+}
+
+/* Lays out the run's arrays in s->mem (sizes in ovk_sim_new). */
+static void layout(ovk_sim *s, size_t nR) {
+    double *p = s->mem;
+    size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh;
+    s->lam = p; p += m;
+    s->warm.q[0] = p; p += nc;
+    s->warm.q[1] = p; p += nc;
+    s->step_warm.q[0] = p; p += nc;
+    s->step_warm.q[1] = p; p += nc;
+    s->last_y = p; p += ny;
+    s->last_lam = p; p += m;
+    s->ev_lam = p; p += m;
+    s->ev_qf = p; p += nc;
+    s->guess = p; p += m > nc ? m : nc;
+    s->yout = p; p += ny;
+    s->phi = p; p += m;
+    s->J = p; p += m * nh;
+    s->gam = p; p += m;
+    s->svd = p; p += nR * nh;
+    s->JR = p; p += nR * nh;
+    s->N = p; p += nh * nh;
+    s->N2 = p; p += nh * nh;
+    s->sq = p; p += nh * nh;
+    s->rk.y = p; /* the integrator's block starts here: ovk_rk_start lays it out */
+}
+
+static int check_opts(ovk_sim *s, const ovk_sim_opts *o) {
+    const ovk_rk_opts *r = &o->rk;
+    if (r->method == OVK_METHOD_RK4 ? !(r->step > 0.0 && isfinite(r->step))
+                                    : r->method != OVK_METHOD_DOPRI5 || !(r->tolerance > 0.0) ||
+                                          !(r->max_step > 0.0) || !isfinite(r->tolerance))
+        return snprintf(s->msg, sizeof s->msg, "cannot start: method %d, tolerance %g, max_step %g, step %g: not "
+                        "a method and settings the C integrators take", r->method, r->tolerance, r->max_step,
+                        r->step), OVK_INVALID;
+    if (!(o->ratio_tol >= 0.0))
+        return snprintf(s->msg, sizeof s->msg, "cannot start: ratio_tol %g", o->ratio_tol), OVK_INVALID;
+    return OVK_OK;
+}
+
+ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const double *y0) {
+    ovk_sim *s = calloc(1, sizeof *s);
+    if (!s) return NULL;
+    if (!M || !o || !y0) {
+        s->status = OVK_INVALID;
+        snprintf(s->msg, sizeof s->msg, "cannot start: a null model, options or initial state");
+        return s;
+    }
+    s->M = M;
+    s->o = *o;
+    if ((s->status = check_opts(s, o))) return s;
+    s->d = ovk_make_data(M);
+    if (!s->d || ovk_data_status(s->d)) {
+        s->status = s->d ? ovk_data_status(s->d) : OVK_NOMEM;
+        snprintf(s->msg, sizeof s->msg, "cannot start: %s", ovk_message(s->d));
+        return s;
+    }
+    s->n = M->nb * M->nq_b;
+    s->nh = M->nb * M->nh_b;
+    if (M->nR > s->nh) {
+        s->status = OVK_INVALID;
+        snprintf(s->msg, sizeof s->msg, "cannot start: %d kept rows for %d velocities", M->nR, s->nh);
+        return s;
+    }
+    s->ny = s->n + s->nh;
+    s->m = M->m;
+    s->ncols = M->ncols;
+    size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh, nR = (size_t)M->nR;
+    size_t need = 5 * m + 6 * nc + 2 * ny + (m > nc ? m : nc) + m * nh + 2 * nR * nh + 3 * nh * nh +
+                  ovk_rk_doubles(s->ny);
+    s->mem = calloc(need, sizeof(double));
+    s->piv = calloc(nh ? nh : 1, sizeof(int));
+    if (!s->mem || !s->piv) {
+        s->status = OVK_NOMEM;
+        snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (%zu bytes)", need * sizeof(double));
+        return s;
+    }
+    layout(s, nR);
+    s->min_ratio = INFINITY;
+    s->t_prev = t0;
+    int status = ovk_rk_start(&s->rk, &o->rk, s->ny, s->rk.y, t0, y0, sim_rhs, s, s->msg);
+    if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, 1, s->msg);
+    if (status) s->status = stopped(s, status, "cannot start", t0);
+    return s;
+}
+
+void ovk_sim_free(ovk_sim *s) {
+    if (!s) return;
+    ovk_free_data(s->d);
+    free(s->mem);
+    free(s->piv);
+    free(s);
+}
+
+int ovk_sim_status(const ovk_sim *s) { return s ? s->status : OVK_NOMEM; }
+const char *ovk_sim_message(const ovk_sim *s) { return s ? s->msg : "no simulation (out of memory)"; }
+
+/* The budgets after a step (Simulation._check_budget): this call's (steps since n0, wall time
+ * since started), then the run's life. */
+static int check_budget(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
+    const ovk_rk *rk = &s->rk;
+    double spent = now() - started;
+    if (call_steps >= 0 && rk->nsteps - n0 > call_steps)
+        return snprintf(s->msg, sizeof s->msg, "%lld internal steps > %lld allowed for this step, at t = %.9g s",
+                        rk->nsteps - n0, call_steps, rk->t), OVK_BUDGET;
+    if (call_wall > 0.0 && spent > call_wall)
+        return snprintf(s->msg, sizeof s->msg, "%.3g s wall time > %g s allowed for this step, at t = %.9g s",
+                        spent, call_wall, rk->t), OVK_BUDGET;
+    if (s->o.max_steps > 0 && rk->nsteps >= s->o.max_steps)
+        return snprintf(s->msg, sizeof s->msg, "work budget exhausted: %lld internal steps (max_steps = %lld) "
+                        "reached t = %.9g s of %g s; raise the budget or use a larger step / looser tolerance",
+                        rk->nsteps, s->o.max_steps, rk->t, s->o.stop_time), OVK_BUDGET;
+    if (s->o.max_wall_time > 0.0 && s->wall_time + spent > s->o.max_wall_time)
+        return snprintf(s->msg, sizeof s->msg, "work budget exhausted: wall time %.1f s (max_wall_time = %g s) "
+                        "reached t = %.9g s of %g s after %lld steps; raise the budget or use a larger step / "
+                        "looser tolerance", s->wall_time + spent, s->o.max_wall_time, rk->t, s->o.stop_time,
+                        rk->nsteps), OVK_BUDGET;
+    return OVK_OK;
+}
+
+/* One accepted step and its checks (the body of Simulation.advance's loop). */
+static int step_checked(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
+    ovk_rk *rk = &s->rk;
+    double t_before = rk->t;
+    int status = ovk_rk_step(rk, sim_rhs, s, s->msg);
+    if (!status && !(rk->t > t_before)) {
+        snprintf(s->msg, sizeof s->msg, "t = %.9g s: time does not advance (step below the resolution of t)",
+                 t_before);
+        status = OVK_STALLED;
+    }
+    if (!status) status = ovk_sim_monitor(s, rk->t, rk->y, 0, s->msg);
+    if (status) return stopped(s, status, "integration stopped", rk->t);
+    if (s->warm.count) hist_push(&s->step_warm, s->ncols, rk->t, s->warm.q[0]);
+    if ((status = ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam))) {
+        snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d));
+        return stopped(s, status, "integration stopped", rk->t);
+    }
+    for (int r = 0; r < s->m; r++)
+        if (fabs(s->phi[r]) > s->max_drift) s->max_drift = fabs(s->phi[r]);
+    if ((status = check_budget(s, started, n0, call_steps, call_wall)))
+        return stopped(s, status, "integration stopped", rk->t);
+    return OVK_OK;
+}
+
+int ovk_sim_step(ovk_sim *s) {
+    if (!s) return OVK_NOMEM;
+    if (s->status) return s->status;
+    double started = now();
+    int status = step_checked(s, started, s->rk.nsteps, -1, 0.0);
+    s->wall_time += now() - started;
+    return status;
+}
+
+/* Integrates until t_target and writes y(t_target) (dense output) into y (Simulation.advance);
+ * max_steps < 0 and max_wall_time <= 0: no budget of this call. */
+int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max_wall_time, double *y) {
+    if (!s) return OVK_NOMEM;
+    if (s->status) return s->status;
+    ovk_rk *rk = &s->rk;
+    double eps = 1e-12 * (fabs(t_target) > 1.0 ? fabs(t_target) : 1.0), started = now();
+    long long n0 = rk->nsteps;
+    int status = OVK_OK;
+    while (!status && rk->t < t_target - eps) status = step_checked(s, started, n0, max_steps, max_wall_time);
+    s->wall_time += now() - started;
+    if (status) return status;
+    if (rk->t - t_target < -eps || !isfinite(t_target))
+        return snprintf(s->msg, sizeof s->msg, "could not reach t = %.17g", t_target), OVK_STALLED;
+    if (fabs(rk->t - t_target) > eps)
+        ovk_rk_dense(rk, t_target, y);
+    else
+        memcpy(y, rk->y, (size_t)s->ny * sizeof(double));
+    return OVK_OK;
+}
+
+void ovk_sim_state_vector(const ovk_sim *s, double *y) { memcpy(y, s->rk.y, (size_t)s->ny * sizeof(double)); }
+
+/* t, the next step size, accepted steps, evaluations of the integrator, of the right-hand side,
+ * friction force evaluations, max drift, min ratio, stiff steps, rk4's stable step, wall time. */
+void ovk_sim_info(const ovk_sim *s, double *info) {
+    const ovk_rk *rk = &s->rk;
+    double v[OVK_SIM_NINFO] = {rk->t, rk->method == OVK_METHOD_RK4 ? rk->step : rk->h, (double)rk->nsteps,
+                               (double)rk->nfev, (double)s->evaluations, (double)s->friction_iterations,
+                               s->max_drift, s->min_ratio, (double)rk->stiff_steps, rk->stable_step, s->wall_time};
+    memcpy(info, v, sizeof v);
+}
+
+/* Reactions (nj x OVK_NREAC) and friction outputs (nj) at (t, y) of the last step
+ * (Simulation.derived_outputs): the run's state is left as it was. */
+int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double *fric) {
+    if (!s) return OVK_NOMEM;
+    if (s->status) return s->status;
+    const double *lam = s->last_lam;
+    int same = s->has_last && s->last_t == t;
+    for (int i = 0; same && i < s->ny; i++) same = s->last_y[i] == y[i];
+    if (!same) {
+        int its = 0, status = solve(s, t, y, s->step_warm.count ? &s->step_warm : &s->warm,
+                                    s->has_lam ? s->lam : NULL, s->yout, &its);
+        if (status) return status;
+        lam = s->ev_lam;
+    }
+    int status = ovk_outputs(s->M, s->d, y, lam, reac, fric);
+    if (status) snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d));
+    return status;
+}

@@ -1,0 +1,128 @@
+/* The state of a run as plain bytes (FMI get/set/serialize FMU state): every field that changes
+ * during a run, in one fixed order written by one function for measuring, saving and loading, so
+ * the three can never disagree. Layout: the magic "OVKSIM", a format version and the sizes (method,
+ * n, ncols, m), which a load checks against the run it restores into, then the fields as native
+ * bytes (a state is restored on the machine and build that saved it, as FMI requires). A restore
+ * is exact: the same bits continue the same trajectory. The wall time spent is not part of the
+ * state (Simulation.get_state leaves it out too). */
+#include <stdio.h>
+#include <string.h>
+
+#include "core.h"
+
+#define STATE_MAGIC "OVKSIM"
+#define STATE_VERSION 1
+
+typedef struct {
+    unsigned char *w;       /* saving: the next byte to write */
+    const unsigned char *r; /* loading: the next byte to read */
+    size_t size, cap;       /* bytes so far; capacity of the buffer */
+    int bad;
+} codec;
+
+static void io(codec *c, void *x, size_t n) {
+    if (c->size + n > c->cap) c->bad = 1;
+    if (!c->bad && c->w) memcpy(c->w + c->size, x, n);
+    if (!c->bad && c->r) memcpy(x, c->r + c->size, n);
+    c->size += n;
+}
+
+static void io_hist(codec *c, ovk_hist *h, int nc) {
+    io(c, &h->count, sizeof h->count);
+    io(c, h->t, sizeof h->t);
+    io(c, h->q[0], (size_t)nc * sizeof(double));
+    io(c, h->q[1], (size_t)nc * sizeof(double));
+}
+
+static void io_rk(codec *c, ovk_rk *rk) {
+    size_t n = (size_t)rk->n * sizeof(double);
+    int ints[6] = {rk->has_K, rk->dense_ready, rk->n_stiff, rk->n_nonstiff, rk->n_limited, 0};
+    long long counts[4] = {rk->k, rk->nfev, rk->nsteps, rk->stiff_steps};
+    double reals[6] = {rk->t, rk->h, rk->t0, rk->t_old, rk->h_old, rk->stable_step};
+    io(c, ints, sizeof ints);
+    io(c, counts, sizeof counts);
+    io(c, reals, sizeof reals);
+    if (c->r && !c->bad) {
+        rk->has_K = ints[0], rk->dense_ready = ints[1], rk->n_stiff = ints[2], rk->n_nonstiff = ints[3];
+        rk->n_limited = ints[4];
+        rk->k = counts[0], rk->nfev = counts[1], rk->nsteps = counts[2], rk->stiff_steps = counts[3];
+        rk->t = reals[0], rk->h = reals[1], rk->t0 = reals[2], rk->t_old = reals[3], rk->h_old = reals[4];
+        rk->stable_step = reals[5];
+    }
+    io(c, rk->y, n);
+    io(c, rk->f, n);
+    io(c, rk->y_old, n);
+    io(c, rk->f_old, n);
+    io(c, rk->K, 7 * n);
+    io(c, rk->Q, 4 * n);
+}
+
+/* The header and every field of the run, in order. */
+static void io_sim(codec *c, ovk_sim *s) {
+    char magic[8] = STATE_MAGIC;
+    int head[5] = {STATE_VERSION, s->rk.method, s->ny, s->ncols, s->m}, want[5];
+    memcpy(want, head, sizeof head);
+    io(c, magic, sizeof magic);
+    io(c, head, sizeof head);
+    if (c->r && !c->bad && (memcmp(magic, STATE_MAGIC, sizeof STATE_MAGIC) || memcmp(head, want, sizeof head)))
+        c->bad = 2;
+    io_rk(c, &s->rk);
+    io(c, &s->has_lam, sizeof s->has_lam);
+    io(c, s->lam, (size_t)s->m * sizeof(double));
+    io_hist(c, &s->warm, s->ncols);
+    io_hist(c, &s->step_warm, s->ncols);
+    io(c, &s->has_last, sizeof s->has_last);
+    io(c, &s->last_t, sizeof s->last_t);
+    io(c, s->last_y, (size_t)s->ny * sizeof(double));
+    io(c, s->last_lam, (size_t)s->m * sizeof(double));
+    io(c, &s->friction_iterations, sizeof s->friction_iterations);
+    io(c, &s->evaluations, sizeof s->evaluations);
+    io(c, &s->max_drift, sizeof s->max_drift);
+    io(c, &s->min_ratio, sizeof s->min_ratio);
+    io(c, &s->t_prev, sizeof s->t_prev);
+    io(c, &s->sign, sizeof s->sign);
+    io(c, s->N, (size_t)(s->nh - s->M->nR) * (size_t)s->nh * sizeof(double));
+}
+
+size_t ovk_sim_state_size(const ovk_sim *s) {
+    if (!s || !s->mem) return 0;
+    codec c = {NULL, NULL, 0, (size_t)-1, 0};
+    io_sim(&c, (ovk_sim *)s); /* measuring: nothing is read or written */
+    return c.size;
+}
+
+int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size) {
+    if (!s) return OVK_NOMEM;
+    if (!s->mem || !buf) return snprintf(s->msg, sizeof s->msg, "get state: no run or no buffer"), OVK_INVALID;
+    codec c = {buf, NULL, 0, size, 0};
+    io_sim(&c, s);
+    if (c.bad || c.size != size)
+        return snprintf(s->msg, sizeof s->msg, "get state: a buffer of %zu bytes for a state of %zu", size,
+                        ovk_sim_state_size(s)), OVK_INVALID;
+    return OVK_OK;
+}
+
+/* Restores a state saved by ovk_sim_get_state of a run of the same model and method; the run's
+ * status is cleared (a stopped run continues from the restored state). A state of another
+ * size, format or run is refused and the run is left as it was. */
+int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size) {
+    if (!s) return OVK_NOMEM;
+    size_t need = ovk_sim_state_size(s);
+    if (!s->mem || !buf || size != need)
+        return snprintf(s->msg, sizeof s->msg, "set state: %zu bytes, a state of this run has %zu", size, need),
+               OVK_INVALID;
+    codec probe = {NULL, buf, 0, size, 0};
+    char magic[8];
+    int head[5], want[5] = {STATE_VERSION, s->rk.method, s->ny, s->ncols, s->m};
+    io(&probe, magic, sizeof magic);
+    io(&probe, head, sizeof head);
+    if (memcmp(magic, STATE_MAGIC, sizeof STATE_MAGIC) || memcmp(head, want, sizeof want))
+        return snprintf(s->msg, sizeof s->msg, "set state: not a state of this run (format %d, method %d, %d "
+                        "states, %d friction columns, %d rows)", head[0], head[1], head[2], head[3], head[4]),
+               OVK_INVALID;
+    codec c = {NULL, buf, 0, size, 0};
+    io_sim(&c, s);
+    s->status = OVK_OK;
+    s->msg[0] = '\0';
+    return OVK_OK;
+}

@@ -1,0 +1,166 @@
+"""The model file of an FMU that runs without Python (``resources/overcon_model.bin``): everything the
+C FMI layer (``native/fmi2_*.c`` over the core) needs, written at ``overcon build`` from the
+compiled model, the scene's solver settings and the variable table (:mod:`overcon.fmu.variables`).
+
+Why a file of its own: the C FMU cannot read TOML nor compile a mechanism; the packing of
+:class:`overcon.kernel.Kernel` (the ``ovk_model`` the core evaluates) is the compiled model, so the
+file carries exactly those arrays, with the initial state, the output plan, the variables and the
+parameters' rules (:data:`overcon.params.RULES`, with their messages' texts).
+
+Layout (native byte order; int32 ``i``, float64 ``d``; a string is an int32 length including its
+terminating zero, then the bytes and the zero; an array an int32 count then the items):
+
+1. ``b"OVKFMU01"``, i format version (:data:`FORMAT`), i the core's ABI (:data:`overcon.kernel.ABI`),
+   string GUID;
+2. the model: 13 i counts and 2 d (baumgarte, tol) in ``ovk_model`` order, then its 25 arrays
+   (int32 or float64 items, in ``ovk_model`` order);
+3. the run: i n, i nh, i quaternion (1: orientation coordinates are quaternions), d start time,
+   d stop time, array d y0;
+4. outputs: i count, then per output i kind (:data:`OUT_KINDS`), i a, i b (a position: the index
+   into q; a velocity: the index into h; a reaction: joint and component; friction: joint);
+5. variables: i count, then per variable string name, i type (:data:`TYPES`), i causality, i
+   variability (:data:`VARIABILITIES`), i key kind (:data:`KEYS`), i key argument (the output index,
+   the constant 0/1, the parameter index);
+6. parameters: i count, then per parameter string name, i type, i target (:data:`TARGETS`), i joint
+   (friction parameters), i rule kind (0 real, 1 int, 2 choice), d low, d high, i has low, i has
+   high, i low open, string range text, string why, i number of choices then the choices as
+   strings, d default (numbers), string default (strings), i tunable;
+7. messages logged at fmi2Instantiate: i count, then per message i fmi2Status, string text.
+"""
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+from .. import kernel as kernel_mod
+from ..params import rule_of
+
+FORMAT = 1
+MAGIC = b"OVKFMU01"
+TYPES = {"Real": 0, "Integer": 1, "Boolean": 2, "String": 3}
+CAUSALITIES = {"output": 0, "parameter": 1, "local": 2}
+VARIABILITIES = {"continuous": 0, "constant": 1, "fixed": 2, "tunable": 3, "discrete": 4}
+KEYS = {"output": 0, "constant": 1, "param": 2, "stable_step": 3}
+OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6}
+TARGETS = {"mu": 1, "v_reg": 2, "mu_static": 3, "v_stribeck": 4, "solver.method": 10, "solver.tolerance": 11,
+           "solver.step": 12, "solver.max_step": 13, "solver.baumgarte": 14, "solver.friction_tol": 15,
+           "solver.friction_max_iter": 16, "solver.kernel": 17, "solver.max_internal_steps": 18,
+           "solver.max_wall_time": 19}
+"""What a parameter sets: a friction law's entry of ``jlawp`` (1-4) or a solver setting (10-19)."""
+INT_FIELDS = ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols", "nfj", "nfg", "max_iter")
+DOUBLE_FIELDS = {"Minv", "mass", "inertia", "gravity", "jconst", "jlawp", "lp"}
+
+
+def support(model) -> str | None:
+    """None if the C FMU runs ``model``, else the reason (the Python FMU runs it then): the core's
+    coverage (:func:`overcon.kernel.support`) and outputs the C layer computes (not the energies)."""
+    why = kernel_mod.support(model)
+    if why is None and model.energy_outputs:
+        why = "energy outputs (the C FMU reports positions, velocities, reactions and friction forces)"
+    return why
+
+
+class _Out:
+    def __init__(self):
+        self.parts: list[bytes] = []
+
+    def i(self, *v):
+        self.parts.append(struct.pack(f"={len(v)}i", *v))
+
+    def d(self, *v):
+        self.parts.append(struct.pack(f"={len(v)}d", *v))
+
+    def s(self, text: str):
+        raw = str(text).encode("utf-8") + b"\0"
+        self.i(len(raw))
+        self.parts.append(raw)
+
+    def ints(self, a):
+        a = np.ascontiguousarray(a, dtype=np.int32).reshape(-1)
+        self.i(a.size)
+        self.parts.append(a.tobytes())
+
+    def doubles(self, a):
+        a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1)
+        self.i(a.size)
+        self.parts.append(a.tobytes())
+
+
+def _outputs(w: _Out, model) -> None:
+    """The output plan in output order (``model.output_names()``)."""
+    rows = [(OUT_KINDS["position"], i, 0) for _, i in model.position_outputs]
+    rows += [(OUT_KINDS["velocity"], i, 0) for _, i in model.velocity_outputs]
+    rows += [(OUT_KINDS["reaction"], j, comp) for j in model.reaction_joints
+             for comp in range(len(model.joints[j].components))]
+    rows += [(OUT_KINDS["friction"], j, 0) for j in model.friction_outputs]
+    assert len(rows) == len(model.output_names())
+    w.i(len(rows))
+    for r in rows:
+        w.i(*r)
+
+
+def _param(w: _Out, model, var) -> None:
+    name = var.key[1]
+    group, _, field = name.rpartition(".")
+    joint = -1
+    target = TARGETS.get(name)
+    if target is None:
+        target = TARGETS[field]
+        joint = next(j for j, c in enumerate(model.joints) if c.name == group)
+    rule = rule_of(name)
+    kind = {"real": 0, "int": 1, "choice": 2}[rule.kind]
+    w.s(name)
+    w.i(TYPES[var.type], target, joint, kind)
+    w.d(rule.low if rule.low is not None else 0.0, rule.high if rule.high is not None else 0.0)
+    w.i(rule.low is not None, rule.high is not None, bool(rule.low_open))
+    w.s(rule.range_text())
+    w.s(rule.why)
+    w.i(len(rule.choices))
+    for c in rule.choices:
+        w.s(c)
+    w.d(float(var.start) if not isinstance(var.start, str) else 0.0)
+    w.s(var.start if isinstance(var.start, str) else "")
+    w.i(var.variability == "tunable")
+
+
+def model_file(model, solver, table, guid: str, messages=()) -> bytes:
+    """The bytes of ``resources/overcon_model.bin`` (module docstring) for ``model`` with the
+    solver settings ``solver``, the variable table ``table`` and the GUID; ``messages``:
+    (fmi2Status, text) logged at every fmi2Instantiate (the pre-check's warnings)."""
+    lib, reason = kernel_mod.library()
+    if lib is None:
+        raise RuntimeError(f"the C FMU needs the compiled core: {reason}")
+    k = kernel_mod.Kernel(lib, model, solver)
+    cm = k._cmodel
+    by_address = {a.ctypes.data: a for a in k._keep}
+    w = _Out()
+    w.parts.append(MAGIC)
+    w.i(FORMAT, kernel_mod.ABI)
+    w.s(guid)
+    w.i(*(getattr(cm, n) for n in INT_FIELDS))
+    w.d(cm.baumgarte, cm.tol)
+    for name, _ in cm._fields_:
+        if name in INT_FIELDS or name in ("baumgarte", "tol"):
+            continue
+        (w.doubles if name in DOUBLE_FIELDS else w.ints)(by_address[getattr(cm, name)])
+    w.i(model.n, model.nh, int(model.rotation == "quaternion"))
+    w.d(model.scene.start_time, model.scene.stop_time)
+    w.doubles(np.concatenate([model.q0, model.h0]))
+    _outputs(w, model)
+    params = [v for v in table if v.key[0] == "param"]
+    index = {v.key[1]: n for n, v in enumerate(params)}
+    w.i(len(table))
+    for v in table:
+        kind, arg = v.key
+        a = arg if kind == "output" else int(bool(arg)) if kind == "constant" else index[arg] if kind == "param" else 0
+        w.s(v.name)
+        w.i(TYPES[v.type], CAUSALITIES[v.causality], VARIABILITIES[v.variability], KEYS[kind], a)
+    w.i(len(params))
+    for v in params:
+        _param(w, model, v)
+    w.i(len(messages))
+    for status, text in messages:
+        w.i(int(status))
+        w.s(text)
+    return b"".join(w.parts)

@@ -1,0 +1,139 @@
+/* The FMI 2.0 co-simulation layer of an overcon FMU without Python: the FMI functions over the C
+ * core's run (core/sim.c), reading the model file resources/overcon_model.bin that overcon build
+ * writes (overcon.fmu.cmodel: its docstring describes the layout). It behaves as the Python slave
+ * (overcon.fmu.slave) for the models and methods it covers: states, variables, parameters and their
+ * rules, the tolerance rule of fmi2SetupExperiment, the doStep work budget, lazy reactions, FMU
+ * states bit for bit, the log categories.
+ *   fmi2_model.c   reads and checks the model file
+ *   fmi2_core.c    instances: instantiate, free, logging, debug logging
+ *   fmi2_run.c     the run: parameters applied, outputs, setup, initialization, fmi2DoStep
+ *   fmi2_vars.c    fmi2Get*, fmi2Set* (parameters and their rules), reset, status queries
+ *   fmi2_state.c   FMU states: get, set, free, serialize, deserialize
+ * C11 and libm; no global mutable state (every instance owns its memory). */
+#ifndef OVERCON_FMI2_CORE_H
+#define OVERCON_FMI2_CORE_H
+
+#include <stddef.h>
+
+#include "../../core/core.h"
+
+typedef void *fmi2Component;
+typedef void *fmi2ComponentEnvironment;
+typedef void *fmi2FMUstate;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Integer;
+typedef int fmi2Boolean;
+typedef char fmi2Char;
+typedef const fmi2Char *fmi2String;
+typedef char fmi2Byte;
+#define fmi2True 1
+#define fmi2False 0
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
+typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
+typedef void *(*fmi2CallbackAllocateMemory)(size_t, size_t);
+typedef void (*fmi2CallbackFreeMemory)(void *);
+typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment, fmi2Status);
+typedef struct {
+    const fmi2CallbackLogger logger;
+    const fmi2CallbackAllocateMemory allocateMemory;
+    const fmi2CallbackFreeMemory freeMemory;
+    const fmi2StepFinished stepFinished;
+    const fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+#define FMU_EXPORT __attribute__((visibility("default")))
+#define FMU_HIDDEN __attribute__((visibility("hidden")))
+
+enum { T_REAL = 0, T_INTEGER = 1, T_BOOLEAN = 2, T_STRING = 3 };
+enum { K_OUTPUT = 0, K_CONSTANT = 1, K_PARAM = 2, K_STABLE_STEP = 3 };
+enum { V_CONTINUOUS = 0, V_CONSTANT = 1, V_FIXED = 2, V_TUNABLE = 3, V_DISCRETE = 4 };
+enum { O_POSITION = 1, O_VELOCITY = 2, O_REACTION = 5, O_FRICTION = 6 };
+enum { P_MU = 1, P_VREG = 2, P_MU_STATIC = 3, P_VSTRIBECK = 4, P_METHOD = 10, P_TOLERANCE = 11, P_STEP = 12,
+       P_MAX_STEP = 13, P_BAUMGARTE = 14, P_FRICTION_TOL = 15, P_FRICTION_MAX_ITER = 16, P_KERNEL = 17,
+       P_MAX_INTERNAL_STEPS = 18, P_MAX_WALL_TIME = 19 };
+enum { RULE_REAL = 0, RULE_INT = 1, RULE_CHOICE = 2 };
+#define FMU_MAX_CHOICES 8
+
+typedef struct { const char *name; int type, causality, variability, key, arg; } fmu_var;
+typedef struct {
+    const char *name, *range_text, *why, *sdefault;
+    int type, target, joint, rule, has_lo, has_hi, low_open, nchoices, tunable;
+    double lo, hi, ddefault;
+    const char *choices[FMU_MAX_CHOICES];
+} fmu_param;
+typedef struct { int kind, a, b; } fmu_out;
+
+/* The model file, read once per instance; strings point into the file's bytes (kept). */
+typedef struct {
+    unsigned char *bytes;
+    size_t size;
+    const char *guid;
+    ovk_model M;
+    void *arrays[25];
+    int n, nh, ny, quaternion;
+    double start_time, stop_time, *y0;
+    int nout, nstate_out; /* outputs; the first nstate_out come from the state alone */
+    fmu_out *out;
+    int nvar, nparam, nmsg;
+    fmu_var *var;
+    fmu_param *par;
+    int *msg_status;
+    const char **msg;
+} fmu_model;
+
+FMU_HIDDEN int fmu_model_read(const char *path, fmu_model *fm, char *err, size_t errsize);
+FMU_HIDDEN void fmu_model_free(fmu_model *fm);
+
+enum { M_INSTANTIATED = 1, M_INITIALIZATION = 2, M_STEPPING = 4, M_ERROR = 8, M_TERMINATED = 16 };
+enum { CAT_EVENTS, CAT_WARNING, CAT_ERROR, CAT_FATAL, N_CATEGORIES };
+#define FMU_MSG 1024
+
+/* Everything an FMU state holds: the mode, parameters, time, outputs and the run's bytes. */
+typedef struct fmu_saved {
+    struct fmu_saved *next;
+    int mode, tol_source, have_outputs, derived_stale, has_y, has_sim, has_failed;
+    double start_time, t, stable_step;
+    double *pval;       /* nparam */
+    int *pset;          /* nparam: set by the host */
+    double *outputs, *y; /* nout, ny */
+    unsigned char *sim; /* the run's state bytes */
+    size_t sim_size;
+} fmu_saved;
+
+typedef struct {
+    fmu_model fm;
+    char *name;
+    fmi2CallbackLogger logger;
+    fmi2ComponentEnvironment env;
+    int enabled[N_CATEGORIES];
+    ovk_model M;        /* fm.M with the parameters' values (jlawp, baumgarte, tol, max_iter) */
+    double *jlawp;      /* nj x NLP: the friction laws with the parameters */
+    ovk_sim *sim;
+    int sim_valid;      /* sim was made with the current parameters and start time */
+    double *pval;       /* nparam: numbers; strings as the index of the choice */
+    int *pset;
+    int tol_source;     /* 0 the scene, 1 the parameter, 2 fmi2SetupExperiment */
+    int mode, have_outputs, derived_stale, derived_read, has_y, has_failed;
+    double start_time, t, stable_step;
+    double *outputs, *y, *reac, *fric; /* nout, ny, nj x OVK_NREAC, nj */
+    const char **strings; /* fmi2GetString results (choices: static for the instance's life) */
+    fmu_saved *states;
+    char msg[FMU_MSG];
+} fmu_inst;
+
+FMU_HIDDEN void fmu_log(fmu_inst *c, fmi2Status status, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+FMU_HIDDEN void fmu_repr(double x, char *buf, size_t size);
+FMU_HIDDEN void fmu_init_fields(fmu_inst *c);
+FMU_HIDDEN int fmu_apply_params(fmu_inst *c);
+FMU_HIDDEN int fmu_read_derived(fmu_inst *c);
+FMU_HIDDEN int fmu_ensure_sim(fmu_inst *c, int compute_outputs);
+FMU_HIDDEN int fmu_allowed(fmu_inst *c, const char *fn, int modes);
+
+#endif

@@ -1,0 +1,183 @@
+"""The integrators and the run in C (core/integrate_rk.c, core/sim.c through overcon.kernel.Run)
+against the Python run (overcon.simulate.Simulation with solver.kernel = "c", the same right-hand
+side): the same accepted steps, states, dense outputs, derived outputs, counters and failures,
+and a byte state that restores a run exactly."""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from overcon import kernel, scene as scene_mod
+from overcon.checks import compile_checked
+from overcon.simulate import Simulation, SimulationError
+
+MECH = Path(__file__).resolve().parent.parent / "mechanisms"
+REL = 1e-12
+"""C run against Python run, per state entry (relative to max(1, |entry|)): the same arithmetic in
+the same order (both sum in a fixed order, without the BLAS), so round-off at most."""
+CASES = [("planar_none_wo4", "dopri5"), ("planar_f145_wo6", "dopri5"), ("planar_f1_wo4", "dopri5"),
+         ("spatial_GH_wo9", "dopri5"), ("spatial_GHMN_wo18", "dopri5"), ("examples/door", "dopri5"),
+         ("examples/fourbar", "dopri5"), ("examples/loop", "dopri5"), ("planar_f45_wo4", "rk4"),
+         ("spatial_MN_wo5", "rk4"), ("examples/carriage", "rk4")]
+
+
+def setup(name, method, stop_time=0.6, mu=None, **solver):
+    sc = scene_mod.as_scene(scene_mod.load(MECH / f"{name}.toml"), stop_time=stop_time)
+    if mu is not None:
+        sc = dataclasses.replace(sc, friction_params={k: dataclasses.replace(v, mu=mu)
+                                                      for k, v in sc.friction_params.items()})
+    model = compile_checked(sc)
+    return model, dataclasses.replace(sc.solver, kernel="c", method=method, **solver)
+
+
+def rel(a, b) -> float:
+    return float(np.max(np.abs(np.asarray(a) - np.asarray(b)) / np.maximum(1.0, np.abs(np.asarray(b))), initial=0.0))
+
+
+@pytest.mark.parametrize("name, method", CASES)
+def test_c_run_takes_the_python_steps(name, method):
+    """Step for step: the same times, states and next step sizes, then the same counters (right-
+    hand sides, friction force evaluations), constraint drift and monitor ratio."""
+    model, solver = setup(name, method)
+    sim = Simulation(model, solver)
+    run = kernel.Run(model, solver)
+    itg = sim._integrator
+    assert run.info["t"] == itg.t and np.array_equal(run.y, itg.y)
+    while itg.t < model.scene.stop_time:
+        sim.advance(itg.t + 1e-9)  # exactly one step (far longer than 1e-9 s), with Simulation's step-end checks
+        run.step()
+        info = run.info
+        assert rel(info["t"], itg.t) <= REL and rel(run.y, itg.y) <= REL, itg.t
+        if method == "dopri5":
+            assert rel(info["h"], itg.h) <= REL
+    assert sim.kernel_repeats == 0  # the Python run never left the core's right-hand side
+    assert info["nsteps"] == itg.nsteps > 10 and info["nfev"] == itg.nfev
+    assert info["evaluations"] == sim.evaluations and info["friction_iterations"] == sim.friction_iterations
+    assert rel(info["max_drift"], sim.max_drift) <= REL and info["max_drift"] > 0.0
+    assert info["min_ratio"] == pytest.approx(sim.monitor.min_ratio, rel=1e-9)  # Jacobi against LAPACK's SVD
+
+
+@pytest.mark.parametrize("name, method", [("planar_f145_wo6", "dopri5"), ("spatial_GH_wo9", "dopri5"),
+                                          ("planar_f45_wo4", "rk4"), ("examples/fourbar", "dopri5")])
+def test_c_run_outputs_equal_python_outputs(name, method):
+    """On an output grid that does not meet the steps: y by dense output and the reactions and
+    friction forces (the last evaluation's multipliers at a step end, else one solve warm-started
+    from the step-end forces) equal the Python run's."""
+    model, solver = setup(name, method)
+    sim = Simulation(model, solver)
+    run = kernel.Run(model, solver)
+    plan = sim._derived
+    for t in np.arange(0.0, model.scene.stop_time, 0.0123)[1:]:
+        y_py = sim.advance(t)
+        y_c = run.advance(t)
+        assert rel(y_c, y_py) <= REL
+        if plan.size:
+            want = sim.derived_outputs(t, y_py)
+            got = plan.values_from_kernel(*run.outputs(t, y_c))
+            assert rel(got, want) <= REL
+    assert run.info["evaluations"] == sim.evaluations  # outputs never counted as the run's evaluations
+
+
+@pytest.mark.parametrize("method", ["dopri5", "rk4"])
+def test_state_bytes_restore_the_run_bit_for_bit(method):
+    """get_state at t1, continue to t2; set_state and continue again: the same bits; a state of
+    another run (other sizes) or a truncated one is refused and leaves the run as it was."""
+    model, solver = setup("planar_f145_wo6", method)
+    run = kernel.Run(model, solver)
+    run.advance(0.2)
+    saved = run.get_state()
+    a = [run.advance(t) for t in (0.23, 0.31, 0.4)]
+    info_a = run.info
+    run.set_state(saved)
+    b = [run.advance(t) for t in (0.23, 0.31, 0.4)]
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert {k: v for k, v in run.info.items() if k != "wall_time"} == {
+        k: v for k, v in info_a.items() if k != "wall_time"}
+    other = kernel.Run(*setup("planar_none_wo4", method))
+    with pytest.raises(kernel.RunStopped, match="set state"):
+        other.set_state(saved)
+    with pytest.raises(kernel.RunStopped, match="set state"):
+        run.set_state(saved[:-8])
+    assert np.array_equal(run.y, b[-1]) or run.info["t"] >= 0.4
+
+
+def test_rk4_unstable_step_names_the_python_stable_step():
+    """rk4 beyond its stability boundary (sticking friction, a step of 20 ms): the C run stops
+    at the same time as the Python run, with the same stable step (a number) and the same words."""
+    model, solver = setup("planar_f145_wo6", "rk4", mu=1.0, step=0.02, stop_time=1.0)
+    with pytest.raises(SimulationError) as py:
+        Simulation(model, solver).advance(1.0)
+    assert py.value.stable_step is not None
+    with pytest.raises(kernel.RunStopped) as c:
+        kernel.Run(model, solver).advance(1.0)
+    assert c.value.status == 10
+    assert rel(c.value.stable_step, py.value.stable_step) <= REL
+    assert str(c.value) == str(py.value)
+
+
+def test_step_budget_stops_the_run_and_a_call_budget_too():
+    """The life budget (max_steps) and one call's budget stop with status 11, naming the steps."""
+    model, solver = setup("planar_f45_wo4", "dopri5")
+    run = kernel.Run(model, solver, max_steps=5)
+    with pytest.raises(kernel.RunStopped, match=r"work budget exhausted: 5 internal steps \(max_steps = 5\)") as e:
+        run.advance(0.5)
+    assert e.value.status == 11 and run.info["nsteps"] == 5
+    run = kernel.Run(model, solver)
+    with pytest.raises(kernel.RunStopped, match=r"integration stopped: .*4 internal steps > 3 allowed for this step"):
+        run.advance(0.5, max_steps=3)
+
+
+def test_singular_position_stops_both_runs_alike(tmp_path):
+    """The sliders driven through K = L = O (free length 0): a finite step jumps over the rank
+    loss, and both runs catch the crossing (the sign of det([J_R; N^T]) with the previous step's
+    null-space basis) at the same step, with the same message."""
+    text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
+    path = tmp_path / "l0.toml"
+    path.write_text(text)
+    sc = scene_mod.as_scene(scene_mod.load(path), stop_time=2.0)
+    model = compile_checked(sc)
+    solver = dataclasses.replace(sc.solver, kernel="c")
+    sim = Simulation(model, solver)
+    with pytest.raises(SimulationError, match="passed a singular position between") as py:
+        sim.advance(2.0)
+    assert sim.kernel_repeats == 0
+    run = kernel.Run(model, solver)
+    with pytest.raises(kernel.RunStopped) as c:
+        run.advance(2.0)
+    assert c.value.status == 12 and str(c.value) == str(py.value)
+    assert run.info["min_ratio"] == pytest.approx(sim.monitor.min_ratio, rel=1e-9)
+
+
+def test_robust_friction_path_succeeds_and_fails_where_numpy_does():
+    """States where the core's Newton and damped Newton give up (spatial paper mechanism, mu up
+    to 3, fast random velocities), cold-started: the C robust path (fixed point, then finite-difference Newton)
+    converges exactly where the numpy path's does, to the same multipliers within what two
+    solves to the friction tolerance can differ by (1e-9 relative), and fails where it fails."""
+    from overcon.dynamics import FrictionSolveError, evaluate
+
+    outcomes = {"both": 0, "neither": 0}
+    for name in ("spatial_MN_wo5", "spatial_GHMN_wo18"):
+        for mu in (1.0, 3.0):
+            model, solver = setup(name, "dopri5", mu=mu)
+            k = kernel.Kernel(kernel.library()[0], model, solver)
+            rng = np.random.default_rng(1)
+            for _ in range(30):
+                y = np.concatenate([model.q0 + 0.05 * rng.standard_normal(model.n),
+                                    model.h0 + 3.0 * rng.standard_normal(model.nh)])
+                if k.evaluate(0.0, y) is not None or k.last_status != 2:
+                    continue
+                failed = k.newton_failed()
+                c = k.evaluate_robust(y)
+                try:
+                    ev = evaluate(model, 0.0, y[: model.n], y[model.n:], solver=solver, newton_failed=failed)
+                except FrictionSolveError:
+                    assert c is None and k.last_status == 2 and "did not converge" in k.last_message
+                    outcomes["neither"] += 1
+                    continue
+                assert c is not None, k.last_message
+                assert rel(c[1], ev.lam) <= 1e-9 and rel(c[0][model.n:], ev.hdot) <= 1e-9
+                outcomes["both"] += 1
+    assert outcomes["both"] >= 5 and outcomes["neither"] >= 5, outcomes

@@ -1,0 +1,200 @@
+"""FMUs without Python (``overcon build --runtime c``): the FMI layer over the compiled core
+(fmu_src/overcon/fmu/native/fmi2_*.c), compiled once at the package installation. Their results
+equal the in-process run, they carry no Python (no .py file, no libpython needed or loaded: the plain
+C host runs them from an empty environment), their FMU state restores bit for bit, and a scene
+the C layer does not cover is built with the Python runtime, saying so. The FMI calls one by one
+run for both runtimes in test_fmi_calls.py."""
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import subprocess
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+fmpy = pytest.importorskip("fmpy")
+
+from fmpy.fmi1 import FMICallException  # noqa: E402
+from fmpy.fmi2 import FMU2Slave  # noqa: E402
+
+from overcon import scene as scene_mod  # noqa: E402
+from overcon.checks import compile_checked  # noqa: E402
+from overcon.fmu import build as fmu_build  # noqa: E402
+from overcon.simulate import Simulation, SimulationError, run  # noqa: E402
+
+from test_fmu import Logs  # noqa: E402
+
+pytestmark = pytest.mark.integration
+
+ROOT = Path(__file__).resolve().parents[1]
+MECH = ROOT / "mechanisms"
+SCENES = {"planar_f145_wo6": MECH / "planar_f145_wo6.toml", "planar_f45_wo4": MECH / "planar_f45_wo4.toml",
+          "spatial_GH_wo9": MECH / "spatial_GH_wo9.toml", "spatial_MN_wo5": MECH / "spatial_MN_wo5.toml",
+          "door_h1_wo_hinge2": MECH / "examples" / "door_h1_wo_hinge2.toml",
+          "carriage_guide_wo_rod": MECH / "examples" / "carriage_guide_wo_rod.toml"}
+POSITION = ("x", "y", "z", "phi", "alpha", "beta", "gamma", "e0", "e1", "e2", "e3")
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fmus_c")
+    lines = []
+    code, results = fmu_build.build_all([str(p) for p in SCENES.values()], out, refs=False, allow_nonunique=True,
+                                        runtime="c", echo=lines.append, echo_err=lines.append)
+    assert code == 0, lines
+    assert all("runtime c)" in line for line in lines if ": built " in line), lines
+    return {r.name: r.fmu for r in results}
+
+
+def unzip(fmu: Path, tmp_path: Path) -> Path:
+    return Path(fmpy.extract(str(fmu), str(tmp_path / fmu.stem)))
+
+
+def test_c_fmu_carries_no_python(built):
+    """No Python file, no recorded Python, and a binary that needs libm and libc only."""
+    for fmu in built.values():
+        names = zipfile.ZipFile(fmu).namelist()
+        assert not [n for n in names if n.endswith((".py", ".pyc"))] and "resources/overcon_python.txt" not in names
+        assert "resources/overcon_model.bin" in names
+    readelf = shutil.which("readelf")
+    if readelf is None:
+        pytest.skip("needs readelf (binutils)")
+    so = fmu_build.C_RUNTIME_LIBRARY
+    needed = [line.split("[")[1].rstrip("]") for line in subprocess.run(
+        [readelf, "-d", str(so)], capture_output=True, text=True, check=True).stdout.splitlines() if "NEEDED" in line]
+    assert needed and all(n.startswith(("libm.so", "libc.so")) for n in needed), needed
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_fmpy_equals_the_in_process_run(built, name):
+    """fmpy.simulate_fmu over the default experiment equals ``overcon simulate`` in process (the
+    same C arithmetic on both sides): positions to 1e-9 m, every output to 1e-9 relative."""
+    spec = scene_mod.load(SCENES[name])
+    got = fmpy.simulate_fmu(str(built[name]), output_interval=spec.solver.output_interval)
+    ref = run(compile_checked(spec), spec.solver)
+    assert len(got) == len(ref.time) and np.array_equal(got["time"], ref.time)
+    for col in ref.names:
+        scale = max(1.0, float(np.max(np.abs(ref.column(col)))))
+        bound = 1e-9 if col.rsplit(".", 1)[1] in POSITION else 1e-9 * scale
+        assert np.max(np.abs(got[col] - ref.column(col))) <= bound, col
+
+
+@pytest.fixture(scope="module")
+def host(tmp_path_factory):
+    cc = shutil.which("cc")
+    if cc is None:
+        pytest.skip("needs a C compiler (cc) for the test host")
+    exe = tmp_path_factory.mktemp("c_host_c") / "fmu_host"
+    subprocess.run([cc, "-O2", "-Wall", "-o", str(exe), str(ROOT / "tests" / "c_host" / "fmu_host.c"), "-ldl", "-lm"],
+                   check=True, capture_output=True)
+    return exe
+
+
+@pytest.mark.parametrize("name", ["planar_f45_wo4", "door_h1_wo_hinge2"])
+def test_plain_c_host_without_python(built, host, tmp_path, name):
+    """The plain C host from an empty environment (env -i): exit 0, every row written, no
+    libpython in the process (/proc/self/maps, -n), the FMU state saved half-way through its
+    bytes restores the second half bit for bit (-S), and the values equal fmpy's."""
+    d = unzip(built[name], tmp_path)
+    md = fmpy.read_model_description(str(d))
+    ex = md.defaultExperiment
+    outs = [v for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+    args = ["-q", "-w", "-n", "-S", str(d), md.coSimulation.modelIdentifier, md.guid, ex.startTime, ex.stopTime,
+            ex.stepSize, ex.tolerance, *(f"{v.valueReference}:{v.name}" for v in outs)]
+    proc = subprocess.run([str(host), *map(str, args)], capture_output=True, text=True, timeout=600, env={})
+    assert proc.returncode == 0, proc.stderr
+    rows = np.array([[float(x) for x in line.split(",")] for line in proc.stdout.splitlines()[1:]])
+    n_rows = round((float(ex.stopTime) - float(ex.startTime)) / float(ex.stepSize)) + 1
+    assert rows.shape == (n_rows, 1 + len(outs))
+    ref = fmpy.simulate_fmu(str(built[name]), output_interval=float(ex.stepSize))
+    assert np.array_equal(rows[:, 1:], np.column_stack([ref[v.name] for v in outs]))
+
+
+def slave(d: Path, logs: Logs):
+    md = fmpy.read_model_description(str(d))
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(d), modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="c")
+    fmu.instantiate(callbacks=logs.callbacks, loggingOn=True)
+    return fmu, {v.name: v.valueReference for v in md.modelVariables}
+
+
+def test_friction_parameter_equals_the_in_process_run(built, tmp_path):
+    """joint4.mu = 0.35 set by the host: the same motion and reactions as the scene with that
+    coefficient (and not those of the scene's own)."""
+    d = unzip(built["planar_f45_wo4"], tmp_path)
+    fmu, vr = slave(d, Logs())
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.setReal([vr["joint4.mu"]], [0.35])
+    fmu.exitInitializationMode()
+    for k in range(50):
+        fmu.doStep(k * 0.01, 0.01)
+    got = fmu.getReal([vr["slider1.x"], vr["joint4.Fx"]])
+    fmu.terminate()
+    fmu.freeInstance()
+    spec = scene_mod.load(SCENES["planar_f45_wo4"])
+    spec = dataclasses.replace(spec, friction_params={**spec.friction_params, "joint4": dataclasses.replace(
+        spec.friction_params["joint4"], mu=0.35)})
+    ref = run(compile_checked(spec), spec.solver, stop_time=0.5)
+    assert got == [ref.column("slider1.x")[-1], ref.column("joint4.Fx")[-1]]
+    assert got[1] != run(compile_checked(scene_mod.load(SCENES["planar_f45_wo4"])),
+                         spec.solver, stop_time=0.5).column("joint4.Fx")[-1]
+
+
+def test_rk4_unstable_step_is_readable_as_in_python(built, tmp_path):
+    """rk4 at 20 ms on sticking friction (mu = 1): fmi2DoStep fails with the unstable-step
+    message and solver.stable_step holds the Python run's stable step."""
+    d = unzip(built["planar_f145_wo6"], tmp_path)
+    logs = Logs()
+    fmu, vr = slave(d, logs)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.setString([vr["solver.method"]], ["rk4"])
+    fmu.setReal([vr["solver.step"], vr["joint1.mu"], vr["joint4.mu"], vr["joint5.mu"]], [0.02, 1.0, 1.0, 1.0])
+    fmu.exitInitializationMode()
+    with pytest.raises(FMICallException):
+        for k in range(50):
+            fmu.doStep(k * 0.02, 0.02)
+    stable = fmu.getReal([vr["solver.stable_step"]])[0]
+    fmu.freeInstance()
+    spec = scene_mod.load(SCENES["planar_f145_wo6"])
+    spec = dataclasses.replace(spec, friction_params={k: dataclasses.replace(v, mu=1.0)
+                                                      for k, v in spec.friction_params.items()})
+    solver = dataclasses.replace(spec.solver, method="rk4", step=0.02)
+    with pytest.raises(SimulationError) as exc:
+        Simulation(compile_checked(spec), solver).advance(1.0)
+    assert stable == exc.value.stable_step > 0.0
+    assert any(s == 3 and "rk4 is unstable with the fixed step 0.02 s" in m for s, _, m in logs.records)
+
+
+def test_a_method_the_c_layer_lacks_fails_at_initialization(built, tmp_path):
+    d = unzip(built["planar_f45_wo4"], tmp_path)
+    logs = Logs()
+    fmu, vr = slave(d, logs)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.setString([vr["solver.method"]], ["radau"])
+    with pytest.raises(FMICallException):
+        fmu.exitInitializationMode()
+    assert any(s == 3 and "solver.method = 'radau' is not available in this FMU" in m for s, _, m in logs.records)
+    fmu.freeInstance()
+
+
+def test_uncovered_scene_is_built_with_python_and_said(tmp_path):
+    """A min-norm scene: the C layer does not cover it; the build says so and the FMU embeds
+    Python (and runs)."""
+    text = (MECH / "planar_none_wo4.toml").read_text()
+    path = tmp_path / "mn.toml"
+    path.write_text(text.replace("eliminate = ", 'redundancy = "min-norm"\n# eliminate = ', 1))
+    (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
+    lines = []
+    code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, runtime="c", echo=lines.append,
+                                        echo_err=lines.append)
+    assert code == 0, lines
+    assert any("runtime python (the FMU embeds Python): the C runtime does not cover redundancy 'min-norm'" in line
+               for line in lines), lines
+    assert "resources/overcon_python.txt" in zipfile.ZipFile(results[0].fmu).namelist()
+    assert len(fmpy.simulate_fmu(str(results[0].fmu), stop_time=0.05)) > 1

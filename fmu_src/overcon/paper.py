@@ -116,7 +116,8 @@ def run_group(items: list[tuple[Path, SceneSpec]], *, tolerance: float | None = 
 
 
 def make_figures(directory: Path, out: Path, *, tolerance: float | None = None, log=print) -> list[Path]:
-    """Run the groups the paper's figures need and write fig3.png ... fig9.png into ``out``."""
+    """Run the groups the paper's figures need and write fig3.png ... fig9.png into ``out``; then the
+    figures beyond the paper (:data:`BEYOND`) whose compliant scenes are in ``directory``."""
     from .plots import plot_series
 
     groups = scene_groups(directory)

@@ -1,4 +1,5 @@
-"""The paper's scene groups and figures (Figs. 3, 4, 5, 7, 8, 9), run in process.
+"""The paper's scene groups and figures (Figs. 3, 4, 5, 7, 8, 9), run in process, and the figures
+beyond the paper (:data:`overcon.figures.BEYOND`: a paper group beside a compliant variant).
 
 A *group* is the set of scene files with the same ``group`` field: one friction set under
 different eliminations. Its motion is unique when the positions of lockstep runs (every variant
@@ -14,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from . import scene
-from .figures import ADAPTIVE_RUNS, FIGURES, Figure, figure_series  # noqa: F401  (the figures are defined without the engine)
+from .figures import (ADAPTIVE_RUNS, BEYOND, FIGURES, BeyondFigure, Figure, Placement,  # noqa: F401  (the figures
+                      beyond_series, figure_series, placement)  # are defined without the engine)
 from .checks import compile_checked
 from .precheck import precheck
 from .simulate import Result, SimulationError, run_scene
@@ -114,7 +116,8 @@ def run_group(items: list[tuple[Path, SceneSpec]], *, tolerance: float | None = 
 
 
 def make_figures(directory: Path, out: Path, *, tolerance: float | None = None, log=print) -> list[Path]:
-    """Run the groups the paper's figures need and write fig3.png ... fig9.png into ``out``."""
+    """Run the groups the paper's figures need and write fig3.png ... fig9.png into ``out``; then the
+    figures beyond the paper (:data:`BEYOND`) whose compliant scenes are in ``directory``."""
     from .plots import plot_series
 
     groups = scene_groups(directory)
@@ -135,4 +138,33 @@ def make_figures(directory: Path, out: Path, *, tolerance: float | None = None, 
         written.append(plot_series(out / f"{fig.name}.png", time, series, title=fig.title, ylabel=fig.ylabel,
                                    reference=reference, runs=ADAPTIVE_RUNS))
         log(f"wrote {written[-1]}")
+    for fig in BEYOND:
+        if all((directory / fig.directory / f"{name}.toml").is_file() for name in fig.scenes):
+            if fig.rigid_group not in cache:
+                cache[fig.rigid_group] = run_group(groups[fig.rigid_group], tolerance=tolerance)
+            path, where = beyond_figure(fig, directory, out, cache[fig.rigid_group], tolerance=tolerance)
+            written.append(path)
+            log(f"wrote {path} (beyond the paper: compliant runs differ by {where.spread:.3g}, "
+                f"s = {where.s:.2f} between the eliminations)")
     return written
+
+
+def beyond_figure(fig: BeyondFigure, directory: Path, out: Path, rigid: GroupRun, *,
+                  tolerance: float | None = None) -> tuple[Path, Placement]:
+    """Run the compliant scenes of ``fig`` (in ``directory / fig.directory``) in process and draw
+    them beside the rigid group's adaptive runs ``rigid`` (same time grid); the PNG's path and
+    where the compliant motion lies."""
+    from .plots import plot_series
+
+    runs = [run_scene(scene.as_scene(scene.load(directory / fig.directory / f"{name}.toml"), tolerance=tolerance))
+            for name in fig.scenes]
+    time = rigid.results[0].time
+    if any(r.time.shape != time.shape or not np.allclose(r.time, time, rtol=0, atol=1e-9) for r in runs):
+        raise ValueError(f"{fig.name}: the compliant scenes' output grid is not the grid of group {fig.rigid_group}")
+    compliant = [r.column(fig.output) for r in runs]
+    rigid_curves = [(lab, res.column(fig.output)) for lab, res in zip(rigid.labels, rigid.results)]
+    where = placement(compliant, [v for _, v in rigid_curves])
+    series, reference = beyond_series(fig, rigid_curves, compliant)
+    path = plot_series(out / f"{fig.name}.png", time, series, title=fig.title, ylabel=fig.ylabel,
+                       reference=reference, runs=ADAPTIVE_RUNS + f"; compliant runs differ by {where.spread:.2g} m")
+    return path, where

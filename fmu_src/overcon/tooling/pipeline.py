@@ -318,6 +318,7 @@ class ReproduceOutcome(_Verdicts):
     report: Path
     figures: list[Path]
     seconds: dict  # phase -> wall seconds
+    beyond: dict = field(default_factory=dict)  # figure name -> Placement (figures beyond the paper)
 
     @property
     def all_match(self) -> bool:
@@ -347,6 +348,53 @@ def _figures(comparisons: list[Comparison], out_dir: Path, echo) -> list[tuple[s
                         ylabel=fig.ylabel, reference=reference, runs="; ".join(sorted(shown)))
         out.append((fig.title, p))
     return out
+
+
+def _beyond(comparisons: list[Comparison], mech: Path, out_dir: Path, *, jobs: int, stop_time,
+            echo) -> tuple[list[str], dict]:
+    """The figures beyond the paper (:data:`overcon.figures.BEYOND`): build the compliant scenes of
+    each (in ``mech / fig.directory``) as FMUs, run them on the rigid group's grid and draw them
+    beside that group's adaptive runs. The report's section (Markdown lines) and each figure's
+    :class:`~overcon.figures.Placement`. A figure whose scenes or rigid group are missing is
+    skipped, a failed run reported, neither stops the job."""
+    from ..figures import BEYOND, beyond_series, placement, placement_text
+    from ..fmu.build import build_all
+    from ..plots import plot_series
+
+    by_group = {c.group: c for c in comparisons if c.failure is None and c.series}
+    lines, where = [], {}
+    for fig in BEYOND:
+        files = [mech / fig.directory / f"{name}.toml" for name in fig.scenes]
+        if fig.rigid_group not in by_group or not all(f.is_file() for f in files):
+            echo(f"{fig.name}: skipped (group {fig.rigid_group} or the scenes {', '.join(fig.scenes)} not in this set)")
+            continue
+        rigid = by_group[fig.rigid_group]
+        lines += [f"### {fig.title}", ""]
+        _, res = build_all(files, out_dir / "fmus" / "beyond", allow_nonunique=True, refs=False, jobs=jobs, echo=echo)
+        infos = [inspect_fmu(r.fmu) for r in res if r.status == "built"]
+        jobs_ = [Job(i.model, i, experiment(i, stop_time=stop_time), out_dir / "results" / "beyond" / f"{i.model}.csv")
+                 for i in infos]
+        results, failures = run_jobs(jobs_, workers=jobs, echo=echo) if len(infos) == len(files) else ({}, {})
+        if len(results) != len(files):
+            why = "; ".join(str(f) for f in failures.values()) or "a compliant scene was not built (see above)"
+            echo(f"!!! {fig.name}: not drawn: {why}")
+            lines += [f"**Not drawn**: {why}", ""]
+            continue
+        series = [read_series(results[i.model].csv) for i in infos]
+        time_ = rigid.series[0].time
+        if any(s.time.shape != time_.shape or not np.allclose(s.time, time_, rtol=0, atol=1e-9) for s in series):
+            raise InputError(f"{fig.name}: the compliant scenes' output grid is not the grid of group {fig.rigid_group}")
+        compliant = [s.values[fig.output] for s in series]
+        rigid_curves = [(lab, s.values[fig.output]) for lab, s in zip(rigid.labels, rigid.series)]
+        where[fig.name] = p = placement(compliant, [v for _, v in rigid_curves])
+        curves, reference = beyond_series(fig, rigid_curves, compliant)
+        png = plot_series(out_dir / f"{fig.name}.png", time_, curves, title=fig.title, ylabel=fig.ylabel,
+                          reference=reference, runs="adaptive runs (each FMU's own solver settings); compliant runs "
+                          f"differ by {p.spread:.2g} m")
+        lines += [placement_text(fig, p, list(rigid.labels)), "", f"![{fig.title}]({png.name})", ""]
+        echo(f"{fig.name}: compliant runs differ by {p.spread:.3g}; between the eliminations at "
+             f"{p.share_between:.0%} of the points, s = {p.s:.2f}")
+    return lines, where
 
 
 def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, stop_time=None,
@@ -390,6 +438,7 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
         echo(verdict_line(c))
     t2 = time.perf_counter()
     figures = _figures(comparisons, out_dir, echo)
+    beyond, where = _beyond(comparisons, mech, out_dir, jobs=jobs, stop_time=stop_time, echo=echo)
     plots = {c.group: plot_comparison(c, out_dir / "groups", "worst") for c in comparisons}
     t_plot = time.perf_counter() - t2
     total = time.perf_counter() - t0
@@ -411,5 +460,5 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
     ]
     report = out_dir / "report.md"
     report.write_text(markdown(comparisons, out_dir, title="overcon reproduce: uniqueness of the simulated motion",
-                               intro=intro, figures=figures, plots=plots), encoding="utf-8")
-    return ReproduceOutcome(comparisons, report, [p for _, p in figures], seconds)
+                               intro=intro, figures=figures, plots=plots, beyond=beyond), encoding="utf-8")
+    return ReproduceOutcome(comparisons, report, [p for _, p in figures], seconds, where)

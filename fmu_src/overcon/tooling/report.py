@@ -203,8 +203,10 @@ def group_section(c: Comparison, base: Path, plots: list[Path]) -> list[str]:
 
 
 def markdown(comparisons: list[Comparison], base: Path, *, title: str, intro: list[str] = (),
-             figures: list[tuple[str, Path]] = (), plots: dict | None = None, tail: list[str] = ()) -> str:
-    """The whole report; image links relative to ``base`` (the report's directory)."""
+             figures: list[tuple[str, Path]] = (), plots: dict | None = None, tail: list[str] = (),
+             beyond: list[str] = ()) -> str:
+    """The whole report; image links relative to ``base`` (the report's directory). ``beyond``:
+    the Markdown lines of the figures beyond the paper, a section after the paper's figures."""
     plots = plots or {}
     n_failed = sum(c.failure is not None for c in comparisons)
     n_bad = sum(not c.matches for c in comparisons) - n_failed
@@ -226,6 +228,12 @@ def markdown(comparisons: list[Comparison], base: Path, *, title: str, intro: li
         lines += ["## Figures of the paper", ""]
         for caption, p in figures:
             lines += [f"**{caption}**", "", f"![{caption}]({_rel(p, base)})", ""]
+    if beyond:
+        lines += ["## Beyond the paper: compliant joints", "",
+                  "*Not in the paper.* A paper group whose friction joint has a non-unique reaction, run also with "
+                  "compliant joints (`redundancy = \"compliant\"`, issue 24): the joints share their loads by their "
+                  "stiffnesses, so the reactions, the friction and the motion are unique again, whatever elimination "
+                  "the scene names. Shown beside the rigid eliminations' curves.", "", *beyond]
     lines += ["## Groups", ""]
     for c in comparisons:
         lines += group_section(c, base, plots.get(c.group, []))

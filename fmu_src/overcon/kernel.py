@@ -55,7 +55,7 @@ STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "frictio
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
           7: "invalid model or argument", 8: "step size too small", 9: "stiffness detected",
           10: "rk4 step unstable", 11: "work budget exhausted", 12: "singular position (monitor)",
-          13: "time does not advance"}
+          13: "time does not advance", 14: "elimination expired or degrading (the C run does not choose it again)"}
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,

@@ -54,7 +54,8 @@ enum {
     OVK_UNSTABLE = 10, /* integrator: rk4's fixed step beyond its stability boundary (stable_step) */
     OVK_BUDGET = 11,   /* simulation: the work budget (steps or wall time) ran out */
     OVK_SINGULAR_POSITION = 12, /* simulation: the kept Jacobian lost rank (singularity monitor) */
-    OVK_STALLED = 13   /* simulation: time does not advance, or the target was not reached */
+    OVK_STALLED = 13,  /* simulation: time does not advance, or the target was not reached */
+    OVK_ELIMINATION = 14 /* simulation: the elimination expired or degrades (the C run does not choose it again) */
 };
 enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
@@ -207,17 +208,22 @@ typedef struct {
     long long friction_iterations, evaluations;
     double max_drift, min_ratio, t_prev, wall_time;
     double *ev_lam, *ev_qf, *guess, *yout; /* scratch: m, ncols, max(m, ncols), ny */
-    double *phi, *J, *gam, *svd;   /* scratch: m, m nh, m, nR nh */
-    double *JR, *N, *N2, *sq;      /* monitor: J_R (nR nh), null-space basis and scratch (nh nh each) */
-    double sign;                   /* monitor: sign of det([J_R; N^T]) at the last check */
-    int *piv;                      /* nh: the monitor's LU pivots */
+    double *phi, *J, *gam;         /* scratch: m, m nh, m */
+    double *W, *W2, *T;            /* watch scratch: weighted rows, their forward difference, Jacobi (m nh each) */
+    double *Q, *sv;                /* watch scratch: left singular vectors (nR nR), singular values (m + nh) */
+    double *ywatch, *ystar, *qwatch; /* watch scratch: states (ny each), coordinate rates (n) */
+    double rate, ratio;            /* watch: dr/dt and r of the kept equations at the last check */
     double *mem;                   /* the one allocation behind the arrays above and the integrator's */
     int status;
     char msg[OVK_MSG];
 } ovk_sim;
 #define OVK_SIM_NINFO 11
-OVK_HIDDEN int ovk_sim_monitor(ovk_sim *s, double t, const double *y, int first, char *msg);
-OVK_HIDDEN int ovk_sv_ratio(double *B, int c, int r, double *ratio);
+/* watch.c: the singularity watch after each step; the expiry behind a failed step */
+OVK_HIDDEN int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg);
+OVK_HIDDEN int ovk_sim_expiring(ovk_sim *s, int failed, char *msg);
+/* svd.c: one-sided Jacobi */
+OVK_HIDDEN int ovk_jacobi_rows(double *B, int k, int r, double *Q);
+OVK_HIDDEN void ovk_singular_values(const double *A, int rows, int cols, double *T, double *sv);
 
 /* failures: the status, with its message written into d->msg (printf format) */
 OVK_HIDDEN int ovk_fail(ovk_data *d, int status, const char *fmt, ...)

@@ -123,11 +123,14 @@ static void layout(ovk_sim *s, size_t nR) {
     s->phi = p; p += m;
     s->J = p; p += m * nh;
     s->gam = p; p += m;
-    s->svd = p; p += nR * nh;
-    s->JR = p; p += nR * nh;
-    s->N = p; p += nh * nh;
-    s->N2 = p; p += nh * nh;
-    s->sq = p; p += nh * nh;
+    s->W = p; p += m * nh;
+    s->W2 = p; p += m * nh;
+    s->T = p; p += m * nh;
+    s->Q = p; p += nR * nR;
+    s->sv = p; p += m + nh;
+    s->ywatch = p; p += ny;
+    s->ystar = p; p += ny;
+    s->qwatch = p; p += (size_t)s->n;
     s->rk.y = p; /* the integrator's block starts here: ovk_rk_start lays it out */
 }
 
@@ -172,11 +175,10 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->m = M->m;
     s->ncols = M->ncols;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh, nR = (size_t)M->nR;
-    size_t need = 5 * m + 6 * nc + 2 * ny + (m > nc ? m : nc) + m * nh + 2 * nR * nh + 3 * nh * nh +
+    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 4 * m * nh + nR * nR + m + nh + (size_t)s->n +
                   ovk_rk_doubles(s->ny);
     s->mem = calloc(need, sizeof(double));
-    s->piv = calloc(nh ? nh : 1, sizeof(int));
-    if (!s->mem || !s->piv) {
+    if (!s->mem) {
         s->status = OVK_NOMEM;
         snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (%zu bytes)", need * sizeof(double));
         return s;
@@ -185,7 +187,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->min_ratio = INFINITY;
     s->t_prev = t0;
     int status = ovk_rk_start(&s->rk, &o->rk, s->ny, s->rk.y, t0, y0, sim_rhs, s, s->msg);
-    if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, 1, s->msg);
+    if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, NULL, 1, s->msg);
     if (status) s->status = stopped(s, status, "cannot start", t0);
     return s;
 }
@@ -194,7 +196,6 @@ void ovk_sim_free(ovk_sim *s) {
     if (!s) return;
     ovk_free_data(s->d);
     free(s->mem);
-    free(s->piv);
     free(s);
 }
 
@@ -234,7 +235,8 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
                  t_before);
         status = OVK_STALLED;
     }
-    if (!status) status = ovk_sim_monitor(s, rk->t, rk->y, 0, s->msg);
+    if (status && status != OVK_STALLED) status = ovk_sim_expiring(s, status, s->msg);
+    if (!status) status = ovk_sim_monitor(s, rk->t, rk->y, rk->f, 0, s->msg);
     if (status) return stopped(s, status, "integration stopped", rk->t);
     if (s->warm.count) hist_push(&s->step_warm, s->ncols, rk->t, s->warm.q[0]);
     if ((status = ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam))) {

@@ -19,7 +19,9 @@
  *   integrate_rk.c      the explicit integrators of overcon.integrators: dopri5 (dense output), rk4
  *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
  *                       work budgets, derived outputs at any point of the last step
- *   svd.c               the singularity monitor: one-sided Jacobi SVD, null space, crossing test
+ *   svd.c               one-sided Jacobi SVD: singular values, the kept rows' singular vectors
+ *   watch.c             the singularity watch of overcon.watch: r and dr/dt after each step, the
+ *                       minimum of r inside a step, singular position or expired/degrading elimination
  *   sim_state.c         a run's state as plain bytes (FMI get/set/serialize FMU state)
  *   api.c               the exported entry points (ovk_*), the only symbols of the library
  * Units and signs: SI, the paper's conventions (those of overcon.evaluation and overcon.joints).

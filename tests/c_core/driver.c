@@ -279,7 +279,7 @@ static int run_sim(reader *r, model_t *m, tally *t) {
     double *want_reac = rd_array(r, sizeof(double), &n_r), *want_fric = rd_array(r, sizeof(double), &n_f);
     double *y = calloc((size_t)(n_y ? n_y : 1), sizeof(double)), info[OVK_SIM_NINFO];
     double *reac = calloc((size_t)(n_r ? n_r : 1), sizeof(double)), *fric = calloc((size_t)(n_f ? n_f : 1), sizeof(double));
-    ovk_sim_opts o = {{method, 1, v[0], v[1], 0.0, v[2]}, 0, 0.0, 1e-6, v[3]};
+    ovk_sim_opts o = {{method, 1, v[0], v[1], 0.0, v[2]}, 0, 0.0, 1e-6, v[3], 0};
     for (int rep = 0; rep < 2 && !r->bad && y && reac && fric; rep++) {
         ovk_sim *s = ovk_sim_new(&m->M, &o, 0.0, y0);
         if (!s) { r->bad = 2; break; }

@@ -20,6 +20,7 @@
  *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
  *                       work budgets, derived outputs at any point of the last step
  *   svd.c               one-sided Jacobi SVD: singular values, the kept rows' singular vectors
+ *   energy.c            the energy outputs: kinetic, potential, the work ledger of friction and loads
  *   watch.c             the singularity watch of overcon.watch: r and dr/dt after each step, the
  *                       minimum of r inside a step, singular position or expired/degrading elimination
  *   sim_state.c         a run's state as plain bytes (FMI get/set/serialize FMU state)
@@ -40,7 +41,7 @@
 
 #include <stddef.h>
 
-#define OVK_ABI 6 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+#define OVK_ABI 7 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
     OVK_OK = 0,
@@ -190,6 +191,7 @@ typedef struct {
     double max_wall_time; /* s spent in ovk_sim_advance over the run's life; <= 0: no limit */
     double ratio_tol;     /* singularity monitor: sigma_min / sigma_max below it stops the run */
     double stop_time;     /* the scene's stop time (s), named by the budget messages */
+    int energy;           /* keep the work ledger of the energy outputs (two more evaluations a step) */
 } ovk_sim_opts;
 /* Friction forces of the last two solves at distinct times, newest first (simulate._ForcesHistory). */
 typedef struct {
@@ -215,11 +217,18 @@ typedef struct {
     double *Q, *sv;                /* watch scratch: left singular vectors (nR nR), singular values (m + nh) */
     double *ywatch, *ystar, *qwatch; /* watch scratch: states (ny each), coordinate rates (n) */
     double rate, ratio;            /* watch: dr/dt and r of the kept equations at the last check */
+    double *qload;                 /* energy: the constant loads' Q (nh) */
+    double work_t[2], work_w[2][2], work_p[2][2]; /* energy ledger: (t, work, powers) at the last two step ends */
     double *mem;                   /* the one allocation behind the arrays above and the integrator's */
     int status;
     char msg[OVK_MSG];
 } ovk_sim;
 #define OVK_SIM_NINFO 11
+OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
+                             double *ydot, int *its);
+/* energy.c: the energy outputs' ledger */
+OVK_HIDDEN int ovk_sim_energy_start(ovk_sim *s, double t0, const double *y0);
+OVK_HIDDEN int ovk_sim_energy_step(ovk_sim *s);
 /* watch.c: the singularity watch after each step; the expiry behind a failed step */
 OVK_HIDDEN int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg);
 OVK_HIDDEN int ovk_sim_expiring(ovk_sim *s, int failed, char *msg);
@@ -347,6 +356,7 @@ OVK_EXPORT int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps,
 OVK_EXPORT void ovk_sim_state_vector(const ovk_sim *s, double *y);
 OVK_EXPORT void ovk_sim_info(const ovk_sim *s, double *info);
 OVK_EXPORT int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double *fric);
+OVK_EXPORT int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out);
 OVK_EXPORT size_t ovk_sim_state_size(const ovk_sim *s);
 OVK_EXPORT int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size);
 OVK_EXPORT int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size);

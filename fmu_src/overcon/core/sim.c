@@ -64,8 +64,8 @@ static int hist_guess(const ovk_hist *h, int nc, double t, double *out) {
 }
 
 /* One evaluation warm-started from the history h and the multipliers lam (Simulation._solve). */
-static int solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam, double *ydot,
-                 int *its) {
+int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam, double *ydot,
+                  int *its) {
     int mode = 0, damped = 0;
     const double *g = s->guess;
     if (s->ncols && hist_guess(h, s->ncols, t, s->guess)) {
@@ -89,7 +89,7 @@ static int solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const
 /* The integrator's right-hand side (Simulation._rhs). */
 static int sim_rhs(void *ctx, double t, const double *y, double *ydot) {
     ovk_sim *s = ctx;
-    int its = 0, status = solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, ydot, &its);
+    int its = 0, status = ovk_sim_solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, ydot, &its);
     if (status) return status;
     if (s->M->nfj) {
         memcpy(s->lam, s->ev_lam, (size_t)s->m * sizeof(double));
@@ -131,6 +131,7 @@ static void layout(ovk_sim *s, size_t nR) {
     s->ywatch = p; p += ny;
     s->ystar = p; p += ny;
     s->qwatch = p; p += (size_t)s->n;
+    s->qload = p; p += nh;
     s->rk.y = p; /* the integrator's block starts here: ovk_rk_start lays it out */
 }
 
@@ -176,7 +177,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->ncols = M->ncols;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh, nR = (size_t)M->nR;
     size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 4 * m * nh + nR * nR + m + nh + (size_t)s->n +
-                  ovk_rk_doubles(s->ny);
+                  nh + ovk_rk_doubles(s->ny);
     s->mem = calloc(need, sizeof(double));
     if (!s->mem) {
         s->status = OVK_NOMEM;
@@ -188,6 +189,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->t_prev = t0;
     int status = ovk_rk_start(&s->rk, &o->rk, s->ny, s->rk.y, t0, y0, sim_rhs, s, s->msg);
     if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, NULL, 1, s->msg);
+    if (!status) status = ovk_sim_energy_start(s, t0, s->rk.y);
     if (status) s->status = stopped(s, status, "cannot start", t0);
     return s;
 }
@@ -237,6 +239,7 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     }
     if (status && status != OVK_STALLED) status = ovk_sim_expiring(s, status, s->msg);
     if (!status) status = ovk_sim_monitor(s, rk->t, rk->y, rk->f, 0, s->msg);
+    if (!status) status = ovk_sim_energy_step(s);
     if (status) return stopped(s, status, "integration stopped", rk->t);
     if (s->warm.count) hist_push(&s->step_warm, s->ncols, rk->t, s->warm.q[0]);
     if ((status = ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam))) {
@@ -301,7 +304,7 @@ int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double 
     int same = s->has_last && s->last_t == t;
     for (int i = 0; same && i < s->ny; i++) same = s->last_y[i] == y[i];
     if (!same) {
-        int its = 0, status = solve(s, t, y, s->step_warm.count ? &s->step_warm : &s->warm,
+        int its = 0, status = ovk_sim_solve(s, t, y, s->step_warm.count ? &s->step_warm : &s->warm,
                                     s->has_lam ? s->lam : NULL, s->yout, &its);
         if (status) return status;
         lam = s->ev_lam;

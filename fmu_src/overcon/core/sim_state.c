@@ -11,7 +11,7 @@
 #include "core.h"
 
 #define STATE_MAGIC "OVKSIM"
-#define STATE_VERSION 2
+#define STATE_VERSION 3
 
 typedef struct {
     unsigned char *w;       /* saving: the next byte to write */
@@ -82,6 +82,9 @@ static void io_sim(codec *c, ovk_sim *s) {
     io(c, &s->t_prev, sizeof s->t_prev);
     io(c, &s->rate, sizeof s->rate);
     io(c, &s->ratio, sizeof s->ratio);
+    io(c, s->work_t, sizeof s->work_t);
+    io(c, s->work_w, sizeof s->work_w);
+    io(c, s->work_p, sizeof s->work_p);
 }
 
 size_t ovk_sim_state_size(const ovk_sim *s) {

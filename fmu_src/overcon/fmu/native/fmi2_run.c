@@ -136,7 +136,7 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
                             "without Python: dopri5 and rk4); overcon build --runtime python builds one with every "
                             "method", method), 0;
         ovk_sim_opts o = {{m, 1, param(c, P_TOLERANCE), param(c, P_MAX_STEP), 0.0, param(c, P_STEP)},
-                          LIFE_MAX_STEPS, LIFE_MAX_WALL_TIME, 1e-6, fm->stop_time};
+                          LIFE_MAX_STEPS, LIFE_MAX_WALL_TIME, 1e-6, fm->stop_time, 0};
         c->sim = ovk_sim_new(&c->M, &o, c->start_time, fm->y0);
         if (!c->sim) return snprintf(c->msg, sizeof c->msg, "MemoryError: out of memory"), 0;
         if (ovk_sim_status(c->sim)) {

@@ -198,3 +198,27 @@ def test_uncovered_scene_is_built_with_python_and_said(tmp_path):
                for line in lines), lines
     assert "resources/overcon_python.txt" in zipfile.ZipFile(results[0].fmu).namelist()
     assert len(fmpy.simulate_fmu(str(results[0].fmu), stop_time=0.05)) > 1
+
+
+def test_energy_outputs_are_built_for_the_c_runtime_and_equal_the_in_process_run(tmp_path):
+    """A scene with ``[outputs] energy = true`` (friction in three joints, a spring, a torque) is
+    built with the C runtime now, and fmpy's energy.kinetic, potential, dissipated and applied
+    equal the in-process run's (the same C ledger arithmetic on both sides within round-off)."""
+    (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
+    path = tmp_path / "energy_f145.toml"
+    path.write_text((MECH / "planar_f145_wo6.toml").read_text().replace('name = "planar_f145_wo6"',
+                                                                       'name = "energy_f145"')
+                    .replace('reactions = "all"', 'reactions = "all"\nenergy = true').replace("stop_time = 4.0",
+                                                                                            "stop_time = 1.0"))
+    lines = []
+    code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, allow_nonunique=True, runtime="c",
+                                        echo=lines.append, echo_err=lines.append)
+    assert code == 0 and any(": built " in line and "runtime c)" in line for line in lines), lines
+    spec = scene_mod.load(path)
+    got = fmpy.simulate_fmu(str(results[0].fmu), output_interval=spec.solver.output_interval)
+    ref = run(compile_checked(spec), spec.solver)
+    assert np.array_equal(got["time"], ref.time)
+    for col in ("energy.kinetic", "energy.potential", "energy.dissipated", "energy.applied"):
+        scale = max(1.0, float(np.max(np.abs(ref.column(col)))))
+        assert np.max(np.abs(got[col] - ref.column(col))) <= 1e-9 * scale, col
+    assert ref.column("energy.dissipated")[-1] > 0.01  # friction did work

@@ -20,9 +20,9 @@ order), baumgarte and tol (float64), then per array field of ovk_model an int32 
 items (int32 or float64). 'E' an evaluation of the last model: guess mode, y, guess, expected
 status, iterations, damped, for status 2 the status of the robust path (ovk_evaluate_robust) and
 for its success y' and lam, and for status 0 y', lam, qf, reactions, friction outputs (each an
-int32 length and float64 items). 'R' a run of the last model in C (core/sim.c): method, tolerance,
+int32 length and float64 items). 'R' a run of the last model in C (core/sim.c): method, energy ledger (0/1), tolerance,
 max_step, step, end time, y0, then what the installed core's run gave: status, y at the end, the
-first 10 entries of ovk_sim_info (all but the wall time), reactions and friction outputs at the end
+first 10 entries of ovk_sim_info (all but the wall time), reactions, friction outputs and energies at the end
 (a run the watch stops: its status and empty arrays).
 """
 from __future__ import annotations
@@ -115,20 +115,21 @@ class Writer:
         solver = dataclasses.replace(solver, method=method)
         run = kernel.Run(model, solver)
         y0 = np.concatenate([model.q0, model.h0])
-        self.parts.append(b"R" + struct.pack("=i4d", kernel.C_METHODS[method], solver.tolerance, solver.max_step,
-                                             solver.step, t_end))
+        self.parts.append(b"R" + struct.pack("=2i4d", kernel.C_METHODS[method], int(model.energy_outputs),
+                                             solver.tolerance, solver.max_step, solver.step, t_end))
         self.doubles(y0)
         try:
             run.advance(t_end / 2)
             y = run.advance(t_end)
             reac, fric = run.outputs(t_end, y)
+            energies = run.energies(t_end, y)
             status = 0
         except kernel.RunStopped as exc:  # a stop (the watch's) in the second half: the driver expects it
-            status, reac, fric = exc.status, np.zeros(0), np.zeros(0)
+            status, reac, fric, energies = exc.status, np.zeros(0), np.zeros(0), np.zeros(0)
             y = np.zeros(0)
         info = run.info if status == 0 else {k: 0.0 for k in kernel.INFO}
         self.parts.append(struct.pack("=i", status))
-        for a in (y, [info[k] for k in kernel.INFO[:10]], reac, fric):
+        for a in (y, [info[k] for k in kernel.INFO[:10]], reac, fric, energies):
             self.doubles(a)
         self.counts["runs"] = self.counts.get("runs", 0) + 1
         return status
@@ -189,6 +190,7 @@ def build(tmp: Path) -> Writer:
         random_states(w, model, n, seed=7)
         if name in ("planar_f145_wo6", "spatial_GH_wo9"):
             w.run(model, spec.solver, "dopri5", 0.2)
+            w.run(dataclasses.replace(model, energy_outputs=True), spec.solver, "dopri5", 0.2)  # energy.c
             w.run(model, spec.solver, "rk4", 0.05)
     # quaternions and the spatial axis joints, with friction
     for name in ("door_h1_wo_hinge2", "carriage_guide_wo_rod", "loop_A1_wo_A2"):

@@ -2,8 +2,9 @@
  * step. The right-hand side warm-starts the friction solve as Simulation._rhs does (the friction
  * forces of the last two solves extrapolated to t, else the last multipliers); after every
  * accepted step the run checks, in Simulation.advance's order, that time advanced, the singularity
- * monitor's ratio (svd.c), records the step-end friction forces and the constraint drift, and the
- * work budgets. The derived outputs at a point of the last step reuse the last evaluation when it
+ * watch (watch.c; after a failed step, whether the elimination was expiring), keeps the energy
+ * ledger when asked (energy.c), records the step-end friction forces and the constraint drift, and
+ * the work budgets. The derived outputs at a point of the last step reuse the last evaluation when it
  * was at exactly that point, else solve once warm-started from the step-end forces, without
  * changing the run's state (Simulation.derived_outputs).
  *

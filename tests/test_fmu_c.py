@@ -222,3 +222,30 @@ def test_energy_outputs_are_built_for_the_c_runtime_and_equal_the_in_process_run
         scale = max(1.0, float(np.max(np.abs(ref.column(col)))))
         assert np.max(np.abs(got[col] - ref.column(col))) <= 1e-9 * scale, col
     assert ref.column("energy.dissipated")[-1] > 0.01  # friction did work
+
+
+def test_degrading_elimination_stops_the_c_fmu_and_names_the_python_runtime(tmp_path):
+    """The Bricard linkage eliminating Phi2 (energy outputs on): the Python run chooses the
+    elimination again at about 1.206 s; the C FMU, which cannot, runs up to there, then the
+    doStep holding that instant fails with the watch's reason and the advice to build with
+    --runtime python (logged as an error)."""
+    path = ROOT / "tests" / "data" / "bricard" / "bricard_wo2.toml"
+    lines = []
+    code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, allow_nonunique=True, runtime="c",
+                                        echo=lines.append, echo_err=lines.append)
+    assert code == 0 and any(": built " in line and "runtime c)" in line for line in lines), lines
+    d = unzip(results[0].fmu, tmp_path)
+    logs = Logs()
+    fmu, vr = slave(d, logs)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    done = 0
+    with pytest.raises(FMICallException):
+        for k in range(140):
+            fmu.doStep(k * 0.01, 0.01)
+            done = k + 1
+    fmu.freeInstance()
+    assert done == 120  # the step to 1.21 s holds the stop at 1.20634626 s
+    assert any(s == 3 and "t = 1.20634626 s: the elimination degrades" in m and "build with --runtime python" in m
+               for s, _, m in logs.records), logs.records

@@ -322,3 +322,25 @@ def test_c_run_energies_equal_python_energies(name, method):
     plain.advance(grid[-1])
     assert plain.info["evaluations"] < sim.evaluations or not model.friction_joints
     assert np.array_equal(plain.energies(grid[-1], plain.y)[2:], [0.0, 0.0])
+
+
+def test_failed_step_of_an_expiring_elimination_stops_the_c_run_at_the_python_instant(tmp_path):
+    """The parallelogram eliminating Phi11 with friction mu = 0.5 on G0 (tolerance 1e-8): the
+    step over the upright position fails (the friction solve); r was falling fast enough to reach
+    0 within two steps while all equations keep their rank, so the elimination expiring is the
+    cause (SingularityMonitor.expiring). Python stops there (the reaction of G0 is not unique);
+    the C run stops at the same instant with the same words up to the failure's own (the core's
+    friction message is worded differently), then says why it stops (status 14)."""
+    from test_watch import _parallelogram
+    model, solver = _watch_scene(_parallelogram(tmp_path, "G0", "[11]"), 0.6)
+    model = compile_checked(dataclasses.replace(model.scene, friction_params={
+        k: dataclasses.replace(v, mu=0.5) for k, v in model.scene.friction_params.items()}))
+    solver = dataclasses.replace(solver, tolerance=1e-8)
+    with pytest.raises(SimulationError) as py:
+        Simulation(model, solver).advance(0.6)
+    with pytest.raises(kernel.RunStopped) as c:
+        kernel.Run(model, solver).advance(0.6)
+    lead = str(py.value).split("friction solve")[0]
+    assert "the elimination chosen at the start expires (the step from t = " in lead
+    assert c.value.status == 14 and str(c.value).startswith(lead + "friction solve")
+    assert str(c.value).endswith(f"); {C_REFUSES} (eliminated: Phi11)")

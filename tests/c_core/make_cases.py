@@ -164,7 +164,8 @@ def random_states(w: Writer, model, n, seed):
 def watch_stops(w: "Writer", tmp: Path) -> None:
     """Runs the watch stops (core/watch.c): the N-four-bar passing its flat position (a singular
     position located inside a step, status 12), the parallelogram whose elimination expires
-    (status 14) and the Bricard linkage whose elimination degrades (status 14)."""
+    (status 14; with friction, on a failed step) and the Bricard linkage whose elimination
+    degrades (status 14)."""
     import subprocess
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from test_watch import _parallelogram
@@ -178,6 +179,14 @@ def watch_stops(w: "Writer", tmp: Path) -> None:
         status = w.run(model, spec.solver, "dopri5", t_end)
         if status != want:
             raise SystemExit(f"make_cases: {path.name} stopped with status {status}, not {want}")
+    # a failed step whose cause is the elimination expiring (watch.c, ovk_sim_expiring): status 14
+    spec = scene_mod.as_scene(scene_mod.load(_parallelogram(tmp, "G0", "[11]")), stop_time=0.3)
+    spec = dataclasses.replace(spec, friction_params={k: dataclasses.replace(v, mu=0.5)
+                                                      for k, v in spec.friction_params.items()})
+    model = compile_checked(spec)
+    w.model(model, spec.solver)
+    if w.run(model, dataclasses.replace(spec.solver, tolerance=1e-8), "dopri5", 0.3) != 14:
+        raise SystemExit("make_cases: the parallelogram with friction did not stop as its elimination expired")
 
 
 def build(tmp: Path) -> Writer:

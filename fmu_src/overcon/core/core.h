@@ -77,7 +77,7 @@ enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 #define SIN_BETA_MIN 1e-3
 #define QUAT_NORM_RATE 1.0 /* overcon.kinematics.QUAT_NORM_RATE: the quaternion norm stabilisation (1/s) */
 #define OVK_MAX_FRICTION 32 /* friction joints (and OVK_MAXEQ x that multipliers): overcon.kernel.support checks */
-#define OVK_MSG 512         /* bytes of the failure message, with its terminating zero */
+#define OVK_MSG 1024        /* bytes of the failure message, with its terminating zero */
 
 #if defined(__GNUC__)
 #define OVK_EXPORT __attribute__((visibility("default")))

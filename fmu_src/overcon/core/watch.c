@@ -270,6 +270,6 @@ int ovk_sim_expiring(ovk_sim *s, int failed, char *msg) {
     if (full < s->M->nR) return snprintf(msg, OVK_MSG, "%s", why), failed;
     eliminated(s->M, names, sizeof names);
     return say(msg, OVK_ELIMINATION, "t = %.9g s: the kept equations lose rank here while the mechanism stays regular: the "
-             "elimination chosen at the start expires (the step from t = %.9g s failed: %.200s); " C_REFUSES
+             "elimination chosen at the start expires (the step from t = %.9g s failed: %.400s); " C_REFUSES
              " (eliminated: %s)", rk->t + dt, rk->t, why, names);
 }

@@ -3,11 +3,13 @@
 # ASan on Linux): tests/c_core/make_cases.py writes packed models and the results the installed
 # core gives (the paper's planar and spatial mechanisms, the quaternion examples with spatial revolute,
 # prismatic, cylindrical and spherical joints, a chain of every spatial joint type, damped-Newton states and every failure
-# status), then tests/c_core/driver.c, compiled with the core's sources and the sanitizers, runs
+# status, and runs stopped by the singularity watch of core/watch.c: a singular position located inside a
+# step, an expired and a degrading elimination), then tests/c_core/driver.c, compiled with the core's sources and the sanitizers, runs
 # every case 20 times in two workspaces and requires the same bits, statuses and messages. Any
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.
 # Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmi2_*.c over the core),
-# compiled with the sanitizers into C-runtime FMUs of a friction scene and a quaternion scene, run
+# compiled with the sanitizers into C-runtime FMUs of a friction scene, a quaternion scene and a scene
+# with energy outputs (the Bricard linkage), run
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
 # Also compiles the core with clang -Werror when clang is installed. About 30 s.
@@ -33,12 +35,13 @@ FMI=fmu_src/overcon/fmu/native
 "$PY" - "$tmp/fmus" <<'PYEOF'
 import sys
 from overcon.fmu.build import build_all
-code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml"], sys.argv[1],
+code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml",
+                     "tests/data/bricard/bricard_wo2.toml"], sys.argv[1],
                     refs=False, validate=False, runtime="c", allow_nonunique=True, echo=lambda s: None)
 sys.exit(code)
 PYEOF
 $CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host" tests/c_host/fmu_host.c -ldl -lm  # POSIX (dlopen, realpath): not -std=c11
-for id in planar_f45_wo4 door_h1_wo_hinge2; do
+for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2; do
     mkdir -p "$tmp/$id" && (cd "$tmp/$id" && unzip -q "../fmus/$id.fmu")
     $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmi2_*.c "$CORE"/*.c -lm
     guid=$(sed -n 's/.*guid="\([^"]*\)".*/\1/p' "$tmp/$id/modelDescription.xml" | head -n 1)

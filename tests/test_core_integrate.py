@@ -132,8 +132,9 @@ def test_step_budget_stops_the_run_and_a_call_budget_too():
 
 def test_singular_position_stops_both_runs_alike(tmp_path):
     """The sliders driven through K = L = O (free length 0): a finite step jumps over the rank
-    loss, and both runs catch the crossing (the sign of det([J_R; N^T]) with the previous step's
-    null-space basis) at the same step, with the same message."""
+    loss; both runs see r fall then rise inside one step, locate its minimum on the dense output
+    (golden section), judge the whole Jacobian rank deficient there, and stop at the same instant
+    with the same message."""
     text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
     path = tmp_path / "l0.toml"
     path.write_text(text)
@@ -141,7 +142,7 @@ def test_singular_position_stops_both_runs_alike(tmp_path):
     model = compile_checked(sc)
     solver = dataclasses.replace(sc.solver, kernel="c")
     sim = Simulation(model, solver)
-    with pytest.raises(SimulationError, match="passed a singular position between") as py:
+    with pytest.raises(SimulationError, match=r"passed a singular position \(between the steps.*rank deficient \(rank 10 < 11") as py:
         sim.advance(2.0)
     assert sim.kernel_repeats == 0
     run = kernel.Run(model, solver)
@@ -181,3 +182,165 @@ def test_robust_friction_path_succeeds_and_fails_where_numpy_does():
                 assert rel(c[1], ev.lam) <= 1e-9 and rel(c[0][model.n:], ev.hdot) <= 1e-9
                 outcomes["both"] += 1
     assert outcomes["both"] >= 5 and outcomes["neither"] >= 5, outcomes
+
+
+# ----------------------------------------------------------------------------- the watch (core/watch.c)
+
+def _watch_scene(path, stop_time):
+    sc = scene_mod.as_scene(scene_mod.load(path), stop_time=stop_time)
+    model = compile_checked(sc)
+    return model, dataclasses.replace(sc.solver, kernel="c")
+
+
+def _stepwise(model, solver, sim=None):
+    """Both runs step for step until one stops: (the Python exception or None, the C RunStopped
+    or None, the Simulation); every step the same t and state."""
+    sim = sim or Simulation(model, solver)
+    run = kernel.Run(model, solver)
+    itg, py, c = sim._integrator, None, None
+    while itg.t < model.scene.stop_time and py is None and c is None:
+        try:
+            sim.advance(itg.t + 1e-9)
+        except SimulationError as exc:
+            py = exc
+        try:
+            run.step()
+        except kernel.RunStopped as exc:
+            c = exc
+        assert run.info["nsteps"] == sim._integrator.nsteps
+        if py is None and c is None:
+            assert run.info["t"] == sim._integrator.t and np.array_equal(run.y, sim._integrator.y)
+    return py, c, sim
+
+
+def test_n_four_bar_flat_position_stops_both_runs_at_the_same_instant(tmp_path):
+    """The N-four-bar (2 loops, eliminated form) reaches its flat position, an even-multiplicity
+    rank loss where no singular value changes sign: both runs take the same steps, find r's
+    minimum inside the same step and stop with the same words (a singular position of the
+    mechanism, status 12)."""
+    import subprocess
+    import sys
+    subprocess.run([sys.executable, str(MECH / "examples" / "nfourbar.py"), "2", "--out", str(tmp_path)], check=True,
+                   capture_output=True)
+    py, c, _ = _stepwise(*_watch_scene(tmp_path / "nfourbar_2_scene.toml", 1.0))
+    assert py is not None and c is not None, (py, c)
+    assert "passed a singular position (between the steps" in str(py) and "rank deficient" in str(py)
+    assert c.status == 12 and str(c) == str(py)
+
+
+C_REFUSES = "the C runtime does not choose the eliminated equations again: build with --runtime python"
+
+
+def test_expired_elimination_stops_the_c_run_where_python_chooses_again(tmp_path, monkeypatch):
+    """The parallelogram eliminating Phi11 (tests/test_watch.py): at the upright position only the
+    kept equations lose rank. The Python run chooses them again there and goes on; the C run
+    stops at that instant (status 14) with the Python watch's EliminationExpired words, then
+    says why it stops. With Simulation._expired raising the expiry (no reselection), the Python
+    run stops on the same step with exactly the C message's first part."""
+    from test_watch import _parallelogram
+    model, solver = _watch_scene(_parallelogram(tmp_path, None, "[11]"), 0.3)
+    done = Simulation(model, solver)
+    done.advance(0.3)
+    (t_event, kind, _), = done.events
+    assert kind == "elimination-reselected"
+
+    def no_reselection(self, exc, t, y):
+        raise exc
+    monkeypatch.setattr(Simulation, "_expired", no_reselection)
+    py, c, _ = _stepwise(model, solver)
+    assert c is not None and c.status == 14 and py is not None
+    assert str(c) == f"{py}; {C_REFUSES} (eliminated: Phi11)"
+    assert f"integration stopped: t = {t_event:.9g} s: the motion passed a singular position" in str(c)
+    assert "the elimination chosen at the start has expired" in str(c)
+
+
+def test_degrading_elimination_stops_the_c_run_where_python_chooses_again(monkeypatch):
+    """The Bricard linkage eliminating Phi2: near 1.206 s the kept equations become ill-conditioned
+    (r < 1e-3) while the whole Jacobian is not, and the Python run chooses the elimination again
+    (an event). The C run takes the same steps up to there and stops after that very step
+    (status 14), naming the ratio the Python event names."""
+    model, solver = _watch_scene(Path(__file__).resolve().parent / "data" / "bricard" / "bricard_wo2.toml", 1.3)
+    done = Simulation(model, solver)
+    done.advance(1.3)
+    (t_event, kind, detail), = done.events
+    assert kind == "elimination-reselected" and detail.startswith("eliminated [2] -> ")
+    steps_at = []
+
+    def stop_instead(self, itg):  # a SimulationError: not a failure _recover would look into
+        steps_at.append(itg.t)
+        raise SimulationError("degrading")
+    monkeypatch.setattr(Simulation, "_degraded", stop_instead)
+    py, c, sim = _stepwise(model, solver)
+    assert py is not None and c is not None and c.status == 14
+    assert steps_at == [sim._integrator.t] and f"{steps_at[0]:.9g}" == f"{t_event:.9g}"
+    shown = detail.split("sigma_min/sigma_max ")[1].rstrip(")")
+    assert str(c).startswith(f"integration stopped: t = {t_event:.9g} s: the elimination degrades: the kept "
+                             f"equations' sigma_min/sigma_max {shown} is below 0.001")
+    assert str(c).endswith(f"{C_REFUSES} (eliminated: Phi2)")
+
+
+def test_parallelogram_without_expiry_keeps_the_python_steps(tmp_path):
+    """The same parallelogram under the elimination "auto" chooses (valid at the upright
+    position): the watch sees r dip and rise without a stop, and the C run takes the Python
+    steps to the end, with the same smallest ratio within the two SVDs' round-off."""
+    from test_watch import _parallelogram
+    model, solver = _watch_scene(_parallelogram(tmp_path, None, '"auto"'), 0.6)
+    py, c, sim = _stepwise(model, solver)
+    assert py is None and c is None and not sim.events
+    run = kernel.Run(model, solver)
+    run.advance(0.6)
+    assert run.info["nsteps"] == sim._integrator.nsteps > 20
+    assert run.info["min_ratio"] == pytest.approx(sim.monitor.min_ratio, rel=1e-9)
+
+
+# ----------------------------------------------------------------------------- energy outputs (core/energy.c)
+
+@pytest.mark.parametrize("name, method", [("planar_f145_wo6", "dopri5"), ("examples/carriage_guide_wo_rod", "rk4"),
+                                          ("planar_sliders", "dopri5"), ("examples/door_h1_wo_hinge2", "dopri5")])
+def test_c_run_energies_equal_python_energies(name, method):
+    """Friction, constant forces and torques, springs, quaternions: on an output grid that does
+    not meet the steps the C run's energy.kinetic, potential, dissipated and applied equal the
+    Python run's within round-off, its ledger costs the same evaluations, and the states stay
+    equal (the ledger's solves never touch the integration's warm start); a state restored
+    restores the ledger."""
+    model, solver = setup(name, method, stop_time=0.5)
+    model = dataclasses.replace(model, energy_outputs=True)
+    sim, run = Simulation(model, solver), kernel.Run(model, solver)
+    grid = np.arange(0.0, 0.5, 0.0123)[1:]
+    for t in grid:
+        y_py, y_c = sim.advance(t), run.advance(t)
+        assert rel(y_c, y_py) <= REL
+        e_py = sim.state_outputs(y_py, t)[-4:]
+        assert rel(run.energies(t, y_c), e_py) <= REL, t
+    assert run.info["evaluations"] == sim.evaluations
+    assert abs(e_py[2]) + abs(e_py[3]) > 0.1 or "spring" in {ld.type for ld in model.loads}  # work done, or a spring
+    saved = run.get_state()
+    later = run.energies(0.5, run.advance(0.5))
+    run.set_state(saved)
+    assert np.array_equal(run.energies(0.5, run.advance(0.5)), later)
+    plain = kernel.Run(model, solver, energy=False)  # no ledger: no extra evaluations, the work reads 0
+    plain.advance(grid[-1])
+    assert plain.info["evaluations"] < sim.evaluations or not model.friction_joints
+    assert np.array_equal(plain.energies(grid[-1], plain.y)[2:], [0.0, 0.0])
+
+
+def test_failed_step_of_an_expiring_elimination_stops_the_c_run_at_the_python_instant(tmp_path):
+    """The parallelogram eliminating Phi11 with friction mu = 0.5 on G0 (tolerance 1e-8): the
+    step over the upright position fails (the friction solve); r was falling fast enough to reach
+    0 within two steps while all equations keep their rank, so the elimination expiring is the
+    cause (SingularityMonitor.expiring). Python stops there (the reaction of G0 is not unique);
+    the C run stops at the same instant with the same words up to the failure's own (the core's
+    friction message is worded differently), then says why it stops (status 14)."""
+    from test_watch import _parallelogram
+    model, solver = _watch_scene(_parallelogram(tmp_path, "G0", "[11]"), 0.6)
+    model = compile_checked(dataclasses.replace(model.scene, friction_params={
+        k: dataclasses.replace(v, mu=0.5) for k, v in model.scene.friction_params.items()}))
+    solver = dataclasses.replace(solver, tolerance=1e-8)
+    with pytest.raises(SimulationError) as py:
+        Simulation(model, solver).advance(0.6)
+    with pytest.raises(kernel.RunStopped) as c:
+        kernel.Run(model, solver).advance(0.6)
+    lead = str(py.value).split("friction solve")[0]
+    assert "the elimination chosen at the start expires (the step from t = " in lead
+    assert c.value.status == 14 and str(c.value).startswith(lead + "friction solve")
+    assert str(c.value).endswith(f"); {C_REFUSES} (eliminated: Phi11)")

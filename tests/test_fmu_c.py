@@ -198,3 +198,54 @@ def test_uncovered_scene_is_built_with_python_and_said(tmp_path):
                for line in lines), lines
     assert "resources/overcon_python.txt" in zipfile.ZipFile(results[0].fmu).namelist()
     assert len(fmpy.simulate_fmu(str(results[0].fmu), stop_time=0.05)) > 1
+
+
+def test_energy_outputs_are_built_for_the_c_runtime_and_equal_the_in_process_run(tmp_path):
+    """A scene with ``[outputs] energy = true`` (friction in three joints, a spring, a torque) is
+    built with the C runtime now, and fmpy's energy.kinetic, potential, dissipated and applied
+    equal the in-process run's (the same C ledger arithmetic on both sides within round-off)."""
+    (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
+    path = tmp_path / "energy_f145.toml"
+    path.write_text((MECH / "planar_f145_wo6.toml").read_text().replace('name = "planar_f145_wo6"',
+                                                                       'name = "energy_f145"')
+                    .replace('reactions = "all"', 'reactions = "all"\nenergy = true').replace("stop_time = 4.0",
+                                                                                            "stop_time = 1.0"))
+    lines = []
+    code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, allow_nonunique=True, runtime="c",
+                                        echo=lines.append, echo_err=lines.append)
+    assert code == 0 and any(": built " in line and "runtime c)" in line for line in lines), lines
+    spec = scene_mod.load(path)
+    got = fmpy.simulate_fmu(str(results[0].fmu), output_interval=spec.solver.output_interval)
+    ref = run(compile_checked(spec), spec.solver)
+    assert np.array_equal(got["time"], ref.time)
+    for col in ("energy.kinetic", "energy.potential", "energy.dissipated", "energy.applied"):
+        scale = max(1.0, float(np.max(np.abs(ref.column(col)))))
+        assert np.max(np.abs(got[col] - ref.column(col))) <= 1e-9 * scale, col
+    assert ref.column("energy.dissipated")[-1] > 0.01  # friction did work
+
+
+def test_degrading_elimination_stops_the_c_fmu_and_names_the_python_runtime(tmp_path):
+    """The Bricard linkage eliminating Phi2 (energy outputs on): the Python run chooses the
+    elimination again at about 1.206 s; the C FMU, which cannot, runs up to there, then the
+    doStep holding that instant fails with the watch's reason and the advice to build with
+    --runtime python (logged as an error)."""
+    path = ROOT / "tests" / "data" / "bricard" / "bricard_wo2.toml"
+    lines = []
+    code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, allow_nonunique=True, runtime="c",
+                                        echo=lines.append, echo_err=lines.append)
+    assert code == 0 and any(": built " in line and "runtime c)" in line for line in lines), lines
+    d = unzip(results[0].fmu, tmp_path)
+    logs = Logs()
+    fmu, vr = slave(d, logs)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    done = 0
+    with pytest.raises(FMICallException):
+        for k in range(140):
+            fmu.doStep(k * 0.01, 0.01)
+            done = k + 1
+    fmu.freeInstance()
+    assert done == 120  # the step to 1.21 s holds the stop at 1.20634626 s
+    assert any(s == 3 and "t = 1.20634626 s: the elimination degrades" in m and "build with --runtime python" in m
+               for s, _, m in logs.records), logs.records

@@ -48,14 +48,14 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 6  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
+ABI = 7  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
 MAX_FRICTION = 32  # OVK_MAX_FRICTION in core/core.h
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
           7: "invalid model or argument", 8: "step size too small", 9: "stiffness detected",
           10: "rk4 step unstable", 11: "work budget exhausted", 12: "singular position (monitor)",
-          13: "time does not advance"}
+          13: "time does not advance", 14: "elimination expired or degrading (the C run does not choose it again)"}
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
@@ -108,6 +108,7 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_sim_advance", i, [vp, ctypes.c_double, ctypes.c_longlong, ctypes.c_double, vp]),
                             ("ovk_sim_state_vector", None, [vp, vp]), ("ovk_sim_info", None, [vp, vp]),
                             ("ovk_sim_outputs", i, [vp, ctypes.c_double, vp, vp, vp]),
+                            ("ovk_sim_energy", i, [vp, ctypes.c_double, vp, vp]),
                             ("ovk_sim_state_size", ctypes.c_size_t, [vp]),
                             ("ovk_sim_get_state", i, [vp, vp, ctypes.c_size_t]),
                             ("ovk_sim_set_state", i, [vp, vp, ctypes.c_size_t])):
@@ -472,7 +473,7 @@ class _CRkOpts(ctypes.Structure):
 class _CSimOpts(ctypes.Structure):
     """``ovk_sim_opts`` of core/core.h."""
     _fields_ = [("rk", _CRkOpts), ("max_steps", ctypes.c_longlong), ("max_wall_time", ctypes.c_double),
-                ("ratio_tol", ctypes.c_double), ("stop_time", ctypes.c_double)]
+                ("ratio_tol", ctypes.c_double), ("stop_time", ctypes.c_double), ("energy", ctypes.c_int)]
 
 
 class RunStopped(RuntimeError):
@@ -492,7 +493,10 @@ class Run:
     that hold it equal to the Python run."""
 
     def __init__(self, model, solver, *, start_time: float | None = None, max_steps: int | None = None,
-                 max_wall_time: float | None = None, ratio_tol: float = 1e-6, detect_stiffness: bool = True):
+                 max_wall_time: float | None = None, ratio_tol: float = 1e-6, detect_stiffness: bool = True,
+                 energy: bool | None = None):
+        """``energy``: keep the work ledger of :meth:`energies` (default: when the model has energy
+        outputs; it costs two evaluations a step with friction, as in the Python run)."""
         lib, reason = library()
         if lib is None:
             raise KernelUnavailable(reason)
@@ -504,7 +508,8 @@ class Run:
         rk = _CRkOpts(method=C_METHODS[solver.method], detect_stiffness=int(detect_stiffness),
                       tolerance=solver.tolerance, max_step=solver.max_step, first_step=0.0, step=solver.step)
         self._opts = _CSimOpts(rk=rk, max_steps=max_steps or 0, max_wall_time=max_wall_time or 0.0,
-                               ratio_tol=ratio_tol, stop_time=model.scene.stop_time)
+                               ratio_tol=ratio_tol, stop_time=model.scene.stop_time,
+                               energy=int(model.energy_outputs if energy is None else energy))
         t0 = model.scene.start_time if start_time is None else start_time
         y0 = np.ascontiguousarray(np.concatenate([model.q0, model.h0]), float)
         sim = lib.ovk_sim_new(self.kernel._pm, ctypes.byref(self._opts), t0, y0.ctypes.data)
@@ -561,6 +566,17 @@ class Run:
         if status:
             self._raise(status)
         return reac, fric
+
+    def energies(self, t: float, y: np.ndarray) -> np.ndarray:
+        """[kinetic, potential, dissipated, applied] (J) at (t, y) of the last step, as the energy
+        outputs of :meth:`overcon.simulate.Simulation.state_outputs` (the work from the ledger:
+        zeros when the run keeps none)."""
+        yy = np.ascontiguousarray(y, float)
+        out = np.zeros(4)
+        status = self._lib.ovk_sim_energy(self._sim, t, yy.ctypes.data, out.ctypes.data)
+        if status:
+            self._raise(status)
+        return out
 
     def get_state(self) -> bytes:
         size = self._lib.ovk_sim_state_size(self._sim)

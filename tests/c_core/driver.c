@@ -270,16 +270,18 @@ static void refusals(model_t *m, tally *t) {
 /* An 'R' record: the run in C twice, each saving its state half-way, finishing, restoring the
  * state and finishing again; every finish must give the installed core's bits. */
 static int run_sim(reader *r, model_t *m, tally *t) {
-    int method = rd_i32(r), n_y = 0, n_e = 0, n_i = 0, n_r = 0, n_f = 0;
+    int method = rd_i32(r), energy = rd_i32(r), n_y = 0, n_e = 0, n_i = 0, n_r = 0, n_f = 0;
     double v[4];
     rd(r, v, sizeof v);
     double *y0 = rd_array(r, sizeof(double), &n_y);
     int want_status = rd_i32(r);
     double *want_y = rd_array(r, sizeof(double), &n_e), *want_info = rd_array(r, sizeof(double), &n_i);
     double *want_reac = rd_array(r, sizeof(double), &n_r), *want_fric = rd_array(r, sizeof(double), &n_f);
+    int n_en = 0;
+    double *want_en = rd_array(r, sizeof(double), &n_en), en[4] = {0.0, 0.0, 0.0, 0.0};
     double *y = calloc((size_t)(n_y ? n_y : 1), sizeof(double)), info[OVK_SIM_NINFO];
     double *reac = calloc((size_t)(n_r ? n_r : 1), sizeof(double)), *fric = calloc((size_t)(n_f ? n_f : 1), sizeof(double));
-    ovk_sim_opts o = {{method, 1, v[0], v[1], 0.0, v[2]}, 0, 0.0, 1e-6, v[3]};
+    ovk_sim_opts o = {{method, 1, v[0], v[1], 0.0, v[2]}, 0, 0.0, 1e-6, v[3], energy};
     for (int rep = 0; rep < 2 && !r->bad && y && reac && fric; rep++) {
         ovk_sim *s = ovk_sim_new(&m->M, &o, 0.0, y0);
         if (!s) { r->bad = 2; break; }
@@ -292,6 +294,7 @@ static int run_sim(reader *r, model_t *m, tally *t) {
             if (again) status = ovk_sim_set_state(s, saved, size);
             if (!status) status = ovk_sim_advance(s, v[3], -1, 0.0, y);
             if (!status) status = ovk_sim_outputs(s, v[3], y, reac, fric);
+            if (!status) status = ovk_sim_energy(s, v[3], y, en);
             ovk_sim_info(s, info);
             if (status != want_status) fail(t, ovk_sim_message(s));
             if (!status) {
@@ -299,6 +302,7 @@ static int run_sim(reader *r, model_t *m, tally *t) {
                 compare(t, "run", "info", info, want_info, n_i < OVK_SIM_NINFO ? n_i : OVK_SIM_NINFO);
                 compare(t, "run", "reactions", reac, want_reac, n_r);
                 compare(t, "run", "friction", fric, want_fric, n_f);
+                compare(t, "run", "energies", en, want_en, n_en < 4 ? n_en : 4);
             }
         }
         if (!saved) fail(t, "run: no state to save");
@@ -306,7 +310,7 @@ static int run_sim(reader *r, model_t *m, tally *t) {
         ovk_sim_free(s);
         t->calls++;
     }
-    free(y0); free(want_y); free(want_info); free(want_reac); free(want_fric);
+    free(y0); free(want_y); free(want_info); free(want_reac); free(want_fric); free(want_en);
     free(y); free(reac); free(fric);
     return !r->bad;
 }

@@ -20,9 +20,10 @@ order), baumgarte and tol (float64), then per array field of ovk_model an int32 
 items (int32 or float64). 'E' an evaluation of the last model: guess mode, y, guess, expected
 status, iterations, damped, for status 2 the status of the robust path (ovk_evaluate_robust) and
 for its success y' and lam, and for status 0 y', lam, qf, reactions, friction outputs (each an
-int32 length and float64 items). 'R' a run of the last model in C (core/sim.c): method, tolerance,
+int32 length and float64 items). 'R' a run of the last model in C (core/sim.c): method, energy ledger (0/1), tolerance,
 max_step, step, end time, y0, then what the installed core's run gave: status, y at the end, the
-first 10 entries of ovk_sim_info (all but the wall time), reactions and friction outputs at the end.
+first 10 entries of ovk_sim_info (all but the wall time), reactions, friction outputs and energies at the end
+(a run the watch stops: its status and empty arrays).
 """
 from __future__ import annotations
 
@@ -42,6 +43,7 @@ MECH = Path(__file__).resolve().parents[2] / "mechanisms"
 COUNTS = ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols", "nfj", "nfg", "max_iter")
 FLOATS = ("baumgarte", "tol")
 DOUBLE_FIELDS = {"Minv", "mass", "inertia", "gravity", "jconst", "jlawp", "lp"}
+BRICARD = Path(__file__).resolve().parents[1] / "data" / "bricard" / "bricard_wo2.toml"
 TWO_PINS = Path(__file__).resolve().parents[1] / "data" / "two_pins" / "two_pins_wo3.toml"
 
 
@@ -107,23 +109,30 @@ class Writer:
         self.counts["evaluations"] += 1
         return status
 
-    def run(self, model, solver, method: str, t_end: float):
+    def run(self, model, solver, method: str, t_end: float) -> int:
         """A run of the model with ``method`` to t_end (the driver also saves and restores its
-        state half-way and requires the same bits)."""
+        state half-way and requires the same bits, or the same stop); its status."""
         solver = dataclasses.replace(solver, method=method)
         run = kernel.Run(model, solver)
         y0 = np.concatenate([model.q0, model.h0])
-        self.parts.append(b"R" + struct.pack("=i4d", kernel.C_METHODS[method], solver.tolerance, solver.max_step,
-                                             solver.step, t_end))
+        self.parts.append(b"R" + struct.pack("=2i4d", kernel.C_METHODS[method], int(model.energy_outputs),
+                                             solver.tolerance, solver.max_step, solver.step, t_end))
         self.doubles(y0)
-        run.advance(t_end / 2)
-        y = run.advance(t_end)
-        reac, fric = run.outputs(t_end, y)
-        info = run.info
-        self.parts.append(struct.pack("=i", 0))
-        for a in (y, [info[k] for k in kernel.INFO[:10]], reac, fric):
+        try:
+            run.advance(t_end / 2)
+            y = run.advance(t_end)
+            reac, fric = run.outputs(t_end, y)
+            energies = run.energies(t_end, y)
+            status = 0
+        except kernel.RunStopped as exc:  # a stop (the watch's) in the second half: the driver expects it
+            status, reac, fric, energies = exc.status, np.zeros(0), np.zeros(0), np.zeros(0)
+            y = np.zeros(0)
+        info = run.info if status == 0 else {k: 0.0 for k in kernel.INFO}
+        self.parts.append(struct.pack("=i", status))
+        for a in (y, [info[k] for k in kernel.INFO[:10]], reac, fric, energies):
             self.doubles(a)
         self.counts["runs"] = self.counts.get("runs", 0) + 1
+        return status
 
     def write(self, path: Path):
         path.write_bytes(b"".join(self.parts))
@@ -152,8 +161,37 @@ def random_states(w: Writer, model, n, seed):
             w.evaluation(y, qf_guess=rng.standard_normal(w.kernel._ncols))
 
 
+def watch_stops(w: "Writer", tmp: Path) -> None:
+    """Runs the watch stops (core/watch.c): the N-four-bar passing its flat position (a singular
+    position located inside a step, status 12), the parallelogram whose elimination expires
+    (status 14; with friction, on a failed step) and the Bricard linkage whose elimination
+    degrades (status 14)."""
+    import subprocess
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from test_watch import _parallelogram
+    subprocess.run([sys.executable, str(MECH / "examples" / "nfourbar.py"), "2", "--out", str(tmp)], check=True,
+                   capture_output=True)
+    for path, t_end, want in ((tmp / "nfourbar_2_scene.toml", 0.8, 12), (_parallelogram(tmp, None, "[11]"), 0.3, 14),
+                              (BRICARD, 1.3, 14)):
+        spec = scene_mod.as_scene(scene_mod.load(path), stop_time=t_end)
+        model = compile_checked(spec)
+        w.model(model, spec.solver)
+        status = w.run(model, spec.solver, "dopri5", t_end)
+        if status != want:
+            raise SystemExit(f"make_cases: {path.name} stopped with status {status}, not {want}")
+    # a failed step whose cause is the elimination expiring (watch.c, ovk_sim_expiring): status 14
+    spec = scene_mod.as_scene(scene_mod.load(_parallelogram(tmp, "G0", "[11]")), stop_time=0.3)
+    spec = dataclasses.replace(spec, friction_params={k: dataclasses.replace(v, mu=0.5)
+                                                      for k, v in spec.friction_params.items()})
+    model = compile_checked(spec)
+    w.model(model, spec.solver)
+    if w.run(model, dataclasses.replace(spec.solver, tolerance=1e-8), "dopri5", 0.3) != 14:
+        raise SystemExit("make_cases: the parallelogram with friction did not stop as its elimination expired")
+
+
 def build(tmp: Path) -> Writer:
     w = Writer()
+    watch_stops(w, tmp)
     for name, n in (("planar_f145_wo6", 12), ("spatial_MN_wo5", 12), ("spatial_GH_wo9", 30), ("spatial_GHMN_wo18", 30)):
         spec = spec_of(MECH / f"{name}.toml")
         model = compile_checked(spec)
@@ -161,6 +199,7 @@ def build(tmp: Path) -> Writer:
         random_states(w, model, n, seed=7)
         if name in ("planar_f145_wo6", "spatial_GH_wo9"):
             w.run(model, spec.solver, "dopri5", 0.2)
+            w.run(dataclasses.replace(model, energy_outputs=True), spec.solver, "dopri5", 0.2)  # energy.c
             w.run(model, spec.solver, "rk4", 0.05)
     # quaternions and the spatial axis joints, with friction
     for name in ("door_h1_wo_hinge2", "carriage_guide_wo_rod", "loop_A1_wo_A2"):

@@ -19,7 +19,10 @@
  *   integrate_rk.c      the explicit integrators of overcon.integrators: dopri5 (dense output), rk4
  *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
  *                       work budgets, derived outputs at any point of the last step
- *   svd.c               the singularity monitor: one-sided Jacobi SVD, null space, crossing test
+ *   svd.c               one-sided Jacobi SVD: singular values, the kept rows' singular vectors
+ *   energy.c            the energy outputs: kinetic, potential, the work ledger of friction and loads
+ *   watch.c             the singularity watch of overcon.watch: r and dr/dt after each step, the
+ *                       minimum of r inside a step, singular position or expired/degrading elimination
  *   sim_state.c         a run's state as plain bytes (FMI get/set/serialize FMU state)
  *   api.c               the exported entry points (ovk_*), the only symbols of the library
  * Units and signs: SI, the paper's conventions (those of overcon.evaluation and overcon.joints).
@@ -38,7 +41,7 @@
 
 #include <stddef.h>
 
-#define OVK_ABI 6 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+#define OVK_ABI 7 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
     OVK_OK = 0,
@@ -54,7 +57,8 @@ enum {
     OVK_UNSTABLE = 10, /* integrator: rk4's fixed step beyond its stability boundary (stable_step) */
     OVK_BUDGET = 11,   /* simulation: the work budget (steps or wall time) ran out */
     OVK_SINGULAR_POSITION = 12, /* simulation: the kept Jacobian lost rank (singularity monitor) */
-    OVK_STALLED = 13   /* simulation: time does not advance, or the target was not reached */
+    OVK_STALLED = 13,  /* simulation: time does not advance, or the target was not reached */
+    OVK_ELIMINATION = 14 /* simulation: the elimination expired or degrades (the C run does not choose it again) */
 };
 enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
@@ -73,7 +77,7 @@ enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 #define SIN_BETA_MIN 1e-3
 #define QUAT_NORM_RATE 1.0 /* overcon.kinematics.QUAT_NORM_RATE: the quaternion norm stabilisation (1/s) */
 #define OVK_MAX_FRICTION 32 /* friction joints (and OVK_MAXEQ x that multipliers): overcon.kernel.support checks */
-#define OVK_MSG 512         /* bytes of the failure message, with its terminating zero */
+#define OVK_MSG 1024        /* bytes of the failure message, with its terminating zero */
 
 #if defined(__GNUC__)
 #define OVK_EXPORT __attribute__((visibility("default")))
@@ -187,6 +191,7 @@ typedef struct {
     double max_wall_time; /* s spent in ovk_sim_advance over the run's life; <= 0: no limit */
     double ratio_tol;     /* singularity monitor: sigma_min / sigma_max below it stops the run */
     double stop_time;     /* the scene's stop time (s), named by the budget messages */
+    int energy;           /* keep the work ledger of the energy outputs (two more evaluations a step) */
 } ovk_sim_opts;
 /* Friction forces of the last two solves at distinct times, newest first (simulate._ForcesHistory). */
 typedef struct {
@@ -207,17 +212,29 @@ typedef struct {
     long long friction_iterations, evaluations;
     double max_drift, min_ratio, t_prev, wall_time;
     double *ev_lam, *ev_qf, *guess, *yout; /* scratch: m, ncols, max(m, ncols), ny */
-    double *phi, *J, *gam, *svd;   /* scratch: m, m nh, m, nR nh */
-    double *JR, *N, *N2, *sq;      /* monitor: J_R (nR nh), null-space basis and scratch (nh nh each) */
-    double sign;                   /* monitor: sign of det([J_R; N^T]) at the last check */
-    int *piv;                      /* nh: the monitor's LU pivots */
+    double *phi, *J, *gam;         /* scratch: m, m nh, m */
+    double *W, *W2, *T;            /* watch scratch: weighted rows, their forward difference, Jacobi (m nh each) */
+    double *Q, *sv;                /* watch scratch: left singular vectors (nR nR), singular values (m + nh) */
+    double *ywatch, *ystar, *qwatch; /* watch scratch: states (ny each), coordinate rates (n) */
+    double rate, ratio;            /* watch: dr/dt and r of the kept equations at the last check */
+    double *qload;                 /* energy: the constant loads' Q (nh) */
+    double work_t[2], work_w[2][2], work_p[2][2]; /* energy ledger: (t, work, powers) at the last two step ends */
     double *mem;                   /* the one allocation behind the arrays above and the integrator's */
     int status;
     char msg[OVK_MSG];
 } ovk_sim;
 #define OVK_SIM_NINFO 11
-OVK_HIDDEN int ovk_sim_monitor(ovk_sim *s, double t, const double *y, int first, char *msg);
-OVK_HIDDEN int ovk_sv_ratio(double *B, int c, int r, double *ratio);
+OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
+                             double *ydot, int *its);
+/* energy.c: the energy outputs' ledger */
+OVK_HIDDEN int ovk_sim_energy_start(ovk_sim *s, double t0, const double *y0);
+OVK_HIDDEN int ovk_sim_energy_step(ovk_sim *s);
+/* watch.c: the singularity watch after each step; the expiry behind a failed step */
+OVK_HIDDEN int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg);
+OVK_HIDDEN int ovk_sim_expiring(ovk_sim *s, int failed, char *msg);
+/* svd.c: one-sided Jacobi */
+OVK_HIDDEN int ovk_jacobi_rows(double *B, int k, int r, double *Q);
+OVK_HIDDEN void ovk_singular_values(const double *A, int rows, int cols, double *T, double *sv);
 
 /* failures: the status, with its message written into d->msg (printf format) */
 OVK_HIDDEN int ovk_fail(ovk_data *d, int status, const char *fmt, ...)
@@ -339,6 +356,7 @@ OVK_EXPORT int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps,
 OVK_EXPORT void ovk_sim_state_vector(const ovk_sim *s, double *y);
 OVK_EXPORT void ovk_sim_info(const ovk_sim *s, double *info);
 OVK_EXPORT int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double *fric);
+OVK_EXPORT int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out);
 OVK_EXPORT size_t ovk_sim_state_size(const ovk_sim *s);
 OVK_EXPORT int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size);
 OVK_EXPORT int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size);

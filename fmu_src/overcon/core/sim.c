@@ -2,8 +2,9 @@
  * step. The right-hand side warm-starts the friction solve as Simulation._rhs does (the friction
  * forces of the last two solves extrapolated to t, else the last multipliers); after every
  * accepted step the run checks, in Simulation.advance's order, that time advanced, the singularity
- * monitor's ratio (svd.c), records the step-end friction forces and the constraint drift, and the
- * work budgets. The derived outputs at a point of the last step reuse the last evaluation when it
+ * watch (watch.c; after a failed step, whether the elimination was expiring), keeps the energy
+ * ledger when asked (energy.c), records the step-end friction forces and the constraint drift, and
+ * the work budgets. The derived outputs at a point of the last step reuse the last evaluation when it
  * was at exactly that point, else solve once warm-started from the step-end forces, without
  * changing the run's state (Simulation.derived_outputs).
  *
@@ -64,8 +65,8 @@ static int hist_guess(const ovk_hist *h, int nc, double t, double *out) {
 }
 
 /* One evaluation warm-started from the history h and the multipliers lam (Simulation._solve). */
-static int solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam, double *ydot,
-                 int *its) {
+int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam, double *ydot,
+                  int *its) {
     int mode = 0, damped = 0;
     const double *g = s->guess;
     if (s->ncols && hist_guess(h, s->ncols, t, s->guess)) {
@@ -89,7 +90,7 @@ static int solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const
 /* The integrator's right-hand side (Simulation._rhs). */
 static int sim_rhs(void *ctx, double t, const double *y, double *ydot) {
     ovk_sim *s = ctx;
-    int its = 0, status = solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, ydot, &its);
+    int its = 0, status = ovk_sim_solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, ydot, &its);
     if (status) return status;
     if (s->M->nfj) {
         memcpy(s->lam, s->ev_lam, (size_t)s->m * sizeof(double));
@@ -123,11 +124,15 @@ static void layout(ovk_sim *s, size_t nR) {
     s->phi = p; p += m;
     s->J = p; p += m * nh;
     s->gam = p; p += m;
-    s->svd = p; p += nR * nh;
-    s->JR = p; p += nR * nh;
-    s->N = p; p += nh * nh;
-    s->N2 = p; p += nh * nh;
-    s->sq = p; p += nh * nh;
+    s->W = p; p += m * nh;
+    s->W2 = p; p += m * nh;
+    s->T = p; p += m * nh;
+    s->Q = p; p += nR * nR;
+    s->sv = p; p += m + nh;
+    s->ywatch = p; p += ny;
+    s->ystar = p; p += ny;
+    s->qwatch = p; p += (size_t)s->n;
+    s->qload = p; p += nh;
     s->rk.y = p; /* the integrator's block starts here: ovk_rk_start lays it out */
 }
 
@@ -172,11 +177,10 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->m = M->m;
     s->ncols = M->ncols;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh, nR = (size_t)M->nR;
-    size_t need = 5 * m + 6 * nc + 2 * ny + (m > nc ? m : nc) + m * nh + 2 * nR * nh + 3 * nh * nh +
-                  ovk_rk_doubles(s->ny);
+    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 4 * m * nh + nR * nR + m + nh + (size_t)s->n +
+                  nh + ovk_rk_doubles(s->ny);
     s->mem = calloc(need, sizeof(double));
-    s->piv = calloc(nh ? nh : 1, sizeof(int));
-    if (!s->mem || !s->piv) {
+    if (!s->mem) {
         s->status = OVK_NOMEM;
         snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (%zu bytes)", need * sizeof(double));
         return s;
@@ -185,7 +189,8 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->min_ratio = INFINITY;
     s->t_prev = t0;
     int status = ovk_rk_start(&s->rk, &o->rk, s->ny, s->rk.y, t0, y0, sim_rhs, s, s->msg);
-    if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, 1, s->msg);
+    if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, NULL, 1, s->msg);
+    if (!status) status = ovk_sim_energy_start(s, t0, s->rk.y);
     if (status) s->status = stopped(s, status, "cannot start", t0);
     return s;
 }
@@ -194,7 +199,6 @@ void ovk_sim_free(ovk_sim *s) {
     if (!s) return;
     ovk_free_data(s->d);
     free(s->mem);
-    free(s->piv);
     free(s);
 }
 
@@ -234,7 +238,9 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
                  t_before);
         status = OVK_STALLED;
     }
-    if (!status) status = ovk_sim_monitor(s, rk->t, rk->y, 0, s->msg);
+    if (status && status != OVK_STALLED) status = ovk_sim_expiring(s, status, s->msg);
+    if (!status) status = ovk_sim_monitor(s, rk->t, rk->y, rk->f, 0, s->msg);
+    if (!status) status = ovk_sim_energy_step(s);
     if (status) return stopped(s, status, "integration stopped", rk->t);
     if (s->warm.count) hist_push(&s->step_warm, s->ncols, rk->t, s->warm.q[0]);
     if ((status = ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam))) {
@@ -299,7 +305,7 @@ int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double 
     int same = s->has_last && s->last_t == t;
     for (int i = 0; same && i < s->ny; i++) same = s->last_y[i] == y[i];
     if (!same) {
-        int its = 0, status = solve(s, t, y, s->step_warm.count ? &s->step_warm : &s->warm,
+        int its = 0, status = ovk_sim_solve(s, t, y, s->step_warm.count ? &s->step_warm : &s->warm,
                                     s->has_lam ? s->lam : NULL, s->yout, &its);
         if (status) return status;
         lam = s->ev_lam;

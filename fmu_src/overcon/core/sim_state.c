@@ -11,7 +11,7 @@
 #include "core.h"
 
 #define STATE_MAGIC "OVKSIM"
-#define STATE_VERSION 1
+#define STATE_VERSION 3
 
 typedef struct {
     unsigned char *w;       /* saving: the next byte to write */
@@ -80,8 +80,11 @@ static void io_sim(codec *c, ovk_sim *s) {
     io(c, &s->max_drift, sizeof s->max_drift);
     io(c, &s->min_ratio, sizeof s->min_ratio);
     io(c, &s->t_prev, sizeof s->t_prev);
-    io(c, &s->sign, sizeof s->sign);
-    io(c, s->N, (size_t)(s->nh - s->M->nR) * (size_t)s->nh * sizeof(double));
+    io(c, &s->rate, sizeof s->rate);
+    io(c, &s->ratio, sizeof s->ratio);
+    io(c, s->work_t, sizeof s->work_t);
+    io(c, s->work_w, sizeof s->work_w);
+    io(c, s->work_p, sizeof s->work_p);
 }
 
 size_t ovk_sim_state_size(const ovk_sim *s) {

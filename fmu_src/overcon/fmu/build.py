@@ -24,8 +24,7 @@ At run time it needs only a Python with numpy and scipy (the binary finds one: s
 ``native/overcon_fmi2.c`` and the README).
 
 ``runtime="c"`` (``overcon build --runtime c``) builds an FMU without Python where the C FMI layer
-covers the model (:func:`overcon.fmu.cmodel.support`: the core's joints and rotations, no energy
-outputs)::
+covers the model (:func:`overcon.fmu.cmodel.support`: the core's joints and rotations)::
 
     modelDescription.xml              the same variables
     binaries/<platform>/<scene>.so    the FMI layer over the core (native/fmi2_*.c and core/*.c),
@@ -37,7 +36,7 @@ outputs)::
 
 Its integrators are dopri5 and rk4 (core/integrate_rk.c); setting solver.method to dop853 or
 radau fails at initialization with the reason. A model the C layer does not cover (min-norm or
-compliant redundancy, energy outputs, ...) is built with the Python runtime, and the build output
+compliant redundancy, ...) is built with the Python runtime, and the build output
 says so. ``<hash>`` (and the GUID) is a SHA-256 over the scene
 file, the mechanism file, the overcon source (Python, the binary's C) and the compiled core, so FMUs of different scenes (or of
 one scene from different sources) never share module names in one process, and rebuilding

@@ -17,7 +17,8 @@ terminating zero, then the bytes and the zero; an array an int32 count then the 
 3. the run: i n, i nh, i quaternion (1: orientation coordinates are quaternions), d start time,
    d stop time, array d y0;
 4. outputs: i count, then per output i kind (:data:`OUT_KINDS`), i a, i b (a position: the index
-   into q; a velocity: the index into h; a reaction: joint and component; friction: joint);
+   into q; a velocity: the index into h; an energy: 0-3 in spec.ENERGY_OUTPUTS order; a reaction: joint
+   and component; friction: joint);
 5. variables: i count, then per variable string name, i type (:data:`TYPES`), i causality, i
    variability (:data:`VARIABILITIES`), i key kind (:data:`KEYS`), i key argument (the output index,
    the constant 0/1, the parameter index);
@@ -42,7 +43,7 @@ TYPES = {"Real": 0, "Integer": 1, "Boolean": 2, "String": 3}
 CAUSALITIES = {"output": 0, "parameter": 1, "local": 2}
 VARIABILITIES = {"continuous": 0, "constant": 1, "fixed": 2, "tunable": 3, "discrete": 4}
 KEYS = {"output": 0, "constant": 1, "param": 2, "stable_step": 3}
-OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6}
+OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6, "energy": 7}
 TARGETS = {"mu": 1, "v_reg": 2, "mu_static": 3, "v_stribeck": 4, "solver.method": 10, "solver.tolerance": 11,
            "solver.step": 12, "solver.max_step": 13, "solver.baumgarte": 14, "solver.friction_tol": 15,
            "solver.friction_max_iter": 16, "solver.kernel": 17, "solver.max_internal_steps": 18,
@@ -54,11 +55,8 @@ DOUBLE_FIELDS = {"Minv", "mass", "inertia", "gravity", "jconst", "jlawp", "lp"}
 
 def support(model) -> str | None:
     """None if the C FMU runs ``model``, else the reason (the Python FMU runs it then): the core's
-    coverage (:func:`overcon.kernel.support`) and outputs the C layer computes (not the energies)."""
-    why = kernel_mod.support(model)
-    if why is None and model.energy_outputs:
-        why = "energy outputs (the C FMU reports positions, velocities, reactions and friction forces)"
-    return why
+    coverage (:func:`overcon.kernel.support`); the C layer computes every output kind."""
+    return kernel_mod.support(model)
 
 
 class _Out:
@@ -91,6 +89,7 @@ def _outputs(w: _Out, model) -> None:
     """The output plan in output order (``model.output_names()``)."""
     rows = [(OUT_KINDS["position"], i, 0) for _, i in model.position_outputs]
     rows += [(OUT_KINDS["velocity"], i, 0) for _, i in model.velocity_outputs]
+    rows += [(OUT_KINDS["energy"], k, 0) for k in range(4)] if model.energy_outputs else []  # spec.ENERGY_OUTPUTS order
     rows += [(OUT_KINDS["reaction"], j, comp) for j in model.reaction_joints
              for comp in range(len(model.joints[j].components))]
     rows += [(OUT_KINDS["friction"], j, 0) for j in model.friction_outputs]

@@ -50,7 +50,7 @@ typedef struct {
 enum { T_REAL = 0, T_INTEGER = 1, T_BOOLEAN = 2, T_STRING = 3 };
 enum { K_OUTPUT = 0, K_CONSTANT = 1, K_PARAM = 2, K_STABLE_STEP = 3 };
 enum { V_CONTINUOUS = 0, V_CONSTANT = 1, V_FIXED = 2, V_TUNABLE = 3, V_DISCRETE = 4 };
-enum { O_POSITION = 1, O_VELOCITY = 2, O_REACTION = 5, O_FRICTION = 6 };
+enum { O_POSITION = 1, O_VELOCITY = 2, O_REACTION = 5, O_FRICTION = 6, O_ENERGY = 7 }; /* energy: a = 0-3 */
 enum { P_MU = 1, P_VREG = 2, P_MU_STATIC = 3, P_VSTRIBECK = 4, P_METHOD = 10, P_TOLERANCE = 11, P_STEP = 12,
        P_MAX_STEP = 13, P_BAUMGARTE = 14, P_FRICTION_TOL = 15, P_FRICTION_MAX_ITER = 16, P_KERNEL = 17,
        P_MAX_INTERNAL_STEPS = 18, P_MAX_WALL_TIME = 19 };
@@ -76,6 +76,7 @@ typedef struct {
     int n, nh, ny, quaternion;
     double start_time, stop_time, *y0;
     int nout, nstate_out; /* outputs; the first nstate_out come from the state alone */
+    int energy;           /* energy outputs: the run keeps the work ledger */
     fmu_out *out;
     int nvar, nparam, nmsg;
     fmu_var *var;

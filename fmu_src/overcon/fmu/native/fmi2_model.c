@@ -129,6 +129,7 @@ static void read_rest(reader *r, fmu_model *fm) {
     for (int k = 0; k < fm->nout && !r->bad; k++) {
         fm->out[k].kind = rd_int(r), fm->out[k].a = rd_int(r), fm->out[k].b = rd_int(r);
         if (fm->out[k].kind == O_POSITION || fm->out[k].kind == O_VELOCITY) fm->nstate_out = k + 1;
+        if (fm->out[k].kind == O_ENERGY) fm->energy = 1;
     }
     if (counted(r, &fm->nvar) && (fm->var = calloc((size_t)fm->nvar + 1, sizeof *fm->var)) == NULL) r->bad = 2;
     for (int k = 0; k < fm->nvar && !r->bad; k++) {
@@ -154,7 +155,8 @@ static int check_tables(const fmu_model *fm, char *err, size_t errsize) {
         int ok = (o->kind == O_POSITION && o->a >= 0 && o->a < fm->n) ||
                  (o->kind == O_VELOCITY && o->a >= 0 && o->a < fm->nh) ||
                  (o->kind == O_REACTION && o->a >= 0 && o->a < fm->M.nj && o->b >= 0 && o->b < OVK_NREAC) ||
-                 (o->kind == O_FRICTION && o->a >= 0 && o->a < fm->M.nj);
+                 (o->kind == O_FRICTION && o->a >= 0 && o->a < fm->M.nj) ||
+                 (o->kind == O_ENERGY && o->a >= 0 && o->a < 4);
         if (!ok) return snprintf(err, errsize, "output %d: kind %d, %d, %d out of range", k, o->kind, o->a, o->b), 0;
     }
     for (int k = 0; k < fm->nvar; k++) {

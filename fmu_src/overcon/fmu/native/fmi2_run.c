@@ -78,14 +78,21 @@ static void state_outputs(const fmu_inst *c, const double *y, double *out) {
     }
 }
 
-/* The reactions and friction forces at (t, y) into out (ovk_sim_outputs); a status on failure. */
+/* The energies, reactions and friction forces at (t, y) into out (ovk_sim_energy, ovk_sim_outputs:
+ * each only when an output needs it); a status on failure. */
 static int derived_outputs(fmu_inst *c, double t, const double *y, double *out) {
     const fmu_model *fm = &c->fm;
-    int status = ovk_sim_outputs(c->sim, t, y, c->reac, c->fric);
+    int forces = 0, status = OVK_OK;
+    double energy[4] = {0.0, 0.0, 0.0, 0.0};
+    for (int k = fm->nstate_out; k < fm->nout; k++) forces |= fm->out[k].kind != O_ENERGY;
+    if (fm->energy) status = ovk_sim_energy(c->sim, t, y, energy);
+    if (!status && forces) status = ovk_sim_outputs(c->sim, t, y, c->reac, c->fric);
     if (status) return status;
     for (int k = fm->nstate_out; k < fm->nout; k++) {
         const fmu_out *o = &fm->out[k];
-        out[k] = o->kind == O_REACTION ? c->reac[o->a * OVK_NREAC + o->b] : c->fric[o->a];
+        out[k] = o->kind == O_ENERGY     ? energy[o->a]
+                 : o->kind == O_REACTION ? c->reac[o->a * OVK_NREAC + o->b]
+                                         : c->fric[o->a];
     }
     return OVK_OK;
 }
@@ -136,7 +143,7 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
                             "without Python: dopri5 and rk4); overcon build --runtime python builds one with every "
                             "method", method), 0;
         ovk_sim_opts o = {{m, 1, param(c, P_TOLERANCE), param(c, P_MAX_STEP), 0.0, param(c, P_STEP)},
-                          LIFE_MAX_STEPS, LIFE_MAX_WALL_TIME, 1e-6, fm->stop_time};
+                          LIFE_MAX_STEPS, LIFE_MAX_WALL_TIME, 1e-6, fm->stop_time, fm->energy};
         c->sim = ovk_sim_new(&c->M, &o, c->start_time, fm->y0);
         if (!c->sim) return snprintf(c->msg, sizeof c->msg, "MemoryError: out of memory"), 0;
         if (ovk_sim_status(c->sim)) {

@@ -1,0 +1,158 @@
+/* The energy outputs of a C run, as overcon.simulate.Simulation's (energy.kinetic, potential,
+ * dissipated, applied): the kinetic energy 1/2 h^T M h and the potential energy of gravity and the
+ * springs at a state; the work of joint friction and of the constant forces and torques since the
+ * start from the ledger of simulate._WorkLedger: Simpson's rule over each accepted step on the
+ * powers at its start, middle (dense output) and end, read inside the last step by the cubic
+ * Hermite interpolant of the work and the powers at the step's ends. Each power costs one
+ * evaluation of Eq. 18 for the friction forces when the model has friction joints, warm-started
+ * like the dense output and counted as the Python run counts it. */
+#include <math.h>
+#include <string.h>
+
+#include "core.h"
+#include "small.h"
+
+/* The two attachment points of spring lp (dim entries each) at the frames f. */
+static void spring_points(const ovk_model *M, const ovk_frames *f, const double *lp, int bi, int bj, double *pi,
+                          double *pj) {
+    int si = ovk_slot(M, bi), sj = ovk_slot(M, bj), dim = M->dim;
+    double t[3];
+    if (dim == 2) {
+        mat2vec(f->R + 4 * si, lp + 3, t);
+        for (int i = 0; i < 2; i++) pi[i] = f->r[2 * si + i] + t[i];
+        mat2vec(f->R + 4 * sj, lp + 6, t);
+        for (int i = 0; i < 2; i++) pj[i] = f->r[2 * sj + i] + t[i];
+    } else {
+        mat3vec(f->R + 9 * si, lp + 3, t);
+        for (int i = 0; i < 3; i++) pi[i] = f->r[3 * si + i] + t[i];
+        mat3vec(f->R + 9 * sj, lp + 6, t);
+        for (int i = 0; i < 3; i++) pj[i] = f->r[3 * sj + i] + t[i];
+    }
+}
+
+/* [friction power dissipated (W, >= 0), power of the constant forces and torques (W)] at
+ * (t, y) (Simulation._powers). */
+static int powers(ovk_sim *s, double t, const double *y, double *p) {
+    const ovk_model *M = s->M;
+    int kh = M->nh_b, dim = M->dim, n = s->n;
+    const double *h = y + n;
+    ovk_frames_build(M, y, h, &s->d->f);
+    memset(s->qload, 0, (size_t)s->nh * sizeof(double));
+    for (int l = 0; l < M->nl; l++) {
+        const double *lp = M->lp + NLD * l;
+        int bi = M->lbi[l];
+        if (M->ltype[l] == LD_FORCE) {
+            for (int i = 0; i < dim; i++) s->qload[bi * kh + i] += lp[i];
+        } else if (M->ltype[l] == LD_TORQUE && dim == 2) {
+            s->qload[bi * kh + 2] += lp[0];
+        } else if (M->ltype[l] == LD_TORQUE) {
+            double tb[3];
+            mat3tvec(s->d->f.R + 9 * bi, lp, tb);
+            for (int i = 0; i < 3; i++) s->qload[bi * kh + 3 + i] += tb[i];
+        }
+    }
+    double applied = 0.0;
+    for (int k = 0; k < s->nh; k++) applied += h[k] * s->qload[k];
+    p[0] = 0.0;
+    p[1] = applied;
+    if (!M->nfj) return OVK_OK;
+    int its = 0, status = ovk_sim_solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, s->yout, &its);
+    if (status) return status;
+    s->evaluations++;
+    double fp = 0.0;
+    for (int k = 0; k < s->ncols; k++) fp += h[M->cols[k]] * s->ev_qf[k];
+    p[0] = -fp;
+    return OVK_OK;
+}
+
+/* The ledger at the start t0 (y0): no work yet, the powers there. */
+int ovk_sim_energy_start(ovk_sim *s, double t0, const double *y0) {
+    if (!s->o.energy) return OVK_OK;
+    double p[2];
+    int status = powers(s, t0, y0, p);
+    if (status) return status;
+    for (int k = 0; k < 2; k++) {
+        s->work_t[k] = t0;
+        s->work_w[k][0] = s->work_w[k][1] = 0.0;
+        s->work_p[k][0] = p[0], s->work_p[k][1] = p[1];
+    }
+    return OVK_OK;
+}
+
+/* The ledger after the accepted step (t_old, t] (_WorkLedger.step): Simpson on its powers. */
+int ovk_sim_energy_step(ovk_sim *s) {
+    if (!s->o.energy) return OVK_OK;
+    ovk_rk *rk = &s->rk;
+    double mid = 0.5 * (rk->t_old + rk->t), pm[2], pe[2];
+    ovk_rk_dense(rk, mid, s->ystar);
+    int status = powers(s, mid, s->ystar, pm);
+    if (!status) status = powers(s, rk->t, rk->y, pe);
+    if (status) return status;
+    double t0 = s->work_t[1], w[2];
+    for (int k = 0; k < 2; k++)
+        w[k] = s->work_w[1][k] + (rk->t - t0) / 6.0 * (s->work_p[1][k] + 4.0 * pm[k] + pe[k]);
+    s->work_t[0] = s->work_t[1];
+    memcpy(s->work_w[0], s->work_w[1], sizeof w);
+    memcpy(s->work_p[0], s->work_p[1], sizeof w);
+    s->work_t[1] = rk->t;
+    memcpy(s->work_w[1], w, sizeof w);
+    memcpy(s->work_p[1], pe, sizeof pe);
+    return OVK_OK;
+}
+
+/* The work [dissipated, applied] at t inside the last step (_WorkLedger.at). */
+static void work_at(const ovk_sim *s, double t, double *out) {
+    double t0 = s->work_t[0], t1 = s->work_t[1];
+    if (t1 <= t0 || t >= t1) {
+        out[0] = s->work_w[1][0], out[1] = s->work_w[1][1];
+        return;
+    }
+    double h = t1 - t0, x = (t - t0) / (t1 - t0), x2 = pow(x, 2.0), x3 = pow(x, 3.0);
+    for (int k = 0; k < 2; k++)
+        out[k] = (2 * x3 - 3 * x2 + 1) * s->work_w[0][k] + (x3 - 2 * x2 + x) * h * s->work_p[0][k] +
+                 (-2 * x3 + 3 * x2) * s->work_w[1][k] + (x3 - x2) * h * s->work_p[1][k];
+}
+
+/* [kinetic, potential, dissipated, applied] (J) at (t, y) of the last step (Simulation.state_outputs);
+ * the run's state is left as it was. */
+int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out) {
+    if (!s) return OVK_NOMEM;
+    if (s->status) return s->status;
+    const ovk_model *M = s->M;
+    int nb = M->nb, kh = M->nh_b, dim = M->dim, n = s->n;
+    const double *h = y + n;
+    double kin = 0.0;
+    for (int b = 0; b < nb; b++)
+        for (int i = 0; i < kh; i++) {
+            double mass = i < dim ? M->mass[b] : dim == 3 ? M->inertia[3 * b + i - 3] : 1.0 / M->Minv[b * kh + i];
+            kin += mass * h[b * kh + i] * h[b * kh + i];
+        }
+    memcpy(s->ystar, y, (size_t)s->ny * sizeof(double));
+    for (int b = 0; M->nq_b == 7 && b < nb; b++) { /* quaternions as e / |e| (normalized_coordinates) */
+        double *e = s->ystar + 7 * b + 3, norm = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3]);
+        for (int i = 0; i < 4; i++) e[i] /= norm;
+    }
+    ovk_frames_build(M, s->ystar, s->ystar + n, &s->d->f);
+    const ovk_frames *f = &s->d->f;
+    double grav = 0.0;
+    for (int b = 0; b < nb; b++) {
+        double rg = 0.0;
+        for (int i = 0; i < dim; i++) rg += f->r[dim * b + i] * M->gravity[i];
+        grav += M->mass[b] * rg;
+    }
+    double pot = -grav;
+    for (int l = 0; l < M->nl; l++) {
+        if (M->ltype[l] != LD_SPRING) continue;
+        const double *lp = M->lp + NLD * l;
+        double pi[3] = {0}, pj[3] = {0}, len2 = 0.0;
+        spring_points(M, f, lp, M->lbi[l], M->lbj[l], pi, pj);
+        for (int i = 0; i < dim; i++) len2 += (pi[i] - pj[i]) * (pi[i] - pj[i]);
+        double stretch = sqrt(len2) - lp[10];
+        pot += 0.5 * lp[9] * stretch * stretch;
+    }
+    out[0] = 0.5 * kin;
+    out[1] = pot;
+    if (s->o.energy) work_at(s, t, out + 2);
+    else out[2] = out[3] = 0.0;
+    return OVK_OK;
+}

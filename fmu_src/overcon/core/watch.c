@@ -1,0 +1,275 @@
+/* The singularity watch of a C run, as overcon.watch.SingularityMonitor with the run's checks of
+ * overcon.simulate.Simulation._watch and _recover: after every accepted step
+ * r = sigma_min / sigma_max of the kept Jacobian J_R M^-1/2 (unit-norm rows) and its rate dr/dt
+ * (ds_k/dt = u_k^T J' v_k, J' by a forward difference of J along q' = the integrator's
+ * derivative); a step that starts with r falling and ends with r rising holds a minimum of r,
+ * located by golden section on the dense output; r below ratio_tol is a singular position,
+ * judged by the whole Jacobian's numerical rank: the mechanism's (OVK_SINGULAR_POSITION) or only
+ * the kept set's (OVK_ELIMINATION, an expired elimination). The Python run then chooses the
+ * eliminated equations again (or stops naming other valid ones), and it does so early when the
+ * elimination degrades (r < 1e-3 with the whole Jacobian 100 times better conditioned): the C run
+ * has no pivoted QR, so it stops there with OVK_ELIMINATION, saying so. Messages are worded as
+ * the Python run's, so a stop reads the same from either runtime. */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "core.h"
+
+#define DEGRADED_RATIO 1e-3  /* watch.DEGRADED_RATIO */
+#define DEGRADED_MARGIN 100.0 /* watch.DEGRADED_MARGIN */
+#define SEARCH_REL 1e-9      /* watch.SEARCH_REL */
+#define C_REFUSES "the C runtime does not choose the eliminated equations again: build with --runtime python"
+
+/* A message into msg (OVK_MSG bytes, cut there) and the status. */
+#if defined(__GNUC__)
+__attribute__((format(printf, 3, 4)))
+#endif
+static int say(char *msg, int status, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, OVK_MSG, fmt, ap);
+    va_end(ap);
+    return status;
+}
+
+/* Rows `rows` (k of them; NULL: all m) of Phi_h at y times M^-1/2, each scaled to unit norm,
+ * into out (k x nh) (watch.weighted_rows). The frames at y stay in the workspace. */
+static int weighted(ovk_sim *s, const double *y, const int *rows, int k, double *out, char *msg) {
+    const ovk_model *M = s->M;
+    int nh = s->nh, status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
+    if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
+    for (int i = 0; i < k; i++) {
+        const double *row = s->J + (size_t)(rows ? rows[i] : i) * nh;
+        double *o = out + (size_t)i * nh, norm2 = 0.0;
+        for (int c = 0; c < nh; c++) {
+            o[c] = row[c] * sqrt(M->Minv[c]);
+            norm2 += o[c] * o[c];
+        }
+        double norm = sqrt(norm2);
+        for (int c = 0; c < nh; c++) o[c] /= norm;
+    }
+    return OVK_OK;
+}
+
+/* sigma_min / sigma_max of the k x nh rows A (watch.ratio: 1 for no rows, 0 for no sigma_max). */
+static double ratio_of(ovk_sim *s, const double *A, int k) {
+    if (!k) return 1.0;
+    ovk_singular_values(A, k, s->nh, s->T, s->sv);
+    return s->sv[0] > 0.0 ? s->sv[k - 1] / s->sv[0] : 0.0;
+}
+
+/* The whole Jacobian's singular values at y into s->sv (min(m, nh) of them, largest first). */
+static int full_values(ovk_sim *s, const double *y, char *msg) {
+    int status = weighted(s, y, NULL, s->m, s->W2, msg);
+    if (!status) ovk_singular_values(s->W2, s->m, s->nh, s->T, s->sv);
+    return status;
+}
+
+/* The whole Jacobian's numerical rank at y (watch.numerical_rank with ratio_tol). */
+static int full_rank(ovk_sim *s, const double *y, int *rank, char *msg) {
+    int status = full_values(s, y, msg), k = s->m < s->nh ? s->m : s->nh;
+    *rank = 0;
+    for (int i = 0; !status && i < k; i++) *rank += s->sv[i] >= s->o.ratio_tol * s->sv[0];
+    return status;
+}
+
+/* u^T D v for D (k x nh), u (k), v (nh). */
+static double bilinear(const double *u, const double *D, const double *v, int k, int nh) {
+    double out = 0.0;
+    for (int a = 0; a < k; a++) {
+        double row = 0.0;
+        for (int c = 0; c < nh; c++) row += D[(size_t)a * nh + c] * v[c];
+        out += u[a] * row;
+    }
+    return out;
+}
+
+/* (r, dr/dt) at y (watch.ratio_and_rate): qdot the coordinate rates (NULL: computed at y). */
+static int ratio_and_rate(ovk_sim *s, const double *y, const double *qdot, double *r, double *rate, char *msg) {
+    const ovk_model *M = s->M;
+    int nR = M->nR, nh = s->nh, n = s->n;
+    int status = weighted(s, y, M->retained, nR, s->W, msg);
+    if (!status && !qdot) {
+        if ((status = ovk_rates(M, s->d, y, y + n, s->qwatch)))
+            return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
+        qdot = s->qwatch;
+    }
+    if (status) return status;
+    memcpy(s->T, s->W, (size_t)nR * nh * sizeof(double));
+    ovk_jacobi_rows(s->T, nR, nh, s->Q); /* rows: sigma_i v_i; rows of Q: u_i */
+    int lo = 0, hi = 0;
+    for (int i = 0; i < nR; i++) {
+        double *v = s->T + (size_t)i * nh, sv = 0.0;
+        for (int c = 0; c < nh; c++) sv += v[c] * v[c];
+        s->sv[i] = sqrt(sv);
+        for (int c = 0; c < nh; c++) v[c] = s->sv[i] > 0.0 ? v[c] / s->sv[i] : 0.0;
+        if (s->sv[i] < s->sv[lo]) lo = i;
+        if (s->sv[i] > s->sv[hi]) hi = i;
+    }
+    double most = 0.0;
+    for (int i = 0; i < n; i++) most = fabs(qdot[i]) > most ? fabs(qdot[i]) : most;
+    double dt = 1e-7 / (most > 1.0 ? most : 1.0);
+    memcpy(s->ywatch, y, (size_t)s->ny * sizeof(double));
+    for (int i = 0; i < n; i++) s->ywatch[i] = y[i] + dt * qdot[i];
+    if ((status = weighted(s, s->ywatch, M->retained, nR, s->W2, msg))) return status;
+    for (size_t i = 0; i < (size_t)nR * nh; i++) s->W2[i] = (s->W2[i] - s->W[i]) / dt; /* J' */
+    double ds_min = bilinear(s->Q + (size_t)lo * nR, s->W2, s->T + (size_t)lo * nh, nR, nh);
+    double ds_max = bilinear(s->Q + (size_t)hi * nR, s->W2, s->T + (size_t)hi * nh, nR, nh);
+    double smax = s->sv[hi];
+    *r = smax > 0.0 ? s->sv[lo] / smax : 0.0;
+    *rate = smax > 0.0 ? (ds_min - *r * ds_max) / smax : 0.0;
+    return OVK_OK;
+}
+
+/* r of the kept equations at tau on the last step's dense output (the state into s->ywatch). */
+static int ratio_at(ovk_sim *s, double tau, double *r, char *msg) {
+    ovk_rk_dense(&s->rk, tau, s->ywatch);
+    int status = weighted(s, s->ywatch, s->M->retained, s->M->nR, s->W2, msg);
+    if (!status) *r = ratio_of(s, s->W2, s->M->nR);
+    return status;
+}
+
+/* The minimum of r on [a, b] along the dense output by golden section (watch._minimum). */
+static int minimum(ovk_sim *s, double a, double b, double *t_min, double *r_min, char *msg) {
+    const double golden = (sqrt(5.0) - 1.0) / 2.0, eps = 2.220446049250313e-16;
+    double c = b - golden * (b - a), d = a + golden * (b - a), fc = 0.0, fd = 0.0;
+    int status = ratio_at(s, c, &fc, msg);
+    if (!status) status = ratio_at(s, d, &fd, msg);
+    double wide = fabs(a) > fabs(b) ? fabs(a) : fabs(b), stop = SEARCH_REL * (b - a);
+    if (8.0 * eps * wide > stop) stop = 8.0 * eps * wide;
+    while (!status && b - a > stop) {
+        if (fc < fd) {
+            b = d, d = c, fd = fc;
+            c = b - golden * (b - a);
+            status = ratio_at(s, c, &fc, msg);
+        } else {
+            a = c, c = d, fc = fd;
+            d = a + golden * (b - a);
+            status = ratio_at(s, d, &fd, msg);
+        }
+    }
+    *t_min = fc < fd ? c : d;
+    *r_min = fc < fd ? fc : fd;
+    return status;
+}
+
+/* r for a message (watch.shown_ratio). */
+static void shown(double r, char *out, size_t size) {
+    if (r >= 1e-9)
+        snprintf(out, size, "%.2g", r);
+    else
+        snprintf(out, size, "< 1e-09");
+}
+
+/* The eliminated equations as "Phi3, Phi7" (1-based; "none"). */
+static void eliminated(const ovk_model *M, char *out, size_t size) {
+    size_t used = 0;
+    out[0] = '\0';
+    for (int row = 0, k = 0; row < M->m; row++) {
+        if (k < M->nR && M->retained[k] == row) {
+            k++;
+            continue;
+        }
+        int w = snprintf(out + used, size - used, "%sPhi%d", used ? ", " : "", row + 1);
+        if (w < 0 || (size_t)w >= size - used) break;
+        used += (size_t)w;
+    }
+    if (!used) snprintf(out, size, "none");
+}
+
+/* r at t (the state y) judged (watch._judge): nothing when r >= ratio_tol; else a singular
+ * position of the mechanism when the whole Jacobian lost rank too, or the kept set's expiry.
+ * passed: the located minimum lies strictly inside the step (a, b). */
+static int judge(ovk_sim *s, double t, double r, const double *y, int passed, double a, double b, char *msg) {
+    if (r < s->min_ratio) s->min_ratio = r;
+    if (r >= s->o.ratio_tol) return OVK_OK;
+    char where[160], rs[24], names[200];
+    if (passed)
+        snprintf(where, sizeof where, "t = %.9g s: the motion passed a singular position (between the steps at "
+                 "t = %.9g s and %.9g s)", t, a, b);
+    else
+        snprintf(where, sizeof where, "t = %.9g s: singular position", t);
+    int full = 0, nR = s->M->nR, status = full_rank(s, y, &full, msg);
+    if (status) return status;
+    shown(r, rs, sizeof rs);
+    if (full < nR)
+        return snprintf(msg, OVK_MSG, "%s: the mechanism's constraint Jacobian is rank deficient (rank %d < %d; "
+                        "kept equations' sigma_min/sigma_max %s, below %g)", where, full, nR, rs, s->o.ratio_tol),
+               OVK_SINGULAR_POSITION;
+    eliminated(s->M, names, sizeof names);
+    return say(msg, OVK_ELIMINATION, "%s: the kept equations are no longer independent (their sigma_min/sigma_max %s, "
+                    "below %g), while the mechanism is regular there (all equations keep rank %d): the elimination "
+                    "chosen at the start has expired; " C_REFUSES " (eliminated: %s)", where, rs, s->o.ratio_tol,
+                    full, names);
+}
+
+/* After the check at (t, y) with kept ratio r: OVK_ELIMINATION when the elimination degrades
+ * (watch.SingularityMonitor._degrading), where the Python run may choose it again. */
+static int degrading(ovk_sim *s, double t, double r, const double *y, char *msg) {
+    int nR = s->M->nR, k = s->m < s->nh ? s->m : s->nh;
+    if (r >= DEGRADED_RATIO) return OVK_OK;
+    int status = full_values(s, y, msg);
+    if (status) return status;
+    double full = k >= nR && s->sv[0] > 0.0 ? s->sv[nR - 1] / s->sv[0] : 0.0;
+    if (!(full >= DEGRADED_MARGIN * r)) return OVK_OK;
+    char rs[24], names[200];
+    shown(r, rs, sizeof rs);
+    eliminated(s->M, names, sizeof names);
+    return say(msg, OVK_ELIMINATION, "t = %.9g s: the elimination degrades: the kept equations' sigma_min/sigma_max %s "
+                    "is below %g while the whole Jacobian's is %.2g; the Python run chooses the eliminated equations "
+                    "again here when the motion does not depend on them; " C_REFUSES " (eliminated: %s)", t, rs,
+                    DEGRADED_RATIO, full, names);
+}
+
+/* The watch at (t, y) (SingularityMonitor.check and, first = 1, its start at t0: no minimum
+ * search, no degrading test); qdot: the integrator's q' at y (NULL: the coordinate rates). */
+int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg) {
+    if (!s->M->nR) return OVK_OK;
+    double r = 1.0, rate = 0.0;
+    int status = ratio_and_rate(s, y, qdot, &r, &rate, msg);
+    if (status) return status;
+    s->ratio = r;
+    if (!first && s->rate < 0.0 && 0.0 < rate && t > s->t_prev) {
+        double t_min = t, r_min = r;
+        status = minimum(s, s->t_prev, t, &t_min, &r_min, msg);
+        if (!status && r_min < r) {
+            ovk_rk_dense(&s->rk, t_min, s->ywatch);
+            status = judge(s, t_min, r_min, s->ywatch, 1, s->t_prev, t, msg);
+        }
+        if (status) return status;
+    }
+    if ((status = judge(s, t, r, y, 0, 0.0, 0.0, msg))) return status;
+    s->t_prev = t;
+    s->rate = rate;
+    return first ? OVK_OK : degrading(s, t, r, y, msg);
+}
+
+/* After the step from the accepted state failed with status `failed` (its message in msg):
+ * OVK_ELIMINATION with the expiry's message when the kept equations were about to lose rank
+ * while the mechanism stays regular (SingularityMonitor.expiring, Simulation._recover), else
+ * `failed` unchanged. */
+int ovk_sim_expiring(ovk_sim *s, int failed, char *msg) {
+    const ovk_rk *rk = &s->rk;
+    double h = rk->t - rk->t_old;
+    int n = s->n, recoverable = failed == OVK_FRICTION || failed == OVK_EULER || failed == OVK_STEP_SMALL ||
+                                failed == OVK_STIFF || failed == OVK_UNSTABLE;
+    if (!recoverable || !s->M->nR || s->rate >= 0.0 || !(h > 0.0) || rk->nsteps == 0) return failed;
+    double dt = s->ratio / -s->rate;
+    if (dt > 2.0 * h) return failed;
+    char why[OVK_MSG], names[200];
+    memcpy(why, msg, OVK_MSG);
+    why[OVK_MSG - 1] = '\0';
+    if (ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam) || ovk_rates(s->M, s->d, rk->y, rk->y + n, s->qwatch))
+        return failed;
+    memcpy(s->ystar, rk->y, (size_t)s->ny * sizeof(double));
+    for (int i = 0; i < n; i++) s->ystar[i] = rk->y[i] + dt * s->qwatch[i];
+    int full = 0;
+    if (full_rank(s, s->ystar, &full, msg)) return snprintf(msg, OVK_MSG, "%s", why), failed;
+    if (full < s->M->nR) return snprintf(msg, OVK_MSG, "%s", why), failed;
+    eliminated(s->M, names, sizeof names);
+    return say(msg, OVK_ELIMINATION, "t = %.9g s: the kept equations lose rank here while the mechanism stays regular: the "
+             "elimination chosen at the start expires (the step from t = %.9g s failed: %.400s); " C_REFUSES
+             " (eliminated: %s)", rk->t + dt, rk->t, why, names);
+}

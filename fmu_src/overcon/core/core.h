@@ -297,6 +297,8 @@ OVK_HIDDEN double ovk_axis_friction_output(const ovk_model *M, int j, const ovk_
 
 /* loads.c */
 OVK_HIDDEN int ovk_loads(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN void ovk_spring_points(const ovk_model *M, const ovk_frames *f, const double *lp, int bi, int bj,
+                                  double *pi, double *pj);
 
 /* kkt.c */
 OVK_HIDDEN void ovk_kkt_rhs(const ovk_model *M, ovk_data *d, const double *h);

@@ -12,24 +12,6 @@
 #include "core.h"
 #include "small.h"
 
-/* The two attachment points of spring lp (dim entries each) at the frames f. */
-static void spring_points(const ovk_model *M, const ovk_frames *f, const double *lp, int bi, int bj, double *pi,
-                          double *pj) {
-    int si = ovk_slot(M, bi), sj = ovk_slot(M, bj), dim = M->dim;
-    double t[3];
-    if (dim == 2) {
-        mat2vec(f->R + 4 * si, lp + 3, t);
-        for (int i = 0; i < 2; i++) pi[i] = f->r[2 * si + i] + t[i];
-        mat2vec(f->R + 4 * sj, lp + 6, t);
-        for (int i = 0; i < 2; i++) pj[i] = f->r[2 * sj + i] + t[i];
-    } else {
-        mat3vec(f->R + 9 * si, lp + 3, t);
-        for (int i = 0; i < 3; i++) pi[i] = f->r[3 * si + i] + t[i];
-        mat3vec(f->R + 9 * sj, lp + 6, t);
-        for (int i = 0; i < 3; i++) pj[i] = f->r[3 * sj + i] + t[i];
-    }
-}
-
 /* [friction power dissipated (W, >= 0), power of the constant forces and torques (W)] at
  * (t, y) (Simulation._powers). */
 static int powers(ovk_sim *s, double t, const double *y, double *p) {
@@ -145,7 +127,7 @@ int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out) {
         if (M->ltype[l] != LD_SPRING) continue;
         const double *lp = M->lp + NLD * l;
         double pi[3] = {0}, pj[3] = {0}, len2 = 0.0;
-        spring_points(M, f, lp, M->lbi[l], M->lbj[l], pi, pj);
+        ovk_spring_points(M, f, lp, M->lbi[l], M->lbj[l], pi, pj);
         for (int i = 0; i < dim; i++) len2 += (pi[i] - pj[i]) * (pi[i] - pj[i]);
         double stretch = sqrt(len2) - lp[10];
         pot += 0.5 * lp[9] * stretch * stretch;

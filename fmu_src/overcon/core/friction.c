@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "core.h"
+#include "small.h"
 
 /* ------------------------------------------------------------------------------ friction laws */
 
@@ -91,16 +92,6 @@ static void jacobian_reduced(const ovk_model *M, ovk_data *d, double *Dq) {
                 if (cj < M->ncols) Dq[cj * nx + xi] += dQj[k * ne + e];
             }
     }
-}
-
-static double maxabs(const double *a, int n) { /* max |a_i|, NaN if any is NaN (numpy's max) */
-    double m = 0.0;
-    for (int i = 0; i < n; i++) {
-        double v = fabs(a[i]);
-        if (v != v) return v;
-        if (v > m) m = v;
-    }
-    return m;
 }
 
 /* r = lam0x + Wx qf - x: the residual of the friction fixed point (nx). */

@@ -9,19 +9,10 @@
 #include <string.h>
 
 #include "core.h"
+#include "small.h"
 
 #define DEPTH 3
 #define LSTSQ_RCOND 1e-12
-
-static double maxabs(const double *a, int n) { /* NaN if any is NaN */
-    double m = 0.0;
-    for (int i = 0; i < n; i++) {
-        double v = fabs(a[i]);
-        if (v != v) return v;
-        if (v > m) m = v;
-    }
-    return m;
-}
 
 /* g = lam0x + Wx qf(x) (the fixed-point map on the friction multipliers; qf into q). */
 static void G(const ovk_model *M, ovk_data *d, const double *lam0x, const double *Wx, const double *x, double *q,

@@ -7,6 +7,24 @@
 #include "core.h"
 #include "small.h"
 
+/* The two attachment points of spring lp (dim entries each, global frame) at the frames f. */
+void ovk_spring_points(const ovk_model *M, const ovk_frames *f, const double *lp, int bi, int bj, double *pi,
+                       double *pj) {
+    int si = ovk_slot(M, bi), sj = ovk_slot(M, bj);
+    double t[3];
+    if (M->dim == 2) {
+        mat2vec(f->R + 4 * si, lp + 3, t);
+        for (int i = 0; i < 2; i++) pi[i] = f->r[2 * si + i] + t[i];
+        mat2vec(f->R + 4 * sj, lp + 6, t);
+        for (int i = 0; i < 2; i++) pj[i] = f->r[2 * sj + i] + t[i];
+    } else {
+        mat3vec(f->R + 9 * si, lp + 3, t);
+        for (int i = 0; i < 3; i++) pi[i] = f->r[3 * si + i] + t[i];
+        mat3vec(f->R + 9 * sj, lp + 6, t);
+        for (int i = 0; i < 3; i++) pj[i] = f->r[3 * sj + i] + t[i];
+    }
+}
+
 /* OVK_SPRING when a spring of positive free length has coinciding points (its direction is
  * undefined); a spring of free length 0 pulls with -k d, defined there too. */
 int ovk_loads(const ovk_model *M, ovk_data *d) {
@@ -37,18 +55,8 @@ int ovk_loads(const ovk_model *M, ovk_data *d) {
             }
         } else { /* spring */
             int si = ovk_slot(M, bi), sj = ovk_slot(M, bj);
-            double pi[3] = {0}, pj[3] = {0}, dv[3] = {0}, t[3];
-            if (dim == 2) {
-                mat2vec(f->R + 4 * si, lp + 3, t);
-                for (int i = 0; i < 2; i++) pi[i] = f->r[2 * si + i] + t[i];
-                mat2vec(f->R + 4 * sj, lp + 6, t);
-                for (int i = 0; i < 2; i++) pj[i] = f->r[2 * sj + i] + t[i];
-            } else {
-                mat3vec(f->R + 9 * si, lp + 3, t);
-                for (int i = 0; i < 3; i++) pi[i] = f->r[3 * si + i] + t[i];
-                mat3vec(f->R + 9 * sj, lp + 6, t);
-                for (int i = 0; i < 3; i++) pj[i] = f->r[3 * sj + i] + t[i];
-            }
+            double pi[3] = {0}, pj[3] = {0}, dv[3] = {0};
+            ovk_spring_points(M, f, lp, bi, bj, pi, pj);
             double len2 = 0.0;
             for (int i = 0; i < dim; i++) { dv[i] = pi[i] - pj[i]; len2 += dv[i] * dv[i]; }
             double len = sqrt(len2), L0 = lp[10];

@@ -2,6 +2,8 @@
 #ifndef OVERCON_CORE_SMALL_H
 #define OVERCON_CORE_SMALL_H
 
+#include <math.h>
+
 static inline void mat3mul(const double *A, const double *B, double *C) {
     for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++)
@@ -29,5 +31,14 @@ static inline void mat2vec(const double *A, const double *x, double *y) {
     y[1] = A[2] * x[0] + A[3] * x[1];
 }
 static inline double sgn(double x) { return (double)((x > 0.0) - (x < 0.0)); }
+static inline double maxabs(const double *a, int n) { /* max |a_i|, NaN if any is NaN (numpy's max) */
+    double m = 0.0;
+    for (int i = 0; i < n; i++) {
+        double v = fabs(a[i]);
+        if (v != v) return v;
+        if (v > m) m = v;
+    }
+    return m;
+}
 
 #endif

@@ -318,6 +318,30 @@ def _precheck_scene(path: Path, spec: SceneSpec, model, allow_nonunique: bool, e
     return report
 
 
+def _digest(parts, sources) -> str:
+    """SHA-256 (hex) over ``parts`` (bytes) and the (relative path, bytes) ``sources``, each
+    length-prefixed: the GUID's and the package name's source."""
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(len(part).to_bytes(8, "little") + part)
+    for rel, data in sources:
+        h.update(len(rel).to_bytes(8, "little") + rel.encode() + len(data).to_bytes(8, "little") + data)
+    return h.hexdigest()
+
+
+def _finish(path: Path, tmp: Path, fmu: Path, validate: bool) -> None:
+    """Validate the written ``tmp`` (fmpy's checks of modelDescription.xml) when asked, then move
+    it to ``fmu``; a problem removes it and refuses the build, naming the scene ``path``."""
+    if validate:
+        from fmpy.validation import validate_fmu  # noqa: PLC0415
+
+        problems = validate_fmu(str(tmp))
+        if problems:
+            tmp.unlink()
+            raise _NotBuilt("failed", *(f"{path}: modelDescription.xml: {p}" for p in problems))
+    os.replace(tmp, fmu)
+
+
 def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: PrecheckResult, *, sources, binary,
                validate: bool):
     """Write ``<out_dir>/<scene>.fmu`` (through a ``.fmu.part`` file, validated with fmpy unless
@@ -331,15 +355,10 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
         sources = _source_files() if sources is None else sources
         binary = native_binary() if binary is None else binary
 
-        h = hashlib.sha256()
         kernel_bytes = kernel_library()
         kernel_zip = f"binaries/{binary.platform}/{kernel_mod.library_name()}"
-        for part in (FORMAT_VERSION.encode(), NATIVE_SOURCE.read_bytes(), kernel_bytes, scene_zip.encode(),
-                     scene_bytes, mech_zip.encode(), mech_bytes):
-            h.update(len(part).to_bytes(8, "little") + part)
-        for rel, data in sources:
-            h.update(len(rel).to_bytes(8, "little") + rel.encode() + len(data).to_bytes(8, "little") + data)
-        digest = h.hexdigest()
+        digest = _digest((FORMAT_VERSION.encode(), NATIVE_SOURCE.read_bytes(), kernel_bytes, scene_zip.encode(),
+                          scene_bytes, mech_zip.encode(), mech_bytes), sources)
         guid = "{" + str(uuid.UUID(digest[:32])) + "}"
         pkg = f"{_PKG_NAME}_{digest[:16]}"
         reaction_unique = report.reaction_unique
@@ -372,14 +391,7 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
             _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
             for rel, data in sources:
                 _zip_write(zf, f"resources/{pkg}/{rel}", data)
-        if validate:
-            from fmpy.validation import validate_fmu  # noqa: PLC0415
-
-            problems = validate_fmu(str(tmp))
-            if problems:
-                tmp.unlink()
-                raise _NotBuilt("failed", *(f"{path}: modelDescription.xml: {p}" for p in problems))
-        os.replace(tmp, fmu)
+        _finish(path, tmp, fmu, validate)
     except BuildError as exc:
         raise _NotBuilt("failed", f"{path}: build failed: {exc}") from exc
     except (OSError, ValueError, KeyError, RuntimeError) as exc:
@@ -397,13 +409,9 @@ def _write_c_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Prec
         sources = _source_files() if sources is None else sources
         plat, ext = _fmi_platform()
         binary = c_runtime_library()
-        h = hashlib.sha256()
-        for part in (FORMAT_VERSION.encode(), b"runtime c", binary, scene_zip.encode(), scene_bytes,
-                     mech_zip.encode(), mech_bytes):
-            h.update(len(part).to_bytes(8, "little") + part)
-        for rel, data in sources:
-            h.update(len(rel).to_bytes(8, "little") + rel.encode() + len(data).to_bytes(8, "little") + data)
-        guid = "{" + str(uuid.UUID(h.hexdigest()[:32])) + "}"
+        digest = _digest((FORMAT_VERSION.encode(), b"runtime c", binary, scene_zip.encode(), scene_bytes,
+                          mech_zip.encode(), mech_bytes), sources)
+        guid = "{" + str(uuid.UUID(digest[:32])) + "}"
         table = variables.table(model, spec.solver, report.reaction_unique, bool(report.motion_unique))
         overcon_version = _overcon_version()
         xml = description.model_description(
@@ -428,14 +436,7 @@ def _write_c_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Prec
             _zip_write(zf, facts.PATH, facts.encode(facts.record(spec, model, report)))
             _zip_write(zf, f"resources/{scene_zip}", scene_bytes)
             _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
-        if validate:
-            from fmpy.validation import validate_fmu  # noqa: PLC0415
-
-            problems = validate_fmu(str(tmp))
-            if problems:
-                tmp.unlink()
-                raise _NotBuilt("failed", *(f"{path}: modelDescription.xml: {p}" for p in problems))
-        os.replace(tmp, fmu)
+        _finish(path, tmp, fmu, validate)
     except BuildError as exc:
         raise _NotBuilt("failed", f"{path}: build failed: {exc}") from exc
     except (OSError, ValueError, KeyError, RuntimeError) as exc:

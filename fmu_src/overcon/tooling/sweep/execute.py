@@ -153,15 +153,18 @@ def _execute(sw: Sweep, todo, sets: _Sets, writer: RowWriter, client, scheduler,
         link = _dashboard(client)
         if link:
             echo(f"   dashboard: {link}")
-        blobs = {f.info.model: client.scatter(f.data, broadcast=True, hash=True) for f in sw.fmus
+        # hash=False: a key of its own per scatter. A content-hashed key is shared with any earlier
+        # scatter of the same FMU on this scheduler (an earlier sweep of a shared client), whose
+        # release can make the scheduler forget the data under the new tasks ("already forgotten")
+        blobs = {f.info.model: client.scatter(f.data, broadcast=True, hash=False) for f in sw.fmus
                  if any(t[1] is f for t in todo)}
         meta = {}
 
-        def submit(g, f, pk):
+        def submit(g, f, pk, attempt=0):
             grid = sets.grid(g, pk)
             ex = _experiment(sw, f, sets.values[pk], None if grid is None else grid.step)
             key = "overcon-sweep-" + hashlib.sha256(
-                (f"{f.sha} {row_key(f.info.model, pk)} {ex.start_values}").encode()).hexdigest()[:24]
+                (f"{f.sha} {row_key(f.info.model, pk)} {ex.start_values} {attempt}").encode()).hexdigest()[:24]
             fut = client.submit(run_task, blobs[f.info.model], f.sha, f.info, ex, key=key, pure=False)
             meta[fut.key] = (g, f.info.model, pk)
             futures.append(fut)
@@ -169,8 +172,18 @@ def _execute(sw: Sweep, todo, sets: _Sets, writer: RowWriter, client, scheduler,
 
         ready = as_completed([submit(*t) for t in todo])
         bar = _progress_thread(futures, client) if progress else None
+        lost: dict[tuple, int] = {}
         for fut in ready:
-            written += _collect(sw, sets, writer, meta[fut.key], fut, echo, on_rows, client,
+            g, model, pk = meta[fut.key]
+            if _cancelled(fut) and lost.get((model, pk), 0) < LOST_RETRIES:
+                # the scheduler dropped the task (its worker died with the scattered FMU):
+                # scatter the FMU again and run the task again, instead of losing the row
+                lost[(model, pk)] = lost.get((model, pk), 0) + 1
+                f = next(x for x in sw.fmus if x.info.model == model)
+                blobs[model] = client.scatter(f.data, broadcast=True, hash=False)
+                ready.add(submit(g, f, pk, lost[(model, pk)]))
+                continue
+            written += _collect(sw, sets, writer, (g, model, pk), fut, echo, on_rows, client,
                                 lambda g, pk: [ready.add(submit(g, f, pk)) for f in sw.groups[g]])
         if bar is not None:
             bar.join(timeout=5)
@@ -184,6 +197,16 @@ def _execute(sw: Sweep, todo, sets: _Sets, writer: RowWriter, client, scheduler,
             if cluster is not None:
                 cluster.close()
     return written, interrupted
+
+
+LOST_RETRIES = 2
+"""Times a task the scheduler cancelled (its worker died, taking the scattered FMU with it) is
+submitted again before its row records the cancellation."""
+
+
+def _cancelled(fut) -> bool:
+    """The task was cancelled by the scheduler (not failed by the run): status ``cancelled``."""
+    return getattr(fut, "status", "") == "cancelled"
 
 
 def _collect(sw: Sweep, sets: _Sets, writer: RowWriter, where, fut, echo, on_rows, client, resubmit) -> int:

@@ -56,7 +56,9 @@ Results and faults
 elimination of a group has finished one parameter set (so a set is written whole). Each row has a
 ``key`` (scene and parameter set); a key already in the file is never written again. A worker that
 dies has its tasks rerun by Dask (up to ``distributed.scheduler.allowed-failures`` times; then the
-row records ``KilledWorker``). Ctrl-C cancels the remaining tasks and keeps the rows written;
+row records ``KilledWorker``); a task the scheduler cancels (its worker died holding the
+scattered FMU) is submitted again, the FMU scattered again, twice at most (then the row records
+the cancellation). Ctrl-C cancels the remaining tasks and keeps the rows written;
 ``overcon sweep --resume DIR`` reads ``DIR/sweep.json`` (the sweep's definition), rebuilds or
 re-reads the FMUs, refuses to continue if an FMU's GUID changed, and runs only the parameter sets
 not in ``sweep.csv`` (runs of a set that was not complete at the interruption are run again).

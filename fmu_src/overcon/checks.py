@@ -45,8 +45,16 @@ def admit(model: Model, *, check_initial: bool = True, eliminate_field: str = "s
         eliminated, mode = rigid_elimination(model), "compliant"
     else:
         eliminated, mode = resolve_elimination(model, model.scene.eliminate, eliminate_field)
-    retained = np.array([i for i in range(model.m) if i + 1 not in set(eliminated)], int)
-    return replace(model, retained=retained, eliminated=tuple(eliminated), elimination_mode=mode)
+    return with_eliminated(model, eliminated, mode)
+
+
+def with_eliminated(model: Model, eliminated, mode: str | None = None) -> Model:
+    """``model`` keeping every equation but the 1-based ``eliminated`` ones (elimination mode
+    ``mode``, default the model's): at admission, and when a run chooses them again."""
+    gone = set(eliminated)
+    retained = np.array([i for i in range(model.m) if i + 1 not in gone], int)
+    return replace(model, retained=retained, eliminated=tuple(eliminated),
+                   elimination_mode=model.elimination_mode if mode is None else mode)
 
 
 def check_initial_state(model: Model, tol: float = 1e-9) -> None:

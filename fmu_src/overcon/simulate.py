@@ -39,7 +39,7 @@ from .evaluation import (SingularConfiguration, constant_loads, constraints, coo
                          friction_output, jacobian_h, kinetic_energy, normalized_coordinates,
                          physical_reaction, physical_reactions, potential_energy)
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
-from .checks import check_initial_state
+from .checks import check_initial_state, with_eliminated
 from .model import InconsistentInitialState, Model, ModelError  # noqa: F401
 from .spec import SceneSpec, SolverSpec
 from .watch import (EliminationExpired, SingularityMonitor, SingularPosition,  # noqa: F401
@@ -299,16 +299,9 @@ class Simulation:
         and go on from there (an ``elimination-reselected`` event), before the
         ill-conditioning costs accuracy; else keep the elimination (it decides the motion), and
         the run stops if it expires."""
-        if friction_on_nonunique(self.model, itg.y):
-            return
-        before = self.model.eliminated
-        model, eliminated = reselected(self.model, itg.y)
-        if list(before) == eliminated:
-            return
-        self.events.append((itg.t, "elimination-reselected",
-                            f"eliminated {list(before)} -> {eliminated} (the kept equations became ill-conditioned: "
-                            f"sigma_min/sigma_max {shown_ratio(self.monitor.ratio)})"))
-        self._restart(model, itg.t, itg.y.copy())
+        if not friction_on_nonunique(self.model, itg.y):
+            self._choose_again(itg.y, itg.t, f"the kept equations became ill-conditioned: sigma_min/sigma_max "
+                                             f"{shown_ratio(self.monitor.ratio)}", itg.t, itg.y.copy())
 
     def _expired(self, exc: EliminationExpired, t: float, y: np.ndarray) -> None:
         """The kept equations expired at ``exc.t``: choose them again there and restart from
@@ -321,26 +314,37 @@ class Simulation:
                 f"decides the motion, so the run stops (eliminated: "
                 f"{', '.join(f'Phi{i}' for i in self.model.eliminated) or 'none'}; other eliminations valid at the "
                 f"start and here: {', '.join(valid) or 'none found'})", exc.t, exc.ratio, exc.y, exc.t_step) from None
-        before = self.model.eliminated
-        model, eliminated = reselected(self.model, exc.y)
-        if list(before) == eliminated:
+        if not self._choose_again(exc.y, exc.t, f"the kept equations lost rank at t = {exc.t:.9g} s", t, y):
             raise exc
-        self.events.append((exc.t, "elimination-reselected",
-                            f"eliminated {list(before)} -> {eliminated} (the kept equations lost rank at "
-                            f"t = {exc.t:.9g} s)"))
+
+    def _choose_again(self, y_at: np.ndarray, t_event: float, why: str, t: float, y: np.ndarray) -> bool:
+        """Choose the eliminated equations again at the state ``y_at`` (pivoted QR), record the
+        ``elimination-reselected`` event at ``t_event`` and go on from (t, y); False when the
+        choice is the elimination already in use."""
+        before = self.model.eliminated
+        model, eliminated = reselected(self.model, y_at)
+        if list(before) == eliminated:
+            return False
+        self.events.append((t_event, "elimination-reselected", f"eliminated {list(before)} -> {eliminated} ({why})"))
         self._restart(model, t, y)
+        return True
 
     def _restart(self, model: Model, t: float, y: np.ndarray) -> None:
         """Go on from (t, y) under ``model`` (another elimination of the same mechanism): a new
-        integrator with the same settings and counters, kernel, warm starts and watch."""
+        integrator with the same settings and counters, warm starts, and :meth:`_adopt`."""
         old = self._integrator
-        self.model = model
-        self._kernel, self.kernel_note = kernel_mod.select(model, self.solver)
-        self._derived = _DerivedPlan(model)
         self.lam, self._warm, self._step_warm, self._last_eval = None, _ForcesHistory(), _ForcesHistory(), None
         self._integrator = integrators.create(self.method, self._rhs, t, y, dense_fun=self._rhs_dense,
                                               **self.settings)
         self._integrator.nsteps, self._integrator.nfev = old.nsteps, old.nfev
+        self._adopt(model, t, y)
+
+    def _adopt(self, model: Model, t: float, y: np.ndarray) -> None:
+        """Run ``model`` (another elimination of the same mechanism) from (t, y): its kernel, output
+        plan and watch."""
+        self.model = model
+        self._kernel, self.kernel_note = kernel_mod.select(model, self.solver)
+        self._derived = _DerivedPlan(model)
         self.monitor = SingularityMonitor(model, y, t, jac=self._jacobian_source())
 
     def _check_budget(self, itg, started: float, call=(0, None, None)) -> None:
@@ -455,12 +459,7 @@ class Simulation:
 
     def _use_elimination(self, eliminated) -> None:
         """Take the elimination of a saved state (one chosen again during the run)."""
-        retained = np.array([i for i in range(self.model.m) if i + 1 not in set(eliminated)], int)
-        self.model = dataclasses.replace(self.model, retained=retained, eliminated=tuple(eliminated))
-        self._kernel, self.kernel_note = kernel_mod.select(self.model, self.solver)
-        self._derived = _DerivedPlan(self.model)
-        self.monitor = SingularityMonitor(self.model, self._integrator.y, self._integrator.t,
-                                          jac=self._jacobian_source())
+        self._adopt(with_eliminated(self.model, eliminated), self._integrator.t, self._integrator.y)
 
 
 class _WorkLedger:

@@ -268,12 +268,11 @@ def reselected(model, y: np.ndarray):
     """The model with the eliminated equations chosen again at the state y (pivoted QR, as
     ``eliminate = "auto"`` does at q0; compliant equations stay as they are): (model, 1-based
     eliminated equations)."""
-    from dataclasses import replace
     from .analysis import auto_eliminate
+    from .checks import with_eliminated
     rigid = [int(i) for i in SingularityMonitor._rigid_rows(model)]
     eliminated = sorted(rigid[k] + 1 for k in auto_eliminate(_full_jacobian(model, y)[:, rigid]))
-    retained = np.array([i for i in range(model.m) if i + 1 not in set(eliminated)], int)
-    return replace(model, retained=retained, eliminated=tuple(eliminated)), eliminated
+    return with_eliminated(model, eliminated), eliminated
 
 
 def valid_eliminations(model, y: np.ndarray, limit: int = 10) -> list[str]:

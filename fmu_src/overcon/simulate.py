@@ -231,8 +231,7 @@ class Simulation:
             self._work.step(itg.t, self._powers(mid, itg.dense(mid)), self._powers(itg.t, itg.y))
         if self._warm.items:
             self._step_warm.push(itg.t, self._warm.items[0][1])
-        f = frames(self.model, itg.y[: self.n])
-        self.max_drift = max(self.max_drift, float(np.max(np.abs(constraints(self.model, f)), initial=0.0)))
+        self.max_drift = max(self.max_drift, float(np.max(np.abs(self._constraints(itg.y)), initial=0.0)))
         self._check_budget(itg, started, call)
 
     def _recover(self, itg, exc) -> bool:
@@ -254,9 +253,24 @@ class Simulation:
 
     def _jacobian_source(self):
         """Phi_h for the watch: the compiled core's rows when this run has the core (the same
-        joint rows, without numpy's per-call overhead), else None (the numpy path)."""
+        joint rows, without numpy's per-call overhead), else None (the numpy path). The rows
+        of the last state asked for are kept (:meth:`_constraints` reads Phi from them)."""
         kernel = self._kernel
-        return None if kernel is None else (lambda model, y: kernel.rows(y)[1])
+        if kernel is None:
+            return None
+
+        def jac(model, y):
+            phi, J, _ = kernel.rows(y)
+            self._rows_at = (y.copy(), phi)
+            return J
+        return jac
+
+    def _constraints(self, y: np.ndarray) -> np.ndarray:
+        """Phi at the state y: from the core's rows the watch just computed at y, else evaluated."""
+        cached = getattr(self, "_rows_at", None)
+        if cached is not None and np.array_equal(cached[0], y):
+            return cached[1]
+        return constraints(self.model, frames(self.model, y[: self.n]))
 
     def _powers(self, t: float, y: np.ndarray) -> np.ndarray:
         """[power dissipated by joint friction (W, >= 0), power of the constant forces and torques

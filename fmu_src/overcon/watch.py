@@ -94,15 +94,16 @@ def ratio_and_rate(model, y: np.ndarray, rows: np.ndarray, jac=None, qdot=None) 
     """(r, dr/dt) at state y (see the module docstring): r = s_min / s_max; dr/dt from
     ds_k/dt = u_k^T J' v_k with J' by a forward difference of J along q' (``qdot``, default
     the coordinate rates at y). ``jac``: as :func:`weighted_rows`."""
-    J = weighted_rows(model, y, rows, jac)
-    U, sv, Vt = np.linalg.svd(J, full_matrices=False)
     n = model.n
     if qdot is None:
         qdot = coordinate_rates(model, y[:n], y[n:])
     dt = 1e-7 / max(1.0, float(np.max(np.abs(qdot), initial=0.0)))
     y2 = y.copy()
     y2[:n] = y[:n] + dt * qdot
-    Jdot = (weighted_rows(model, y2, rows, jac) - J) / dt
+    J2 = weighted_rows(model, y2, rows, jac)
+    J = weighted_rows(model, y, rows, jac)  # last: a caller's jac may keep the rows at y (the drift)
+    U, sv, Vt = np.linalg.svd(J, full_matrices=False)
+    Jdot = (J2 - J) / dt
     ds_min = float(U[:, -1] @ Jdot @ Vt[-1])
     ds_max = float(U[:, 0] @ Jdot @ Vt[0])
     r = float(sv[-1] / sv[0])

@@ -4,6 +4,8 @@
     python benchmarks/bench.py --quick         # 1 repetition, short ladders (a smoke test, ~1.5 min)
     python benchmarks/bench.py --joints        # per joint type: one evaluation, core against numpy,
                                                # and the example scenes in process (~1 min; printed only)
+    python benchmarks/bench.py --c-runtime     # C-runtime FMUs: FMI overhead per doStep against an empty
+                                               # C FMU, the examples through fmpy (~20 s; printed only)
 
 Prints Markdown tables and writes ``docs/benchmarks.md`` and ``docs/pareto.png`` (``--out DIR``
 elsewhere). Figures are printed, never asserted.
@@ -801,10 +803,21 @@ def main(argv=None) -> int:
     ap.add_argument("--joints", action="store_true",
                     help="only the per-joint-type evaluation cost (core and numpy) and the example scenes in "
                          "process (printed, nothing written)")
+    ap.add_argument("--c-runtime", action="store_true",
+                    help="only the C-runtime FMUs: the FMI overhead per doStep against an empty C FMU, and the "
+                         "example scenes through fmpy (benchmarks/fmu_runtime.py; printed, nothing written)")
     args = ap.parse_args(argv)
     repeat = 1 if args.quick else max(1, args.repeat)
     if args.joints:
         return joints_main(repeat, args.quick)
+    if args.c_runtime:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+        import fmu_runtime
+
+        print("## FMI overhead per doStep: C runtime against an empty C FMU\n")
+        fmu_runtime.overhead(repeat)
+        print("\n## The examples through fmpy, C runtime\n")
+        return fmu_runtime.examples(repeat)
     ladders_def = QUICK if args.quick else LADDERS
     t_start = time.perf_counter()
     from overcon.fmu.build import build_all

@@ -163,7 +163,7 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
         if (!all_finite(c->outputs, fm->nout)) {
             char t[40];
             fmu_repr(c->t, t, sizeof t);
-            return snprintf(c->msg, sizeof c->msg, "ArithmeticError: non-finite initial outputs at t = %.9g s", c->t), 0;
+            return snprintf(c->msg, sizeof c->msg, "ArithmeticError: non-finite initial outputs at t = %s s", t), 0;
         }
         c->have_outputs = c->has_y = 1;
         c->derived_stale = 0;
@@ -288,14 +288,15 @@ static int step_outputs(fmu_inst *c, double t_new, const double *y, double *out)
 
 /* The step itself (overcon.fmu.slave._step): 0 with the reason in c->msg. */
 static int step(fmu_inst *c, double t, double h, double *y) {
-    char a[40], b[40];
-    fmu_repr(t, a, sizeof a);
-    fmu_repr(c->t, b, sizeof b);
+    char a[40], b[40]; /* the numbers of a message, formatted only when there is one (a repr costs µs) */
     if (!(isfinite(t) && isfinite(h) && h >= 0))
         return snprintf(c->msg, sizeof c->msg, "the communication step must be finite and >= 0"), 0;
-    if (fabs(t - c->t) > 1e-9 * (fabs(c->t) > 1.0 ? fabs(c->t) : 1.0))
+    if (fabs(t - c->t) > 1e-9 * (fabs(c->t) > 1.0 ? fabs(c->t) : 1.0)) {
+        fmu_repr(t, a, sizeof a);
+        fmu_repr(c->t, b, sizeof b);
         return snprintf(c->msg, sizeof c->msg, "communication point %s s is not the end of the previous step (%s s)",
                         a, b), 0;
+    }
     if (!c->sim_valid && !fmu_ensure_sim(c, 1)) return 0;
     long long max_steps = (long long)param(c, P_MAX_INTERNAL_STEPS);
     double max_wall = param(c, P_MAX_WALL_TIME);

@@ -1,6 +1,8 @@
 """The FMUs outside fmpy: a plain C host (tests/c_host/fmu_host.c) that knows nothing about Python,
 run from an empty environment (no LD_PRELOAD, no PYTHONPATH, no OPENBLAS_* either; the FMU is
-loaded with dlopen RTLD_LOCAL and starts its own interpreter), and libcosim (libcosimpy).
+loaded with dlopen RTLD_LOCAL and starts its own interpreter), and libcosim (libcosimpy). These are
+the FMUs of the Python runtime (`overcon build --runtime python`), built as such; the C runtime's
+host tests are in tests/test_fmu_c.py.
 
 Runtime: the C host runs each friction FMU (planar_f45_wo4, spatial_MN_wo5) once over its whole
 default experiment (compared with fmpy from the same empty environment: equal to 1e-12), then
@@ -52,7 +54,7 @@ class Fmu:
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     out = tmp_path_factory.mktemp("fmus_hosts")
-    code, _ = build_all([str(MECH / f"{n}.toml") for n in FRICTION], out, refs=False,
+    code, _ = build_all([str(MECH / f"{n}.toml") for n in FRICTION], out, refs=False, runtime="python",
                         echo=lambda s: None, echo_err=lambda s: None)
     assert code == 0
     return {n: Fmu(out / f"{n}.fmu", Path(fmpy.extract(str(out / f"{n}.fmu"), str(out / f"unz_{n}"))))

@@ -1,4 +1,4 @@
-"""Published values: the FMU binary answers fmi2GetReal/fmi2GetBoolean of outputs from arrays the
+"""Published values (the Python runtime, `overcon build --runtime python`): the FMU binary answers fmi2GetReal/fmi2GetBoolean of outputs from arrays the
 slave publishes after a successful fmi2DoStep (no Python call), and every other state through
 Python. Each test compares an instance with the published values (the default) against one with
 them switched off (``OVERCON_NO_PUBLISH=1``: every get through Python, the behaviour before), call
@@ -29,7 +29,7 @@ MECH = ROOT / "mechanisms"
 @pytest.fixture(scope="module")
 def unz(tmp_path_factory):
     out = tmp_path_factory.mktemp("fmus_published")
-    code, _ = fmu_build.build_all([str(MECH / "planar_f45_wo4.toml")], out, refs=False,
+    code, _ = fmu_build.build_all([str(MECH / "planar_f45_wo4.toml")], out, refs=False, runtime="python",
                                   echo=lambda s: None, echo_err=lambda s: None)
     assert code == 0
     return Path(fmpy.extract(str(out / "planar_f45_wo4.fmu"), str(out / "unz")))

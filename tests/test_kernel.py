@@ -256,7 +256,7 @@ def test_kernel_in_fmu_and_numpy_alone(tmp_path):
     from overcon.fmu.build import build_scene
     from test_fmu import Instance, Logs
 
-    r = build_scene(MECH / "planar_none_wo4.toml", tmp_path, echo=lambda *a: None)
+    r = build_scene(MECH / "planar_none_wo4.toml", tmp_path, echo=lambda *a: None, runtime="python")
     assert r.status == "built", r.messages
     with zipfile.ZipFile(r.fmu) as zf:
         assert any(n.startswith("binaries/") and n.endswith("/" + kernel.library_name()) for n in zf.namelist())
@@ -455,7 +455,7 @@ def test_fmu_warns_when_its_library_cannot_be_used(tmp_path):
     from overcon.fmu.build import build_scene
     from test_fmu import Instance, Logs
 
-    r = build_scene(MECH / "planar_none_wo4.toml", tmp_path, echo=lambda *a: None)
+    r = build_scene(MECH / "planar_none_wo4.toml", tmp_path, echo=lambda *a: None, runtime="python")
     unz = Path(fmpy.extract(str(r.fmu), str(tmp_path / "unz")))
     for lib in unz.glob(f"binaries/*/{kernel.library_name()}"):
         lib.unlink()

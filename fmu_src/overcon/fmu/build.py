@@ -250,7 +250,7 @@ class _NotBuilt(Exception):
 
 
 def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, validate: bool = True,
-                echo=print, sources=None, binary: NativeBinary | None = None, runtime: str = "python") -> BuildResult:
+                echo=print, sources=None, binary: NativeBinary | None = None, runtime: str = "c") -> BuildResult:
     """Build the FMU of one scene file (see the module docstring); never raises for bad input."""
     t0 = time.perf_counter()
     res = BuildResult(source=str(path), status="invalid")
@@ -544,7 +544,7 @@ def _reference_job(fmu: str) -> tuple[str, str, float]:
 
 def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = True,
               validate: bool = True, jobs: int | None = None, echo=None, echo_err=None,
-              runtime: str = "python") -> tuple[int, list[BuildResult]]:
+              runtime: str = "c") -> tuple[int, list[BuildResult]]:
     """Build every scene in ``paths`` (files or directories) into ``out_dir``; print progress with
     ``echo`` (problems with ``echo_err``). ``runtime``: "python" (the FMU embeds Python) or "c"
     (without Python where the C runtime covers the scene; module docstring). Returns (exit code,
@@ -643,17 +643,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-validate", action="store_true", help="skip fmpy's validation of each FMU")
     p.add_argument("--jobs", type=_jobs, metavar="N",
                    help="processes for the reference simulations (default: number of CPUs)")
-    p.add_argument("--runtime", choices=RUNTIMES, default="python",
-                   help="python: the FMU embeds the building Python (every model and method); c: the FMU runs "
-                        "the compiled core without Python (dopri5, rk4) where it covers the scene, else python "
-                        "(default python)")
+    p.add_argument("--runtime", choices=RUNTIMES, default="c",
+                   help="c (default): the FMU runs the compiled core without Python where it covers the scene, "
+                        "else it is built with the Python runtime and the build output says why; python: the FMU "
+                        "embeds the building Python")
 
 
 
 def run_args(args) -> int:
     code, _ = build_all(args.paths, args.out, allow_nonunique=args.allow_nonunique,
                         refs=not args.no_ref, validate=not args.no_validate, jobs=args.jobs,
-                        runtime=getattr(args, "runtime", "python"))
+                        runtime=getattr(args, "runtime", "c"))
     return code
 
 

@@ -90,8 +90,9 @@ def build_empty(tmp: Path, n_real: int, n_int: int, n_bool: int) -> Path:
     return d
 
 
-def overhead(repeat: int) -> int:
-    """Print the cost per communication point of the C FMU and of the empty one (module docstring)."""
+def measure_overhead(repeat: int) -> dict:
+    """The cost per communication point of the C FMU and of the empty one (module docstring):
+    ``ours_us``, ``empty_us`` (us per point), the walls per FMU and grid, and the output counts."""
     import re
 
     import fmpy
@@ -123,16 +124,28 @@ def overhead(repeat: int) -> int:
                     t0 = time.perf_counter()
                     fmpy.simulate_fmu(unz, stop_time=stop, output_interval=interval, model_description=m)
                     walls.setdefault((key, interval), []).append(time.perf_counter() - t0)
-        med = {k: statistics.median(v) for k, v in walls.items()}
-        n_hi, n_lo = round(stop / 1e-3), round(stop / 1e-2)
-        per = {k: (med[(k, 1e-3)] - med[(k, 1e-2)]) / (n_hi - n_lo) for k in ("ours", "empty")}
-        print(f"outputs: {counts['Real']} Real, {counts['Integer']} Integer, {counts['Boolean']} Boolean; "
-              f"{n_hi} and {n_lo} communication points over 0-{stop:g} s; medians of {repeat}")
-        print("| FMU | wall, 4000 points (s) | wall, 400 points (s) | per point (us) |")
-        print("|---|---:|---:|---:|")
-        for k, name in (("ours", "overcon C runtime, planar_none_wo4 (positions)"), ("empty", "empty C FMU")):
-            print(f"| {name} | {med[(k, 1e-3)]:.3f} | {med[(k, 1e-2)]:.3f} | {1e6 * per[k]:.1f} |")
-        print(f"ratio per point: {per['ours'] / per['empty']:.2f}")
+    med = {k: statistics.median(v) for k, v in walls.items()}
+    n_hi, n_lo = round(stop / 1e-3), round(stop / 1e-2)
+    per = {k: (med[(k, 1e-3)] - med[(k, 1e-2)]) / (n_hi - n_lo) for k in ("ours", "empty")}
+    return {"ours_us": 1e6 * per["ours"], "empty_us": 1e6 * per["empty"], "walls": med, "n_hi": n_hi, "n_lo": n_lo,
+            "stop": stop, "counts": counts, "repeat": repeat}
+
+
+def overhead_table(o: dict) -> str:
+    """Markdown lines of :func:`measure_overhead`'s figures."""
+    c = o["counts"]
+    lines = [f"outputs: {c['Real']} Real, {c['Integer']} Integer, {c['Boolean']} Boolean; {o['n_hi']} and "
+             f"{o['n_lo']} communication points over 0-{o['stop']:g} s; medians of {o['repeat']}", "",
+             f"| FMU | wall, {o['n_hi']} points (s) | wall, {o['n_lo']} points (s) | per point (us) |",
+             "|---|---:|---:|---:|"]
+    for k, name in (("ours", "overcon C runtime, planar_none_wo4 (positions)"), ("empty", "empty C FMU")):
+        lines.append(f"| {name} | {o['walls'][(k, 1e-3)]:.3f} | {o['walls'][(k, 1e-2)]:.3f} | {o[k + '_us']:.1f} |")
+    lines += ["", f"ratio per point: {o['ours_us'] / o['empty_us']:.2f}"]
+    return "\n".join(lines)
+
+
+def overhead(repeat: int) -> int:
+    print(overhead_table(measure_overhead(repeat)))
     return 0
 
 

@@ -488,7 +488,7 @@ class RunStopped(RuntimeError):
 
 
 class Run:
-    """A whole run in C (core/sim.c: the integrator of core/integrate_rk.c over the core's
+    """A whole run in C (core/sim.c: the integrator of core/integrate_rk.c or integrate_radau.c over the core's
     right-hand side with :class:`overcon.simulate.Simulation`'s warm starts and step-end checks),
     for the methods of :data:`C_METHODS`. The numpy path's fallbacks are not in it: an evaluation
     the core hands back stops the run (:class:`RunStopped`). Used by the C FMU and by the tests

@@ -5,8 +5,7 @@
  * constants, the control and the order of the arithmetic are those of integrators.Dopri5,
  * integrators.Dop853 and integrators.RK4, so that a run here equals the Python run on the same
  * right-hand side to round-off (the same steps, the same accept and reject decisions);
- * tests/test_core_integrate.py and tests/test_core_integrators.py check it. (Dop853 sums its error
- * estimate and dense output through numpy's BLAS, here in index order: round-off apart.)
+ * tests/test_core_integrate.py and tests/test_core_integrators.py check it.
  *
  * dop853's dense output needs three more stages per step. They are evaluated only when an output
  * falls inside the step (the first ovk_rk_dense of the step), with rk->dense_fun, a right-hand side
@@ -381,7 +380,9 @@ int ovk_rk_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg) {
 static int dop853_dense_setup(ovk_rk *rk) {
     int n = rk->n;
     double h = rk->h_old, *K = rk->K, *F = rk->Q;
-    if (!rk->dense_fun) return OVK_INVALID;
+    if (!rk->dense_fun)
+        return snprintf(rk->dense_msg, OVK_MSG, "dop853's dense output needs a right-hand side (rk->dense_fun)"),
+               OVK_INVALID;
     for (int e = 0; e < 3; e++) {
         int s = 13 + e;
         stage_state(rk, rk->y_old, D8_A_EXTRA[e], s, h, rk->ystage);

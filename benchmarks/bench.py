@@ -6,6 +6,8 @@
                                                # and the example scenes in process (~1 min; printed only)
     python benchmarks/bench.py --c-runtime     # C-runtime FMUs: FMI overhead per doStep against an empty
                                                # C FMU, the examples through fmpy (~20 s; printed only)
+    python benchmarks/bench.py --integrators   # dop853 and radau in process: the Python integrator loop
+                                               # against the core's run in C (~1 min; printed only)
 
 Prints Markdown tables and writes ``docs/benchmarks.md`` and ``docs/pareto.png`` (``--out DIR``
 elsewhere). Figures are printed, never asserted.
@@ -706,6 +708,104 @@ def joints_main(repeat: int, quick: bool) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------------ integrators
+
+INTEGRATOR_RUNS = (("planar_f45_wo4", MECH / "planar_f45_wo4.toml", None, None),
+                   ("planar_f145_wo6, mu 1, v_reg 1e-6 m/s", MECH / "planar_f145_wo6.toml", 1.0, (1.0, 1e-6)),
+                   ("compliant_door_h1_wo_hinge2", MECH / "examples" / "compliant_door_h1_wo_hinge2.toml", 0.2, None))
+"""(label, scene, stop time or None for the scene's, (mu, v_reg) for every friction joint or None): a
+paper scene; the same mechanism sticking inside a tiny regularisation band (stiff: dop853 stops,
+radau's case); a compliant example (stiff springs; its stop time shortened so dop853 does not crawl
+for minutes)."""
+INTEGRATOR_WALL = 60.0
+"""s: the wall-time budget of one run (a run that spends it is reported as stopped, not timed)."""
+
+
+def _timed_runs(make, stop: float, repeat: int):
+    """(median wall time, the last run's (steps, final state)) of ``repeat`` runs; a run that stops
+    or cannot run gives (None, that and its reason)."""
+    times, last = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        try:
+            steps, y = make(stop)
+        except Exception as exc:  # the reason is printed in the table (stiff, budget, not covered)
+            how = "not run" if type(exc).__name__ == "KernelUnavailable" else "stopped"
+            return None, f"{how}: {str(exc).split(';')[0][:110]}"
+        times.append(time.perf_counter() - t0)
+        last = (steps, y)
+    return statistics.median(times), last
+
+
+def integrator_rows(repeat: int) -> list[tuple]:
+    """Per scene and method (dop853, radau at the scene's tolerance): the in-process Python loop
+    (overcon.simulate.Simulation: the integrator of overcon.integrators, its right-hand side the
+    core where it covers the model) against the whole run in C (overcon.kernel.Run), to the stop
+    time without outputs on the way."""
+    from overcon import kernel
+    from overcon import scene as scene_mod
+    from overcon.checks import compile_checked
+    from overcon.simulate import Simulation
+
+    rows = []
+    for label, path, stop, friction in INTEGRATOR_RUNS:
+        spec = scene_mod.as_scene(scene_mod.load(path))
+        stop = spec.stop_time if stop is None else stop
+        if friction is not None:
+            spec = replace(spec, friction_params={k: replace(v, mu=friction[0], v_reg=friction[1])
+                                                  for k, v in spec.friction_params.items()})
+        model = compile_checked(spec)
+        for method in ("dop853", "radau"):
+            solver = replace(spec.solver, method=method)
+
+            def python_loop(t, solver=solver):
+                sim = Simulation(model, solver, max_wall_time=INTEGRATOR_WALL)
+                y = sim.advance(t)
+                return sim._integrator.nsteps, y
+
+            def c_run(t, solver=solver):
+                run = kernel.Run(model, solver, max_wall_time=INTEGRATOR_WALL)
+                y = run.advance(t)
+                return int(run.info["nsteps"]), y
+
+            note = Simulation(model, solver).kernel_note.split(" (")[0].replace("right-hand side: ", "")
+            py, py_last = _timed_runs(python_loop, stop, repeat)
+            c, c_last = _timed_runs(c_run, stop, repeat)
+            diff = (float(np.max(np.abs(py_last[1] - c_last[1]))) if py is not None and c is not None else None)
+            rows.append((label, stop, method, solver.tolerance, note, py, py_last, c, c_last, diff))
+            log(f"{label} {method}: python loop {py}, C {c}")
+    return rows
+
+
+def integrators_report(rows, repeat: int) -> str:
+    out = ["## dop853 and radau in process: the Python loop against the run in C "
+           "(`python benchmarks/bench.py --integrators`)", "",
+           f"{machine()}. Median wall time of {repeat} runs from the start to the stop time, no outputs on the way. "
+           "Python loop: overcon.simulate.Simulation (the integrator of overcon.integrators in Python, each "
+           "right-hand side one call of the compiled core where it covers the model, else numpy); C: "
+           "overcon.kernel.Run (core/sim.c with core/integrate_rk.c or core/integrate_radau.c: what the C FMU "
+           "runs). |dy|: the largest difference of the two final states.", "",
+           "| scene | stop (s) | method | tolerance | rhs of the Python loop | Python loop (s) | steps | C run (s) "
+           "| steps | Python / C | \\|dy\\| |",
+           "|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|"]
+    for label, stop, method, tol, note, py, py_last, c, c_last, diff in rows:
+        py_s = f"{py:.3f}" if py is not None else py_last
+        c_s = f"{c:.3f}" if c is not None else c_last
+        out.append(f"| {label} | {stop:g} | {method} | {tol:g} | {note} | {py_s} | "
+                   f"{py_last[0] if py is not None else ''} | {c_s} | {c_last[0] if c is not None else ''} | "
+                   f"{py / c:.1f} | {diff:.1e} |" if py is not None and c is not None else
+                   f"| {label} | {stop:g} | {method} | {tol:g} | {note} | {py_s} | "
+                   f"{py_last[0] if py is not None else ''} | {c_s} | {c_last[0] if c is not None else ''} | | |")
+    return "\n".join(out) + "\n"
+
+
+def integrators_main(repeat: int) -> int:
+    t0 = time.perf_counter()
+    print(integrators_report(integrator_rows(repeat), repeat))
+    log(f"integrators: {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
 # ------------------------------------------------------------------------------------ main
 
 KEEP_MARKER = "<!-- kept by bench.py"
@@ -732,6 +832,9 @@ def main(argv=None) -> int:
     ap.add_argument("--c-runtime", action="store_true",
                     help="only the C-runtime FMUs: the FMI overhead per doStep against an empty C FMU, and the "
                          "example scenes through fmpy (benchmarks/fmu_runtime.py; printed, nothing written)")
+    ap.add_argument("--integrators", action="store_true",
+                    help="only dop853 and radau in process: the Python integrator loop against the run in C "
+                         "(printed, nothing written)")
     args = ap.parse_args(argv)
     repeat = 1 if args.quick else max(1, args.repeat)
     if args.joints:
@@ -744,6 +847,8 @@ def main(argv=None) -> int:
         fmu_runtime.overhead(repeat)
         print("\n## The examples through fmpy, C runtime\n")
         return fmu_runtime.examples(repeat)
+    if args.integrators:
+        return integrators_main(repeat)
     ladders_def = QUICK if args.quick else LADDERS
     t_start = time.perf_counter()
     from overcon.fmu.build import build_all

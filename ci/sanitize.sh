@@ -2,14 +2,15 @@
 # The C core under AddressSanitizer and UndefinedBehaviorSanitizer (and LeakSanitizer, part of
 # ASan on Linux): tests/c_core/make_cases.py writes packed models and the results the installed
 # core gives (the paper's planar and spatial mechanisms, the quaternion examples with spatial revolute,
-# prismatic, cylindrical and spherical joints, a chain of every spatial joint type, damped-Newton states and every failure
+# prismatic, cylindrical and spherical joints, a chain of every spatial joint type, runs with every integrator
+# (dopri5, rk4, dop853, radau), damped-Newton states and every failure
 # status, and runs stopped by the singularity watch of core/watch.c: a singular position located inside a
 # step, an expired and a degrading elimination), then tests/c_core/driver.c, compiled with the core's sources and the sanitizers, runs
 # every case 20 times in two workspaces and requires the same bits, statuses and messages. Any
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.
 # Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmi2_*.c over the core),
-# compiled with the sanitizers into C-runtime FMUs of a friction scene, a quaternion scene and a scene
-# with energy outputs (the Bricard linkage), run
+# compiled with the sanitizers into C-runtime FMUs of a friction scene (also with radau and dop853), a
+# quaternion scene and a scene with energy outputs (the Bricard linkage), run
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
 # Also compiles the core with clang -Werror when clang is installed. About 30 s.
@@ -32,16 +33,25 @@ ASAN_OPTIONS=detect_leaks=1:halt_on_error=1:detect_stack_use_after_return=1 \
 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     "$tmp/driver" "$tmp/cases.bin" 20
 FMI=fmu_src/overcon/fmu/native
-"$PY" - "$tmp/fmus" <<'PYEOF'
-import sys
+"$PY" - "$tmp/fmus" "$tmp/scenes" <<'PYEOF'
+import shutil, sys
+from pathlib import Path
 from overcon.fmu.build import build_all
+scenes = Path(sys.argv[2])  # planar_f45_wo4 with radau (its LU factors in the FMU state) and with dop853
+scenes.mkdir()
+shutil.copy("mechanisms/planar_sliders.toml", scenes)
+text = Path("mechanisms/planar_f45_wo4.toml").read_text()
+for method in ("radau", "dop853"):
+    (scenes / f"f45_{method}.toml").write_text(text.replace('name = "planar_f45_wo4"', f'name = "f45_{method}"')
+                                               .replace("[solver]", f'[solver]\nmethod = "{method}"'))
 code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml",
-                     "tests/data/bricard/bricard_wo2.toml"], sys.argv[1],
+                     "tests/data/bricard/bricard_wo2.toml", str(scenes / "f45_radau.toml"),
+                     str(scenes / "f45_dop853.toml")], sys.argv[1],
                     refs=False, validate=False, runtime="c", allow_nonunique=True, echo=lambda s: None)
 sys.exit(code)
 PYEOF
 $CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host" tests/c_host/fmu_host.c -ldl -lm  # POSIX (dlopen, realpath): not -std=c11
-for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2; do
+for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2 f45_radau f45_dop853; do
     mkdir -p "$tmp/$id" && (cd "$tmp/$id" && unzip -q "../fmus/$id.fmu")
     $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmi2_*.c "$CORE"/*.c -lm
     guid=$(sed -n 's/.*guid="\([^"]*\)".*/\1/p' "$tmp/$id/modelDescription.xml" | head -n 1)

@@ -170,19 +170,6 @@ def test_rk4_unstable_step_is_readable_as_in_python(built, tmp_path):
     assert any(s == 3 and "rk4 is unstable with the fixed step 0.02 s" in m for s, _, m in logs.records)
 
 
-def test_a_method_the_c_layer_lacks_fails_at_initialization(built, tmp_path):
-    d = unzip(built["planar_f45_wo4"], tmp_path)
-    logs = Logs()
-    fmu, vr = slave(d, logs)
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.setString([vr["solver.method"]], ["radau"])
-    with pytest.raises(FMICallException):
-        fmu.exitInitializationMode()
-    assert any(s == 3 and "solver.method = 'radau' is not available in this FMU" in m for s, _, m in logs.records)
-    fmu.freeInstance()
-
-
 def test_uncovered_scene_is_built_with_python_and_said(tmp_path):
     """A min-norm scene: the C layer does not cover it; the build says so and the FMU embeds
     Python (and runs)."""

@@ -236,37 +236,40 @@ class Dop853(AdaptiveRK):
     name = "dop853"
 
     def _error_norm(self, K, h, scale):
-        err5 = (K.T @ self.E5) / scale
-        err3 = (K.T @ self.E3) / scale
-        e5, e3 = float(err5 @ err5), float(err3 @ err3)
+        """Hairer's norm from the 5th- and 3rd-order estimates, summed in index order (:func:`_combine`,
+        :func:`_sum_squares`: core/integrate_rk.c takes the same steps bit for bit)."""
+        err5 = _combine(K, self.E5) / scale
+        err3 = _combine(K, self.E3) / scale
+        e5, e3 = _sum_squares(err5), _sum_squares(err3)
         if e5 == 0.0 and e3 == 0.0:
             return 0.0
-        return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * len(scale))
+        return abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * len(scale))
 
     def _dense_setup(self):
         h, n = self.h_old, self.y.size
         K = np.empty((self.N_STAGES_EXTENDED, n))
         K[: self.n_stages + 1] = self.K
         for s, (a, c) in enumerate(zip(self.A_EXTRA, self.C_EXTRA), start=self.n_stages + 1):
-            K[s] = self.dense_fun(self.t_old + c * h, self.y_old + (K[:s].T @ a[:s]) * h)
+            K[s] = self.dense_fun(self.t_old + c * h, self.y_old + _combine(K[:s], a[:s]) * h)
         F = np.empty((self.INTERPOLATOR_POWER, n))
         delta = self.y - self.y_old
         F[0] = delta
         F[1] = h * K[0] - delta
         F[2] = 2 * delta - h * (self.f + K[0])
-        F[3:] = h * (self.D @ K)
+        for r in range(len(self.D)):
+            F[3 + r] = h * _combine(K, self.D[r])
         return F
 
     def _dense_eval(self, F, x):
         """y_old + the nested polynomial (((F[-1] x + F[-2]) (1 - x) + F[-3]) x + ...) in x: its
         scalar weight per row of F first (suffix products of the factors x, 1 - x, x, ...), then
-        one matrix-vector product instead of two array operations per row."""
+        one weighted sum of the rows (:func:`_combine`) instead of two array operations per row."""
         n = len(F)
         w, p = [0.0] * n, 1.0
         for i in range(n):  # F[i] is multiplied by the factors of rows n - 1 - i ... 0 of F[::-1]
             p *= x if (n - 1 - i) % 2 == 0 else 1 - x
             w[i] = p
-        return np.array(w) @ F + self.y_old
+        return _combine(F, w) + self.y_old
 
 
 RK4_STABILITY = 2.785

@@ -457,8 +457,10 @@ def select(model, solver):
 
 # ----------------------------------------------------------------------------- a run in C
 
-C_METHODS = {"dopri5": 0, "rk4": 1}
-"""The integrators of overcon.integrators that core/integrate_rk.c has (the same steps to round-off)."""
+C_METHODS = {"dopri5": 0, "rk4": 1, "dop853": 2, "radau": 3}
+"""The integrators of overcon.integrators in the core: dopri5, rk4 and dop853 (core/integrate_rk.c:
+the same steps to round-off) and radau (core/integrate_radau.c: its own LU, so the same run within
+the integration tolerance)."""
 INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_drift", "min_ratio", "stiff_steps",
         "stable_step", "wall_time")
 """The entries of ovk_sim_info, in order (core/sim.c)."""
@@ -486,7 +488,7 @@ class RunStopped(RuntimeError):
 
 
 class Run:
-    """A whole run in C (core/sim.c: the integrator of core/integrate_rk.c over the core's
+    """A whole run in C (core/sim.c: the integrator of core/integrate_rk.c or integrate_radau.c over the core's
     right-hand side with :class:`overcon.simulate.Simulation`'s warm starts and step-end checks),
     for the methods of :data:`C_METHODS`. The numpy path's fallbacks are not in it: an evaluation
     the core hands back stops the run (:class:`RunStopped`). Used by the C FMU and by the tests

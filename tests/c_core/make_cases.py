@@ -13,6 +13,8 @@ Euler angles (universal and fixed joints too);
 spatial states where Newton gives up and damped Newton finishes; and every failure status: a
 singular position (tests/data/two_pins: two pins on one bar, rows exactly dependent), the friction solve giving up
 (friction_max_iter = 2), a non-finite state, an Euler singularity, a spring whose points coincide.
+Runs in C with every integrator: dopri5, rk4, dop853 (its dense stages) and radau (its real and
+complex LU), and a radau run whose step collapses on failing friction solves (status 8).
 The script refuses to write a file that lacks any of these.
 
 File layout (native byte order): b"OVKCASE1", then records. 'M' a model: 13 int32 counts (ovk_model
@@ -201,6 +203,8 @@ def build(tmp: Path) -> Writer:
             w.run(model, spec.solver, "dopri5", 0.2)
             w.run(dataclasses.replace(model, energy_outputs=True), spec.solver, "dopri5", 0.2)  # energy.c
             w.run(model, spec.solver, "rk4", 0.05)
+            w.run(model, spec.solver, "dop853", 0.2)  # integrate_rk.c's dop853 with its dense stages
+            w.run(model, spec.solver, "radau", 0.2)  # integrate_radau.c, lu.c
     # quaternions and the spatial axis joints, with friction
     for name in ("door_h1_wo_hinge2", "carriage_guide_wo_rod", "loop_A1_wo_A2"):
         spec = spec_of(MECH / "examples" / f"{name}.toml")
@@ -208,6 +212,8 @@ def build(tmp: Path) -> Writer:
         w.model(model, spec.solver)
         random_states(w, model, 6, seed=3)
         w.run(model, spec.solver, "dopri5", 0.2)
+        if name == "door_h1_wo_hinge2":
+            w.run(model, spec.solver, "radau", 0.2)
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from test_kernel import random_axis_model
 
@@ -224,6 +230,11 @@ def build(tmp: Path) -> Writer:
     for _ in range(12):
         w.evaluation(np.concatenate([model.q0 + 0.05 * rng.standard_normal(model.n),
                                      model.h0 + 3.0 * rng.standard_normal(model.nh)]))
+    # radau's Newton iterations fail (one force evaluation per friction solve): the step collapses
+    solver = dataclasses.replace(spec.solver, friction_max_iter=1, tolerance=1e-6)
+    w.model(model, solver)
+    if w.run(model, solver, "radau", 0.2) != 8:
+        raise SystemExit("make_cases: radau's step did not collapse on the failing friction solve")
     # the friction solve gives up: two force evaluations are not enough for either Newton
     spec = spec_of(MECH / "planar_f45_wo4.toml", friction_max_iter=2)
     model = compile_checked(spec)

@@ -14,9 +14,11 @@
  *   kkt.c               the KKT solve with the scene's elimination (Cholesky of S) and h'
  *   friction.c          friction laws, the reduced friction fixed point, Newton and damped Newton
  *   linalg.c            dense Cholesky and LU (fixed summation order, no BLAS)
+ *   lu.c                complex LU with partial pivoting (radau's complex Newton matrix)
  *   outputs.c           reported reactions and friction forces
  *   rates.c             coordinate rates q' from h
- *   integrate_rk.c      the explicit integrators of overcon.integrators: dopri5 (dense output), rk4
+ *   integrate_rk.c      the explicit integrators of overcon.integrators: dopri5, dop853 (dense output), rk4
+ *   integrate_radau.c   its implicit Radau IIA of order 5 (radau), collocation dense output
  *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
  *                       work budgets, derived outputs at any point of the last step
  *   svd.c               one-sided Jacobi SVD: singular values, the kept rows' singular vectors
@@ -53,7 +55,7 @@ enum {
     OVK_NOMEM = 6,     /* the workspace could not be allocated */
     OVK_INVALID = 7,   /* a model or argument outside what the core takes */
     OVK_STEP_SMALL = 8, /* integrator: the step size fell below the resolution of t */
-    OVK_STIFF = 9,     /* integrator: dopri5's step limited by stability (stiffness detected) */
+    OVK_STIFF = 9,     /* integrator: dopri5's or dop853's step limited by stability (stiffness detected) */
     OVK_UNSTABLE = 10, /* integrator: rk4's fixed step beyond its stability boundary (stable_step) */
     OVK_BUDGET = 11,   /* simulation: the work budget (steps or wall time) ran out */
     OVK_SINGULAR_POSITION = 12, /* simulation: the kept Jacobian lost rank (singularity monitor) */
@@ -153,34 +155,57 @@ typedef struct {
     char msg[OVK_MSG];
 } ovk_data;
 
-/* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, rk4) */
-enum { OVK_METHOD_DOPRI5 = 0, OVK_METHOD_RK4 = 1 };
+/* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, dop853, rk4);
+ * integrate_radau.c: its implicit Radau IIA of order 5 (radau) */
+enum { OVK_METHOD_DOPRI5 = 0, OVK_METHOD_RK4 = 1, OVK_METHOD_DOP853 = 2, OVK_METHOD_RADAU = 3 };
 /* The right-hand side y' = f(t, y) of an integrator: a status (its message written by the callee). */
 typedef int (*ovk_rhs_fn)(void *ctx, double t, const double *y, double *ydot);
 typedef struct {
     int method;          /* OVK_METHOD_* */
-    int detect_stiffness; /* dopri5: stop with OVK_STIFF on a stability-limited crawl */
-    double tolerance, max_step, first_step; /* dopri5: rtol = atol; first_step <= 0: 1e-4 */
+    int detect_stiffness; /* dopri5, dop853: stop with OVK_STIFF on a stability-limited crawl */
+    double tolerance, max_step, first_step; /* dopri5, dop853, radau: rtol = atol; first_step <= 0: 1e-4 */
     double step;         /* rk4: the fixed step */
 } ovk_rk_opts;
-/* The whole integrator state: the scalars here and the arrays in one block of ovk_rk_doubles(n). */
+/* The whole integrator state: the scalars here and the arrays in one block of ovk_rk_doubles(method,
+ * n); sim_state.c saves the fields that are state (not the scratch, not the dense_* callback). */
 typedef struct {
     int method, n, detect_stiffness;
-    int has_K, dense_ready; /* a step was taken (K valid); Q = K^T P is current */
+    int has_K, dense_ready; /* a step was taken (K, radau's Z valid); Q is current for that step */
     int n_stiff, n_nonstiff, n_limited;
-    long long k, nfev, nsteps, stiff_steps; /* k: rk4 steps (t = t0 + k step) */
-    double rtol, max_step, step;
-    double t, h, t0, t_old, h_old, stable_step;
+    int current_jac, has_lu, has_old; /* radau: J at the step's start; LU of lu_h; h_abs_old, error_norm_old */
+    int nK, nQ;          /* rows of K and Q that are state (0: scratch only) */
+    long long k, nfev, nsteps, stiff_steps, njev, nlu; /* k: rk4 steps (t = t0 + k step) */
+    double rtol, max_step, step, newton_tol;
+    double t, h, t0, t_old, h_old, stable_step; /* radau: h is its h_abs */
+    double h_abs_old, error_norm_old, lu_h; /* radau: the last accepted step's size and error; the LU's h */
     double *y, *f, *y_old, *f_old; /* n each */
-    double *K;       /* 7 n: the stages of the last step (rk4: rows 0-3 scratch) */
+    double *K;       /* the stages of the last step: dopri5 7 n; dop853 16 n (12 stages, f_new, 3 dense
+                      * stages); rk4 rows 0-3 scratch */
     double *ynew, *ystage; /* n each: scratch */
-    double *Q;       /* 4 n: dopri5 dense output coefficients */
+    double *Q;       /* dense output coefficients: dopri5 4 n, dop853 7 n */
+    double *J, *LU, *LUc, *Zs; /* radau: Jacobian, real LU (n n), complex LU (2 n n), the last step's Z (3 n) */
+    int *piv, *pivc;           /* radau: the LUs' row interchanges (n each) */
+    double *Z0, *Z, *W, *dW, *F, *cw, *err, *scale; /* radau scratch: 3 n x 6, then 2 n, n, n */
+    ovk_rhs_fn dense_fun; /* dop853's 3 dense stages: a right-hand side that leaves the run's state alone */
+    void *dense_ctx;
+    int dense_status;     /* the dense stages failed: the status, until the next step; the message in */
+    char dense_msg[OVK_MSG]; /* dense_msg (dense_fun writes it) */
 } ovk_rk;
-OVK_HIDDEN size_t ovk_rk_doubles(int n);
+OVK_HIDDEN size_t ovk_rk_doubles(int method, int n);
 OVK_HIDDEN int ovk_rk_start(ovk_rk *rk, const ovk_rk_opts *o, int n, double *mem, double t0, const double *y0,
                             ovk_rhs_fn fun, void *ctx, char *msg);
 OVK_HIDDEN int ovk_rk_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg);
-OVK_HIDDEN void ovk_rk_dense(ovk_rk *rk, double t, double *out);
+OVK_HIDDEN int ovk_rk_dense(ovk_rk *rk, double t, double *out);
+OVK_HIDDEN size_t ovk_radau_doubles(int n);
+OVK_HIDDEN void ovk_radau_layout(ovk_rk *rk, double *p);
+OVK_HIDDEN int ovk_radau_start(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg);
+OVK_HIDDEN int ovk_radau_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg);
+OVK_HIDDEN void ovk_radau_dense(const ovk_rk *rk, double t, double *out);
+OVK_HIDDEN int ovk_radau_constants(const char *name, const double **data, int *rows, int *cols);
+/* The integrators' constants by method and name (dopri5: C A B E P; dop853: C A B E3 E5 D A_EXTRA
+ * C_EXTRA; radau: C E T TI P MU (MU_REAL, Re and Im MU_COMPLEX)), so tests compare them with SciPy's
+ * bit for bit: OVK_OK and a pointer to rows x cols doubles (row-major), else OVK_INVALID. */
+OVK_EXPORT int ovk_integrator_constants(int method, const char *name, const double **data, int *rows, int *cols);
 
 /* sim.c: a run of the model (overcon.simulate.Simulation without the numpy path): the integrator
  * over ovk_evaluate with the friction warm starts, the step-end checks (singularity monitor,
@@ -325,6 +350,10 @@ OVK_HIDDEN void ovk_cho_solve(const double *U, int n, double *b);
 OVK_HIDDEN void ovk_cho_solve_many(const double *U, int n, double *B, int nc);
 OVK_HIDDEN int ovk_lu_factor(double *A, int n, int *piv);
 OVK_HIDDEN void ovk_lu_solve(const double *A, int n, const int *piv, double *b);
+
+/* lu.c: complex LU with partial pivoting (entries as (re, im) pairs, row-major) */
+OVK_HIDDEN int ovk_zlu_factor(double *A, int n, int *piv);
+OVK_HIDDEN void ovk_zlu_solve(const double *A, int n, const int *piv, double *b);
 
 /* outputs.c */
 OVK_HIDDEN void ovk_reported(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,

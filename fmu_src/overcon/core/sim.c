@@ -106,6 +106,15 @@ static int sim_rhs(void *ctx, double t, const double *y, double *ydot) {
     return OVK_OK;
 }
 
+/* The right-hand side of dop853's dense stages (Simulation._rhs_dense): warm-started as sim_rhs,
+ * leaving the warm starts and the counters alone; a failure's message into rk.dense_msg. */
+static int sim_rhs_dense(void *ctx, double t, const double *y, double *ydot) {
+    ovk_sim *s = ctx;
+    int its = 0, status = ovk_sim_solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, ydot, &its);
+    if (status) memcpy(s->rk.dense_msg, s->msg, sizeof s->msg);
+    return status;
+}
+
 /* Lays out the run's arrays in s->mem (sizes in ovk_sim_new). */
 static void layout(ovk_sim *s, size_t nR) {
     double *p = s->mem;
@@ -138,9 +147,10 @@ static void layout(ovk_sim *s, size_t nR) {
 
 static int check_opts(ovk_sim *s, const ovk_sim_opts *o) {
     const ovk_rk_opts *r = &o->rk;
+    int adaptive = r->method == OVK_METHOD_DOPRI5 || r->method == OVK_METHOD_DOP853 || r->method == OVK_METHOD_RADAU;
     if (r->method == OVK_METHOD_RK4 ? !(r->step > 0.0 && isfinite(r->step))
-                                    : r->method != OVK_METHOD_DOPRI5 || !(r->tolerance > 0.0) ||
-                                          !(r->max_step > 0.0) || !isfinite(r->tolerance))
+                                    : !adaptive || !(r->tolerance > 0.0) || !(r->max_step > 0.0) ||
+                                          !isfinite(r->tolerance))
         return snprintf(s->msg, sizeof s->msg, "cannot start: method %d, tolerance %g, max_step %g, step %g: not "
                         "a method and settings the C integrators take", r->method, r->tolerance, r->max_step,
                         r->step), OVK_INVALID;
@@ -178,7 +188,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->ncols = M->ncols;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh, nR = (size_t)M->nR;
     size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 4 * m * nh + nR * nR + m + nh + (size_t)s->n +
-                  nh + ovk_rk_doubles(s->ny);
+                  nh + ovk_rk_doubles(o->rk.method, s->ny);
     s->mem = calloc(need, sizeof(double));
     if (!s->mem) {
         s->status = OVK_NOMEM;
@@ -189,6 +199,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->min_ratio = INFINITY;
     s->t_prev = t0;
     int status = ovk_rk_start(&s->rk, &o->rk, s->ny, s->rk.y, t0, y0, sim_rhs, s, s->msg);
+    s->rk.dense_fun = sim_rhs_dense, s->rk.dense_ctx = s;
     if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, NULL, 1, s->msg);
     if (!status) status = ovk_sim_energy_start(s, t0, s->rk.y);
     if (status) s->status = stopped(s, status, "cannot start", t0);
@@ -241,6 +252,8 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     if (status && status != OVK_STALLED) status = ovk_sim_expiring(s, status, s->msg);
     if (!status) status = ovk_sim_monitor(s, rk->t, rk->y, rk->f, 0, s->msg);
     if (!status) status = ovk_sim_energy_step(s);
+    if (rk->dense_status) /* dop853's dense stages failed under the watch or the ledger: that is the cause */
+        status = rk->dense_status, memcpy(s->msg, rk->dense_msg, sizeof s->msg);
     if (status) return stopped(s, status, "integration stopped", rk->t);
     if (s->warm.count) hist_push(&s->step_warm, s->ncols, rk->t, s->warm.q[0]);
     if ((status = ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam))) {
@@ -277,9 +290,10 @@ int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max
     if (status) return status;
     if (rk->t - t_target < -eps || !isfinite(t_target))
         return snprintf(s->msg, sizeof s->msg, "could not reach t = %.17g", t_target), OVK_STALLED;
-    if (fabs(rk->t - t_target) > eps)
-        ovk_rk_dense(rk, t_target, y);
-    else
+    if (fabs(rk->t - t_target) > eps) {
+        if ((status = ovk_rk_dense(rk, t_target, y)))
+            return memcpy(s->msg, rk->dense_msg, sizeof s->msg), stopped(s, status, "integration stopped", rk->t);
+    } else
         memcpy(y, rk->y, (size_t)s->ny * sizeof(double));
     return OVK_OK;
 }

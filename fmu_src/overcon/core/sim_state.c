@@ -11,7 +11,7 @@
 #include "core.h"
 
 #define STATE_MAGIC "OVKSIM"
-#define STATE_VERSION 3
+#define STATE_VERSION 4
 
 typedef struct {
     unsigned char *w;       /* saving: the next byte to write */
@@ -34,27 +34,42 @@ static void io_hist(codec *c, ovk_hist *h, int nc) {
     io(c, h->q[1], (size_t)nc * sizeof(double));
 }
 
+/* The integrator: its counters and scalars, then the arrays that are state for its method (the
+ * stages and dense output coefficients of the last step; radau's Jacobian, LU factors with their
+ * pivots, and the last step's Z), each of a size fixed by the method and n, so every state of a run
+ * has one size. dense_status is no state: a restored run computes the dense output again. */
 static void io_rk(codec *c, ovk_rk *rk) {
     size_t n = (size_t)rk->n * sizeof(double);
-    int ints[6] = {rk->has_K, rk->dense_ready, rk->n_stiff, rk->n_nonstiff, rk->n_limited, 0};
-    long long counts[4] = {rk->k, rk->nfev, rk->nsteps, rk->stiff_steps};
-    double reals[6] = {rk->t, rk->h, rk->t0, rk->t_old, rk->h_old, rk->stable_step};
+    int ints[8] = {rk->has_K, rk->dense_ready, rk->n_stiff, rk->n_nonstiff, rk->n_limited, rk->current_jac,
+                   rk->has_lu, rk->has_old};
+    long long counts[6] = {rk->k, rk->nfev, rk->nsteps, rk->stiff_steps, rk->njev, rk->nlu};
+    double reals[9] = {rk->t, rk->h, rk->t0, rk->t_old, rk->h_old, rk->stable_step, rk->h_abs_old,
+                       rk->error_norm_old, rk->lu_h};
     io(c, ints, sizeof ints);
     io(c, counts, sizeof counts);
     io(c, reals, sizeof reals);
     if (c->r && !c->bad) {
         rk->has_K = ints[0], rk->dense_ready = ints[1], rk->n_stiff = ints[2], rk->n_nonstiff = ints[3];
-        rk->n_limited = ints[4];
+        rk->n_limited = ints[4], rk->current_jac = ints[5], rk->has_lu = ints[6], rk->has_old = ints[7];
         rk->k = counts[0], rk->nfev = counts[1], rk->nsteps = counts[2], rk->stiff_steps = counts[3];
+        rk->njev = counts[4], rk->nlu = counts[5];
         rk->t = reals[0], rk->h = reals[1], rk->t0 = reals[2], rk->t_old = reals[3], rk->h_old = reals[4];
-        rk->stable_step = reals[5];
+        rk->stable_step = reals[5], rk->h_abs_old = reals[6], rk->error_norm_old = reals[7], rk->lu_h = reals[8];
+        rk->dense_status = OVK_OK;
     }
     io(c, rk->y, n);
     io(c, rk->f, n);
     io(c, rk->y_old, n);
     io(c, rk->f_old, n);
-    io(c, rk->K, 7 * n);
-    io(c, rk->Q, 4 * n);
+    io(c, rk->K, (size_t)rk->nK * n);
+    io(c, rk->Q, (size_t)rk->nQ * n);
+    if (rk->method == OVK_METHOD_RADAU) {
+        io(c, rk->J, (size_t)rk->n * n);
+        io(c, rk->LU, (size_t)rk->n * n);
+        io(c, rk->LUc, 2 * (size_t)rk->n * n);
+        io(c, rk->piv, 2 * (size_t)rk->n * sizeof(int)); /* piv and pivc */
+        io(c, rk->Zs, 3 * n);
+    }
 }
 
 /* The header and every field of the run, in order. */

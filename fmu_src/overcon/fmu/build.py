@@ -34,8 +34,8 @@ covers the model (:func:`overcon.fmu.cmodel.support`: the core's joints and rota
                                       (overcon.fmu.cmodel)
     resources/overcon_fmu.json, resources/overcon_facts.json, resources/scene/...  as above
 
-Its integrators are dopri5 and rk4 (core/integrate_rk.c); setting solver.method to dop853 or
-radau fails at initialization with the reason. A model the C layer does not cover (min-norm or
+Its integrators are every method of the Python FMU: dopri5, dop853 and rk4 (core/integrate_rk.c)
+and radau (core/integrate_radau.c). A model the C layer does not cover (min-norm or
 compliant redundancy, ...) is built with the Python runtime, and the build output
 says so. ``<hash>`` (and the GUID) is a SHA-256 over the scene
 file, the mechanism file, the overcon source (Python, the binary's C) and the compiled core, so FMUs of different scenes (or of

@@ -137,11 +137,11 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
         if (!fmu_apply_params(c)) return 0;
         warn_switched(c);
         const char *method = choice(c, P_METHOD);
-        int m = !strcmp(method, "dopri5") ? OVK_METHOD_DOPRI5 : !strcmp(method, "rk4") ? OVK_METHOD_RK4 : -1;
+        int m = !strcmp(method, "dopri5") ? OVK_METHOD_DOPRI5 : !strcmp(method, "rk4") ? OVK_METHOD_RK4
+              : !strcmp(method, "dop853") ? OVK_METHOD_DOP853 : !strcmp(method, "radau") ? OVK_METHOD_RADAU : -1;
         if (m < 0)
             return snprintf(c->msg, sizeof c->msg, "solver.method = '%s' is not available in this FMU (it runs "
-                            "without Python: dopri5 and rk4); overcon build --runtime python builds one with every "
-                            "method", method), 0;
+                            "without Python: dopri5, dop853, rk4 and radau)", method), 0;
         ovk_sim_opts o = {{m, 1, param(c, P_TOLERANCE), param(c, P_MAX_STEP), 0.0, param(c, P_STEP)},
                           LIFE_MAX_STEPS, LIFE_MAX_WALL_TIME, 1e-6, fm->stop_time, fm->energy};
         c->sim = ovk_sim_new(&c->M, &o, c->start_time, fm->y0);

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 7  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
+ABI = 8  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
 MAX_FRICTION = 32  # OVK_MAX_FRICTION in core/core.h
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
@@ -162,10 +162,6 @@ def support(model) -> str | None:
 
     if model.kind == "spatial" and model.rotation not in _ROTATIONS:
         return f"rotation {model.rotation!r} (the kernel has z-x-z Euler angles and quaternions)"
-    if model.elimination_mode == "min-norm":
-        return "redundancy 'min-norm' (the kernel solves the eliminated form, by Cholesky)"
-    if model.compliant_rows.size:
-        return "compliant joints (the kernel solves rigid joints only)"
     for c in model.joints:
         if (model.kind, c.type) not in _JOINTS:
             covered = ", ".join(TYPES[t].name for k, t in _JOINTS if k == model.kind)
@@ -181,6 +177,12 @@ def support(model) -> str | None:
     return None
 
 
+REDUNDANCY_COUNTS = ("redundancy", "nrig", "nax", "nwatch", "nfull")
+REDUNDANCY_ARRAYS = ("ckind", "ck", "cd", "rigpos", "rigrows", "rigbody", "axi", "axp", "watch", "full")
+"""The redundancy block at the end of ``ovk_model`` (core/core.h), in its order."""
+REDUNDANCY_DOUBLES = {"ck", "cd", "axp"}
+
+
 class _CModel(ctypes.Structure):
     """``ovk_model`` of core/core.h (same order)."""
     _fields_ = ([(n, ctypes.c_int) for n in ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols",
@@ -189,7 +191,52 @@ class _CModel(ctypes.Structure):
                 + [(n, ctypes.c_void_p) for n in ("retained", "Minv", "mass", "inertia", "gravity", "jtype", "jbi",
                                                   "jbj", "jneq", "jrows", "jconst", "jlaw", "jlawp", "ltype", "lbi",
                                                   "lbj", "lp", "xrows", "cols", "fj", "fgroup", "fx", "fci", "fcj",
-                                                  "rbody")])
+                                                  "rbody")]
+                + [(n, ctypes.c_int) for n in REDUNDANCY_COUNTS]
+                + [(n, ctypes.c_void_p) for n in REDUNDANCY_ARRAYS])
+
+
+_REDUNDANCY = {"eliminate": 0, "min-norm": 1, "compliant": 2}
+"""OVK_ELIMINATE, OVK_MIN_NORM, OVK_COMPLIANT of core/core.h, by overcon.spec.REDUNDANCY_METHODS."""
+
+
+def _redundancy_block(model) -> dict:
+    """The redundancy block of ``ovk_model`` (core/core.h): the method, and for "compliant" the
+    compliant rows' kinds and scalar values (:func:`overcon.model._compliance`), the rigid rows
+    the eliminated solve keeps (positions in ``retained``, equations, bodies) and the per-axis
+    joints (:class:`overcon.model.AxisCompliance`: bodies, row counts, retained positions; frame,
+    k_t, d_t, k_r, d_r); for both methods the rows of the singularity watch at the start
+    (:class:`overcon.watch.SingularityMonitor`: rows watched, rows of the whole rigid Jacobian).
+    Arrays as lists; the keys are the field names."""
+    method = "min-norm" if model.elimination_mode == "min-norm" else "compliant" if model.compliant_rows.size \
+        else "eliminate"
+    out = {"redundancy": _REDUNDANCY[method], "nrig": 0, "nax": 0, "nwatch": 0, "nfull": 0}
+    if method == "eliminate":
+        return out
+    from .watch import SingularityMonitor
+
+    y0 = np.concatenate([model.q0, model.h0])
+    watch = SingularityMonitor._watched_rows(None, model, y0)  # uses no instance state
+    full = SingularityMonitor._rigid_rows(model)
+    out.update(nwatch=len(watch), nfull=len(full), watch=list(watch), full=list(full))
+    if method != "compliant":
+        return out
+    R = [int(r) for r in model.retained]
+    pos = {r: p for p, r in enumerate(R)}
+    kind = np.zeros(len(R), int)
+    kind[[pos[int(r)] for r in model.compliant_rows if int(r) in pos]] = 1
+    bodies = {r: (c.bi, c.bj) for c in model.joints for r in c.rows}
+    axi, axp = [], []
+    for ax in model.compliance_axes:
+        t = [pos[r] for r in ax.t_rows]
+        r_ = [pos[r] for r in ax.r_rows]
+        kind[t + r_] = 2
+        axi.append([ax.bi, ax.bj, len(t), len(r_)] + (t + [-1] * 3)[:3] + (r_ + [-1] * 3)[:3])
+        axp.append(np.concatenate([np.asarray(ax.frame, float).reshape(-1), ax.k_t, ax.d_t, ax.k_r, ax.d_r]))
+    rig = [p for p in range(len(R)) if kind[p] == 0]
+    out.update(nrig=len(rig), nax=len(axi), ckind=list(kind), ck=model.row_stiffness, cd=model.row_damping,
+               rigpos=rig, rigrows=[R[p] for p in rig], rigbody=[bodies[R[p]] for p in rig], axi=axi, axp=axp)
+    return out
 
 
 def _joint_constants(model, c) -> np.ndarray:
@@ -297,6 +344,11 @@ class Kernel:
         m.fx, m.fci, m.fcj = arr(fx, I32), arr(fci, I32), arr(fcj, I32)
         bodies_of_row = {r: (c.bi, c.bj) for c in joints for r in c.rows}
         m.rbody = arr([bodies_of_row[int(r)] for r in model.retained], I32)
+        red = _redundancy_block(model)
+        for name in REDUNDANCY_COUNTS:
+            setattr(m, name, red[name])
+        for name in REDUNDANCY_ARRAYS:
+            setattr(m, name, arr(red.get(name, ()), float if name in REDUNDANCY_DOUBLES else I32))
         self._cmodel = m
         self._pm = ctypes.addressof(m)
         self._data = self._workspace(lib)

@@ -13,7 +13,8 @@ terminating zero, then the bytes and the zero; an array an int32 count then the 
 1. ``b"OVKFMU01"``, i format version (:data:`FORMAT`), i the core's ABI (:data:`overcon.kernel.ABI`),
    string GUID;
 2. the model: 13 i counts and 2 d (baumgarte, tol) in ``ovk_model`` order, then its 25 arrays
-   (int32 or float64 items, in ``ovk_model`` order);
+   (int32 or float64 items, in ``ovk_model`` order), then its redundancy block: 5 i counts
+   (:data:`overcon.kernel.REDUNDANCY_COUNTS`) and 10 arrays (:data:`overcon.kernel.REDUNDANCY_ARRAYS`);
 3. the run: i n, i nh, i quaternion (1: orientation coordinates are quaternions), d start time,
    d stop time, array d y0;
 4. outputs: i count, then per output i kind (:data:`OUT_KINDS`), i a, i b (a position: the index
@@ -37,7 +38,7 @@ import numpy as np
 from .. import kernel as kernel_mod
 from ..params import rule_of
 
-FORMAT = 1
+FORMAT = 2
 MAGIC = b"OVKFMU01"
 TYPES = {"Real": 0, "Integer": 1, "Boolean": 2, "String": 3}
 CAUSALITIES = {"output": 0, "parameter": 1, "local": 2}
@@ -139,10 +140,14 @@ def model_file(model, solver, table, guid: str, messages=()) -> bytes:
     w.s(guid)
     w.i(*(getattr(cm, n) for n in INT_FIELDS))
     w.d(cm.baumgarte, cm.tol)
+    red = set(kernel_mod.REDUNDANCY_COUNTS + kernel_mod.REDUNDANCY_ARRAYS)
     for name, _ in cm._fields_:
-        if name in INT_FIELDS or name in ("baumgarte", "tol"):
+        if name in INT_FIELDS or name in ("baumgarte", "tol") or name in red:
             continue
         (w.doubles if name in DOUBLE_FIELDS else w.ints)(by_address[getattr(cm, name)])
+    w.i(*(getattr(cm, n) for n in kernel_mod.REDUNDANCY_COUNTS))
+    for name in kernel_mod.REDUNDANCY_ARRAYS:
+        (w.doubles if name in kernel_mod.REDUNDANCY_DOUBLES else w.ints)(by_address[getattr(cm, name)])
     w.i(model.n, model.nh, int(model.rotation == "quaternion"))
     w.d(model.scene.start_time, model.scene.stop_time)
     w.doubles(np.concatenate([model.q0, model.h0]))

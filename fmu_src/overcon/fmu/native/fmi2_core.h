@@ -72,7 +72,7 @@ typedef struct {
     size_t size;
     const char *guid;
     ovk_model M;
-    void *arrays[25];
+    void *arrays[35]; /* the 25 arrays of ovk_model, then the 10 of its redundancy block */
     int n, nh, ny, quaternion;
     double start_time, stop_time, *y0;
     int nout, nstate_out; /* outputs; the first nstate_out come from the state alone */

@@ -11,6 +11,7 @@
 #include "fmi2_core.h"
 
 #define MAX_ITEMS (1 << 24)
+#define FMU_FORMAT 2 /* overcon.fmu.cmodel.FORMAT */
 
 typedef struct {
     const unsigned char *p, *end;
@@ -59,6 +60,29 @@ static void *rd_array(reader *r, size_t item, int *count) {
     return a;
 }
 
+/* The redundancy block of ovk_model (overcon.kernel.REDUNDANCY_COUNTS, REDUNDANCY_ARRAYS): its
+ * sizes checked here, its indices by the core (ovk_make_data). */
+static void read_redundancy(reader *r, fmu_model *fm) {
+    ovk_model *M = &fm->M;
+    int *counts[] = {&M->redundancy, &M->nrig, &M->nax, &M->nwatch, &M->nfull};
+    for (size_t i = 0; i < sizeof counts / sizeof counts[0]; i++) *counts[i] = rd_int(r);
+    const void **fields[10] = {(const void **)&M->ckind, (const void **)&M->ck, (const void **)&M->cd,
+                               (const void **)&M->rigpos, (const void **)&M->rigrows, (const void **)&M->rigbody,
+                               (const void **)&M->axi, (const void **)&M->axp, (const void **)&M->watch,
+                               (const void **)&M->full};
+    static const int is_double[10] = {0, 1, 1, 0, 0, 0, 0, 1, 0, 0};
+    int comp = M->redundancy == OVK_COMPLIANT, any = M->redundancy != OVK_ELIMINATE;
+    const long long want[10] = {comp ? M->nR : 0, comp ? M->m : 0, comp ? M->m : 0, M->nrig, M->nrig,
+                                2LL * M->nrig, (long long)OVK_NAXI * M->nax, (long long)OVK_NAXP * M->nax,
+                                any ? M->nwatch : 0, any ? M->nfull : 0};
+    for (int k = 0; k < 10; k++) {
+        int count = 0;
+        fm->arrays[25 + k] = rd_array(r, is_double[k] ? sizeof(double) : sizeof(int), &count);
+        *fields[k] = fm->arrays[25 + k];
+        if (!r->bad && !(count == want[k] || (want[k] == 0 && count == 1))) r->bad = 1; /* empty: one zero */
+    }
+}
+
 static void read_packed(reader *r, fmu_model *fm) {
     ovk_model *M = &fm->M;
     int *counts[] = {&M->dim, &M->nb, &M->nq_b, &M->nh_b, &M->m, &M->nR, &M->nj, &M->nl,
@@ -85,6 +109,7 @@ static void read_packed(reader *r, fmu_model *fm) {
         *fields[k] = fm->arrays[k];
         if (!r->bad && !(count == want[k] || (want[k] == 0 && count == 1))) r->bad = 1; /* empty: one zero */
     }
+    read_redundancy(r, fm);
 }
 
 static void read_param(reader *r, fmu_param *p) {
@@ -193,9 +218,9 @@ int fmu_model_read(const char *path, fmu_model *fm, char *err, size_t errsize) {
     char magic[8];
     rd(&r, magic, sizeof magic);
     int format = rd_int(&r), abi = rd_int(&r);
-    if (r.bad || memcmp(magic, "OVKFMU01", 8) || format != 1 || abi != OVK_ABI) {
-        snprintf(err, errsize, "%s: not a model file of this FMU's core (format %d, ABI %d; expected 1, %d)", path,
-                 format, abi, OVK_ABI);
+    if (r.bad || memcmp(magic, "OVKFMU01", 8) || format != FMU_FORMAT || abi != OVK_ABI) {
+        snprintf(err, errsize, "%s: not a model file of this FMU's core (format %d, ABI %d; expected %d, %d)", path,
+                 format, abi, FMU_FORMAT, OVK_ABI);
         fmu_model_free(fm);
         return 0;
     }
@@ -212,7 +237,7 @@ int fmu_model_read(const char *path, fmu_model *fm, char *err, size_t errsize) {
 }
 
 void fmu_model_free(fmu_model *fm) {
-    for (int k = 0; k < 25; k++) free(fm->arrays[k]);
+    for (int k = 0; k < 35; k++) free(fm->arrays[k]);
     free(fm->y0);
     free(fm->out);
     free(fm->var);

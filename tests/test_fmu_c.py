@@ -183,19 +183,20 @@ def test_a_method_the_c_layer_lacks_fails_at_initialization(built, tmp_path):
     fmu.freeInstance()
 
 
-def test_uncovered_scene_is_built_with_python_and_said(tmp_path):
-    """A min-norm scene: the C layer does not cover it; the build says so and the FMU embeds
-    Python (and runs)."""
-    text = (MECH / "planar_none_wo4.toml").read_text()
-    path = tmp_path / "mn.toml"
-    path.write_text(text.replace("eliminate = ", 'redundancy = "min-norm"\n# eliminate = ', 1))
+def test_uncovered_scene_is_built_with_python_and_said(tmp_path, monkeypatch):
+    """A scene the C layer does not cover (here: more friction joints than the core takes, its
+    limit lowered to 1 for the test): the build says so and the FMU embeds Python (and runs)."""
+    from overcon import kernel
+    monkeypatch.setattr(kernel, "MAX_FRICTION", 1)
+    path = tmp_path / "f45.toml"
+    path.write_text((MECH / "planar_f45_wo4.toml").read_text())
     (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
     lines = []
     code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, runtime="c", echo=lines.append,
                                         echo_err=lines.append)
     assert code == 0, lines
-    assert any("runtime python (the FMU embeds Python): the C runtime does not cover redundancy 'min-norm'" in line
-               for line in lines), lines
+    assert any("runtime python (the FMU embeds Python): the C runtime does not cover 2 friction joints (the kernel "
+               "takes at most 1)" in line for line in lines), lines
     assert "resources/overcon_python.txt" in zipfile.ZipFile(results[0].fmu).namelist()
     assert len(fmpy.simulate_fmu(str(results[0].fmu), stop_time=0.05)) > 1
 

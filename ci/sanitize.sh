@@ -8,8 +8,9 @@
 # every case 20 times in two workspaces and requires the same bits, statuses and messages. Any
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.
 # Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmi2_*.c over the core),
-# compiled with the sanitizers into C-runtime FMUs of a friction scene, a quaternion scene and a scene
-# with energy outputs (the Bricard linkage), run
+# compiled with the sanitizers into C-runtime FMUs of a friction scene, a quaternion scene, a scene
+# with energy outputs (the Bricard linkage) and the compliant door (every FMU's model file also
+# carries the packed models of the redundancy parameter's other methods), run
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
 # Also compiles the core with clang -Werror when clang is installed. About 30 s.
@@ -32,16 +33,22 @@ ASAN_OPTIONS=detect_leaks=1:halt_on_error=1:detect_stack_use_after_return=1 \
 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     "$tmp/driver" "$tmp/cases.bin" 20
 FMI=fmu_src/overcon/fmu/native
-"$PY" - "$tmp/fmus" <<'PYEOF'
+"$PY" - "$tmp/fmus" "$tmp/cd" <<'PYEOF'
 import sys
+from pathlib import Path
 from overcon.fmu.build import build_all
+cd = Path(sys.argv[2])  # the compliant door with dopri5 (the C runtime's integrators): core/compliance.c
+cd.mkdir()
+(cd / "compliant_door.toml").write_text(Path("mechanisms/examples/compliant_door.toml").read_text())
+(cd / "compliant_door_h1_wo_hinge2.toml").write_text(
+    Path("mechanisms/examples/compliant_door_h1_wo_hinge2.toml").read_text().replace('"radau"', '"dopri5"'))
 code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml",
-                     "tests/data/bricard/bricard_wo2.toml"], sys.argv[1],
+                     "tests/data/bricard/bricard_wo2.toml", str(cd / "compliant_door_h1_wo_hinge2.toml")], sys.argv[1],
                     refs=False, validate=False, runtime="c", allow_nonunique=True, echo=lambda s: None)
 sys.exit(code)
 PYEOF
 $CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host" tests/c_host/fmu_host.c -ldl -lm  # POSIX (dlopen, realpath): not -std=c11
-for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2; do
+for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2 compliant_door_h1_wo_hinge2; do
     mkdir -p "$tmp/$id" && (cd "$tmp/$id" && unzip -q "../fmus/$id.fmu")
     $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmi2_*.c "$CORE"/*.c -lm
     guid=$(sed -n 's/.*guid="\([^"]*\)".*/\1/p' "$tmp/$id/modelDescription.xml" | head -n 1)

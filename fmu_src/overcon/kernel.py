@@ -8,7 +8,9 @@ arithmetic in one call.
 What it covers (:func:`support`): planar mechanisms of revolute and translational joints, spatial
 mechanisms with z-x-z Euler angles or quaternions and every spatial joint type (spherical,
 revolute, prismatic, cylindrical, universal, fixed); gravity, forces, torques, springs; friction laws ``regularised`` and
-``stribeck``; up to :data:`MAX_FRICTION` friction joints. Anything else runs on the numpy path
+``stribeck``; up to :data:`MAX_FRICTION` friction joints; every redundancy method of
+:data:`overcon.spec.REDUNDANCY_METHODS` (``min-norm``: core/kkt_minnorm.c; ``compliant``:
+core/compliance.c, packed by :func:`_redundancy_block`). Anything else runs on the numpy path
 (the reason is logged). Within an evaluation, whatever the numpy path reports or falls back on
 (a singular position, the friction solve's fixed-point fallback, an Euler singularity, a spring
 of positive free length whose points coincide, a non-finite number) makes the core return a

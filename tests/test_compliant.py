@@ -322,7 +322,8 @@ def test_core_compliant_equals_the_numpy_path(name):
     """Scalar (door, loop, the paper's group) and per-axis values (the four-bar's hinge A), with
     friction on a compliant joint: the core's y', multipliers (the compliant rows' spring-damper
     forces) and friction forces against overcon.dynamics at states along the run. Measured: at most
-    8e-13 relative (the four-bar)."""
+    0.12 of the bound (the door at 1e8 N/m, where the stiffness times the positions' round-off
+    dominates; 0.011 the four-bar's per-axis hinge)."""
     from test_redundancy import core_equals_numpy, states_along_a_run
     spec = scene.load(EXAMPLES / f"{name}.toml")
     model = compile_checked(spec)

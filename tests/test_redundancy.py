@@ -141,12 +141,15 @@ def test_core_min_norm_equals_the_numpy_path(path):
 def test_c_run_of_min_norm_equals_the_python_run(tmp_path):
     """A whole run in C (core/sim.c with the watch on an independent set of the rows) against
     the Python run over the same core: the same steps, the same positions."""
-    from overcon.kernel import Run
+    from overcon.fmu.cmodel import watch_rows
+    from overcon.kernel import Run, RunStopped
     from overcon.simulate import Simulation
     spec = scene.load(_variant(tmp_path, "planar_f1_wo4", None, stop=0.3))
     solver = dataclasses.replace(spec.solver, method="dopri5")
     model = compile_checked(spec)
-    c = Run(model, solver)
+    with pytest.raises(RunStopped, match="no rows for the singularity watch under redundancy 'min-norm'"):
+        Run(model, solver)  # the rows are chosen above the core's layer
+    c = Run(model, solver, watch=watch_rows(model))
     py = Simulation(model, solver)
     for t in (0.1, 0.2, 0.3):
         assert np.max(np.abs(c.advance(t) - py.advance(t))) <= 1e-12

@@ -202,25 +202,24 @@ _REDUNDANCY = {"eliminate": 0, "min-norm": 1, "compliant": 2}
 """OVK_ELIMINATE, OVK_MIN_NORM, OVK_COMPLIANT of core/core.h, by overcon.spec.REDUNDANCY_METHODS."""
 
 
-def _redundancy_block(model) -> dict:
+def _redundancy_block(model, watch=None) -> dict:
     """The redundancy block of ``ovk_model`` (core/core.h): the method, and for "compliant" the
     compliant rows' kinds and scalar values (:func:`overcon.model._compliance`), the rigid rows
     the eliminated solve keeps (positions in ``retained``, equations, bodies) and the per-axis
     joints (:class:`overcon.model.AxisCompliance`: bodies, row counts, retained positions; frame,
-    k_t, d_t, k_r, d_r); for both methods the rows of the singularity watch at the start
-    (:class:`overcon.watch.SingularityMonitor`: rows watched, rows of the whole rigid Jacobian).
-    Arrays as lists; the keys are the field names."""
+    k_t, d_t, k_r, d_r); for both methods the rows of the singularity watch of a run in C,
+    ``watch`` = (rows watched, rows of the whole rigid Jacobian), chosen above this layer
+    (:func:`overcon.fmu.cmodel.watch_rows`); without them (an evaluation only) the counts are -1
+    and core/sim.c refuses to start a run. Arrays as lists; the keys are the field names."""
     method = "min-norm" if model.elimination_mode == "min-norm" else "compliant" if model.compliant_rows.size \
         else "eliminate"
     out = {"redundancy": _REDUNDANCY[method], "nrig": 0, "nax": 0, "nwatch": 0, "nfull": 0}
     if method == "eliminate":
         return out
-    from .watch import SingularityMonitor
-
-    y0 = np.concatenate([model.q0, model.h0])
-    watch = SingularityMonitor._watched_rows(None, model, y0)  # uses no instance state
-    full = SingularityMonitor._rigid_rows(model)
-    out.update(nwatch=len(watch), nfull=len(full), watch=list(watch), full=list(full))
+    if watch is None:
+        out.update(nwatch=-1, nfull=-1)
+    else:
+        out.update(nwatch=len(watch[0]), nfull=len(watch[1]), watch=list(watch[0]), full=list(watch[1]))
     if method != "compliant":
         return out
     R = [int(r) for r in model.retained]
@@ -281,6 +280,14 @@ def _load_constants(ld) -> np.ndarray:
     return out
 
 
+def _pack_redundancy(m: _CModel, red: dict, arr) -> None:
+    """The redundancy block ``red`` (:func:`_redundancy_block`) into ``m``; ``arr`` keeps each array."""
+    for name in REDUNDANCY_COUNTS:
+        setattr(m, name, red[name])
+    for name in REDUNDANCY_ARRAYS:
+        setattr(m, name, arr(red.get(name, ()), float if name in REDUNDANCY_DOUBLES else np.int32))
+
+
 class Kernel:
     """The kernel bound to one model and solver settings: packed arrays, the core's workspace
     (``ovk_data``: one per instance, so instances never share memory) and output buffers made
@@ -288,7 +295,7 @@ class Kernel:
     must be done on the numpy path (the status is kept in :attr:`last_status`, the core's message in
     :attr:`last_message`)."""
 
-    def __init__(self, lib, model, solver):
+    def __init__(self, lib, model, solver, watch=None):  # watch: see _redundancy_block (a C run's)
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
         self._rows_fn = lib.ovk_rows
         self._lib_robust = lib.ovk_evaluate_robust
@@ -346,11 +353,7 @@ class Kernel:
         m.fx, m.fci, m.fcj = arr(fx, I32), arr(fci, I32), arr(fcj, I32)
         bodies_of_row = {r: (c.bi, c.bj) for c in joints for r in c.rows}
         m.rbody = arr([bodies_of_row[int(r)] for r in model.retained], I32)
-        red = _redundancy_block(model)
-        for name in REDUNDANCY_COUNTS:
-            setattr(m, name, red[name])
-        for name in REDUNDANCY_ARRAYS:
-            setattr(m, name, arr(red.get(name, ()), float if name in REDUNDANCY_DOUBLES else I32))
+        _pack_redundancy(m, _redundancy_block(model, watch), arr)
         self._cmodel = m
         self._pm = ctypes.addressof(m)
         self._data = self._workspace(lib)
@@ -548,16 +551,18 @@ class Run:
 
     def __init__(self, model, solver, *, start_time: float | None = None, max_steps: int | None = None,
                  max_wall_time: float | None = None, ratio_tol: float = 1e-6, detect_stiffness: bool = True,
-                 energy: bool | None = None):
+                 energy: bool | None = None, watch=None):
         """``energy``: keep the work ledger of :meth:`energies` (default: when the model has energy
-        outputs; it costs two evaluations a step with friction, as in the Python run)."""
+        outputs; it costs two evaluations a step with friction, as in the Python run). ``watch``:
+        the watch's rows under min-norm or compliant (:func:`overcon.fmu.cmodel.watch_rows`; the
+        run refuses to start without them)."""
         lib, reason = library()
         if lib is None:
             raise KernelUnavailable(reason)
         why = support(model)
         if why is not None or solver.method not in C_METHODS:
             raise KernelUnavailable(why or f"method {solver.method!r} (the C integrators: {', '.join(C_METHODS)})")
-        self._lib, self.kernel = lib, Kernel(lib, model, solver)
+        self._lib, self.kernel = lib, Kernel(lib, model, solver, watch)
         self.ny = model.n + model.nh
         rk = _CRkOpts(method=C_METHODS[solver.method], detect_stiffness=int(detect_stiffness),
                       tolerance=solver.tolerance, max_step=solver.max_step, first_step=0.0, step=solver.step)

@@ -39,6 +39,7 @@ import numpy as np
 
 from overcon import kernel, scene as scene_mod
 from overcon.checks import compile_checked
+from overcon.fmu.cmodel import watch_rows
 
 MECH = Path(__file__).resolve().parents[2] / "mechanisms"
 COUNTS = ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols", "nfj", "nfg", "max_iter")
@@ -63,8 +64,8 @@ class Writer:
         self.parts.append(struct.pack("=i", a.size) + a.tobytes())
 
     def model(self, model, solver):
-        k, note = kernel.select(model, dataclasses.replace(solver, kernel="c"))
-        assert k is not None, note
+        assert kernel.support(model) is None, kernel.support(model)
+        k = kernel.Kernel(kernel.library()[0], model, solver, watch_rows(model))  # the rows of the 'R' runs' watch
         cm = k._cmodel
         by_address = {a.ctypes.data: a for a in k._keep}
         self.parts.append(b"M" + struct.pack("=13i", *(getattr(cm, n) for n in COUNTS))
@@ -118,7 +119,7 @@ class Writer:
         """A run of the model with ``method`` to t_end (the driver also saves and restores its
         state half-way and requires the same bits, or the same stop); its status."""
         solver = dataclasses.replace(solver, method=method)
-        run = kernel.Run(model, solver)
+        run = kernel.Run(model, solver, watch=watch_rows(model))
         y0 = np.concatenate([model.q0, model.h0])
         self.parts.append(b"R" + struct.pack("=2i4d", kernel.C_METHODS[method], int(model.energy_outputs),
                                              solver.tolerance, solver.max_step, solver.step, t_end))

@@ -37,8 +37,9 @@ int ovk_check_redundancy(const ovk_model *M, ovk_data *d) {
     if (M->redundancy != OVK_MIN_NORM && M->redundancy != OVK_COMPLIANT)
         return ovk_fail(d, OVK_INVALID, "model: redundancy %d is not eliminate (0), min-norm (1) or compliant (2)",
                         M->redundancy);
-    if (M->nwatch < 0 || M->nwatch > M->m || M->nfull < 0 || M->nfull > M->m || !in_range(M->watch, M->nwatch, 0, M->m) ||
-        !in_range(M->full, M->nfull, 0, M->m))
+    int unpacked = M->nwatch == -1 && M->nfull == -1; /* no watch rows: evaluations only (sim.c refuses a run) */
+    if (!unpacked && (M->nwatch < 0 || M->nwatch > M->m || M->nfull < 0 || M->nfull > M->m ||
+                      !in_range(M->watch, M->nwatch, 0, M->m) || !in_range(M->full, M->nfull, 0, M->m)))
         return ovk_fail(d, OVK_INVALID, "model: %d watched rows, %d rows of the whole Jacobian: out of range [0, %d]",
                         M->nwatch, M->nfull, M->m);
     if (M->redundancy == OVK_MIN_NORM) return OVK_OK;

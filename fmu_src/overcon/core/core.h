@@ -118,7 +118,8 @@ typedef struct {
      * equations are handled, and the rows the singularity watch (watch.c) judges */
     int redundancy;        /* OVK_ELIMINATE, OVK_MIN_NORM (every row retained), OVK_COMPLIANT */
     int nrig, nax;         /* compliant: rigid retained rows; joints with per-axis values */
-    int nwatch, nfull;     /* the watch: rows watched (kept, independent), rows of the whole rigid Jacobian */
+    int nwatch, nfull;     /* the watch: rows watched (kept, independent), rows of the whole rigid Jacobian
+                            * (-1, -1: not packed; a model for evaluations only, sim.c refuses a run) */
     const int *ckind;      /* nR: per retained position 0 rigid, 1 compliant (scalar values), 2 per axis */
     const double *ck, *cd; /* m: stiffness (N/m, N.m/rad), damping (N.s/m, N.m.s/rad) of each scalar row */
     const int *rigpos, *rigrows, *rigbody; /* nrig, nrig, nrig * 2: the rigid rows' retained positions,

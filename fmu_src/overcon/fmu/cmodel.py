@@ -43,6 +43,7 @@ from .. import kernel as kernel_mod
 from ..checks import compile_checked
 from ..params import rule_of
 from ..spec import REDUNDANCY_METHODS
+from ..watch import SingularityMonitor
 from .variables import redundancy_methods, redundancy_rule, with_redundancy
 
 FORMAT = 2
@@ -149,6 +150,15 @@ def _param(w: _Out, model, var) -> None:
     w.i(var.variability == "tunable")
 
 
+def watch_rows(model) -> tuple[list[int], list[int]]:
+    """(rows watched, rows of the whole rigid Jacobian) of a run's singularity watch at the start
+    (:class:`overcon.watch.SingularityMonitor`: under min-norm an independent set of the rows,
+    under compliant the rigid ones): what the C run's watch (core/watch.c) judges."""
+    y0 = np.concatenate([model.q0, model.h0])
+    rows = SingularityMonitor._watched_rows(None, model, y0)  # a static choice: it reads no instance state
+    return [int(r) for r in rows], [int(r) for r in SingularityMonitor._rigid_rows(model)]
+
+
 def _packed(w: _Out, k) -> None:
     """The packed model of the Kernel ``k`` (part 2 of the layout)."""
     cm = k._cmodel
@@ -176,12 +186,13 @@ def model_file(model, solver, table, guid: str, messages=()) -> bytes:
     w.parts.append(MAGIC)
     w.i(FORMAT, kernel_mod.ABI)
     w.s(guid)
-    _packed(w, kernel_mod.Kernel(lib, model, solver))
+    _packed(w, kernel_mod.Kernel(lib, model, solver, watch_rows(model)))
     others = [m for m in redundancy_methods(model) if m != model.scene.redundancy]
     w.i(len(others))
     for method in others:  # the models of the redundancy parameter's other values
         w.i(REDUNDANCY_METHODS.index(method))
-        _packed(w, kernel_mod.Kernel(lib, compile_checked(with_redundancy(model.scene, method)), solver))
+        other = compile_checked(with_redundancy(model.scene, method))
+        _packed(w, kernel_mod.Kernel(lib, other, solver, watch_rows(other)))
     w.i(model.n, model.nh, int(model.rotation == "quaternion"))
     w.d(model.scene.start_time, model.scene.stop_time)
     w.doubles(np.concatenate([model.q0, model.h0]))

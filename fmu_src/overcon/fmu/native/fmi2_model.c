@@ -73,7 +73,7 @@ static void read_redundancy(reader *r, ovk_model *M, void **arrays) {
     int comp = M->redundancy == OVK_COMPLIANT, any = M->redundancy != OVK_ELIMINATE;
     const long long want[10] = {comp ? M->nR : 0, comp ? M->m : 0, comp ? M->m : 0, M->nrig, M->nrig,
                                 2LL * M->nrig, (long long)OVK_NAXI * M->nax, (long long)OVK_NAXP * M->nax,
-                                any ? M->nwatch : 0, any ? M->nfull : 0};
+                                any && M->nwatch > 0 ? M->nwatch : 0, any && M->nfull > 0 ? M->nfull : 0};
     for (int k = 0; k < 10; k++) {
         int count = 0;
         arrays[25 + k] = rd_array(r, is_double[k] ? sizeof(double) : sizeof(int), &count);

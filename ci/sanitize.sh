@@ -10,7 +10,8 @@
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.
 # Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmi2_*.c over the core),
 # compiled with the sanitizers into C-runtime FMUs of a friction scene (also with radau and dop853), a
-# quaternion scene and a scene with energy outputs (the Bricard linkage), run
+# quaternion scene, a scene with energy outputs (the Bricard linkage) and the compliant door (every
+# FMU's model file also carries the packed models of the redundancy parameter's other methods), run
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
 # Also compiles the core with clang -Werror when clang is installed. About 30 s.
@@ -44,14 +45,19 @@ text = Path("mechanisms/planar_f45_wo4.toml").read_text()
 for method in ("radau", "dop853"):
     (scenes / f"f45_{method}.toml").write_text(text.replace('name = "planar_f45_wo4"', f'name = "f45_{method}"')
                                                .replace("[solver]", f'[solver]\nmethod = "{method}"'))
+# the compliant door (core/compliance.c) with dopri5: its radau run is slow under the sanitizers
+(scenes / "compliant_door.toml").write_text(Path("mechanisms/examples/compliant_door.toml").read_text())
+(scenes / "compliant_door_h1_wo_hinge2.toml").write_text(
+    Path("mechanisms/examples/compliant_door_h1_wo_hinge2.toml").read_text().replace('"radau"', '"dopri5"'))
 code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml",
                      "tests/data/bricard/bricard_wo2.toml", str(scenes / "f45_radau.toml"),
-                     str(scenes / "f45_dop853.toml")], sys.argv[1],
+                     str(scenes / "f45_dop853.toml"), str(scenes / "compliant_door_h1_wo_hinge2.toml")],
+                    sys.argv[1],
                     refs=False, validate=False, runtime="c", allow_nonunique=True, echo=lambda s: None)
 sys.exit(code)
 PYEOF
 $CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host" tests/c_host/fmu_host.c -ldl -lm  # POSIX (dlopen, realpath): not -std=c11
-for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2 f45_radau f45_dop853; do
+for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2 f45_radau f45_dop853 compliant_door_h1_wo_hinge2; do
     mkdir -p "$tmp/$id" && (cd "$tmp/$id" && unzip -q "../fmus/$id.fmu")
     $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmi2_*.c "$CORE"/*.c -lm
     guid=$(sed -n 's/.*guid="\([^"]*\)".*/\1/p' "$tmp/$id/modelDescription.xml" | head -n 1)

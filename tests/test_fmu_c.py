@@ -170,19 +170,20 @@ def test_rk4_unstable_step_is_readable_as_in_python(built, tmp_path):
     assert any(s == 3 and "rk4 is unstable with the fixed step 0.02 s" in m for s, _, m in logs.records)
 
 
-def test_uncovered_scene_is_built_with_python_and_said(tmp_path):
-    """A min-norm scene: the C layer does not cover it; the build says so and the FMU embeds
-    Python (and runs)."""
-    text = (MECH / "planar_none_wo4.toml").read_text()
-    path = tmp_path / "mn.toml"
-    path.write_text(text.replace("eliminate = ", 'redundancy = "min-norm"\n# eliminate = ', 1))
+def test_uncovered_scene_is_built_with_python_and_said(tmp_path, monkeypatch):
+    """A scene the C layer does not cover (here: more friction joints than the core takes, its
+    limit lowered to 1 for the test): the build says so and the FMU embeds Python (and runs)."""
+    from overcon import kernel
+    monkeypatch.setattr(kernel, "MAX_FRICTION", 1)
+    path = tmp_path / "f45.toml"
+    path.write_text((MECH / "planar_f45_wo4.toml").read_text())
     (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
     lines = []
     code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, runtime="c", echo=lines.append,
                                         echo_err=lines.append)
     assert code == 0, lines
-    assert any("runtime python (the FMU embeds Python): the C runtime does not cover redundancy 'min-norm'" in line
-               for line in lines), lines
+    assert any("runtime python (the FMU embeds Python): the C runtime does not cover 2 friction joints (the kernel "
+               "takes at most 1)" in line for line in lines), lines
     assert "resources/overcon_python.txt" in zipfile.ZipFile(results[0].fmu).namelist()
     assert len(fmpy.simulate_fmu(str(results[0].fmu), stop_time=0.05)) > 1
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import zipfile
 from pathlib import Path
 
@@ -172,15 +173,16 @@ def test_adaptive_friction_runs_agree_within_accuracy():
     assert np.max(np.abs(res[1].values[:, cols] - res[0].values[:, cols])) < 1e-6
 
 
-def uncovered_door(tmp_path: Path) -> Path:
-    """The example door scene with redundancy = "min-norm" instead of its elimination: a model the
-    kernel does not cover (it solves the eliminated form)."""
-    for f in EXAMPLES.glob("door*.toml"):
-        (tmp_path / f.name).write_text(f.read_text())
-    scene_file = tmp_path / "door_h1_wo_hinge2.toml"
-    text = scene_file.read_text()
-    assert 'eliminate = ["hinge2"]' in text
-    scene_file.write_text(text.replace('eliminate = ["hinge2"]', 'redundancy = "min-norm"'))
+UNCOVERED = "2 friction joints (the kernel takes at most 1)"
+
+
+def uncovered(tmp_path: Path, monkeypatch) -> Path:
+    """The paper's scene with friction in joints 4 and 5, with the core's friction-joint limit
+    lowered to 1 for the test: a model the kernel does not cover (:data:`UNCOVERED`)."""
+    monkeypatch.setattr(kernel, "MAX_FRICTION", 1)
+    (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
+    scene_file = tmp_path / "planar_f45_wo4.toml"
+    scene_file.write_text((MECH / "planar_f45_wo4.toml").read_text())
     return scene_file
 
 
@@ -192,11 +194,12 @@ def test_selection_and_note(monkeypatch, tmp_path):
     assert "compiled kernel" in Simulation(model, spec.solver).kernel_note
     assert Simulation(model, dataclasses.replace(spec.solver, kernel="numpy")).kernel_note == \
         "right-hand side: numpy (solver.kernel = 'numpy')"
-    door = compile_checked(scene_mod.as_scene(scene_mod.load(uncovered_door(tmp_path))))
+    door = compile_checked(scene_mod.as_scene(scene_mod.load(uncovered(tmp_path, monkeypatch))))
     note = Simulation(door, spec.solver).kernel_note
-    assert note.startswith("right-hand side: numpy (solver.kernel = 'auto': ") and "'min-norm'" in note
-    with pytest.raises(SimulationError, match=r"solver.kernel = 'c': redundancy 'min-norm'"):
+    assert note.startswith("right-hand side: numpy (solver.kernel = 'auto': ") and UNCOVERED in note
+    with pytest.raises(SimulationError, match=rf"solver.kernel = 'c': {re.escape(UNCOVERED)}"):
         Simulation(door, dataclasses.replace(spec.solver, kernel="c"))
+    monkeypatch.undo()  # the core's own friction-joint limit again
     saved = dict(kernel._state)
     try:
         kernel.disable("no library here (test)")
@@ -297,7 +300,7 @@ def test_kernel_outputs_equal_numpy(name):
     assert not np.any(sims["c"]._derived.values_from_kernel(*sims["c"]._kernel.outputs(y, zero)))
 
 
-def test_cli_kernel_flag_and_scene_field(tmp_path, capsys):
+def test_cli_kernel_flag_and_scene_field(tmp_path, capsys, monkeypatch):
     """overcon simulate --kernel: the summary names the path; c where the kernel cannot run is bad
     input (exit 2) naming the flag and why; a scene's [solver] kernel outside auto|c|numpy is
     refused naming the field."""
@@ -309,9 +312,9 @@ def test_cli_kernel_flag_and_scene_field(tmp_path, capsys):
     assert "right-hand side: numpy (solver.kernel = 'numpy')" in capsys.readouterr().out
     assert main(["simulate", str(MECH / "planar_f45_wo4.toml"), "--stop-time", "0.2", "--out", str(out)]) == 0
     assert "right-hand side: compiled kernel" in capsys.readouterr().out
-    assert main(["simulate", str(uncovered_door(tmp_path)), "--stop-time", "0.1", "--out", str(out),
+    assert main(["simulate", str(uncovered(tmp_path, monkeypatch)), "--stop-time", "0.1", "--out", str(out),
                  "--kernel", "c"]) == 2
-    assert "--kernel c: the compiled kernel cannot run: redundancy 'min-norm'" in capsys.readouterr().err
+    assert f"--kernel c: the compiled kernel cannot run: {UNCOVERED}" in capsys.readouterr().err
     text = (MECH / "planar_f45_wo4.toml").read_text()
     assert "[solver]" in text
     (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
@@ -429,18 +432,18 @@ def test_spring_of_zero_free_length_at_coinciding_points(tmp_path):
 
 
 @pytest.mark.integration
-def test_check_and_build_refuse_a_kernel_that_cannot_run(tmp_path, capsys):
+def test_check_and_build_refuse_a_kernel_that_cannot_run(tmp_path, capsys, monkeypatch):
     """[solver] kernel = "c" on a model the kernel does not cover: check and build refuse the scene
     (exit 2, file and field named) instead of an FMU that could never start."""
     from overcon.cli import main
 
-    scene_file = uncovered_door(tmp_path)
+    scene_file = uncovered(tmp_path, monkeypatch)
     text = scene_file.read_text()
     scene_file.write_text(text.replace("[solver]", '[solver]\nkernel = "c"', 1) if "[solver]" in text
                           else text + '\n[solver]\nkernel = "c"\n')
     assert main(["check", str(scene_file)]) == 2
     err = capsys.readouterr().err
-    assert "solver.kernel = 'c': the compiled kernel cannot run: redundancy 'min-norm'" in err
+    assert f"solver.kernel = 'c': the compiled kernel cannot run: {UNCOVERED}" in err
     assert main(["build", str(scene_file), "--out", str(tmp_path / "out"), "--no-ref"]) == 2
     assert "solver.kernel = 'c': the compiled kernel cannot run" in capsys.readouterr().err
     assert not list((tmp_path / "out").glob("*.fmu"))

@@ -8,7 +8,9 @@ arithmetic in one call.
 What it covers (:func:`support`): planar mechanisms of revolute and translational joints, spatial
 mechanisms with z-x-z Euler angles or quaternions and every spatial joint type (spherical,
 revolute, prismatic, cylindrical, universal, fixed); gravity, forces, torques, springs; friction laws ``regularised`` and
-``stribeck``; up to :data:`MAX_FRICTION` friction joints. Anything else runs on the numpy path
+``stribeck``; up to :data:`MAX_FRICTION` friction joints; every redundancy method of
+:data:`overcon.spec.REDUNDANCY_METHODS` (``min-norm``: core/kkt_minnorm.c; ``compliant``:
+core/compliance.c, packed by :func:`_redundancy_block`). Anything else runs on the numpy path
 (the reason is logged). Within an evaluation, whatever the numpy path reports or falls back on
 (a singular position, the friction solve's fixed-point fallback, an Euler singularity, a spring
 of positive free length whose points coincide, a non-finite number) makes the core return a
@@ -48,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 7  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
+ABI = 8  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
 MAX_FRICTION = 32  # OVK_MAX_FRICTION in core/core.h
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
@@ -162,10 +164,6 @@ def support(model) -> str | None:
 
     if model.kind == "spatial" and model.rotation not in _ROTATIONS:
         return f"rotation {model.rotation!r} (the kernel has z-x-z Euler angles and quaternions)"
-    if model.elimination_mode == "min-norm":
-        return "redundancy 'min-norm' (the kernel solves the eliminated form, by Cholesky)"
-    if model.compliant_rows.size:
-        return "compliant joints (the kernel solves rigid joints only)"
     for c in model.joints:
         if (model.kind, c.type) not in _JOINTS:
             covered = ", ".join(TYPES[t].name for k, t in _JOINTS if k == model.kind)
@@ -181,6 +179,12 @@ def support(model) -> str | None:
     return None
 
 
+REDUNDANCY_COUNTS = ("redundancy", "nrig", "nax", "nwatch", "nfull")
+REDUNDANCY_ARRAYS = ("ckind", "ck", "cd", "rigpos", "rigrows", "rigbody", "axi", "axp", "watch", "full")
+"""The redundancy block at the end of ``ovk_model`` (core/core.h), in its order."""
+REDUNDANCY_DOUBLES = {"ck", "cd", "axp"}
+
+
 class _CModel(ctypes.Structure):
     """``ovk_model`` of core/core.h (same order)."""
     _fields_ = ([(n, ctypes.c_int) for n in ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols",
@@ -189,7 +193,51 @@ class _CModel(ctypes.Structure):
                 + [(n, ctypes.c_void_p) for n in ("retained", "Minv", "mass", "inertia", "gravity", "jtype", "jbi",
                                                   "jbj", "jneq", "jrows", "jconst", "jlaw", "jlawp", "ltype", "lbi",
                                                   "lbj", "lp", "xrows", "cols", "fj", "fgroup", "fx", "fci", "fcj",
-                                                  "rbody")])
+                                                  "rbody")]
+                + [(n, ctypes.c_int) for n in REDUNDANCY_COUNTS]
+                + [(n, ctypes.c_void_p) for n in REDUNDANCY_ARRAYS])
+
+
+_REDUNDANCY = {"eliminate": 0, "min-norm": 1, "compliant": 2}
+"""OVK_ELIMINATE, OVK_MIN_NORM, OVK_COMPLIANT of core/core.h, by overcon.spec.REDUNDANCY_METHODS."""
+
+
+def _redundancy_block(model, watch=None) -> dict:
+    """The redundancy block of ``ovk_model`` (core/core.h): the method, and for "compliant" the
+    compliant rows' kinds and scalar values (:func:`overcon.model._compliance`), the rigid rows
+    the eliminated solve keeps (positions in ``retained``, equations, bodies) and the per-axis
+    joints (:class:`overcon.model.AxisCompliance`: bodies, row counts, retained positions; frame,
+    k_t, d_t, k_r, d_r); for both methods the rows of the singularity watch of a run in C,
+    ``watch`` = (rows watched, rows of the whole rigid Jacobian), chosen above this layer
+    (:func:`overcon.fmu.cmodel.watch_rows`); without them (an evaluation only) the counts are -1
+    and core/sim.c refuses to start a run. Arrays as lists; the keys are the field names."""
+    method = "min-norm" if model.elimination_mode == "min-norm" else "compliant" if model.compliant_rows.size \
+        else "eliminate"
+    out = {"redundancy": _REDUNDANCY[method], "nrig": 0, "nax": 0, "nwatch": 0, "nfull": 0}
+    if method == "eliminate":
+        return out
+    if watch is None:
+        out.update(nwatch=-1, nfull=-1)
+    else:
+        out.update(nwatch=len(watch[0]), nfull=len(watch[1]), watch=list(watch[0]), full=list(watch[1]))
+    if method != "compliant":
+        return out
+    R = [int(r) for r in model.retained]
+    pos = {r: p for p, r in enumerate(R)}
+    kind = np.zeros(len(R), int)
+    kind[[pos[int(r)] for r in model.compliant_rows if int(r) in pos]] = 1
+    bodies = {r: (c.bi, c.bj) for c in model.joints for r in c.rows}
+    axi, axp = [], []
+    for ax in model.compliance_axes:
+        t = [pos[r] for r in ax.t_rows]
+        r_ = [pos[r] for r in ax.r_rows]
+        kind[t + r_] = 2
+        axi.append([ax.bi, ax.bj, len(t), len(r_)] + (t + [-1] * 3)[:3] + (r_ + [-1] * 3)[:3])
+        axp.append(np.concatenate([np.asarray(ax.frame, float).reshape(-1), ax.k_t, ax.d_t, ax.k_r, ax.d_r]))
+    rig = [p for p in range(len(R)) if kind[p] == 0]
+    out.update(nrig=len(rig), nax=len(axi), ckind=list(kind), ck=model.row_stiffness, cd=model.row_damping,
+               rigpos=rig, rigrows=[R[p] for p in rig], rigbody=[bodies[R[p]] for p in rig], axi=axi, axp=axp)
+    return out
 
 
 def _joint_constants(model, c) -> np.ndarray:
@@ -232,6 +280,14 @@ def _load_constants(ld) -> np.ndarray:
     return out
 
 
+def _pack_redundancy(m: _CModel, red: dict, arr) -> None:
+    """The redundancy block ``red`` (:func:`_redundancy_block`) into ``m``; ``arr`` keeps each array."""
+    for name in REDUNDANCY_COUNTS:
+        setattr(m, name, red[name])
+    for name in REDUNDANCY_ARRAYS:
+        setattr(m, name, arr(red.get(name, ()), float if name in REDUNDANCY_DOUBLES else np.int32))
+
+
 class Kernel:
     """The kernel bound to one model and solver settings: packed arrays, the core's workspace
     (``ovk_data``: one per instance, so instances never share memory) and output buffers made
@@ -239,7 +295,7 @@ class Kernel:
     must be done on the numpy path (the status is kept in :attr:`last_status`, the core's message in
     :attr:`last_message`)."""
 
-    def __init__(self, lib, model, solver):
+    def __init__(self, lib, model, solver, watch=None):  # watch: see _redundancy_block (a C run's)
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
         self._rows_fn = lib.ovk_rows
         self._lib_robust = lib.ovk_evaluate_robust
@@ -297,6 +353,7 @@ class Kernel:
         m.fx, m.fci, m.fcj = arr(fx, I32), arr(fci, I32), arr(fcj, I32)
         bodies_of_row = {r: (c.bi, c.bj) for c in joints for r in c.rows}
         m.rbody = arr([bodies_of_row[int(r)] for r in model.retained], I32)
+        _pack_redundancy(m, _redundancy_block(model, watch), arr)
         self._cmodel = m
         self._pm = ctypes.addressof(m)
         self._data = self._workspace(lib)
@@ -496,16 +553,18 @@ class Run:
 
     def __init__(self, model, solver, *, start_time: float | None = None, max_steps: int | None = None,
                  max_wall_time: float | None = None, ratio_tol: float = 1e-6, detect_stiffness: bool = True,
-                 energy: bool | None = None):
+                 energy: bool | None = None, watch=None):
         """``energy``: keep the work ledger of :meth:`energies` (default: when the model has energy
-        outputs; it costs two evaluations a step with friction, as in the Python run)."""
+        outputs; it costs two evaluations a step with friction, as in the Python run). ``watch``:
+        the watch's rows under min-norm or compliant (:func:`overcon.fmu.cmodel.watch_rows`; the
+        run refuses to start without them)."""
         lib, reason = library()
         if lib is None:
             raise KernelUnavailable(reason)
         why = support(model)
         if why is not None or solver.method not in C_METHODS:
             raise KernelUnavailable(why or f"method {solver.method!r} (the C integrators: {', '.join(C_METHODS)})")
-        self._lib, self.kernel = lib, Kernel(lib, model, solver)
+        self._lib, self.kernel = lib, Kernel(lib, model, solver, watch)
         self.ny = model.n + model.nh
         rk = _CRkOpts(method=C_METHODS[solver.method], detect_stiffness=int(detect_stiffness),
                       tolerance=solver.tolerance, max_step=solver.max_step, first_step=0.0, step=solver.step)

@@ -15,7 +15,7 @@
 
 #include "core.h"
 
-#define NFIELDS 25
+#define NFIELDS 35
 #define MAX_ITEMS (1 << 24)
 
 typedef struct {
@@ -107,6 +107,18 @@ static int read_model(reader *r, model_t *m) {
     M->fci = keep(m, r, I);
     M->fcj = keep(m, r, I);
     M->rbody = keep(m, r, I);
+    int *red[] = {&M->redundancy, &M->nrig, &M->nax, &M->nwatch, &M->nfull}; /* the redundancy block */
+    for (size_t i = 0; i < sizeof red / sizeof red[0]; i++) *red[i] = rd_i32(r);
+    M->ckind = keep(m, r, I);
+    M->ck = keep(m, r, D);
+    M->cd = keep(m, r, D);
+    M->rigpos = keep(m, r, I);
+    M->rigrows = keep(m, r, I);
+    M->rigbody = keep(m, r, I);
+    M->axi = keep(m, r, I);
+    M->axp = keep(m, r, D);
+    M->watch = keep(m, r, I);
+    M->full = keep(m, r, I);
     if (r->bad) return 0;
     for (int w = 0; w < 2; w++) {
         m->d[w] = ovk_make_data(M);

@@ -9,7 +9,8 @@ The cases: the paper's planar mechanism (friction in two revolute and one transl
 its spatial mechanism (friction in two spherical joints) at random states, cold and warm-started;
 the quaternion examples (door: spatial revolute joints; carriage: prismatic and cylindrical; loop:
 revolute and spherical, each with friction) and a random chain of every spatial joint type in
-Euler angles (universal and fixed joints too);
+Euler angles (universal and fixed joints too); redundancy "min-norm" (the paper's planar group, the door) and
+"compliant" (the door, the four-bar with per-axis values, the paper's group), evaluated and run;
 spatial states where Newton gives up and damped Newton finishes; and every failure status: a
 singular position (tests/data/two_pins: two pins on one bar, rows exactly dependent), the friction solve giving up
 (friction_max_iter = 2), a non-finite state, an Euler singularity, a spring whose points coincide.
@@ -40,6 +41,7 @@ import numpy as np
 
 from overcon import kernel, scene as scene_mod
 from overcon.checks import compile_checked
+from overcon.fmu.cmodel import watch_rows
 
 MECH = Path(__file__).resolve().parents[2] / "mechanisms"
 COUNTS = ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols", "nfj", "nfg", "max_iter")
@@ -64,16 +66,20 @@ class Writer:
         self.parts.append(struct.pack("=i", a.size) + a.tobytes())
 
     def model(self, model, solver):
-        k, note = kernel.select(model, dataclasses.replace(solver, kernel="c"))
-        assert k is not None, note
+        assert kernel.support(model) is None, kernel.support(model)
+        k = kernel.Kernel(kernel.library()[0], model, solver, watch_rows(model))  # the rows of the 'R' runs' watch
         cm = k._cmodel
         by_address = {a.ctypes.data: a for a in k._keep}
         self.parts.append(b"M" + struct.pack("=13i", *(getattr(cm, n) for n in COUNTS))
                           + struct.pack("=2d", *(getattr(cm, n) for n in FLOATS)))
+        red = set(kernel.REDUNDANCY_COUNTS + kernel.REDUNDANCY_ARRAYS)
         for name, ctype in cm._fields_:
-            if name in COUNTS or name in FLOATS:
+            if name in COUNTS or name in FLOATS or name in red:
                 continue
             (self.doubles if name in DOUBLE_FIELDS else self.ints)(by_address[getattr(cm, name)])
+        self.parts.append(struct.pack("=5i", *(getattr(cm, n) for n in kernel.REDUNDANCY_COUNTS)))
+        for name in kernel.REDUNDANCY_ARRAYS:
+            (self.doubles if name in kernel.REDUNDANCY_DOUBLES else self.ints)(by_address[getattr(cm, name)])
         self.kernel = k
         self.counts["models"] += 1
         return k
@@ -115,7 +121,7 @@ class Writer:
         """A run of the model with ``method`` to t_end (the driver also saves and restores its
         state half-way and requires the same bits, or the same stop); its status."""
         solver = dataclasses.replace(solver, method=method)
-        run = kernel.Run(model, solver)
+        run = kernel.Run(model, solver, watch=watch_rows(model))
         y0 = np.concatenate([model.q0, model.h0])
         self.parts.append(b"R" + struct.pack("=2i4d", kernel.C_METHODS[method], int(model.energy_outputs),
                                              solver.tolerance, solver.max_step, solver.step, t_end))
@@ -214,6 +220,20 @@ def build(tmp: Path) -> Writer:
         w.run(model, spec.solver, "dopri5", 0.2)
         if name == "door_h1_wo_hinge2":
             w.run(model, spec.solver, "radau", 0.2)
+    # redundancy "min-norm" (kkt_minnorm.c) and "compliant" (compliance.c: scalar and per-axis
+    # values, friction on compliant joints), evaluations and runs
+    for path, redundancy in ((MECH / "planar_f1_wo4.toml", "min-norm"), (MECH / "examples" / "door_h1_wo_hinge2.toml",
+                                                                         "min-norm"),
+                             (MECH / "examples" / "compliant_door_h1_wo_hinge2.toml", None),
+                             (MECH / "examples" / "compliant_fourbar_A_wo3_4_5.toml", None),
+                             (MECH / "examples" / "compliant_planar_f1_wo4.toml", None)):
+        spec = spec_of(path)
+        if redundancy:
+            spec = dataclasses.replace(spec, redundancy=redundancy, eliminate=())
+        model = compile_checked(spec)
+        w.model(model, spec.solver)
+        random_states(w, model, 4, seed=5)
+        w.run(model, dataclasses.replace(spec.solver, method="dopri5"), "dopri5", 0.02)
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from test_kernel import random_axis_model
 

@@ -81,7 +81,7 @@ static int check_model(const ovk_model *M, ovk_data *d) {
     for (int g = 0; g < M->nfg; g++)
         if (M->fgroup[g] > M->fgroup[g + 1])
             return ovk_fail(d, OVK_INVALID, "model: friction group %d starts after the next one", g);
-    return OVK_OK;
+    return ovk_check_redundancy(M, d);
 }
 
 ovk_data *ovk_make_data(const ovk_model *M) {
@@ -96,7 +96,7 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     size_t n_work = 4 * nx + nx * nc                          /* lam0x, x, x0, Wx */
                     + 4 * nx + nc * nx + nx * nx + nc + nx;   /* r, Dq, Mx, dx, xn, qn, rn (damped Newton) */
     size_t need = n_frames + m * nh + 2 * m + nR * nR + 2 * nR + nh + nR * nc + 6 * OVK_MAXEQ * nj + n_work
-                  + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols);
+                  + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols) + ovk_redundancy_doubles(M);
     d->mem = calloc(need ? need : 1, sizeof(double));
     d->ctx = calloc(nfj ? nfj : 1, sizeof(ovk_fctx));
     if (!d->mem || !d->ctx) {
@@ -128,6 +128,8 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->Qj = p; p += 6 * nfj;
     d->robust = p;
     p += ovk_robust_doubles(M->nx, M->ncols);
+    d->red = p;
+    p += ovk_redundancy_doubles(M);
     d->work = p;
     return d;
 }
@@ -166,7 +168,7 @@ int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int
     ovk_constraint_rows(M, d, q);
     ovk_kkt_rhs(M, d, h);
     if ((status = ovk_loads(M, d))) return status;
-    if ((status = ovk_kkt_solve(M, d))) return status;
+    if ((status = M->redundancy == OVK_COMPLIANT ? ovk_compliant_solve(M, d, h) : ovk_kkt_solve(M, d))) return status;
     if (M->nfj && (status = ovk_friction(M, d, guess_mode, guess, qf, iterations, damped))) {
         d->robust_ready = status == OVK_FRICTION;
         return status;

@@ -12,6 +12,8 @@
  *                       row primitives of overcon.joints.spatial_rows, reactions, friction
  *   loads.c             applied forces: gravity, gyroscopic, force, torque, spring
  *   kkt.c               the KKT solve with the scene's elimination (Cholesky of S) and h'
+ *   kkt_minnorm.c       redundancy "min-norm": S^+ by a rank-revealing SVD in place of the Cholesky factor
+ *   compliance.c        redundancy "compliant": spring-damper multipliers of compliant joints, rigid rest
  *   friction.c          friction laws, the reduced friction fixed point, Newton and damped Newton
  *   linalg.c            dense Cholesky and LU (fixed summation order, no BLAS)
  *   lu.c                complex LU with partial pivoting (radau's complex Newton matrix)
@@ -43,7 +45,7 @@
 
 #include <stddef.h>
 
-#define OVK_ABI 7 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+#define OVK_ABI 8 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
     OVK_OK = 0,
@@ -114,7 +116,26 @@ typedef struct {
     const int *fx;         /* nfj * OVK_MAXEQ: x index per equation (nx = eliminated) */
     const int *fci, *fcj;  /* nfj * 6: index into cols per coordinate of body i, j (ncols = base) */
     const int *rbody;      /* nR * 2: the bodies (-1 base) of each retained row: Phi_h is zero elsewhere */
+    /* redundancy (overcon.spec.REDUNDANCY_METHODS; kkt_minnorm.c, compliance.c): how the redundant
+     * equations are handled, and the rows the singularity watch (watch.c) judges */
+    int redundancy;        /* OVK_ELIMINATE, OVK_MIN_NORM (every row retained), OVK_COMPLIANT */
+    int nrig, nax;         /* compliant: rigid retained rows; joints with per-axis values */
+    int nwatch, nfull;     /* the watch: rows watched (kept, independent), rows of the whole rigid Jacobian
+                            * (-1, -1: not packed; a model for evaluations only, sim.c refuses a run) */
+    const int *ckind;      /* nR: per retained position 0 rigid, 1 compliant (scalar values), 2 per axis */
+    const double *ck, *cd; /* m: stiffness (N/m, N.m/rad), damping (N.s/m, N.m.s/rad) of each scalar row */
+    const int *rigpos, *rigrows, *rigbody; /* nrig, nrig, nrig * 2: the rigid rows' retained positions,
+                            * equations and bodies (-1 base): the eliminated problem compliance.c solves */
+    const int *axi;        /* nax * 10: bodies i, j; counts of translational, rotational rows; their
+                            * retained positions (3 + 3, -1 unused) */
+    const double *axp;     /* nax * 21: joint frame (3 x 3 row-major, columns the axes in body i's
+                            * axes), k_t, d_t, k_r, d_r along its x, y, z */
+    const int *watch;      /* nwatch: equations watched (SingularityMonitor.rows at the start) */
+    const int *full;       /* nfull: equations of the whole Jacobian (the rigid ones) */
 } ovk_model;
+enum { OVK_ELIMINATE = 0, OVK_MIN_NORM = 1, OVK_COMPLIANT = 2 };
+#define OVK_NAXI 10 /* ints per per-axis compliant joint (axi) */
+#define OVK_NAXP 21 /* doubles per per-axis compliant joint (axp) */
 
 /* Frames of the bodies, slot nb = the base. */
 typedef struct {
@@ -153,6 +174,7 @@ typedef struct {
     double *mem;   /* the one allocation behind the double buffers above */
     int status;    /* nonzero: the workspace could not be made (every call returns it) */
     char msg[OVK_MSG];
+    double *red;   /* redundancy: scratch of kkt_minnorm.c / compliance.c (ovk_redundancy_doubles) */
 } ovk_data;
 
 /* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, dop853, rk4);
@@ -330,6 +352,14 @@ OVK_HIDDEN void ovk_kkt_rhs(const ovk_model *M, ovk_data *d, const double *h);
 OVK_HIDDEN int ovk_kkt_solve(const ovk_model *M, ovk_data *d);
 OVK_HIDDEN void ovk_kkt_friction_columns(const ovk_model *M, ovk_data *d);
 OVK_HIDDEN void ovk_kkt_accelerations(const ovk_model *M, ovk_data *d, double *lam, double *hdot);
+
+/* kkt_minnorm.c, compliance.c: redundancy "min-norm" and "compliant" */
+OVK_HIDDEN size_t ovk_redundancy_doubles(const ovk_model *M);
+OVK_HIDDEN int ovk_check_redundancy(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN int ovk_minnorm_factor(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN void ovk_minnorm_solve_many(const ovk_model *M, ovk_data *d, double *B, int nc);
+OVK_HIDDEN int ovk_compliant_solve(const ovk_model *M, ovk_data *d, const double *h);
+OVK_HIDDEN void ovk_compliant_columns(const ovk_model *M, ovk_data *d);
 
 /* friction.c */
 OVK_HIDDEN double ovk_law_magnitude(const double *lp, int law, double speed);

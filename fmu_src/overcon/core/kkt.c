@@ -51,10 +51,11 @@ int ovk_kkt_solve(const ovk_model *M, ovk_data *d) {
     for (int i = 0; i < nR * nR; i++)
         if (!isfinite(S[i]))
             return ovk_fail(d, OVK_NONFINITE, "non-finite number in S = Phi_h M^-1 Phi_h^T (row %d)", i / nR);
-    int col = ovk_cholesky(S, nR);
+    int col = M->redundancy == OVK_MIN_NORM ? 0 : ovk_cholesky(S, nR), status; /* redundancy: min-norm */
     if (col)
         return ovk_fail(d, OVK_SINGULAR, "singular position: S = Phi_h M^-1 Phi_h^T is not positive definite "
                         "(Cholesky pivot %d of %d, retained row %d)", col - 1, nR, M->retained[col - 1]);
+    if (M->redundancy == OVK_MIN_NORM && (status = ovk_minnorm_factor(M, d))) return status; /* S^+ in d->S */
     for (int i = 0; i < nR; i++) {
         const double *Ji = J + (size_t)M->retained[i] * nh;
         double s = 0.0;
@@ -69,7 +70,10 @@ int ovk_kkt_solve(const ovk_model *M, ovk_data *d) {
         if (!isfinite(d->lamR[i]))
             return ovk_fail(d, OVK_NONFINITE, "non-finite number in the multipliers' right-hand side (row %d)",
                             M->retained[i]);
-    ovk_cho_solve(S, nR, d->lamR);
+    if (M->redundancy == OVK_MIN_NORM)
+        ovk_minnorm_solve_many(M, d, d->lamR, 1);
+    else
+        ovk_cho_solve(S, nR, d->lamR);
     return OVK_OK;
 }
 
@@ -77,12 +81,19 @@ int ovk_kkt_solve(const ovk_model *M, ovk_data *d) {
  * each friction velocity (one column per entry of cols). */
 void ovk_kkt_friction_columns(const ovk_model *M, ovk_data *d) {
     int nR = M->nR, nc = M->ncols, nh = M->nb * M->nh_b;
+    if (M->redundancy == OVK_COMPLIANT) { /* redundancy: the rigid rows' columns (compliance.c) */
+        ovk_compliant_columns(M, d);
+        return;
+    }
     for (int i = 0; i < nR; i++)
         for (int c = 0; c < nc; c++) {
             int k = M->cols[c];
             d->W[i * nc + c] = M->Minv[k] * d->J[(size_t)M->retained[i] * nh + k];
         }
-    ovk_cho_solve_many(d->S, nR, d->W, nc);
+    if (M->redundancy == OVK_MIN_NORM)
+        ovk_minnorm_solve_many(M, d, d->W, nc);
+    else
+        ovk_cho_solve_many(d->S, nR, d->W, nc);
 }
 
 /* lam (m: lam_R at the retained rows, zeros at the eliminated ones) and h' = M^-1 (Q - J_R^T lam_R). */

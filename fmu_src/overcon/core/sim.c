@@ -178,9 +178,17 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     }
     s->n = M->nb * M->nq_b;
     s->nh = M->nb * M->nh_b;
-    if (M->nR > s->nh) {
+    int kept = M->redundancy ? M->nwatch : M->nR; /* redundancy: the rows the watch judges (watch.c) */
+    if (kept < 0) {
         s->status = OVK_INVALID;
-        snprintf(s->msg, sizeof s->msg, "cannot start: %d kept rows for %d velocities", M->nR, s->nh);
+        snprintf(s->msg, sizeof s->msg, "cannot start: the model carries no rows for the singularity watch under "
+                 "redundancy %s (overcon.fmu.cmodel.watch_rows packs them)", M->redundancy == OVK_MIN_NORM ?
+                 "'min-norm'" : "'compliant'");
+        return s;
+    }
+    if (kept > s->nh) {
+        s->status = OVK_INVALID;
+        snprintf(s->msg, sizeof s->msg, "cannot start: %d kept rows for %d velocities", kept, s->nh);
         return s;
     }
     s->ny = s->n + s->nh;

@@ -22,6 +22,15 @@
 #define SEARCH_REL 1e-9      /* watch.SEARCH_REL */
 #define C_REFUSES "the C runtime does not choose the eliminated equations again: build with --runtime python"
 
+/* redundancy: the rows the watch judges (SingularityMonitor.rows and full_rows): under "eliminate"
+ * the retained rows and every equation; under "min-norm" (every row retained) an independent
+ * set of them chosen at the start and every equation; under "compliant" the rigid retained rows
+ * and the rigid equations (compliant equations are forces, they cannot lose rank). */
+static const int *kept_rows(const ovk_model *M) { return M->redundancy ? M->watch : M->retained; }
+static int n_kept(const ovk_model *M) { return M->redundancy ? M->nwatch : M->nR; }
+static const int *full_rows(const ovk_model *M) { return M->redundancy ? M->full : NULL; }
+static int n_full(const ovk_model *M) { return M->redundancy ? M->nfull : M->m; }
+
 /* A message into msg (OVK_MSG bytes, cut there) and the status. */
 #if defined(__GNUC__)
 __attribute__((format(printf, 3, 4)))
@@ -62,14 +71,14 @@ static double ratio_of(ovk_sim *s, const double *A, int k) {
 
 /* The whole Jacobian's singular values at y into s->sv (min(m, nh) of them, largest first). */
 static int full_values(ovk_sim *s, const double *y, char *msg) {
-    int status = weighted(s, y, NULL, s->m, s->W2, msg);
-    if (!status) ovk_singular_values(s->W2, s->m, s->nh, s->T, s->sv);
+    int status = weighted(s, y, full_rows(s->M), n_full(s->M), s->W2, msg);
+    if (!status) ovk_singular_values(s->W2, n_full(s->M), s->nh, s->T, s->sv);
     return status;
 }
 
 /* The whole Jacobian's numerical rank at y (watch.numerical_rank with ratio_tol). */
 static int full_rank(ovk_sim *s, const double *y, int *rank, char *msg) {
-    int status = full_values(s, y, msg), k = s->m < s->nh ? s->m : s->nh;
+    int status = full_values(s, y, msg), k = n_full(s->M) < s->nh ? n_full(s->M) : s->nh;
     *rank = 0;
     for (int i = 0; !status && i < k; i++) *rank += s->sv[i] >= s->o.ratio_tol * s->sv[0];
     return status;
@@ -89,8 +98,8 @@ static double bilinear(const double *u, const double *D, const double *v, int k,
 /* (r, dr/dt) at y (watch.ratio_and_rate): qdot the coordinate rates (NULL: computed at y). */
 static int ratio_and_rate(ovk_sim *s, const double *y, const double *qdot, double *r, double *rate, char *msg) {
     const ovk_model *M = s->M;
-    int nR = M->nR, nh = s->nh, n = s->n;
-    int status = weighted(s, y, M->retained, nR, s->W, msg);
+    int nR = n_kept(M), nh = s->nh, n = s->n;
+    int status = weighted(s, y, kept_rows(M), nR, s->W, msg);
     if (!status && !qdot) {
         if ((status = ovk_rates(M, s->d, y, y + n, s->qwatch)))
             return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
@@ -113,7 +122,7 @@ static int ratio_and_rate(ovk_sim *s, const double *y, const double *qdot, doubl
     double dt = 1e-7 / (most > 1.0 ? most : 1.0);
     memcpy(s->ywatch, y, (size_t)s->ny * sizeof(double));
     for (int i = 0; i < n; i++) s->ywatch[i] = y[i] + dt * qdot[i];
-    if ((status = weighted(s, s->ywatch, M->retained, nR, s->W2, msg))) return status;
+    if ((status = weighted(s, s->ywatch, kept_rows(M), nR, s->W2, msg))) return status;
     for (size_t i = 0; i < (size_t)nR * nh; i++) s->W2[i] = (s->W2[i] - s->W[i]) / dt; /* J' */
     double ds_min = bilinear(s->Q + (size_t)lo * nR, s->W2, s->T + (size_t)lo * nh, nR, nh);
     double ds_max = bilinear(s->Q + (size_t)hi * nR, s->W2, s->T + (size_t)hi * nh, nR, nh);
@@ -126,8 +135,8 @@ static int ratio_and_rate(ovk_sim *s, const double *y, const double *qdot, doubl
 /* r of the kept equations at tau on the last step's dense output (the state into s->ywatch). */
 static int ratio_at(ovk_sim *s, double tau, double *r, char *msg) {
     ovk_rk_dense(&s->rk, tau, s->ywatch);
-    int status = weighted(s, s->ywatch, s->M->retained, s->M->nR, s->W2, msg);
-    if (!status) *r = ratio_of(s, s->W2, s->M->nR);
+    int status = weighted(s, s->ywatch, kept_rows(s->M), n_kept(s->M), s->W2, msg);
+    if (!status) *r = ratio_of(s, s->W2, n_kept(s->M));
     return status;
 }
 
@@ -191,13 +200,18 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
                  "t = %.9g s and %.9g s)", t, a, b);
     else
         snprintf(where, sizeof where, "t = %.9g s: singular position", t);
-    int full = 0, nR = s->M->nR, status = full_rank(s, y, &full, msg);
+    int full = 0, nR = n_kept(s->M), status = full_rank(s, y, &full, msg);
     if (status) return status;
     shown(r, rs, sizeof rs);
     if (full < nR)
         return snprintf(msg, OVK_MSG, "%s: the mechanism's constraint Jacobian is rank deficient (rank %d < %d; "
                         "kept equations' sigma_min/sigma_max %s, below %g)", where, full, nR, rs, s->o.ratio_tol),
                OVK_SINGULAR_POSITION;
+    if (s->M->redundancy == OVK_MIN_NORM) /* the Python run chooses the watched set again; the dynamics never used it */
+        return say(msg, OVK_ELIMINATION, "%s: the equations watched under redundancy 'min-norm' are no longer "
+                        "independent (their sigma_min/sigma_max %s, below %g), while the mechanism is regular there "
+                        "(all equations keep rank %d): the C runtime does not choose the watched equations again: "
+                        "build with --runtime python", where, rs, s->o.ratio_tol, full);
     eliminated(s->M, names, sizeof names);
     return say(msg, OVK_ELIMINATION, "%s: the kept equations are no longer independent (their sigma_min/sigma_max %s, "
                     "below %g), while the mechanism is regular there (all equations keep rank %d): the elimination "
@@ -208,8 +222,8 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
 /* After the check at (t, y) with kept ratio r: OVK_ELIMINATION when the elimination degrades
  * (watch.SingularityMonitor._degrading), where the Python run may choose it again. */
 static int degrading(ovk_sim *s, double t, double r, const double *y, char *msg) {
-    int nR = s->M->nR, k = s->m < s->nh ? s->m : s->nh;
-    if (r >= DEGRADED_RATIO) return OVK_OK;
+    int nR = n_kept(s->M), k = n_full(s->M) < s->nh ? n_full(s->M) : s->nh;
+    if (r >= DEGRADED_RATIO || s->M->redundancy == OVK_MIN_NORM) return OVK_OK; /* min-norm keeps every equation */
     int status = full_values(s, y, msg);
     if (status) return status;
     double full = k >= nR && s->sv[0] > 0.0 ? s->sv[nR - 1] / s->sv[0] : 0.0;
@@ -226,7 +240,7 @@ static int degrading(ovk_sim *s, double t, double r, const double *y, char *msg)
 /* The watch at (t, y) (SingularityMonitor.check and, first = 1, its start at t0: no minimum
  * search, no degrading test); qdot: the integrator's q' at y (NULL: the coordinate rates). */
 int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg) {
-    if (!s->M->nR) return OVK_OK;
+    if (!n_kept(s->M)) return OVK_OK;
     double r = 1.0, rate = 0.0;
     int status = ratio_and_rate(s, y, qdot, &r, &rate, msg);
     if (status) return status;
@@ -255,7 +269,9 @@ int ovk_sim_expiring(ovk_sim *s, int failed, char *msg) {
     double h = rk->t - rk->t_old;
     int n = s->n, recoverable = failed == OVK_FRICTION || failed == OVK_EULER || failed == OVK_STEP_SMALL ||
                                 failed == OVK_STIFF || failed == OVK_UNSTABLE;
-    if (!recoverable || !s->M->nR || s->rate >= 0.0 || !(h > 0.0) || rk->nsteps == 0) return failed;
+    if (!recoverable || !n_kept(s->M) || s->M->redundancy == OVK_MIN_NORM || s->rate >= 0.0 || !(h > 0.0) ||
+        rk->nsteps == 0)
+        return failed;
     double dt = s->ratio / -s->rate;
     if (dt > 2.0 * h) return failed;
     char why[OVK_MSG], names[200];
@@ -267,7 +283,7 @@ int ovk_sim_expiring(ovk_sim *s, int failed, char *msg) {
     for (int i = 0; i < n; i++) s->ystar[i] = rk->y[i] + dt * s->qwatch[i];
     int full = 0;
     if (full_rank(s, s->ystar, &full, msg)) return snprintf(msg, OVK_MSG, "%s", why), failed;
-    if (full < s->M->nR) return snprintf(msg, OVK_MSG, "%s", why), failed;
+    if (full < n_kept(s->M)) return snprintf(msg, OVK_MSG, "%s", why), failed;
     eliminated(s->M, names, sizeof names);
     return say(msg, OVK_ELIMINATION, "t = %.9g s: the kept equations lose rank here while the mechanism stays regular: the "
              "elimination chosen at the start expires (the step from t = %.9g s failed: %.400s); " C_REFUSES

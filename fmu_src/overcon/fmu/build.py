@@ -35,9 +35,9 @@ covers the model (:func:`overcon.fmu.cmodel.support`: the core's joints and rota
     resources/overcon_fmu.json, resources/overcon_facts.json, resources/scene/...  as above
 
 Its integrators are every method of the Python FMU: dopri5, dop853 and rk4 (core/integrate_rk.c)
-and radau (core/integrate_radau.c). A model the C layer does not cover (min-norm or
-compliant redundancy, ...) is built with the Python runtime, and the build output
-says so. ``<hash>`` (and the GUID) is a SHA-256 over the scene
+and radau (core/integrate_radau.c). Every redundancy method runs in it (min-norm:
+core/kkt_minnorm.c; compliant: core/compliance.c). A model the C layer does not cover is built
+with the Python runtime, and the build output says so. ``<hash>`` (and the GUID) is a SHA-256 over the scene
 file, the mechanism file, the overcon source (Python, the binary's C) and the compiled core, so FMUs of different scenes (or of
 one scene from different sources) never share module names in one process, and rebuilding
 unchanged inputs gives the same GUID and, with the same compiler and Python, the same bytes. The

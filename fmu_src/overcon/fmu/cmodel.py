@@ -13,7 +13,12 @@ terminating zero, then the bytes and the zero; an array an int32 count then the 
 1. ``b"OVKFMU01"``, i format version (:data:`FORMAT`), i the core's ABI (:data:`overcon.kernel.ABI`),
    string GUID;
 2. the model: 13 i counts and 2 d (baumgarte, tol) in ``ovk_model`` order, then its 25 arrays
-   (int32 or float64 items, in ``ovk_model`` order);
+   (int32 or float64 items, in ``ovk_model`` order), then its redundancy block: 5 i counts
+   (:data:`overcon.kernel.REDUNDANCY_COUNTS`) and 10 arrays (:data:`overcon.kernel.REDUNDANCY_ARRAYS`);
+   then i the number of other redundancy methods the ``redundancy`` parameter may choose
+   (:func:`overcon.fmu.variables.redundancy_methods` but the scene's own), and per method i its
+   index in :data:`overcon.spec.REDUNDANCY_METHODS` (``OVK_ELIMINATE`` ...) and its packed model as
+   above (the scene compiled under it: :func:`overcon.fmu.variables.with_redundancy`);
 3. the run: i n, i nh, i quaternion (1: orientation coordinates are quaternions), d start time,
    d stop time, array d y0;
 4. outputs: i count, then per output i kind (:data:`OUT_KINDS`), i a, i b (a position: the index
@@ -35,11 +40,15 @@ import struct
 import numpy as np
 
 from .. import kernel as kernel_mod
+from ..checks import compile_checked
 from ..params import rule_of
+from ..spec import REDUNDANCY_METHODS
+from ..watch import SingularityMonitor
+from .variables import redundancy_methods, redundancy_rule, with_redundancy
 
-FORMAT = 1
+FORMAT = 2
 MAGIC = b"OVKFMU01"
-TYPES = {"Real": 0, "Integer": 1, "Boolean": 2, "String": 3}
+TYPES = {"Real": 0, "Integer": 1, "Boolean": 2, "String": 3, "Enumeration": 1}  # an Enumeration is an Integer in FMI 2.0's calls
 CAUSALITIES = {"output": 0, "parameter": 1, "local": 2}
 VARIABILITIES = {"continuous": 0, "constant": 1, "fixed": 2, "tunable": 3, "discrete": 4}
 KEYS = {"output": 0, "constant": 1, "param": 2, "stable_step": 3}
@@ -47,7 +56,7 @@ OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6, "energy
 TARGETS = {"mu": 1, "v_reg": 2, "mu_static": 3, "v_stribeck": 4, "solver.method": 10, "solver.tolerance": 11,
            "solver.step": 12, "solver.max_step": 13, "solver.baumgarte": 14, "solver.friction_tol": 15,
            "solver.friction_max_iter": 16, "solver.kernel": 17, "solver.max_internal_steps": 18,
-           "solver.max_wall_time": 19}
+           "solver.max_wall_time": 19, "redundancy": 20}
 """What a parameter sets: a friction law's entry of ``jlawp`` (1-4) or a solver setting (10-19)."""
 INT_FIELDS = ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols", "nfj", "nfg", "max_iter")
 DOUBLE_FIELDS = {"Minv", "mass", "inertia", "gravity", "jconst", "jlawp", "lp"}
@@ -99,8 +108,26 @@ def _outputs(w: _Out, model) -> None:
         w.i(*r)
 
 
+def _redundancy_param(w: _Out, model, var) -> None:
+    """The ``redundancy`` parameter as an integer rule [1, number of methods] with the texts of
+    :func:`overcon.fmu.variables.redundancy_rule`."""
+    known, why = redundancy_rule(model)
+    w.s(var.name)
+    w.i(TYPES[var.type], TARGETS["redundancy"], -1, 1)
+    w.d(1.0, float(len(redundancy_methods(model))))
+    w.i(1, 1, 0)
+    w.s(known)
+    w.s(why)
+    w.i(0)
+    w.d(float(var.start))
+    w.s("")
+    w.i(0)
+
+
 def _param(w: _Out, model, var) -> None:
     name = var.key[1]
+    if name == "redundancy":
+        return _redundancy_param(w, model, var)
     group, _, field = name.rpartition(".")
     joint = -1
     target = TARGETS.get(name)
@@ -123,6 +150,31 @@ def _param(w: _Out, model, var) -> None:
     w.i(var.variability == "tunable")
 
 
+def watch_rows(model) -> tuple[list[int], list[int]]:
+    """(rows watched, rows of the whole rigid Jacobian) of a run's singularity watch at the start
+    (:class:`overcon.watch.SingularityMonitor`: under min-norm an independent set of the rows,
+    under compliant the rigid ones): what the C run's watch (core/watch.c) judges."""
+    y0 = np.concatenate([model.q0, model.h0])
+    rows = SingularityMonitor._watched_rows(None, model, y0)  # a static choice: it reads no instance state
+    return [int(r) for r in rows], [int(r) for r in SingularityMonitor._rigid_rows(model)]
+
+
+def _packed(w: _Out, k) -> None:
+    """The packed model of the Kernel ``k`` (part 2 of the layout)."""
+    cm = k._cmodel
+    by_address = {a.ctypes.data: a for a in k._keep}
+    w.i(*(getattr(cm, n) for n in INT_FIELDS))
+    w.d(cm.baumgarte, cm.tol)
+    red = set(kernel_mod.REDUNDANCY_COUNTS + kernel_mod.REDUNDANCY_ARRAYS)
+    for name, _ in cm._fields_:
+        if name in INT_FIELDS or name in ("baumgarte", "tol") or name in red:
+            continue
+        (w.doubles if name in DOUBLE_FIELDS else w.ints)(by_address[getattr(cm, name)])
+    w.i(*(getattr(cm, n) for n in kernel_mod.REDUNDANCY_COUNTS))
+    for name in kernel_mod.REDUNDANCY_ARRAYS:
+        (w.doubles if name in kernel_mod.REDUNDANCY_DOUBLES else w.ints)(by_address[getattr(cm, name)])
+
+
 def model_file(model, solver, table, guid: str, messages=()) -> bytes:
     """The bytes of ``resources/overcon_model.bin`` (module docstring) for ``model`` with the
     solver settings ``solver``, the variable table ``table`` and the GUID; ``messages``:
@@ -130,19 +182,17 @@ def model_file(model, solver, table, guid: str, messages=()) -> bytes:
     lib, reason = kernel_mod.library()
     if lib is None:
         raise RuntimeError(f"the C FMU needs the compiled core: {reason}")
-    k = kernel_mod.Kernel(lib, model, solver)
-    cm = k._cmodel
-    by_address = {a.ctypes.data: a for a in k._keep}
     w = _Out()
     w.parts.append(MAGIC)
     w.i(FORMAT, kernel_mod.ABI)
     w.s(guid)
-    w.i(*(getattr(cm, n) for n in INT_FIELDS))
-    w.d(cm.baumgarte, cm.tol)
-    for name, _ in cm._fields_:
-        if name in INT_FIELDS or name in ("baumgarte", "tol"):
-            continue
-        (w.doubles if name in DOUBLE_FIELDS else w.ints)(by_address[getattr(cm, name)])
+    _packed(w, kernel_mod.Kernel(lib, model, solver, watch_rows(model)))
+    others = [m for m in redundancy_methods(model) if m != model.scene.redundancy]
+    w.i(len(others))
+    for method in others:  # the models of the redundancy parameter's other values
+        w.i(REDUNDANCY_METHODS.index(method))
+        other = compile_checked(with_redundancy(model.scene, method))
+        _packed(w, kernel_mod.Kernel(lib, other, solver, watch_rows(other)))
     w.i(model.n, model.nh, int(model.rotation == "quaternion"))
     w.d(model.scene.start_time, model.scene.stop_time)
     w.doubles(np.concatenate([model.q0, model.h0]))

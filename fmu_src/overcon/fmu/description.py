@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from xml.etree import ElementTree as ET
 
-from .variables import UNITS, Var
+from .variables import REDUNDANCY_ITEMS, REDUNDANCY_TYPE, UNITS, Var
 
 LOG_CATEGORIES = {
     "logEvents": "Information (fmi2OK): initialization, tolerance used. Only with debug logging on.",
@@ -62,6 +62,12 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
     for name in used:
         u = ET.SubElement(units, "Unit", {"name": name})
         ET.SubElement(u, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
+    if any(v.type == "Enumeration" for v in table):  # the redundancy parameter's type
+        st = ET.SubElement(ET.SubElement(root, "TypeDefinitions"), "SimpleType", {
+            "name": REDUNDANCY_TYPE, "description": "how the redundant constraints are handled ([scene] redundancy)"})
+        enum = ET.SubElement(st, "Enumeration")
+        for value, (name, text) in enumerate(REDUNDANCY_ITEMS.items(), start=1):
+            ET.SubElement(enum, "Item", {"name": name, "value": str(value), "description": text})
     cats = ET.SubElement(root, "LogCategories")
     for name, text in LOG_CATEGORIES.items():
         ET.SubElement(cats, "Category", {"name": name, "description": text})
@@ -83,6 +89,8 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
                 typ["start"] = "true" if v.start else "false"
             else:
                 typ["start"] = str(v.start)
+        if v.type == "Enumeration":
+            typ["declaredType"] = REDUNDANCY_TYPE
         ET.SubElement(sv, v.type, typ)
     ms = ET.SubElement(root, "ModelStructure")
     outputs = ET.SubElement(ms, "Outputs")

@@ -21,6 +21,11 @@ Behaviour
   budget ``solver.max_internal_steps``/``solver.max_wall_time`` is tunable: also while stepping).
   A value that is non-finite or out of range is refused with fmi2Error and the reason; the
   instance keeps its previous value.
+* ``redundancy`` (an Enumeration read and written with fmi2GetInteger/fmi2SetInteger: 1
+  eliminate, 2 min-norm, 3 compliant, the last only for a scene with compliant joints; default
+  the scene's ``[scene] redundancy``): set before initialization, the model is compiled again
+  under that method (:func:`overcon.fmu.variables.with_redundancy`), so the run is the one of a scene file with that
+  key. The constant ``motion_unique`` stays the build's pre-check verdict.
 * Tolerance (the rule, also in the README): the integrator's tolerance is, first, the parameter
   ``solver.tolerance`` if the host set it (fmi2SetReal, before or after fmi2SetupExperiment);
   else the tolerance the host gave to ``fmi2SetupExperiment`` (``toleranceDefined``), as the FMI
@@ -201,7 +206,7 @@ class OverconSlave:
         spec = scene_mod.load(res / self._manifest["scene"])
         self._scene = spec
         self._model0 = compile_checked(spec)
-        self._model, self._model_friction = self._model0, spec.friction_params  # compiled for these
+        self._model, self._model_friction = self._model0, (spec.friction_params, spec.redundancy)  # compiled for these
         self._vars = variables.table(self._model0, spec.solver, self._manifest["reaction_unique"],
                                      self._manifest["motion_unique"])
         self._defaults = {v.key[1]: v.start for v in self._vars if v.key[0] == "param"}
@@ -292,7 +297,7 @@ class OverconSlave:
             if r >= len(self._vars):
                 raise CallRefused(f"value reference {r} does not exist (this FMU has 0 to {len(self._vars) - 1})")
             v = self._vars[r]
-            if v.type != typ:
+            if v.type != typ and not (v.type == "Enumeration" and typ == "Integer"):  # FMI: enumerations as Integer
                 raise CallRefused(f"value reference {r} ({v.name}) is a {v.type} variable, not {typ}")
             out.append((r, v))
         if len(self._ref_cache) < 256:
@@ -372,7 +377,10 @@ class OverconSlave:
                                       "(fmi2Reset first)")
         if value is None:
             self._refuse(name, value, "a value is required")
-        reason = variables.rule(name).check(value)
+        if name == "redundancy":
+            reason = variables.redundancy_refusal(self._model0, value)
+        else:
+            reason = variables.rule(name).check(value)
         if reason is None and name.endswith(".mu_static"):
             mu_name = name[: -len("_static")]
             reason = check_mu_static(self._params[mu_name], value, mu_name)
@@ -403,19 +411,20 @@ class OverconSlave:
         function :func:`overcon.params.apply_overrides` (its range rules and ``mu_static >= mu``).
         Its run-length relations are not applied: an FMU's run length is the host's, bounded per
         fmi2DoStep by the work budget."""
-        values = {k: v for k, v in self._params.items() if k not in self._tunable}
+        values = {k: v for k, v in self._params.items() if k not in self._tunable and k != "redundancy"}
         new, problems = apply_overrides(self._scene, values, relations=False)
         if problems:
             raise ParameterRefused("; ".join(f"parameter {name} refused: {msg}" for name, msg in problems))
-        return new
+        return variables.with_redundancy(new, variables.redundancy_methods(self._model0)[self._params["redundancy"] - 1])
 
     def _model_for(self, spec):
         """The compiled model of ``spec``: recompiled (rank analysis included) only when the
-        friction parameters changed. Solver options are not part of a Model (they go to the
+        friction parameters or the redundancy method changed. Solver options are not part of a Model (they go to the
         Simulation), so a new ``solver.*`` value never recompiles."""
-        if spec.friction_params != self._model_friction:
-            self._model = self._model0 if spec.friction_params == self._scene.friction_params else compile_checked(spec)
-            self._model_friction = spec.friction_params
+        if (spec.friction_params, spec.redundancy) != self._model_friction:
+            own = (spec.friction_params, spec.redundancy) == (self._scene.friction_params, self._scene.redundancy)
+            self._model = self._model0 if own else compile_checked(spec)
+            self._model_friction = (spec.friction_params, spec.redundancy)
             switched = [self._model.joints[j].name for j in self._model.friction_joints
                         if frictionless(self._model.joints[j].law) != frictionless(self._model0.joints[j].law)]
             if switched:

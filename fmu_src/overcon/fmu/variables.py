@@ -12,17 +12,21 @@ Value references are the positions in :func:`table` (0-based), in this order:
    ``<joint>.mu`` and ``<joint>.v_reg`` (law ``stribeck`` also ``<joint>.mu_static`` and
    ``<joint>.v_stribeck``), then the solver settings ``solver.*`` of
    :class:`overcon.spec.SolverSpec`, then the work budget of one ``fmi2DoStep`` (``BUDGET_PARAMS``,
-   FMU only, variability tunable).
+   FMU only, variability tunable);
+4. ``solver.stable_step`` (local), then ``redundancy`` (:func:`redundancy_var`: an Enumeration
+   parameter, variability fixed, start the scene's ``[scene] redundancy``), last so that adding it
+   kept every earlier value reference.
 
 ``UNITS`` gives every unit's SI base-unit exponents (FMI ``BaseUnit``).
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from ..joints import TYPES
 from ..params import check_param, rule_of
-from ..spec import COORDINATE_UNITS, ENERGY_OUTPUTS, VELOCITY_OUTPUTS
+from ..spec import COORDINATE_UNITS, ENERGY_OUTPUTS, REDUNDANCY_METHODS, VELOCITY_OUTPUTS
 
 UNITS: dict[str, dict[str, int]] = {
     "1": {},
@@ -79,7 +83,8 @@ def state_outputs_beyond_positions(model) -> list[tuple[str, str]]:
 
 @dataclass(frozen=True)
 class Var:
-    """One scalar variable. ``type`` Real/Integer/Boolean/String; ``unit`` for Real only;
+    """One scalar variable. ``type`` Real/Integer/Boolean/String/Enumeration (:data:`REDUNDANCY_TYPE`,
+    read and written as an Integer); ``unit`` for Real only;
     ``start`` None where FMI forbids one (initial calculated); ``key`` what the slave reads or
     writes: ``("output", k)``, ``("constant", value)``, ``("param", name)``, ``("stable_step", None)``."""
 
@@ -213,7 +218,71 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool) 
                    "the largest stable fixed step that rk4 named when it refused a step as unstable (s); 0 until it "
                    "does. Readable after the failed fmi2DoStep: the lockstep comparison repeats its runs with it",
                    unit="s", key=("stable_step", None)))
+    out.append(redundancy_var(model))
     return out
+
+
+REDUNDANCY_TYPE = "overcon.Redundancy"
+"""The FMI 2.0 TypeDefinition of the ``redundancy`` parameter: an Enumeration whose items are
+:data:`overcon.spec.REDUNDANCY_METHODS` with values 1, 2, 3 in that order."""
+REDUNDANCY_ITEMS = {
+    "eliminate": "the paper's method: the scene's eliminated equations are removed",
+    "min-norm": "every equation kept, minimum-norm multipliers (one motion, without physical ground)",
+    "compliant": "joints with a [joints.compliance] table are spring-dampers (unique reactions); only for a "
+                 "scene that has such joints",
+}
+
+
+def redundancy_methods(model) -> tuple[str, ...]:
+    """The values the ``redundancy`` parameter of ``model``'s FMU takes: "compliant" only when a
+    joint of the mechanism has a ``[joints.compliance]`` table."""
+    compliant = any(j.compliance is not None for j in model.scene.mechanism.joints)
+    return tuple(m for m in REDUNDANCY_METHODS if m != "compliant" or compliant)
+
+
+def redundancy_rule(model) -> tuple[str, str]:
+    """(the admissible values as a text, why "compliant" is not among them or ""): the rule of the
+    ``redundancy`` parameter of ``model``'s FMU, written into the C FMU's model file too, so both
+    runtimes refuse a value with the same words."""
+    methods = redundancy_methods(model)
+    known = "one of " + ", ".join(f"{i} ({m})" for i, m in enumerate(methods, start=1))
+    why = "" if "compliant" in methods else (
+        f"3 (compliant) needs a joint with a [joints.compliance] table: mechanism {model.scene.mechanism.name} "
+        "has none")
+    return known, why
+
+
+def redundancy_refusal(model, value) -> str | None:
+    """Why ``value`` (an Enumeration value: 1 eliminate, 2 min-norm, 3 compliant) is refused for
+    the ``redundancy`` parameter of ``model``'s FMU, or None."""
+    if isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= len(redundancy_methods(model)):
+        return None
+    known, why = redundancy_rule(model)
+    return f"must be {known}, got {value!r}" + (f" ({why})" if why else "")
+
+
+def with_redundancy(spec, method: str):
+    """``spec`` under the redundancy ``method`` (the FMU parameter ``redundancy``), exactly as the
+    scene key ``[scene] redundancy`` would give it: "min-norm" and "compliant" choose no
+    elimination (``eliminate = ()``); "eliminate" keeps the scene's eliminated equations, or
+    ``"auto"`` (pivoted QR at q0, :func:`overcon.checks.resolve_elimination`) for a scene that
+    names none."""
+    if method == spec.redundancy:
+        return spec
+    if method == "eliminate":
+        return dataclasses.replace(spec, redundancy=method, eliminate=spec.eliminate or "auto")
+    return dataclasses.replace(spec, redundancy=method, eliminate=())
+
+
+def redundancy_var(model) -> Var:
+    """The ``redundancy`` parameter (issue 24): how the redundant constraints are handled, as the
+    scene key ``[scene] redundancy``; set before initialization it changes the run exactly as that
+    key would (:mod:`overcon.fmu.slave`)."""
+    methods = redundancy_methods(model)
+    return Var("redundancy", "Enumeration", "parameter", "fixed", "exact",
+               "redundant constraints: " + "; ".join(f"{i} {m}: {REDUNDANCY_ITEMS[m]}"
+                                                     for i, m in enumerate(methods, start=1)),
+               start=REDUNDANCY_METHODS.index(model.scene.redundancy) + 1, key=("param", "redundancy"))
 
 
 def rule(name: str) -> ParamRule:

@@ -53,7 +53,7 @@ enum { V_CONTINUOUS = 0, V_CONSTANT = 1, V_FIXED = 2, V_TUNABLE = 3, V_DISCRETE 
 enum { O_POSITION = 1, O_VELOCITY = 2, O_REACTION = 5, O_FRICTION = 6, O_ENERGY = 7 }; /* energy: a = 0-3 */
 enum { P_MU = 1, P_VREG = 2, P_MU_STATIC = 3, P_VSTRIBECK = 4, P_METHOD = 10, P_TOLERANCE = 11, P_STEP = 12,
        P_MAX_STEP = 13, P_BAUMGARTE = 14, P_FRICTION_TOL = 15, P_FRICTION_MAX_ITER = 16, P_KERNEL = 17,
-       P_MAX_INTERNAL_STEPS = 18, P_MAX_WALL_TIME = 19 };
+       P_MAX_INTERNAL_STEPS = 18, P_MAX_WALL_TIME = 19, P_REDUNDANCY = 20 };
 enum { RULE_REAL = 0, RULE_INT = 1, RULE_CHOICE = 2 };
 #define FMU_MAX_CHOICES 8
 
@@ -72,7 +72,11 @@ typedef struct {
     size_t size;
     const char *guid;
     ovk_model M;
-    void *arrays[25];
+    void *arrays[35]; /* the 25 arrays of ovk_model, then the 10 of its redundancy block */
+    int nalt;         /* redundancy: the models of the parameter's other methods */
+    int alt_code[2];  /* their OVK_ELIMINATE, OVK_MIN_NORM or OVK_COMPLIANT */
+    ovk_model alt[2];
+    void *alt_arrays[2][35];
     int n, nh, ny, quaternion;
     double start_time, stop_time, *y0;
     int nout, nstate_out; /* outputs; the first nstate_out come from the state alone */
@@ -87,6 +91,7 @@ typedef struct {
 
 FMU_HIDDEN int fmu_model_read(const char *path, fmu_model *fm, char *err, size_t errsize);
 FMU_HIDDEN void fmu_model_free(fmu_model *fm);
+FMU_HIDDEN const ovk_model *fmu_model_for(const fmu_model *fm, int code);
 
 enum { M_INSTANTIATED = 1, M_INITIALIZATION = 2, M_STEPPING = 4, M_ERROR = 8, M_TERMINATED = 16 };
 enum { CAT_EVENTS, CAT_WARNING, CAT_ERROR, CAT_FATAL, N_CATEGORIES };

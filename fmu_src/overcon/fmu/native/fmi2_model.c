@@ -11,6 +11,7 @@
 #include "fmi2_core.h"
 
 #define MAX_ITEMS (1 << 24)
+#define FMU_FORMAT 2 /* overcon.fmu.cmodel.FORMAT */
 
 typedef struct {
     const unsigned char *p, *end;
@@ -59,8 +60,29 @@ static void *rd_array(reader *r, size_t item, int *count) {
     return a;
 }
 
-static void read_packed(reader *r, fmu_model *fm) {
-    ovk_model *M = &fm->M;
+/* The redundancy block of ovk_model (overcon.kernel.REDUNDANCY_COUNTS, REDUNDANCY_ARRAYS): its
+ * sizes checked here, its indices by the core (ovk_make_data). */
+static void read_redundancy(reader *r, ovk_model *M, void **arrays) {
+    int *counts[] = {&M->redundancy, &M->nrig, &M->nax, &M->nwatch, &M->nfull};
+    for (size_t i = 0; i < sizeof counts / sizeof counts[0]; i++) *counts[i] = rd_int(r);
+    const void **fields[10] = {(const void **)&M->ckind, (const void **)&M->ck, (const void **)&M->cd,
+                               (const void **)&M->rigpos, (const void **)&M->rigrows, (const void **)&M->rigbody,
+                               (const void **)&M->axi, (const void **)&M->axp, (const void **)&M->watch,
+                               (const void **)&M->full};
+    static const int is_double[10] = {0, 1, 1, 0, 0, 0, 0, 1, 0, 0};
+    int comp = M->redundancy == OVK_COMPLIANT, any = M->redundancy != OVK_ELIMINATE;
+    const long long want[10] = {comp ? M->nR : 0, comp ? M->m : 0, comp ? M->m : 0, M->nrig, M->nrig,
+                                2LL * M->nrig, (long long)OVK_NAXI * M->nax, (long long)OVK_NAXP * M->nax,
+                                any && M->nwatch > 0 ? M->nwatch : 0, any && M->nfull > 0 ? M->nfull : 0};
+    for (int k = 0; k < 10; k++) {
+        int count = 0;
+        arrays[25 + k] = rd_array(r, is_double[k] ? sizeof(double) : sizeof(int), &count);
+        *fields[k] = arrays[25 + k];
+        if (!r->bad && !(count == want[k] || (want[k] == 0 && count == 1))) r->bad = 1; /* empty: one zero */
+    }
+}
+
+static void read_packed(reader *r, ovk_model *M, void **arrays) {
     int *counts[] = {&M->dim, &M->nb, &M->nq_b, &M->nh_b, &M->m, &M->nR, &M->nj, &M->nl,
                      &M->nx, &M->ncols, &M->nfj, &M->nfg, &M->max_iter};
     for (size_t i = 0; i < sizeof counts / sizeof counts[0]; i++) *counts[i] = rd_int(r);
@@ -81,10 +103,32 @@ static void read_packed(reader *r, fmu_model *fm) {
                                 M->nfg + 1LL, nfj * OVK_MAXEQ, nfj * 6, nfj * 6, 2LL * M->nR};
     for (int k = 0; k < 25; k++) {
         int count = 0;
-        fm->arrays[k] = rd_array(r, is_double[k] ? sizeof(double) : sizeof(int), &count);
-        *fields[k] = fm->arrays[k];
+        arrays[k] = rd_array(r, is_double[k] ? sizeof(double) : sizeof(int), &count);
+        *fields[k] = arrays[k];
         if (!r->bad && !(count == want[k] || (want[k] == 0 && count == 1))) r->bad = 1; /* empty: one zero */
     }
+    read_redundancy(r, M, arrays);
+}
+
+/* The packed models of the redundancy parameter's other methods (at most two). */
+static void read_alternatives(reader *r, fmu_model *fm) {
+    fm->nalt = rd_int(r);
+    if (fm->nalt < 0 || fm->nalt > 2) { r->bad = 1; fm->nalt = 0; }
+    for (int a = 0; a < fm->nalt && !r->bad; a++) {
+        fm->alt_code[a] = rd_int(r);
+        read_packed(r, &fm->alt[a], fm->alt_arrays[a]);
+        const ovk_model *A = &fm->alt[a], *M = &fm->M;
+        if (fm->alt_code[a] < OVK_ELIMINATE || fm->alt_code[a] > OVK_COMPLIANT || A->dim != M->dim || A->nb != M->nb ||
+            A->nq_b != M->nq_b || A->nh_b != M->nh_b || A->m != M->m || A->nj != M->nj || A->nl != M->nl)
+            r->bad = 1; /* another mechanism than the scene's */
+    }
+}
+
+/* The packed model of redundancy method `code` (the parameter's value - 1; -1: the scene's own). */
+const ovk_model *fmu_model_for(const fmu_model *fm, int code) {
+    for (int a = 0; a < fm->nalt; a++)
+        if (fm->alt_code[a] == code) return &fm->alt[a];
+    return &fm->M;
 }
 
 static void read_param(reader *r, fmu_param *p) {
@@ -170,7 +214,8 @@ static int check_tables(const fmu_model *fm, char *err, size_t errsize) {
     for (int k = 0; k < fm->nparam; k++) {
         const fmu_param *p = &fm->par[k];
         if (p->target < P_MU || (p->target <= P_VSTRIBECK && (p->joint < 0 || p->joint >= fm->M.nj)) ||
-            p->target > P_MAX_WALL_TIME || (p->rule == RULE_CHOICE && p->nchoices < 1))
+            p->target > P_REDUNDANCY || (p->target > P_MAX_WALL_TIME && p->target < P_REDUNDANCY) ||
+            (p->rule == RULE_CHOICE && p->nchoices < 1))
             return snprintf(err, errsize, "parameter %s: target %d, joint %d out of range", p->name, p->target,
                             p->joint), 0;
     }
@@ -193,14 +238,15 @@ int fmu_model_read(const char *path, fmu_model *fm, char *err, size_t errsize) {
     char magic[8];
     rd(&r, magic, sizeof magic);
     int format = rd_int(&r), abi = rd_int(&r);
-    if (r.bad || memcmp(magic, "OVKFMU01", 8) || format != 1 || abi != OVK_ABI) {
-        snprintf(err, errsize, "%s: not a model file of this FMU's core (format %d, ABI %d; expected 1, %d)", path,
-                 format, abi, OVK_ABI);
+    if (r.bad || memcmp(magic, "OVKFMU01", 8) || format != FMU_FORMAT || abi != OVK_ABI) {
+        snprintf(err, errsize, "%s: not a model file of this FMU's core (format %d, ABI %d; expected %d, %d)", path,
+                 format, abi, FMU_FORMAT, OVK_ABI);
         fmu_model_free(fm);
         return 0;
     }
     fm->guid = rd_string(&r);
-    read_packed(&r, fm);
+    read_packed(&r, &fm->M, fm->arrays);
+    read_alternatives(&r, fm);
     read_rest(&r, fm);
     if (r.bad || r.p != r.end || !check_tables(fm, err, errsize)) {
         if (r.bad || r.p != r.end)
@@ -212,7 +258,10 @@ int fmu_model_read(const char *path, fmu_model *fm, char *err, size_t errsize) {
 }
 
 void fmu_model_free(fmu_model *fm) {
-    for (int k = 0; k < 25; k++) free(fm->arrays[k]);
+    for (int k = 0; k < 35; k++) {
+        free(fm->arrays[k]);
+        for (int a = 0; a < 2; a++) free(fm->alt_arrays[a][k]);
+    }
     free(fm->y0);
     free(fm->out);
     free(fm->var);

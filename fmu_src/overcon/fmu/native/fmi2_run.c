@@ -36,7 +36,8 @@ static const char *choice(const fmu_inst *c, int target) {
  * when a Stribeck law's mu_static is below its mu (overcon.params.check_mu_static). */
 int fmu_apply_params(fmu_inst *c) {
     const fmu_model *fm = &c->fm;
-    c->M = fm->M;
+    int red = param_index(fm, P_REDUNDANCY, -1); /* redundancy: the model of the method the parameter names */
+    c->M = *fmu_model_for(fm, red < 0 ? -1 : (int)c->pval[red] - 1);
     memcpy(c->jlawp, fm->M.jlawp, (size_t)fm->M.nj * NLP * sizeof(double));
     for (int k = 0; k < fm->nparam; k++) {
         const fmu_param *p = &fm->par[k];

@@ -1,0 +1,90 @@
+"""The compliant door (mechanisms/examples/compliant_door_h1_wo_hinge2.toml: two compliant hinges,
+friction in hinge1) at a high stiffness through fmpy, as issue 24 measures it: 2 s simulated,
+``fmpy.simulate_fmu`` at the scene's output interval.
+
+    python benchmarks/compliant_door.py                    # k = 1e9 N/m, ~1 min on the 2-core machine
+    python benchmarks/compliant_door.py --stiffness 1e8 1e9
+
+At stiffness k every compliant value is scaled by overcon.converge's rule (stiffnesses by k / k0,
+dampings by sqrt(k / k0), k0 = 1e8 N/m the file's), written as a scene file next to a copy of the
+mechanism. Each FMU is built with ``--runtime c`` (no Python in it) and run with each integrator
+the C runtime has (solver.method set through fmpy's start values); a run that stops prints its
+reason. The reference is the Python runtime's FMU with radau (the scene's method). Printed per
+run: wall time of simulate_fmu (median of --repeat), and the largest position difference from
+the reference (m). Figures are printed, never asserted.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "mechanisms" / "examples"
+K0 = 1e8  # N/m: the stiffness of the file's hinges
+
+
+def scaled_files(tmp: Path, k: float) -> Path:
+    """The scene and its mechanism at stiffness k (module docstring); the scene's path."""
+    mech = (EXAMPLES / "compliant_door.toml").read_text()
+    s, r = k / K0, math.sqrt(k / K0)
+
+    def scale(m, factor):
+        return f"{m.group(1)}{float(m.group(2)) * factor!r}"
+    mech = re.sub(r"^((?:rotational_)?stiffness = )([0-9.e+-]+)", lambda m: scale(m, s), mech, flags=re.M)
+    mech = re.sub(r"^((?:rotational_)?damping = )([0-9.e+-]+)", lambda m: scale(m, r), mech, flags=re.M)
+    d = tmp / f"k{k:.0e}"
+    d.mkdir()
+    (d / "compliant_door.toml").write_text(mech)
+    scene = d / "compliant_door_h1_wo_hinge2.toml"
+    scene.write_text((EXAMPLES / "compliant_door_h1_wo_hinge2.toml").read_text())
+    return scene
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--stiffness", type=float, nargs="+", default=[1e9])
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args(argv)
+    import fmpy
+    import numpy as np
+
+    from overcon.fmu.build import build_all
+    from overcon.kernel import C_METHODS
+
+    print("| k (N/m) | runtime | method | simulate_fmu (s) | max position difference from radau (m) | stopped |")
+    print("|---:|---|---|---:|---:|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in args.stiffness:
+            scene = scaled_files(Path(tmp), k)
+            fmus = {}
+            for runtime in ("python", "c"):
+                code, res = build_all([str(scene)], Path(tmp) / f"{runtime}{k:.0e}", refs=False, runtime=runtime,
+                                      echo=lambda s: None, echo_err=lambda s: None)
+                assert code == 0 and res[0].fmu, res[0].messages
+                fmus[runtime] = str(res[0].fmu)
+            ref = fmpy.simulate_fmu(fmus["python"])
+            cols = [n for n in ref.dtype.names if n.startswith("door.")]
+            runs = [("python", "radau")] + [("c", m) for m in C_METHODS if m != "rk4"]
+            for runtime, method in runs:
+                walls, stopped, out = [], "", None
+                for _ in range(args.repeat):
+                    t0 = time.perf_counter()
+                    try:
+                        out = fmpy.simulate_fmu(fmus[runtime], start_values={"solver.method": method})
+                    except Exception as exc:  # noqa: BLE001 - printed, the benchmark goes on
+                        stopped = str(exc).splitlines()[0][:120]
+                    walls.append(time.perf_counter() - t0)
+                diff = max(float(np.max(np.abs(out[c] - ref[c]))) for c in cols) if out is not None and \
+                    len(out) == len(ref) else float("nan")
+                print(f"| {k:.0e} | {runtime} | {method} | {statistics.median(walls):.3f} | {diff:.2e} | "
+                      f"{stopped or 'no'} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

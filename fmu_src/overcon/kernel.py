@@ -111,7 +111,10 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_sim_energy", i, [vp, ctypes.c_double, vp, vp]),
                             ("ovk_sim_state_size", ctypes.c_size_t, [vp]),
                             ("ovk_sim_get_state", i, [vp, vp, ctypes.c_size_t]),
-                            ("ovk_sim_set_state", i, [vp, vp, ctypes.c_size_t])):
+                            ("ovk_sim_set_state", i, [vp, vp, ctypes.c_size_t]),
+                            ("ovk_unique", i, [vp] * 5), ("ovk_sim_uniqueness", i, [vp] * 3),
+                            ("ovk_sim_events", i, [vp]),
+                            ("ovk_sim_event", ctypes.c_char_p, [vp, i, vp, vp])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib
@@ -242,6 +245,7 @@ class Kernel:
     def __init__(self, lib, model, solver):
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
         self._rows_fn = lib.ovk_rows
+        self._lib_unique = lib.ovk_unique
         self._lib_robust = lib.ovk_evaluate_robust
         plan = model.plan
         I32 = np.int32
@@ -407,6 +411,17 @@ class Kernel:
             raise RuntimeError(f"the compiled core's outputs failed ({STATUS.get(status, status)}): {self._message()}")
         return self._reac, self._fric
 
+
+    def unique(self, y: np.ndarray) -> tuple[int, np.ndarray]:
+        """(rank of the whole Jacobian, each joint's reaction unique (nj bools, model order)) at
+        the state y by the pre-check's one-factorisation rule (core/unique.c; the same verdicts as
+        :func:`overcon.analysis.analyse` with ``methods = "svd"`` on Phi_h^T)."""
+        rank, unique = ctypes.c_int(0), np.zeros(len(self.model.joints) or 1, np.intc)
+        self._y[:] = y
+        status = self._lib_unique(self._pm, self._data, self._ptrs[0], ctypes.addressof(rank), unique.ctypes.data)
+        if status:
+            raise RuntimeError(f"the compiled core's uniqueness failed ({STATUS.get(status, status)}): {self._message()}")
+        return rank.value, unique[: len(self.model.joints)].astype(bool)
 
     def rows(self, y: np.ndarray):
         """(Phi (m,), Phi_h (m, nh), gamma (m,; without Baumgarte)) of the core at y: the joint rows
@@ -577,6 +592,30 @@ class Run:
         if status:
             self._raise(status)
         return out
+
+    @property
+    def events(self) -> list[tuple[float, str, str]]:
+        """The run's events (time s, kind, detail) as :attr:`overcon.simulate.Simulation.events`
+        (kinds :data:`overcon.simulate.EVENT_KINDS`; the core's ``joints[k]`` named)."""
+        from .simulate import EVENT_KINDS
+        t, kind, out = ctypes.c_double(0.0), ctypes.c_int(0), []
+        names = [c.name for c in self.kernel.model.joints]
+        for k in range(self._lib.ovk_sim_events(self._sim)):
+            detail = self._lib.ovk_sim_event(self._sim, k, ctypes.addressof(t), ctypes.addressof(kind))
+            text = detail.decode("utf-8", "replace")
+            if kind.value == 3:  # uniqueness-change: the core numbers the joints
+                for j in reversed(range(len(names))):
+                    text = text.replace(f"joints[{j}]:", f"{names[j]}:")
+            out.append((t.value, EVENT_KINDS[kind.value], text))
+        return out
+
+    def uniqueness(self) -> tuple[int, dict[str, bool], bool]:
+        """(rank, joint name -> reaction unique, motion_unique) at the last evaluation of the
+        uniqueness along the motion (core/watch.c: the start, and the steps it evaluates at)."""
+        joints = self.kernel.model.joints
+        rank, unique = ctypes.c_int(0), np.zeros(len(joints) or 1, np.intc)
+        motion = self._lib.ovk_sim_uniqueness(self._sim, ctypes.addressof(rank), unique.ctypes.data)
+        return rank.value, {c.name: bool(u) for c, u in zip(joints, unique)}, bool(motion)
 
     def get_state(self) -> bytes:
         size = self._lib.ovk_sim_state_size(self._sim)

@@ -36,6 +36,8 @@ static int stopped(ovk_sim *s, int status, const char *lead, double t) {
     for (size_t k = 0; k < parts; k++)
         for (const char *c = part[k]; *c && n + 1 < sizeof s->msg; c++) s->msg[n++] = *c;
     s->msg[n] = '\0';
+    /* the event at the time the cause names (a located instant), as Simulation's "stopped" */
+    ovk_sim_push_event(s, when[0] ? t : strtod(cause + 4, NULL), OVK_EV_STOPPED, s->msg + strlen(lead) + 2);
     return status;
 }
 
@@ -188,8 +190,16 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     layout(s, nR);
     s->min_ratio = INFINITY;
     s->t_prev = t0;
+    s->along_unique = calloc(2 * (size_t)M->nj + 1, sizeof(int));
+    s->along_work = malloc(ovk_unique_doubles(s->m, s->nh) * sizeof(double) + 1);
+    if (!s->along_unique || !s->along_work) {
+        s->status = OVK_NOMEM;
+        snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (uniqueness along the motion)");
+        return s;
+    }
     int status = ovk_rk_start(&s->rk, &o->rk, s->ny, s->rk.y, t0, y0, sim_rhs, s, s->msg);
     if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, NULL, 1, s->msg);
+    if (!status) status = ovk_sim_along(s, t0, s->rk.y, 1, s->msg);
     if (!status) status = ovk_sim_energy_start(s, t0, s->rk.y);
     if (status) s->status = stopped(s, status, "cannot start", t0);
     return s;
@@ -199,6 +209,9 @@ void ovk_sim_free(ovk_sim *s) {
     if (!s) return;
     ovk_free_data(s->d);
     free(s->mem);
+    free(s->along_unique);
+    free(s->along_work);
+    free(s->events);
     free(s);
 }
 
@@ -313,4 +326,47 @@ int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double 
     int status = ovk_outputs(s->M, s->d, y, lam, reac, fric);
     if (status) snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d));
     return status;
+}
+
+/* Records an event (detail cut at OVK_MSG bytes); OVK_NOMEM when the list cannot grow (the event
+ * is then lost and the caller stops the run, saying so). */
+int ovk_sim_push_event(ovk_sim *s, double t, int kind, const char *detail) {
+    if (s->nevents == s->cap_events) {
+        int cap = s->cap_events ? 2 * s->cap_events : 8;
+        ovk_event *grown = cap > 0 ? realloc(s->events, (size_t)cap * sizeof *grown) : NULL;
+        if (!grown) return OVK_NOMEM;
+        s->events = grown;
+        s->cap_events = cap;
+    }
+    ovk_event *e = &s->events[s->nevents++];
+    e->t = t;
+    e->kind = kind;
+    snprintf(e->detail, sizeof e->detail, "%s", detail);
+    return OVK_OK;
+}
+
+int ovk_sim_events(const ovk_sim *s) { return s ? s->nevents : 0; }
+
+/* Event k (0-based): its detail, with its time and kind; NULL when there is no event k. */
+const char *ovk_sim_event(const ovk_sim *s, int k, double *t, int *kind) {
+    if (!s || k < 0 || k >= s->nevents) return NULL;
+    *t = s->events[k].t;
+    *kind = s->events[k].kind;
+    return s->events[k].detail;
+}
+
+/* The last evaluation of the uniqueness along the motion: the rank and each joint's verdict (nj)
+ * into rank and unique; returns motion_unique (every friction joint with a nonzero law unique,
+ * the paper's Eq. 17), or -1 without a run. */
+int ovk_sim_uniqueness(const ovk_sim *s, int *rank, int *unique) {
+    if (!s || !s->along_unique) return -1;
+    const ovk_model *M = s->M;
+    int motion = 1;
+    *rank = s->along_rank;
+    memcpy(unique, s->along_unique, (size_t)M->nj * sizeof(int));
+    for (int k = 0; k < M->nfj; k++) {
+        const double *lp = M->jlawp + (size_t)M->fj[k] * NLP;
+        if (!(lp[0] == 0.0 && lp[3] == 0.0) && !s->along_unique[M->fj[k]]) motion = 0;
+    }
+    return motion;
 }

@@ -20,6 +20,7 @@
 #define DEGRADED_RATIO 1e-3  /* watch.DEGRADED_RATIO */
 #define DEGRADED_MARGIN 100.0 /* watch.DEGRADED_MARGIN */
 #define SEARCH_REL 1e-9      /* watch.SEARCH_REL */
+#define ALONG_RATIO 1e-3     /* watch.ALONG_RATIO: below it the uniqueness along the motion is evaluated */
 #define C_REFUSES "the C runtime does not choose the eliminated equations again: build with --runtime python"
 
 /* A message into msg (OVK_MSG bytes, cut there) and the status. */
@@ -194,6 +195,7 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
     int full = 0, nR = s->M->nR, status = full_rank(s, y, &full, msg);
     if (status) return status;
     shown(r, rs, sizeof rs);
+    if (full < nR && (status = ovk_sim_along(s, t, y, 0, msg))) return status; /* the events at that instant */
     if (full < nR)
         return snprintf(msg, OVK_MSG, "%s: the mechanism's constraint Jacobian is rank deficient (rank %d < %d; "
                         "kept equations' sigma_min/sigma_max %s, below %g)", where, full, nR, rs, s->o.ratio_tol),
@@ -223,6 +225,54 @@ static int degrading(ovk_sim *s, double t, double r, const double *y, char *msg)
                     DEGRADED_RATIO, full, names);
 }
 
+/* motion_unique from the verdicts u (nj): every friction joint with a nonzero law unique. */
+static int motion_of(const ovk_model *M, const int *u) {
+    for (int k = 0; k < M->nfj; k++) {
+        const double *lp = M->jlawp + (size_t)M->fj[k] * NLP;
+        if (!(lp[0] == 0.0 && lp[3] == 0.0) && !u[M->fj[k]]) return 0;
+    }
+    return 1;
+}
+
+/* The uniqueness along the motion at (t, y) (watch.Uniqueness.update): the whole Jacobian's
+ * rank and every joint's verdict by the pre-check's rule (unique.c); after the first evaluation
+ * (first = 1, at the start: no events), a rank-change event when the rank differs from the last
+ * evaluation's and a uniqueness-change event when a friction joint's verdict does (friction
+ * joints as "joints[k]", 0-based in model order; the bindings put the names in). */
+int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg) {
+    const ovk_model *M = s->M;
+    int nj = M->nj, rank = 0, *now = s->along_unique + nj, *was = s->along_unique;
+    int status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
+    if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
+    if ((status = ovk_unique_rows(M, s->J, s->along_work, &rank, now)))
+        return say(msg, status, "t = %.9g s: uniqueness along the motion: a non-finite constraint Jacobian", t);
+    if (!first && rank != s->along_rank) {
+        char text[64];
+        snprintf(text, sizeof text, "rank %d -> %d", s->along_rank, rank);
+        if ((status = ovk_sim_push_event(s, t, OVK_EV_RANK, text)))
+            return say(msg, status, "t = %.9g s: out of memory for the run's events", t);
+    }
+    char text[OVK_MSG] = "";
+    size_t len = 0;
+    for (int k = 0; !first && k < M->nfj; k++) {
+        int j = M->fj[k];
+        if (now[j] == was[j]) continue;
+        int w = snprintf(text + len, sizeof text - len, "%sjoints[%d]: %s -> %s", len ? ", " : "", j,
+                         was[j] ? "unique" : "not unique", now[j] ? "unique" : "not unique");
+        if (w < 0 || (size_t)w >= sizeof text - len) break;
+        len += (size_t)w;
+    }
+    int motion_was = motion_of(M, was), motion_now = motion_of(M, now);
+    if (len && motion_was != motion_now && len < sizeof text)
+        snprintf(text + len, sizeof text - len, "; motion_unique %s -> %s", motion_was ? "true" : "false",
+                 motion_now ? "true" : "false");
+    if (len && (status = ovk_sim_push_event(s, t, OVK_EV_UNIQUENESS, text)))
+        return say(msg, status, "t = %.9g s: out of memory for the run's events", t);
+    s->along_rank = rank;
+    memcpy(was, now, (size_t)nj * sizeof(int));
+    return OVK_OK;
+}
+
 /* The watch at (t, y) (SingularityMonitor.check and, first = 1, its start at t0: no minimum
  * search, no degrading test); qdot: the integrator's q' at y (NULL: the coordinate rates). */
 int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg) {
@@ -243,6 +293,7 @@ int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, i
     if ((status = judge(s, t, r, y, 0, 0.0, 0.0, msg))) return status;
     s->t_prev = t;
     s->rate = rate;
+    if (!first && r < ALONG_RATIO && (status = ovk_sim_along(s, t, y, 0, msg))) return status;
     return first ? OVK_OK : degrading(s, t, r, y, msg);
 }
 

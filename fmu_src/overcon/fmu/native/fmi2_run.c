@@ -153,6 +153,7 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
             return 0;
         }
         c->sim_valid = 1;
+        c->events_logged = 0;
         c->t = c->start_time;
     }
     if (compute_outputs && !c->have_outputs) {
@@ -286,6 +287,56 @@ static int step_outputs(fmu_inst *c, double t_new, const double *y, double *out)
     return 1;
 }
 
+/* The value of a variable of key K_ALONG (arg: 0 rank, 1 motion_unique, 2 + j joint j's
+ * reaction_unique): the run's last judgement of the uniqueness along the motion (core/watch.c),
+ * the run made first when there is none; 0 with the reason in c->msg. */
+int fmu_along_value(fmu_inst *c, int arg, double *out) {
+    if (!c->sim_valid && !fmu_ensure_sim(c, 0)) return 0;
+    int nj = c->fm.M.nj, rank = 0, *unique = malloc(((size_t)nj + 1) * sizeof(int));
+    if (!unique) return snprintf(c->msg, sizeof c->msg, "MemoryError: out of memory"), 0;
+    int motion = ovk_sim_uniqueness(c->sim, &rank, unique);
+    *out = arg == 0 ? rank : arg == 1 ? motion : arg - 2 < nj ? unique[arg - 2] : 0;
+    free(unique);
+    return 1;
+}
+
+/* Logs the run's events not logged yet (category logEvents, as overcon.fmu.slave._log_events:
+ * "t = <t> s: event <kind>: <detail>", a friction joint named instead of the core's joints[k]);
+ * the stop of a failed step is logged with its error, not here. */
+static void log_events(fmu_inst *c) {
+    static const char *kinds[5] = {"singular", "elimination-reselected", "rank-change", "uniqueness-change",
+                                   "stopped"};
+    int count = ovk_sim_events(c->sim);
+    for (; c->events_logged < count; c->events_logged++) {
+        double t = 0.0;
+        int kind = 0;
+        const char *detail = ovk_sim_event(c->sim, c->events_logged, &t, &kind);
+        if (!detail || kind < 0 || kind > 4 || kind == OVK_EV_STOPPED) continue;
+        char named[FMU_MSG];
+        size_t len = 0;
+        for (const char *p = detail; *p && len + 1 < sizeof named;) {
+            int j = -1, used = 0;
+            if (sscanf(p, "joints[%d]:%n", &j, &used) == 1 && used > 0) {
+                for (int v = 0; v < c->fm.nvar; v++) /* the joint's name: its "<joint>.reaction_unique" */
+                    if (c->fm.var[v].key == K_ALONG && c->fm.var[v].arg == 2 + j) {
+                        const char *name = c->fm.var[v].name;
+                        size_t n = strlen(name) - strlen(".reaction_unique");
+                        len += (size_t)snprintf(named + len, sizeof named - len, "%.*s:", (int)n, name);
+                        p += used;
+                        break;
+                    }
+                if (p[0] == 'j' && used) { /* no variable names it: keep the core's text */
+                    named[len++] = *p++;
+                }
+                continue;
+            }
+            named[len++] = *p++;
+        }
+        named[len < sizeof named ? len : sizeof named - 1] = '\0';
+        fmu_log(c, fmi2OK, "t = %.9g s: event %s: %s", t, kinds[kind], named);
+    }
+}
+
 /* The step itself (overcon.fmu.slave._step): 0 with the reason in c->msg. */
 static int step(fmu_inst *c, double t, double h, double *y) {
     char a[40], b[40];
@@ -299,7 +350,9 @@ static int step(fmu_inst *c, double t, double h, double *y) {
     if (!c->sim_valid && !fmu_ensure_sim(c, 1)) return 0;
     long long max_steps = (long long)param(c, P_MAX_INTERNAL_STEPS);
     double max_wall = param(c, P_MAX_WALL_TIME);
+    if (c->events_logged > ovk_sim_events(c->sim)) c->events_logged = ovk_sim_events(c->sim); /* a restored state */
     int status = ovk_sim_advance(c->sim, t + h, max_steps, max_wall, y);
+    log_events(c);
     if (status == OVK_BUDGET) {
         const char *m = ovk_sim_message(c->sim), *lead = "integration stopped: ";
         if (!strncmp(m, lead, strlen(lead))) m += strlen(lead);

@@ -86,6 +86,8 @@ static void io_sim(codec *c, ovk_sim *s) {
     io(c, s->work_t, sizeof s->work_t);
     io(c, s->work_w, sizeof s->work_w);
     io(c, s->work_p, sizeof s->work_p);
+    int *kept = c->r ? s->kept + 5 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj : (int *)s->Mrun.retained; /* load: scratch */
+    io(c, kept, (size_t)s->Mrun.nR * sizeof(int)); /* the kept equations (chosen again during the run) */
     io(c, &s->along_rank, sizeof s->along_rank);
     io(c, s->along_unique, (size_t)s->M->nj * sizeof(int));
     io(c, &s->nevents, sizeof s->nevents); /* last: a load sizes the list from it (ovk_sim_set_state) */
@@ -143,6 +145,11 @@ int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size) {
                OVK_INVALID;
     codec c = {NULL, buf, 0, size, 0};
     io_sim(&c, s); /* nevents is read before the events: the loop reads the saved ones */
+    const int *kept = s->kept + 5 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj;
+    if (memcmp(kept, s->Mrun.retained, (size_t)s->Mrun.nR * sizeof(int))) { /* another kept set: its arrays */
+        int status = ovk_sim_use_kept(s, kept);
+        if (status) return status;
+    }
     s->status = OVK_OK;
     s->msg[0] = '\0';
     return OVK_OK;

@@ -139,3 +139,89 @@ int ovk_unique(const ovk_model *M, ovk_data *d, const double *y, int *rank, int 
     free(mem);
     return status;
 }
+
+/* The kept set's packed arrays, as overcon.kernel.Kernel packs them from overcon.model.build_plan
+ * (one implementation: the Kernel calls this): rbody (2 nR: the bodies of each kept row's joint),
+ * xrows (the positions in lam_R of the kept rows of the friction joints, joints in model order)
+ * and fx (nfj x OVK_MAXEQ, friction joints in plan order M->fj: each equation's index into
+ * xrows, nx for an eliminated one and the padding). iwork: m + nR ints. Returns nx. */
+int ovk_pack_kept(const ovk_model *M, const int *retained, int nR, int *xrows, int *fx, int *rbody, int *iwork) {
+    int m = M->m, *pos = iwork, *xpos = iwork + m, nx = 0;
+    for (int r = 0; r < m; r++) pos[r] = -1;
+    for (int p = 0; p < nR; p++) {
+        pos[retained[p]] = p;
+        xpos[p] = -1;
+    }
+    for (int j = 0; j < M->nj; j++) {
+        int friction = 0;
+        for (int k = 0; k < M->nfj; k++) friction |= M->fj[k] == j;
+        for (int e = 0; e < M->jneq[j]; e++) {
+            int p = pos[M->jrows[(size_t)j * OVK_MAXEQ + e]];
+            if (p < 0) continue;
+            rbody[2 * p] = M->jbi[j];
+            rbody[2 * p + 1] = M->jbj[j];
+            if (friction) {
+                xpos[p] = nx;
+                xrows[nx++] = p;
+            }
+        }
+    }
+    for (int k = 0; k < M->nfj; k++) {
+        int j = M->fj[k];
+        for (int e = 0; e < OVK_MAXEQ; e++) {
+            int p = e < M->jneq[j] ? pos[M->jrows[(size_t)j * OVK_MAXEQ + e]] : -1;
+            fx[(size_t)k * OVK_MAXEQ + e] = p >= 0 && xpos[p] >= 0 ? xpos[p] : nx;
+        }
+    }
+    return nx;
+}
+
+/* The equations an automatic elimination keeps at the rows J (m x nh), as
+ * overcon.analysis.independent_columns: the first r pivots of the column-pivoted Householder QR
+ * of the equilibrated A = Phi_h^T (the pivot: the largest remaining column norm, the first of
+ * equals, as LAPACK's dgeqp3), r its rank by the rule of ovk_unique_rows. kept: m flags; work:
+ * ovk_unique_doubles(m, nh); iwork: nj + m ints. Returns the status; r into *rank. */
+int ovk_choose_kept(const ovk_model *M, const double *J, double *work, int *iwork, int *kept, int *rank) {
+    int m = M->m, nh = M->nb * M->nh_b, *perm = iwork + M->nj;
+    int status = ovk_unique_rows(M, J, work, rank, iwork);
+    if (status) return status;
+    double *B = work + (size_t)m * nh; /* A's columns (the equations) as rows, equilibrated */
+    memcpy(B, work, (size_t)m * nh * sizeof(double));
+    for (int e = 0; e < m; e++) perm[e] = e;
+    int steps = m < nh ? m : nh;
+    for (int k = 0; k < steps && k < *rank; k++) {
+        int best = k;
+        double most = -1.0;
+        for (int e = k; e < m; e++) {
+            double n2 = 0.0;
+            for (int c = k; c < nh; c++) n2 += B[(size_t)e * nh + c] * B[(size_t)e * nh + c];
+            if (n2 > most) most = n2, best = e;
+        }
+        if (best != k) {
+            for (int c = 0; c < nh; c++) {
+                double x = B[(size_t)k * nh + c];
+                B[(size_t)k * nh + c] = B[(size_t)best * nh + c];
+                B[(size_t)best * nh + c] = x;
+            }
+            int x = perm[k];
+            perm[k] = perm[best];
+            perm[best] = x;
+        }
+        double *v = B + (size_t)k * nh, norm = sqrt(most);
+        if (!(norm > 0.0)) break;
+        double alpha = v[k] > 0.0 ? -norm : norm, vk = v[k] - alpha, vv = vk * vk;
+        for (int c = k + 1; c < nh; c++) vv += v[c] * v[c];
+        for (int e = k + 1; e < m && vv > 0.0; e++) { /* H = I - 2 u u^T / u^T u, u = (vk, v[k+1:]) */
+            double *w = B + (size_t)e * nh, dot = vk * w[k];
+            for (int c = k + 1; c < nh; c++) dot += v[c] * w[c];
+            double f = 2.0 * dot / vv;
+            w[k] -= f * vk;
+            for (int c = k + 1; c < nh; c++) w[c] -= f * v[c];
+        }
+        v[k] = alpha;
+        for (int c = k + 1; c < nh; c++) v[c] = 0.0;
+    }
+    for (int e = 0; e < m; e++) kept[e] = 0;
+    for (int k = 0; k < *rank; k++) kept[perm[k]] = 1;
+    return OVK_OK;
+}

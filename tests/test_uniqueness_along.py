@@ -209,3 +209,25 @@ def test_the_fmu_outputs_change_at_the_flat_position(tmp_path, runtime):
     assert [m.split(": event ")[1] for m in events] == [
         "rank-change: rank 8 -> 7", "uniqueness-change: G0: unique -> not unique; motion_unique true -> false"]
     assert all(abs(float(m.split("t = ")[1].split(" s")[0]) - T_FLAT) < 1e-3 for m in events)
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.stem)
+def test_the_core_packs_the_kept_set_as_the_numpy_plan(path):
+    """The kept set's arrays the core packs (ovk_pack_kept: what a C run uses when it chooses the
+    kept equations again) are the numpy plan's: the friction rows in lam_R, each friction
+    equation's index among them (eliminated: the pad), the bodies of each kept row."""
+    model, spec = _compiled(path)
+    if kernel.support(model) is not None:
+        pytest.skip(f"the core does not cover it: {kernel.support(model)}")
+    k = kernel.Kernel(kernel.library()[0], model, spec.solver)
+    cm, plan = k._cmodel, model.plan
+
+    def ints(address, n):
+        return np.ctypeslib.as_array((ctypes.c_int32 * max(n, 1)).from_address(address))[:n].tolist()
+
+    import ctypes
+    assert cm.nx == len(plan.friction_xrows) and ints(cm.xrows, cm.nx) == plan.friction_xrows.tolist()
+    want = [list(row) + [len(plan.friction_xrows)] * (6 - len(row)) for g in plan.friction for row in g.x_index.tolist()]
+    assert ints(cm.fx, 6 * cm.nfj) == [x for row in want for x in row]
+    bodies = {r: (c.bi, c.bj) for c in model.joints for r in c.rows}
+    assert ints(cm.rbody, 2 * cm.nR) == [b for r in model.retained for b in bodies[int(r)]]

@@ -55,7 +55,7 @@ STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "frictio
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
           7: "invalid model or argument", 8: "step size too small", 9: "stiffness detected",
           10: "rk4 step unstable", 11: "work budget exhausted", 12: "singular position (monitor)",
-          13: "time does not advance", 14: "elimination expired or degrading (the C run does not choose it again)"}
+          13: "time does not advance", 14: "elimination expired where it decides the motion"}
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
@@ -114,7 +114,8 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_sim_set_state", i, [vp, vp, ctypes.c_size_t]),
                             ("ovk_unique", i, [vp] * 5), ("ovk_sim_uniqueness", i, [vp] * 3),
                             ("ovk_sim_events", i, [vp]),
-                            ("ovk_sim_event", ctypes.c_char_p, [vp, i, vp, vp])):
+                            ("ovk_sim_event", ctypes.c_char_p, [vp, i, vp, vp]),
+                            ("ovk_pack_kept", i, [vp, vp, i, vp, vp, vp, vp])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib
@@ -271,16 +272,10 @@ class Kernel:
             out[:, :nh_b] = a
             return out
 
-        def pad_x(a):
-            out = np.full((len(a), MAXEQ), len(plan.friction_xrows))
-            out[:, :a.shape[1]] = a
-            return out
-
-        fx = np.concatenate([pad_x(g.x_index) for g in plan.friction]) if plan.friction else np.zeros((0, MAXEQ))
         fci = np.concatenate([pad_cols(g.col_i) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
         fcj = np.concatenate([pad_cols(g.col_j) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
         m = _CModel(dim=model.dim, nb=model.nb, nq_b=model.nq_b, nh_b=nh_b, m=model.m, nR=len(model.retained),
-                    nj=len(joints), nl=len(model.loads), nx=len(plan.friction_xrows), ncols=len(plan.friction_cols),
+                    nj=len(joints), nl=len(model.loads), nx=0, ncols=len(plan.friction_cols),
                     nfj=len(fj), nfg=len(plan.friction), max_iter=solver.friction_max_iter,
                     baumgarte=solver.baumgarte, tol=solver.friction_tol)
         m.retained = arr(model.retained, I32)
@@ -296,11 +291,18 @@ class Kernel:
         m.ltype = arr([_LOADS[ld.type] for ld in model.loads], I32)
         m.lbi, m.lbj = arr([ld.bi for ld in model.loads], I32), arr([ld.bj for ld in model.loads], I32)
         m.lp = arr([_load_constants(ld) for ld in model.loads], float)
-        m.xrows, m.cols = arr(plan.friction_xrows, I32), arr(plan.friction_cols, I32)
+        m.cols = arr(plan.friction_cols, I32)
         m.fj, m.fgroup = arr(fj, I32), arr(fgroup, I32)
-        m.fx, m.fci, m.fcj = arr(fx, I32), arr(fci, I32), arr(fcj, I32)
-        bodies_of_row = {r: (c.bi, c.bj) for c in joints for r in c.rows}
-        m.rbody = arr([bodies_of_row[int(r)] for r in model.retained], I32)
+        m.fci, m.fcj = arr(fci, I32), arr(fcj, I32)
+        # the kept set's arrays (xrows, fx, rbody) from the core's packing, which a run in C uses
+        # again when it chooses the kept equations anew (core/unique.c ovk_pack_kept)
+        n_r, n_f = len(model.retained), len(fj)
+        xrows, fx = np.zeros(MAXEQ * n_f + 1, np.int32), np.zeros(MAXEQ * n_f + 1, np.int32)
+        rbody, iwork = np.zeros(2 * n_r + 1, np.int32), np.zeros(model.m + n_r + 1, np.int32)
+        retained = np.ascontiguousarray(model.retained, np.int32)
+        m.nx = lib.ovk_pack_kept(ctypes.addressof(m), retained.ctypes.data, n_r, xrows.ctypes.data, fx.ctypes.data,
+                                 rbody.ctypes.data, iwork.ctypes.data)
+        m.xrows, m.fx, m.rbody = arr(xrows[: m.nx], I32), arr(fx[: MAXEQ * n_f], I32), arr(rbody[: 2 * n_r], I32)
         self._cmodel = m
         self._pm = ctypes.addressof(m)
         self._data = self._workspace(lib)
@@ -539,7 +541,14 @@ class Run:
             raise RunStopped(status, self._message())
 
     def _message(self) -> str:
-        return self._lib.ovk_sim_message(self._sim).decode("utf-8", "replace")
+        return self._named(self._lib.ovk_sim_message(self._sim).decode("utf-8", "replace"))
+
+    def _named(self, text: str) -> str:
+        """The core's ``joints[k]`` (joints named by number in its messages and events) named."""
+        if "joints[" in text:
+            for j, c in reversed(list(enumerate(self.kernel.model.joints))):
+                text = text.replace(f"joints[{j}]", c.name)
+        return text
 
     def _raise(self, status: int):
         stable = self.info["stable_step"] if status == 10 else None
@@ -599,14 +608,9 @@ class Run:
         (kinds :data:`overcon.simulate.EVENT_KINDS`; the core's ``joints[k]`` named)."""
         from .simulate import EVENT_KINDS
         t, kind, out = ctypes.c_double(0.0), ctypes.c_int(0), []
-        names = [c.name for c in self.kernel.model.joints]
         for k in range(self._lib.ovk_sim_events(self._sim)):
             detail = self._lib.ovk_sim_event(self._sim, k, ctypes.addressof(t), ctypes.addressof(kind))
-            text = detail.decode("utf-8", "replace")
-            if kind.value == 3:  # uniqueness-change: the core numbers the joints
-                for j in reversed(range(len(names))):
-                    text = text.replace(f"joints[{j}]:", f"{names[j]}:")
-            out.append((t.value, EVENT_KINDS[kind.value], text))
+            out.append((t.value, EVENT_KINDS[kind.value], self._named(detail.decode("utf-8", "replace"))))
         return out
 
     def uniqueness(self) -> tuple[int, dict[str, bool], bool]:

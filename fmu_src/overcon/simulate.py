@@ -208,6 +208,7 @@ class Simulation:
                 except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
                     if not self._recover(itg, exc):
                         raise
+                itg = self._integrator  # a new one when the kept equations were chosen again
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             where = "" if str(exc).startswith("t = ") else f"t = {itg.t:.9g} s: "
             self.events.append((getattr(exc, "t", itg.t), "stopped", f"{where}{exc}"))
@@ -356,10 +357,10 @@ class Simulation:
         integrator with the same settings and counters, warm starts, and :meth:`_adopt`."""
         old = self._integrator
         self.lam, self._warm, self._step_warm, self._last_eval = None, _ForcesHistory(), _ForcesHistory(), None
+        self._adopt(model, t, y)  # first: the new integrator's first derivative is the new model's
         self._integrator = integrators.create(self.method, self._rhs, t, y, dense_fun=self._rhs_dense,
                                               **self.settings)
         self._integrator.nsteps, self._integrator.nfev = old.nsteps, old.nfev
-        self._adopt(model, t, y)
 
     def _adopt(self, model: Model, t: float, y: np.ndarray) -> None:
         """Run ``model`` (another elimination of the same mechanism) from (t, y): its kernel, output

@@ -300,9 +300,29 @@ int fmu_along_value(fmu_inst *c, int arg, double *out) {
     return 1;
 }
 
+/* The core's text with its "joints[k]" (a friction joint, numbered) named by the joint's
+ * "<joint>.reaction_unique" variable, as the Python runtime words it. */
+static void named(const fmu_inst *c, const char *in, char *out, size_t size) {
+    size_t len = 0;
+    for (const char *p = in; *p && len + 1 < size;) {
+        int j = -1, used = 0, done = 0;
+        if (sscanf(p, "joints[%d]%n", &j, &used) == 1 && used > 0 && p[used - 1] == ']')
+            for (int v = 0; v < c->fm.nvar && !done; v++)
+                if (c->fm.var[v].key == K_ALONG && c->fm.var[v].arg == 2 + j) {
+                    const char *name = c->fm.var[v].name;
+                    int n = (int)(strlen(name) - strlen(".reaction_unique"));
+                    int w = snprintf(out + len, size - len, "%.*s", n, name);
+                    len = w < 0 || (size_t)w >= size - len ? size - 1 : len + (size_t)w;
+                    p += used;
+                    done = 1;
+                }
+        if (!done) out[len++] = *p++;
+    }
+    out[len] = '\0';
+}
+
 /* Logs the run's events not logged yet (category logEvents, as overcon.fmu.slave._log_events:
- * "t = <t> s: event <kind>: <detail>", a friction joint named instead of the core's joints[k]);
- * the stop of a failed step is logged with its error, not here. */
+ * "t = <t> s: event <kind>: <detail>"); the stop of a failed step is logged with its error. */
 static void log_events(fmu_inst *c) {
     static const char *kinds[5] = {"singular", "elimination-reselected", "rank-change", "uniqueness-change",
                                    "stopped"};
@@ -312,28 +332,9 @@ static void log_events(fmu_inst *c) {
         int kind = 0;
         const char *detail = ovk_sim_event(c->sim, c->events_logged, &t, &kind);
         if (!detail || kind < 0 || kind > 4 || kind == OVK_EV_STOPPED) continue;
-        char named[FMU_MSG];
-        size_t len = 0;
-        for (const char *p = detail; *p && len + 1 < sizeof named;) {
-            int j = -1, used = 0;
-            if (sscanf(p, "joints[%d]:%n", &j, &used) == 1 && used > 0) {
-                for (int v = 0; v < c->fm.nvar; v++) /* the joint's name: its "<joint>.reaction_unique" */
-                    if (c->fm.var[v].key == K_ALONG && c->fm.var[v].arg == 2 + j) {
-                        const char *name = c->fm.var[v].name;
-                        size_t n = strlen(name) - strlen(".reaction_unique");
-                        len += (size_t)snprintf(named + len, sizeof named - len, "%.*s:", (int)n, name);
-                        p += used;
-                        break;
-                    }
-                if (p[0] == 'j' && used) { /* no variable names it: keep the core's text */
-                    named[len++] = *p++;
-                }
-                continue;
-            }
-            named[len++] = *p++;
-        }
-        named[len < sizeof named ? len : sizeof named - 1] = '\0';
-        fmu_log(c, fmi2OK, "t = %.9g s: event %s: %s", t, kinds[kind], named);
+        char text[FMU_MSG];
+        named(c, detail, text, sizeof text);
+        fmu_log(c, fmi2OK, "t = %.9g s: event %s: %s", t, kinds[kind], text);
     }
 }
 
@@ -366,7 +367,11 @@ static int step(fmu_inst *c, double t, double h, double *y) {
         ovk_sim_info(c->sim, info);
         c->stable_step = info[9];
     }
-    if (status) return snprintf(c->msg, sizeof c->msg, "SimulationError: %s", ovk_sim_message(c->sim)), 0;
+    if (status) {
+        char text[FMU_MSG];
+        named(c, ovk_sim_message(c->sim), text, sizeof text);
+        return snprintf(c->msg, sizeof c->msg, "SimulationError: %.1000s", text), 0; /* cut as the core cuts its own */
+    }
     return 1;
 }
 

@@ -36,7 +36,8 @@ static int stopped(ovk_sim *s, int status, const char *lead, double t) {
     for (size_t k = 0; k < parts; k++)
         for (const char *c = part[k]; *c && n + 1 < sizeof s->msg; c++) s->msg[n++] = *c;
     s->msg[n] = '\0';
-    /* the event at the time the cause names (a located instant), as Simulation's "stopped" */
+    /* the event at the time the cause names (a located instant), as Simulation's "stopped" (for
+     * want of memory it is not recorded: the status and this message still say why the run stopped) */
     ovk_sim_push_event(s, when[0] ? t : strtod(cause + 4, NULL), OVK_EV_STOPPED, s->msg + strlen(lead) + 2);
     return status;
 }

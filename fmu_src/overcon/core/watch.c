@@ -394,7 +394,8 @@ static int valid_eliminations(ovk_sim *s, const double *y, char *out, size_t siz
         if (!ok) continue;
         char one[96];
         listed(gone, m, one, sizeof one);
-        len += (size_t)snprintf(out + len, len < size ? size - len : 0, "%s%s", found ? ", " : "", one);
+        if (len >= size) break; /* the list is cut at the message's size */
+        len += (size_t)snprintf(out + len, size - len, "%s%s", found ? ", " : "", one);
         found++;
     }
     if (!found) snprintf(out, size, "none found");
@@ -416,7 +417,7 @@ static int nonunique_friction(ovk_sim *s, const double *y, char *out, size_t siz
         for (int k = 0; k < M->nfj; k++) friction |= M->fj[k] == j;
         const double *lp = M->jlawp + (size_t)j * NLP;
         if (!friction || (lp[0] == 0.0 && lp[3] == 0.0) || u[j]) continue;
-        len += (size_t)snprintf(out + len, len < size ? size - len : 0, "%sjoints[%d]", count ? ", " : "", j);
+        if (len < size) len += (size_t)snprintf(out + len, size - len, "%sjoints[%d]", count ? ", " : "", j);
         count++;
     }
     return count;

@@ -294,15 +294,8 @@ class Kernel:
         m.cols = arr(plan.friction_cols, I32)
         m.fj, m.fgroup = arr(fj, I32), arr(fgroup, I32)
         m.fci, m.fcj = arr(fci, I32), arr(fcj, I32)
-        # the kept set's arrays (xrows, fx, rbody) from the core's packing, which a run in C uses
-        # again when it chooses the kept equations anew (core/unique.c ovk_pack_kept)
-        n_r, n_f = len(model.retained), len(fj)
-        xrows, fx = np.zeros(MAXEQ * n_f + 1, np.int32), np.zeros(MAXEQ * n_f + 1, np.int32)
-        rbody, iwork = np.zeros(2 * n_r + 1, np.int32), np.zeros(model.m + n_r + 1, np.int32)
-        retained = np.ascontiguousarray(model.retained, np.int32)
-        m.nx = lib.ovk_pack_kept(ctypes.addressof(m), retained.ctypes.data, n_r, xrows.ctypes.data, fx.ctypes.data,
-                                 rbody.ctypes.data, iwork.ctypes.data)
-        m.xrows, m.fx, m.rbody = arr(xrows[: m.nx], I32), arr(fx[: MAXEQ * n_f], I32), arr(rbody[: 2 * n_r], I32)
+        xrows, fx, rbody = self._pack_kept(lib, m, model.retained)
+        m.xrows, m.fx, m.rbody = arr(xrows, I32), arr(fx, I32), arr(rbody, I32)
         self._cmodel = m
         self._pm = ctypes.addressof(m)
         self._data = self._workspace(lib)
@@ -324,6 +317,19 @@ class Kernel:
         self._fric = np.zeros(len(joints))
         self._lam_in = np.zeros(model.m)
         self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
+
+    @staticmethod
+    def _pack_kept(lib, m, retained) -> tuple:
+        """(xrows, fx, rbody) of the kept equations ``retained`` of the packed model ``m`` (whose
+        other fields are set; ``m.nx`` is set here), from the core's packing (core/unique.c
+        ovk_pack_kept), which a run in C uses again when it chooses the kept equations anew."""
+        n_r, n_f = len(retained), m.nfj
+        xrows, fx = np.zeros(MAXEQ * n_f + 1, np.int32), np.zeros(MAXEQ * n_f + 1, np.int32)
+        rbody, iwork = np.zeros(2 * n_r + 1, np.int32), np.zeros(m.m + n_r + 1, np.int32)
+        kept = np.ascontiguousarray(retained, np.int32)
+        m.nx = lib.ovk_pack_kept(ctypes.addressof(m), kept.ctypes.data, n_r, xrows.ctypes.data, fx.ctypes.data,
+                                 rbody.ctypes.data, iwork.ctypes.data)
+        return xrows[: m.nx], fx[: MAXEQ * n_f], rbody[: 2 * n_r]
 
     def _workspace(self, lib) -> int:
         """The core's workspace for the packed model, freed with this object; raises when the
@@ -476,6 +482,8 @@ def select(model, solver):
 
 C_METHODS = {"dopri5": 0, "rk4": 1}
 """The integrators of overcon.integrators that core/integrate_rk.c has (the same steps to round-off)."""
+EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
+"""The kinds of a run's events, in the order of core/core.h's OVK_EV_* (overcon.simulate.EVENT_KINDS)."""
 INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_drift", "min_ratio", "stiff_steps",
         "stable_step", "wall_time")
 """The entries of ovk_sim_info, in order (core/sim.c)."""
@@ -606,7 +614,6 @@ class Run:
     def events(self) -> list[tuple[float, str, str]]:
         """The run's events (time s, kind, detail) as :attr:`overcon.simulate.Simulation.events`
         (kinds :data:`overcon.simulate.EVENT_KINDS`; the core's ``joints[k]`` named)."""
-        from .simulate import EVENT_KINDS
         t, kind, out = ctypes.c_double(0.0), ctypes.c_int(0), []
         for k in range(self._lib.ovk_sim_events(self._sim)):
             detail = self._lib.ovk_sim_event(self._sim, k, ctypes.addressof(t), ctypes.addressof(kind))

@@ -46,7 +46,7 @@ from .watch import (ALONG_RATIO, EliminationExpired, SingularityMonitor, Singula
                     Uniqueness, friction_on_nonunique, reselected, shown_ratio, valid_eliminations)
 
 
-EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
+EVENT_KINDS = kernel_mod.EVENT_KINDS
 """Kinds of :attr:`Simulation.events` (``overcon simulate --events``): a singular position passed,
 the kept equations chosen again, the rank or a friction joint's uniqueness changing along the
 motion (:class:`overcon.watch.Uniqueness`: at the step's end, or at the located instant of the

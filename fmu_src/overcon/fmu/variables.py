@@ -200,10 +200,8 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
         out.append(Var(f"{name}.reaction_unique", "Boolean", "output", "constant", "exact",
                        f"pre-check: the reaction of joint {name} is unique (does not depend on the "
                        "eliminated equations)", start=val, key=("constant", val)))
-    out.append(Var("motion_unique", "Boolean", "output", "discrete", "exact",
-                   "the motion is unique: no friction on a joint whose reaction is not unique (paper Eq. 17), "
-                   "judged along the motion (start value: the pre-check at t = 0)",
-                   start=bool(motion_unique), key=("along", "motion")))
+    out.append(_along_var("motion_unique", "Boolean", "the motion is unique: no friction on a joint whose reaction "
+                          "is not unique (paper Eq. 17)", bool(motion_unique), "motion"))
     for j in model.friction_joints:
         c = model.joints[j]
         for p in _friction_param_names(c.law):
@@ -232,18 +230,23 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
     for j in model.friction_joints:
         if j not in set(model.reaction_joints):
             out.append(_along_reaction(model, j, bool(reaction_unique.get(model.joints[j].name, True))))
-    out.append(Var("rank", "Integer", "output", "discrete", "exact",
-                   "rank of the whole constraint Jacobian along the motion (the pre-check's rule; start value: "
-                   "the pre-check at t = 0)", start=int(rank) if rank is not None else 0, key=("along", "rank")))
+    out.append(_along_var("rank", "Integer", "rank of the whole constraint Jacobian (the pre-check's rule)",
+                          int(rank) if rank is not None else 0, "rank"))
     return out
 
 
+def _along_var(name: str, typ: str, text: str, start, arg) -> Var:
+    """A discrete output judged along the motion (:class:`overcon.watch.Uniqueness`), its start
+    value the pre-check's at t = 0."""
+    return Var(name, typ, "output", "discrete", "exact", f"{text}, judged along the motion (start value: the "
+               "pre-check at t = 0)", start=start, key=("along", arg))
+
+
 def _along_reaction(model, j: int, start: bool) -> Var:
-    """``<joint>.reaction_unique`` of friction joint ``j``: a discrete output judged along the motion."""
+    """``<joint>.reaction_unique`` of friction joint ``j``."""
     name = model.joints[j].name
-    return Var(f"{name}.reaction_unique", "Boolean", "output", "discrete", "exact",
-               f"the reaction of joint {name} is unique (does not depend on the eliminated equations), judged along "
-               "the motion (start value: the pre-check at t = 0)", start=start, key=("along", j))
+    return _along_var(f"{name}.reaction_unique", "Boolean", f"the reaction of joint {name} is unique (does not "
+                      "depend on the eliminated equations)", start, j)
 
 
 def rule(name: str) -> ParamRule:

@@ -123,7 +123,7 @@ def test_value_references_and_writes_to_outputs(unz):
     # a write to an output: fmi2Error with a message, never fmi2Fatal, nothing set
     x = s.vr("slider1.x")
     assert "(slider1.x) is output (continuous): it cannot be set" in s.error(s.fmu.setReal, [x], [1.0])
-    assert "(motion_unique) is output (constant)" in s.error(s.fmu.setBoolean, [s.vr("motion_unique")], [False])
+    assert "(motion_unique) is output (discrete)" in s.error(s.fmu.setBoolean, [s.vr("motion_unique")], [False])
     assert s.fmu.getBoolean([s.vr("motion_unique")]) == [True]
     s.fmu.exitInitializationMode()
     for _ in range(3):

@@ -217,7 +217,11 @@ def test_model_description(fmus):
     assert (units["slider1.x"], units["link3.phi"], units["joint1.Fy"], units["joint1.T"]) == ("m", "rad", "N", "N.m")
     byname = {v.name: v for v in md.modelVariables}
     assert byname["joint1.reaction_unique"].start == "false" or byname["joint1.reaction_unique"].start is False
-    assert byname["motion_unique"].variability == "constant"
+    # judged along the motion (discrete), the pre-check's verdict as the start value
+    assert byname["motion_unique"].variability == "discrete" and byname["motion_unique"].initial == "exact"
+    assert byname["joint4.reaction_unique"].variability == "discrete"  # a friction joint
+    assert byname["joint1.reaction_unique"].variability == "constant"  # no friction
+    assert byname["rank"].type == "Integer" and byname["rank"].start == "11"
     for p in ("joint4.mu", "joint4.v_reg", "joint5.mu", "solver.tolerance", "solver.max_step", "solver.baumgarte"):
         assert byname[p].causality == "parameter" and byname[p].variability == "fixed", p
     assert byname["joint4.v_reg"].unit == "rad/s" and byname["joint4.mu"].unit == "1"

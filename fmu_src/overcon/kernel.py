@@ -57,7 +57,7 @@ STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "frictio
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
           7: "invalid model or argument", 8: "step size too small", 9: "stiffness detected",
           10: "rk4 step unstable", 11: "work budget exhausted", 12: "singular position (monitor)",
-          13: "time does not advance", 14: "elimination expired or degrading (the C run does not choose it again)"}
+          13: "time does not advance", 14: "elimination expired where it decides the motion"}
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
@@ -113,7 +113,11 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_sim_energy", i, [vp, ctypes.c_double, vp, vp]),
                             ("ovk_sim_state_size", ctypes.c_size_t, [vp]),
                             ("ovk_sim_get_state", i, [vp, vp, ctypes.c_size_t]),
-                            ("ovk_sim_set_state", i, [vp, vp, ctypes.c_size_t])):
+                            ("ovk_sim_set_state", i, [vp, vp, ctypes.c_size_t]),
+                            ("ovk_unique", i, [vp] * 5), ("ovk_sim_uniqueness", i, [vp] * 3),
+                            ("ovk_sim_events", i, [vp]),
+                            ("ovk_sim_event", ctypes.c_char_p, [vp, i, vp, vp]),
+                            ("ovk_pack_kept", i, [vp, vp, i, vp, vp, vp, vp])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib
@@ -298,6 +302,7 @@ class Kernel:
     def __init__(self, lib, model, solver, watch=None):  # watch: see _redundancy_block (a C run's)
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
         self._rows_fn = lib.ovk_rows
+        self._lib_unique = lib.ovk_unique
         self._lib_robust = lib.ovk_evaluate_robust
         plan = model.plan
         I32 = np.int32
@@ -323,16 +328,10 @@ class Kernel:
             out[:, :nh_b] = a
             return out
 
-        def pad_x(a):
-            out = np.full((len(a), MAXEQ), len(plan.friction_xrows))
-            out[:, :a.shape[1]] = a
-            return out
-
-        fx = np.concatenate([pad_x(g.x_index) for g in plan.friction]) if plan.friction else np.zeros((0, MAXEQ))
         fci = np.concatenate([pad_cols(g.col_i) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
         fcj = np.concatenate([pad_cols(g.col_j) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
         m = _CModel(dim=model.dim, nb=model.nb, nq_b=model.nq_b, nh_b=nh_b, m=model.m, nR=len(model.retained),
-                    nj=len(joints), nl=len(model.loads), nx=len(plan.friction_xrows), ncols=len(plan.friction_cols),
+                    nj=len(joints), nl=len(model.loads), nx=0, ncols=len(plan.friction_cols),
                     nfj=len(fj), nfg=len(plan.friction), max_iter=solver.friction_max_iter,
                     baumgarte=solver.baumgarte, tol=solver.friction_tol)
         m.retained = arr(model.retained, I32)
@@ -348,11 +347,11 @@ class Kernel:
         m.ltype = arr([_LOADS[ld.type] for ld in model.loads], I32)
         m.lbi, m.lbj = arr([ld.bi for ld in model.loads], I32), arr([ld.bj for ld in model.loads], I32)
         m.lp = arr([_load_constants(ld) for ld in model.loads], float)
-        m.xrows, m.cols = arr(plan.friction_xrows, I32), arr(plan.friction_cols, I32)
+        m.cols = arr(plan.friction_cols, I32)
         m.fj, m.fgroup = arr(fj, I32), arr(fgroup, I32)
-        m.fx, m.fci, m.fcj = arr(fx, I32), arr(fci, I32), arr(fcj, I32)
-        bodies_of_row = {r: (c.bi, c.bj) for c in joints for r in c.rows}
-        m.rbody = arr([bodies_of_row[int(r)] for r in model.retained], I32)
+        m.fci, m.fcj = arr(fci, I32), arr(fcj, I32)
+        xrows, fx, rbody = self._pack_kept(lib, m, model.retained)
+        m.xrows, m.fx, m.rbody = arr(xrows, I32), arr(fx, I32), arr(rbody, I32)
         _pack_redundancy(m, _redundancy_block(model, watch), arr)
         self._cmodel = m
         self._pm = ctypes.addressof(m)
@@ -375,6 +374,19 @@ class Kernel:
         self._fric = np.zeros(len(joints))
         self._lam_in = np.zeros(model.m)
         self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
+
+    @staticmethod
+    def _pack_kept(lib, m, retained) -> tuple:
+        """(xrows, fx, rbody) of the kept equations ``retained`` of the packed model ``m`` (whose
+        other fields are set; ``m.nx`` is set here), from the core's packing (core/unique.c
+        ovk_pack_kept), which a run in C uses again when it chooses the kept equations anew."""
+        n_r, n_f = len(retained), m.nfj
+        xrows, fx = np.zeros(MAXEQ * n_f + 1, np.int32), np.zeros(MAXEQ * n_f + 1, np.int32)
+        rbody, iwork = np.zeros(2 * n_r + 1, np.int32), np.zeros(m.m + n_r + 1, np.int32)
+        kept = np.ascontiguousarray(retained, np.int32)
+        m.nx = lib.ovk_pack_kept(ctypes.addressof(m), kept.ctypes.data, n_r, xrows.ctypes.data, fx.ctypes.data,
+                                 rbody.ctypes.data, iwork.ctypes.data)
+        return xrows[: m.nx], fx[: MAXEQ * n_f], rbody[: 2 * n_r]
 
     def _workspace(self, lib) -> int:
         """The core's workspace for the packed model, freed with this object; raises when the
@@ -465,6 +477,17 @@ class Kernel:
         return self._reac, self._fric
 
 
+    def unique(self, y: np.ndarray) -> tuple[int, np.ndarray]:
+        """(rank of the whole Jacobian, each joint's reaction unique (nj bools, model order)) at
+        the state y by the pre-check's one-factorisation rule (core/unique.c; the same verdicts as
+        :func:`overcon.analysis.analyse` with ``methods = "svd"`` on Phi_h^T)."""
+        rank, unique = ctypes.c_int(0), np.zeros(len(self.model.joints) or 1, np.intc)
+        self._y[:] = y
+        status = self._lib_unique(self._pm, self._data, self._ptrs[0], ctypes.addressof(rank), unique.ctypes.data)
+        if status:
+            raise RuntimeError(f"the compiled core's uniqueness failed ({STATUS.get(status, status)}): {self._message()}")
+        return rank.value, unique[: len(self.model.joints)].astype(bool)
+
     def rows(self, y: np.ndarray):
         """(Phi (m,), Phi_h (m, nh), gamma (m,; without Baumgarte)) of the core at y: the joint rows
         it solves with (:func:`overcon.evaluation.constraints`, ``jacobian_h``, ``gamma``), for
@@ -518,6 +541,8 @@ C_METHODS = {"dopri5": 0, "rk4": 1, "dop853": 2, "radau": 3}
 """The integrators of overcon.integrators in the core: dopri5, rk4 and dop853 (core/integrate_rk.c:
 the same steps to round-off) and radau (core/integrate_radau.c: its own LU, so the same run within
 the integration tolerance)."""
+EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
+"""The kinds of a run's events, in the order of core/core.h's OVK_EV_* (overcon.simulate.EVENT_KINDS)."""
 INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_drift", "min_ratio", "stiff_steps",
         "stable_step", "wall_time")
 """The entries of ovk_sim_info, in order (core/sim.c)."""
@@ -585,7 +610,14 @@ class Run:
             raise RunStopped(status, self._message())
 
     def _message(self) -> str:
-        return self._lib.ovk_sim_message(self._sim).decode("utf-8", "replace")
+        return self._named(self._lib.ovk_sim_message(self._sim).decode("utf-8", "replace"))
+
+    def _named(self, text: str) -> str:
+        """The core's ``joints[k]`` (joints named by number in its messages and events) named."""
+        if "joints[" in text:
+            for j, c in reversed(list(enumerate(self.kernel.model.joints))):
+                text = text.replace(f"joints[{j}]", c.name)
+        return text
 
     def _raise(self, status: int):
         stable = self.info["stable_step"] if status == 10 else None
@@ -638,6 +670,24 @@ class Run:
         if status:
             self._raise(status)
         return out
+
+    @property
+    def events(self) -> list[tuple[float, str, str]]:
+        """The run's events (time s, kind, detail) as :attr:`overcon.simulate.Simulation.events`
+        (kinds :data:`overcon.simulate.EVENT_KINDS`; the core's ``joints[k]`` named)."""
+        t, kind, out = ctypes.c_double(0.0), ctypes.c_int(0), []
+        for k in range(self._lib.ovk_sim_events(self._sim)):
+            detail = self._lib.ovk_sim_event(self._sim, k, ctypes.addressof(t), ctypes.addressof(kind))
+            out.append((t.value, EVENT_KINDS[kind.value], self._named(detail.decode("utf-8", "replace"))))
+        return out
+
+    def uniqueness(self) -> tuple[int, dict[str, bool], bool]:
+        """(rank, joint name -> reaction unique, motion_unique) at the last evaluation of the
+        uniqueness along the motion (core/watch.c: the start, and the steps it evaluates at)."""
+        joints = self.kernel.model.joints
+        rank, unique = ctypes.c_int(0), np.zeros(len(joints) or 1, np.intc)
+        motion = self._lib.ovk_sim_uniqueness(self._sim, ctypes.addressof(rank), unique.ctypes.data)
+        return rank.value, {c.name: bool(u) for c, u in zip(joints, unique)}, bool(motion)
 
     def get_state(self) -> bytes:
         size = self._lib.ovk_sim_state_size(self._sim)

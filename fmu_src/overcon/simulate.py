@@ -42,16 +42,17 @@ from .params import MAX_OUTPUT_POINTS, check_param, output_points
 from .checks import check_initial_state, with_eliminated
 from .model import InconsistentInitialState, Model, ModelError  # noqa: F401
 from .spec import SceneSpec, SolverSpec
-from .watch import (EliminationExpired, SingularityMonitor, SingularPosition,  # noqa: F401
-                    friction_on_nonunique, reselected, shown_ratio, valid_eliminations)
+from .watch import (ALONG_RATIO, EliminationExpired, SingularityMonitor, SingularPosition,  # noqa: F401
+                    Uniqueness, friction_on_nonunique, reselected, shown_ratio, valid_eliminations)
 
 
-EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
+EVENT_KINDS = kernel_mod.EVENT_KINDS
 """Kinds of :attr:`Simulation.events` (``overcon simulate --events``): a singular position passed,
 the kept equations chosen again, the rank or a friction joint's uniqueness changing along the
-motion, the run stopping (its reason). This version records ``elimination-reselected`` and
-``stopped`` (a singular position of the mechanism stops every method: no formulation here passes
-one and keeps the branch, see the README)."""
+motion (:class:`overcon.watch.Uniqueness`: at the step's end, or at the located instant of the
+singular position that stops the run), the run stopping (its reason). ``singular`` is not
+recorded by this version: a singular position of the mechanism stops every method (no
+formulation here passes one and keeps the branch, see the README), and the stop says so."""
 
 
 class SimulationError(RuntimeError):
@@ -135,6 +136,7 @@ class Simulation:
             self._integrator = integrators.create(self.method, self._rhs, t0, y0, dense_fun=self._rhs_dense,
                                                   **self.settings)
             self.monitor = SingularityMonitor(model, y0, t0, jac=self._jacobian_source())
+            self.along = Uniqueness(model, y0, self._kernel)
             self._work = _WorkLedger(t0, self._powers(t0, y0)) if model.energy_outputs else None
         except (ArithmeticError, np.linalg.LinAlgError) as exc:
             self.events.append((t0, "stopped", str(exc)))
@@ -206,6 +208,7 @@ class Simulation:
                 except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
                     if not self._recover(itg, exc):
                         raise
+                itg = self._integrator  # a new one when the kept equations were chosen again
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             where = "" if str(exc).startswith("t = ") else f"t = {itg.t:.9g} s: "
             self.events.append((getattr(exc, "t", itg.t), "stopped", f"{where}{exc}"))
@@ -226,6 +229,8 @@ class Simulation:
             raise SimulationError(f"t = {t_before:.9g} s: time does not advance (step below the resolution of t)")
         if not self._watch(itg):
             return  # the step is taken again from its start, under another elimination
+        if self.monitor.ratio < ALONG_RATIO:  # only there can the rank or a verdict change (watch.Uniqueness)
+            self.events += self.along.update(itg.t, itg.y)
         if self._work is not None:
             mid = 0.5 * (itg.t_old + itg.t)
             self._work.step(itg.t, self._powers(mid, itg.dense(mid)), self._powers(itg.t, itg.y))
@@ -306,6 +311,10 @@ class Simulation:
         except EliminationExpired as exc:
             self._expired(exc, itg.t_old, itg.y_old.copy())
             return False
+        except SingularPosition as exc:  # the rank and the verdicts at the instant the run stops
+            if exc.y is not None:
+                self.events += self.along.update(exc.t, exc.y)
+            raise
 
     def _degraded(self, itg) -> None:
         """The kept equations are becoming ill-conditioned while the mechanism is not: when the
@@ -348,10 +357,10 @@ class Simulation:
         integrator with the same settings and counters, warm starts, and :meth:`_adopt`."""
         old = self._integrator
         self.lam, self._warm, self._step_warm, self._last_eval = None, _ForcesHistory(), _ForcesHistory(), None
+        self._adopt(model, t, y)  # first: the new integrator's first derivative is the new model's
         self._integrator = integrators.create(self.method, self._rhs, t, y, dense_fun=self._rhs_dense,
                                               **self.settings)
         self._integrator.nsteps, self._integrator.nfev = old.nsteps, old.nfev
-        self._adopt(model, t, y)
 
     def _adopt(self, model: Model, t: float, y: np.ndarray) -> None:
         """Run ``model`` (another elimination of the same mechanism) from (t, y): its kernel, output
@@ -360,6 +369,8 @@ class Simulation:
         self._kernel, self.kernel_note = kernel_mod.select(model, self.solver)
         self._derived = _DerivedPlan(model)
         self.monitor = SingularityMonitor(model, y, t, jac=self._jacobian_source())
+        if hasattr(self, "along"):  # the verdicts do not depend on the elimination: kept
+            self.along.model, self.along.kernel = model, self._kernel
 
     def _check_budget(self, itg, started: float, call=(0, None, None)) -> None:
         """Raise BudgetExceeded when the step count or the wall time is used up: the Simulation's
@@ -450,6 +461,7 @@ class Simulation:
                 "friction_iterations": self.friction_iterations, "evaluations": self.evaluations,
                 "max_drift": self.max_drift,
                 "monitor": self.monitor.state(), "events": list(self.events), "target": self._target,
+                "along": self.along.state(),
                 "work": None if self._work is None else self._work.state(),
                 "eliminated": self.model.eliminated}
 
@@ -470,6 +482,8 @@ class Simulation:
         if tuple(state.get("eliminated", self.model.eliminated)) != tuple(self.model.eliminated):
             self._use_elimination(state["eliminated"])
         self.monitor.set_state(state["monitor"])
+        if "along" in state:  # states saved before it existed: the verdicts at the start
+            self.along.set_state(state["along"])
 
     def _use_elimination(self, eliminated) -> None:
         """Take the elimination of a saved state (one chosen again during the run)."""

@@ -39,12 +39,19 @@ DEGRADED_MARGIN = 100.0  # ... when the whole Jacobian is at least this much bet
 SEARCH_REL = 1e-9  # golden-section search: stop when the bracket is below this fraction of the step
 
 
-class SingularPosition(SingularConfiguration):
-    """The mechanism is singular at ``t`` (s): its whole Jacobian lost rank there."""
+ALONG_RATIO = 1e-3
+"""Below this r of the kept equations the uniqueness along the motion (:class:`Uniqueness`) is
+evaluated at the step's end (decided: above it neither the rank nor a verdict can change, see
+:class:`Uniqueness`; it is :data:`DEGRADED_RATIO`, where the watch judges the whole Jacobian anyway)."""
 
-    def __init__(self, message: str, t: float, ratio: float):
+
+class SingularPosition(SingularConfiguration):
+    """The mechanism is singular at ``t`` (s): its whole Jacobian lost rank there (``y``: the
+    state there)."""
+
+    def __init__(self, message: str, t: float, ratio: float, y: np.ndarray | None = None):
         super().__init__(message)
-        self.t, self.ratio = t, ratio
+        self.t, self.ratio, self.y = t, ratio, y
 
 
 class EliminationExpired(SingularConfiguration):
@@ -225,7 +232,7 @@ class SingularityMonitor:
         if full < self.kept_rank:
             raise SingularPosition(
                 f"{where}: the mechanism's constraint Jacobian is rank deficient (rank {full} < {self.kept_rank}; "
-                f"kept equations' sigma_min/sigma_max {shown_ratio(r)}, below {self.ratio_tol:g})", t, r)
+                f"kept equations' sigma_min/sigma_max {shown_ratio(r)}, below {self.ratio_tol:g})", t, r, y.copy())
         if self.model.elimination_mode == "min-norm":  # the watched subset expired, the dynamics never used it
             from .analysis import independent_columns
             self.rows = np.array(independent_columns(_full_jacobian(self.model, y)), int)
@@ -291,3 +298,76 @@ def valid_eliminations(model, y: np.ndarray, limit: int = 10) -> list[str]:
     current = set(model.eliminated)
     good = [s for s in singles if s != current and _kept_rank_ok(J0, s, rank) and _kept_rank_ok(J1, s, rank)]
     return [f"[{', '.join(str(i) for i in sorted(s))}]" for s in good[:limit]]
+
+
+# ----------------------------------------------------------------------------- uniqueness along the motion
+
+class Uniqueness:
+    """The uniqueness along the motion of one run: the whole Jacobian's rank and each joint's
+    reaction verdict by the pre-check's one-factorisation rule (:func:`overcon.analysis.analyse`,
+    ``methods = "svd"``, its tolerances; the compiled core's ``core/unique.c`` where the run has
+    the core, the same rule), and ``motion_unique``: every friction joint with a nonzero law has
+    a unique reaction (paper, Eq. 17; a property of the Jacobian, the same whatever the
+    elimination; a compliant joint's reaction is unique).
+
+    When (decided, for the cost: one SVD of the whole Jacobian with its right singular vectors):
+    at the start, after an accepted step whose kept equations have r < :data:`ALONG_RATIO`, and
+    at a singular position where the run stops (its located instant). Along a motion through
+    regular positions neither can change in an interval: the equations hold along the motion, so
+    the rank of all of them equals that of the kept ones while those are independent, and with
+    the rank fixed the null space, hence each joint's B = J_P N_P, is analytic in q, so a verdict
+    differs only at isolated instants, which no sampling sees. A change needs the kept Jacobian
+    near its loss of rank, where r falls below :data:`ALONG_RATIO` first. :meth:`update` returns
+    the events (time s, kind, detail) of a change, at the time of the evaluation (the step's end,
+    or the located singular instant)."""
+
+    def __init__(self, model, y: np.ndarray, kernel=None):
+        self.model, self.kernel = model, kernel
+        self.rank, self.unique = self._evaluate(y)
+
+    def _evaluate(self, y: np.ndarray) -> tuple[int, dict]:
+        model = self.model
+        if self.kernel is not None:
+            rank, verdicts = self.kernel.unique(y)
+            return rank, {c.name: bool(v) for c, v in zip(model.joints, verdicts)}
+        from .analysis import analyse
+        rigid = [int(i) for i in SingularityMonitor._rigid_rows(model)]
+        position = {row: k for k, row in enumerate(rigid)}
+        groups = {c.name: [position[r] for r in c.rows if r in position] for c in model.joints}
+        res = analyse(_full_jacobian(model, y)[:, rigid], {k: v for k, v in groups.items() if v}, methods="svd")
+        return res.rank, {c.name: bool(res.joints[c.name].unique) if c.name in res.joints else True
+                          for c in model.joints}
+
+    def _acting(self) -> list[str]:
+        from .precheck import frictionless
+        return [self.model.joints[j].name for j in self.model.friction_joints
+                if not frictionless(self.model.joints[j].law)]
+
+    @property
+    def motion_unique(self) -> bool:
+        return all(self.unique[name] for name in self._acting())
+
+    def update(self, t: float, y: np.ndarray) -> list[tuple[float, str, str]]:
+        """Evaluate at the state y (time t, s) and return the events of a change."""
+        rank, unique = self._evaluate(y)
+        events = []
+        if rank != self.rank:
+            events.append((t, "rank-change", f"rank {self.rank} -> {rank}"))
+        word = {True: "unique", False: "not unique"}
+        changed = [f"{self.model.joints[j].name}: {word[self.unique[self.model.joints[j].name]]} -> "
+                   f"{word[unique[self.model.joints[j].name]]}" for j in self.model.friction_joints
+                   if unique[self.model.joints[j].name] != self.unique[self.model.joints[j].name]]
+        was = self.motion_unique
+        self.rank, self.unique = rank, unique
+        if changed:
+            detail = ", ".join(changed)
+            if was != self.motion_unique:
+                detail += f"; motion_unique {str(was).lower()} -> {str(self.motion_unique).lower()}"
+            events.append((t, "uniqueness-change", detail))
+        return events
+
+    def state(self) -> tuple:
+        return (self.rank, dict(self.unique))
+
+    def set_state(self, s: tuple) -> None:
+        self.rank, self.unique = s[0], dict(s[1])

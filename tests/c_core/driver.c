@@ -225,6 +225,16 @@ static int run_evaluation(reader *r, model_t *m, int reps, tally *t) {
             t->calls++;
             compare(t, where, names[3], out[3], exp[3], sizes[3]);
             compare(t, where, names[4], out[4], exp[4], sizes[4]);
+            /* uniqueness along the motion (unique.c): twice, the same rank and verdicts */
+            int rank[2] = {-1, -2}, *uq = calloc(2 * (size_t)M->nj + 2, sizeof(int));
+            if (!uq || ovk_unique(M, m->d[w], y, &rank[0], uq) || ovk_unique(M, m->d[w], y, &rank[1], uq + M->nj + 1) ||
+                rank[0] != rank[1] || rank[0] < 0 || rank[0] > M->m ||
+                memcmp(uq, uq + M->nj + 1, (size_t)M->nj * sizeof(int))) {
+                snprintf(line, sizeof line, "%s: ovk_unique failed or differs between calls (%s)", where,
+                         ovk_message(m->d[w]));
+                fail(t, line);
+            }
+            free(uq);
         }
     ok = 1;
 done:

@@ -26,7 +26,10 @@
  *   svd.c               one-sided Jacobi SVD: singular values, the kept rows' singular vectors
  *   energy.c            the energy outputs: kinetic, potential, the work ledger of friction and loads
  *   watch.c             the singularity watch of overcon.watch: r and dr/dt after each step, the
- *                       minimum of r inside a step, singular position or expired/degrading elimination
+ *                       minimum of r inside a step, singular position or expired/degrading elimination;
+ *                       the uniqueness along the motion and its events
+ *   unique.c            the whole Jacobian's rank and each joint's reaction uniqueness (the pre-check's
+ *                       one-factorisation rule)
  *   sim_state.c         a run's state as plain bytes (FMI get/set/serialize FMU state)
  *   api.c               the exported entry points (ovk_*), the only symbols of the library
  * Units and signs: SI, the paper's conventions (those of overcon.evaluation and overcon.joints).
@@ -62,7 +65,7 @@ enum {
     OVK_BUDGET = 11,   /* simulation: the work budget (steps or wall time) ran out */
     OVK_SINGULAR_POSITION = 12, /* simulation: the kept Jacobian lost rank (singularity monitor) */
     OVK_STALLED = 13,  /* simulation: time does not advance, or the target was not reached */
-    OVK_ELIMINATION = 14 /* simulation: the elimination expired or degrades (the C run does not choose it again) */
+    OVK_ELIMINATION = 14 /* simulation: the elimination expired where it decides the motion (or no other is found) */
 };
 enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
@@ -240,6 +243,13 @@ typedef struct {
     double stop_time;     /* the scene's stop time (s), named by the budget messages */
     int energy;           /* keep the work ledger of the energy outputs (two more evaluations a step) */
 } ovk_sim_opts;
+/* An event of a run (overcon.simulate.EVENT_KINDS, in that order): time (s), kind, detail. */
+enum { OVK_EV_SINGULAR = 0, OVK_EV_RESELECTED = 1, OVK_EV_RANK = 2, OVK_EV_UNIQUENESS = 3, OVK_EV_STOPPED = 4 };
+typedef struct {
+    double t;
+    int kind;
+    char detail[OVK_MSG];
+} ovk_event;
 /* Friction forces of the last two solves at distinct times, newest first (simulate._ForcesHistory). */
 typedef struct {
     int count;
@@ -269,6 +279,18 @@ typedef struct {
     double *mem;                   /* the one allocation behind the arrays above and the integrator's */
     int status;
     char msg[OVK_MSG];
+    /* uniqueness along the motion (unique.c, evaluated by watch.c) and the run's events */
+    int along_rank;                /* the whole Jacobian's rank at the last evaluation (pre-check rule) */
+    int *along_unique;             /* nj: each joint's reaction unique there */
+    double *along_work;            /* ovk_unique_doubles(m, nh) */
+    ovk_event *events;             /* nevents of cap_events, in the order they happened */
+    int nevents, cap_events;
+    /* the kept equations chosen again during the run (watch.c, sim.c) */
+    ovk_model Mrun;                /* *M with the kept set below once chosen again; s->M points here */
+    int *kept;                     /* retained (m) | xrows, fx (OVK_MAXEQ nfj each) | rbody (2 m) | scratch (5 m + nj) */
+    double *y0;                    /* ny: the initial state (eliminations valid at the start and later) */
+    int degrading;                 /* the step just accepted found the elimination degrading */
+    double expired_t;              /* the instant the kept set expired (its state in ystar) */
 } ovk_sim;
 #define OVK_SIM_NINFO 11
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
@@ -279,6 +301,19 @@ OVK_HIDDEN int ovk_sim_energy_step(ovk_sim *s);
 /* watch.c: the singularity watch after each step; the expiry behind a failed step */
 OVK_HIDDEN int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg);
 OVK_HIDDEN int ovk_sim_expiring(ovk_sim *s, int failed, char *msg);
+/* watch.c: uniqueness along the motion at (t, y), events when it changed; sim.c: an event recorded */
+OVK_HIDDEN int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg);
+OVK_HIDDEN int ovk_sim_push_event(ovk_sim *s, double t, int kind, const char *detail);
+/* unique.c: rank and per-joint reaction uniqueness from the whole Jacobian (the pre-check's rule) */
+OVK_HIDDEN size_t ovk_unique_doubles(int m, int nh);
+OVK_HIDDEN int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank, int *unique);
+OVK_HIDDEN int ovk_choose_kept(const ovk_model *M, const double *J, double *work, int *iwork, int *kept, int *rank);
+/* sim.c: the run goes on from (t, y) under the kept equations `kept` (m flags), its integrator anew */
+OVK_HIDDEN int ovk_sim_restart(ovk_sim *s, const int *kept, double t, const double *y);
+OVK_HIDDEN int ovk_sim_use_kept(ovk_sim *s, const int *retained);
+/* watch.c: an expired elimination chosen again (or the stop), a degrading one chosen again */
+OVK_HIDDEN int ovk_sim_expired(ovk_sim *s, double t_from, const double *y_from);
+OVK_HIDDEN int ovk_sim_degraded(ovk_sim *s);
 /* svd.c: one-sided Jacobi */
 OVK_HIDDEN int ovk_jacobi_rows(double *B, int k, int r, double *Q);
 OVK_HIDDEN void ovk_singular_values(const double *A, int rows, int cols, double *T, double *sv);
@@ -421,5 +456,12 @@ OVK_EXPORT int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out
 OVK_EXPORT size_t ovk_sim_state_size(const ovk_sim *s);
 OVK_EXPORT int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size);
 OVK_EXPORT int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size);
+/* unique.c, sim.c: uniqueness along the motion; the run's events */
+OVK_EXPORT int ovk_unique(const ovk_model *M, ovk_data *d, const double *y, int *rank, int *unique);
+OVK_EXPORT int ovk_pack_kept(const ovk_model *M, const int *retained, int nR, int *xrows, int *fx, int *rbody,
+                             int *iwork);
+OVK_EXPORT int ovk_sim_uniqueness(const ovk_sim *s, int *rank, int *unique);
+OVK_EXPORT int ovk_sim_events(const ovk_sim *s);
+OVK_EXPORT const char *ovk_sim_event(const ovk_sim *s, int k, double *t, int *kind);
 
 #endif

@@ -36,6 +36,9 @@ static int stopped(ovk_sim *s, int status, const char *lead, double t) {
     for (size_t k = 0; k < parts; k++)
         for (const char *c = part[k]; *c && n + 1 < sizeof s->msg; c++) s->msg[n++] = *c;
     s->msg[n] = '\0';
+    /* the event at the time the cause names (a located instant), as Simulation's "stopped" (for
+     * want of memory it is not recorded: the status and this message still say why the run stopped) */
+    ovk_sim_push_event(s, when[0] ? t : strtod(cause + 4, NULL), OVK_EV_STOPPED, s->msg + strlen(lead) + 2);
     return status;
 }
 
@@ -167,7 +170,8 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
         snprintf(s->msg, sizeof s->msg, "cannot start: a null model, options or initial state");
         return s;
     }
-    s->M = M;
+    s->Mrun = *M; /* the run's own model: its kept set can be chosen again (ovk_sim_use_kept) */
+    s->M = &s->Mrun;
     s->o = *o;
     if ((s->status = check_opts(s, o))) return s;
     s->d = ovk_make_data(M);
@@ -206,9 +210,21 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     layout(s, nR);
     s->min_ratio = INFINITY;
     s->t_prev = t0;
+    s->along_unique = calloc(2 * (size_t)M->nj + 1, sizeof(int));
+    s->along_work = malloc(ovk_unique_doubles(s->m, s->nh) * sizeof(double) + 1);
+    s->kept = calloc(8 * (size_t)s->m + 2 * OVK_MAXEQ * (size_t)M->nfj + (size_t)M->nj + 1, sizeof(int));
+    s->y0 = malloc((size_t)s->ny * sizeof(double) + 1);
+    if (!s->along_unique || !s->along_work || !s->kept || !s->y0) {
+        s->status = OVK_NOMEM;
+        snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (uniqueness along the motion)");
+        return s;
+    }
+    memcpy(s->kept, M->retained, (size_t)M->nR * sizeof(int));
+    memcpy(s->y0, y0, (size_t)s->ny * sizeof(double));
     int status = ovk_rk_start(&s->rk, &o->rk, s->ny, s->rk.y, t0, y0, sim_rhs, s, s->msg);
     s->rk.dense_fun = sim_rhs_dense, s->rk.dense_ctx = s;
     if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, NULL, 1, s->msg);
+    if (!status) status = ovk_sim_along(s, t0, s->rk.y, 1, s->msg);
     if (!status) status = ovk_sim_energy_start(s, t0, s->rk.y);
     if (status) s->status = stopped(s, status, "cannot start", t0);
     return s;
@@ -218,6 +234,11 @@ void ovk_sim_free(ovk_sim *s) {
     if (!s) return;
     ovk_free_data(s->d);
     free(s->mem);
+    free(s->along_unique);
+    free(s->along_work);
+    free(s->events);
+    free(s->kept);
+    free(s->y0);
     free(s);
 }
 
@@ -257,8 +278,14 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
                  t_before);
         status = OVK_STALLED;
     }
-    if (status && status != OVK_STALLED) status = ovk_sim_expiring(s, status, s->msg);
+    int failed = status && status != OVK_STALLED;
+    if (failed) status = ovk_sim_expiring(s, status, s->msg);
+    s->degrading = 0;
     if (!status) status = ovk_sim_monitor(s, rk->t, rk->y, rk->f, 0, s->msg);
+    if (status == OVK_ELIMINATION) { /* the kept set expired: chosen again and the step taken anew, or the stop */
+        status = ovk_sim_expired(s, failed ? rk->t : rk->t_old, failed ? rk->y : rk->y_old);
+        if (!status) return OVK_OK;
+    }
     if (!status) status = ovk_sim_energy_step(s);
     if (rk->dense_status) /* dop853's dense stages failed under the watch or the ledger: that is the cause */
         status = rk->dense_status, memcpy(s->msg, rk->dense_msg, sizeof s->msg);
@@ -270,6 +297,7 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     }
     for (int r = 0; r < s->m; r++)
         if (fabs(s->phi[r]) > s->max_drift) s->max_drift = fabs(s->phi[r]);
+    if (s->degrading && (status = ovk_sim_degraded(s))) return stopped(s, status, "integration stopped", rk->t);
     if ((status = check_budget(s, started, n0, call_steps, call_wall)))
         return stopped(s, status, "integration stopped", rk->t);
     return OVK_OK;
@@ -334,5 +362,96 @@ int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double 
     }
     int status = ovk_outputs(s->M, s->d, y, lam, reac, fric);
     if (status) snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d));
+    return status;
+}
+
+/* Records an event (detail cut at OVK_MSG bytes); OVK_NOMEM when the list cannot grow (the event
+ * is then lost and the caller stops the run, saying so). */
+int ovk_sim_push_event(ovk_sim *s, double t, int kind, const char *detail) {
+    if (s->nevents == s->cap_events) {
+        int cap = s->cap_events ? 2 * s->cap_events : 8;
+        ovk_event *grown = cap > 0 ? realloc(s->events, (size_t)cap * sizeof *grown) : NULL;
+        if (!grown) return OVK_NOMEM;
+        s->events = grown;
+        s->cap_events = cap;
+    }
+    ovk_event *e = &s->events[s->nevents++];
+    e->t = t;
+    e->kind = kind;
+    snprintf(e->detail, sizeof e->detail, "%s", detail);
+    return OVK_OK;
+}
+
+int ovk_sim_events(const ovk_sim *s) { return s ? s->nevents : 0; }
+
+/* Event k (0-based): its detail, with its time and kind; NULL when there is no event k. */
+const char *ovk_sim_event(const ovk_sim *s, int k, double *t, int *kind) {
+    if (!s || k < 0 || k >= s->nevents) return NULL;
+    *t = s->events[k].t;
+    *kind = s->events[k].kind;
+    return s->events[k].detail;
+}
+
+/* The last evaluation of the uniqueness along the motion: the rank and each joint's verdict (nj)
+ * into rank and unique; returns motion_unique (every friction joint with a nonzero law unique,
+ * the paper's Eq. 17), or -1 without a run. */
+int ovk_sim_uniqueness(const ovk_sim *s, int *rank, int *unique) {
+    if (!s || !s->along_unique) return -1;
+    const ovk_model *M = s->M;
+    int motion = 1;
+    *rank = s->along_rank;
+    memcpy(unique, s->along_unique, (size_t)M->nj * sizeof(int));
+    for (int k = 0; k < M->nfj; k++) {
+        const double *lp = M->jlawp + (size_t)M->fj[k] * NLP;
+        if (!(lp[0] == 0.0 && lp[3] == 0.0) && !s->along_unique[M->fj[k]]) motion = 0;
+    }
+    return motion;
+}
+
+/* The run's kept equations become `retained` (M->nR of them, ascending): the packed arrays of the
+ * kept set made again in the run's own memory (ovk_pack_kept, as overcon.kernel packs them) and a
+ * workspace for them (the number of friction multipliers may change). The status. */
+int ovk_sim_use_kept(ovk_sim *s, const int *retained) {
+    ovk_model *R = &s->Mrun;
+    int m = s->m, nfj = R->nfj, *own = s->kept, *xrows = own + m, *fx = xrows + OVK_MAXEQ * nfj;
+    int *rbody = fx + OVK_MAXEQ * nfj, *iwork = rbody + 2 * m;
+    if (retained != own) memmove(own, retained, (size_t)R->nR * sizeof(int));
+    int nx = ovk_pack_kept(R, own, R->nR, xrows, fx, rbody, iwork);
+    ovk_model next = *R;
+    next.retained = own, next.xrows = xrows, next.fx = fx, next.rbody = rbody, next.nx = nx;
+    ovk_data *d = ovk_make_data(&next);
+    if (!d || ovk_data_status(d)) {
+        int status = d ? ovk_data_status(d) : OVK_NOMEM;
+        snprintf(s->msg, sizeof s->msg, "the kept equations chosen again: %s", d ? ovk_message(d) : "out of memory");
+        ovk_free_data(d);
+        return status;
+    }
+    ovk_free_data(s->d);
+    s->d = d;
+    *R = next;
+    return OVK_OK;
+}
+
+/* Goes on from (t, y) under the kept equations `kept` (m flags; as many as before) as
+ * Simulation._restart: a new integrator with the same settings and step counters, no warm
+ * starts, the watch started anew there. The status (its message in s->msg). */
+int ovk_sim_restart(ovk_sim *s, const int *kept, double t, const double *y) {
+    int nR = 0, *retained = s->kept + 5 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj; /* scratch: m ints */
+    for (int r = 0; r < s->m; r++)
+        if (kept[r]) retained[nR++] = r;
+    if (nR != s->Mrun.nR)
+        return snprintf(s->msg, sizeof s->msg, "t = %.9g s: %d equations chosen to keep, the run keeps %d", t, nR,
+                        s->Mrun.nR), OVK_INVALID;
+    int status = ovk_sim_use_kept(s, retained);
+    if (status) return status;
+    memmove(s->ystar, y, (size_t)s->ny * sizeof(double)); /* y may lie in the integrator's arrays */
+    long long nsteps = s->rk.nsteps, nfev = s->rk.nfev;
+    s->has_lam = s->has_last = 0;
+    s->warm.count = s->step_warm.count = 0;
+    status = ovk_rk_start(&s->rk, &s->o.rk, s->ny, s->rk.y, t, s->ystar, sim_rhs, s, s->msg);
+    s->rk.nsteps = nsteps, s->rk.nfev = nfev;
+    s->min_ratio = INFINITY; /* a new watch (SingularityMonitor) */
+    s->t_prev = t;
+    if (!status) status = ovk_sim_monitor(s, t, s->rk.y, NULL, 1, s->msg);
     return status;
 }

@@ -6,6 +6,7 @@
  * is exact: the same bits continue the same trajectory. The wall time spent is not part of the
  * state (Simulation.get_state leaves it out too). */
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "core.h"
@@ -100,6 +101,12 @@ static void io_sim(codec *c, ovk_sim *s) {
     io(c, s->work_t, sizeof s->work_t);
     io(c, s->work_w, sizeof s->work_w);
     io(c, s->work_p, sizeof s->work_p);
+    int *kept = c->r ? s->kept + 5 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj : (int *)s->Mrun.retained; /* load: scratch */
+    io(c, kept, (size_t)s->Mrun.nR * sizeof(int)); /* the kept equations (chosen again during the run) */
+    io(c, &s->along_rank, sizeof s->along_rank);
+    io(c, s->along_unique, (size_t)s->M->nj * sizeof(int));
+    io(c, &s->nevents, sizeof s->nevents); /* last: a load sizes the list from it (ovk_sim_set_state) */
+    for (int k = 0; k < s->nevents && !c->bad; k++) io(c, &s->events[k], sizeof s->events[k]);
 }
 
 size_t ovk_sim_state_size(const ovk_sim *s) {
@@ -125,10 +132,23 @@ int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size) {
  * size, format or run is refused and the run is left as it was. */
 int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size) {
     if (!s) return OVK_NOMEM;
-    size_t need = ovk_sim_state_size(s);
+    /* the size of a state of this run with the saved number of events (the last int before them) */
+    size_t fixed = ovk_sim_state_size(s) - (size_t)s->nevents * sizeof(ovk_event), need = fixed;
+    int saved = -1;
+    if (buf && size >= fixed) {
+        memcpy(&saved, buf + fixed - sizeof saved, sizeof saved);
+        need = saved >= 0 && (size_t)saved <= (size - fixed) / sizeof(ovk_event)
+                   ? fixed + (size_t)saved * sizeof(ovk_event) : 0;
+    }
     if (!s->mem || !buf || size != need)
         return snprintf(s->msg, sizeof s->msg, "set state: %zu bytes, a state of this run has %zu", size, need),
                OVK_INVALID;
+    if (saved > s->cap_events) { /* room for the saved events before anything is overwritten */
+        ovk_event *grown = realloc(s->events, (size_t)saved * sizeof *grown);
+        if (!grown) return snprintf(s->msg, sizeof s->msg, "set state: out of memory for %d events", saved), OVK_NOMEM;
+        s->events = grown;
+        s->cap_events = saved;
+    }
     codec probe = {NULL, buf, 0, size, 0};
     char magic[8];
     int head[5], want[5] = {STATE_VERSION, s->rk.method, s->ny, s->ncols, s->m};
@@ -139,7 +159,12 @@ int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size) {
                         "states, %d friction columns, %d rows)", head[0], head[1], head[2], head[3], head[4]),
                OVK_INVALID;
     codec c = {NULL, buf, 0, size, 0};
-    io_sim(&c, s);
+    io_sim(&c, s); /* nevents is read before the events: the loop reads the saved ones */
+    const int *kept = s->kept + 5 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj;
+    if (memcmp(kept, s->Mrun.retained, (size_t)s->Mrun.nR * sizeof(int))) { /* another kept set: its arrays */
+        int status = ovk_sim_use_kept(s, kept);
+        if (status) return status;
+    }
     s->status = OVK_OK;
     s->msg[0] = '\0';
     return OVK_OK;

@@ -1,15 +1,18 @@
 /* The singularity watch of a C run, as overcon.watch.SingularityMonitor with the run's checks of
- * overcon.simulate.Simulation._watch and _recover: after every accepted step
+ * overcon.simulate.Simulation._watch, _recover, _expired and _degraded: after every accepted step
  * r = sigma_min / sigma_max of the kept Jacobian J_R M^-1/2 (unit-norm rows) and its rate dr/dt
  * (ds_k/dt = u_k^T J' v_k, J' by a forward difference of J along q' = the integrator's
  * derivative); a step that starts with r falling and ends with r rising holds a minimum of r,
  * located by golden section on the dense output; r below ratio_tol is a singular position,
  * judged by the whole Jacobian's numerical rank: the mechanism's (OVK_SINGULAR_POSITION) or only
- * the kept set's (OVK_ELIMINATION, an expired elimination). The Python run then chooses the
- * eliminated equations again (or stops naming other valid ones), and it does so early when the
- * elimination degrades (r < 1e-3 with the whole Jacobian 100 times better conditioned): the C run
- * has no pivoted QR, so it stops there with OVK_ELIMINATION, saying so. Messages are worded as
- * the Python run's, so a stop reads the same from either runtime. */
+ * the kept set's (an expired elimination). An expired elimination is chosen again (pivoted QR,
+ * unique.c) when the motion does not depend on it (no friction joint with a nonzero law whose
+ * reaction is not unique there) and the step is taken anew under it; else the run stops
+ * (OVK_ELIMINATION) naming the eliminations valid at the start and there. A degrading elimination
+ * (r < 1e-3 with the whole Jacobian 100 times better conditioned) is chosen again at the step's
+ * end on the same condition. The uniqueness along the motion (unique.c) is judged where it can
+ * change. Messages and events are worded as the Python run's (friction joints as joints[k], named
+ * by the bindings), so a stop reads the same from either runtime. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -20,7 +23,7 @@
 #define DEGRADED_RATIO 1e-3  /* watch.DEGRADED_RATIO */
 #define DEGRADED_MARGIN 100.0 /* watch.DEGRADED_MARGIN */
 #define SEARCH_REL 1e-9      /* watch.SEARCH_REL */
-#define C_REFUSES "the C runtime does not choose the eliminated equations again: build with --runtime python"
+#define ALONG_RATIO 1e-3     /* watch.ALONG_RATIO: below it the uniqueness along the motion is evaluated */
 
 /* redundancy: the rows the watch judges (SingularityMonitor.rows and full_rows): under "eliminate"
  * the retained rows and every equation; under "min-norm" (every row retained) an independent
@@ -194,7 +197,7 @@ static void eliminated(const ovk_model *M, char *out, size_t size) {
 static int judge(ovk_sim *s, double t, double r, const double *y, int passed, double a, double b, char *msg) {
     if (r < s->min_ratio) s->min_ratio = r;
     if (r >= s->o.ratio_tol) return OVK_OK;
-    char where[160], rs[24], names[200];
+    char where[160], rs[24];
     if (passed)
         snprintf(where, sizeof where, "t = %.9g s: the motion passed a singular position (between the steps at "
                  "t = %.9g s and %.9g s)", t, a, b);
@@ -203,6 +206,7 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
     int full = 0, nR = n_kept(s->M), status = full_rank(s, y, &full, msg);
     if (status) return status;
     shown(r, rs, sizeof rs);
+    if (full < nR && (status = ovk_sim_along(s, t, y, 0, msg))) return status; /* the events at that instant */
     if (full < nR)
         return snprintf(msg, OVK_MSG, "%s: the mechanism's constraint Jacobian is rank deficient (rank %d < %d; "
                         "kept equations' sigma_min/sigma_max %s, below %g)", where, full, nR, rs, s->o.ratio_tol),
@@ -212,29 +216,73 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
                         "independent (their sigma_min/sigma_max %s, below %g), while the mechanism is regular there "
                         "(all equations keep rank %d): the C runtime does not choose the watched equations again: "
                         "build with --runtime python", where, rs, s->o.ratio_tol, full);
-    eliminated(s->M, names, sizeof names);
+    s->expired_t = t;
+    memmove(s->ystar, y, (size_t)s->ny * sizeof(double));
     return say(msg, OVK_ELIMINATION, "%s: the kept equations are no longer independent (their sigma_min/sigma_max %s, "
                     "below %g), while the mechanism is regular there (all equations keep rank %d): the elimination "
-                    "chosen at the start has expired; " C_REFUSES " (eliminated: %s)", where, rs, s->o.ratio_tol,
-                    full, names);
+                    "chosen at the start has expired", where, rs, s->o.ratio_tol, full);
 }
 
-/* After the check at (t, y) with kept ratio r: OVK_ELIMINATION when the elimination degrades
- * (watch.SingularityMonitor._degrading), where the Python run may choose it again. */
-static int degrading(ovk_sim *s, double t, double r, const double *y, char *msg) {
+/* After the check at (t, y) with kept ratio r: the elimination degrades
+ * (watch.SingularityMonitor._degrading) when r < 1e-3 while the whole Jacobian's rank-th singular
+ * value ratio is at least 100 r; then sim.c chooses it again after the step (ovk_sim_degraded).
+ * Never under min-norm, which keeps every equation. */
+static int degrading(ovk_sim *s, double r, const double *y, char *msg) {
     int nR = n_kept(s->M), k = n_full(s->M) < s->nh ? n_full(s->M) : s->nh;
-    if (r >= DEGRADED_RATIO || s->M->redundancy == OVK_MIN_NORM) return OVK_OK; /* min-norm keeps every equation */
+    if (r >= DEGRADED_RATIO || s->M->redundancy == OVK_MIN_NORM) return OVK_OK;
     int status = full_values(s, y, msg);
     if (status) return status;
     double full = k >= nR && s->sv[0] > 0.0 ? s->sv[nR - 1] / s->sv[0] : 0.0;
-    if (!(full >= DEGRADED_MARGIN * r)) return OVK_OK;
-    char rs[24], names[200];
-    shown(r, rs, sizeof rs);
-    eliminated(s->M, names, sizeof names);
-    return say(msg, OVK_ELIMINATION, "t = %.9g s: the elimination degrades: the kept equations' sigma_min/sigma_max %s "
-                    "is below %g while the whole Jacobian's is %.2g; the Python run chooses the eliminated equations "
-                    "again here when the motion does not depend on them; " C_REFUSES " (eliminated: %s)", t, rs,
-                    DEGRADED_RATIO, full, names);
+    s->degrading = full >= DEGRADED_MARGIN * r;
+    return OVK_OK;
+}
+
+/* motion_unique from the verdicts u (nj): every friction joint with a nonzero law unique. */
+static int motion_of(const ovk_model *M, const int *u) {
+    for (int k = 0; k < M->nfj; k++) {
+        const double *lp = M->jlawp + (size_t)M->fj[k] * NLP;
+        if (!(lp[0] == 0.0 && lp[3] == 0.0) && !u[M->fj[k]]) return 0;
+    }
+    return 1;
+}
+
+/* The uniqueness along the motion at (t, y) (watch.Uniqueness.update): the whole Jacobian's
+ * rank and every joint's verdict by the pre-check's rule (unique.c); after the first evaluation
+ * (first = 1, at the start: no events), a rank-change event when the rank differs from the last
+ * evaluation's and a uniqueness-change event when a friction joint's verdict does (friction
+ * joints as "joints[k]", 0-based in model order; the bindings put the names in). */
+int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg) {
+    const ovk_model *M = s->M;
+    int nj = M->nj, rank = 0, *now = s->along_unique + nj, *was = s->along_unique;
+    int status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
+    if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
+    if ((status = ovk_unique_rows(M, s->J, s->along_work, &rank, now)))
+        return say(msg, status, "t = %.9g s: uniqueness along the motion: a non-finite constraint Jacobian", t);
+    if (!first && rank != s->along_rank) {
+        char text[64];
+        snprintf(text, sizeof text, "rank %d -> %d", s->along_rank, rank);
+        if ((status = ovk_sim_push_event(s, t, OVK_EV_RANK, text)))
+            return say(msg, status, "t = %.9g s: out of memory for the run's events", t);
+    }
+    char text[OVK_MSG] = "";
+    size_t len = 0;
+    for (int k = 0; !first && k < M->nfj; k++) {
+        int j = M->fj[k];
+        if (now[j] == was[j]) continue;
+        int w = snprintf(text + len, sizeof text - len, "%sjoints[%d]: %s -> %s", len ? ", " : "", j,
+                         was[j] ? "unique" : "not unique", now[j] ? "unique" : "not unique");
+        if (w < 0 || (size_t)w >= sizeof text - len) break;
+        len += (size_t)w;
+    }
+    int motion_was = motion_of(M, was), motion_now = motion_of(M, now);
+    if (len && motion_was != motion_now && len < sizeof text)
+        snprintf(text + len, sizeof text - len, "; motion_unique %s -> %s", motion_was ? "true" : "false",
+                 motion_now ? "true" : "false");
+    if (len && (status = ovk_sim_push_event(s, t, OVK_EV_UNIQUENESS, text)))
+        return say(msg, status, "t = %.9g s: out of memory for the run's events", t);
+    s->along_rank = rank;
+    memcpy(was, now, (size_t)nj * sizeof(int));
+    return OVK_OK;
 }
 
 /* The watch at (t, y) (SingularityMonitor.check and, first = 1, its start at t0: no minimum
@@ -257,7 +305,8 @@ int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, i
     if ((status = judge(s, t, r, y, 0, 0.0, 0.0, msg))) return status;
     s->t_prev = t;
     s->rate = rate;
-    return first ? OVK_OK : degrading(s, t, r, y, msg);
+    if (!first && r < ALONG_RATIO && (status = ovk_sim_along(s, t, y, 0, msg))) return status;
+    return first ? OVK_OK : degrading(s, r, y, msg);
 }
 
 /* After the step from the accepted state failed with status `failed` (its message in msg):
@@ -274,7 +323,7 @@ int ovk_sim_expiring(ovk_sim *s, int failed, char *msg) {
         return failed;
     double dt = s->ratio / -s->rate;
     if (dt > 2.0 * h) return failed;
-    char why[OVK_MSG], names[200];
+    char why[OVK_MSG];
     memcpy(why, msg, OVK_MSG);
     why[OVK_MSG - 1] = '\0';
     if (ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam) || ovk_rates(s->M, s->d, rk->y, rk->y + n, s->qwatch))
@@ -284,8 +333,178 @@ int ovk_sim_expiring(ovk_sim *s, int failed, char *msg) {
     int full = 0;
     if (full_rank(s, s->ystar, &full, msg)) return snprintf(msg, OVK_MSG, "%s", why), failed;
     if (full < n_kept(s->M)) return snprintf(msg, OVK_MSG, "%s", why), failed;
-    eliminated(s->M, names, sizeof names);
+    s->expired_t = rk->t + dt;
     return say(msg, OVK_ELIMINATION, "t = %.9g s: the kept equations lose rank here while the mechanism stays regular: the "
-             "elimination chosen at the start expires (the step from t = %.9g s failed: %.400s); " C_REFUSES
-             " (eliminated: %s)", rk->t + dt, rk->t, why, names);
+             "elimination chosen at the start expires (the step from t = %.9g s failed: %.600s)", rk->t + dt, rk->t, why);
+}
+
+/* ------------------------------------------------------------------ the elimination chosen again */
+
+/* The numerical rank of the rows `rows` (count k; all m for NULL) of the raw J (m x nh) by
+ * analysis.numerical_rank: singular values above max(1e-9, max(k, nh) eps) sigma_1 (s->W, s->T,
+ * s->sv are scratch). */
+static int raw_rank(ovk_sim *s, const double *J, const int *skip_flags, int *count) {
+    int nh = s->nh, k = 0;
+    for (int r = 0; r < s->m; r++)
+        if (!skip_flags || !skip_flags[r]) memcpy(s->W + (size_t)k++ * nh, J + (size_t)r * nh, (size_t)nh * sizeof(double));
+    *count = k;
+    if (!k) return 0;
+    ovk_singular_values(s->W, k, nh, s->T, s->sv);
+    int n = k < nh ? k : nh, big = k > nh ? k : nh, rank = 0;
+    double rt = 1e-9 > big * 2.220446049250313e-16 ? 1e-9 : big * 2.220446049250313e-16;
+    for (int i = 0; i < n; i++) rank += s->sv[i] > rt * s->sv[0];
+    return rank;
+}
+
+/* "[a, b]": the 1-based equations of the m flags `gone`, into out. */
+static void listed(const int *gone, int m, char *out, size_t size) {
+    size_t len = (size_t)snprintf(out, size, "[");
+    for (int r = 0, first = 1; r < m && len < size; r++)
+        if (gone[r]) {
+            len += (size_t)snprintf(out + len, size - len, "%s%d", first ? "" : ", ", r + 1);
+            first = 0;
+        }
+    if (len < size) snprintf(out + len, size - len, "]");
+}
+
+/* The flags of the eliminated equations of the run's kept set into gone (m). */
+static void eliminated_flags(const ovk_sim *s, int *gone) {
+    for (int r = 0; r < s->m; r++) gone[r] = 1;
+    for (int p = 0; p < s->M->nR; p++) gone[s->M->retained[p]] = 0;
+}
+
+/* The flags of the equations an automatic elimination removes at y into gone (m): the complement
+ * of ovk_choose_kept at y (watch.reselected). */
+static int chosen_gone(ovk_sim *s, const double *y, int *gone, char *msg) {
+    int *iwork = s->kept + 7 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj, rank = 0;
+    int status = ovk_rows(s->M, s->d, y, s->phi, s->J, s->gam);
+    if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
+    if ((status = ovk_choose_kept(s->M, s->J, s->along_work, iwork, gone, &rank))) return status;
+    for (int r = 0; r < s->m; r++) gone[r] = !gone[r];
+    return OVK_OK;
+}
+
+/* Eliminations valid both at the start and at y as "[a], [b]" (watch.valid_eliminations, at
+ * most 10): with one redundant equation every single equation that qualifies, else the set
+ * chosen at y if it qualifies at the start too; "none found" when none. */
+static int valid_eliminations(ovk_sim *s, const double *y, char *out, size_t size, char *msg) {
+    int m = s->m, *gone = s->kept + 5 * m + 2 * OVK_MAXEQ * s->Mrun.nfj, *current = gone + m;
+    int status = ovk_rows(s->M, s->d, s->y0, s->phi, s->W2, s->gam); /* J at the start into W2 */
+    if (!status) status = ovk_rows(s->M, s->d, y, s->phi, s->J, s->gam);
+    if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
+    int count = 0, rank = raw_rank(s, s->W2, NULL, &count), found = 0;
+    size_t len = 0;
+    out[0] = '\0';
+    eliminated_flags(s, current);
+    int singles = m - rank == 1, candidates = singles ? m : 1;
+    double *J1 = s->J;
+    for (int c = 0; c < candidates && found < 10; c++) {
+        if (singles) {
+            for (int r = 0; r < m; r++) gone[r] = r == c;
+        } else if ((status = chosen_gone(s, y, gone, msg))) { /* its rows at y into s->J again: J1 */
+            return status;
+        }
+        int same = 1;
+        for (int r = 0; r < m; r++) same &= gone[r] == current[r];
+        int k0 = 0, k1 = 0, ok = !same && raw_rank(s, s->W2, gone, &k0) == rank && k0 == rank;
+        ok = ok && raw_rank(s, J1, gone, &k1) == rank && k1 == rank;
+        if (!ok) continue;
+        char one[96];
+        listed(gone, m, one, sizeof one);
+        if (len >= size) break; /* the list is cut at the message's size */
+        len += (size_t)snprintf(out + len, size - len, "%s%s", found ? ", " : "", one);
+        found++;
+    }
+    if (!found) snprintf(out, size, "none found");
+    return OVK_OK;
+}
+
+/* Friction joints with a nonzero law whose reaction is not unique at y, as "joints[k], ..." into
+ * out (watch.friction_on_nonunique); returns their count (negative: a status). */
+static int nonunique_friction(ovk_sim *s, const double *y, char *out, size_t size, char *msg) {
+    const ovk_model *M = s->M;
+    int rank = 0, *u = s->along_unique + M->nj, count = 0;
+    int status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
+    if (!status) status = ovk_unique_rows(M, s->J, s->along_work, &rank, u);
+    if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), -status;
+    size_t len = 0;
+    out[0] = '\0';
+    for (int j = 0; j < M->nj; j++) {
+        int friction = 0;
+        for (int k = 0; k < M->nfj; k++) friction |= M->fj[k] == j;
+        const double *lp = M->jlawp + (size_t)j * NLP;
+        if (!friction || (lp[0] == 0.0 && lp[3] == 0.0) || u[j]) continue;
+        if (len < size) len += (size_t)snprintf(out + len, size - len, "%sjoints[%d]", count ? ", " : "", j);
+        count++;
+    }
+    return count;
+}
+
+/* Chooses the kept equations again at y_at, records the event at t_event ("eliminated [a] ->
+ * [b] (why)") and goes on from (t_from, y_from) (Simulation._choose_again); 1 when the choice is
+ * the elimination in use (nothing done), 0 when restarted, else minus a status. */
+static int choose_again(ovk_sim *s, const double *y_at, double t_event, const char *why, double t_from,
+                        const double *y_from, char *msg) {
+    int m = s->m, *gone = s->kept + 6 * m + 2 * OVK_MAXEQ * s->Mrun.nfj;
+    int *before = s->kept + 5 * m + 2 * OVK_MAXEQ * s->Mrun.nfj;
+    int status = chosen_gone(s, y_at, gone, msg);
+    if (status) return -status;
+    eliminated_flags(s, before);
+    int same = 1;
+    for (int r = 0; r < m; r++) same &= gone[r] == before[r];
+    if (same) return 1;
+    char was[96], now[96], detail[OVK_MSG];
+    listed(before, m, was, sizeof was);
+    listed(gone, m, now, sizeof now);
+    snprintf(detail, sizeof detail, "eliminated %s -> %s (%s)", was, now, why);
+    for (int r = 0; r < m; r++) gone[r] = !gone[r]; /* the kept flags */
+    if ((status = ovk_sim_push_event(s, t_event, OVK_EV_RESELECTED, detail)))
+        return snprintf(msg, OVK_MSG, "t = %.9g s: out of memory for the run's events", t_event), -status;
+    if ((status = ovk_sim_restart(s, gone, t_from, y_from))) return -status;
+    return 0;
+}
+
+/* The kept set expired at s->expired_t (state in s->ystar; the expiry's message in s->msg)
+ * (Simulation._expired): with friction on a joint whose reaction is not unique there the run
+ * stops, naming the eliminations that stay valid (OVK_ELIMINATION); else the equations are
+ * chosen again there and the run goes on from (t_from, y_from), the start of the step (OVK_OK),
+ * or, when the choice is the elimination in use, it stops with the expiry. */
+int ovk_sim_expired(ovk_sim *s, double t_from, const double *y_from) {
+    char names[OVK_MSG], valid[OVK_MSG], gone[OVK_MSG], why[96], scratch[OVK_MSG];
+    double t_event = s->expired_t;
+    memcpy(s->yout, y_from, (size_t)s->ny * sizeof(double)); /* the restart's state, apart */
+    int count = nonunique_friction(s, s->ystar, names, sizeof names, scratch);
+    if (count < 0) return snprintf(s->msg, sizeof s->msg, "%s", scratch), -count;
+    if (count > 0) {
+        int status = valid_eliminations(s, s->ystar, valid, sizeof valid, scratch);
+        if (status) return snprintf(s->msg, sizeof s->msg, "%s", scratch), status;
+        eliminated(s->M, gone, sizeof gone);
+        size_t len = strlen(s->msg);
+        snprintf(s->msg + len, sizeof s->msg - len, "; with friction on %s, whose reaction is not unique, the "
+                 "elimination decides the motion, so the run stops (eliminated: %s; other eliminations valid at the "
+                 "start and here: %s)", names, gone, valid);
+        return OVK_ELIMINATION;
+    }
+    snprintf(why, sizeof why, "the kept equations lost rank at t = %.9g s", t_event);
+    int done = choose_again(s, s->ystar, t_event, why, t_from, s->yout, scratch);
+    if (done == 1) return OVK_ELIMINATION; /* the same equations: the expiry stands */
+    if (done < 0) return snprintf(s->msg, sizeof s->msg, "%s", scratch), -done;
+    return OVK_OK;
+}
+
+/* The step just accepted found the elimination degrading (Simulation._degraded): when the motion
+ * does not depend on it, the equations are chosen again at the step's end and the run goes on
+ * from there; else it keeps them (the run stops if they expire). The status. */
+int ovk_sim_degraded(ovk_sim *s) {
+    const ovk_rk *rk = &s->rk;
+    char names[OVK_MSG], why[96], rs[24], scratch[OVK_MSG];
+    int count = nonunique_friction(s, rk->y, names, sizeof names, scratch);
+    if (count < 0) return snprintf(s->msg, sizeof s->msg, "%s", scratch), -count;
+    if (count > 0) return OVK_OK;
+    shown(s->ratio, rs, sizeof rs);
+    snprintf(why, sizeof why, "the kept equations became ill-conditioned: sigma_min/sigma_max %s", rs);
+    memcpy(s->yout, rk->y, (size_t)s->ny * sizeof(double));
+    int done = choose_again(s, s->yout, rk->t, why, rk->t, s->yout, scratch);
+    if (done < 0) return snprintf(s->msg, sizeof s->msg, "%s", scratch), -done;
+    return OVK_OK;
 }

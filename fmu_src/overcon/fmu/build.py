@@ -362,7 +362,7 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
         guid = "{" + str(uuid.UUID(digest[:32])) + "}"
         pkg = f"{_PKG_NAME}_{digest[:16]}"
         reaction_unique = report.reaction_unique
-        table = variables.table(model, spec.solver, reaction_unique, bool(report.motion_unique))
+        table = variables.table(model, spec.solver, reaction_unique, bool(report.motion_unique), report.rank)
         overcon_version = _overcon_version()
         xml = description.model_description(
             spec, table, guid=guid, version=overcon_version,
@@ -412,7 +412,7 @@ def _write_c_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Prec
         digest = _digest((FORMAT_VERSION.encode(), b"runtime c", binary, scene_zip.encode(), scene_bytes,
                           mech_zip.encode(), mech_bytes), sources)
         guid = "{" + str(uuid.UUID(digest[:32])) + "}"
-        table = variables.table(model, spec.solver, report.reaction_unique, bool(report.motion_unique))
+        table = variables.table(model, spec.solver, report.reaction_unique, bool(report.motion_unique), report.rank)
         overcon_version = _overcon_version()
         xml = description.model_description(
             spec, table, guid=guid, version=overcon_version,

@@ -26,7 +26,7 @@ terminating zero, then the bytes and the zero; an array an int32 count then the 
    and component; friction: joint);
 5. variables: i count, then per variable string name, i type (:data:`TYPES`), i causality, i
    variability (:data:`VARIABILITIES`), i key kind (:data:`KEYS`), i key argument (the output index,
-   the constant 0/1, the parameter index);
+   the constant 0/1, the parameter index, :data:`ALONG_ARGS` for the uniqueness along the motion);
 6. parameters: i count, then per parameter string name, i type, i target (:data:`TARGETS`), i joint
    (friction parameters), i rule kind (0 real, 1 int, 2 choice), d low, d high, i has low, i has
    high, i low open, string range text, string why, i number of choices then the choices as
@@ -51,13 +51,15 @@ MAGIC = b"OVKFMU01"
 TYPES = {"Real": 0, "Integer": 1, "Boolean": 2, "String": 3, "Enumeration": 1}  # an Enumeration is an Integer in FMI 2.0's calls
 CAUSALITIES = {"output": 0, "parameter": 1, "local": 2}
 VARIABILITIES = {"continuous": 0, "constant": 1, "fixed": 2, "tunable": 3, "discrete": 4}
-KEYS = {"output": 0, "constant": 1, "param": 2, "stable_step": 3}
+KEYS = {"output": 0, "constant": 1, "param": 2, "stable_step": 3, "along": 4}
 OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6, "energy": 7}
 TARGETS = {"mu": 1, "v_reg": 2, "mu_static": 3, "v_stribeck": 4, "solver.method": 10, "solver.tolerance": 11,
            "solver.step": 12, "solver.max_step": 13, "solver.baumgarte": 14, "solver.friction_tol": 15,
            "solver.friction_max_iter": 16, "solver.kernel": 17, "solver.max_internal_steps": 18,
            "solver.max_wall_time": 19, "redundancy": 20}
 """What a parameter sets: a friction law's entry of ``jlawp`` (1-4) or a solver setting (10-19)."""
+ALONG_ARGS = {"rank": 0, "motion": 1}
+"""The argument of a variable of key "along": 0 rank, 1 motion_unique, 2 + j joint j's reaction_unique."""
 INT_FIELDS = ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols", "nfj", "nfg", "max_iter")
 DOUBLE_FIELDS = {"Minv", "mass", "inertia", "gravity", "jconst", "jlawp", "lp"}
 
@@ -202,7 +204,8 @@ def model_file(model, solver, table, guid: str, messages=()) -> bytes:
     w.i(len(table))
     for v in table:
         kind, arg = v.key
-        a = arg if kind == "output" else int(bool(arg)) if kind == "constant" else index[arg] if kind == "param" else 0
+        a = (arg if kind == "output" else int(bool(arg)) if kind == "constant" else index[arg] if kind == "param"
+             else (ALONG_ARGS[arg] if arg in ALONG_ARGS else 2 + arg) if kind == "along" else 0)
         w.s(v.name)
         w.i(TYPES[v.type], CAUSALITIES[v.causality], VARIABILITIES[v.variability], KEYS[kind], a)
     w.i(len(params))

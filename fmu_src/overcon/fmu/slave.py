@@ -227,6 +227,7 @@ class OverconSlave:
                 self._pub_real_slot[r] = v.key[1]
             elif v.type == "Boolean" and v.key[0] == "constant" and v.causality == "output":
                 self._pub_bool[r] = int(bool(v.key[1]))
+        self._pub_along = [(r, v.key[1]) for r, v in enumerate(self._vars) if v.type == "Boolean" and v.key[0] == "along"]
         self._init_fields()
         for text in friction_warnings(self._model0):  # the pre-check's warnings (also in the manifest)
             self.log(text, Status.WARNING)
@@ -264,15 +265,19 @@ class OverconSlave:
         if not self._publishing:
             return
         self._pub_values[:] = self._outputs
+        for r, arg in self._pub_along:  # the discrete verdicts, as Python would answer them
+            self._pub_bool[r] = int(bool(self._along(arg)))
         derived_ok = not self._derived_stale and (self._derived_read or len(self._outputs) == self._n_positions)
         self._pub_flags[1] = 1 if derived_ok else 0
         self._pub_flags[0] = 1
 
-    def _log_events(self, sim) -> None:
+    def _log_events(self, sim, skip_stopped: bool = False) -> None:
         """Log the run's events (overcon.simulate.EVENT_KINDS: an elimination chosen again, ...)
-        not logged yet, at info level (category logEvents); a failed step logs its stop itself."""
+        not logged yet, at info level (category logEvents); a failed step logs its stop itself
+        (``skip_stopped``)."""
         for t, kind, detail in sim.events[self._events_logged:]:
-            self.log(f"t = {t:.9g} s: event {kind}: {detail}")
+            if not (skip_stopped and kind == "stopped"):
+                self.log(f"t = {t:.9g} s: event {kind}: {detail}")
         self._events_logged = len(sim.events)
 
     def log(self, message: str, status=Status.OK) -> None:
@@ -314,9 +319,23 @@ class OverconSlave:
             return float(self._outputs[arg])
         if kind == "constant":
             return arg
+        if kind == "along":  # the run's last judgement of the uniqueness along the motion
+            return self._along(arg)
         if kind == "stable_step":
             return self._stable_step
         return self._params[arg]
+
+    def _along(self, arg):
+        """``rank``, ``motion_unique`` or joint ``arg``'s ``reaction_unique`` of the run's
+        :class:`overcon.watch.Uniqueness` (the run is made first when there is none)."""
+        if self._sim is None:
+            self._ensure_sim()
+        along = self._sim.along
+        if arg == "rank":
+            return along.rank
+        if arg == "motion":
+            return along.motion_unique
+        return along.unique[self._model0.joints[arg].name]
 
     def _get(self, typ: str, vr_address: int, n: int, values_address: int) -> None:
         refs = self._refs(vr_address, n, typ)
@@ -575,6 +594,8 @@ class OverconSlave:
                 if bad:  # (else the sum overflowed)
                     raise ArithmeticError(f"t = {t_new:.9g} s: non-finite outputs {', '.join(bad)}")
         except Exception as exc:  # the run cannot continue: fmi2Error, never NaN, never a crash
+            if self._sim is not None:  # the events on the way to the stop (the stop itself: below)
+                self._log_events(self._sim, skip_stopped=True)
             what = str(exc) if isinstance(exc, CallRefused) else f"{type(exc).__name__}: {exc}"
             if getattr(exc, "stable_step", None):
                 self._stable_step = float(exc.stable_step)

@@ -6,8 +6,10 @@ Value references are the positions in :func:`table` (0-based), in this order:
    (N, N.m) and the friction forces ``<joint>.friction`` of the scene's friction joints (N, or
    N.m for revolute joints; :func:`overcon.evaluation.friction_output`), causality output,
    variability continuous, initial calculated;
-2. pre-check verdicts (Booleans, causality output, variability constant, initial exact):
-   ``<joint>.reaction_unique`` per reaction joint of the scene, and ``motion_unique``;
+2. uniqueness verdicts (Booleans, causality output, initial exact, the start value the pre-check's at
+   t = 0): ``<joint>.reaction_unique`` per reaction joint of the scene (variability constant, the
+   pre-check, for a joint without friction; discrete, judged along the motion
+   (:class:`overcon.watch.Uniqueness`), for a friction joint), and ``motion_unique`` (discrete);
 3. parameters (causality parameter, variability fixed, initial exact): per friction joint
    ``<joint>.mu`` and ``<joint>.v_reg`` (law ``stribeck`` also ``<joint>.mu_static`` and
    ``<joint>.v_stribeck``), then the solver settings ``solver.*`` of
@@ -16,6 +18,13 @@ Value references are the positions in :func:`table` (0-based), in this order:
 4. ``solver.stable_step`` (local), then ``redundancy`` (:func:`redundancy_var`: an Enumeration
    parameter, variability fixed, start the scene's ``[scene] redundancy``), last so that adding it
    kept every earlier value reference.
+
+5. after them (so that the older value references stay): ``<joint>.reaction_unique`` (discrete) of the
+   friction joints that are no reaction joints, and ``rank`` (Integer, discrete): the whole
+   Jacobian's rank along the motion.
+
+The discrete outputs hold the verdict of the run's last evaluation (key ``("along", ...)``): the
+communication point after a successful ``fmi2DoStep``, the instant a failed one stopped at.
 
 ``UNITS`` gives every unit's SI base-unit exponents (FMI ``BaseUnit``).
 """
@@ -149,11 +158,12 @@ def _friction_param_names(law) -> tuple[str, ...]:
     return ("mu", "v_reg", "mu_static", "v_stribeck") if law.name == "stribeck" else ("mu", "v_reg")
 
 
-def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool) -> list[Var]:
+def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, rank: int | None = None) -> list[Var]:
     """All variables of the FMU of ``model`` with the solver options ``solver`` (the start values
     of the ``solver.*`` parameters; see the module docstring for the order). Per joint type
     facts (units, texts) come from :data:`overcon.joints.TYPES`. ``reaction_unique``: pre-check
-    verdict per joint name; ``motion_unique``: the scene's."""
+    verdict per joint name; ``motion_unique``, ``rank``: the scene's (start values; the run
+    updates them, see the module docstring)."""
     out: list[Var] = []
     body_of = {i: name for i, name in enumerate(model.body_names)}
     k = 0
@@ -185,15 +195,18 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool) 
                        f"friction {TYPES[c.type].friction_text} of joint {c.name} on body {body_of.get(c.bi, 'base')} "
                        f"({c.law.name} law)", unit=unit, key=("output", k)))
         k += 1
+    friction = set(model.friction_joints)
     for j in model.reaction_joints:
         name = model.joints[j].name
         val = bool(reaction_unique[name])
+        if j in friction:
+            out.append(_along_reaction(model, j, val))
+            continue
         out.append(Var(f"{name}.reaction_unique", "Boolean", "output", "constant", "exact",
                        f"pre-check: the reaction of joint {name} is unique (does not depend on the "
                        "eliminated equations)", start=val, key=("constant", val)))
-    out.append(Var("motion_unique", "Boolean", "output", "constant", "exact",
-                   "pre-check: the motion is unique (no friction on a joint with a non-unique reaction)",
-                   start=bool(motion_unique), key=("constant", bool(motion_unique))))
+    out.append(_along_var("motion_unique", "Boolean", "the motion is unique: no friction on a joint whose reaction "
+                          "is not unique (paper Eq. 17)", bool(motion_unique), "motion"))
     for j in model.friction_joints:
         c = model.joints[j]
         for p in _friction_param_names(c.law):
@@ -219,6 +232,12 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool) 
                    "does. Readable after the failed fmi2DoStep: the lockstep comparison repeats its runs with it",
                    unit="s", key=("stable_step", None)))
     out.append(redundancy_var(model))
+    # uniqueness along the motion, after every older variable (their value references stay)
+    for j in model.friction_joints:
+        if j not in set(model.reaction_joints):
+            out.append(_along_reaction(model, j, bool(reaction_unique.get(model.joints[j].name, True))))
+    out.append(_along_var("rank", "Integer", "rank of the whole constraint Jacobian (the pre-check's rule)",
+                          int(rank) if rank is not None else 0, "rank"))
     return out
 
 
@@ -283,6 +302,20 @@ def redundancy_var(model) -> Var:
                "redundant constraints: " + "; ".join(f"{i} {m}: {REDUNDANCY_ITEMS[m]}"
                                                      for i, m in enumerate(methods, start=1)),
                start=REDUNDANCY_METHODS.index(model.scene.redundancy) + 1, key=("param", "redundancy"))
+
+
+def _along_var(name: str, typ: str, text: str, start, arg) -> Var:
+    """A discrete output judged along the motion (:class:`overcon.watch.Uniqueness`), its start
+    value the pre-check's at t = 0."""
+    return Var(name, typ, "output", "discrete", "exact", f"{text}, judged along the motion (start value: the "
+               "pre-check at t = 0)", start=start, key=("along", arg))
+
+
+def _along_reaction(model, j: int, start: bool) -> Var:
+    """``<joint>.reaction_unique`` of friction joint ``j``."""
+    name = model.joints[j].name
+    return _along_var(f"{name}.reaction_unique", "Boolean", f"the reaction of joint {name} is unique (does not "
+                      "depend on the eliminated equations)", start, j)
 
 
 def rule(name: str) -> ParamRule:

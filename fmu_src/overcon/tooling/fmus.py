@@ -1,7 +1,7 @@
 """What the tooling needs to know about an FMU before running it, read without loading its binary.
 
 From ``modelDescription.xml`` (fmpy's reader): model identifier, DefaultExperiment, the Real
-outputs with their units, and the constant Boolean outputs an overcon FMU carries
+outputs with their units, and the Boolean verdicts an overcon FMU carries (constants, or discrete outputs whose start value is the pre-check's)
 (``motion_unique``, ``<joint>.reaction_unique``: the pre-check's predictions). From an overcon
 FMU's facts record ``resources/overcon_facts.json`` (:mod:`overcon.fmu.facts`, versioned): group,
 friction set, eliminated equations, mechanism and predictions, and the paper-style label
@@ -140,7 +140,9 @@ def inspect_fmu(path) -> FmuInfo:
             position = unit in POSITION_UNITS or (unit == "1" and v.name.endswith(QUATERNION_SUFFIXES))
             kind = "position" if position else "reaction" if unit in REACTION_UNITS else "other"
             outputs.append(Output(v.name, unit, kind))
-        elif v.type == "Boolean" and v.variability == "constant":
+        elif v.type == "Boolean" and (v.variability == "constant" or v.start is not None):
+            # the pre-check's verdicts: constants, or (FMUs that judge them along the motion)
+            # discrete outputs whose start value is the pre-check's at t = 0
             constants[v.name] = _bool(v.start)
     if not outputs:
         raise InputError(f"{path}: the FMU has no Real outputs to record")

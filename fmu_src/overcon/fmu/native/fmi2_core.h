@@ -49,6 +49,7 @@ typedef struct {
 
 enum { T_REAL = 0, T_INTEGER = 1, T_BOOLEAN = 2, T_STRING = 3 };
 enum { K_OUTPUT = 0, K_CONSTANT = 1, K_PARAM = 2, K_STABLE_STEP = 3 };
+enum { K_ALONG = 4 }; /* arg 0 rank, 1 motion_unique, 2 + j joint j's reaction_unique (fmu_along_value) */
 enum { V_CONTINUOUS = 0, V_CONSTANT = 1, V_FIXED = 2, V_TUNABLE = 3, V_DISCRETE = 4 };
 enum { O_POSITION = 1, O_VELOCITY = 2, O_REACTION = 5, O_FRICTION = 6, O_ENERGY = 7 }; /* energy: a = 0-3 */
 enum { P_MU = 1, P_VREG = 2, P_MU_STATIC = 3, P_VSTRIBECK = 4, P_METHOD = 10, P_TOLERANCE = 11, P_STEP = 12,
@@ -128,6 +129,7 @@ typedef struct {
     const char **strings; /* fmi2GetString results (choices: static for the instance's life) */
     fmu_saved *states;
     char msg[FMU_MSG];
+    int events_logged;  /* events of the run already logged (fmi2_run.c) */
 } fmu_inst;
 
 FMU_HIDDEN void fmu_log(fmu_inst *c, fmi2Status status, const char *fmt, ...)
@@ -141,5 +143,6 @@ FMU_HIDDEN int fmu_apply_params(fmu_inst *c);
 FMU_HIDDEN int fmu_read_derived(fmu_inst *c);
 FMU_HIDDEN int fmu_ensure_sim(fmu_inst *c, int compute_outputs);
 FMU_HIDDEN int fmu_allowed(fmu_inst *c, const char *fn, int modes);
+FMU_HIDDEN int fmu_along_value(fmu_inst *c, int arg, double *out);
 
 #endif

@@ -205,8 +205,8 @@ static int check_tables(const fmu_model *fm, char *err, size_t errsize) {
     }
     for (int k = 0; k < fm->nvar; k++) {
         const fmu_var *v = &fm->var[k];
-        int lim = v->key == K_OUTPUT ? fm->nout : v->key == K_PARAM ? fm->nparam : 2;
-        if (v->type < T_REAL || v->type > T_STRING || v->key < K_OUTPUT || v->key > K_STABLE_STEP || v->arg < 0 ||
+        int lim = v->key == K_OUTPUT ? fm->nout : v->key == K_PARAM ? fm->nparam : v->key == K_ALONG ? 2 + fm->M.nj : 2;
+        if (v->type < T_REAL || v->type > T_STRING || v->key < K_OUTPUT || v->key > K_ALONG || v->arg < 0 ||
             (v->key != K_STABLE_STEP && v->arg >= lim))
             return snprintf(err, errsize, "variable %d (%s): type %d, key %d, %d out of range", k, v->name, v->type,
                             v->key, v->arg), 0;

@@ -154,6 +154,7 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
             return 0;
         }
         c->sim_valid = 1;
+        c->events_logged = 0;
         c->t = c->start_time;
     }
     if (compute_outputs && !c->have_outputs) {
@@ -287,6 +288,57 @@ static int step_outputs(fmu_inst *c, double t_new, const double *y, double *out)
     return 1;
 }
 
+/* The value of a variable of key K_ALONG (arg: 0 rank, 1 motion_unique, 2 + j joint j's
+ * reaction_unique): the run's last judgement of the uniqueness along the motion (core/watch.c),
+ * the run made first when there is none; 0 with the reason in c->msg. */
+int fmu_along_value(fmu_inst *c, int arg, double *out) {
+    if (!c->sim_valid && !fmu_ensure_sim(c, 0)) return 0;
+    int nj = c->fm.M.nj, rank = 0, *unique = malloc(((size_t)nj + 1) * sizeof(int));
+    if (!unique) return snprintf(c->msg, sizeof c->msg, "MemoryError: out of memory"), 0;
+    int motion = ovk_sim_uniqueness(c->sim, &rank, unique);
+    *out = arg == 0 ? rank : arg == 1 ? motion : arg - 2 < nj ? unique[arg - 2] : 0;
+    free(unique);
+    return 1;
+}
+
+/* The core's text with its "joints[k]" (a friction joint, numbered) named by the joint's
+ * "<joint>.reaction_unique" variable, as the Python runtime words it. */
+static void named(const fmu_inst *c, const char *in, char *out, size_t size) {
+    size_t len = 0;
+    for (const char *p = in; *p && len + 1 < size;) {
+        int j = -1, used = 0, done = 0;
+        if (sscanf(p, "joints[%d]%n", &j, &used) == 1 && used > 0 && p[used - 1] == ']')
+            for (int v = 0; v < c->fm.nvar && !done; v++)
+                if (c->fm.var[v].key == K_ALONG && c->fm.var[v].arg == 2 + j) {
+                    const char *name = c->fm.var[v].name;
+                    int n = (int)(strlen(name) - strlen(".reaction_unique"));
+                    int w = snprintf(out + len, size - len, "%.*s", n, name);
+                    len = w < 0 || (size_t)w >= size - len ? size - 1 : len + (size_t)w;
+                    p += used;
+                    done = 1;
+                }
+        if (!done) out[len++] = *p++;
+    }
+    out[len] = '\0';
+}
+
+/* Logs the run's events not logged yet (category logEvents, as overcon.fmu.slave._log_events:
+ * "t = <t> s: event <kind>: <detail>"); the stop of a failed step is logged with its error. */
+static void log_events(fmu_inst *c) {
+    static const char *kinds[5] = {"singular", "elimination-reselected", "rank-change", "uniqueness-change",
+                                   "stopped"};
+    int count = ovk_sim_events(c->sim);
+    for (; c->events_logged < count; c->events_logged++) {
+        double t = 0.0;
+        int kind = 0;
+        const char *detail = ovk_sim_event(c->sim, c->events_logged, &t, &kind);
+        if (!detail || kind < 0 || kind > 4 || kind == OVK_EV_STOPPED) continue;
+        char text[FMU_MSG];
+        named(c, detail, text, sizeof text);
+        fmu_log(c, fmi2OK, "t = %.9g s: event %s: %s", t, kinds[kind], text);
+    }
+}
+
 /* The step itself (overcon.fmu.slave._step): 0 with the reason in c->msg. */
 static int step(fmu_inst *c, double t, double h, double *y) {
     char a[40], b[40]; /* the numbers of a message, formatted only when there is one (a repr costs µs) */
@@ -301,7 +353,9 @@ static int step(fmu_inst *c, double t, double h, double *y) {
     if (!c->sim_valid && !fmu_ensure_sim(c, 1)) return 0;
     long long max_steps = (long long)param(c, P_MAX_INTERNAL_STEPS);
     double max_wall = param(c, P_MAX_WALL_TIME);
+    if (c->events_logged > ovk_sim_events(c->sim)) c->events_logged = ovk_sim_events(c->sim); /* a restored state */
     int status = ovk_sim_advance(c->sim, t + h, max_steps, max_wall, y);
+    log_events(c);
     if (status == OVK_BUDGET) {
         const char *m = ovk_sim_message(c->sim), *lead = "integration stopped: ";
         if (!strncmp(m, lead, strlen(lead))) m += strlen(lead);
@@ -315,7 +369,11 @@ static int step(fmu_inst *c, double t, double h, double *y) {
         ovk_sim_info(c->sim, info);
         c->stable_step = info[9];
     }
-    if (status) return snprintf(c->msg, sizeof c->msg, "SimulationError: %s", ovk_sim_message(c->sim)), 0;
+    if (status) {
+        char text[FMU_MSG];
+        named(c, ovk_sim_message(c->sim), text, sizeof text);
+        return snprintf(c->msg, sizeof c->msg, "SimulationError: %.1000s", text), 0; /* cut as the core cuts its own */
+    }
     return 1;
 }
 

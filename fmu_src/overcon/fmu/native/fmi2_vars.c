@@ -45,6 +45,8 @@ static int value_of(fmu_inst *c, const char *fn, const fmu_var *v, double *out) 
         *out = v->arg;
     } else if (v->key == K_STABLE_STEP) {
         *out = c->stable_step;
+    } else if (v->key == K_ALONG) {
+        if (!fmu_along_value(c, v->arg, out)) return fmu_log(c, fmi2Error, "%s: %s", fn, c->msg), 0;
     } else {
         *out = c->pval[v->arg];
     }

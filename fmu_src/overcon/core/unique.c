@@ -1,0 +1,262 @@
+/* Uniqueness along the motion: from one rank-revealing factorisation of the whole constraint
+ * Jacobian at a state (every equation, not only the kept ones), its rank and, per joint, whether
+ * its reaction is unique. The rule is the pre-check's one-factorisation test
+ * (overcon.analysis.analyse with methods = "svd", the paper's App. B.11), with its equilibration
+ * and tolerances, so that a verdict along the run reads as the pre-check's at t = 0:
+ *   A = Phi_h^T (n = nh coordinates x m equations), round-off rows and columns
+ *       (max-norm <= 100 max(n, m) eps max|A|) set to zero, then Ruiz-equilibrated (rows and
+ *       columns to unit max-norm within 1e-3, at most 50 sweeps) (analysis.equilibrate);
+ *   A = U S V^T; rank r = #{sigma > max(1e-9, max(n, m) eps) sigma_1} (analysis.DEFAULT_RTOL);
+ *   N = the right singular vectors of the m - r other singular values (a basis of null(A));
+ *   joint P unique iff max_i ||(A_P N_P)[i, :]||_2 <= b_rtol sigma_1 with
+ *   b_rtol = max(1e-9, 100 max(n, m) eps sigma_1 / sigma_r) (analysis.B_NOISE_FACTOR).
+ * The SVD is one-sided Jacobi on the rows of A^T (svd.c) with the rotations accumulated: the
+ * rows of the rotation are V's columns, the norms of the rotated rows the singular values. The
+ * decisions are the same as numpy's LAPACK SVD wherever a verdict is not a tie at the
+ * thresholds (tests/test_uniqueness_along.py holds them equal on every mechanism of the
+ * repository and on random linkages). Dimensionless. ovk_unique_rows works in the caller's
+ * buffer (ovk_unique_doubles); ovk_unique, for a caller without one, allocates it per call. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "core.h"
+
+#define UNIQUE_RTOL 1e-9       /* analysis.DEFAULT_RTOL */
+#define UNIQUE_NOISE 100.0     /* analysis.NOISE_FACTOR and analysis.B_NOISE_FACTOR */
+#define RUIZ_SWEEPS 50         /* analysis._RUIZ_SWEEPS */
+#define RUIZ_TOL 1e-3          /* analysis._RUIZ_TOL */
+#define EPS 2.220446049250313e-16
+
+size_t ovk_unique_doubles(int m, int nh) {
+    size_t M = (size_t)m, n = (size_t)nh;
+    return 2 * M * n + M * M + 2 * M + n;
+}
+
+/* B = A^T (m rows of nh): round-off rows and columns of A zeroed, then Ruiz. cn (m) and rn (nh):
+ * scratch for the max-norms of A's columns (B's rows) and A's rows (B's columns). */
+static void equilibrate(double *B, int m, int nh, double *cn, double *rn) {
+    double amax = 0.0;
+    for (size_t i = 0; i < (size_t)m * nh; i++) amax = fabs(B[i]) > amax ? fabs(B[i]) : amax;
+    if (amax == 0.0) return;
+    double floor = UNIQUE_NOISE * (m > nh ? m : nh) * EPS * amax;
+    for (int c = 0; c < nh; c++) { /* A's rows: coordinates */
+        double x = 0.0;
+        for (int e = 0; e < m; e++) x = fabs(B[(size_t)e * nh + c]) > x ? fabs(B[(size_t)e * nh + c]) : x;
+        if (x <= floor)
+            for (int e = 0; e < m; e++) B[(size_t)e * nh + c] = 0.0;
+    }
+    for (int e = 0; e < m; e++) { /* A's columns: equations */
+        double x = 0.0, *row = B + (size_t)e * nh;
+        for (int c = 0; c < nh; c++) x = fabs(row[c]) > x ? fabs(row[c]) : x;
+        if (x <= floor) memset(row, 0, (size_t)nh * sizeof(double));
+    }
+    for (int sweep = 0; sweep < RUIZ_SWEEPS; sweep++) {
+        double dev = 0.0;
+        for (int c = 0; c < nh; c++) rn[c] = 0.0;
+        for (int e = 0; e < m; e++) {
+            const double *row = B + (size_t)e * nh;
+            cn[e] = 0.0;
+            for (int c = 0; c < nh; c++) {
+                double a = fabs(row[c]);
+                cn[e] = a > cn[e] ? a : cn[e];
+                rn[c] = a > rn[c] ? a : rn[c];
+            }
+        }
+        for (int c = 0; c < nh; c++)
+            if (rn[c] > 0.0 && fabs(1.0 - rn[c]) > dev) dev = fabs(1.0 - rn[c]);
+        for (int e = 0; e < m; e++)
+            if (cn[e] > 0.0 && fabs(1.0 - cn[e]) > dev) dev = fabs(1.0 - cn[e]);
+        if (dev <= RUIZ_TOL) break;
+        for (int c = 0; c < nh; c++) rn[c] = rn[c] > 0.0 ? 1.0 / sqrt(rn[c]) : 1.0;
+        for (int e = 0; e < m; e++) cn[e] = cn[e] > 0.0 ? 1.0 / sqrt(cn[e]) : 1.0;
+        for (int e = 0; e < m; e++) {
+            double *row = B + (size_t)e * nh;
+            for (int c = 0; c < nh; c++) row[c] = rn[c] * row[c] * cn[e];
+        }
+    }
+}
+
+/* Under "compliant", whether equation e is a compliant one (its retained position's ckind). */
+static int compliant_equation(const ovk_model *M, int e) {
+    for (int p = 0; p < M->nR; p++)
+        if (M->retained[p] == e) return M->ckind[p] != 0;
+    return 0;
+}
+
+/* The position of equation e among the rows the uniqueness judges (the rigid equations under
+ * "compliant", every equation otherwise), or -1 for a compliant equation. O(m nR) under
+ * "compliant" only (its mechanisms are small); e itself otherwise. */
+static int judged_position(const ovk_model *M, int e) {
+    if (M->redundancy != OVK_COMPLIANT) return e;
+    if (compliant_equation(M, e)) return -1;
+    int k = 0;
+    for (int f = 0; f < e; f++) k += !compliant_equation(M, f);
+    return k;
+}
+
+/* The number of rows the uniqueness judges. */
+static int judged_count(const ovk_model *M) {
+    int k = 0;
+    for (int e = 0; e < M->m; e++) k += judged_position(M, e) >= 0;
+    return M->redundancy == OVK_COMPLIANT ? k : M->m;
+}
+
+int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank, int *unique) {
+    int nh = M->nb * M->nh_b;
+    int m = judged_count(M), big = m > nh ? m : nh;
+    double *A = work, *B = A + (size_t)m * nh, *Q = B + (size_t)m * nh, *sv = Q + (size_t)m * m, *cn = sv + m;
+    double *rn = cn + m;
+    for (size_t i = 0; i < (size_t)M->m * nh; i++)
+        if (!isfinite(J[i])) return OVK_NONFINITE;
+    /* under "compliant" the compliant equations are forces, not constraints: the rigid rest is
+     * judged (precheck.analyse_model) and a compliant joint's reaction is unique (its deformation) */
+    for (int e = 0, k = 0; e < M->m; e++)
+        if (judged_position(M, e) >= 0) memcpy(B + (size_t)k++ * nh, J + (size_t)e * nh, (size_t)nh * sizeof(double));
+    equilibrate(B, m, nh, cn, rn);
+    memcpy(A, B, (size_t)m * nh * sizeof(double)); /* A^T equilibrated, kept for the joints' A_P */
+    ovk_jacobi_rows(B, m, nh, Q); /* rows of Q B: sigma_k u_k^T; rows of Q: v_k (V's columns) */
+    double smax = 0.0;
+    for (int k = 0; k < m; k++) {
+        double s2 = 0.0;
+        for (int c = 0; c < nh; c++) s2 += B[(size_t)k * nh + c] * B[(size_t)k * nh + c];
+        sv[k] = sqrt(s2);
+        smax = sv[k] > smax ? sv[k] : smax;
+    }
+    double tol = (UNIQUE_RTOL > big * EPS ? UNIQUE_RTOL : big * EPS) * smax, smin_kept = smax;
+    int r = 0;
+    for (int k = 0; k < m; k++)
+        if (sv[k] > tol) {
+            r++;
+            smin_kept = sv[k] < smin_kept ? sv[k] : smin_kept;
+        }
+    double kappa = r > 0 && smin_kept > 0.0 ? smax / smin_kept : 1.0;
+    double brt = UNIQUE_NOISE * big * EPS * kappa;
+    brt = brt > UNIQUE_RTOL ? brt : UNIQUE_RTOL;
+    double limit = brt * smax;
+    for (int j = 0; j < M->nj; j++) {
+        const int *rows = M->jrows + (size_t)j * OVK_MAXEQ;
+        int cols[OVK_MAXEQ], compliant = 0;
+        for (int e = 0; e < M->jneq[j]; e++) compliant |= (cols[e] = judged_position(M, rows[e])) < 0;
+        if (compliant) {
+            unique[j] = 1;
+            continue;
+        }
+        double peak = 0.0;
+        for (int i = 0; i < nh; i++) { /* row i of B_P = A_P N_P over the null vectors */
+            double norm2 = 0.0;
+            for (int k = 0; k < m; k++) {
+                if (sv[k] > tol) continue;
+                double b = 0.0;
+                for (int e = 0; e < M->jneq[j]; e++) b += A[(size_t)cols[e] * nh + i] * Q[(size_t)k * m + cols[e]];
+                norm2 += b * b;
+            }
+            peak = sqrt(norm2) > peak ? sqrt(norm2) : peak;
+        }
+        unique[j] = peak == 0.0 || (limit > 0.0 && peak <= limit);
+    }
+    *rank = r;
+    return OVK_OK;
+}
+
+int ovk_unique(const ovk_model *M, ovk_data *d, const double *y, int *rank, int *unique) {
+    if (!M || !d || !y || !rank || !unique) return OVK_INVALID;
+    if (d->status) return d->status;
+    int m = M->m, nh = M->nb * M->nh_b;
+    double *mem = malloc((2 * (size_t)m + (size_t)m * nh + ovk_unique_doubles(m, nh) + 1) * sizeof(double));
+    if (!mem) return ovk_fail(d, OVK_NOMEM, "uniqueness: out of memory (%d equations, %d velocities)", m, nh);
+    double *phi = mem, *gam = phi + m, *J = gam + m, *work = J + (size_t)m * nh;
+    int status = ovk_rows(M, d, y, phi, J, gam);
+    if (!status) {
+        status = ovk_unique_rows(M, J, work, rank, unique);
+        if (status) ovk_fail(d, status, "uniqueness: a non-finite entry in the constraint Jacobian");
+    }
+    free(mem);
+    return status;
+}
+
+/* The kept set's packed arrays, as overcon.kernel.Kernel packs them from overcon.model.build_plan
+ * (one implementation: the Kernel calls this): rbody (2 nR: the bodies of each kept row's joint),
+ * xrows (the positions in lam_R of the kept rows of the friction joints, joints in model order)
+ * and fx (nfj x OVK_MAXEQ, friction joints in plan order M->fj: each equation's index into
+ * xrows, nx for an eliminated one and the padding). iwork: m + nR ints. Returns nx. */
+int ovk_pack_kept(const ovk_model *M, const int *retained, int nR, int *xrows, int *fx, int *rbody, int *iwork) {
+    int m = M->m, *pos = iwork, *xpos = iwork + m, nx = 0;
+    for (int r = 0; r < m; r++) pos[r] = -1;
+    for (int p = 0; p < nR; p++) {
+        pos[retained[p]] = p;
+        xpos[p] = -1;
+    }
+    for (int j = 0; j < M->nj; j++) {
+        int friction = 0;
+        for (int k = 0; k < M->nfj; k++) friction |= M->fj[k] == j;
+        for (int e = 0; e < M->jneq[j]; e++) {
+            int p = pos[M->jrows[(size_t)j * OVK_MAXEQ + e]];
+            if (p < 0) continue;
+            rbody[2 * p] = M->jbi[j];
+            rbody[2 * p + 1] = M->jbj[j];
+            if (friction) {
+                xpos[p] = nx;
+                xrows[nx++] = p;
+            }
+        }
+    }
+    for (int k = 0; k < M->nfj; k++) {
+        int j = M->fj[k];
+        for (int e = 0; e < OVK_MAXEQ; e++) {
+            int p = e < M->jneq[j] ? pos[M->jrows[(size_t)j * OVK_MAXEQ + e]] : -1;
+            fx[(size_t)k * OVK_MAXEQ + e] = p >= 0 && xpos[p] >= 0 ? xpos[p] : nx;
+        }
+    }
+    return nx;
+}
+
+/* The equations an automatic elimination keeps at the rows J (m x nh), as
+ * overcon.analysis.independent_columns: the first r pivots of the column-pivoted Householder QR
+ * of the equilibrated A = Phi_h^T (the pivot: the largest remaining column norm, the first of
+ * equals, as LAPACK's dgeqp3), r its rank by the rule of ovk_unique_rows. kept: m flags; work:
+ * ovk_unique_doubles(m, nh); iwork: nj + m ints. Returns the status; r into *rank. */
+int ovk_choose_kept(const ovk_model *M, const double *J, double *work, int *iwork, int *kept, int *rank) {
+    int m = M->m, nh = M->nb * M->nh_b, *perm = iwork + M->nj;
+    int status = ovk_unique_rows(M, J, work, rank, iwork);
+    if (status) return status;
+    double *B = work + (size_t)m * nh; /* A's columns (the equations) as rows, equilibrated */
+    memcpy(B, work, (size_t)m * nh * sizeof(double));
+    for (int e = 0; e < m; e++) perm[e] = e;
+    int steps = m < nh ? m : nh;
+    for (int k = 0; k < steps && k < *rank; k++) {
+        int best = k;
+        double most = -1.0;
+        for (int e = k; e < m; e++) {
+            double n2 = 0.0;
+            for (int c = k; c < nh; c++) n2 += B[(size_t)e * nh + c] * B[(size_t)e * nh + c];
+            if (n2 > most) most = n2, best = e;
+        }
+        if (best != k) {
+            for (int c = 0; c < nh; c++) {
+                double x = B[(size_t)k * nh + c];
+                B[(size_t)k * nh + c] = B[(size_t)best * nh + c];
+                B[(size_t)best * nh + c] = x;
+            }
+            int x = perm[k];
+            perm[k] = perm[best];
+            perm[best] = x;
+        }
+        double *v = B + (size_t)k * nh, norm = sqrt(most);
+        if (!(norm > 0.0)) break;
+        double alpha = v[k] > 0.0 ? -norm : norm, vk = v[k] - alpha, vv = vk * vk;
+        for (int c = k + 1; c < nh; c++) vv += v[c] * v[c];
+        for (int e = k + 1; e < m && vv > 0.0; e++) { /* H = I - 2 u u^T / u^T u, u = (vk, v[k+1:]) */
+            double *w = B + (size_t)e * nh, dot = vk * w[k];
+            for (int c = k + 1; c < nh; c++) dot += v[c] * w[c];
+            double f = 2.0 * dot / vv;
+            w[k] -= f * vk;
+            for (int c = k + 1; c < nh; c++) w[c] -= f * v[c];
+        }
+        v[k] = alpha;
+        for (int c = k + 1; c < nh; c++) v[c] = 0.0;
+    }
+    for (int e = 0; e < m; e++) kept[e] = 0;
+    for (int k = 0; k < *rank; k++) kept[perm[k]] = 1;
+    return OVK_OK;
+}

@@ -140,7 +140,7 @@ def model_file(model, solver, table, guid: str, messages=()) -> bytes:
     w.i(*(getattr(cm, n) for n in INT_FIELDS))
     w.d(cm.baumgarte, cm.tol)
     for name, _ in cm._fields_:
-        if name in INT_FIELDS or name in ("baumgarte", "tol"):
+        if name in INT_FIELDS or name in ("baumgarte", "tol", "formulation"):  # formulation: eliminated (0) here
             continue
         (w.doubles if name in DOUBLE_FIELDS else w.ints)(by_address[getattr(cm, name)])
     w.i(model.n, model.nh, int(model.rotation == "quaternion"))

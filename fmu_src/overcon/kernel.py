@@ -249,8 +249,7 @@ class Kernel:
 
     def __init__(self, lib, model, solver):
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
-        self._rows_fn = lib.ovk_rows
-        self._project_fn = lib.ovk_project
+        self._rows_fn, self._project_fn = lib.ovk_rows, lib.ovk_project
         self._lib_robust = lib.ovk_evaluate_robust
         plan = model.plan
         I32 = np.int32

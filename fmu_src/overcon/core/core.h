@@ -336,7 +336,9 @@ enum { OVK_AL_SLOT_BASE, OVK_AL_SLOT_RHS, OVK_AL_SLOT_X, OVK_AL_SLOT_UNIT, OVK_A
        OVK_AL_SLOT_ZERO, OVK_AL_SLOT_P1, OVK_AL_SLOT_P2, OVK_AL_SLOT_P3, OVK_AL_SLOT_PR1, OVK_AL_SLOT_PR2,
        OVK_AL_SLOT_END };
 OVK_HIDDEN double *ovk_al_slot(const ovk_model *M, const ovk_data *d, int which);
-OVK_HIDDEN int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs);
+#define OVK_AL_ALPHA_PROJ 1e6 /* the projections' penalty, relative to M over J^T J (kkt_al.c) */
+#define OVK_PROJ_SLACK 10.0   /* project.c: |Phi| up to this times tol is accepted once the corrections stall */
+OVK_HIDDEN int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double alpha_rel);
 OVK_HIDDEN void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const double *Q, const double *g,
                              double *x, double *lam);
 

@@ -14,11 +14,19 @@
  * residual left is in the directions that lose rank, where no acceleration can satisfy it: the
  * step-end projections of project.c take the state back onto the constraints).
  *
- * alpha (decided here): AL_ALPHA_REL times max_k M_kk / max_k (J_R^T J_R)_kk, with M's scale
- * (kg, kg m^2) and the rows' (1 or m): alpha J_R^T J_R then outweighs M by about AL_ALPHA_REL,
- * so a direction of S whose eigenvalue is 1e-3 of the largest gains 3 digits an iteration, while
- * the condition number of the leading matrix (about AL_ALPHA_REL) costs at most 6 of the 16 digits
- * in one solve, which the iteration on lam recovers in the constraint residual.
+ * alpha (decided here): alpha_rel times max_k M_kk / max_k (J^T J)_kk, with M's scale (kg,
+ * kg m^2) and the rows' (1 or m): alpha J^T J then outweighs M by about alpha_rel. A direction of
+ * S whose eigenvalue is a fraction f of the largest contracts by 1 / (1 + alpha_rel f) an
+ * iteration, while the leading matrix's condition number (about alpha_rel) costs digits of the
+ * result. The acceleration solve takes AL_ALPHA_DYN = 1e5: its result is the evaluation's y', so
+ * its round-off matters (measured on six friction scenes: lam within about 1e-11 of the eliminated
+ * form's, relative; with 1e6 it was 2e-10, and the round-off of y' showed as energy noise that kept
+ * dopri5 at tolerance 1e-12 from converging); it only stalls near a singular position, where the
+ * projections finish the work. The projections (project.c) take OVK_AL_ALPHA_PROJ = 1e6: they
+ * solve for small corrections, whose round-off is relative to the correction; a larger alpha
+ * corrects the directions that lose rank harder, which measured worse (N-four-bar N = 2 at
+ * tolerance 1e-12: B0's x 5e-5 m off the 1-DOF motion after 4 s with 1e8, 3e-7 m with 1e6), a
+ * smaller one (1e5) leaves the positions short of the constraints there.
  *
  * Structure: M is diagonal and each kept row touches at most two bodies (rbody), so the leading
  * matrix is banded in body order with half bandwidth (max |b_i - b_j| + 1) nh_b - 1 (ovk_al_half_band):
@@ -30,9 +38,9 @@
 
 #include "core.h"
 
-#define AL_ALPHA_REL 1e6
+#define AL_ALPHA_DYN 1e5  /* alpha of the acceleration solve, relative (file header) */
 #define AL_TOL 1e-13      /* residual / scale at which the iteration stops */
-#define AL_MAX_ITER 60    /* iterations at most (a regular position needs 3-6) */
+#define AL_MAX_ITER 100   /* iterations at most (a regular position needs 3-10) */
 #define AL_STALL 0.5      /* after 3 iterations, a residual that falls by less than this factor has stalled */
 
 /* The half bandwidth of M + alpha J^T J for any set of rows: every joint's two bodies (a row
@@ -130,7 +138,7 @@ static void rows_t_add(const ovk_model *M, const ovk_data *d, const ovk_rowset *
 /* The band factor of M + alpha J^T J of the rows rs in d->J (band row k holds columns k..k+p,
  * then its Cholesky factor U, A = U^T U). OVK_NONFINITE on a non-finite entry; OVK_SINGULAR if a
  * pivot is not positive (M is positive definite, so only round-off beyond repair does that). */
-int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs) {
+int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double alpha_rel) {
     int nh = M->nb * M->nh_b, kh = M->nh_b, p = ovk_al_half_band(M), w = p + 1;
     double *A = d->al;
     d->al_band = p;
@@ -155,7 +163,7 @@ int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs) {
     }
     for (int k = 0; k < nh; k++)
         if (A[(size_t)k * w] > jmax) jmax = A[(size_t)k * w];
-    d->al_alpha = jmax > 0.0 ? AL_ALPHA_REL * mmax / jmax : 0.0;
+    d->al_alpha = jmax > 0.0 ? alpha_rel * mmax / jmax : 0.0;
     for (size_t e = 0; e < (size_t)nh * w; e++) A[e] *= d->al_alpha;
     for (int k = 0; k < nh; k++) A[(size_t)k * w] += 1.0 / M->Minv[k];
     for (size_t e = 0; e < (size_t)nh * w; e++)
@@ -238,7 +246,7 @@ void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const d
  * d->Q and d->g. The same statuses, but never OVK_SINGULAR at a singular position. */
 int ovk_kkt_al_solve(const ovk_model *M, ovk_data *d) {
     ovk_rowset kept = ovk_al_kept(M);
-    int status = ovk_al_factor(M, d, &kept);
+    int status = ovk_al_factor(M, d, &kept, AL_ALPHA_DYN);
     if (status) return status;
     ovk_al_solve(M, d, &kept, d->Q, d->g, slot(M, d, SLOT_X), d->lamR);
     for (int i = 0; i < M->nR; i++)

@@ -137,7 +137,7 @@ def measure(n: int, tmp: Path, stop: float, c_max: int) -> dict:
             "us_eval": eval_cost(model, spec.solver, py["states"])}
 
 
-def plot(rows: list[dict], path: Path) -> None:
+def plot(rows: list[dict], path: Path, stop: float) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -151,7 +151,7 @@ def plot(rows: list[dict], path: Path) -> None:
         ax.loglog(ns, core[0] * (ns / ns[0]) ** slope, "k" + style, lw=0.8, label=f"slope {slope}")
     ax.set_xlabel("N (loops)")
     ax.set_ylabel("microseconds per evaluation")
-    ax.set_title("N-four-bar, singular = \"pass\", 20 s, tolerance 1e-9")
+    ax.set_title(f"N-four-bar, singular = \"pass\", 0-{stop:g} s, tolerance 1e-9")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", lw=0.3)
     fig.tight_layout()
@@ -183,7 +183,7 @@ def main(argv=None) -> int:
                   f"{py['watch']:>7.2f} {py['project']:>6.2f} {c_wall:>7} {r['us_eval']:>8.1f} "
                   f"{py['wall'] / py['evaluations'] * 1e6:>8.1f}", flush=True)
     if args.plot:
-        plot(rows, args.plot)
+        plot(rows, args.plot, args.stop_time)
     return 0
 
 

@@ -252,12 +252,3 @@ def test_simulate_singular_flag_events_and_refusals(tmp_path, capsys):
     bad.write_text(path.read_text().replace("[solver]", '[solver]\nsingular = "maybe"'))
     assert main(["simulate", str(bad), "--out", str(out)]) == 2
     assert "solver.singular" in capsys.readouterr().err
-
-
-@pytest.mark.parametrize("n", [2, 10, 40])
-def test_the_example_scenes_are_the_generators(n, tmp_path):
-    """mechanisms/examples/nfourbar_<N>.toml and _scene.toml (N = 2, 10, 40: the benchmark's data,
-    passing its singular positions) are what ``nfourbar.py N --singular pass`` writes."""
-    mech, scene = _nfourbar().write(n, tmp_path, singular="pass")
-    assert (MECH / "examples" / mech.name).read_text() == mech.read_text()
-    assert (MECH / "examples" / scene.name).read_text() == scene.read_text()

@@ -5,7 +5,8 @@
 # prismatic, cylindrical and spherical joints, a chain of every spatial joint type, runs with every integrator
 # (dopri5, rk4, dop853, radau), damped-Newton states and every failure
 # status, and runs stopped by the singularity watch of core/watch.c: a singular position located inside a
-# step, an expired and a degrading elimination), then tests/c_core/driver.c, compiled with the core's sources and the sanitizers, runs
+# step, an expired and a degrading elimination; formulation AL: evaluations at a singular position, projections
+# (ovk_project) and a run passing a singular position), then tests/c_core/driver.c, compiled with the core's sources and the sanitizers, runs
 # every case 20 times in two workspaces and requires the same bits, statuses and messages. Any
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.
 # Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmi2_*.c over the core),

@@ -20,7 +20,7 @@ import time
 
 from .argtypes import count as _jobs
 from .simulate import MAX_STEPS, MAX_WALL_TIME
-from .spec import KERNELS, METHODS
+from .spec import KERNELS, METHODS, SINGULAR
 from .verdict import LOCKSTEP_STEP
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
@@ -65,6 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", choices=METHODS, help="integrator")
     s.add_argument("--kernel", choices=KERNELS,
                    help="right-hand side: auto (the compiled kernel where it covers the model), c, numpy")
+    s.add_argument("--singular", choices=SINGULAR,
+                   help="at a singular position of the mechanism: stop (default; exit 3) or pass (augmented "
+                        "Lagrangian with projections, compiled kernel; a 'singular' event is recorded)")
     s.add_argument("--step", type=_number, metavar="H", help=f"rk4 step ({_range('solver.step')})")
     s.add_argument("--max-step", type=_number, metavar="H",
                    help=f"largest step of the adaptive methods ({_range('solver.max_step')})")
@@ -251,7 +254,7 @@ def _load(args):
     return spec, compile_checked(spec, eliminate_field="scene.eliminate" if args.eliminate is None else "--eliminate")
 
 
-SOLVER_FLAGS = ("method", "tolerance", "step", "max_step", "output_interval", "kernel")
+SOLVER_FLAGS = ("method", "tolerance", "step", "max_step", "output_interval", "kernel", "singular")
 """``simulate`` flags that override the scene's [solver] table (checked by overcon.params)."""
 
 
@@ -272,6 +275,9 @@ def cmd_check(args) -> int:
     why = refusal(model, spec.solver)
     if why is not None:
         return _input_error(f"{args.file}: solver.kernel = 'c': the compiled kernel cannot run: {why}", args)
+    from .kernel import singular_refusal
+    if (why := singular_refusal(model, spec.solver)) is not None:
+        return _input_error(f"{args.file}: {why}", args)
     report = precheck(model, args.file, args.methods)
     path = None if args.along is None else _along(args, spec, model)
     if isinstance(path, int):
@@ -323,6 +329,9 @@ def cmd_simulate(args) -> int:
     if why is not None:
         where = "--kernel c" if args.kernel else f"{args.file}: solver.kernel = 'c'"
         return _input_error(f"{where}: the compiled kernel cannot run: {why}")
+    from .kernel import singular_refusal
+    if (why := singular_refusal(model, spec.solver, here=True)) is not None:
+        return _input_error(f"{'--singular pass' if args.singular else args.file}: {why}")
     start = time.perf_counter()
     try:
         with single_threaded_blas():

@@ -50,14 +50,20 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 8  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
+ABI = 9  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
 MAX_FRICTION = 32  # OVK_MAX_FRICTION in core/core.h
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
           7: "invalid model or argument", 8: "step size too small", 9: "stiffness detected",
           10: "rk4 step unstable", 11: "work budget exhausted", 12: "singular position (monitor)",
-          13: "time does not advance", 14: "elimination expired where it decides the motion"}
+          13: "time does not advance", 14: "elimination expired where it decides the motion",
+          15: "projection onto the constraints did not converge"}
+FORMULATIONS = {"stop": 0, "pass": 1}
+"""``solver.singular`` -> ``ovk_model.formulation``: the eliminated form's Cholesky of S (kkt.c), or
+the augmented Lagrangian solve of the kept rows with step-end projections (kkt_al.c, project.c)."""
+PROJECTION_TOL = 1e-11  # m or rad: OVK_PROJ_TOL of core/core.h, the step-end projection's max |Phi|
+PROJECTION_MAX_ITER = 20  # OVK_PROJ_MAX_ITER of core/core.h: its position corrections at most
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
@@ -83,8 +89,8 @@ LIBRARY = Path(__file__).resolve().parent / "core" / f"libovercore{_shared_suffi
 class KernelUnavailable(RuntimeError):
     """``kernel = "c"`` was asked for and the kernel cannot run (the message says why)."""
 
-    def __init__(self, reason: str):
-        super().__init__(f"solver.kernel = 'c': {reason}")
+    def __init__(self, reason: str, setting: str = "solver.kernel = 'c'"):
+        super().__init__(f"{setting}: {reason}")
 
 
 # ----------------------------------------------------------------------------- the library
@@ -104,6 +110,7 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_evaluate", i, [vp, vp, ctypes.c_double, vp, i, vp, vp, vp, vp, vp, vp]),
                             ("ovk_outputs", i, [vp] * 6), ("ovk_rows", i, [vp] * 6),
                             ("ovk_evaluate_robust", i, [vp] * 8),
+                            ("ovk_project", i, [vp, vp, ctypes.c_double, vp, ctypes.c_double, i, vp]),
                             ("ovk_sim_new", vp, [vp, vp, ctypes.c_double, vp]), ("ovk_sim_free", None, [vp]),
                             ("ovk_sim_status", i, [vp]), ("ovk_sim_message", ctypes.c_char_p, [vp]),
                             ("ovk_sim_step", i, [vp]),
@@ -199,7 +206,8 @@ class _CModel(ctypes.Structure):
                                                   "lbj", "lp", "xrows", "cols", "fj", "fgroup", "fx", "fci", "fcj",
                                                   "rbody")]
                 + [(n, ctypes.c_int) for n in REDUNDANCY_COUNTS]
-                + [(n, ctypes.c_void_p) for n in REDUNDANCY_ARRAYS])
+                + [(n, ctypes.c_void_p) for n in REDUNDANCY_ARRAYS]
+                + [("formulation", ctypes.c_int)])
 
 
 _REDUNDANCY = {"eliminate": 0, "min-norm": 1, "compliant": 2}
@@ -301,7 +309,7 @@ class Kernel:
 
     def __init__(self, lib, model, solver, watch=None):  # watch: see _redundancy_block (a C run's)
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
-        self._rows_fn = lib.ovk_rows
+        self._rows_fn, self._project_fn = lib.ovk_rows, lib.ovk_project
         self._lib_unique = lib.ovk_unique
         self._lib_robust = lib.ovk_evaluate_robust
         plan = model.plan
@@ -333,7 +341,8 @@ class Kernel:
         m = _CModel(dim=model.dim, nb=model.nb, nq_b=model.nq_b, nh_b=nh_b, m=model.m, nR=len(model.retained),
                     nj=len(joints), nl=len(model.loads), nx=0, ncols=len(plan.friction_cols),
                     nfj=len(fj), nfg=len(plan.friction), max_iter=solver.friction_max_iter,
-                    baumgarte=solver.baumgarte, tol=solver.friction_tol)
+                    baumgarte=solver.baumgarte, tol=solver.friction_tol,
+                    formulation=FORMULATIONS[getattr(solver, "singular", "stop")])
         m.retained = arr(model.retained, I32)
         m.Minv, m.mass = arr(model.Minv, float), arr(model.mass, float)
         m.inertia = arr(model.inertia if model.kind == "spatial" else np.zeros((model.nb, 3)), float)
@@ -501,6 +510,23 @@ class Kernel:
         return phi, J, gam
 
 
+    def project(self, t: float, y: np.ndarray, tol: float = PROJECTION_TOL, max_iter: int = PROJECTION_MAX_ITER):
+        """(y projected onto every constraint equation, max |Phi| left) (core/project.c: positions then
+        velocities, mass-orthogonal); t (s) names the instant in the message. Raises
+        :class:`ProjectionFailed` with the core's message when the positions do not reach ``tol``."""
+        out = np.ascontiguousarray(y, float).copy()
+        drift = ctypes.c_double(0.0)
+        status = self._project_fn(self._pm, self._data, t, out.ctypes.data, tol, max_iter, ctypes.byref(drift))
+        self.last_status = status
+        if status:
+            raise ProjectionFailed(self._message())
+        return out, drift.value
+
+
+class ProjectionFailed(ArithmeticError):
+    """The step-end projection (core/project.c) could not take the state onto the constraints."""
+
+
 def _unavailable(model) -> str | None:
     """Why the kernel cannot run ``model`` in this process (not covered, or no library), or None."""
     why = support(model)
@@ -521,13 +547,32 @@ def refusal(model, solver, *, here: bool = False) -> str | None:
     return _unavailable(model) if here else support(model)
 
 
+def singular_refusal(model, solver, *, here: bool = False) -> str | None:
+    """Why ``solver.singular = "pass"`` cannot run (it needs the compiled kernel: the numpy path has
+    only the eliminated form), as a whole sentence, or None; ``here`` as :func:`refusal`."""
+    if getattr(solver, "singular", "stop") != "pass":
+        return None
+    if getattr(solver, "kernel", "auto") == "numpy":
+        return ("solver.singular = 'pass' runs on the compiled kernel (core/kkt_al.c, core/project.c), not with "
+                "solver.kernel = 'numpy'")
+    why = _unavailable(model) if here else support(model)
+    return None if why is None else f"solver.singular = 'pass' needs the compiled kernel, which cannot run: {why}"
+
+
 def select(model, solver):
     """(a :class:`Kernel` or None, a note saying which path runs and why) for ``solver.kernel``;
     raises :class:`KernelUnavailable` for ``"c"`` when the kernel cannot run."""
     choice = getattr(solver, "kernel", "auto")
+    passing = getattr(solver, "singular", "stop") == "pass"
     if choice == "numpy":
+        if passing:
+            raise KernelUnavailable("it runs on the compiled kernel (the augmented Lagrangian solve and projections of "
+                                    "core/kkt_al.c, core/project.c), not with solver.kernel = 'numpy'",
+                                    "solver.singular = 'pass'")
         return None, "right-hand side: numpy (solver.kernel = 'numpy')"
     why = _unavailable(model)
+    if why is not None and passing:
+        raise KernelUnavailable(f"it needs the compiled kernel: {why}", "solver.singular = 'pass'")
     if why is not None:
         if choice == "c":
             raise KernelUnavailable(why)
@@ -544,7 +589,7 @@ the integration tolerance)."""
 EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
 """The kinds of a run's events, in the order of core/core.h's OVK_EV_* (overcon.simulate.EVENT_KINDS)."""
 INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_drift", "min_ratio", "stiff_steps",
-        "stable_step", "wall_time")
+        "stable_step", "wall_time", "singular_passed", "last_singular", "projection_drift")
 """The entries of ovk_sim_info, in order (core/sim.c)."""
 
 

@@ -39,6 +39,7 @@ bounds the work of one evaluation.
 
 ``solver.method`` one of :data:`overcon.spec.METHODS`.
 ``solver.kernel`` one of :data:`overcon.spec.KERNELS` (:mod:`overcon.kernel`).
+``solver.singular`` one of :data:`overcon.spec.SINGULAR` (stop at, or pass, a singular position).
 
 Friction (per joint): ``mu`` in [0, 1e6] and ``mu_static`` >= ``mu`` (1; 1e6 is far beyond any
 physical coefficient, and larger values overflow the friction solve into non-finite forces), ``v_reg`` > 0 and
@@ -60,7 +61,7 @@ import math
 from dataclasses import dataclass
 from numbers import Integral, Real
 
-from .spec import KERNELS, METHODS, SolverSpec
+from .spec import KERNELS, METHODS, SINGULAR, SolverSpec
 
 MAX_OUTPUT_POINTS = 1_000_000
 """Largest number of output points (stop - start) / output_interval + 1."""
@@ -115,6 +116,7 @@ class Rule:
 RULES: dict[str, Rule] = {
     "solver.method": Rule("choice", choices=METHODS),
     "solver.kernel": Rule("choice", choices=KERNELS),
+    "solver.singular": Rule("choice", choices=SINGULAR),
     "solver.tolerance": Rule("real", 1e-14, 1e-2, unit="1",
                              why="below 1e-14 the error test is under double-precision round-off and the "
                                  "step size collapses; above 1e-2 the error exceeds 1 m"),

@@ -135,7 +135,7 @@ class Simulation:
         try:
             self._integrator = integrators.create(self.method, self._rhs, t0, y0, dense_fun=self._rhs_dense,
                                                   **self.settings)
-            self.monitor = SingularityMonitor(model, y0, t0, jac=self._jacobian_source())
+            self.monitor = SingularityMonitor(model, y0, t0, jac=self._jacobian_source(), passing=self._passing())
             self.along = Uniqueness(model, y0, self._kernel)
             self._work = _WorkLedger(t0, self._powers(t0, y0)) if model.energy_outputs else None
         except (ArithmeticError, np.linalg.LinAlgError) as exc:
@@ -155,10 +155,42 @@ class Simulation:
             r = self._kernel.evaluate(t, y, lam_guess, qf_guess)
             if r is not None:
                 return r, None
+            if self.solver.singular == "pass":  # the numpy path has only the eliminated form
+                return self._core_only(t, y, lam_guess), None
             self.kernel_repeats += 1
             failed = self._kernel.newton_failed()
         return None, evaluate(self.model, t, y[: self.n], y[self.n:], lam_guess, solver=self.solver,
                               qf_guess=qf_guess, newton_failed=failed)
+
+    def _core_only(self, t: float, y: np.ndarray, lam_guess):
+        """Under ``solver.singular = "pass"``, an evaluation the core handed back: the friction solve
+        finished by the core's robust path (as the numpy path's), any other status stops the step
+        with the core's message."""
+        kernel = self._kernel
+        if kernel.last_status == 2:
+            r = kernel.evaluate_robust(y, lam_guess)
+            if r is not None:
+                return r
+        raise ArithmeticError(f"t = {t:.9g} s: {kernel.last_message} (compiled core, solver.singular = 'pass')")
+
+    def _passing(self):
+        """The watch's ``passing`` hook for ``solver.singular = "pass"`` (a ``singular`` event), else None."""
+        if self.solver.singular != "pass":
+            return None
+        return lambda t, detail: self.events.append((t, "singular", detail))
+
+    def _project(self, itg) -> None:
+        """``solver.singular = "pass"``, after an accepted step: the state projected onto the
+        constraints (every equation), mass-orthogonally (positions, then velocities: core/project.c through
+        :meth:`overcon.kernel.Kernel.project`), and the integrator's last derivative (the FSAL
+        stage of dopri5, the start of rk4's next step) evaluated again there. The dense output of
+        the step keeps the unprojected end (within the drift, <= 1e-9 m at tolerance 1e-9)."""
+        try:
+            y, _ = self._kernel.project(itg.t, itg.y)
+        except kernel_mod.ProjectionFailed as exc:
+            raise ArithmeticError(str(exc)) from None
+        itg.y = y
+        itg.f = self._rhs(itg.t, y)
 
     def _evaluate(self, t: float, y: np.ndarray, lam_guess, qf_guess):
         """(y', lam, qf, friction iterations) at (t, y) (:meth:`_solve`; the numpy path adds the
@@ -227,6 +259,8 @@ class Simulation:
         itg.step()
         if not itg.t > t_before:
             raise SimulationError(f"t = {t_before:.9g} s: time does not advance (step below the resolution of t)")
+        if self.solver.singular == "pass":
+            self._project(itg)
         if not self._watch(itg):
             return  # the step is taken again from its start, under another elimination
         if self.monitor.ratio < ALONG_RATIO:  # only there can the rank or a verdict change (watch.Uniqueness)
@@ -368,7 +402,7 @@ class Simulation:
         self.model = model
         self._kernel, self.kernel_note = kernel_mod.select(model, self.solver)
         self._derived = _DerivedPlan(model)
-        self.monitor = SingularityMonitor(model, y, t, jac=self._jacobian_source())
+        self.monitor = SingularityMonitor(model, y, t, jac=self._jacobian_source(), passing=self._passing())
         if hasattr(self, "along"):  # the verdicts do not depend on the elimination: kept
             self.along.model, self.along.kernel = model, self._kernel
 

@@ -105,6 +105,13 @@ integration), B ``regularised`` (mu*clip(v/v_reg, -1, 1), the paper's choice), C
 
 METHODS = ("dopri5", "dop853", "rk4", "radau")
 KERNELS = ("auto", "c", "numpy")
+SINGULAR = ("stop", "pass")
+"""``[solver] singular``: what a run does at a singular position of the mechanism (its constraint
+Jacobian loses rank). ``"stop"`` (default): the paper's eliminated form; the run stops there (exit 3).
+``"pass"``: the augmented Lagrangian formulation over the kept equations with mass-orthogonal
+projections after every step (core/kkt_al.c, core/project.c; compiled kernel only): the run goes
+through and records a ``singular`` event; where the rank is regular its multipliers are the
+eliminated form's (README, "Singular positions")."""
 """Values of the solver setting ``kernel`` (:mod:`overcon.kernel`)."""
 """Integrators offered (see :mod:`overcon.integrators`): adaptive explicit ``dopri5`` and
 ``dop853``, fixed-step ``rk4``, implicit (stiff) ``radau``."""
@@ -210,7 +217,8 @@ class SolverSpec:
     tolerance of the adaptive methods dopri5, dop853, radau; for ``rk4`` it is unused). ``step`` is the fixed step of
     ``rk4`` (s). ``baumgarte`` is the constraint-stabilisation frequency (1/s, 0 disables).
     ``friction_tol``/``friction_max_iter`` control the friction solve. ``kernel`` picks the
-    right-hand side's implementation, one of :data:`KERNELS` (:mod:`overcon.kernel`). Defaults from the
+    right-hand side's implementation, one of :data:`KERNELS` (:mod:`overcon.kernel`). ``singular``:
+    stop at or pass a singular position, one of :data:`SINGULAR`. Defaults from the
     measurements in docs/benchmarks.md: dopri5 at 1e-9 reaches about 1e-7 m with friction (at 1e-8
     only about 2e-6 m: the kink of the regularised friction law spoils the error estimate)."""
 
@@ -223,6 +231,7 @@ class SolverSpec:
     friction_max_iter: int = 50
     max_step: float = 0.05
     kernel: str = "auto"
+    singular: str = "stop"
 
 
 REDUNDANCY_METHODS = ("eliminate", "min-norm", "compliant")

@@ -22,7 +22,8 @@ Which singular position (decided here): at the instant found, the whole Jacobian
 equation, the same weighting) is judged too. If it keeps the rank the kept equations had at the
 start, the mechanism is regular there and only the kept set lost rank: :class:`EliminationExpired`
 (the caller may choose another set and go on). Else the mechanism itself is singular:
-:class:`SingularPosition`. Under min-norm, an expired watch subset is chosen again silently (the
+:class:`SingularPosition`, or, for a run that passes singular positions (``solver.singular =
+"pass"``), a ``singular`` event handed to the run, which goes on. Under min-norm, an expired watch subset is chosen again silently (the
 dynamics never used it).
 """
 from __future__ import annotations
@@ -121,10 +122,14 @@ class SingularityMonitor:
     """The watch (module docstring) over one run. :meth:`check` after every accepted step;
     ``min_ratio`` is the smallest r seen (step ends and located minima)."""
 
-    def __init__(self, model, y: np.ndarray, t0: float, ratio_tol: float = 1e-6, jac=None):
+    def __init__(self, model, y: np.ndarray, t0: float, ratio_tol: float = 1e-6, jac=None, passing=None):
         """``jac(model, y)``: Phi_h at y (the compiled core's rows where a run has it; default
-        :func:`numpy_jacobian`)."""
-        self.model, self.ratio_tol, self.jac = model, ratio_tol, jac
+        :func:`numpy_jacobian`). ``passing(t, message)``: given by a run that passes singular
+        positions (``solver.singular = "pass"``): a singular position of the mechanism is handed
+        to it, once per passage (the located minimum, else the first step end below ``ratio_tol``),
+        instead of raising :class:`SingularPosition`."""
+        self.model, self.ratio_tol, self.jac, self.passing = model, ratio_tol, jac, passing
+        self._below = False  # passing: r was below ratio_tol at the last step end (the same passage)
         self.rows = self._watched_rows(model, y)
         self.full_rows = self._rigid_rows(model)
         self.kept_rank = len(self.rows)  # the kept equations are independent at the start
@@ -151,10 +156,11 @@ class SingularityMonitor:
         return np.asarray(model.retained, int)
 
     def state(self) -> tuple:
-        return (self.rows.copy(), self.t_prev, self.rate, self.min_ratio, self.ratio)
+        return (self.rows.copy(), self.t_prev, self.rate, self.min_ratio, self.ratio, self._below)
 
     def set_state(self, s: tuple) -> None:
-        rows, self.t_prev, self.rate, self.min_ratio, self.ratio = s
+        rows, self.t_prev, self.rate, self.min_ratio, self.ratio = s[:5]
+        self._below = bool(s[5]) if len(s) > 5 else False
         self.rows = np.asarray(rows, int).copy()
 
     def check(self, t: float, y: np.ndarray, dense=None, qdot=None) -> bool:
@@ -166,11 +172,13 @@ class SingularityMonitor:
             return False
         r, rate = ratio_and_rate(self.model, y, self.rows, self.jac, qdot)
         self.ratio = r
+        seen = self._below
         if self.rate < 0.0 < rate and dense is not None and t > self.t_prev:
             t_min, r_min = self._minimum(dense, self.t_prev, t)
             if r_min < r:
-                self._judge(t_min, r_min, dense(t_min), self.t_prev, passed=(self.t_prev, t))
-        self._judge(t, r, y, self.t_prev)
+                seen = self._judge(t_min, r_min, dense(t_min), self.t_prev, passed=(self.t_prev, t), seen=seen)
+        self._judge(t, r, y, self.t_prev, seen=seen)
+        self._below = r < self.ratio_tol
         self.t_prev, self.rate = t, rate
         return self._degrading(r, y)
 
@@ -222,13 +230,20 @@ class SingularityMonitor:
                 fd = f(d)
         return (c, fc) if fc < fd else (d, fd)
 
-    def _judge(self, t: float, r: float, y: np.ndarray, t_step: float, passed=None) -> None:
+    def _judge(self, t: float, r: float, y: np.ndarray, t_step: float, passed=None, seen: bool = False) -> bool:
+        """Raise as the module docstring says; under ``passing``, return whether this passage of a
+        singular position has been handed over (``seen``: already, by an earlier judgement)."""
         self.min_ratio = min(self.min_ratio, r)
         if r >= self.ratio_tol:
-            return
+            return seen
         where = (f"t = {t:.9g} s: the motion passed a singular position (between the steps at "
                  f"t = {passed[0]:.9g} s and {passed[1]:.9g} s)" if passed else f"t = {t:.9g} s: singular position")
         full = numerical_rank(weighted_rows(self.model, y, self.full_rows, self.jac), self.ratio_tol)
+        if full < self.kept_rank and self.passing is not None:
+            if not seen:
+                self.passing(t, f"{where}: the mechanism's constraint Jacobian is rank deficient (rank {full} < "
+                                f"{self.kept_rank}; kept equations' sigma_min/sigma_max {shown_ratio(r)}): passed")
+            return True
         if full < self.kept_rank:
             raise SingularPosition(
                 f"{where}: the mechanism's constraint Jacobian is rank deficient (rank {full} < {self.kept_rank}; "
@@ -236,7 +251,7 @@ class SingularityMonitor:
         if self.model.elimination_mode == "min-norm":  # the watched subset expired, the dynamics never used it
             from .analysis import independent_columns
             self.rows = np.array(independent_columns(_full_jacobian(self.model, y)), int)
-            return
+            return seen
         raise EliminationExpired(
             f"{where}: the kept equations are no longer independent (their sigma_min/sigma_max {shown_ratio(r)}, "
             f"below {self.ratio_tol:g}), while the mechanism is regular there (all equations keep rank {full}): the "

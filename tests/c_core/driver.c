@@ -119,6 +119,7 @@ static int read_model(reader *r, model_t *m) {
     M->axp = keep(m, r, D);
     M->watch = keep(m, r, I);
     M->full = keep(m, r, I);
+    M->formulation = rd_i32(r);
     if (r->bad) return 0;
     for (int w = 0; w < 2; w++) {
         m->d[w] = ovk_make_data(M);
@@ -265,6 +266,15 @@ static void refusals(model_t *m, tally *t) {
         OVK_INVALID)
         fail(t, "refusals: a refused workspace evaluated");
     ovk_free_data(d);
+    bad = m->M;
+    bad.formulation = 2;
+    d = ovk_make_data(&bad);
+    if (!d) { fail(t, "refusals: out of memory"); return; }
+    if (ovk_data_status(d) != OVK_INVALID || !ovk_message(d)[0]) fail(t, "refusals: formulation 2 accepted");
+    double drift = 0.0;
+    if (ovk_project(&bad, d, 0.0, &ydot_dummy, 1e-11, 20, &drift) != OVK_INVALID)
+        fail(t, "refusals: a refused workspace projected");
+    ovk_free_data(d);
     d = ovk_make_data(NULL);
     if (!d) { fail(t, "refusals: out of memory"); return; }
     if (ovk_data_status(d) != OVK_INVALID || !ovk_message(d)[0]) fail(t, "refusals: a null model accepted");
@@ -280,6 +290,9 @@ static void refusals(model_t *m, tally *t) {
             fail(t, "refusals: guess mode 3 accepted");
         if (ovk_evaluate(&m->M, m->d[0], 0.0, y, 1, NULL, yd, lam, qf, &its, &damped) != OVK_INVALID)
             fail(t, "refusals: guess mode 1 without a guess accepted");
+        double drift = 0.0;
+        if (ovk_project(&m->M, m->d[0], 0.0, y, 0.0, 20, &drift) != OVK_INVALID || !ovk_message(m->d[0])[0])
+            fail(t, "refusals: a projection with tolerance 0 accepted");
     } else {
         fail(t, "refusals: out of memory");
     }
@@ -337,6 +350,33 @@ static int run_sim(reader *r, model_t *m, tally *t) {
     return !r->bad;
 }
 
+/* A 'P' record: ovk_project in both workspaces, reps times; every call must give the installed
+ * core's status, state and drift bits. */
+static int run_projection(reader *r, model_t *m, int reps, tally *t) {
+    double tol;
+    rd(r, &tol, sizeof tol);
+    int max_iter = rd_i32(r), n_y = 0, n_o = 0, n_d = 0;
+    double *y0 = rd_array(r, sizeof(double), &n_y);
+    int want_status = rd_i32(r);
+    double *want_y = rd_array(r, sizeof(double), &n_o), *want_d = rd_array(r, sizeof(double), &n_d);
+    double *y = calloc((size_t)(n_y ? n_y : 1), sizeof(double));
+    for (int rep = 0; rep < reps && !r->bad && y; rep++)
+        for (int w = 0; w < 2; w++) {
+            memcpy(y, y0, sizeof(double) * (size_t)n_y);
+            double drift = -1.0;
+            int status = ovk_project(&m->M, m->d[w], 0.0, y, tol, max_iter, &drift);
+            if (status != want_status) fail(t, ovk_message(m->d[w]));
+            if (!status) {
+                compare(t, "project", "y", y, want_y, n_o < n_y ? n_o : n_y);
+                compare(t, "project", "drift", &drift, want_d, n_d < 1 ? n_d : 1);
+            }
+            t->calls++;
+        }
+    if (!y) r->bad = 2;
+    free(y0); free(want_y); free(want_d); free(y);
+    return !r->bad;
+}
+
 int main(int argc, char **argv) {
     if (argc < 2 || argc > 3) {
         fprintf(stderr, "usage: %s CASES [REPS]\n", argv[0]);
@@ -385,6 +425,8 @@ int main(int argc, char **argv) {
             run_evaluation(&r, &m, reps, &t);
         } else if (tag == 'R' && have_model) {
             run_sim(&r, &m, &t);
+        } else if (tag == 'P' && have_model) {
+            run_projection(&r, &m, reps, &t);
         } else {
             r.bad = 1;
         }

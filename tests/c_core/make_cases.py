@@ -26,7 +26,10 @@ for its success y' and lam, and for status 0 y', lam, qf, reactions, friction ou
 int32 length and float64 items). 'R' a run of the last model in C (core/sim.c): method, energy ledger (0/1), tolerance,
 max_step, step, end time, y0, then what the installed core's run gave: status, y at the end, the
 first 10 entries of ovk_sim_info (all but the wall time), reactions, friction outputs and energies at the end
-(a run the watch stops: its status and empty arrays).
+(a run the watch stops: its status and empty arrays). The model record ends with ovk_model's
+formulation (int32). 'P' a projection of the last model (ovk_project): tol (float64), max_iter
+(int32), y, then what the installed core gave: status, the projected y and the drift (empty on a
+failure).
 """
 from __future__ import annotations
 
@@ -74,12 +77,13 @@ class Writer:
                           + struct.pack("=2d", *(getattr(cm, n) for n in FLOATS)))
         red = set(kernel.REDUNDANCY_COUNTS + kernel.REDUNDANCY_ARRAYS)
         for name, ctype in cm._fields_:
-            if name in COUNTS or name in FLOATS or name in red:
+            if name in COUNTS or name in FLOATS or name in red or name == "formulation":
                 continue
             (self.doubles if name in DOUBLE_FIELDS else self.ints)(by_address[getattr(cm, name)])
         self.parts.append(struct.pack("=5i", *(getattr(cm, n) for n in kernel.REDUNDANCY_COUNTS)))
         for name in kernel.REDUNDANCY_ARRAYS:
             (self.doubles if name in kernel.REDUNDANCY_DOUBLES else self.ints)(by_address[getattr(cm, name)])
+        self.parts.append(struct.pack("=i", cm.formulation))
         self.kernel = k
         self.counts["models"] += 1
         return k
@@ -142,6 +146,21 @@ class Writer:
         self.counts["runs"] = self.counts.get("runs", 0) + 1
         return status
 
+    def projection(self, y, tol: float, max_iter: int) -> int:
+        """A 'P' record: ovk_project of the last model at y (core/project.c) and what it gave."""
+        k = self.kernel
+        try:
+            out, drift = k.project(0.0, y, tol, max_iter)
+        except kernel.ProjectionFailed:
+            out, drift = np.zeros(0), 0.0
+        self.parts.append(b"P" + struct.pack("=di", tol, max_iter))
+        self.doubles(y)
+        self.parts.append(struct.pack("=i", k.last_status))
+        self.doubles(out)
+        self.doubles([drift] if out.size else [])
+        self.counts["projections"] = self.counts.get("projections", 0) + 1
+        return k.last_status
+
     def write(self, path: Path):
         path.write_bytes(b"".join(self.parts))
 
@@ -198,8 +217,39 @@ def watch_stops(w: "Writer", tmp: Path) -> None:
         raise SystemExit("make_cases: the parallelogram with friction did not stop as its elimination expired")
 
 
+def singular_pass(w: "Writer", tmp: Path) -> None:
+    """Formulation AL (solver.singular = "pass": core/kkt_al.c, core/project.c): evaluations of a
+    friction scene and of the N-four-bar at its flat position (where S is singular), projections
+    of perturbed states (one that reaches the constraints, one that runs out of corrections), and
+    C runs through the N-four-bar's flat position (the watch passing it) and of a friction scene."""
+    import subprocess
+    subprocess.run([sys.executable, str(MECH / "examples" / "nfourbar.py"), "2", "--out", str(tmp / "al"),
+                    "--singular", "pass"], check=True, capture_output=True)
+    spec = scene_mod.as_scene(scene_mod.load(tmp / "al" / "nfourbar_2_scene.toml"), stop_time=1.0)
+    model = compile_checked(spec)
+    w.model(model, spec.solver)
+    flat = np.concatenate([model.q0, model.h0])
+    for b, name in enumerate(model.body_names):  # every link on the ground line: cranks along +x
+        i = int(name[-1])
+        flat[3 * b: 3 * b + 3] = (i + 0.5, 0.0, 0.0) if name.startswith("crank") else (i + 1.5, 0.0, 0.0)
+    if w.evaluation(flat) != 0:
+        raise SystemExit("make_cases: the AL evaluation at the N-four-bar's flat position failed")
+    rng = np.random.default_rng(5)
+    y = np.concatenate([model.q0, model.h0]) + 1e-4 * rng.standard_normal(model.n + model.nh)
+    if w.projection(y, 1e-11, 20) != 0 or w.projection(y + 0.1, 1e-11, 1) != 15:
+        raise SystemExit("make_cases: the projections did not give status 0 and 15")
+    if w.run(model, spec.solver, "dopri5", 1.0) != 0:
+        raise SystemExit("make_cases: the C run with singular = 'pass' did not pass the flat position")
+    spec = spec_of(MECH / "planar_f145_wo6.toml", singular="pass")
+    model = compile_checked(spec)
+    w.model(model, spec.solver)
+    random_states(w, model, 4, seed=11)
+    w.run(model, spec.solver, "dopri5", 0.2)
+
+
 def build(tmp: Path) -> Writer:
     w = Writer()
+    singular_pass(w, tmp)
     watch_stops(w, tmp)
     for name, n in (("planar_f145_wo6", 12), ("spatial_MN_wo5", 12), ("spatial_GH_wo9", 30), ("spatial_GHMN_wo18", 30)):
         spec = spec_of(MECH / f"{name}.toml")
@@ -300,6 +350,7 @@ def main(argv=None) -> int:
     st = w.counts["statuses"]
     missing = [s for s in (0, 1, 2, 3, 4, 5) if not st.get(s)]  # every status but out of memory
     if (missing or not w.counts["damped_ok"] or not w.counts.get("runs") or not w.counts.get("robust_ok")
+            or not w.counts.get("projections")
             or not w.counts.get("robust_failed")):
         print(f"make_cases: the cases lack statuses {missing} or a damped Newton that finished "
               f"({w.counts['damped_ok']}): {w.counts}", file=sys.stderr)

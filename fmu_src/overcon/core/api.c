@@ -49,6 +49,9 @@ static int check_model(const ovk_model *M, ovk_data *d) {
     if (M->nfj > OVK_MAX_FRICTION || M->nx > OVK_MAXEQ * M->nfj)
         return ovk_fail(d, OVK_INVALID, "model: %d friction joints with %d multipliers (the core takes at most %d "
                         "joints, %d multipliers each)", M->nfj, M->nx, OVK_MAX_FRICTION, OVK_MAXEQ);
+    if (M->formulation != OVK_FORM_ELIMINATED && M->formulation != OVK_FORM_AL)
+        return ovk_fail(d, OVK_INVALID, "model: formulation %d (0 eliminated, 1 augmented Lagrangian)",
+                        M->formulation);
     if (M->nR > M->m || M->ncols > M->nb * M->nh_b || M->max_iter < 1 || !(M->tol > 0.0) ||
         !(M->baumgarte >= 0.0))
         return ovk_fail(d, OVK_INVALID, "model: nR %d of m %d rows, %d friction columns of %d velocities, "
@@ -131,6 +134,14 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->red = p;
     p += ovk_redundancy_doubles(M);
     d->work = p;
+    d->al_band = ovk_al_half_band(M); /* the AL band and vectors: formulation AL and ovk_project */
+    d->al = calloc(ovk_al_doubles(M), sizeof(double));
+    d->al_rows = calloc(3 * m + 1, sizeof(int));
+    if (!d->al || !d->al_rows)
+        d->status = ovk_fail(d, OVK_NOMEM, "out of memory: the augmented Lagrangian workspace needs %zu bytes",
+                             ovk_al_doubles(M) * sizeof(double) + (3 * m + 1) * sizeof(int));
+    else
+        ovk_al_make_rows(M, d);
     return d;
 }
 
@@ -138,6 +149,8 @@ void ovk_free_data(ovk_data *d) {
     if (!d) return;
     free(d->mem);
     free(d->ctx);
+    free(d->al);
+    free(d->al_rows);
     free(d);
 }
 
@@ -168,7 +181,10 @@ int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int
     ovk_constraint_rows(M, d, q);
     ovk_kkt_rhs(M, d, h);
     if ((status = ovk_loads(M, d))) return status;
-    if ((status = M->redundancy == OVK_COMPLIANT ? ovk_compliant_solve(M, d, h) : ovk_kkt_solve(M, d))) return status;
+    status = M->redundancy == OVK_COMPLIANT       ? ovk_compliant_solve(M, d, h)
+             : M->formulation == OVK_FORM_AL          ? ovk_kkt_al_solve(M, d)
+                                                      : ovk_kkt_solve(M, d);
+    if (status) return status;
     if (M->nfj && (status = ovk_friction(M, d, guess_mode, guess, qf, iterations, damped))) {
         d->robust_ready = status == OVK_FRICTION;
         return status;

@@ -14,6 +14,8 @@
  *   kkt.c               the KKT solve with the scene's elimination (Cholesky of S) and h'
  *   kkt_minnorm.c       redundancy "min-norm": S^+ by a rank-revealing SVD in place of the Cholesky factor
  *   compliance.c        redundancy "compliant": spring-damper multipliers of compliant joints, rigid rest
+ *   kkt_al.c            formulation AL: the augmented Lagrangian solve of the kept rows (banded Cholesky)
+ *   project.c           formulation AL: mass-orthogonal projections of a state onto the constraints
  *   friction.c          friction laws, the reduced friction fixed point, Newton and damped Newton
  *   linalg.c            dense Cholesky and LU (fixed summation order, no BLAS)
  *   lu.c                complex LU with partial pivoting (radau's complex Newton matrix)
@@ -48,7 +50,7 @@
 
 #include <stddef.h>
 
-#define OVK_ABI 8 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+#define OVK_ABI 9 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
     OVK_OK = 0,
@@ -65,7 +67,8 @@ enum {
     OVK_BUDGET = 11,   /* simulation: the work budget (steps or wall time) ran out */
     OVK_SINGULAR_POSITION = 12, /* simulation: the kept Jacobian lost rank (singularity monitor) */
     OVK_STALLED = 13,  /* simulation: time does not advance, or the target was not reached */
-    OVK_ELIMINATION = 14 /* simulation: the elimination expired where it decides the motion (or no other is found) */
+    OVK_ELIMINATION = 14, /* simulation: the elimination expired where it decides the motion (or no other is found) */
+    OVK_PROJECTION = 15  /* project.c: the positions did not reach the constraints within the corrections allowed */
 };
 enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
@@ -84,6 +87,8 @@ enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 #define SIN_BETA_MIN 1e-3
 #define QUAT_NORM_RATE 1.0 /* overcon.kinematics.QUAT_NORM_RATE: the quaternion norm stabilisation (1/s) */
 #define OVK_MAX_FRICTION 32 /* friction joints (and OVK_MAXEQ x that multipliers): overcon.kernel.support checks */
+#define OVK_PROJ_TOL 1e-11   /* m or rad: max |Phi| a run's step-end projection reaches (overcon.kernel.PROJECTION_TOL) */
+#define OVK_PROJ_MAX_ITER 20 /* position corrections of that projection at most (overcon.kernel.PROJECTION_MAX_ITER) */
 #define OVK_MSG 1024        /* bytes of the failure message, with its terminating zero */
 
 #if defined(__GNUC__)
@@ -135,10 +140,12 @@ typedef struct {
                             * axes), k_t, d_t, k_r, d_r along its x, y, z */
     const int *watch;      /* nwatch: equations watched (SingularityMonitor.rows at the start) */
     const int *full;       /* nfull: equations of the whole Jacobian (the rigid ones) */
+    int formulation;       /* OVK_FORM_*: the acceleration solve (solver.singular: "stop" eliminated, "pass" AL) */
 } ovk_model;
 enum { OVK_ELIMINATE = 0, OVK_MIN_NORM = 1, OVK_COMPLIANT = 2 };
 #define OVK_NAXI 10 /* ints per per-axis compliant joint (axi) */
 #define OVK_NAXP 21 /* doubles per per-axis compliant joint (axp) */
+enum { OVK_FORM_ELIMINATED = 0, OVK_FORM_AL = 1 };
 
 /* Frames of the bodies, slot nb = the base. */
 typedef struct {
@@ -178,6 +185,12 @@ typedef struct {
     int status;    /* nonzero: the workspace could not be made (every call returns it) */
     char msg[OVK_MSG];
     double *red;   /* redundancy: scratch of kkt_minnorm.c / compliance.c (ovk_redundancy_doubles) */
+    double *al;    /* formulation AL: the band factor of M + alpha J_R^T J_R and the solve's vectors (kkt_al.c) */
+    double al_alpha; /* the penalty alpha of the last factorisation (kg for unit-length rows; kkt_al.c) */
+    int al_band;   /* the half bandwidth of M + alpha J_R^T J_R in velocity coordinates */
+    int al_iterations; /* AL iterations of the last solve; al_stalled: it stopped on stagnation, not on tol */
+    int al_stalled;
+    int *al_rows;  /* every equation (m), then its two bodies (2 m): the row set of ovk_project */
 } ovk_data;
 
 /* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, dop853, rk4);
@@ -291,8 +304,11 @@ typedef struct {
     double *y0;                    /* ny: the initial state (eliminations valid at the start and later) */
     int degrading;                 /* the step just accepted found the elimination degrading */
     double expired_t;              /* the instant the kept set expired (its state in ystar) */
+    long long singular_passed;     /* formulation AL: singular positions the watch found and the run passed */
+    double last_singular;          /* the time of the last of them (s; 0 while none) */
+    double proj_drift;             /* formulation AL: max |Phi| after the step-end projections */
 } ovk_sim;
-#define OVK_SIM_NINFO 11
+#define OVK_SIM_NINFO 14
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
                              double *ydot, int *its);
 /* energy.c: the energy outputs' ledger */
@@ -395,6 +411,25 @@ OVK_HIDDEN int ovk_minnorm_factor(const ovk_model *M, ovk_data *d);
 OVK_HIDDEN void ovk_minnorm_solve_many(const ovk_model *M, ovk_data *d, double *B, int nc);
 OVK_HIDDEN int ovk_compliant_solve(const ovk_model *M, ovk_data *d, const double *h);
 OVK_HIDDEN void ovk_compliant_columns(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN int ovk_kkt_al_solve(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN void ovk_kkt_al_columns(const ovk_model *M, ovk_data *d);
+
+/* kkt_al.c: the augmented Lagrangian solve over the kept rows (formulation AL), banded */
+typedef struct { int n; const int *rows, *rbody; } ovk_rowset; /* rows of Phi_h, each with its two bodies */
+OVK_HIDDEN ovk_rowset ovk_al_kept(const ovk_model *M);
+OVK_HIDDEN ovk_rowset ovk_al_all(const ovk_model *M, const ovk_data *d);
+OVK_HIDDEN void ovk_al_make_rows(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN int ovk_al_half_band(const ovk_model *M);
+OVK_HIDDEN size_t ovk_al_doubles(const ovk_model *M);
+enum { OVK_AL_SLOT_BASE, OVK_AL_SLOT_RHS, OVK_AL_SLOT_X, OVK_AL_SLOT_UNIT, OVK_AL_SLOT_RES, OVK_AL_SLOT_LAMC,
+       OVK_AL_SLOT_ZERO, OVK_AL_SLOT_P1, OVK_AL_SLOT_P2, OVK_AL_SLOT_P3, OVK_AL_SLOT_PR1, OVK_AL_SLOT_PR2,
+       OVK_AL_SLOT_END };
+OVK_HIDDEN double *ovk_al_slot(const ovk_model *M, const ovk_data *d, int which);
+#define OVK_AL_ALPHA_PROJ 1e6 /* the projections' penalty, relative to M over J^T J (kkt_al.c) */
+#define OVK_PROJ_SLACK 10.0   /* project.c: |Phi| up to this times tol is accepted once the corrections stall */
+OVK_HIDDEN int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double alpha_rel);
+OVK_HIDDEN void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const double *Q, const double *g,
+                             double *x, double *lam);
 
 /* friction.c */
 OVK_HIDDEN double ovk_law_magnitude(const double *lp, int law, double speed);
@@ -441,6 +476,10 @@ OVK_EXPORT int ovk_evaluate_robust(const ovk_model *M, ovk_data *d, const double
                                    double *lam, double *qf, int *iterations);
 OVK_EXPORT int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,
                            double *fric);
+
+/* project.c: the mass-orthogonal projection of a state onto Phi = 0 and Phi_h h = 0 (every equation) */
+OVK_EXPORT int ovk_project(const ovk_model *M, ovk_data *d, double t, double *y, double tol, int max_iter,
+                           double *drift);
 
 /* sim.c, sim_state.c: a run in C (see ovk_sim above) */
 OVK_EXPORT ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const double *y0);

@@ -80,6 +80,10 @@ int ovk_kkt_solve(const ovk_model *M, ovk_data *d) {
 /* d->W = S^-1 J_R M^-1 [:, cols]: how the retained multipliers answer a unit friction force on
  * each friction velocity (one column per entry of cols). */
 void ovk_kkt_friction_columns(const ovk_model *M, ovk_data *d) {
+    if (M->formulation == OVK_FORM_AL) { /* kkt_al.c: the same columns by the AL solve */
+        ovk_kkt_al_columns(M, d);
+        return;
+    }
     int nR = M->nR, nc = M->ncols, nh = M->nb * M->nh_b;
     if (M->redundancy == OVK_COMPLIANT) { /* redundancy: the rigid rows' columns (compliance.c) */
         ovk_compliant_columns(M, d);

@@ -268,6 +268,39 @@ static int check_budget(ovk_sim *s, double started, long long n0, long long call
     return OVK_OK;
 }
 
+/* Formulation AL (solver.singular = "pass"), after an accepted step: the state projected onto the
+ * constraints (project.c) and the integrator's last derivative (dopri5's FSAL stage) evaluated
+ * again at the projected state (Simulation._project). */
+static int project_step(ovk_sim *s) {
+    ovk_rk *rk = &s->rk;
+    double drift = 0.0;
+    int status = ovk_project(s->M, s->d, rk->t, rk->y, OVK_PROJ_TOL, OVK_PROJ_MAX_ITER, &drift);
+    if (status) return snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d)), status;
+    if (drift > s->proj_drift) s->proj_drift = drift;
+    rk->dense_ready = 0;
+    return sim_rhs(s, rk->t, rk->y, rk->f);
+}
+
+/* Formulation AL: the watch found a singular position of the mechanism (its message in s->msg,
+ * starting "t = <time> s"); the run passes it, counting it once per passage (not again while r
+ * stayed below ratio_tol at the last step end, r_before), and the watch starts again from the
+ * step's end (SingularityMonitor with Simulation's passing hook). */
+static int pass_singular(ovk_sim *s, double r_before) {
+    ovk_rk *rk = &s->rk;
+    if (!(r_before < s->o.ratio_tol)) { /* a new passage: a 'singular' event, as the in-process run's */
+        s->singular_passed++;
+        s->last_singular = strncmp(s->msg, "t = ", 4) == 0 ? strtod(s->msg + 4, NULL) : rk->t;
+        if (ovk_sim_push_event(s, s->last_singular, OVK_EV_SINGULAR, s->msg))
+            return snprintf(s->msg, sizeof s->msg, "t = %.9g s: out of memory for the run's events", rk->t), OVK_NOMEM;
+    }
+    int status = ovk_sim_monitor(s, rk->t, rk->y, rk->f, 1, s->msg);
+    if (status == OVK_SINGULAR_POSITION) { /* the step's end itself: the watch goes on from it */
+        s->t_prev = rk->t;
+        status = OVK_OK;
+    }
+    return status;
+}
+
 /* One accepted step and its checks (the body of Simulation.advance's loop). */
 static int step_checked(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
     ovk_rk *rk = &s->rk;
@@ -281,7 +314,10 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     int failed = status && status != OVK_STALLED;
     if (failed) status = ovk_sim_expiring(s, status, s->msg);
     s->degrading = 0;
+    if (!status && s->M->formulation == OVK_FORM_AL) status = project_step(s);
+    double r_before = s->ratio; /* r at the last step end */
     if (!status) status = ovk_sim_monitor(s, rk->t, rk->y, rk->f, 0, s->msg);
+    if (status == OVK_SINGULAR_POSITION && s->M->formulation == OVK_FORM_AL) status = pass_singular(s, r_before);
     if (status == OVK_ELIMINATION) { /* the kept set expired: chosen again and the step taken anew, or the stop */
         status = ovk_sim_expired(s, failed ? rk->t : rk->t_old, failed ? rk->y : rk->y_old);
         if (!status) return OVK_OK;
@@ -337,12 +373,15 @@ int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max
 void ovk_sim_state_vector(const ovk_sim *s, double *y) { memcpy(y, s->rk.y, (size_t)s->ny * sizeof(double)); }
 
 /* t, the next step size, accepted steps, evaluations of the integrator, of the right-hand side,
- * friction force evaluations, max drift, min ratio, stiff steps, rk4's stable step, wall time. */
+ * friction force evaluations, max drift, min ratio, stiff steps, rk4's stable step, wall time,
+ * singular positions passed (formulation AL), the time of the last one (0 while none), the largest
+ * max |Phi| left by the step-end projections. */
 void ovk_sim_info(const ovk_sim *s, double *info) {
     const ovk_rk *rk = &s->rk;
     double v[OVK_SIM_NINFO] = {rk->t, rk->method == OVK_METHOD_RK4 ? rk->step : rk->h, (double)rk->nsteps,
                                (double)rk->nfev, (double)s->evaluations, (double)s->friction_iterations,
-                               s->max_drift, s->min_ratio, (double)rk->stiff_steps, rk->stable_step, s->wall_time};
+                               s->max_drift, s->min_ratio, (double)rk->stiff_steps, rk->stable_step, s->wall_time,
+                               (double)s->singular_passed, s->last_singular, s->proj_drift};
     memcpy(info, v, sizeof v);
 }
 

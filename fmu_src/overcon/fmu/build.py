@@ -267,6 +267,8 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         used = runtime
         if runtime == "c":
             why = cmodel.support(model)
+            if why is None and spec.solver.singular == "pass":  # the C FMU packs the eliminated form only
+                why = "solver.singular = 'pass'"
             if why is not None:
                 used = "python"
                 echo(f"{spec.name}: runtime python (the FMU embeds Python): the C runtime does not cover {why}")
@@ -304,6 +306,9 @@ def _load_scene(path: Path):
         raise _NotBuilt("invalid", *(str(p) for p in exc.problems)) from exc
     except (ModelError, ValueError, OSError) as exc:
         raise _NotBuilt("invalid", f"{path}: {exc}") from exc
+    why = kernel_mod.singular_refusal(model, spec.solver)
+    if why is not None:
+        raise _NotBuilt("invalid", f"{path}: {why}")
     why = kernel_mod.refusal(model, spec.solver)
     if why is not None:
         raise _NotBuilt("invalid", f"{path}: solver.kernel = 'c': the compiled kernel cannot run: {why}")

@@ -169,8 +169,8 @@ def _packed(w: _Out, k) -> None:
     w.d(cm.baumgarte, cm.tol)
     red = set(kernel_mod.REDUNDANCY_COUNTS + kernel_mod.REDUNDANCY_ARRAYS)
     for name, _ in cm._fields_:
-        if name in INT_FIELDS or name in ("baumgarte", "tol") or name in red:
-            continue
+        if name in INT_FIELDS or name in ("baumgarte", "tol", "formulation") or name in red:
+            continue  # formulation: the C FMU runs the eliminated form (0)
         (w.doubles if name in DOUBLE_FIELDS else w.ints)(by_address[getattr(cm, name)])
     w.i(*(getattr(cm, n) for n in kernel_mod.REDUNDANCY_COUNTS))
     for name in kernel_mod.REDUNDANCY_ARRAYS:

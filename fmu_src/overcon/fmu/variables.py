@@ -232,10 +232,14 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
                    "does. Readable after the failed fmi2DoStep: the lockstep comparison repeats its runs with it",
                    unit="s", key=("stable_step", None)))
     out.append(redundancy_var(model))
-    # uniqueness along the motion, after every older variable (their value references stay)
-    for j in model.friction_joints:
-        if j not in set(model.reaction_joints):
-            out.append(_along_reaction(model, j, bool(reaction_unique.get(model.joints[j].name, True))))
+    return out + _along_outputs(model, reaction_unique, rank)
+
+
+def _along_outputs(model, reaction_unique, rank) -> list[Var]:
+    """The uniqueness along the motion, after every older variable (their value references stay):
+    ``<joint>.reaction_unique`` of the friction joints that are no reaction joints, then ``rank``."""
+    out = [_along_reaction(model, j, bool(reaction_unique.get(model.joints[j].name, True)))
+           for j in model.friction_joints if j not in set(model.reaction_joints)]
     out.append(_along_var("rank", "Integer", "rank of the whole constraint Jacobian (the pre-check's rule)",
                           int(rank) if rank is not None else 0, "rank"))
     return out

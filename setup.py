@@ -1,6 +1,6 @@
 """Compiles overcon's C core (fmu_src/overcon/core/*.c) into overcon/core/libovercore.<so|dylib|dll>
 when the package is installed (``pip install .``, ``pip install -e .``), and the binary of the FMUs
-that run without Python (the core and the FMI layer fmu_src/overcon/fmu/native/fmi2_*.c) into
+that run without Python (the core and the FMI layer fmu_src/overcon/fmu/native/fmu_*.c, fmi2_*.c) into
 overcon/fmu/native/libovercon_fmi2.<so|dylib|dll>, which ``overcon build`` copies into such an FMU;
 everything else about the package is in pyproject.toml.
 
@@ -33,8 +33,8 @@ CORE = Path("fmu_src") / "overcon" / "core"
 SOURCES = sorted(str(p.as_posix()) for p in CORE.glob("*.c"))
 HEADERS = sorted(str(p.as_posix()) for p in CORE.glob("*.h"))
 FMI = Path("fmu_src") / "overcon" / "fmu" / "native"
-FMI_SOURCES = sorted(str(p.as_posix()) for p in FMI.glob("fmi2_*.c"))
-FMI_HEADERS = sorted(str(p.as_posix()) for p in FMI.glob("fmi2_*.h"))
+FMI_SOURCES = sorted(str(p.as_posix()) for p in [*FMI.glob("fmu_*.c"), *FMI.glob("fmi2_*.c")])
+FMI_HEADERS = sorted(str(p.as_posix()) for p in FMI.glob("*.h"))
 CFLAGS = ["-O2", "-ffp-contract=off", "-fno-fast-math", "-std=c11", "-Wall", "-Wextra", "-Werror"]
 SHARED = ["-shared", "-fPIC"]
 LIBS = ["-lm"]

@@ -7,7 +7,7 @@
 # step, an expired and a degrading elimination), then tests/c_core/driver.c, compiled with the core's sources and the sanitizers, runs
 # every case 20 times in two workspaces and requires the same bits, statuses and messages. Any
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.
-# Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmi2_*.c over the core),
+# Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmu_*.c and fmi2_*.c over the core),
 # compiled with the sanitizers into C-runtime FMUs of a friction scene, a quaternion scene and a scene
 # with energy outputs (the Bricard linkage), run
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
@@ -43,7 +43,7 @@ PYEOF
 $CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host" tests/c_host/fmu_host.c -ldl -lm  # POSIX (dlopen, realpath): not -std=c11
 for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2; do
     mkdir -p "$tmp/$id" && (cd "$tmp/$id" && unzip -q "../fmus/$id.fmu")
-    $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmi2_*.c "$CORE"/*.c -lm
+    $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmu_*.c "$FMI"/fmi2_*.c "$CORE"/*.c -lm
     guid=$(sed -n 's/.*guid="\([^"]*\)".*/\1/p' "$tmp/$id/modelDescription.xml" | head -n 1)
     vrs=$("$PY" -c "import fmpy, sys; md = fmpy.read_model_description(sys.argv[1]); print(' '.join(f'{v.valueReference}:{v.name}' for v in md.modelVariables if v.causality == 'output' and v.type == 'Real'))" "$tmp/$id")
     # shellcheck disable=SC2086

@@ -423,7 +423,7 @@ def _write_c_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Prec
                     "reaction_unique": report.reaction_unique, "motion_unique": bool(report.motion_unique),
                     "precheck_problems": list(report.problems), "precheck_warnings": list(report.warnings),
                     "binary": {"platform": plat, "library": C_RUNTIME_LIBRARY.name,
-                               "source": "overcon/core, overcon/fmu/native/fmi2_*.c"},
+                               "source": "overcon/core, overcon/fmu/native/fmu_*.c, fmi2_*.c"},
                     "model_file": {"path": "resources/overcon_model.bin", "format": cmodel.FORMAT}}
         out_dir.mkdir(parents=True, exist_ok=True)
         fmu = out_dir / f"{spec.name}.fmu"

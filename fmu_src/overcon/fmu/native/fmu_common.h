@@ -1,17 +1,23 @@
-/* The FMI 2.0 co-simulation layer of an overcon FMU without Python: the FMI functions over the C
- * core's run (core/sim.c), reading the model file resources/overcon_model.bin that overcon build
- * writes (overcon.fmu.cmodel: its docstring describes the layout). It behaves as the Python slave
+/* The FMI layer of an overcon FMU without Python: the FMI functions over the C core's run
+ * (core/sim.c), reading the model file resources/overcon_model.bin that overcon build writes
+ * (overcon.fmu.cmodel: its docstring describes the layout). It behaves as the Python slave
  * (overcon.fmu.slave) for the models and methods it covers: states, variables, parameters and their
  * rules, the tolerance rule of fmi2SetupExperiment, the doStep work budget, lazy reactions, FMU
- * states bit for bit, the log categories.
- *   fmi2_model.c   reads and checks the model file
- *   fmi2_core.c    instances: instantiate, free, logging, debug logging
- *   fmi2_run.c     the run: parameters applied, outputs, setup, initialization, fmi2DoStep
- *   fmi2_vars.c    fmi2Get*, fmi2Set* (parameters and their rules), reset, status queries
- *   fmi2_state.c   FMU states: get, set, free, serialize, deserialize
+ * states bit for bit, the log categories. The code shared by the FMI versions:
+ *   fmu_model.c    reads and checks the model file
+ *   fmu_inst.c     instances: made from the resources folder, freed, logging, mode checks
+ *   fmu_run.c      the run: parameters applied, outputs, tolerance rule, initialization, a step
+ *   fmu_vars.c     variable access: references checked, values read, parameters and their rules
+ *   fmu_state.c    FMU states: get, set, free, serialize, deserialize
+ * and the FMI 2.0 functions over it:
+ *   fmi2_core.c    instantiate, free, debug logging
+ *   fmi2_run.c     fmi2SetupExperiment, initialization, fmi2DoStep
+ *   fmi2_vars.c    fmi2Get*, fmi2Set*, reset, status queries
+ *   fmi2_state.c   FMU states
+ * The FMI 2.0 types below are the shared code's too (fmi3Status has fmi2Status's values).
  * C11 and libm; no global mutable state (every instance owns its memory). */
-#ifndef OVERCON_FMI2_CORE_H
-#define OVERCON_FMI2_CORE_H
+#ifndef OVERCON_FMU_COMMON_H
+#define OVERCON_FMU_COMMON_H
 
 #include <stddef.h>
 
@@ -136,5 +142,41 @@ FMU_HIDDEN int fmu_apply_params(fmu_inst *c);
 FMU_HIDDEN int fmu_read_derived(fmu_inst *c);
 FMU_HIDDEN int fmu_ensure_sim(fmu_inst *c, int compute_outputs);
 FMU_HIDDEN int fmu_allowed(fmu_inst *c, const char *fn, int modes);
+
+/* fmu_inst.c */
+FMU_HIDDEN fmu_inst *fmu_checked(fmi2Component comp, const char *fn);
+FMU_HIDDEN int fmu_resource_dir(const char *uri, char *out, size_t size);
+FMU_HIDDEN fmu_inst *fmu_instantiate(const fmu_inst *tmp, const char *fn, const char *resources, const char *guid,
+                                     int logging_on);
+FMU_HIDDEN void fmu_free_inst(fmu_inst *c);
+FMU_HIDDEN void fmu_default_categories(fmu_inst *c, int logging_on);
+FMU_HIDDEN int fmu_set_debug_logging(fmu_inst *c, const char *fn, int logging_on, size_t n,
+                                     const char *const categories[]);
+/* fmu_run.c */
+FMU_HIDDEN int fmu_param_index(const fmu_model *fm, int target, int joint);
+FMU_HIDDEN double fmu_param_value(const fmu_inst *c, int target);
+FMU_HIDDEN const char *fmu_choice(const fmu_inst *c, int target);
+FMU_HIDDEN void fmu_state_outputs(const fmu_inst *c, const double *y, double *out);
+FMU_HIDDEN int fmu_derived_outputs(fmu_inst *c, double t, const double *y, double *out);
+FMU_HIDDEN int fmu_all_finite(const double *a, int n);
+FMU_HIDDEN fmi2Status fmu_host_tolerance(fmu_inst *c, const char *fn, double tolerance);
+FMU_HIDDEN fmi2Status fmu_exit_init(fmu_inst *c, const char *fn);
+FMU_HIDDEN fmi2Status fmu_do_step(fmu_inst *c, const char *fn, double t, double h);
+/* fmu_vars.c */
+FMU_HIDDEN extern const char *fmu_causality_names[3];
+FMU_HIDDEN extern const char *fmu_variability_names[5];
+FMU_HIDDEN int fmu_check_refs(fmu_inst *c, const char *fn, const fmi2ValueReference vr[], size_t nvr,
+                              const void *values, int type);
+FMU_HIDDEN int fmu_value_of(fmu_inst *c, const char *fn, const fmu_var *v, double *out);
+FMU_HIDDEN int fmu_set_param(fmu_inst *c, const char *fn, int k, double x, const char *s);
+/* fmu_state.c */
+FMU_HIDDEN fmi2Status fmu_state_get(fmu_inst *c, const char *fn, fmi2FMUstate *state);
+FMU_HIDDEN fmi2Status fmu_state_set(fmu_inst *c, const char *fn, fmi2FMUstate state);
+FMU_HIDDEN fmi2Status fmu_state_free(fmu_inst *c, const char *fn, fmi2FMUstate *state);
+FMU_HIDDEN fmi2Status fmu_state_size(fmu_inst *c, const char *fn, fmi2FMUstate state, size_t *size);
+FMU_HIDDEN fmi2Status fmu_state_serialize(fmu_inst *c, const char *fn, fmi2FMUstate state, fmi2Byte bytes[],
+                                          size_t size);
+FMU_HIDDEN fmi2Status fmu_state_deserialize(fmu_inst *c, const char *fn, const fmi2Byte bytes[], size_t size,
+                                            fmi2FMUstate *state);
 
 #endif

@@ -8,7 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fmi2_core.h"
+#include "fmu_common.h"
 
 #define MAX_ITEMS (1 << 24)
 

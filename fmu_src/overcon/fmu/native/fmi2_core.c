@@ -22,16 +22,25 @@ FMU_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuTy
         fmu_log(&tmp, fmi2Error, "fmi2Instantiate: instanceName is empty");
         return NULL;
     }
-    if (fmuType != fmi2CoSimulation) {
-        fmu_log(&tmp, fmi2Error, "fmi2Instantiate: this FMU supports co-simulation only (fmuType %d given)", fmuType);
+    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
+        fmu_log(&tmp, fmi2Error, "fmi2Instantiate: fmuType %d is neither fmi2ModelExchange nor fmi2CoSimulation",
+                fmuType);
         return NULL;
     }
+    tmp.me = fmuType == fmi2ModelExchange;
     if (!resourceLocation || !fmu_resource_dir(resourceLocation, resources, sizeof resources)) {
         fmu_log(&tmp, fmi2Error, "fmi2Instantiate: fmuResourceLocation %s is not a file: URI of the FMU's resources "
                 "folder", resourceLocation ? resourceLocation : "(NULL)");
         return NULL;
     }
-    return fmu_instantiate(&tmp, "fmi2Instantiate", resources, guid, loggingOn);
+    fmu_inst *c = fmu_instantiate(&tmp, "fmi2Instantiate", resources, guid, loggingOn);
+    if (c && c->me && !c->fm.me) {
+        fmu_log(c, fmi2Error, "fmi2Instantiate: this FMU was built for co-simulation only (overcon build --kind me "
+                "or both offers Model Exchange)");
+        fmu_free_inst(c);
+        return NULL;
+    }
+    return c;
 }
 
 FMU_EXPORT void fmi2FreeInstance(fmi2Component comp) {

@@ -12,20 +12,7 @@ FMU_EXPORT fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean tolera
     fmu_inst *c = comp;
     if (!c) return fmi2Error;
     if (!fmu_allowed(c, "fmi2SetupExperiment", M_INSTANTIATED)) return fmi2Error;
-    char a[40], b[40];
-    fmu_repr(startTime, a, sizeof a);
-    fmu_repr(stopTime, b, sizeof b);
-    if (!isfinite(startTime)) {
-        fmu_log(c, fmi2Error, "fmi2SetupExperiment: start time %s refused (not finite)", a);
-        return fmi2Error;
-    }
-    if (stopTimeDefined && !(stopTime >= startTime)) {
-        fmu_log(c, fmi2Error, "fmi2SetupExperiment: stop time %s is before the start time %s", b, a);
-        return fmi2Error;
-    }
-    c->start_time = startTime;
-    c->sim_valid = c->have_outputs = 0;
-    return toleranceDefined ? fmu_host_tolerance(c, "fmi2SetupExperiment", tolerance) : fmi2OK;
+    return fmu_setup(c, "fmi2SetupExperiment", toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
 }
 
 FMU_EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
@@ -51,7 +38,7 @@ FMU_EXPORT fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicati
 
 FMU_EXPORT fmi2Status fmi2Terminate(fmi2Component comp) {
     fmu_inst *c = comp;
-    if (!c || !fmu_allowed(c, "fmi2Terminate", M_STEPPING | M_ERROR)) return fmi2Error;
+    if (!c || !fmu_allowed(c, "fmi2Terminate", FMU_RUNNING(c) | M_ERROR)) return fmi2Error;
     c->mode = M_TERMINATED;
     return fmi2OK;
 }

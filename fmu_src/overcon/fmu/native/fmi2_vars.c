@@ -9,15 +9,12 @@
 
 #include "fmu_common.h"
 
-#define READABLE (M_INITIALIZATION | M_STEPPING | M_ERROR | M_TERMINATED)
-#define WRITABLE (M_INSTANTIATED | M_INITIALIZATION | M_STEPPING)
-#define ANY_MODE (M_INSTANTIATED | M_INITIALIZATION | M_STEPPING | M_ERROR | M_TERMINATED)
 
 
 static fmi2Status get_values(fmi2Component comp, const char *fn, const fmi2ValueReference vr[], size_t nvr,
                              void *values, int type) {
     fmu_inst *c = comp;
-    if (!c || !fmu_allowed(c, fn, READABLE) || !fmu_check_refs(c, fn, vr, nvr, values, type)) return fmi2Error;
+    if (!c || !fmu_allowed(c, fn, FMU_READABLE(c)) || !fmu_check_refs(c, fn, vr, nvr, values, type)) return fmi2Error;
     for (size_t i = 0; i < nvr; i++) {
         const fmu_var *v = &c->fm.var[vr[i]];
         double x;
@@ -51,7 +48,7 @@ FMU_EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr
 static fmi2Status set_values(fmi2Component comp, const char *fn, const fmi2ValueReference vr[], size_t nvr,
                              const void *values, int type) {
     fmu_inst *c = comp;
-    if (!c || !fmu_allowed(c, fn, WRITABLE) || !fmu_check_refs(c, fn, vr, nvr, values, type)) return fmi2Error;
+    if (!c || !fmu_allowed(c, fn, FMU_WRITABLE(c)) || !fmu_check_refs(c, fn, vr, nvr, values, type)) return fmi2Error;
     for (size_t i = 0; i < nvr; i++) {
         const fmu_var *v = &c->fm.var[vr[i]];
         if (v->key != K_PARAM) {
@@ -88,7 +85,7 @@ FMU_EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr
 
 FMU_EXPORT fmi2Status fmi2Reset(fmi2Component comp) {
     fmu_inst *c = comp;
-    if (!c || !fmu_allowed(c, "fmi2Reset", ANY_MODE)) return fmi2Error;
+    if (!c || !fmu_allowed(c, "fmi2Reset", FMU_ANY_MODE(c))) return fmi2Error;
     fmu_init_fields(c);
     return fmi2OK;
 }
@@ -96,7 +93,7 @@ FMU_EXPORT fmi2Status fmi2Reset(fmi2Component comp) {
 /* fmi2Get*Status: fmi2LastSuccessfulTime (Real) and fmi2Terminated (Boolean) are known. */
 static fmi2Status status_query(fmi2Component comp, const char *fn, int kind, void *value, int type) {
     fmu_inst *c = comp;
-    if (!c || !fmu_allowed(c, fn, ANY_MODE)) return fmi2Error;
+    if (!c || !fmu_allowed(c, fn, FMU_ANY_MODE(c))) return fmi2Error;
     static const char *kinds[4] = {"fmi2DoStepStatus", "fmi2PendingStatus", "fmi2LastSuccessfulTime",
                                    "fmi2Terminated"};
     if (!value) return fmu_log(c, fmi2Error, "%s: %s: value is NULL", fn, fn), fmi2Error;

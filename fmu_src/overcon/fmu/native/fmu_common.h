@@ -9,11 +9,14 @@
  *   fmu_run.c      the run: parameters applied, outputs, tolerance rule, initialization, a step
  *   fmu_vars.c     variable access: references checked, values read, parameters and their rules
  *   fmu_state.c    FMU states: get, set, free, serialize, deserialize
+ *   fmu_me.c       Model Exchange: continuous states, derivatives, the event that corrects them
  * and the FMI 2.0 functions over it:
  *   fmi2_core.c    instantiate, free, debug logging
  *   fmi2_run.c     fmi2SetupExperiment, initialization, fmi2DoStep
  *   fmi2_vars.c    fmi2Get*, fmi2Set*, reset, status queries
  *   fmi2_state.c   FMU states
+ *   fmi2_me.c      Model Exchange
+ * (the FMI 3.0 functions: fmi3_*.c, their types in fmi3_types.h).
  * The FMI 2.0 types below are the shared code's too (fmi3Status has fmi2Status's values).
  * C11 and libm; no global mutable state (every instance owns its memory). */
 #ifndef OVERCON_FMU_COMMON_H
@@ -22,6 +25,7 @@
 #include <stddef.h>
 
 #include "../../core/core.h"
+#include "fmi3_types.h"
 
 typedef void *fmi2Component;
 typedef void *fmi2ComponentEnvironment;
@@ -43,6 +47,11 @@ typedef void *(*fmi2CallbackAllocateMemory)(size_t, size_t);
 typedef void (*fmi2CallbackFreeMemory)(void *);
 typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment, fmi2Status);
 typedef struct {
+    fmi2Boolean newDiscreteStatesNeeded, terminateSimulation, nominalsOfContinuousStatesChanged,
+        valuesOfContinuousStatesChanged, nextEventTimeDefined;
+    fmi2Real nextEventTime;
+} fmi2EventInfo;
+typedef struct {
     const fmi2CallbackLogger logger;
     const fmi2CallbackAllocateMemory allocateMemory;
     const fmi2CallbackFreeMemory freeMemory;
@@ -54,7 +63,10 @@ typedef struct {
 #define FMU_HIDDEN __attribute__((visibility("hidden")))
 
 enum { T_REAL = 0, T_INTEGER = 1, T_BOOLEAN = 2, T_STRING = 3 };
-enum { K_OUTPUT = 0, K_CONSTANT = 1, K_PARAM = 2, K_STABLE_STEP = 3 };
+enum { K_OUTPUT = 0, K_CONSTANT = 1, K_PARAM = 2, K_STABLE_STEP = 3, K_STATE = 4, K_DERIVATIVE = 5, K_ARRAY = 6, K_TIME = 7 };
+/* K_STATE, K_DERIVATIVE: entry arg of y = [q, h] and of its derivative (Model Exchange's continuous
+ * states); K_ARRAY (FMI 3.0): the consecutive reaction outputs of one joint from output arg on; K_TIME (FMI 3.0):
+ * the independent variable time. */
 enum { V_CONTINUOUS = 0, V_CONSTANT = 1, V_FIXED = 2, V_TUNABLE = 3, V_DISCRETE = 4 };
 enum { O_POSITION = 1, O_VELOCITY = 2, O_REACTION = 5, O_FRICTION = 6, O_ENERGY = 7 }; /* energy: a = 0-3 */
 enum { P_MU = 1, P_VREG = 2, P_MU_STATIC = 3, P_VSTRIBECK = 4, P_METHOD = 10, P_TOLERANCE = 11, P_STEP = 12,
@@ -81,6 +93,7 @@ typedef struct {
     void *arrays[25];
     int n, nh, ny, quaternion;
     double start_time, stop_time, *y0;
+    int me;               /* Model Exchange offered: the variables have the continuous states */
     int nout, nstate_out; /* outputs; the first nstate_out come from the state alone */
     int energy;           /* energy outputs: the run keeps the work ledger */
     fmu_out *out;
@@ -94,7 +107,13 @@ typedef struct {
 FMU_HIDDEN int fmu_model_read(const char *path, fmu_model *fm, char *err, size_t errsize);
 FMU_HIDDEN void fmu_model_free(fmu_model *fm);
 
-enum { M_INSTANTIATED = 1, M_INITIALIZATION = 2, M_STEPPING = 4, M_ERROR = 8, M_TERMINATED = 16 };
+enum { M_INSTANTIATED = 1, M_INITIALIZATION = 2, M_STEPPING = 4, M_ERROR = 8, M_TERMINATED = 16, M_EVENT = 32,
+       M_CONTINUOUS = 64 }; /* M_STEPPING: co-simulation; M_EVENT, M_CONTINUOUS: Model Exchange */
+/* The modes in which a call is allowed: the co-simulation modes, or Model Exchange's in its place. */
+#define FMU_RUNNING(c) ((c)->me ? M_EVENT | M_CONTINUOUS : M_STEPPING)
+#define FMU_READABLE(c) (M_INITIALIZATION | FMU_RUNNING(c) | M_ERROR | M_TERMINATED)
+#define FMU_WRITABLE(c) (M_INSTANTIATED | M_INITIALIZATION | FMU_RUNNING(c))
+#define FMU_ANY_MODE(c) (M_INSTANTIATED | M_INITIALIZATION | FMU_RUNNING(c) | M_ERROR | M_TERMINATED)
 enum { CAT_EVENTS, CAT_WARNING, CAT_ERROR, CAT_FATAL, N_CATEGORIES };
 #define FMU_MSG 1024
 
@@ -114,7 +133,12 @@ typedef struct {
     fmu_model fm;
     char *name;
     fmi2CallbackLogger logger;
+    fmi3LogMessageCallback log3; /* FMI 3.0's logger (instead of logger) */
     fmi2ComponentEnvironment env;
+    int fmi3;           /* instantiated through the FMI 3.0 functions (their names in messages) */
+    int me;             /* instantiated for Model Exchange: y is the host's state x at time t */
+    int dx_valid;       /* dx (and, in Model Exchange, the outputs) belong to the current (t, y) */
+    double *dx;         /* ny: the derivatives at (t, y) (fmu_me.c) */
     int enabled[N_CATEGORIES];
     ovk_model M;        /* fm.M with the parameters' values (jlawp, baumgarte, tol, max_iter) */
     double *jlawp;      /* nj x NLP: the friction laws with the parameters */
@@ -157,19 +181,31 @@ FMU_HIDDEN int fmu_param_index(const fmu_model *fm, int target, int joint);
 FMU_HIDDEN double fmu_param_value(const fmu_inst *c, int target);
 FMU_HIDDEN const char *fmu_choice(const fmu_inst *c, int target);
 FMU_HIDDEN void fmu_state_outputs(const fmu_inst *c, const double *y, double *out);
-FMU_HIDDEN int fmu_derived_outputs(fmu_inst *c, double t, const double *y, double *out);
+FMU_HIDDEN int fmu_derived_outputs(fmu_inst *c, double t, const double *y, const double *lam, double *out);
 FMU_HIDDEN int fmu_all_finite(const double *a, int n);
 FMU_HIDDEN fmi2Status fmu_host_tolerance(fmu_inst *c, const char *fn, double tolerance);
+FMU_HIDDEN fmi2Status fmu_setup(fmu_inst *c, const char *fn, int toleranceDefined, double tolerance, double startTime,
+                                int stopTimeDefined, double stopTime);
 FMU_HIDDEN fmi2Status fmu_exit_init(fmu_inst *c, const char *fn);
 FMU_HIDDEN fmi2Status fmu_do_step(fmu_inst *c, const char *fn, double t, double h);
 /* fmu_vars.c */
-FMU_HIDDEN extern const char *fmu_causality_names[3];
+FMU_HIDDEN extern const char *fmu_causality_names[4];
 FMU_HIDDEN extern const char *fmu_variability_names[5];
 FMU_HIDDEN int fmu_check_refs(fmu_inst *c, const char *fn, const fmi2ValueReference vr[], size_t nvr,
                               const void *values, int type);
 FMU_HIDDEN int fmu_value_of(fmu_inst *c, const char *fn, const fmu_var *v, double *out);
 FMU_HIDDEN int fmu_set_param(fmu_inst *c, const char *fn, int k, double x, const char *s);
 /* fmu_state.c */
+/* fmu_me.c: Model Exchange (and the derivative variables in co-simulation) */
+FMU_HIDDEN int fmu_me_eval(fmu_inst *c);
+FMU_HIDDEN fmi2Status fmu_me_set_time(fmu_inst *c, const char *fn, double t);
+FMU_HIDDEN fmi2Status fmu_me_set_states(fmu_inst *c, const char *fn, const double x[], size_t n);
+FMU_HIDDEN fmi2Status fmu_me_get_states(fmu_inst *c, const char *fn, double x[], size_t n);
+FMU_HIDDEN fmi2Status fmu_me_get_derivatives(fmu_inst *c, const char *fn, double dx[], size_t n);
+FMU_HIDDEN fmi2Status fmu_me_get_nominals(fmu_inst *c, const char *fn, double x[], size_t n);
+FMU_HIDDEN fmi2Status fmu_me_event_indicators(fmu_inst *c, const char *fn, double z[], size_t n);
+FMU_HIDDEN int fmu_me_needs_correction(const fmu_inst *c);
+FMU_HIDDEN int fmu_me_correct(fmu_inst *c);
 FMU_HIDDEN fmi2Status fmu_state_get(fmu_inst *c, const char *fn, fmi2FMUstate *state);
 FMU_HIDDEN fmi2Status fmu_state_set(fmu_inst *c, const char *fn, fmi2FMUstate state);
 FMU_HIDDEN fmi2Status fmu_state_free(fmu_inst *c, const char *fn, fmi2FMUstate *state);

@@ -21,12 +21,16 @@ static void default_categories(fmu_inst *c, int logging_on) {
 void fmu_log(fmu_inst *c, fmi2Status status, const char *fmt, ...) {
     int cat = status == fmi2OK ? CAT_EVENTS : status <= fmi2Discard ? CAT_WARNING : status == fmi2Error ? CAT_ERROR
                                                                                                        : CAT_FATAL;
-    if (!c || !c->logger || (status < fmi2Error && !c->enabled[cat])) return;
+    if (!c || !(c->logger || c->log3) || (status < fmi2Error && !c->enabled[cat])) return;
     char msg[4 * FMU_MSG], esc[8 * FMU_MSG];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
+    if (c->log3) { /* FMI 3.0: the message is not a format */
+        c->log3(c->env, (fmi3Status)status, category_names[cat], msg);
+        return;
+    }
     size_t j = 0;
     for (const char *s = msg; *s && j + 2 < sizeof esc; s++) {
         esc[j++] = *s;
@@ -60,6 +64,8 @@ static const char *mode_name(int mode) {
     case M_INSTANTIATED: return "instantiated";
     case M_INITIALIZATION: return "initialization mode";
     case M_STEPPING: return "slave initialized";
+    case M_EVENT: return "event mode";
+    case M_CONTINUOUS: return "continuous-time mode";
     case M_ERROR: return "error";
     default: return "terminated";
     }
@@ -68,9 +74,10 @@ static const char *mode_name(int mode) {
 /* 1 if the instance's mode is one of modes, else the refusal logged (names in sorted order). */
 int fmu_allowed(fmu_inst *c, const char *fn, int modes) {
     if (c->mode & modes) return 1;
-    static const int sorted[5] = {M_ERROR, M_INITIALIZATION, M_INSTANTIATED, M_STEPPING, M_TERMINATED};
-    char list[160] = "";
-    for (int k = 0; k < 5; k++)
+    static const int sorted[7] = {M_CONTINUOUS, M_ERROR, M_EVENT, M_INITIALIZATION, M_INSTANTIATED, M_STEPPING,
+                                  M_TERMINATED};
+    char list[200] = "";
+    for (int k = 0; k < 7; k++)
         if (modes & sorted[k]) {
             if (list[0]) strcat(list, ", ");
             strcat(list, mode_name(sorted[k]));
@@ -128,6 +135,7 @@ void fmu_init_fields(fmu_inst *c) {
     c->sim = NULL;
     c->sim_valid = c->have_outputs = c->derived_stale = c->derived_read = c->has_y = c->has_failed = 0;
     c->stable_step = 0.0;
+    c->dx_valid = 0;
     memset(c->outputs, 0, (size_t)(fm->nout ? fm->nout : 1) * sizeof(double));
 }
 
@@ -138,7 +146,7 @@ void fmu_free_inst(fmu_inst *c) {
         free(s->pval), free(s->pset), free(s->outputs), free(s->y), free(s->sim), free(s);
     }
     ovk_sim_free(c->sim);
-    free(c->jlawp), free(c->pval), free(c->pset), free(c->outputs), free(c->y), free(c->reac), free(c->fric);
+    free(c->jlawp), free(c->pval), free(c->pset), free(c->outputs), free(c->y), free(c->reac), free(c->fric), free(c->dx);
     free(c->strings);
     fmu_model_free(&c->fm);
     free(c->name);
@@ -156,8 +164,9 @@ static int alloc_arrays(fmu_inst *c) {
     c->y = calloc((size_t)fm->ny + 1, sizeof(double));
     c->reac = calloc(nj * OVK_NREAC, sizeof(double));
     c->fric = calloc(nj, sizeof(double));
+    c->dx = calloc((size_t)fm->ny + 1, sizeof(double));
     c->strings = calloc((size_t)fm->nvar + 1, sizeof(char *));
-    return c->jlawp && c->pval && c->pset && c->outputs && c->y && c->reac && c->fric && c->strings;
+    return c->jlawp && c->pval && c->pset && c->outputs && c->y && c->reac && c->fric && c->dx && c->strings;
 }
 
 /* The instance named tmp->name with tmp's logger, its model read from the resources folder
@@ -174,7 +183,8 @@ fmu_inst *fmu_instantiate(const fmu_inst *tmp, const char *fn, const char *resou
         return NULL;
     }
     strcpy(c->name, tmp->name);
-    c->logger = tmp->logger, c->env = tmp->env;
+    c->logger = tmp->logger, c->log3 = tmp->log3, c->env = tmp->env;
+    c->fmi3 = tmp->fmi3, c->me = tmp->me;
     default_categories(c, logging_on);
     if (!fmu_model_read(path, &c->fm, err, sizeof err)) {
         fmu_log(c, fmi2Error, "%s: %s", fn, err);

@@ -80,14 +80,18 @@ void fmu_state_outputs(const fmu_inst *c, const double *y, double *out) {
 }
 
 /* The energies, reactions and friction forces at (t, y) into out (ovk_sim_energy, ovk_sim_outputs:
- * each only when an output needs it); a status on failure. */
-int fmu_derived_outputs(fmu_inst *c, double t, const double *y, double *out) {
+ * each only when an output needs it); with lam (Model Exchange) the reactions and friction forces of
+ * those multipliers, the evaluation at (t, y) that gave the derivatives (ovk_outputs). A status on
+ * failure, its message in the run's. */
+int fmu_derived_outputs(fmu_inst *c, double t, const double *y, const double *lam, double *out) {
     const fmu_model *fm = &c->fm;
     int forces = 0, status = OVK_OK;
     double energy[4] = {0.0, 0.0, 0.0, 0.0};
     for (int k = fm->nstate_out; k < fm->nout; k++) forces |= fm->out[k].kind != O_ENERGY;
     if (fm->energy) status = ovk_sim_energy(c->sim, t, y, energy);
-    if (!status && forces) status = ovk_sim_outputs(c->sim, t, y, c->reac, c->fric);
+    if (!status && forces && !lam) status = ovk_sim_outputs(c->sim, t, y, c->reac, c->fric);
+    if (!status && forces && lam && (status = ovk_outputs(&c->M, c->sim->d, y, lam, c->reac, c->fric)))
+        snprintf(c->sim->msg, sizeof c->sim->msg, "%s", ovk_message(c->sim->d));
     if (status) return status;
     for (int k = fm->nstate_out; k < fm->nout; k++) {
         const fmu_out *o = &fm->out[k];
@@ -154,12 +158,13 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
             return 0;
         }
         c->sim_valid = 1;
+        c->dx_valid = 0;
         c->t = c->start_time;
     }
     if (compute_outputs && !c->have_outputs) {
         int status = ovk_sim_advance(c->sim, c->t, -1, 0.0, c->y);
         fmu_state_outputs(c, c->y, c->outputs);
-        if (!status) status = fmu_derived_outputs(c, c->t, c->y, c->outputs);
+        if (!status) status = fmu_derived_outputs(c, c->t, c->y, NULL, c->outputs);
         if (status) return snprintf(c->msg, sizeof c->msg, "SimulationError: %s", ovk_sim_message(c->sim)), 0;
         if (!fmu_all_finite(c->outputs, fm->nout)) {
             char t[40];
@@ -177,7 +182,7 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
 int fmu_read_derived(fmu_inst *c) {
     c->derived_read = 1;
     if (!c->derived_stale) return 1;
-    int status = fmu_derived_outputs(c, c->t, c->y, c->outputs);
+    int status = fmu_derived_outputs(c, c->t, c->y, NULL, c->outputs);
     if (status || !fmu_all_finite(c->outputs, c->fm.nout)) {
         char t[40];
         fmu_repr(c->t, t, sizeof t);
@@ -221,7 +226,7 @@ static int step_outputs(fmu_inst *c, double t_new, const double *y, double *out)
     const fmu_model *fm = &c->fm;
     memcpy(out, c->outputs, (size_t)fm->nout * sizeof(double));
     fmu_state_outputs(c, y, out);
-    if ((c->derived_read || fm->nout == fm->nstate_out) && fmu_derived_outputs(c, t_new, y, out))
+    if ((c->derived_read || fm->nout == fm->nstate_out) && fmu_derived_outputs(c, t_new, y, NULL, out))
         return snprintf(c->msg, sizeof c->msg, "SimulationError: %s", ovk_sim_message(c->sim)), 0;
     if (!fmu_all_finite(out, fm->nout)) {
         size_t len = (size_t)snprintf(c->msg, sizeof c->msg, "ArithmeticError: t = %.9g s: non-finite outputs", t_new);
@@ -269,6 +274,26 @@ static int step(fmu_inst *c, double t, double h, double *y) {
     return 1;
 }
 
+/* The experiment's start time, stop time and tolerance (fn: fmi2SetupExperiment,
+ * fmi3EnterInitializationMode): a start time that is not finite or a stop time before it refused. */
+fmi2Status fmu_setup(fmu_inst *c, const char *fn, int toleranceDefined, double tolerance, double startTime,
+                     int stopTimeDefined, double stopTime) {
+    char a[40], b[40];
+    fmu_repr(startTime, a, sizeof a);
+    fmu_repr(stopTime, b, sizeof b);
+    if (!isfinite(startTime)) {
+        fmu_log(c, fmi2Error, "%s: start time %s refused (not finite)", fn, a);
+        return fmi2Error;
+    }
+    if (stopTimeDefined && !(stopTime >= startTime)) {
+        fmu_log(c, fmi2Error, "%s: stop time %s is before the start time %s", fn, b, a);
+        return fmi2Error;
+    }
+    c->start_time = startTime;
+    c->sim_valid = c->have_outputs = 0;
+    return toleranceDefined ? fmu_host_tolerance(c, fn, tolerance) : fmi2OK;
+}
+
 /* The end of initialization (fn: the FMI call): the run made and the outputs computed, the choice of
  * tolerance logged; fmi2Error with the reason when the run cannot start. */
 fmi2Status fmu_exit_init(fmu_inst *c, const char *fn) {
@@ -277,13 +302,19 @@ fmi2Status fmu_exit_init(fmu_inst *c, const char *fn) {
         fmu_log(c, fmi2Error, "%s: initialization failed: %s", fn, c->msg);
         return fmi2Error;
     }
-    c->mode = M_STEPPING;
-    static const char *sources[3] = {"the scene", "the parameter solver.tolerance", "fmi2SetupExperiment"};
+    c->mode = c->me ? M_EVENT : M_STEPPING;
+    const char *sources[3] = {"the scene", "the parameter solver.tolerance",
+                              c->fmi3 ? "fmi3EnterInitializationMode" : "fmi2SetupExperiment"};
     char t[40], tol[40];
     fmu_repr(c->t, t, sizeof t);
     fmu_repr(fmu_param_value(c, P_TOLERANCE), tol, sizeof tol);
-    fmu_log(c, fmi2OK, "initialized at t = %s s: method %s, tolerance %s (from %s); right-hand side and integrator: "
-            "the compiled core in this FMU's binary (no Python)", t, fmu_choice(c, P_METHOD), tol, sources[c->tol_source]);
+    if (c->me)
+        fmu_log(c, fmi2OK, "initialized at t = %s s for Model Exchange: the host integrates; right-hand side: the "
+                "compiled core in this FMU's binary (no Python), the friction solve started cold at every (t, x)", t);
+    else
+        fmu_log(c, fmi2OK, "initialized at t = %s s: method %s, tolerance %s (from %s); right-hand side and "
+                "integrator: the compiled core in this FMU's binary (no Python)", t, fmu_choice(c, P_METHOD), tol,
+                sources[c->tol_source]);
     if (strcmp(fmu_choice(c, P_KERNEL), "numpy") == 0)
         fmu_log(c, fmi2Warning, "solver.kernel = 'numpy' cannot be honoured: this FMU runs without Python, on the "
                 "compiled core");
@@ -310,13 +341,15 @@ fmi2Status fmu_do_step(fmu_inst *c, const char *fn, double currentCommunicationP
         c->mode = M_ERROR;
         c->has_failed = 1;
         fmu_log(c, fmi2Error, "%s(%s, %s): %s; the run stopped at t = %s s (the outputs keep their values "
-                "there; fmi2SetFMUstate or fmi2Reset to continue)", fn, a, b, c->msg, t);
+                "there; %s to continue)", fn, a, b, c->msg, t,
+                c->fmi3 ? "fmi3SetFMUState or fmi3Reset" : "fmi2SetFMUstate or fmi2Reset");
         free(y);
         return fmi2Error;
     }
     memcpy(c->outputs, out, (size_t)fm->nout * sizeof(double));
     memcpy(c->y, y, (size_t)fm->ny * sizeof(double));
     c->t = t_new;
+    c->dx_valid = 0;
     c->have_outputs = c->has_y = 1;
     c->derived_stale = !c->derived_read && fm->nout > fm->nstate_out;
     free(y);

@@ -102,6 +102,7 @@ static fmi2Status restore(fmu_inst *c, const char *fn, const fmu_saved *s) {
     memcpy(c->y, s->y, (size_t)fm->ny * sizeof(double));
     c->have_outputs = s->have_outputs, c->has_failed = s->has_failed, c->stable_step = s->stable_step;
     c->has_y = s->has_y;
+    c->dx_valid = 0;
     c->derived_stale = s->derived_stale && s->has_y;
     return fmi2OK;
 }

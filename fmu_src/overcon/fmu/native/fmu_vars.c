@@ -10,7 +10,7 @@
 #include "fmu_common.h"
 
 static const char *type_names[4] = {"Real", "Integer", "Boolean", "String"};
-const char *fmu_causality_names[3] = {"output", "parameter", "local"};
+const char *fmu_causality_names[4] = {"output", "parameter", "local", "independent"};
 const char *fmu_variability_names[5] = {"continuous", "constant", "fixed", "tunable", "discrete"};
 
 /* The references checked: each exists and has type `type`; 0 with the refusal logged. */
@@ -33,12 +33,24 @@ int fmu_check_refs(fmu_inst *c, const char *fn, const fmi2ValueReference vr[], s
 /* The value of variable v as a number (strings: the index of the choice); 0 with the reason
  * logged when an output cannot be computed. */
 int fmu_value_of(fmu_inst *c, const char *fn, const fmu_var *v, double *out) {
-    if (v->key == K_OUTPUT) {
+    if (v->key == K_OUTPUT && c->me && (c->mode & (M_EVENT | M_CONTINUOUS | M_TERMINATED | M_ERROR))) {
+        if (!fmu_me_eval(c)) return fmu_log(c, fmi2Error, "%s: %s", fn, c->msg), 0;
+        *out = c->outputs[v->arg];
+    } else if (v->key == K_STATE) {
+        if (!c->has_y && !fmu_ensure_sim(c, 1)) return fmu_log(c, fmi2Error, "%s: %s", fn, c->msg), 0;
+        *out = c->y[v->arg];
+    } else if (v->key == K_DERIVATIVE) {
+        if (!c->has_y && !fmu_ensure_sim(c, 1)) return fmu_log(c, fmi2Error, "%s: %s", fn, c->msg), 0;
+        if (!fmu_me_eval(c)) return fmu_log(c, fmi2Error, "%s: %s", fn, c->msg), 0;
+        *out = c->dx[v->arg];
+    } else if (v->key == K_OUTPUT) {
         if (!c->have_outputs && !fmu_ensure_sim(c, 1)) return fmu_log(c, fmi2Error, "%s: %s", fn, c->msg), 0;
         if (v->arg >= c->fm.nstate_out && !fmu_read_derived(c)) return fmu_log(c, fmi2Error, "%s: %s", fn, c->msg), 0;
         *out = c->outputs[v->arg];
     } else if (v->key == K_CONSTANT) {
         *out = v->arg;
+    } else if (v->key == K_TIME) {
+        *out = c->t;
     } else if (v->key == K_STABLE_STEP) {
         *out = c->stable_step;
     } else {
@@ -65,8 +77,9 @@ int fmu_set_param(fmu_inst *c, const char *fn, int k, double x, const char *s) {
     if (p->rule == RULE_CHOICE) snprintf(shown, sizeof shown, "'%s'", s ? s : "None");
     else if (p->type == T_INTEGER) snprintf(shown, sizeof shown, "%d", (int)x);
     else fmu_repr(x, shown, sizeof shown);
-    if (c->mode == M_STEPPING && !p->tunable)
-        snprintf(why, sizeof why, "variability fixed: it cannot change after initialization (fmi2Reset first)");
+    if ((c->mode & (M_STEPPING | M_EVENT | M_CONTINUOUS)) && !p->tunable)
+        snprintf(why, sizeof why, "variability fixed: it cannot change after initialization (%sReset first)",
+                 c->fmi3 ? "fmi3" : "fmi2");
     else if (p->rule == RULE_CHOICE && !s)
         snprintf(why, sizeof why, "a value is required");
     else if (p->rule == RULE_CHOICE) {

@@ -1,4 +1,4 @@
-"""modelDescription.xml (FMI 2.0 co-simulation) of a scene's FMU, from the variable table of
+"""modelDescription.xml (FMI 2.0 or 3.0; co-simulation, Model Exchange or both) of a scene's FMU, from the variable table of
 :mod:`overcon.fmu.variables` (the same table the slave registers, so value references agree).
 
 Written directly rather than by pythonfmu's ``Fmi2Slave.to_xml``, whose output fails
@@ -9,6 +9,14 @@ of the binary, DefaultExperiment from the scene (stepSize = solver.output_interv
 tolerance = solver.tolerance), the variables, and ModelStructure (Outputs: every output, the
 constant pre-check Booleans with no dependencies; InitialUnknowns: the calculated outputs,
 depending on the parameters).
+
+With Model Exchange (``kinds`` containing "me", C runtime) also the ModelExchange capabilities
+(no event indicators, fmi2/3CompletedIntegratorStep needed: it asks for the event that
+re-normalises quaternions) and ModelStructure's Derivatives (FMI 2.0) or ContinuousStateDerivative
+(FMI 3.0) entries of the ``der(...)`` variables. FMI 3.0 (:func:`model_description` with
+``fmi=3``, C runtime) writes the same variables with FMI 3.0's types (Float64, Int32, Boolean,
+String), the instantiation token, the array variables (``Dimension``) and references by value
+reference.
 """
 from __future__ import annotations
 
@@ -33,30 +41,53 @@ def _num(x) -> str:
     return repr(float(x))
 
 
+KINDS = ("cs", "me")
+"""The interface kinds an FMU may offer: co-simulation, Model Exchange."""
+
+
 def model_description(scene, table: list[Var], *, guid: str, generation_tool: str,
-                      version: str = "") -> bytes:
+                      version: str = "", fmi: int = 2, kinds=("cs",)) -> bytes:
     """The XML document (UTF-8 bytes) for ``scene`` (name, description and the default
-    experiment, from its solver options) with the variables of ``table``."""
+    experiment, from its solver options) with the variables of ``table``, for FMI ``fmi`` (2 or 3)
+    offering ``kinds`` (a subset of :data:`KINDS`, not empty)."""
+    if fmi not in (2, 3) or not kinds or set(kinds) - set(KINDS):
+        raise ValueError(f"model_description: fmi {fmi!r}, kinds {kinds!r}: FMI 2 or 3, kinds among {KINDS}")
+    if fmi == 3:
+        return _fmi3(scene, table, guid=guid, generation_tool=generation_tool, version=version, kinds=kinds)
     attrib = {"fmiVersion": "2.0", "modelName": scene.name, "guid": guid}
     if scene.description:
         attrib["description"] = scene.description
     if version:
         attrib["version"] = version
     attrib.update(generationTool=generation_tool, variableNamingConvention="structured")
+    if "me" in kinds:
+        attrib["numberOfEventIndicators"] = "0"
     root = ET.Element("fmiModelDescription", attrib)
-    ET.SubElement(root, "CoSimulation", {
-        "modelIdentifier": scene.name,
-        "needsExecutionTool": "true",  # a Python interpreter with numpy and scipy
-        "canHandleVariableCommunicationStepSize": "true",
-        "canInterpolateInputs": "false",
-        "maxOutputDerivativeOrder": "0",
-        "canRunAsynchronuously": "false",
-        "canBeInstantiatedOnlyOncePerProcess": "false",
-        "canNotUseMemoryManagementFunctions": "true",
-        "canGetAndSetFMUstate": "true",
-        "canSerializeFMUstate": "true",
-        "providesDirectionalDerivative": "false",
-    })
+    if "me" in kinds:
+        ET.SubElement(root, "ModelExchange", {
+            "modelIdentifier": scene.name,
+            "needsExecutionTool": "false",
+            "completedIntegratorStepNotNeeded": "false",
+            "canBeInstantiatedOnlyOncePerProcess": "false",
+            "canNotUseMemoryManagementFunctions": "true",
+            "canGetAndSetFMUstate": "true",
+            "canSerializeFMUstate": "true",
+            "providesDirectionalDerivative": "false",
+        })
+    if "cs" in kinds:
+        ET.SubElement(root, "CoSimulation", {
+            "modelIdentifier": scene.name,
+            "needsExecutionTool": "true",  # a Python interpreter with numpy and scipy
+            "canHandleVariableCommunicationStepSize": "true",
+            "canInterpolateInputs": "false",
+            "maxOutputDerivativeOrder": "0",
+            "canRunAsynchronuously": "false",
+            "canBeInstantiatedOnlyOncePerProcess": "false",
+            "canNotUseMemoryManagementFunctions": "true",
+            "canGetAndSetFMUstate": "true",
+            "canSerializeFMUstate": "true",
+            "providesDirectionalDerivative": "false",
+        })
     used = sorted({v.unit for v in table if v.unit is not None})
     units = ET.SubElement(root, "UnitDefinitions")
     for name in used:
@@ -70,12 +101,16 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
         "tolerance": _num(scene.solver.tolerance), "stepSize": _num(scene.solver.output_interval)})
     mv = ET.SubElement(root, "ModelVariables")
     for vr, v in enumerate(table):
+        if v.size != 1:
+            continue  # arrays are FMI 3.0's
         sv = ET.SubElement(mv, "ScalarVariable", {
             "name": v.name, "valueReference": str(vr), "description": v.description,
             "causality": v.causality, "variability": v.variability, "initial": v.initial})
         typ = {}
         if v.unit is not None:
             typ["unit"] = v.unit
+        if v.derivative is not None:
+            typ["derivative"] = str(v.derivative + 1)
         if v.start is not None:
             if v.type == "Real":
                 typ["start"] = _num(v.start)
@@ -96,10 +131,84 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
         ET.SubElement(outputs, "Unknown", a)
         if v.initial in ("approx", "calculated"):
             initial.append(i)
+    derivatives = [i for i, v in enumerate(table, start=1) if v.derivative is not None]
+    if derivatives:
+        ders = ET.SubElement(ms, "Derivatives")
+        for i in derivatives:
+            ET.SubElement(ders, "Unknown", {"index": str(i)})
+        initial = sorted(initial + derivatives)
     if initial:
         iu = ET.SubElement(ms, "InitialUnknowns")
         for i in initial:
             ET.SubElement(iu, "Unknown", {"index": str(i)})
+    ET.indent(root)
+    text = ET.tostring(root, encoding="unicode")
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n").encode("utf-8")
+
+
+_FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+
+
+def _fmi3(scene, table: list[Var], *, guid: str, generation_tool: str, version: str, kinds) -> bytes:
+    """The FMI 3.0 document (see :func:`model_description`): value references are table positions."""
+    attrib = {"fmiVersion": "3.0", "modelName": scene.name, "instantiationToken": guid}
+    if scene.description:
+        attrib["description"] = scene.description
+    if version:
+        attrib["version"] = version
+    attrib.update(generationTool=generation_tool, variableNamingConvention="structured")
+    root = ET.Element("fmiModelDescription", attrib)
+    common = {"modelIdentifier": scene.name, "needsExecutionTool": "false",
+              "canBeInstantiatedOnlyOncePerProcess": "false", "canGetAndSetFMUState": "true",
+              "canSerializeFMUState": "true", "providesDirectionalDerivatives": "false",
+              "providesAdjointDerivatives": "false"}
+    if "me" in kinds:
+        ET.SubElement(root, "ModelExchange", {**common, "needsCompletedIntegratorStep": "true"})
+    if "cs" in kinds:
+        ET.SubElement(root, "CoSimulation", {**common, "canHandleVariableCommunicationStepSize": "true",
+                                             "maxOutputDerivativeOrder": "0", "hasEventMode": "false",
+                                             "providesIntermediateUpdate": "false",
+                                             "canReturnEarlyAfterIntermediateUpdate": "false"})
+    used = sorted({v.unit for v in table if v.unit is not None})
+    units = ET.SubElement(root, "UnitDefinitions")
+    for name in used:
+        u = ET.SubElement(units, "Unit", {"name": name})
+        ET.SubElement(u, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
+    cats = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES.items():
+        ET.SubElement(cats, "Category", {"name": name, "description": text.replace("fmi2", "fmi3")})
+    ET.SubElement(root, "DefaultExperiment", {
+        "startTime": _num(scene.start_time), "stopTime": _num(scene.stop_time),
+        "tolerance": _num(scene.solver.tolerance), "stepSize": _num(scene.solver.output_interval)})
+    mv = ET.SubElement(root, "ModelVariables")
+    for vr, v in enumerate(table):
+        a = {"name": v.name, "valueReference": str(vr), "description": v.description.replace("fmi2", "fmi3"),
+             "causality": v.causality, "variability": v.variability}
+        if v.initial:
+            a["initial"] = v.initial
+        if v.unit is not None and v.type == "Real":
+            a["unit"] = v.unit
+        if v.derivative is not None:
+            a["derivative"] = str(v.derivative)
+        if v.start is not None and v.type != "String":
+            a["start"] = (_num(v.start) if v.type == "Real" else ("true" if v.start else "false")
+                          if v.type == "Boolean" else str(v.start))
+        el = ET.SubElement(mv, _FMI3_TYPES[v.type], a)
+        if v.start is not None and v.type == "String":
+            ET.SubElement(el, "Start", {"value": str(v.start)})
+        if v.size != 1:
+            ET.SubElement(el, "Dimension", {"start": str(v.size)})
+    ms = ET.SubElement(root, "ModelStructure")
+    for vr, v in enumerate(table):
+        if v.causality == "output":
+            ET.SubElement(ms, "Output", {"valueReference": str(vr), **({"dependencies": ""}
+                                                                        if v.variability == "constant" else {})})
+    for vr, v in enumerate(table):
+        if v.derivative is not None:
+            ET.SubElement(ms, "ContinuousStateDerivative", {"valueReference": str(vr)})
+    for vr, v in enumerate(table):
+        if (v.causality == "output" or v.derivative is not None) and v.initial in ("approx", "calculated"):
+            ET.SubElement(ms, "InitialUnknown", {"valueReference": str(vr)})
     ET.indent(root)
     text = ET.tostring(root, encoding="unicode")
     return ('<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n").encode("utf-8")

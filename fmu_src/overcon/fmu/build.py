@@ -518,7 +518,10 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     every Real output, FMI cross-check CSV: quoted header, comma separated, full precision) and
     ``<id>_ref.opt`` next to it. A run that fails or ends before the stop time raises
     :class:`ReferenceRunFailed` naming the model, the time reached and the FMU's logged reason,
-    and leaves no (stale) reference files."""
+    and leaves no (stale) reference files. FMI 3.0 (scalar Float64 outputs) and Model-Exchange-only
+    FMUs (fmpy's CVode at the default experiment's tolerance) are run by fmpy's own instantiation;
+    their logged reasons come from fmpy's exception (fmpy keeps an FMI 3.0 instance's logger alive
+    with the instance, so the caveat of _reference_callbacks does not apply)."""
     import fmpy  # noqa: PLC0415
     from fmpy.fmi2 import FMU2Slave  # noqa: PLC0415
     from fmpy.util import write_csv  # noqa: PLC0415
@@ -526,8 +529,10 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     md = fmpy.read_model_description(str(fmu))
     ex = md.defaultExperiment
     start, stop, step = float(ex.startTime), float(ex.stopTime), float(ex.stepSize)
-    names = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
-    stem = md.coSimulation.modelIdentifier
+    names = [v.name for v in md.modelVariables if v.causality == "output" and v.type in ("Real", "Float64")
+             and not getattr(v, "dimensions", None)]
+    fmi2_cs = md.fmiVersion == "2.0" and md.coSimulation is not None
+    stem = (md.coSimulation or md.modelExchange).modelIdentifier
     csv_path, opt_path = fmu.parent / f"{stem}_ref.csv", fmu.parent / f"{stem}_ref.opt"
     for stale in (csv_path, opt_path):
         stale.unlink(missing_ok=True)
@@ -537,13 +542,16 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     reached, failure = start, ""
     try:
         fmpy.extract(str(fmu), unzipdir)
-        instance = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=stem, instanceName=stem)
-        instance.instantiate(callbacks=_reference_callbacks(), loggingOn=False)
-        try:
-            result = fmpy.simulate_fmu(unzipdir, output=names, output_interval=step, fmu_instance=instance)
-            reached = float(result["time"][-1]) if len(result) else start
-        finally:
-            instance.freeInstance()
+        if fmi2_cs:
+            instance = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=stem, instanceName=stem)
+            instance.instantiate(callbacks=_reference_callbacks(), loggingOn=False)
+            try:
+                result = fmpy.simulate_fmu(unzipdir, output=names, output_interval=step, fmu_instance=instance)
+            finally:
+                instance.freeInstance()
+        else:
+            result = fmpy.simulate_fmu(unzipdir, output=names, output_interval=step)
+        reached = float(result["time"][-1]) if len(result) else start
     except Exception as exc:  # fmpy raises on fmi2Error
         failure = f"{type(exc).__name__}: {exc}"
         reached = None

@@ -12,7 +12,8 @@
 # with energy outputs (the Bricard linkage), run
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
-# Also compiles the core with clang -Werror when clang is installed. About 30 s.
+# Then the FMI 3.0 layer (fmi3_*.c) the same way through tests/c_host/fmu_host3.c, co-simulation (-S) and
+# Model Exchange (-M). Also compiles the core with clang -Werror when clang is installed. About 40 s.
 # Usage: bash ci/sanitize.sh   (PYTHON: the installed overcon's interpreter, default .venv/bin/python;
 #                               CC: the compiler, default cc)
 set -euo pipefail
@@ -50,6 +51,31 @@ for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2; do
     ASAN_OPTIONS=detect_leaks=1:halt_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
         "$tmp/fmu_host" -q -S -w "$tmp/$id" "$id" "$guid" 0 1 0.01 1e-9 $vrs > "$tmp/$id.csv"
     echo "sanitize: C-runtime FMU $id: $(($(wc -l < "$tmp/$id.csv") - 1)) rows, FMU state restored bit for bit"
+done
+# The FMI 3.0 layer (fmu_*.c and fmi3_*.c over the core), sanitized, by the plain FMI 3.0 host: co-simulation
+# with the FMU state through its bytes (-S), and Model Exchange (-M: the host's Euler steps, the quaternion
+# event of fmu_me.c) on a friction scene and a quaternion scene.
+"$PY" - "$tmp/fmus3" <<'PYEOF'
+import sys
+from overcon.fmu.build import build_all
+code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml"], sys.argv[1],
+                    refs=False, validate=False, runtime="c", fmi=3, allow_nonunique=True, echo=lambda s: None)
+sys.exit(code)
+PYEOF
+$CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host3" tests/c_host/fmu_host3.c -ldl -lm
+arch=$(uname -m)
+for id in planar_f45_wo4 door_h1_wo_hinge2; do
+    mkdir -p "$tmp/3_$id" && (cd "$tmp/3_$id" && unzip -q "../fmus3/$id.fmu")
+    $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/3_$id/binaries/$arch-linux/$id.so" "$FMI"/fmu_*.c "$FMI"/fmi3_*.c "$CORE"/*.c -lm
+    token=$(sed -n 's/.*instantiationToken="\([^"]*\)".*/\1/p' "$tmp/3_$id/modelDescription.xml" | head -n 1)
+    vrs=$("$PY" -c "import fmpy, sys; md = fmpy.read_model_description(sys.argv[1]); print(' '.join(f'{v.valueReference}:{v.name}' for v in md.modelVariables if v.causality == 'output' and v.type == 'Float64' and not v.dimensions))" "$tmp/3_$id")
+    # shellcheck disable=SC2086
+    ASAN_OPTIONS=detect_leaks=1:halt_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+        "$tmp/fmu_host3" -q -S -w "$tmp/3_$id" "$id" "$token" 0 1 0.01 1e-9 $vrs > "$tmp/3_$id.csv"
+    # shellcheck disable=SC2086
+    ASAN_OPTIONS=detect_leaks=1:halt_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+        "$tmp/fmu_host3" -q -M -w "$tmp/3_$id" "$id" "$token" 0 0.2 0.001 1e-9 $vrs > "$tmp/3_${id}_me.csv"
+    echo "sanitize: FMI 3.0 FMU $id: $(($(wc -l < "$tmp/3_$id.csv") - 1)) rows co-simulation, FMU state restored bit for bit; $(($(wc -l < "$tmp/3_${id}_me.csv") - 1)) rows Model Exchange"
 done
 if command -v clang >/dev/null 2>&1; then
     clang "${FLAGS[@]}" -shared -fPIC -o "$tmp/libovercore_clang.so" "$CORE"/*.c -lm

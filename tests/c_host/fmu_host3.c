@@ -17,6 +17,9 @@
  *   -S     FMU state: half-way, fmi3GetFMUState, fmi3SerializeFMUState, fmi3FreeFMUState and
  *          fmi3DeserializeFMUState; after the last step fmi3SetFMUState of that state and the second
  *          half again: the last values must be the same bits (exit 5 otherwise)
+ *   -M     Model Exchange instead: fmi3InstantiateModelExchange, and the host integrates with explicit
+ *          Euler at step STEP (fmi3SetTime, fmi3SetContinuousStates, fmi3GetContinuousStateDerivatives,
+ *          fmi3CompletedIntegratorStep and the event it may ask for); the rows are its outputs
  *   TOL <= 0  no tolerance passed to fmi3EnterInitializationMode
  *
  * Exit status: 0 ok, 1 usage, 2 loading, 3 an FMI call returned an error status, 4 a libpython
@@ -61,6 +64,15 @@ typedef fmi3Status (*fmi3SetFMUStateTYPE)(fmi3Instance, fmi3FMUState);
 typedef fmi3Status (*fmi3SerializedFMUStateSizeTYPE)(fmi3Instance, fmi3FMUState, size_t *);
 typedef fmi3Status (*fmi3SerializeFMUStateTYPE)(fmi3Instance, fmi3FMUState, fmi3Byte[], size_t);
 typedef fmi3Status (*fmi3DeserializeFMUStateTYPE)(fmi3Instance, const fmi3Byte[], size_t, fmi3FMUState *);
+typedef fmi3Instance (*fmi3InstantiateModelExchangeTYPE)(fmi3String, fmi3String, fmi3String, fmi3Boolean, fmi3Boolean,
+                                                         fmi3InstanceEnvironment, fmi3LogMessageCallback);
+typedef fmi3Status (*fmi3GetNumberOfContinuousStatesTYPE)(fmi3Instance, size_t *);
+typedef fmi3Status (*fmi3ArrayTYPE)(fmi3Instance, fmi3Float64[], size_t); /* get states, derivatives */
+typedef fmi3Status (*fmi3SetContinuousStatesTYPE)(fmi3Instance, const fmi3Float64[], size_t);
+typedef fmi3Status (*fmi3SetTimeTYPE)(fmi3Instance, fmi3Float64);
+typedef fmi3Status (*fmi3CompletedIntegratorStepTYPE)(fmi3Instance, fmi3Boolean, fmi3Boolean *, fmi3Boolean *);
+typedef fmi3Status (*fmi3UpdateDiscreteStatesTYPE)(fmi3Instance, fmi3Boolean *, fmi3Boolean *, fmi3Boolean *,
+                                                   fmi3Boolean *, fmi3Boolean *, fmi3Float64 *);
 
 static const char *status_name(fmi3Status s) {
     static const char *names[] = {"ok", "warning", "discard", "error", "fatal"};
@@ -132,19 +144,64 @@ static void do_step(void *lib, fmi3Instance c, fmi3Status worst, double t, doubl
     check(worst, ((fmi3DoStepTYPE)sym(lib, "fmi3DoStep"))(c, t, h, true, &event, &terminate, &early, &last), what);
 }
 
+/* -M: the host's explicit Euler from start to stop at step h, printing the outputs at every step. */
+static int model_exchange(void *lib, fmi3Instance c, fmi3Status worst, double start, double stop, double h,
+                          const fmi3ValueReference *vr, int nvr, fmi3Float64 *values) {
+    size_t n = 0;
+    check(worst, ((fmi3GetNumberOfContinuousStatesTYPE)sym(lib, "fmi3GetNumberOfContinuousStates"))(c, &n),
+          "fmi3GetNumberOfContinuousStates");
+    fmi3Float64 *x = calloc(n ? n : 1, sizeof *x), *dx = calloc(n ? n : 1, sizeof *dx);
+    if (!x || !dx) return 3;
+    fmi3Boolean need = false, term = false, nominals = false, changed = false, next_defined = false;
+    fmi3Float64 next_time = 0.0;
+    fmi3UpdateDiscreteStatesTYPE update = (fmi3UpdateDiscreteStatesTYPE)sym(lib, "fmi3UpdateDiscreteStates");
+    check(worst, update(c, &need, &term, &nominals, &changed, &next_defined, &next_time), "fmi3UpdateDiscreteStates");
+    check(worst, ((fmi3InstanceTYPE)sym(lib, "fmi3EnterContinuousTimeMode"))(c), "fmi3EnterContinuousTimeMode");
+    check(worst, ((fmi3ArrayTYPE)sym(lib, "fmi3GetContinuousStates"))(c, x, n), "fmi3GetContinuousStates");
+    fmi3GetFloat64TYPE get = (fmi3GetFloat64TYPE)sym(lib, "fmi3GetFloat64");
+    fmi3ArrayTYPE derivatives = (fmi3ArrayTYPE)sym(lib, "fmi3GetContinuousStateDerivatives");
+    fmi3SetContinuousStatesTYPE set_states = (fmi3SetContinuousStatesTYPE)sym(lib, "fmi3SetContinuousStates");
+    fmi3SetTimeTYPE set_time = (fmi3SetTimeTYPE)sym(lib, "fmi3SetTime");
+    fmi3CompletedIntegratorStepTYPE completed = (fmi3CompletedIntegratorStepTYPE)sym(lib, "fmi3CompletedIntegratorStep");
+    for (long k = 0;; k++) {
+        double t = start + (double)k * h;
+        check(worst, get(c, vr, (size_t)nvr, values, (size_t)nvr), "fmi3GetFloat64");
+        printf("%.17g", t);
+        for (int j = 0; j < nvr; j++) printf(",%.17g", values[j]);
+        printf("\n");
+        if (t > stop || isclose(t, stop)) break;
+        check(worst, derivatives(c, dx, n), "fmi3GetContinuousStateDerivatives");
+        for (size_t j = 0; j < n; j++) x[j] += h * dx[j];
+        check(worst, set_time(c, start + (double)(k + 1) * h), "fmi3SetTime");
+        check(worst, set_states(c, x, n), "fmi3SetContinuousStates");
+        fmi3Boolean event = false;
+        check(worst, completed(c, true, &event, &term), "fmi3CompletedIntegratorStep");
+        if (event) {
+            check(worst, ((fmi3InstanceTYPE)sym(lib, "fmi3EnterEventMode"))(c), "fmi3EnterEventMode");
+            check(worst, update(c, &need, &term, &nominals, &changed, &next_defined, &next_time),
+                  "fmi3UpdateDiscreteStates");
+            check(worst, ((fmi3InstanceTYPE)sym(lib, "fmi3EnterContinuousTimeMode"))(c), "fmi3EnterContinuousTimeMode");
+            if (changed) check(worst, ((fmi3ArrayTYPE)sym(lib, "fmi3GetContinuousStates"))(c, x, n), "fmi3GetContinuousStates");
+        }
+    }
+    free(x), free(dx);
+    return 0;
+}
+
 int main(int argc, char **argv) {
-    int logging = 1, i = 1, no_python = 0, state_check = 0;
+    int logging = 1, i = 1, no_python = 0, state_check = 0, me = 0;
     fmi3Status worst = fmi3Warning;
     while (i < argc && argv[i][0] == '-') {
         if (!strcmp(argv[i], "-q")) logging = 0;
         else if (!strcmp(argv[i], "-w")) worst = fmi3OK;
         else if (!strcmp(argv[i], "-S")) state_check = 1;
         else if (!strcmp(argv[i], "-n")) no_python = 1;
+        else if (!strcmp(argv[i], "-M")) me = 1;
         else break;
         i++;
     }
     if (argc - i < 8) {
-        fprintf(stderr, "usage: %s [-q] [-w] [-n] [-S] UNZIPDIR MODEL_ID TOKEN START STOP STEP TOL VR:NAME "
+        fprintf(stderr, "usage: %s [-q] [-w] [-n] [-S] [-M] UNZIPDIR MODEL_ID TOKEN START STOP STEP TOL VR:NAME "
                         "[VR:NAME ...]\n", argv[0]);
         return 1;
     }
@@ -183,8 +240,10 @@ int main(int argc, char **argv) {
         fprintf(stderr, "fmu_host3: cannot load %s: %s\n", so, dlerror());
         return 2;
     }
-    fmi3Instance c = ((fmi3InstantiateCoSimulationTYPE)sym(lib, "fmi3InstantiateCoSimulation"))(
-        "c_host3", token, resources, false, logging, false, false, NULL, 0, NULL, logger, NULL);
+    fmi3Instance c = me ? ((fmi3InstantiateModelExchangeTYPE)sym(lib, "fmi3InstantiateModelExchange"))(
+                              "c_host3", token, resources, false, logging, NULL, logger)
+                        : ((fmi3InstantiateCoSimulationTYPE)sym(lib, "fmi3InstantiateCoSimulation"))(
+                              "c_host3", token, resources, false, logging, false, false, NULL, 0, NULL, logger, NULL);
     if (!c) {
         fprintf(stderr, "fmu_host3: fmi3InstantiateCoSimulation failed\n");
         return 3;
@@ -197,6 +256,15 @@ int main(int argc, char **argv) {
     printf("\"time\"");
     for (int k = 0; k < nvr; k++) printf(",\"%s\"", names[k]);
     printf("\n");
+    if (me) {
+        int rc = model_exchange(lib, c, worst, start, stop, step, vr, nvr, values);
+        if (rc) return rc;
+        check(worst, ((fmi3InstanceTYPE)sym(lib, "fmi3Terminate"))(c), "fmi3Terminate");
+        ((fmi3FreeInstanceTYPE)sym(lib, "fmi3FreeInstance"))(c);
+        dlclose(lib);
+        free(vr), free(names), free(values), free(again);
+        return 0;
+    }
     double time = start, saved_time = start;
     long half = lround((stop - start) / step) / 2, saved_n = 0;
     fmi3FMUState saved = NULL;

@@ -35,8 +35,8 @@ FMU_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuTy
     }
     fmu_inst *c = fmu_instantiate(&tmp, "fmi2Instantiate", resources, guid, loggingOn);
     if (c && c->me && !c->fm.me) {
-        fmu_log(c, fmi2Error, "fmi2Instantiate: this FMU was built for co-simulation only (overcon build --kind me "
-                "or both offers Model Exchange)");
+        fmu_log(c, fmi2Error, "fmi2Instantiate: this FMU supports co-simulation only (built with --kind cs; overcon "
+                "build --kind me or both offers Model Exchange)");
         fmu_free_inst(c);
         return NULL;
     }

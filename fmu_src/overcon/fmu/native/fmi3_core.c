@@ -41,8 +41,8 @@ static fmu_inst *instantiate(const char *fn, int me, fmi3String instanceName, fm
     }
     fmu_inst *c = fmu_instantiate(&tmp, fn, resources, instantiationToken, loggingOn);
     if (c && me && !c->fm.me) {
-        fmu_log(c, fmi2Error, "%s: this FMU was built for co-simulation only (overcon build --kind me or both offers "
-                "Model Exchange)", fn);
+        fmu_log(c, fmi2Error, "%s: this FMU supports co-simulation only (built with --kind cs; overcon build --kind me "
+                "or both offers Model Exchange)", fn);
         fmu_free_inst(c);
         return NULL;
     }

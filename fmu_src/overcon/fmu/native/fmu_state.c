@@ -181,7 +181,8 @@ fmi2Status fmu_state_serialize(fmu_inst *c, const char *fn, fmi2FMUstate state, 
     if (fmu_state_size(c, fn, state, &need) != fmi2OK) return fmi2Error;
     if (!bytes || size < need)
         return fmu_log(c, fmi2Error, "%s: the buffer holds %zu bytes, the state needs %zu "
-                       "(fmi2SerializedFMUstateSize)", fn, size, need), fmi2Error;
+                       "(%s)", fn, size, need,
+                       c->fmi3 ? "fmi3SerializedFMUStateSize" : "fmi2SerializedFMUstateSize"), fmi2Error;
     fmu_saved *s = state;
     size_t h = header_size(c);
     memcpy(bytes, STATE_MAGIC, 8);

@@ -88,17 +88,7 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
             "canSerializeFMUstate": "true",
             "providesDirectionalDerivative": "false",
         })
-    used = sorted({v.unit for v in table if v.unit is not None})
-    units = ET.SubElement(root, "UnitDefinitions")
-    for name in used:
-        u = ET.SubElement(units, "Unit", {"name": name})
-        ET.SubElement(u, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
-    cats = ET.SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES.items():
-        ET.SubElement(cats, "Category", {"name": name, "description": text})
-    ET.SubElement(root, "DefaultExperiment", {
-        "startTime": _num(scene.start_time), "stopTime": _num(scene.stop_time),
-        "tolerance": _num(scene.solver.tolerance), "stepSize": _num(scene.solver.output_interval)})
+    _units_categories_experiment(root, scene, table, "fmi2")
     mv = ET.SubElement(root, "ModelVariables")
     for vr, v in enumerate(table):
         if v.size != 1:
@@ -119,6 +109,31 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
             else:
                 typ["start"] = str(v.start)
         ET.SubElement(sv, v.type, typ)
+    _fmi2_structure(root, table)
+    ET.indent(root)
+    text = ET.tostring(root, encoding="unicode")
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n").encode("utf-8")
+
+
+def _units_categories_experiment(root, scene, table: list[Var], api: str) -> None:
+    """UnitDefinitions, LogCategories (their texts naming the calls of ``api``, "fmi2" or "fmi3") and
+    DefaultExperiment, the same in both FMI versions."""
+    used = sorted({v.unit for v in table if v.unit is not None})
+    units = ET.SubElement(root, "UnitDefinitions")
+    for name in used:
+        u = ET.SubElement(units, "Unit", {"name": name})
+        ET.SubElement(u, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
+    cats = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES.items():
+        ET.SubElement(cats, "Category", {"name": name, "description": text.replace("fmi2", api)})
+    ET.SubElement(root, "DefaultExperiment", {
+        "startTime": _num(scene.start_time), "stopTime": _num(scene.stop_time),
+        "tolerance": _num(scene.solver.tolerance), "stepSize": _num(scene.solver.output_interval)})
+
+
+def _fmi2_structure(root, table: list[Var]) -> None:
+    """FMI 2.0's ModelStructure: Outputs (constants without dependencies), Derivatives,
+    InitialUnknowns (the calculated outputs and derivatives), by 1-based index."""
     ms = ET.SubElement(root, "ModelStructure")
     outputs = ET.SubElement(ms, "Outputs")
     initial = []
@@ -141,9 +156,6 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
         iu = ET.SubElement(ms, "InitialUnknowns")
         for i in initial:
             ET.SubElement(iu, "Unknown", {"index": str(i)})
-    ET.indent(root)
-    text = ET.tostring(root, encoding="unicode")
-    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n").encode("utf-8")
 
 
 _FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
@@ -169,17 +181,7 @@ def _fmi3(scene, table: list[Var], *, guid: str, generation_tool: str, version: 
                                              "maxOutputDerivativeOrder": "0", "hasEventMode": "false",
                                              "providesIntermediateUpdate": "false",
                                              "canReturnEarlyAfterIntermediateUpdate": "false"})
-    used = sorted({v.unit for v in table if v.unit is not None})
-    units = ET.SubElement(root, "UnitDefinitions")
-    for name in used:
-        u = ET.SubElement(units, "Unit", {"name": name})
-        ET.SubElement(u, "BaseUnit", {k: str(e) for k, e in UNITS[name].items()})
-    cats = ET.SubElement(root, "LogCategories")
-    for name, text in LOG_CATEGORIES.items():
-        ET.SubElement(cats, "Category", {"name": name, "description": text.replace("fmi2", "fmi3")})
-    ET.SubElement(root, "DefaultExperiment", {
-        "startTime": _num(scene.start_time), "stopTime": _num(scene.stop_time),
-        "tolerance": _num(scene.solver.tolerance), "stepSize": _num(scene.solver.output_interval)})
+    _units_categories_experiment(root, scene, table, "fmi3")
     mv = ET.SubElement(root, "ModelVariables")
     for vr, v in enumerate(table):
         a = {"name": v.name, "valueReference": str(vr), "description": v.description.replace("fmi2", "fmi3"),

@@ -1,7 +1,8 @@
 """Compiles overcon's C core (fmu_src/overcon/core/*.c) into overcon/core/libovercore.<so|dylib|dll>
 when the package is installed (``pip install .``, ``pip install -e .``), and the binary of the FMUs
-that run without Python (the core and the FMI layer fmu_src/overcon/fmu/native/fmi2_*.c) into
-overcon/fmu/native/libovercon_fmi2.<so|dylib|dll>, which ``overcon build`` copies into such an FMU;
+that run without Python (the core and the FMI layer fmu_src/overcon/fmu/native/fmu_*.c, fmi2_*.c) into
+overcon/fmu/native/libovercon_fmi2.<so|dylib|dll> (FMI 2.0) and, from the same shared files fmu_*.c with
+the FMI 3.0 layer fmi3_*.c, libovercon_fmi3.<so|dylib|dll>, which ``overcon build`` copies into such an FMU;
 everything else about the package is in pyproject.toml.
 
 The core is a plain C library (C11 and libm, no Python API), loaded through ctypes by
@@ -33,8 +34,10 @@ CORE = Path("fmu_src") / "overcon" / "core"
 SOURCES = sorted(str(p.as_posix()) for p in CORE.glob("*.c"))
 HEADERS = sorted(str(p.as_posix()) for p in CORE.glob("*.h"))
 FMI = Path("fmu_src") / "overcon" / "fmu" / "native"
-FMI_SOURCES = sorted(str(p.as_posix()) for p in FMI.glob("fmi2_*.c"))
-FMI_HEADERS = sorted(str(p.as_posix()) for p in FMI.glob("fmi2_*.h"))
+FMI_COMMON = sorted(str(p.as_posix()) for p in FMI.glob("fmu_*.c"))
+FMI_SOURCES = FMI_COMMON + sorted(str(p.as_posix()) for p in FMI.glob("fmi2_*.c"))
+FMI3_SOURCES = FMI_COMMON + sorted(str(p.as_posix()) for p in FMI.glob("fmi3_*.c"))
+FMI_HEADERS = sorted(str(p.as_posix()) for p in FMI.glob("*.h"))
 CFLAGS = ["-O2", "-ffp-contract=off", "-fno-fast-math", "-std=c11", "-Wall", "-Wextra", "-Werror"]
 SHARED = ["-shared", "-fPIC"]
 LIBS = ["-lm"]
@@ -80,6 +83,8 @@ class BuildCore(build_ext):
 setup(
     ext_modules=[Extension("overcon.core.libovercore", sources=SOURCES, depends=HEADERS),
                  Extension("overcon.fmu.native.libovercon_fmi2", sources=SOURCES + FMI_SOURCES,
+                           depends=HEADERS + FMI_HEADERS),
+                 Extension("overcon.fmu.native.libovercon_fmi3", sources=SOURCES + FMI3_SOURCES,
                            depends=HEADERS + FMI_HEADERS)],
     cmdclass={"build_ext": BuildCore},
 )

@@ -9,13 +9,14 @@
 # (ovk_project) and a run passing a singular position), then tests/c_core/driver.c, compiled with the core's sources and the sanitizers, runs
 # every case 20 times in two workspaces and requires the same bits, statuses and messages. Any
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.
-# Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmi2_*.c over the core),
+# Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmu_*.c and fmi2_*.c over the core),
 # compiled with the sanitizers into C-runtime FMUs of a friction scene (also with radau and dop853), a
 # quaternion scene, a scene with energy outputs (the Bricard linkage) and the compliant door (every
 # FMU's model file also carries the packed models of the redundancy parameter's other methods), run
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
-# Also compiles the core with clang -Werror when clang is installed. About 30 s.
+# Then the FMI 3.0 layer (fmi3_*.c) the same way through tests/c_host/fmu_host3.c, co-simulation (-S) and
+# Model Exchange (-M). Also compiles the core with clang -Werror when clang is installed. About 40 s.
 # Usage: bash ci/sanitize.sh   (PYTHON: the installed overcon's interpreter, default .venv/bin/python;
 #                               CC: the compiler, default cc)
 set -euo pipefail
@@ -60,13 +61,38 @@ PYEOF
 $CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host" tests/c_host/fmu_host.c -ldl -lm  # POSIX (dlopen, realpath): not -std=c11
 for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2 f45_radau f45_dop853 compliant_door_h1_wo_hinge2; do
     mkdir -p "$tmp/$id" && (cd "$tmp/$id" && unzip -q "../fmus/$id.fmu")
-    $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmi2_*.c "$CORE"/*.c -lm
+    $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmu_*.c "$FMI"/fmi2_*.c "$CORE"/*.c -lm
     guid=$(sed -n 's/.*guid="\([^"]*\)".*/\1/p' "$tmp/$id/modelDescription.xml" | head -n 1)
     vrs=$("$PY" -c "import fmpy, sys; md = fmpy.read_model_description(sys.argv[1]); print(' '.join(f'{v.valueReference}:{v.name}' for v in md.modelVariables if v.causality == 'output' and v.type == 'Real'))" "$tmp/$id")
     # shellcheck disable=SC2086
     ASAN_OPTIONS=detect_leaks=1:halt_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
         "$tmp/fmu_host" -q -S -w "$tmp/$id" "$id" "$guid" 0 1 0.01 1e-9 $vrs > "$tmp/$id.csv"
     echo "sanitize: C-runtime FMU $id: $(($(wc -l < "$tmp/$id.csv") - 1)) rows, FMU state restored bit for bit"
+done
+# The FMI 3.0 layer (fmu_*.c and fmi3_*.c over the core), sanitized, by the plain FMI 3.0 host: co-simulation
+# with the FMU state through its bytes (-S), and Model Exchange (-M: the host's Euler steps, the quaternion
+# event of fmu_me.c) on a friction scene and a quaternion scene.
+"$PY" - "$tmp/fmus3" <<'PYEOF'
+import sys
+from overcon.fmu.build import build_all
+code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml"], sys.argv[1],
+                    refs=False, validate=False, runtime="c", fmi=3, allow_nonunique=True, echo=lambda s: None)
+sys.exit(code)
+PYEOF
+$CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host3" tests/c_host/fmu_host3.c -ldl -lm
+arch=$(uname -m)
+for id in planar_f45_wo4 door_h1_wo_hinge2; do
+    mkdir -p "$tmp/3_$id" && (cd "$tmp/3_$id" && unzip -q "../fmus3/$id.fmu")
+    $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/3_$id/binaries/$arch-linux/$id.so" "$FMI"/fmu_*.c "$FMI"/fmi3_*.c "$CORE"/*.c -lm
+    token=$(sed -n 's/.*instantiationToken="\([^"]*\)".*/\1/p' "$tmp/3_$id/modelDescription.xml" | head -n 1)
+    vrs=$("$PY" -c "import fmpy, sys; md = fmpy.read_model_description(sys.argv[1]); print(' '.join(f'{v.valueReference}:{v.name}' for v in md.modelVariables if v.causality == 'output' and v.type == 'Float64' and not v.dimensions))" "$tmp/3_$id")
+    # shellcheck disable=SC2086
+    ASAN_OPTIONS=detect_leaks=1:halt_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+        "$tmp/fmu_host3" -q -S -w "$tmp/3_$id" "$id" "$token" 0 1 0.01 1e-9 $vrs > "$tmp/3_$id.csv"
+    # shellcheck disable=SC2086
+    ASAN_OPTIONS=detect_leaks=1:halt_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+        "$tmp/fmu_host3" -q -M -w "$tmp/3_$id" "$id" "$token" 0 0.2 0.001 1e-9 $vrs > "$tmp/3_${id}_me.csv"
+    echo "sanitize: FMI 3.0 FMU $id: $(($(wc -l < "$tmp/3_$id.csv") - 1)) rows co-simulation, FMU state restored bit for bit; $(($(wc -l < "$tmp/3_${id}_me.csv") - 1)) rows Model Exchange"
 done
 if command -v clang >/dev/null 2>&1; then
     clang "${FLAGS[@]}" -shared -fPIC -o "$tmp/libovercore_clang.so" "$CORE"/*.c -lm

@@ -37,11 +37,13 @@ NATIVE = ROOT / "fmu_src" / "overcon" / "fmu" / "native" / "overcon_fmi2.c"
 
 @pytest.fixture(scope="module", params=fmu_build.RUNTIMES)
 def unz(tmp_path_factory, request):
-    """The FMUs of two paper scenes, built with each runtime (the Python slave, and the C layer
-    without Python): every call below behaves alike in both."""
+    """The co-simulation FMUs of two paper scenes, built with each runtime (the Python slave, and the
+    C layer without Python): every call below behaves alike in both. (Model Exchange and FMI 3.0:
+    test_fmi3_me.py.)"""
     out = tmp_path_factory.mktemp(f"fmus_calls_{request.param}")
     code, _ = fmu_build.build_all([str(MECH / "planar_f45_wo4.toml"), str(MECH / "planar_none_wo4.toml")], out,
-                                  refs=False, echo=lambda s: None, echo_err=lambda s: None, runtime=request.param)
+                                  refs=False, echo=lambda s: None, echo_err=lambda s: None, runtime=request.param,
+                                  kind="cs")
     assert code == 0
     done = {}
 

@@ -89,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
     from .fmu.build import add_arguments as _build_arguments
 
     _build_arguments(sub.add_parser(
-        "build", help="build one FMI 2.0 co-simulation FMU per scene file (pre-check first; same as build_fmu.py)"))
+        "build", help="build one FMU per scene file (FMI 2.0 or 3.0, co-simulation and/or Model Exchange; pre-check "
+                      "first; same as build_fmu.py)"))
     _tooling_parsers(sub)
     return parser
 
@@ -158,6 +159,8 @@ def _tooling_parsers(sub) -> None:
     p.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
     p.add_argument("--stop-time", type=_positive, metavar="T", help="shorter runs (s; default: the scenes' stop times)")
     p.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H", help=LOCKSTEP_HELP)
+    p.add_argument("--fmi", type=int, choices=(2, 3), default=2,
+                   help="FMI version of the paper scenes' FMUs: 2 (default) or 3 (FMI 3.0, the C runtime)")
     _sweep_parser(sub)
     _converge_parser(sub)
 
@@ -501,7 +504,7 @@ def cmd_reproduce(args) -> int:
 
     def go():
         out = reproduce(args.out, mechanisms=args.mechanisms, jobs=args.jobs, stop_time=args.stop_time,
-                        lockstep_step=_lockstep(args))
+                        lockstep_step=_lockstep(args), fmi=args.fmi)
         failed = [c for c in out.comparisons if c.failure is not None]
         n_bad = sum(not c.matches for c in out.comparisons) - len(failed)
         print(f"\n{len(out.comparisons)} groups compared, "

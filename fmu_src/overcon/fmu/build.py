@@ -34,6 +34,17 @@ covers the model (:func:`overcon.fmu.cmodel.support`: the core's joints and rota
                                       (overcon.fmu.cmodel)
     resources/overcon_fmu.json, resources/overcon_facts.json, resources/scene/...  as above
 
+FMI version and kind (``fmi``, ``kind``; ``overcon build --fmi 2|3 --kind cs|me|both``, default FMI 2.0
+and both): a C-runtime FMU offers co-simulation, Model Exchange (the continuous states y = [q, h]
+and their derivatives: :mod:`overcon.fmu.variables`, ``native/fmu_me.c``) or both, as FMI 2.0
+(``binaries/linux64``, :data:`C_RUNTIME_LIBRARY`) or FMI 3.0 (``binaries/x86_64-linux``,
+:data:`C_RUNTIME_LIBRARY3`: ``native/fmi3_*.c`` over the same shared ``native/fmu_*.c``). The
+Python-runtime FMU is FMI 2.0 co-simulation only: ``--fmi 3`` or an explicit ``--kind me|both`` is
+refused there (exit 2, naming ``--runtime c``), the default kind meaning co-simulation (said in the
+build output). Model Exchange does not carry the energy outputs (their work ledger integrates over
+the run's own steps): a scene with energy outputs is built for co-simulation only under the default
+kind (said in the build output) and refused (exit 2) under an explicit ``--kind me|both``.
+
 Its integrators are every method of the Python FMU: dopri5, dop853 and rk4 (core/integrate_rk.c)
 and radau (core/integrate_radau.c). Every redundancy method runs in it (min-norm:
 core/kkt_minnorm.c; compliant: core/compliance.c). A model the C layer does not cover is built
@@ -91,8 +102,12 @@ CFLAGS = ["-shared", "-fPIC", "-O2", "-s", "-fvisibility=hidden", "-Wall", "-Wex
 LIBS = ["-ldl", "-lpthread"]
 FORMAT_VERSION = "overcon-fmu-2"  # bump when the FMU layout changes (enters the GUID)
 RUNTIMES = ("python", "c")
+FMI_VERSIONS = (2, 3)
+KINDS = ("cs", "me", "both")
 C_RUNTIME_LIBRARY = Path(__file__).resolve().parent / "native" / f"libovercon_fmi2{kernel_mod._shared_suffix()}"
-"""The binary of the FMUs without Python, compiled by the package installation (setup.py)."""
+"""The binary of the FMI 2.0 FMUs without Python, compiled by the package installation (setup.py)."""
+C_RUNTIME_LIBRARY3 = Path(__file__).resolve().parent / "native" / f"libovercon_fmi3{kernel_mod._shared_suffix()}"
+"""The binary of the FMI 3.0 FMUs (without Python), compiled by the package installation (setup.py)."""
 _PKG_NAME = __name__.split(".")[0]  # "overcon"
 _DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip timestamps: reproducible FMU bytes
 
@@ -187,14 +202,27 @@ def kernel_library() -> bytes:
                          "in the project directory, which compiles it") from exc
 
 
-def c_runtime_library() -> bytes:
-    """The FMU binary without Python (:data:`C_RUNTIME_LIBRARY`). Raises :class:`BuildError` naming
-    the fix when it is missing (a source tree that was never built)."""
+def c_runtime_library(fmi: int = 2) -> bytes:
+    """The FMU binary without Python for FMI ``fmi`` (:data:`C_RUNTIME_LIBRARY`,
+    :data:`C_RUNTIME_LIBRARY3`). Raises :class:`BuildError` naming the fix when it is missing (a
+    source tree that was never built)."""
+    path = C_RUNTIME_LIBRARY3 if fmi == 3 else C_RUNTIME_LIBRARY
     try:
-        return C_RUNTIME_LIBRARY.read_bytes()
+        return path.read_bytes()
     except OSError as exc:
-        raise BuildError(f"the FMU binary without Python {C_RUNTIME_LIBRARY} cannot be read ({exc.strerror or exc}): "
+        raise BuildError(f"the FMU binary without Python {path} cannot be read ({exc.strerror or exc}): "
                          "run `pip install -e .` in the project directory, which compiles it") from exc
+
+
+def _fmi3_platform() -> str:
+    """FMI 3.0's platform tuple of this machine (binaries/<tuple>)."""
+    arch = {"x86_64": "x86_64", "amd64": "x86_64", "aarch64": "aarch64", "arm64": "aarch64"}.get(
+        platform.machine().lower(), platform.machine().lower())
+    if sys.platform.startswith("linux"):
+        return f"{arch}-linux"
+    if sys.platform == "darwin":
+        return f"{arch}-darwin"
+    raise BuildError(f"the FMU binary (dlopen, POSIX) is built on Linux and macOS only, not on {sys.platform}")
 
 
 def _overcon_version() -> str:
@@ -250,8 +278,10 @@ class _NotBuilt(Exception):
 
 
 def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, validate: bool = True,
-                echo=print, sources=None, binary: NativeBinary | None = None, runtime: str = "c") -> BuildResult:
-    """Build the FMU of one scene file (see the module docstring); never raises for bad input."""
+                echo=print, sources=None, binary: NativeBinary | None = None, runtime: str = "c",
+                fmi: int = 2, kind: str | None = None) -> BuildResult:
+    """Build the FMU of one scene file (see the module docstring); never raises for bad input.
+    ``kind`` None: the default (both with the C runtime, co-simulation with the Python runtime)."""
     t0 = time.perf_counter()
     res = BuildResult(source=str(path), status="invalid")
     try:
@@ -272,8 +302,10 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
             if why is not None:
                 used = "python"
                 echo(f"{spec.name}: runtime python (the FMU embeds Python): the C runtime does not cover {why}")
+        kinds = _kinds(spec, model, used, fmi, kind, echo)
         if used == "c":
-            fmu, guid, table = _write_c_fmu(path, out_dir, spec, model, report, sources=sources, validate=validate)
+            fmu, guid, table = _write_c_fmu(path, out_dir, spec, model, report, sources=sources, validate=validate,
+                                            fmi=fmi, kinds=kinds)
         else:
             fmu, guid, table = _write_fmu(path, out_dir, spec, model, report, sources=sources, binary=binary,
                                           validate=validate)
@@ -289,6 +321,29 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
     echo(f"{spec.name}: built {fmu} ({n_out} outputs, {n_par} parameters, "
          f"{fmu.stat().st_size // 1024} KiB, runtime {used}) in {res.seconds:.2f} s")
     return res
+
+
+def _kinds(spec: SceneSpec, model, runtime: str, fmi: int, kind: str | None, echo) -> tuple[str, ...]:
+    """The interface kinds the FMU offers ("cs", "me"), or :class:`_NotBuilt` ("invalid") for an FMI
+    version or kind the runtime cannot give (module docstring)."""
+    if runtime == "python":
+        if fmi == 3 or kind in ("me", "both"):
+            asked = "--fmi 3" if fmi == 3 else f"--kind {kind}"
+            raise _NotBuilt("invalid", f"{spec.name}: {asked} refused: the FMU with the Python runtime is FMI 2.0 "
+                                       "co-simulation only; FMI 3.0 and Model Exchange need the C runtime "
+                                       "(--runtime c, where it covers the scene)")
+        if kind is None:
+            echo(f"{spec.name}: co-simulation only (the Python runtime has no Model Exchange)")
+        return ("cs",)
+    wanted = ("cs", "me") if kind in (None, "both") else (kind,)
+    if "me" in wanted and model.energy_outputs:
+        if kind is not None:
+            raise _NotBuilt("invalid", f"{spec.name}: --kind {kind} refused: Model Exchange does not carry the "
+                                       "energy outputs ([outputs] energy = true; their work ledger integrates over "
+                                       "the run's own steps): use --kind cs")
+        echo(f"{spec.name}: co-simulation only (Model Exchange does not carry the energy outputs)")
+        return ("cs",)
+    return wanted
 
 
 def _load_scene(path: Path):
@@ -405,7 +460,7 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
 
 
 def _write_c_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: PrecheckResult, *, sources,
-                 validate: bool):
+                 validate: bool, fmi: int = 2, kinds=("cs", "me")):
     """Write ``<out_dir>/<scene>.fmu`` with the C runtime (module docstring), as :func:`_write_fmu`."""
     try:
         mech_ref = tomllib.loads(path.read_text(encoding="utf-8"))["scene"]["mechanism"]
@@ -413,22 +468,29 @@ def _write_c_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Prec
         scene_bytes, mech_bytes = path.read_bytes(), (path.parent / mech_ref).read_bytes()
         sources = _source_files() if sources is None else sources
         plat, ext = _fmi_platform()
-        binary = c_runtime_library()
+        if fmi == 3:
+            plat = _fmi3_platform()
+        binary = c_runtime_library(fmi)
         digest = _digest((FORMAT_VERSION.encode(), b"runtime c", binary, scene_zip.encode(), scene_bytes,
-                          mech_zip.encode(), mech_bytes), sources)
+                          mech_zip.encode(), mech_bytes)
+                         + ((f"fmi {fmi} kinds {','.join(kinds)}".encode(),) if (fmi, kinds) != (2, ("cs",)) else ()),
+                         sources)
         guid = "{" + str(uuid.UUID(digest[:32])) + "}"
-        table = variables.table(model, spec.solver, report.reaction_unique, bool(report.motion_unique), report.rank)
+        table = variables.table(model, spec.solver, report.reaction_unique, bool(report.motion_unique), report.rank,
+                                states="me" in kinds, fmi3=fmi == 3)
         overcon_version = _overcon_version()
         xml = description.model_description(
-            spec, table, guid=guid, version=overcon_version,
+            spec, table, guid=guid, version=overcon_version, fmi=fmi, kinds=kinds,
             generation_tool=f"overcon {overcon_version} build_fmu (C runtime: the compiled core, no Python)")
         warnings = [(1, text) for text in friction_warnings(model)]
         model_bin = cmodel.model_file(model, spec.solver, table, guid, warnings)
         manifest = {"scene": scene_zip, "guid": guid, "runtime": "c", "model_identifier": spec.name,
                     "reaction_unique": report.reaction_unique, "motion_unique": bool(report.motion_unique),
                     "precheck_problems": list(report.problems), "precheck_warnings": list(report.warnings),
-                    "binary": {"platform": plat, "library": C_RUNTIME_LIBRARY.name,
-                               "source": "overcon/core, overcon/fmu/native/fmi2_*.c"},
+                    "fmi_version": fmi, "kinds": list(kinds),
+                    "binary": {"platform": plat,
+                               "library": (C_RUNTIME_LIBRARY3 if fmi == 3 else C_RUNTIME_LIBRARY).name,
+                               "source": f"overcon/core, overcon/fmu/native/fmu_*.c, fmi{fmi}_*.c"},
                     "model_file": {"path": "resources/overcon_model.bin", "format": cmodel.FORMAT}}
         out_dir.mkdir(parents=True, exist_ok=True)
         fmu = out_dir / f"{spec.name}.fmu"
@@ -461,7 +523,10 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     every Real output, FMI cross-check CSV: quoted header, comma separated, full precision) and
     ``<id>_ref.opt`` next to it. A run that fails or ends before the stop time raises
     :class:`ReferenceRunFailed` naming the model, the time reached and the FMU's logged reason,
-    and leaves no (stale) reference files."""
+    and leaves no (stale) reference files. FMI 3.0 (scalar Float64 outputs) and Model-Exchange-only
+    FMUs (fmpy's CVode at the default experiment's tolerance) are run by fmpy's own instantiation;
+    their logged reasons come from fmpy's exception (fmpy keeps an FMI 3.0 instance's logger alive
+    with the instance, so the caveat of _reference_callbacks does not apply)."""
     import fmpy  # noqa: PLC0415
     from fmpy.fmi2 import FMU2Slave  # noqa: PLC0415
     from fmpy.util import write_csv  # noqa: PLC0415
@@ -469,8 +534,10 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     md = fmpy.read_model_description(str(fmu))
     ex = md.defaultExperiment
     start, stop, step = float(ex.startTime), float(ex.stopTime), float(ex.stepSize)
-    names = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
-    stem = md.coSimulation.modelIdentifier
+    names = [v.name for v in md.modelVariables if v.causality == "output" and v.type in ("Real", "Float64")
+             and not getattr(v, "dimensions", None)]
+    fmi2_cs = md.fmiVersion == "2.0" and md.coSimulation is not None
+    stem = (md.coSimulation or md.modelExchange).modelIdentifier
     csv_path, opt_path = fmu.parent / f"{stem}_ref.csv", fmu.parent / f"{stem}_ref.opt"
     for stale in (csv_path, opt_path):
         stale.unlink(missing_ok=True)
@@ -480,13 +547,16 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
     reached, failure = start, ""
     try:
         fmpy.extract(str(fmu), unzipdir)
-        instance = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=stem, instanceName=stem)
-        instance.instantiate(callbacks=_reference_callbacks(), loggingOn=False)
-        try:
-            result = fmpy.simulate_fmu(unzipdir, output=names, output_interval=step, fmu_instance=instance)
-            reached = float(result["time"][-1]) if len(result) else start
-        finally:
-            instance.freeInstance()
+        if fmi2_cs:
+            instance = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=stem, instanceName=stem)
+            instance.instantiate(callbacks=_reference_callbacks(), loggingOn=False)
+            try:
+                result = fmpy.simulate_fmu(unzipdir, output=names, output_interval=step, fmu_instance=instance)
+            finally:
+                instance.freeInstance()
+        else:
+            result = fmpy.simulate_fmu(unzipdir, output=names, output_interval=step)
+        reached = float(result["time"][-1]) if len(result) else start
     except Exception as exc:  # fmpy raises on fmi2Error
         failure = f"{type(exc).__name__}: {exc}"
         reached = None
@@ -549,13 +619,16 @@ def _reference_job(fmu: str) -> tuple[str, str, float]:
 
 def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = True,
               validate: bool = True, jobs: int | None = None, echo=None, echo_err=None,
-              runtime: str = "c") -> tuple[int, list[BuildResult]]:
+              runtime: str = "c", fmi: int = 2, kind: str | None = None) -> tuple[int, list[BuildResult]]:
     """Build every scene in ``paths`` (files or directories) into ``out_dir``; print progress with
     ``echo`` (problems with ``echo_err``). ``runtime``: "python" (the FMU embeds Python) or "c"
-    (without Python where the C runtime covers the scene; module docstring). Returns (exit code,
-    results)."""
+    (without Python where the C runtime covers the scene; module docstring); ``fmi`` 2 or 3 and
+    ``kind`` "cs", "me", "both" or None (the default: both with the C runtime, co-simulation with
+    the Python runtime; module docstring). Returns (exit code, results)."""
     if runtime not in RUNTIMES:
         raise ValueError(f"runtime {runtime!r}: one of {', '.join(RUNTIMES)}")
+    if fmi not in FMI_VERSIONS or kind not in (None, *KINDS):
+        raise ValueError(f"fmi {fmi!r}, kind {kind!r}: fmi one of {FMI_VERSIONS}, kind one of {KINDS}")
     echo = echo or (lambda s: print(s, flush=True))
     echo_err = echo_err or (lambda s: print(s, file=sys.stderr, flush=True))
     t0 = time.perf_counter()
@@ -579,7 +652,7 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
     names: dict[str, str] = {}
     for f in files:
         r = build_scene(f, out_dir, allow_nonunique=allow_nonunique, validate=validate, echo=echo,
-                        sources=sources, binary=binary, runtime=runtime)
+                        sources=sources, binary=binary, runtime=runtime, fmi=fmi, kind=kind)
         if r.status == "built" and r.name in names:
             r.status = "failed"
             r.messages.append(f"{f}: scene name {r.name} already built from {names[r.name]} "
@@ -652,13 +725,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="c (default): the FMU runs the compiled core without Python where it covers the scene, "
                         "else it is built with the Python runtime and the build output says why; python: the FMU "
                         "embeds the building Python")
+    p.add_argument("--fmi", type=int, choices=FMI_VERSIONS, default=2,
+                   help="FMI version of the FMUs: 2 (FMI 2.0) or 3 (FMI 3.0, C runtime only) (default 2)")
+    p.add_argument("--kind", choices=KINDS, default=None,
+                   help="interfaces the FMU offers: cs (co-simulation), me (Model Exchange) or both; me and both "
+                        "need the C runtime (default: both with the C runtime, cs with the Python runtime)")
 
 
 
 def run_args(args) -> int:
     code, _ = build_all(args.paths, args.out, allow_nonunique=args.allow_nonunique,
                         refs=not args.no_ref, validate=not args.no_validate, jobs=args.jobs,
-                        runtime=getattr(args, "runtime", "c"))
+                        runtime=getattr(args, "runtime", "c"), fmi=getattr(args, "fmi", 2),
+                        kind=getattr(args, "kind", None))
     return code
 
 

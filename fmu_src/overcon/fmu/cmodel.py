@@ -26,7 +26,8 @@ terminating zero, then the bytes and the zero; an array an int32 count then the 
    and component; friction: joint);
 5. variables: i count, then per variable string name, i type (:data:`TYPES`), i causality, i
    variability (:data:`VARIABILITIES`), i key kind (:data:`KEYS`), i key argument (the output index,
-   the constant 0/1, the parameter index, :data:`ALONG_ARGS` for the uniqueness along the motion);
+   the constant 0/1, the parameter index, the index into y = [q, h] of a continuous state or its
+   derivative, an array's first output index, :data:`ALONG_ARGS` for the uniqueness along the motion);
 6. parameters: i count, then per parameter string name, i type, i target (:data:`TARGETS`), i joint
    (friction parameters), i rule kind (0 real, 1 int, 2 choice), d low, d high, i has low, i has
    high, i low open, string range text, string why, i number of choices then the choices as
@@ -46,12 +47,13 @@ from ..spec import REDUNDANCY_METHODS
 from ..watch import SingularityMonitor
 from .variables import redundancy_methods, redundancy_rule, with_redundancy
 
-FORMAT = 2
+FORMAT = 3
 MAGIC = b"OVKFMU01"
 TYPES = {"Real": 0, "Integer": 1, "Boolean": 2, "String": 3, "Enumeration": 1}  # an Enumeration is an Integer in FMI 2.0's calls
-CAUSALITIES = {"output": 0, "parameter": 1, "local": 2}
+CAUSALITIES = {"output": 0, "parameter": 1, "local": 2, "independent": 3}
 VARIABILITIES = {"continuous": 0, "constant": 1, "fixed": 2, "tunable": 3, "discrete": 4}
-KEYS = {"output": 0, "constant": 1, "param": 2, "stable_step": 3, "along": 4}
+KEYS = {"output": 0, "constant": 1, "param": 2, "stable_step": 3, "state": 4, "derivative": 5, "array": 6, "time": 7,
+        "along": 8}
 OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6, "energy": 7}
 TARGETS = {"mu": 1, "v_reg": 2, "mu_static": 3, "v_stribeck": 4, "solver.method": 10, "solver.tolerance": 11,
            "solver.step": 12, "solver.max_step": 13, "solver.baumgarte": 14, "solver.friction_tol": 15,
@@ -204,7 +206,8 @@ def model_file(model, solver, table, guid: str, messages=()) -> bytes:
     w.i(len(table))
     for v in table:
         kind, arg = v.key
-        a = (arg if kind == "output" else int(bool(arg)) if kind == "constant" else index[arg] if kind == "param"
+        a = (arg if kind in ("output", "state", "derivative", "array") else int(bool(arg)) if kind == "constant"
+             else index[arg] if kind == "param"
              else (ALONG_ARGS[arg] if arg in ALONG_ARGS else 2 + arg) if kind == "along" else 0)
         w.s(v.name)
         w.i(TYPES[v.type], CAUSALITIES[v.causality], VARIABILITIES[v.variability], KEYS[kind], a)

@@ -26,6 +26,16 @@ Value references are the positions in :func:`table` (0-based), in this order:
 The discrete outputs hold the verdict of the run's last evaluation (key ``("along", ...)``): the
 communication point after a successful ``fmi2DoStep``, the instant a failed one stopped at.
 
+6. with Model Exchange (``states=True``, C runtime): the continuous states y = [q, h] of the core,
+   ``q.<body>.<coordinate>`` (m, rad; quaternion components 1, not normalised) and
+   ``h.<body>.<velocity>`` (planar vx, vy, omega; spatial vx, vy, vz in the global frame and wx, wy, wz
+   in the body's axes), causality local, variability continuous, initial exact (start: the scene's
+   q0, h0), then their derivatives ``der(q.<body>.<coordinate>)``, ``der(h.<body>.<velocity>)``
+   (initial calculated);
+7. FMI 3.0 only (``fmi3=True``): per reaction joint the array ``<joint>.reaction`` of its reaction
+   components in the order of the scalar outputs ``<joint>.<component>`` (which stay), then the
+   independent variable ``time`` (s) that FMI 3.0 requires.
+
 ``UNITS`` gives every unit's SI base-unit exponents (FMI ``BaseUnit``).
 """
 from __future__ import annotations
@@ -35,7 +45,7 @@ from dataclasses import dataclass
 
 from ..joints import TYPES
 from ..params import check_param, rule_of
-from ..spec import COORDINATE_UNITS, ENERGY_OUTPUTS, REDUNDANCY_METHODS, VELOCITY_OUTPUTS
+from ..spec import COORDINATE_UNITS, ENERGY_OUTPUTS, REDUNDANCY_METHODS, VELOCITY_OUTPUTS, coordinates
 
 UNITS: dict[str, dict[str, int]] = {
     "1": {},
@@ -45,6 +55,8 @@ UNITS: dict[str, dict[str, int]] = {
     "1/s": {"s": -1},
     "m/s": {"m": 1, "s": -1},
     "rad/s": {"rad": 1, "s": -1},
+    "m/s2": {"m": 1, "s": -2},
+    "rad/s2": {"rad": 1, "s": -2},
     "N": {"kg": 1, "m": 1, "s": -2},
     "N.m": {"kg": 1, "m": 2, "s": -2},
     "J": {"kg": 1, "m": 2, "s": -2},
@@ -106,6 +118,8 @@ class Var:
     unit: str | None = None
     start: object = None
     key: tuple = ()
+    derivative: int | None = None  # a state's derivative: the 0-based table index of that state
+    size: int = 1  # an array variable's number of elements (FMI 3.0)
 
 
 @dataclass(frozen=True)
@@ -158,12 +172,14 @@ def _friction_param_names(law) -> tuple[str, ...]:
     return ("mu", "v_reg", "mu_static", "v_stribeck") if law.name == "stribeck" else ("mu", "v_reg")
 
 
-def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, rank: int | None = None) -> list[Var]:
+def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, rank: int | None = None, *,
+          states: bool = False, fmi3: bool = False) -> list[Var]:
     """All variables of the FMU of ``model`` with the solver options ``solver`` (the start values
     of the ``solver.*`` parameters; see the module docstring for the order). Per joint type
     facts (units, texts) come from :data:`overcon.joints.TYPES`. ``reaction_unique``: pre-check
     verdict per joint name; ``motion_unique``, ``rank``: the scene's (start values; the run
-    updates them, see the module docstring)."""
+    updates them, see the module docstring); ``states``: the continuous states and their
+    derivatives (Model Exchange); ``fmi3``: the reaction arrays and ``time`` (FMI 3.0)."""
     out: list[Var] = []
     body_of = {i: name for i, name in enumerate(model.body_names)}
     k = 0
@@ -232,7 +248,56 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
                    "does. Readable after the failed fmi2DoStep: the lockstep comparison repeats its runs with it",
                    unit="s", key=("stable_step", None)))
     out.append(redundancy_var(model))
-    return out + _along_outputs(model, reaction_unique, rank)
+    out += _along_outputs(model, reaction_unique, rank)
+    if states:
+        out.extend(_states(model, len(out)))
+    if fmi3:
+        out.extend(_reaction_arrays(model, out))
+        out.append(Var("time", "Real", "independent", "continuous", "", "simulation time", unit="s",
+                       key=("time", None)))
+    return out
+
+
+_DERIVATIVE_UNITS = {"m": "m/s", "rad": "rad/s", "1": "1/s", "m/s": "m/s2", "rad/s": "rad/s2"}
+
+
+def _states(model, first: int) -> list[Var]:
+    """The continuous states y = [q, h] and their derivatives (module docstring, item 4); ``first``:
+    the table index of the first state."""
+    coords = coordinates(model.kind, model.rotation)
+    names, units, texts = [], [], []
+    for body in model.body_names:
+        for c in coords:
+            names.append(f"q.{body}.{c}")
+            units.append(COORDINATE_UNITS[c])
+            texts.append(f"{body}: {COORDINATE_TEXT[c]}" + (" (not normalised)" if c.startswith("e") else ""))
+    for body in model.body_names:
+        for v, unit in VELOCITY_OUTPUTS[model.kind]:
+            names.append(f"h.{body}.{v}")
+            units.append(unit)
+            texts.append(f"{body}: {STATE_OUTPUT_TEXT[v]}")
+    y0 = [float(x) for x in model.q0] + [float(x) for x in model.h0]
+    assert len(names) == len(y0)
+    out = [Var(n, "Real", "local", "continuous", "exact", f"continuous state: {t}", unit=u, start=y, key=("state", i))
+           for i, (n, u, t, y) in enumerate(zip(names, units, texts, y0))]
+    out += [Var(f"der({n})", "Real", "local", "continuous", "calculated", f"time derivative of {n}",
+                unit=_DERIVATIVE_UNITS[u], key=("derivative", i), derivative=first + i)
+            for i, (n, u) in enumerate(zip(names, units))]
+    return out
+
+
+def _reaction_arrays(model, table_so_far: list[Var]) -> list[Var]:
+    """Per reaction joint the array of its reaction components (module docstring, item 5)."""
+    index = {v.name: v.key[1] for v in table_so_far if v.key and v.key[0] == "output"}
+    out = []
+    for j in model.reaction_joints:
+        c = model.joints[j]
+        units = {dict(TYPES[c.type].reaction).get(comp, "N") for comp in c.components}
+        out.append(Var(f"{c.name}.reaction", "Real", "output", "continuous", "calculated",
+                       f"reaction of joint {c.name}: the components {', '.join(c.components)} (the scalar outputs "
+                       f"{c.name}.<component>) as one array", unit=units.pop() if len(units) == 1 else None,
+                       key=("array", index[f"{c.name}.{c.components[0]}"]), size=len(c.components)))
+    return out
 
 
 def _along_outputs(model, reaction_unique, rank) -> list[Var]:

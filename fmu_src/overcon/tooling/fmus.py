@@ -111,9 +111,27 @@ def _overcon_facts(path: Path, zf: zipfile.ZipFile) -> dict:
     return dict(facts, label=variant_label(facts["eliminate"]))
 
 
+_FMI2_TYPE = {"Float64": "Real", "Float32": "Real", "Int8": "Integer", "UInt8": "Integer", "Int16": "Integer",
+              "UInt16": "Integer", "Int32": "Integer", "UInt32": "Integer", "Int64": "Integer", "UInt64": "Integer"}
+
+
+def type_name(variable) -> str:
+    """The FMI 2.0 type name (Real, Integer, Boolean, String) of an fmpy model variable of FMI 2.0 or
+    3.0 (Float64 is Real, the integer types Integer): the tooling speaks FMI 2.0's names."""
+    return _FMI2_TYPE.get(variable.type, variable.type)
+
+
+def interface(md) -> str:
+    """The interface the tooling runs an FMU through: co-simulation where the FMU offers it, else
+    Model Exchange (fmpy integrates it, with CVode by default)."""
+    return "CoSimulation" if md.coSimulation is not None else "ModelExchange"
+
+
 def inspect_fmu(path) -> FmuInfo:
-    """Read an FMU's description; :class:`InputError` naming the file if it is missing, not a zip
-    archive, has no readable modelDescription.xml, is not co-simulation or has no Real outputs."""
+    """Read an FMU's description (FMI 2.0 or 3.0); :class:`InputError` naming the file if it is
+    missing, not a zip archive, has no readable modelDescription.xml, offers neither co-simulation
+    nor Model Exchange or has no Real outputs. Array variables (FMI 3.0) are not recorded: their
+    elements are scalar outputs of their own."""
     from fmpy import read_model_description
 
     path = Path(path)
@@ -127,20 +145,21 @@ def inspect_fmu(path) -> FmuInfo:
         md = read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises plain Exceptions, lxml errors, KeyError, BadZipFile
         raise InputError(f"{path}: cannot read modelDescription.xml: {type(exc).__name__}: {exc}") from exc
-    if md.coSimulation is None:
-        raise InputError(f"{path}: not a co-simulation FMU (only FMI co-simulation FMUs are run)")
+    if md.coSimulation is None and md.modelExchange is None:
+        raise InputError(f"{path}: neither co-simulation nor Model Exchange (only those FMUs are run)")
     outputs, constants, params = [], {}, {}
     for v in md.modelVariables:
+        typ = type_name(v)
         if v.causality == "parameter":
-            params[v.name] = v.type
-        if v.causality != "output":
+            params[v.name] = typ
+        if v.causality != "output" or getattr(v, "dimensions", None):
             continue
-        if v.type == "Real" and v.variability != "constant":
+        if typ == "Real" and v.variability != "constant":
             unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
             position = unit in POSITION_UNITS or (unit == "1" and v.name.endswith(QUATERNION_SUFFIXES))
             kind = "position" if position else "reaction" if unit in REACTION_UNITS else "other"
             outputs.append(Output(v.name, unit, kind))
-        elif v.type == "Boolean" and (v.variability == "constant" or v.start is not None):
+        elif typ == "Boolean" and (v.variability == "constant" or v.start is not None):
             # the pre-check's verdicts: constants, or (FMUs that judge them along the motion)
             # discrete outputs whose start value is the pre-check's at t = 0
             constants[v.name] = _bool(v.start)
@@ -156,7 +175,7 @@ def inspect_fmu(path) -> FmuInfo:
             facts = _overcon_facts(path, zf)
     except zipfile.BadZipFile as exc:
         raise InputError(f"{path}: corrupt FMU archive: {exc}") from exc
-    model = md.coSimulation.modelIdentifier
+    model = (md.coSimulation or md.modelExchange).modelIdentifier
     reaction_unique = {name[: -len(".reaction_unique")]: val for name, val in constants.items()
                        if name.endswith(".reaction_unique")} or facts.get("reaction_unique", {})
     motion_unique = constants.get("motion_unique", facts.get("motion_unique"))

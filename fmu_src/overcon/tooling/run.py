@@ -37,7 +37,7 @@ import numpy as np
 
 from ..params import MAX_OUTPUT_POINTS, check_param
 from . import InputError, SimulationFailed
-from .fmus import FmuInfo
+from .fmus import FmuInfo, interface
 
 RESULT_TAG = "OVERCON-RESULT "
 PROGRESS_EVERY = 1.0  # s between progress lines of one FMU
@@ -166,11 +166,12 @@ def _instance(fmu, logger):
         return
     tmp = None if Path(fmu).is_dir() else tempfile.mkdtemp(prefix="overcon-run-")
     where = str(fmu) if tmp is None else fmpy.extract(str(fmu), tmp)
-    instance = fmpy.instantiate_fmu(where, md, "CoSimulation", debug_logging=True, logger=logger)
+    instance = fmpy.instantiate_fmu(where, md, interface(md), debug_logging=True, logger=logger)
+    get = instance.getFloat64 if md.fmiVersion.startswith("3") else instance.getReal
 
     def stable_step():
         try:
-            value = float(instance.getReal([vr])[0])
+            value = float(get([vr])[0])
         except Exception:  # noqa: BLE001 -- the instance may be unusable after the failure
             return None
         return value if value > 0.0 else None
@@ -192,7 +193,8 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
     label = label or Path(fmu).stem
     messages: list[str] = []
 
-    def logger(_env, _instance, status, _category, message):
+    def logger(*args):  # FMI 2.0: (env, instance, status, category, message); FMI 3.0: (env, status, ...)
+        status, message = args[-3], args[-1]
         if status >= 1:  # warning, discard, error, fatal
             text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
             messages.append(["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][min(status, 5)] + ": " + text)

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import InputError
-from ..fmus import FmuInfo, fmu_paths, inspect_fmu
+from ..fmus import FmuInfo, fmu_paths, inspect_fmu, type_name
 from .grid import ParamSpec
 
 LOCKSTEP_FIXED = ("solver.method", "solver.step", "solver.tolerance", "solver.max_step")
@@ -31,7 +31,7 @@ def _load_fmu(path: Path) -> SweepFmu:
 
     info = inspect_fmu(path)
     md = read_model_description(str(path), validate=False)
-    params = {v.name: v.type for v in md.modelVariables if v.causality == "parameter"}
+    params = {v.name: type_name(v) for v in md.modelVariables if v.causality == "parameter"}
     positions = tuple(o for o in info.outputs if o.kind == "position") or info.outputs
     data = Path(path).read_bytes()
     return SweepFmu(dataclasses.replace(info, outputs=positions), params, md.guid, data,

@@ -8,10 +8,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fmi2_core.h"
+#include "fmu_common.h"
 
 #define MAX_ITEMS (1 << 24)
-#define FMU_FORMAT 2 /* overcon.fmu.cmodel.FORMAT */
+#define FMU_FORMAT 3 /* overcon.fmu.cmodel.FORMAT */
 
 typedef struct {
     const unsigned char *p, *end;
@@ -181,6 +181,7 @@ static void read_rest(reader *r, fmu_model *fm) {
         v->name = rd_string(r);
         v->type = rd_int(r), v->causality = rd_int(r), v->variability = rd_int(r);
         v->key = rd_int(r), v->arg = rd_int(r);
+        if (v->key == K_STATE) fm->me = 1;
     }
     if (counted(r, &fm->nparam) && (fm->par = calloc((size_t)fm->nparam + 1, sizeof *fm->par)) == NULL) r->bad = 2;
     for (int k = 0; k < fm->nparam && !r->bad; k++) read_param(r, &fm->par[k]);
@@ -205,9 +206,11 @@ static int check_tables(const fmu_model *fm, char *err, size_t errsize) {
     }
     for (int k = 0; k < fm->nvar; k++) {
         const fmu_var *v = &fm->var[k];
-        int lim = v->key == K_OUTPUT ? fm->nout : v->key == K_PARAM ? fm->nparam : v->key == K_ALONG ? 2 + fm->M.nj : 2;
-        if (v->type < T_REAL || v->type > T_STRING || v->key < K_OUTPUT || v->key > K_ALONG || v->arg < 0 ||
-            (v->key != K_STABLE_STEP && v->arg >= lim))
+        int lim = v->key == K_OUTPUT || v->key == K_ARRAY ? fm->nout : v->key == K_PARAM ? fm->nparam
+                  : v->key == K_STATE || v->key == K_DERIVATIVE ? fm->ny : v->key == K_ALONG ? 2 + fm->M.nj : 2;
+        if (v->type < T_REAL || v->type > T_STRING || v->causality < 0 || v->causality > 3 || v->variability < 0 ||
+            v->variability > 4 || v->key < K_OUTPUT || v->key > K_ALONG || v->arg < 0 ||
+            (v->key != K_STABLE_STEP && v->key != K_TIME && v->arg >= lim))
             return snprintf(err, errsize, "variable %d (%s): type %d, key %d, %d out of range", k, v->name, v->type,
                             v->key, v->arg), 0;
     }

@@ -20,6 +20,8 @@
 #include "fmu_common.h"
 
 #define QUAT_RENORM_TOL 1e-6 /* | |e| - 1 | beyond which an event re-normalises a quaternion */
+#define ME_DRIFT_TOL 1e-6    /* m or rad: max |Phi| beyond which an event projects the state onto the constraints
+                              * (Baumgarte stabilisation keeps it far below at usual tolerances: rare events) */
 
 /* The derivatives at (t, y) into dx, and in Model Exchange the outputs there; 0 with the reason
  * in c->msg. Computed once per (t, y). */
@@ -106,20 +108,32 @@ fmi2Status fmu_me_event_indicators(fmu_inst *c, const char *fn, double z[], size
     return count_ok(c, fn, z, n, 0, "event indicators") ? fmi2OK : fmi2Error;
 }
 
-/* 1 if a quaternion's norm is off by more than QUAT_RENORM_TOL (an event is to correct it). */
+/* The constraint drift max |Phi| at the host's state (every equation; 0 under "compliant", whose
+ * compliant equations are springs, not constraints, and when the rows cannot be evaluated: the
+ * next derivative then says why). */
+static double drift(const fmu_inst *c) {
+    ovk_sim *s = c->sim;
+    if (!s || s->M->redundancy == OVK_COMPLIANT || ovk_rows(s->M, s->d, c->y, s->phi, s->J, s->gam)) return 0.0;
+    double worst = 0.0;
+    for (int i = 0; i < s->M->m; i++) worst = fabs(s->phi[i]) > worst ? fabs(s->phi[i]) : worst;
+    return worst;
+}
+
+/* 1 if a quaternion's norm is off by more than QUAT_RENORM_TOL, or the constraints by more than
+ * ME_DRIFT_TOL (an event is to correct it). */
 int fmu_me_needs_correction(const fmu_inst *c) {
     const fmu_model *fm = &c->fm;
-    if (!fm->quaternion) return 0;
-    for (int b = 0; b < fm->M.nb; b++) {
+    for (int b = 0; fm->quaternion && b < fm->M.nb; b++) {
         const double *e = c->y + b * 7 + 3;
         if (fabs(sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3]) - 1.0) > QUAT_RENORM_TOL) return 1;
     }
-    return 0;
+    return drift(c) > ME_DRIFT_TOL;
 }
 
 /* The correction of the continuous states in event mode, the one place for it: the quaternions
- * re-normalised (e / |e|), then the constraint projection of core/project.c when it lands (called
- * here, on c->y, before dx_valid is cleared). 1 if a state changed. */
+ * re-normalised (e / |e|), then, when the constraints drifted beyond ME_DRIFT_TOL, the
+ * mass-orthogonal projection of positions and velocities onto every constraint (core/project.c,
+ * as a run under solver.singular = "pass" does after each step). 1 if a state changed. */
 int fmu_me_correct(fmu_inst *c) {
     const fmu_model *fm = &c->fm;
     int changed = 0;
@@ -128,6 +142,12 @@ int fmu_me_correct(fmu_inst *c) {
         double *e = c->y + b * 7 + 3, norm = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3]);
         if (norm == 1.0 || !(norm > 0.0)) continue;
         for (int k = 0; k < 4; k++) e[k] /= norm;
+        changed = 1;
+    }
+    if (drift(c) > ME_DRIFT_TOL) {
+        double left = 0.0; /* a projection that stops short leaves the state as corrected so far: the
+                            * next derivative and the drift carry on from it */
+        ovk_project(c->sim->M, c->sim->d, c->t, c->y, OVK_PROJ_TOL, OVK_PROJ_MAX_ITER, &left);
         changed = 1;
     }
     if (changed) c->dx_valid = 0;

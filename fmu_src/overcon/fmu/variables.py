@@ -249,13 +249,18 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
                    unit="s", key=("stable_step", None)))
     out.append(redundancy_var(model))
     out += _along_outputs(model, reaction_unique, rank)
-    if states:
-        out.extend(_states(model, len(out)))
+    return out + _interface_variables(model, out, states, fmi3)
+
+
+def _interface_variables(model, out: list[Var], states: bool, fmi3: bool) -> list[Var]:
+    """After the table ``out``: the continuous states and their derivatives (Model Exchange), then
+    FMI 3.0's reaction arrays and ``time`` (module docstring, items 6 and 7)."""
+    more = _states(model, len(out)) if states else []
     if fmi3:
-        out.extend(_reaction_arrays(model, out))
-        out.append(Var("time", "Real", "independent", "continuous", "", "simulation time", unit="s",
-                       key=("time", None)))
-    return out
+        more += _reaction_arrays(model, out + more)
+        more.append(Var("time", "Real", "independent", "continuous", "", "simulation time", unit="s",
+                        key=("time", None)))
+    return more
 
 
 _DERIVATIVE_UNITS = {"m": "m/s", "rad": "rad/s", "1": "1/s", "m/s": "m/s2", "rad/s": "rad/s2"}

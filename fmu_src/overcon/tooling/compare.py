@@ -414,4 +414,8 @@ def rules_text(comparisons: list[Comparison]) -> str:
             "comes from the positions (outputs in m or rad); reactions are reported but do not decide "
             "(non-unique reactions differ legitimately when the motion is unique). Reference mode: "
             "every common output decides. Prediction: the FMUs' constant output `motion_unique` (pre-check). "
-            "A group one of whose runs failed has no verdict (FAILED, with the reason).")
+            "A group one of whose runs failed has no verdict (FAILED, with the reason)."
+            + (" Uniqueness along the motion: the FMUs' discrete outputs `rank`, `motion_unique` and "
+               "`<joint>.reaction_unique` at every output point, per FMU the intervals (first to last sample) in "
+               "which the rank differs from t = 0's or a friction joint's reaction or the motion is not unique; "
+               "reported, not deciding." if any(a is not None for c in comparisons for a in c.along) else ""))

@@ -32,9 +32,19 @@ Rules (also stated in every report, :func:`rules_text`):
 * **Reference mode** (one FMU against a CSV): every common output decides.
 * **Prediction**: the FMUs' constant ``motion_unique`` outputs (the pre-check); all FMUs of a
   group must agree. FMUs without it: the group is expected to be unique.
+* **Uniqueness along the motion** (:class:`Along`, FMUs with the discrete outputs ``rank``,
+  ``motion_unique``, ``<joint>.reaction_unique``, recorded by :mod:`.run` at every output point):
+  per FMU, the samples are grouped into intervals of constant (rank, friction joints whose
+  reaction is not unique, motion_unique), each from its first to its last sample; reported are
+  the intervals where the rank differs from its value at t = 0 or a friction joint's reaction or
+  the motion is not unique, or, when every sample equals the one at t = 0, that they stayed so.
+  Taken from the adaptive runs (the FMUs' own settings), from the lockstep runs where those
+  failed. Reported, never deciding: the verdict stays the observed comparison of positions.
 """
 from __future__ import annotations
 
+import csv
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -67,6 +77,76 @@ class OutputDiff:
         return self.max_abs <= self.tolerance
 
 
+@dataclass(frozen=True)
+class Interval:
+    """Samples from ``start`` to ``end`` (s) with one ``rank``, the friction joints whose reaction
+    is not unique there (``nonunique``, in the FMU's order) and ``motion_unique``; ``at_stop``:
+    the row a failed run held at its stop (between the previous sample and ``end``)."""
+
+    start: float
+    end: float
+    rank: int
+    nonunique: tuple[str, ...]
+    motion_unique: bool
+    at_stop: bool = False
+
+
+@dataclass(frozen=True)
+class Along:
+    """The discrete uniqueness outputs of one run (module docstring): its intervals in time order
+    and whether the run failed (then the last interval is the row held at the stop)."""
+
+    intervals: tuple[Interval, ...]
+    failed: bool = False
+
+    @property
+    def initial(self) -> Interval:
+        return self.intervals[0]
+
+    @property
+    def unchanged(self) -> bool:
+        """Every sample as at t = 0."""
+        return len(self.intervals) == 1
+
+    def off(self) -> list[Interval]:
+        """The intervals where the rank differs from t = 0's, or a friction joint's reaction or the
+        motion is not unique."""
+        r0 = self.initial.rank
+        return [iv for iv in self.intervals if iv.rank != r0 or iv.nonunique or not iv.motion_unique]
+
+
+def read_along(path, *, failed: bool = False) -> Along | None:
+    """The :class:`Along` of an along file written by :mod:`.run` (None when there is none: an
+    FMU without the discrete outputs); ``failed``: the run failed, its last row is the one held
+    at the stop. :class:`InputError` naming the file when it is not such a file."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    with open(path, encoding="utf-8", newline="") as f:
+        rows = list(csv.reader(f))
+    head = rows[0] if rows else []
+    if head[:1] != ["time"] or "rank" not in head or len(rows) < 2:
+        raise InputError(f"{path}: not an along file of overcon.tooling.run (header \"time\",\"rank\",... "
+                         "and at least one row expected)")
+    col = {n: k for k, n in enumerate(head)}
+    joints = [n[: -len(".reaction_unique")] for n in head if n.endswith(".reaction_unique")]
+    out: list[Interval] = []
+    for k, row in enumerate(rows[1:]):
+        try:
+            t, rank, flags = float(row[0]), int(row[col["rank"]]), {n: int(row[col[n]]) for n in head[1:]}
+        except (ValueError, IndexError) as exc:
+            raise InputError(f"{path}: row {k + 2} is not a time and integers: {row}") from exc
+        iv = Interval(t, t, rank, tuple(j for j in joints if flags[j + ".reaction_unique"] == 0),
+                      bool(flags.get("motion_unique", 1)), failed and k == len(rows) - 2)
+        last = out[-1] if out else None
+        if last is not None and not iv.at_stop and (last.rank, last.nonunique, last.motion_unique) == \
+                (iv.rank, iv.nonunique, iv.motion_unique):
+            out[-1] = dataclasses.replace(last, end=t)
+        else:
+            out.append(iv)
+    return Along(tuple(out), failed)
+
+
 @dataclass
 class Comparison:
     group: str
@@ -87,6 +167,7 @@ class Comparison:
     adaptive_failure: str | None = None  # the adaptive runs failed, the lockstep runs gave the verdict
     lockstep_note: str | None = None  # why the lockstep step differs from the one asked for (unstable rk4)
     lockstep_series: list[Series] | None = None  # the lockstep runs (mode "lockstep"): they decide, plots show them
+    along: list = field(default_factory=list)  # per FMU (infos' order): its Along, or None (no discrete outputs)
 
     @property
     def observed(self) -> bool:
@@ -333,4 +414,8 @@ def rules_text(comparisons: list[Comparison]) -> str:
             "comes from the positions (outputs in m or rad); reactions are reported but do not decide "
             "(non-unique reactions differ legitimately when the motion is unique). Reference mode: "
             "every common output decides. Prediction: the FMUs' constant output `motion_unique` (pre-check). "
-            "A group one of whose runs failed has no verdict (FAILED, with the reason).")
+            "A group one of whose runs failed has no verdict (FAILED, with the reason)."
+            + (" Uniqueness along the motion: the FMUs' discrete outputs `rank`, `motion_unique` and "
+               "`<joint>.reaction_unique` at every output point, per FMU the intervals (first to last sample) in "
+               "which the rank differs from t = 0's or a friction joint's reaction or the motion is not unique; "
+               "reported, not deciding." if any(a is not None for c in comparisons for a in c.along) else ""))

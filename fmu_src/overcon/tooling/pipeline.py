@@ -19,11 +19,11 @@ import numpy as np
 from . import InputError
 from ..verdict import LOCKSTEP_MIN_STEP, LOCKSTEP_STEP, LockstepGrid, lockstep_start_values
 from .compare import (Comparison, compare_group, compare_reference, failed_group, group_fmus, invalid_group,
-                      order_groups, validate_group)
+                      order_groups, read_along, validate_group)
 from .fmus import FmuInfo, inspect_all, inspect_fmu
 from .report import console_table, markdown, plot_comparison, verdict_line
-from .run import (Experiment, Job, RunResult, check_unique_models, experiment, read_series, run_fmus, run_jobs,
-                  start_values_for)
+from .run import (Experiment, Job, RunResult, along_path, check_unique_models, experiment, read_series, run_fmus,
+                  run_jobs, start_values_for)
 
 
 def _echo(s: str) -> None:
@@ -131,7 +131,7 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
                  "adaptive runs (not lockstep)")
         for i in items:
             ex = dataclasses.replace(exps[i.model], start_values=tuple(user[i.model].items()))
-            todo.append(Job(i.model, i, ex, out_dir / f"{i.model}.csv"))
+            todo.append(Job(i.model, i, ex, out_dir / f"{i.model}.csv", along=True))
     grids = {g: LockstepGrid(lockstep_step) for g in lock_groups}
     todo += _lockstep_jobs({g: groups[g] for g in lock_groups}, grids, todo, user, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -152,8 +152,11 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
     for g, items in groups.items():
         adaptive_failed = [str(failures[i.model]) for i in items if i.model in failures]
         lock_failed = [str(failures[k]) for k in (f"lockstep/{i.model}" for i in items) if k in failures]
+        from_lockstep = bool(adaptive_failed) and g in lock_groups and not lock_failed
+        along = _along(items, out_dir, failures, adaptive=not from_lockstep)
         if lock_failed or (adaptive_failed and g not in lock_groups):
             comparisons.append(failed_group(g, items, "\n".join(lock_failed + adaptive_failed)))
+            comparisons[-1].along = along
             continue
         series = None if adaptive_failed else [read_series(results[i.model].csv) for i in items]
         lock = [read_series(results[f"lockstep/{i.model}"].csv) for i in items] if g in lock_groups else None
@@ -161,9 +164,22 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
                           lockstep_step=grids[g].step if lock is not None else None,
                           adaptive_failure="\n".join(adaptive_failed) or None)
         c.lockstep_note = grids[g].note if g in grids else None
+        c.along = along
         c.wall_seconds = [] if adaptive_failed else [results[i.model].sim_seconds for i in items]
         comparisons.append(c)
     return comparisons, results
+
+
+def _along(items: list[FmuInfo], out_dir: Path, failures: dict, *, adaptive: bool) -> list:
+    """Per FMU of a group, the :class:`~overcon.tooling.compare.Along` of its adaptive runs (of its
+    lockstep runs when ``adaptive`` is False: the adaptive ones failed and those did not), None for an FMU without
+    the discrete outputs (:mod:`overcon.tooling.compare`, rules)."""
+    out = []
+    for i in items:
+        key = i.model if adaptive else f"lockstep/{i.model}"
+        csv = out_dir / f"{i.model}.csv" if adaptive else out_dir / "lockstep" / f"{i.model}.csv"
+        out.append(read_along(along_path(csv), failed=key in failures))
+    return out
 
 
 def _lockstep_retry(grid: LockstepGrid, items: list[FmuInfo], failures: dict, echo, group: str) -> bool:
@@ -185,7 +201,7 @@ def _lockstep_jobs(groups: dict[str, list[FmuInfo]], grids: dict[str, LockstepGr
         for i in items:
             values = {**user[i.model], **lockstep_start_values(grids[g].step)}
             lex = dataclasses.replace(exp_of[i.model], start_values=tuple(values.items()))
-            out.append(Job(f"lockstep/{i.model}", i, lex, out_dir / "lockstep" / f"{i.model}.csv"))
+            out.append(Job(f"lockstep/{i.model}", i, lex, out_dir / "lockstep" / f"{i.model}.csv", along=True))
     return out
 
 

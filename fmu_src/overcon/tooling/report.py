@@ -4,7 +4,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from .compare import Comparison, OutputDiff, rules_text
+from .compare import Along, Comparison, Interval, OutputDiff, rules_text
 
 
 def _g(x: float | None) -> str:
@@ -52,7 +52,8 @@ def console_table(c: Comparison) -> str:
     """Every compared output: max abs/rel difference, tolerance, first time over it."""
     if c.failure is not None:
         head = "NOT COMPARED" if c.invalid else "FAILED"
-        return f"{c.group}: " + ", ".join(i.model for i in c.infos) + f"\n  {head}: {c.failure}"
+        return "\n".join([f"{c.group}: " + ", ".join(i.model for i in c.infos) + f"\n  {head}: {c.failure}",
+                          *_console_along(c)])
     lines = [f"{c.group}: " + (f"{c.infos[0].path.name} vs reference {c.reference}" if c.reference is not None
                               else ", ".join(f"{i.model} ({lab})" for i, lab in zip(c.infos, c.labels)))]
     if c.mode == "lockstep":
@@ -71,7 +72,14 @@ def console_table(c: Comparison) -> str:
         flag = " *" if d.decides and not d.within else ""
         lines.append(f"  {d.name:<24} {_unit(d):<5} {d.max_abs:>10.3g} {_g(d.max_rel):>10} {d.tolerance:>10.3g} "
                      f"{first:>11}  {note}{flag}")
+    lines += _console_along(c)
     return "\n".join(lines)
+
+
+def _console_along(c: Comparison) -> list[str]:
+    along = along_lines(c)
+    return ["  uniqueness along the motion (discrete outputs, every output point):", *(f"    {ln}" for ln in along)] \
+        if along else []
 
 
 def _safe(name: str) -> str:
@@ -152,13 +160,60 @@ def summary_rows(comparisons: list[Comparison]) -> list[str]:
     return rows
 
 
+def _state(iv: Interval) -> str:
+    which = (f"reaction not unique: {', '.join(iv.nonunique)}" if iv.nonunique
+             else "friction joints' reactions unique")
+    return f"rank {iv.rank}, {which}, motion {'unique' if iv.motion_unique else 'NOT unique'}"
+
+
+def along_lines(c: Comparison) -> list[str]:
+    """Per FMU with the discrete uniqueness outputs, one line: that they stayed as at t = 0, or the
+    intervals where the rank differs from t = 0's or a friction joint's reaction (or the motion)
+    is not unique (:mod:`overcon.tooling.compare`, rules); [] when no FMU of ``c`` has them."""
+    if not any(a is not None for a in c.along):
+        return []
+    lines = []
+    for info, a in zip(c.infos, c.along):
+        if a is None:
+            lines.append(f"{info.model}: no discrete uniqueness outputs (judged at t = 0 only)")
+            continue
+        lines.append(f"{info.model}: {_along_text(a)}")
+    return lines
+
+
+def _key(iv: Interval) -> tuple:
+    return iv.rank, iv.nonunique, iv.motion_unique
+
+
+def _along_text(a: Along) -> str:
+    i0 = a.initial
+    if all(_key(iv) == _key(i0) for iv in a.intervals):
+        sampled = [iv for iv in a.intervals if not iv.at_stop] or [i0]
+        stop = " and at the run's stop" if a.failed else ""
+        return f"stayed as at t = 0 from {i0.start:g} to {sampled[-1].end:g} s{stop}: {_state(i0)}"
+    off = a.off()
+    head = f"at t = 0 {_state(i0)}; " if off[0] is not i0 else ""
+    parts = []
+    for iv in off:
+        k = a.intervals.index(iv)
+        when = (f"at the run's stop (between t = {a.intervals[k - 1].end:g} and {iv.end:g} s)" if iv.at_stop and k
+                else f"t = {iv.start:g}..{iv.end:g} s")
+        parts.append(f"{when}: {_state(iv)}" + (f" (rank at t = 0: {i0.rank})" if iv.rank != i0.rank else ""))
+    return head + "; ".join(parts)
+
+
 def group_section(c: Comparison, base: Path, plots: list[Path]) -> list[str]:
     lines = [f"### {c.group}", ""]
+    along = along_lines(c)
+    if along:
+        along = ["Uniqueness along the motion (the FMUs' discrete outputs `rank`, `motion_unique`, "
+                 "`<joint>.reaction_unique`, sampled at every output point; reported, not deciding):", "",
+                 *(f"- {ln}" for ln in along), ""]
     if c.failure is not None:
         variants = ", ".join(f"`{i.model}` ({lab})" for i, lab in zip(c.infos, c.labels))
         why = ("**not compared**: the FMUs do not form a group." if c.invalid else
                "**FAILED**, no verdict: a run did not reach its stop time.")
-        return lines + [f"Variants: {variants}. {why}", "", "```", c.failure, "```", ""]
+        return lines + [f"Variants: {variants}. {why}", "", "```", c.failure, "```", "", *along]
     if c.reference is not None:
         lines.append(f"{c.infos[0].path.name} against reference `{c.reference}`: **{c.verdict_text()}**.")
     else:
@@ -196,6 +251,8 @@ def group_section(c: Comparison, base: Path, plots: list[Path]) -> list[str]:
             ru = {True: "yes", False: "no", None: "—"}[w.reaction_unique]
             lines.append(f"| {joint} | {ru} | {w.name} | {w.max_abs:.3g} {_unit(w)} | {_g(w.max_rel)} | "
                          f"{_g(w.first_exceed)} |")
+    if along:
+        lines += ["", *along[:-1]]
     for p in plots:
         lines += ["", f"![{c.group}: {p.stem}]({_rel(p, base)})"]
     lines.append("")

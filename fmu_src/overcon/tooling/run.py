@@ -17,7 +17,18 @@ shortest round-trip ``repr`` of every value, i.e. full double precision) is writ
 A run that raises, or whose last output time is before the stop time (fmpy ends a co-simulation
 quietly when the FMU discards a step), is a :class:`SimulationFailed` carrying the FMU's logged
 reason.
-"""
+
+Uniqueness along the motion (``along=True``: the runs of ``compare`` and ``reproduce``): an FMU
+that publishes the discrete outputs ``rank`` (Integer), ``motion_unique`` and
+``<joint>.reaction_unique`` (Boolean, :func:`along_outputs`) has them recorded at every output
+point into ``<model>.along.csv`` beside ``<model>.csv`` (``"time"``, then those columns as
+integers, Booleans as 0/1). Decided: a file of their own, so that ``<model>.csv`` keeps exactly
+its Real columns: ``fmpy.util.read_csv`` (and :func:`read_series`) cannot read fmpy's ``True``
+and ``False`` literals, so Boolean columns in it would break its readers. A run that fails still
+writes that file when the FMU instance can still be read: the points before the failure, then one
+row at the end of the failed communication step with the values the FMU holds after the failure
+(its verdicts at the instant the run stopped). ``overcon run`` does not record them (its files
+are unchanged)."""
 from __future__ import annotations
 
 import contextlib
@@ -37,9 +48,10 @@ import numpy as np
 
 from ..params import MAX_OUTPUT_POINTS, check_param
 from . import InputError, SimulationFailed
-from .fmus import FmuInfo, interface
+from .fmus import FmuInfo, interface, type_name
 
 RESULT_TAG = "OVERCON-RESULT "
+ALONG_SUFFIX = ".along.csv"  # <model>.along.csv: the discrete uniqueness outputs (module docstring)
 PROGRESS_EVERY = 1.0  # s between progress lines of one FMU
 
 
@@ -183,14 +195,74 @@ def _instance(fmu, logger):
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
 
+def along_outputs(md) -> list[str]:
+    """The discrete uniqueness outputs of the model description ``md`` (fmpy's): ``rank``,
+    ``motion_unique`` (when discrete), then every discrete ``<joint>.reaction_unique`` in the
+    model's order; [] for an FMU without the Integer output ``rank`` (built before they were
+    judged along the motion, where they are constants, or another tool's)."""
+    outs = {v.name: v for v in md.modelVariables if v.causality == "output" and v.variability == "discrete"}
+    if "rank" not in outs or type_name(outs["rank"]) != "Integer":
+        return []
+    flags = [n for n, v in outs.items() if type_name(v) == "Boolean"]
+    return ["rank"] + [n for n in flags if n == "motion_unique"] + [n for n in flags if n.endswith(".reaction_unique")]
+
+
+def along_path(csv: str | Path) -> Path:
+    """``<model>.along.csv`` beside the run's ``<model>.csv``."""
+    csv = Path(csv)
+    stem = csv.name[: -len(".csv")] if csv.name.endswith(".csv") else csv.name
+    return csv.with_name(stem + ALONG_SUFFIX)
+
+
+def _write_along(path: Path, result, names: list[str], held: dict | None = None, step: float = 0.0) -> None:
+    """The along file (module docstring): ``result``'s rows of ``names`` as integers, then, when
+    ``held`` (name -> value after a failure) is given, one row at the last time + ``step``."""
+    rows = [[float(r["time"])] + [int(r[n]) for n in names] for r in result]
+    if held is not None:
+        t = rows[-1][0] + step if rows else float("nan")
+        rows.append([t] + [int(held[n]) for n in names])
+    part = path.with_name(path.name + ".part")
+    with open(part, "w", encoding="utf-8") as f:
+        f.write(",".join(f'"{n}"' for n in ["time", *names]) + "\n")
+        for r in rows:
+            f.write(",".join([repr(r[0]), *map(str, r[1:])]) + "\n")
+    os.replace(part, path)
+
+
+def _held(instance, md, names: list[str]) -> dict | None:
+    """The values of ``names`` an FMU instance holds (after a failed step), or None when it cannot
+    be read any more."""
+    if instance is None or not names:
+        return None
+    var = {v.name: v for v in md.modelVariables}
+    fmi3 = md.fmiVersion.startswith("3")
+    try:
+        out = {}
+        for n in names:
+            vr = [var[n].valueReference]
+            if n == "rank":
+                out[n] = (instance.getInt32 if fmi3 else instance.getInteger)(vr)[0]
+            else:
+                out[n] = bool(instance.getBoolean(vr)[0])
+        return out
+    except Exception:  # noqa: BLE001 -- the instance may be unusable after the failure
+        return None
+
+
 def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, step: float,
-             outputs: list[str], progress: bool = True, label: str = "", start_values: dict | None = None) -> dict:
-    """One ``fmpy.simulate_fmu`` run; writes ``csv``. Returns {rows, sim_seconds, last_time}.
-    Progress lines (``label: 42% ...``) go to stderr at most every :data:`PROGRESS_EVERY` s."""
+             outputs: list[str], progress: bool = True, label: str = "", start_values: dict | None = None,
+             along: bool = False) -> dict:
+    """One ``fmpy.simulate_fmu`` run; writes ``csv`` (and with ``along`` the along file, module
+    docstring). Returns {rows, sim_seconds, last_time}. Progress lines (``label: 42% ...``) go to
+    stderr at most every :data:`PROGRESS_EVERY` s."""
     import fmpy
     from fmpy.util import write_csv
 
     label = label or Path(fmu).stem
+    along_file = along_path(csv)
+    along_file.unlink(missing_ok=True)  # never a stale one from an earlier run
+    discrete = along_outputs(fmpy.read_model_description(str(fmu), validate=False)) if along else []
+    recorder = [None]  # fmpy's recorder, for the points before a failure
     messages: list[str] = []
 
     def logger(*args):  # FMI 2.0: (env, instance, status, category, message); FMI 3.0: (env, status, ...)
@@ -202,7 +274,8 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
     t0 = time.perf_counter()
     last = [None]  # time of the last progress line (first: the first step, after instantiation)
 
-    def step_finished(t, _recorder):
+    def step_finished(t, rec):
+        recorder[0] = rec
         now = time.perf_counter()
         if last[0] is None:
             last[0] = now
@@ -212,8 +285,8 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
             print(f"  {label}: {pct:5.1f}% (t = {t:.4g} of {stop:g} s, {now - t0:.0f} s)", file=sys.stderr, flush=True)
         return True
 
-    kw = dict(start_time=start, stop_time=stop, output_interval=step, output=outputs, step_finished=step_finished,
-              start_values=dict(start_values or {}))
+    kw = dict(start_time=start, stop_time=stop, output_interval=step, output=list(outputs) + discrete,
+              step_finished=step_finished, start_values=dict(start_values or {}))
     stable = None
     try:
         with _instance(fmu, logger) as (where, md, instance, stable_step):
@@ -222,6 +295,11 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
                     if instance is not None else fmpy.simulate_fmu(where, logger=logger, debug_logging=True, **kw)
             except Exception:
                 stable = stable_step()
+                held = _held(instance, md, discrete)
+                if held is not None:  # else no file: its last row would not be the stop's
+                    with contextlib.suppress(Exception):  # the failure is what the caller reports
+                        done = recorder[0].result() if recorder[0] is not None else []
+                        _write_along(along_file, done, discrete, held, step)
                 raise
     except Exception as exc:
         why = "; ".join(messages[-3:])
@@ -236,8 +314,10 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
     csv = Path(csv)
     csv.parent.mkdir(parents=True, exist_ok=True)
     part = csv.with_name(csv.name + ".part")
-    write_csv(str(part), result)
+    write_csv(str(part), result, columns=list(outputs))
     os.replace(part, csv)
+    if discrete:
+        _write_along(along_file, result, discrete)
     return {"rows": len(result), "sim_seconds": sim_seconds, "last_time": last_time}
 
 
@@ -247,7 +327,7 @@ def _worker(argv: list[str]) -> None:
     try:
         out = simulate(job["fmu"], job["csv"], start=job["start"], stop=job["stop"], step=job["step"],
                        outputs=job["outputs"], progress=job["progress"], label=job["label"],
-                       start_values=job.get("start_values"))
+                       start_values=job.get("start_values"), along=job.get("along", False))
         out["error"] = ""
     except SimulationFailed as exc:
         out = {"error": str(exc), "stable_step": exc.stable_step}
@@ -272,13 +352,14 @@ def _worker_env() -> dict:
 
 
 def run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: float | None,
-            label: str = "") -> RunResult:
+            label: str = "", along: bool = False) -> RunResult:
     """Run ``info.path`` (an FMU file or its unzipped directory) in one worker process into
-    ``csv``; :class:`SimulationFailed` with the FMU's logged reason. Used by :func:`run_jobs` and,
-    one run per Dask task, by :mod:`overcon.tooling.sweep`."""
+    ``csv`` (``along``: and the along file, module docstring); :class:`SimulationFailed` with the
+    FMU's logged reason. Used by :func:`run_jobs` and, one run per Dask task, by
+    :mod:`overcon.tooling.sweep`."""
     job = {"fmu": str(info.path), "csv": str(csv), "start": ex.start, "stop": ex.stop, "step": ex.step,
            "outputs": info.output_names, "progress": progress, "label": label or info.model,
-           "start_values": dict(ex.start_values)}
+           "start_values": dict(ex.start_values), "along": along}
     t0 = time.perf_counter()
     try:
         proc = subprocess.run([sys.executable, "-m", "overcon.tooling.run", json.dumps(job)],
@@ -304,6 +385,7 @@ class Job:
     info: FmuInfo
     experiment: Experiment
     csv: Path
+    along: bool = False  # record the discrete uniqueness outputs too (module docstring)
 
 
 def run_jobs(jobs: list[Job], *, workers: int = 2, progress: bool = True, timeout: float | None = None,
@@ -318,7 +400,7 @@ def run_jobs(jobs: list[Job], *, workers: int = 2, progress: bool = True, timeou
     def one(job: Job):
         ex = job.experiment
         try:
-            r = run_one(job.info, ex, job.csv, progress, timeout, label=job.key)
+            r = run_one(job.info, ex, job.csv, progress, timeout, label=job.key, along=job.along)
         except SimulationFailed as exc:
             failures[job.key] = exc
             echo(f"{job.key}: FAILED (reason below)")

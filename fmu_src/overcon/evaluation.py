@@ -188,7 +188,7 @@ def compliant_energy(model: Model, f: Frames, h: np.ndarray) -> tuple[float, flo
     spring of energy 1/2 k Phi^2 and the damper of power d (Phi_h h)^2; a per-axis joint
     (:class:`overcon.model.AxisCompliance`) has 1/2 sum_x k_x (F^T U Phi)_x^2 and
     sum_x d_x (F^T U Phi_h h)_x^2, the deformation and its rate in its joint frame. The C core's
-    ``ovk_compliant_energy`` (core/energy.c) is the same formula in the same order. (0, 0)
+    ``ovk_compliant_energy`` (core/energy.c) is the same formula. (0, 0)
     without compliant rows."""
     if not model.compliant_rows.size:
         return 0.0, 0.0

@@ -11,7 +11,7 @@
 # out-of-bounds access, leak or undefined behaviour stops it with the sanitizer's report.
 # Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmu_*.c and fmi2_*.c over the core),
 # compiled with the sanitizers into C-runtime FMUs of a friction scene (also with radau and dop853), a
-# quaternion scene, a scene with energy outputs (the Bricard linkage) and the compliant door (every
+# quaternion scene, scenes with energy outputs (the Bricard linkage, the compliant door) (every
 # FMU's model file also carries the packed models of the redundancy parameter's other methods), run
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
@@ -47,10 +47,12 @@ text = Path("mechanisms/planar_f45_wo4.toml").read_text()
 for method in ("radau", "dop853"):
     (scenes / f"f45_{method}.toml").write_text(text.replace('name = "planar_f45_wo4"', f'name = "f45_{method}"')
                                                .replace("[solver]", f'[solver]\nmethod = "{method}"'))
-# the compliant door (core/compliance.c) with dopri5: its radau run is slow under the sanitizers
+# the compliant door (core/compliance.c) with dopri5: its radau run is slow under the sanitizers; with
+# energy outputs (core/energy.c: the compliant joints' springs and dampers)
 (scenes / "compliant_door.toml").write_text(Path("mechanisms/examples/compliant_door.toml").read_text())
 (scenes / "compliant_door_h1_wo_hinge2.toml").write_text(
-    Path("mechanisms/examples/compliant_door_h1_wo_hinge2.toml").read_text().replace('"radau"', '"dopri5"'))
+    Path("mechanisms/examples/compliant_door_h1_wo_hinge2.toml").read_text().replace('"radau"', '"dopri5"')
+    .replace('friction = "all"\n', 'friction = "all"\nenergy = true\n'))
 code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml",
                      "tests/data/bricard/bricard_wo2.toml", str(scenes / "f45_radau.toml"),
                      str(scenes / "f45_dop853.toml"), str(scenes / "compliant_door_h1_wo_hinge2.toml")],

@@ -181,6 +181,41 @@ def potential_energy(model: Model, f: Frames) -> float:
     return energy
 
 
+def compliant_energy(model: Model, f: Frames, h: np.ndarray) -> tuple[float, float]:
+    """(elastic energy (J), damper power (W, >= 0)) of the compliant joints (redundancy
+    "compliant") at the frames f and velocities h (nh,): the force law of
+    :func:`overcon.dynamics._compliant_solve`, lam = k Phi + d Phi_h h on the scalar rows, is the
+    spring of energy 1/2 k Phi^2 and the damper of power d (Phi_h h)^2; a per-axis joint
+    (:class:`overcon.model.AxisCompliance`) has 1/2 sum_x k_x (F^T U Phi)_x^2 and
+    sum_x d_x (F^T U Phi_h h)_x^2, the deformation and its rate in its joint frame. The C core's
+    ``ovk_compliant_energy`` (core/energy.c) is the same formula. (0, 0)
+    without compliant rows."""
+    if not model.compliant_rows.size:
+        return 0.0, 0.0
+    Phi, PR = constraints(model, f), jacobian_h(model, f)[model.retained]
+    rate = PR @ h
+    elastic = damping = 0.0
+    for p, row in enumerate(model.retained):
+        k, d = float(model.row_stiffness[row]), float(model.row_damping[row])
+        if k or d:
+            elastic += 0.5 * k * float(Phi[row]) ** 2
+            damping += d * float(rate[p]) ** 2
+    kh = model.nh_b
+    for ax in model.compliance_axes:
+        F = f.R[ax.bi] @ ax.frame
+        b = ax.bi if ax.bi >= 0 else ax.bj
+        for rows, kv, dv, rot in ((ax.t_rows, ax.k_t, ax.d_t, False), (ax.r_rows, ax.k_r, ax.d_r, True)):
+            if not rows:
+                continue
+            pos = np.searchsorted(model.retained, rows)
+            U = f.R[b] @ PR[pos, b * kh + 3:b * kh + 6].T if rot else PR[pos, b * kh:b * kh + 3].T
+            FU = F.T @ U
+            dx, vx = FU @ Phi[list(rows)], FU @ rate[pos]
+            elastic += float(0.5 * np.sum(kv * dx * dx))
+            damping += float(np.sum(dv * vx * vx))
+    return elastic, damping
+
+
 def applied_forces(model: Model, f: Frames) -> np.ndarray:
     """Q (nh,): gravity, constant forces and torques, springs, gyroscopic terms -omega x J omega."""
     nb, d, k = model.nb, model.dim, model.nh_b

@@ -35,8 +35,8 @@ import numpy as np
 from . import kernel as kernel_mod
 from .dynamics import evaluate
 from . import integrators
-from .evaluation import (SingularConfiguration, constant_loads, constraints, coordinate_rates, frames,  # noqa: F401
-                         friction_output, jacobian_h, kinetic_energy, normalized_coordinates,
+from .evaluation import (SingularConfiguration, compliant_energy, constant_loads, constraints,  # noqa: F401
+                         coordinate_rates, frames, friction_output, jacobian_h, kinetic_energy, normalized_coordinates,
                          physical_reaction, physical_reactions, potential_energy)
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
 from .checks import check_initial_state, with_eliminated
@@ -312,20 +312,23 @@ class Simulation:
         return constraints(self.model, frames(self.model, y[: self.n]))
 
     def _powers(self, t: float, y: np.ndarray) -> np.ndarray:
-        """[power dissipated by joint friction (W, >= 0), power of the constant forces and torques
-        (W)] at (t, y): one evaluation of Eq. 18 for the friction forces (warm-started like the
-        dense output, leaving the integration's warm start alone; counted in ``evaluations``)."""
+        """[power dissipated by joint friction and the compliant joints' dampers (W, >= 0), power
+        of the constant forces and torques (W)] at (t, y): one evaluation of Eq. 18 for the
+        friction forces (warm-started like the dense output, leaving the integration's warm start
+        alone; counted in ``evaluations``)."""
         h = y[self.n:]
-        applied = float(h @ constant_loads(self.model, frames(self.model, y[: self.n])))
+        f = frames(self.model, y[: self.n], h)
+        applied = float(h @ constant_loads(self.model, f))
+        damper = compliant_energy(self.model, f, h)[1]
         if not self.model.friction_joints:
-            return np.array([0.0, applied])
+            return np.array([damper, applied])
         r, ev = self._solve(t, y, None if self.lam is None else self.lam.copy(), self._warm.guess(t))
         self.evaluations += 1
         qf = r[2] if r is not None else ev.friction
-        return np.array([-float(h[self.model.plan.friction_cols] @ qf), applied])
+        return np.array([damper - float(h[self.model.plan.friction_cols] @ qf), applied])
 
     def work(self, t: float) -> np.ndarray:
-        """[energy dissipated by friction, work of the constant loads] (J) from the start to t,
+        """[energy dissipated by friction and dampers, work of the constant loads] (J) from the start to t,
         t inside the last step (:class:`_WorkLedger`)."""
         return self._work.at(t)
 
@@ -450,7 +453,9 @@ class Simulation:
         parts = [pos, h[self._derived.velocity_index]]
         if model.energy_outputs:
             q = normalized_coordinates(model, y[: self.n]) if model.rotation == "quaternion" else y[: self.n]
-            parts.append(np.array([kinetic_energy(model, h), potential_energy(model, frames(model, q))]))
+            f = frames(model, q, h)
+            potential = potential_energy(model, f) + compliant_energy(model, f, h)[0]
+            parts.append(np.array([kinetic_energy(model, h), potential]))
             parts.append(self.work(self._target if t is None else t))
         return np.concatenate(parts)
 

@@ -66,7 +66,7 @@ int ovk_check_redundancy(const ovk_model *M, ovk_data *d) {
 }
 
 /* Phi_h h of the retained row at position p (the row's bodies only: it is zero elsewhere). */
-static double row_rate(const ovk_model *M, const ovk_data *d, int p, const double *h) {
+double ovk_row_rate(const ovk_model *M, const ovk_data *d, int p, const double *h) {
     int nh = M->nb * M->nh_b, kh = M->nh_b, row = M->retained[p];
     double s = 0.0;
     for (int s2 = 0; s2 < 2; s2++) {
@@ -77,28 +77,40 @@ static double row_rate(const ovk_model *M, const ovk_data *d, int p, const doubl
     return s;
 }
 
-/* The multipliers of per-axis compliant joint a into d->lamR (module docstring). */
-static void axis_forces(const ovk_model *M, ovk_data *d, int a, const double *h) {
+/* Group rot (0 translational, 1 rotational) of per-axis compliant joint a at the rows of d: its
+ * row count n (<= 3), FU = F^T U (joint-frame components of each row's direction: FU[x][e]),
+ * and each row's Phi and Phi_h h (module docstring). The force law below and the energy outputs
+ * (energy.c: 1/2 sum_x k_x (FU Phi)_x^2, damper power sum_x d_x (FU Phi_h h)_x^2) read it. */
+int ovk_axis_group(const ovk_model *M, const ovk_data *d, int a, int rot, const double *h, double FU[3][3],
+                   double *phi, double *rate) {
     const int *ai = M->axi + OVK_NAXI * a;
     const double *ap = M->axp + OVK_NAXP * a, *Ri = d->f.R + 9 * ovk_slot(M, ai[0]);
-    int b = ai[0] >= 0 ? ai[0] : ai[1], nh = M->nb * M->nh_b;
+    int b = ai[0] >= 0 ? ai[0] : ai[1], nh = M->nb * M->nh_b, n = ai[2 + rot];
+    const int *pos = ai + 4 + 3 * rot;
     const double *Rb = d->f.R + 9 * b;
     double F[9];
     for (int r = 0; r < 3; r++)
         for (int c = 0; c < 3; c++) F[3 * r + c] = Ri[3 * r] * ap[c] + Ri[3 * r + 1] * ap[3 + c] + Ri[3 * r + 2] * ap[6 + c];
+    for (int e = 0; e < n; e++) {
+        const double *Je = d->J + (size_t)M->retained[pos[e]] * nh + 6 * b + 3 * rot;
+        double u[3];
+        for (int x = 0; x < 3; x++) u[x] = rot ? Rb[3 * x] * Je[0] + Rb[3 * x + 1] * Je[1] + Rb[3 * x + 2] * Je[2] : Je[x];
+        for (int x = 0; x < 3; x++) FU[x][e] = F[x] * u[0] + F[3 + x] * u[1] + F[6 + x] * u[2];
+        phi[e] = d->phi[M->retained[pos[e]]];
+        rate[e] = ovk_row_rate(M, d, pos[e], h);
+    }
+    return n;
+}
+
+/* The multipliers of per-axis compliant joint a into d->lamR (module docstring). */
+static void axis_forces(const ovk_model *M, ovk_data *d, int a, const double *h) {
+    const int *ai = M->axi + OVK_NAXI * a;
+    const double *ap = M->axp + OVK_NAXP * a;
     for (int rot = 0; rot < 2; rot++) {
-        int n = ai[2 + rot];
         const int *pos = ai + 4 + 3 * rot;
         const double *kv = ap + 9 + 6 * rot, *dv = kv + 3;
         double FU[3][3], phi[3], rate[3];
-        for (int e = 0; e < n; e++) {
-            const double *Je = d->J + (size_t)M->retained[pos[e]] * nh + 6 * b + 3 * rot;
-            double u[3];
-            for (int x = 0; x < 3; x++) u[x] = rot ? Rb[3 * x] * Je[0] + Rb[3 * x + 1] * Je[1] + Rb[3 * x + 2] * Je[2] : Je[x];
-            for (int x = 0; x < 3; x++) FU[x][e] = F[x] * u[0] + F[3 + x] * u[1] + F[6 + x] * u[2];
-            phi[e] = d->phi[M->retained[pos[e]]];
-            rate[e] = row_rate(M, d, pos[e], h);
-        }
+        int n = ovk_axis_group(M, d, a, rot, h, FU, phi, rate);
         for (int e = 0; e < n; e++) {
             double s = 0.0;
             for (int f = 0; f < n; f++) {
@@ -138,7 +150,7 @@ int ovk_compliant_solve(const ovk_model *M, ovk_data *d, const double *h) {
     for (int p = 0; p < nR; p++)
         if (M->ckind[p] == 1) {
             int row = M->retained[p];
-            d->lamR[p] = M->ck[row] * d->phi[row] + M->cd[row] * row_rate(M, d, p, h);
+            d->lamR[p] = M->ck[row] * d->phi[row] + M->cd[row] * ovk_row_rate(M, d, p, h);
         }
     for (int a = 0; a < M->nax; a++) axis_forces(M, d, a, h);
     ovk_model Mr;

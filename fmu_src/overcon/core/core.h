@@ -314,6 +314,8 @@ OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hi
 /* energy.c: the energy outputs' ledger */
 OVK_HIDDEN int ovk_sim_energy_start(ovk_sim *s, double t0, const double *y0);
 OVK_HIDDEN int ovk_sim_energy_step(ovk_sim *s);
+OVK_HIDDEN void ovk_compliant_energy(const ovk_model *M, ovk_data *d, const double *q, const double *h,
+                                     double *elastic, double *damping);
 /* watch.c: the singularity watch after each step; the expiry behind a failed step */
 OVK_HIDDEN int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg);
 OVK_HIDDEN int ovk_sim_expiring(ovk_sim *s, int failed, char *msg);
@@ -411,6 +413,9 @@ OVK_HIDDEN int ovk_minnorm_factor(const ovk_model *M, ovk_data *d);
 OVK_HIDDEN void ovk_minnorm_solve_many(const ovk_model *M, ovk_data *d, double *B, int nc);
 OVK_HIDDEN int ovk_compliant_solve(const ovk_model *M, ovk_data *d, const double *h);
 OVK_HIDDEN void ovk_compliant_columns(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN double ovk_row_rate(const ovk_model *M, const ovk_data *d, int p, const double *h);
+OVK_HIDDEN int ovk_axis_group(const ovk_model *M, const ovk_data *d, int a, int rot, const double *h, double FU[3][3],
+                              double *phi, double *rate);
 OVK_HIDDEN int ovk_kkt_al_solve(const ovk_model *M, ovk_data *d);
 OVK_HIDDEN void ovk_kkt_al_columns(const ovk_model *M, ovk_data *d);
 

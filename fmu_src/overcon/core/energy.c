@@ -5,15 +5,51 @@
  * powers at its start, middle (dense output) and end, read inside the last step by the cubic
  * Hermite interpolant of the work and the powers at the step's ends. Each power costs one
  * evaluation of Eq. 18 for the friction forces when the model has friction joints, warm-started
- * like the dense output and counted as the Python run counts it. */
+ * like the dense output and counted as the Python run counts it. Under redundancy "compliant" the
+ * compliant joints' springs are in the potential energy and their dampers' power in the dissipated
+ * work (ovk_compliant_energy). */
 #include <math.h>
 #include <string.h>
 
 #include "core.h"
 #include "small.h"
 
-/* [friction power dissipated (W, >= 0), power of the constant forces and torques (W)] at
- * (t, y) (Simulation._powers). */
+/* The compliant joints' elastic energy (J) and damper power (W, >= 0) at (q, h), the frames of d
+ * built there (compliance.c's force law: lam = k Phi + d Phi_h h on the scalar rows, so the
+ * spring's energy is 1/2 k Phi^2 and the damper takes d (Phi_h h)^2; per-axis joints: the
+ * joint-frame components of the deformation, FU Phi, and of its rate, FU Phi_h h, give
+ * 1/2 sum_x k_x (FU Phi)_x^2 and sum_x d_x (FU Phi_h h)_x^2). Zero without compliant rows. */
+void ovk_compliant_energy(const ovk_model *M, ovk_data *d, const double *q, const double *h, double *elastic,
+                          double *damping) {
+    *elastic = *damping = 0.0;
+    if (M->redundancy != OVK_COMPLIANT || M->nrig == M->nR) return;
+    ovk_constraint_rows(M, d, q);
+    for (int p = 0; p < M->nR; p++) {
+        if (M->ckind[p] != 1) continue;
+        int row = M->retained[p];
+        double rate = ovk_row_rate(M, d, p, h);
+        *elastic += 0.5 * M->ck[row] * d->phi[row] * d->phi[row];
+        *damping += M->cd[row] * rate * rate;
+    }
+    for (int a = 0; a < M->nax; a++)
+        for (int rot = 0; rot < 2; rot++) {
+            const double *kv = M->axp + OVK_NAXP * a + 9 + 6 * rot, *dv = kv + 3;
+            double FU[3][3], phi[3], rate[3];
+            int n = ovk_axis_group(M, d, a, rot, h, FU, phi, rate);
+            for (int x = 0; x < 3 && n; x++) {
+                double dx = 0.0, vx = 0.0;
+                for (int e = 0; e < n; e++) {
+                    dx += FU[x][e] * phi[e];
+                    vx += FU[x][e] * rate[e];
+                }
+                *elastic += 0.5 * kv[x] * dx * dx;
+                *damping += dv[x] * vx * vx;
+            }
+        }
+}
+
+/* [power dissipated by joint friction and the compliant joints' dampers (W, >= 0), power of the
+ * constant forces and torques (W)] at (t, y) (Simulation._powers). */
 static int powers(ovk_sim *s, double t, const double *y, double *p) {
     const ovk_model *M = s->M;
     int kh = M->nh_b, dim = M->dim, n = s->n;
@@ -33,9 +69,10 @@ static int powers(ovk_sim *s, double t, const double *y, double *p) {
             for (int i = 0; i < 3; i++) s->qload[bi * kh + 3 + i] += tb[i];
         }
     }
-    double applied = 0.0;
+    double applied = 0.0, elastic, damper;
     for (int k = 0; k < s->nh; k++) applied += h[k] * s->qload[k];
-    p[0] = 0.0;
+    ovk_compliant_energy(M, s->d, y, h, &elastic, &damper);
+    p[0] = damper;
     p[1] = applied;
     if (!M->nfj) return OVK_OK;
     int its = 0, status = ovk_sim_solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, s->yout, &its);
@@ -43,7 +80,7 @@ static int powers(ovk_sim *s, double t, const double *y, double *p) {
     s->evaluations++;
     double fp = 0.0;
     for (int k = 0; k < s->ncols; k++) fp += h[M->cols[k]] * s->ev_qf[k];
-    p[0] = -fp;
+    p[0] = damper - fp;
     return OVK_OK;
 }
 
@@ -95,7 +132,8 @@ static void work_at(const ovk_sim *s, double t, double *out) {
                  (-2 * x3 + 3 * x2) * s->work_w[1][k] + (x3 - x2) * h * s->work_p[1][k];
 }
 
-/* [kinetic, potential, dissipated, applied] (J) at (t, y) of the last step (Simulation.state_outputs);
+/* [kinetic, potential (gravity, springs, compliant joints), dissipated, applied] (J) at (t, y) of
+ * the last step (Simulation.state_outputs);
  * the run's state is left as it was. */
 int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out) {
     if (!s) return OVK_NOMEM;
@@ -132,6 +170,9 @@ int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out) {
         double stretch = sqrt(len2) - lp[10];
         pot += 0.5 * lp[9] * stretch * stretch;
     }
+    double elastic, damper;
+    ovk_compliant_energy(M, s->d, s->ystar, s->ystar + n, &elastic, &damper);
+    pot += elastic;
     out[0] = 0.5 * kin;
     out[1] = pot;
     if (s->o.energy) work_at(s, t, out + 2);

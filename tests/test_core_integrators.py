@@ -162,15 +162,20 @@ RADAU_CASES = ["planar_f45_wo4", "planar_f145_wo6", "spatial_GH_wo9", "spatial_M
 
 @pytest.mark.parametrize("name", RADAU_CASES)
 def test_radau_agrees_with_python_within_the_tolerance(name):
-    """On a 10 ms grid to 0.6 s: every state entry within the tolerance (relative to
-    max(1, |entry|)), accepted steps and right-hand side evaluations within 3 %, every evaluation
-    on the core's right-hand side."""
+    """On a 10 ms grid to 0.6 s, against a tight reference (the core's dop853 at 1e-13): the C
+    radau's error is at most twice the Python radau's plus the tolerance (relative to max(1,
+    |entry|)); accepted steps and right-hand side evaluations within 3 %, every evaluation on the
+    core's right-hand side. Not the two runs' difference against the tolerance: their LUs differ
+    (the Python one is LAPACK's, so the BLAS kernel's), which can change a step-size decision and
+    then the runs differ by their global error, up to 1.3 tolerances measured (examples/fourbar,
+    OpenBLAS Prescott); each run's own global error reaches 31 tolerances (planar_f145_wo6)."""
     model, solver = setup(name, "radau")
     sim = Simulation(model, solver)
     run = kernel.Run(model, solver)
+    ref = kernel.Run(model, dataclasses.replace(solver, method="dop853", tolerance=1e-13))
     for t in np.arange(0.0, model.scene.stop_time, 0.01)[1:]:
-        y_py, y_c = sim.advance(t), run.advance(t)
-        assert rel(y_c, y_py) <= solver.tolerance, t
+        y_py, y_c, y_ref = sim.advance(t), run.advance(t), ref.advance(t)
+        assert rel(y_c, y_ref) <= 2.0 * rel(y_py, y_ref) + solver.tolerance, t
     itg, info = sim._integrator, run.info
     assert sim.kernel_repeats == 0
     assert abs(info["nsteps"] - itg.nsteps) <= 0.03 * itg.nsteps and itg.nsteps > 20

@@ -81,10 +81,12 @@ def test_c_run_outputs_equal_python_outputs(name, method):
     assert run.info["evaluations"] == sim.evaluations  # outputs never counted as the run's evaluations
 
 
-@pytest.mark.parametrize("method", ["dopri5", "rk4"])
+@pytest.mark.parametrize("method", ["dopri5", "rk4", "dop853", "radau"])
 def test_state_bytes_restore_the_run_bit_for_bit(method):
-    """get_state at t1, continue to t2; set_state and continue again: the same bits; a state of
-    another run (other sizes) or a truncated one is refused and leaves the run as it was."""
+    """get_state at t1, continue to t2 (outputs inside a step: dop853's dense coefficients and
+    radau's LU factors are part of the bytes); set_state and continue again: the same bits and
+    counters; a state of another run (other sizes), of the same model under another method, or a
+    truncated one is refused and leaves the run as it was."""
     model, solver = setup("planar_f145_wo6", method)
     run = kernel.Run(model, solver)
     run.advance(0.2)
@@ -99,6 +101,9 @@ def test_state_bytes_restore_the_run_bit_for_bit(method):
     other = kernel.Run(*setup("planar_none_wo4", method))
     with pytest.raises(kernel.RunStopped, match="set state"):
         other.set_state(saved)
+    other_method = kernel.Run(model, dataclasses.replace(solver, method="dopri5" if method == "radau" else "radau"))
+    with pytest.raises(kernel.RunStopped, match="set state: "):
+        other_method.set_state(saved)
     with pytest.raises(kernel.RunStopped, match="set state"):
         run.set_state(saved[:-8])
     assert np.array_equal(run.y, b[-1]) or run.info["t"] >= 0.4

@@ -242,27 +242,6 @@ def test_radau_stops_at_a_singular_position_as_python(tmp_path):
         assert words in str(c.value) and words in str(py.value)
 
 
-@pytest.mark.parametrize("method", ["dop853", "radau"])
-def test_state_bytes_restore_the_run_bit_for_bit(method):
-    """get_state inside the run (after an output inside a step: dop853's dense coefficients and
-    radau's LU factors are part of the bytes), continue; set_state and continue again: the same
-    bits and counters. A state of the same model under another method is refused."""
-    model, solver = setup("planar_f145_wo6", method)
-    run = kernel.Run(model, solver)
-    run.advance(0.2)
-    saved = run.get_state()
-    a = [run.advance(t) for t in (0.23, 0.31, 0.4)]
-    info_a = run.info
-    run.set_state(saved)
-    b = [run.advance(t) for t in (0.23, 0.31, 0.4)]
-    assert all(np.array_equal(x, y) for x, y in zip(a, b))
-    assert {k: v for k, v in run.info.items() if k != "wall_time"} == {
-        k: v for k, v in info_a.items() if k != "wall_time"}
-    other = kernel.Run(model, dataclasses.replace(solver, method="dopri5" if method == "radau" else "radau"))
-    with pytest.raises(kernel.RunStopped, match="set state: "):
-        other.set_state(saved)
-
-
 def test_c_fmu_with_dop853_and_radau_equals_the_in_process_run(tmp_path):
     """The paper's planar_f45_wo4 built with the C runtime, its parameter solver.method set to
     dop853 and to radau, through fmpy over the default experiment: every output at every

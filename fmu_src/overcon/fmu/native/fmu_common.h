@@ -145,6 +145,7 @@ typedef struct {
     int me;             /* instantiated for Model Exchange: y is the host's state x at time t */
     int dx_valid;       /* dx (and, in Model Exchange, the outputs) belong to the current (t, y) */
     double *dx;         /* ny: the derivatives at (t, y) (fmu_me.c) */
+    int *along;         /* nj: the joints' verdicts read by fmu_along_value (made once, not per read) */
     int enabled[N_CATEGORIES];
     ovk_model M;        /* fm.M with the parameters' values (jlawp, baumgarte, tol, max_iter) */
     double *jlawp;      /* nj x NLP: the friction laws with the parameters */

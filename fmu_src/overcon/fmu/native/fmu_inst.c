@@ -147,7 +147,7 @@ void fmu_free_inst(fmu_inst *c) {
     }
     ovk_sim_free(c->sim);
     free(c->jlawp), free(c->pval), free(c->pset), free(c->outputs), free(c->y), free(c->reac), free(c->fric), free(c->dx);
-    free(c->strings);
+    free(c->strings), free(c->along);
     fmu_model_free(&c->fm);
     free(c->name);
     free(c);
@@ -166,7 +166,9 @@ static int alloc_arrays(fmu_inst *c) {
     c->fric = calloc(nj, sizeof(double));
     c->dx = calloc((size_t)fm->ny + 1, sizeof(double));
     c->strings = calloc((size_t)fm->nvar + 1, sizeof(char *));
-    return c->jlawp && c->pval && c->pset && c->outputs && c->y && c->reac && c->fric && c->dx && c->strings;
+    c->along = calloc(nj, sizeof(int));
+    return c->jlawp && c->pval && c->pset && c->outputs && c->y && c->reac && c->fric && c->dx && c->strings &&
+           c->along;
 }
 
 /* The instance named tmp->name with tmp's logger, its model read from the resources folder

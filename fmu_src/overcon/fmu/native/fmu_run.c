@@ -250,11 +250,8 @@ static int step_outputs(fmu_inst *c, double t_new, const double *y, double *out)
  * the run made first when there is none; 0 with the reason in c->msg. */
 int fmu_along_value(fmu_inst *c, int arg, double *out) {
     if (!c->sim_valid && !fmu_ensure_sim(c, 0)) return 0;
-    int nj = c->fm.M.nj, rank = 0, *unique = malloc(((size_t)nj + 1) * sizeof(int));
-    if (!unique) return snprintf(c->msg, sizeof c->msg, "MemoryError: out of memory"), 0;
-    int motion = ovk_sim_uniqueness(c->sim, &rank, unique);
-    *out = arg == 0 ? rank : arg == 1 ? motion : arg - 2 < nj ? unique[arg - 2] : 0;
-    free(unique);
+    int nj = c->fm.M.nj, rank = 0, motion = ovk_sim_uniqueness(c->sim, &rank, c->along);
+    *out = arg == 0 ? rank : arg == 1 ? motion : arg - 2 < nj ? c->along[arg - 2] : 0;
     return 1;
 }
 

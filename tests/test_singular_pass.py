@@ -104,7 +104,27 @@ def _branch(phis: np.ndarray, ref: np.ndarray, sim: Simulation, flats: int, ref_
     assert np.max(np.abs(phis - phis[:, :1])) < 1e-6
     assert np.max(np.abs(phis[:, 0] - ref)) < ref_tol
     assert sim.max_drift <= 1e-8
-    assert [e[1] for e in sim.events] == ["singular"] * flats
+    assert [e[1] for e in sim.events if e[1] != "rank-change"] == ["singular"] * flats
+    _rank_dips(sim)
+
+
+def _singular_times(sim) -> np.ndarray:
+    return np.array([e[0] for e in sim.events if e[1] == "singular"])
+
+
+def _rank_dips(sim) -> None:
+    """The rank recorded along the motion leaves its regular value only next to a flat instant
+    and is back at the end of that step: ``rank a -> b`` then ``rank b -> a``, each within 0.05 s
+    of a ``singular`` event. (b is below a at the instant itself. At a step end a few 1e-5 s from
+    it, b can be above a: the singular value of the mechanism's own motion, round-off elsewhere,
+    measured 1.4e-10 of sigma_max there for K = 40, is judged against the pre-check's rank
+    tolerance, 1e-9 of sigma_max, after the equilibration.)"""
+    ranks = [e for e in sim.events if e[1] == "rank-change"]
+    pairs = [tuple(int(x) for x in e[2].removeprefix("rank ").split(" -> ")) for e in ranks]
+    assert len(pairs) % 2 == 0 and all(away == back[::-1] and away[0] == pairs[0][0]
+                                       for away, back in zip(pairs[::2], pairs[1::2])), pairs
+    times = _singular_times(sim)
+    assert all(np.min(np.abs(times - e[0])) < 0.05 for e in ranks)
 
 
 @pytest.mark.parametrize("k", [3, 10, 40])
@@ -121,7 +141,7 @@ def test_generated_parallelograms_pass_their_flat_position_on_the_parallelogram_
     phis = _crank_angles(sim, model, times, list(range(k)))
     assert len(flats) == 2
     _branch(phis, ref, sim, 2, 1e-5)
-    assert np.max(np.abs(np.array([e[0] for e in sim.events]) - flats)) < 2e-5
+    assert np.max(np.abs(_singular_times(sim) - flats)) < 2e-5
 
 
 def _nfourbar_run(tmp_path: Path, n: int, stop: float):
@@ -142,7 +162,7 @@ def test_nfourbar_2_completes_20_s_with_20_singular_events_at_the_flat_instants(
     sim, phis, ref, flats = _nfourbar_run(tmp_path, 2, 20.0)
     assert len(flats) == 20
     _branch(phis, ref, sim, 20, 1e-4)
-    assert np.max(np.abs(np.array([e[0] for e in sim.events]) - flats)) < 2e-5
+    assert np.max(np.abs(_singular_times(sim) - flats)) < 2e-5
 
 
 @pytest.mark.parametrize("n, stop, flats", [(10, 20.0, 20), (40, 1.6, 2)])
@@ -153,20 +173,17 @@ def test_nfourbar_10_and_40_pass_their_flat_positions_on_the_parallelogram_branc
     _branch(phis, ref, sim, flats, 1e-4)
 
 
-def test_the_c_run_passes_with_the_same_steps_and_counts_the_singular_positions(tmp_path):
-    """core/sim.c under formulation AL (projection, FSAL again, the watch going on) gives the
-    Python run's states bit for bit, and counts the singular positions the Python run records."""
+def test_the_c_run_counts_the_singular_positions_it_passes(tmp_path):
+    """core/sim.c under formulation AL (projection, FSAL again, the watch going on) counts the
+    singular positions it records as events, names the last, and keeps the projection's drift
+    within its tolerance."""
     _, path = _nfourbar().write(2, tmp_path, stop_time=3.0, singular="pass")
     spec = _scene(path)
     model = compile_checked(spec)
     c_run = kernel.Run(model, spec.solver)
-    y_c = c_run.advance(3.0)
-    with single_threaded_blas():
-        sim = Simulation(model, spec.solver)
-        y_py = sim.advance(3.0)
-    assert np.array_equal(y_c, y_py)
+    c_run.advance(3.0)
     info = c_run.info
-    singular = [e for e in sim.events if e[1] == "singular"]
+    singular = [e for e in c_run.events if e[1] == "singular"]
     assert info["singular_passed"] == len(singular) == 3  # flat at 0.71, 1.23 and 2.66 s
     assert info["last_singular"] == pytest.approx(singular[-1][0], abs=1e-8)
     assert info["projection_drift"] <= kernel.PROJECTION_TOL
@@ -237,17 +254,19 @@ def test_an_expired_elimination_keeps_its_behaviour_under_pass(tmp_path):
 
 def test_simulate_singular_flag_events_and_refusals(tmp_path, capsys):
     """``overcon simulate --singular pass`` runs through and writes the ``singular`` events;
-    ``--singular pass --kernel numpy`` and a bad scene value are bad input (exit 2), named."""
+    the deprecated ``--kernel numpy`` warns and runs the core; a bad scene value is bad input
+    (exit 2), named."""
     _, path = _nfourbar().write(2, tmp_path, stop_time=1.5)
     out, events = tmp_path / "o.csv", tmp_path / "ev.csv"
     assert main(["simulate", str(path), "--out", str(out), "--singular", "pass", "--events", str(events)]) == 0
-    rows = list(csv.DictReader(events.open()))
+    rows = [r for r in csv.DictReader(events.open()) if r["kind"] != "rank-change"]
     assert [r["kind"] for r in rows] == ["singular", "singular"]
     assert "rank deficient" in rows[0]["detail"] and "passed" in rows[0]["detail"]
     assert main(["simulate", str(path), "--out", str(out)]) == 3  # the default stops at the first
     capsys.readouterr()
-    assert main(["simulate", str(path), "--out", str(out), "--singular", "pass", "--kernel", "numpy"]) == 2
-    assert "solver.singular = 'pass' runs on the compiled kernel" in capsys.readouterr().err
+    # the deprecated --kernel numpy runs the core, and says so
+    assert main(["simulate", str(path), "--out", str(out), "--singular", "pass", "--kernel", "numpy"]) == 0
+    assert "--kernel numpy: solver.kernel = 'numpy' is deprecated" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
     bad.write_text(path.read_text().replace("[solver]", '[solver]\nsingular = "maybe"'))
     assert main(["simulate", str(bad), "--out", str(out)]) == 2

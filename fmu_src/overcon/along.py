@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .analysis import analyse, numerical_rank
-from .evaluation import frames, jacobian_h
+from .kernel import jacobian
 from .precheck import compliant_joints, frictionless
 from .simulate import Simulation, SimulationError, output_grid
 
@@ -61,7 +61,7 @@ def sample(model, q: np.ndarray, names: list[str]) -> tuple[int, tuple[str, ...]
     """(rank of the rigid equations' Jacobian, friction joints ``names`` whose reaction is not
     unique) at the coordinates q."""
     rigid = [i for i in range(model.m) if i not in set(int(r) for r in model.compliant_rows)]
-    J = jacobian_h(model, frames(model, q)).T[:, rigid]
+    J = jacobian(model, q).T[:, rigid]
     position = {row: k for k, row in enumerate(rigid)}
     groups = {c.name: [position[r] for r in c.rows] for c in model.joints if c.name in set(names)}
     rank = numerical_rank(J)

@@ -1,5 +1,5 @@
 """Admit a compiled :class:`overcon.model.Model` at its initial state: the checks that evaluate it
-(:mod:`overcon.evaluation`), run after :func:`overcon.model.compile_model` and before any run.
+(the compiled core's rows, :func:`overcon.kernel.rows_at`), run after :func:`overcon.model.compile_model` and before any run.
 
 - :func:`check_initial_state` (with :func:`check_euler_q0`): q0/h0 on the constraint manifold;
 - :func:`resolve_elimination`: the eliminated equations checked (or chosen, ``"auto"``) from the
@@ -14,11 +14,12 @@ from dataclasses import replace
 import numpy as np
 
 from . import analysis
-from .evaluation import constraints, frames, jacobian_h
+from .kernel import jacobian, rows_at
+from .kernel import rigid_rows as kernel_rigid_rows
 from .joints import TYPES, InitialFrames
 from .joints.spatial_rows import POINT_ROW
 from .kinematics import SIN_BETA_MIN, euler_singular
-from .model import InconsistentInitialState, Model, ModelError, compile_model
+from .model import InconsistentInitialState, Model, ModelError, _rotations, compile_model
 from .spec import SceneSpec
 
 
@@ -64,7 +65,6 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> None:
     the mechanism file that holds q0/h0; first, for z-x-z Euler bodies, a q0 at the Euler
     singularity (:func:`check_euler_q0`)."""
     check_euler_q0(model)
-    f = frames(model, model.q0, model.h0)
     joint_of = {r + 1: c.name for c in model.joints for r in c.rows}
     mech = model.scene.mechanism
     where = f" (bodies' q0/h0 in {mech.source or mech.name})"
@@ -72,8 +72,8 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> None:
     def eqs(numbers) -> str:
         return ", ".join(f"Phi{i} (joint {joint_of.get(i, '?')})" for i in numbers)
 
+    Phi, Jh = _rows_q0(model, where)
     with np.errstate(all="ignore"):
-        Phi = constraints(model, f)
         scale = max(1.0, float(np.max(np.abs(model.q0))))
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(Phi) <= tol * scale))]
         if bad:
@@ -86,15 +86,34 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> None:
                              f"|Phi{worst}| = {abs(Phi[worst - 1]):.3g}")
             for (j, meaning), rows in axes.items():
                 c = model.joints[j]
-                text = TYPES[c.type].violation_text(meaning, c.p, InitialFrames(f.R[c.bi], f.R[c.bj]))
+                R0 = _rotations(model, np.asarray(model.q0, float))
+                text = TYPES[c.type].violation_text(meaning, c.p, InitialFrames(R0[c.bi], R0[c.bj]))
                 parts.append(f"joint {c.name} (joints[{j}]): {text}: {', '.join(f'Phi{i}' for i in rows)} "
                              f"(joints[{j}].axis_i, joints[{j}].axis_j or the bodies' q0 are wrong)")
             raise InconsistentInitialState("; ".join(parts) + where)
-        vel = jacobian_h(model, f) @ model.h0
+        vel = Jh @ model.h0
         hscale = max(1.0, float(np.max(np.abs(model.h0))))
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(vel) <= tol * hscale))]
     if bad:
         raise InconsistentInitialState(f"initial velocities h0 violate the velocity constraints {eqs(bad)}{where}")
+
+
+def _rows_q0(model: Model, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """(Phi, Phi_h) at q0 from the compiled core; a q0 or h0 it cannot evaluate (a non-finite
+    value) is an :class:`InconsistentInitialState` naming the mechanism file (``where``)."""
+    y = np.concatenate([model.q0, model.h0])
+    if not np.all(np.isfinite(y)):
+        raise InconsistentInitialState(f"initial coordinates q0 or velocities h0 hold a non-finite value{where}")
+    try:
+        Phi, Jh, _ = rows_at(model, model.q0, model.h0)
+    except RuntimeError as exc:
+        raise InconsistentInitialState(f"the constraints cannot be evaluated at q0: {exc}{where}") from None
+    return Phi, Jh
+
+
+def _jacobian_q0(model: Model) -> np.ndarray:
+    """Phi_h^T (nh, m) at q0 (the analysis' orientation: a joint's equations are columns)."""
+    return jacobian(model, model.q0).T
 
 
 def _split_violations(model: Model, Phi: np.ndarray, bad: list[int]):
@@ -139,8 +158,7 @@ def rigid_elimination(model: Model) -> list[int]:
     """Redundancy "compliant": the rigid equations (those of joints without compliance) that are
     dependent among themselves at q0, chosen like ``"auto"`` (1-based). The compliant equations
     are kept: they are forces, not constraints."""
-    f = frames(model, model.q0, model.h0)
-    J = jacobian_h(model, f).T
+    J = _jacobian_q0(model)
     compliant = set(int(r) for r in model.compliant_rows)
     rigid = [i for i in range(model.m) if i not in compliant]
     if not rigid:
@@ -152,8 +170,7 @@ def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate")
     """Check (or choose, for "auto") the eliminated equations at q0. Returns 1-based indices.
     Raises ModelError naming ``field`` (where ``eliminate`` was given) for an elimination the
     mechanism does not admit."""
-    f = frames(model, model.q0, model.h0)
-    J = jacobian_h(model, f).T
+    J = _jacobian_q0(model)
     r = analysis.numerical_rank(J)
     if eliminate == "auto":
         removed = sorted(i + 1 for i in analysis.auto_eliminate(J))
@@ -171,3 +188,17 @@ def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate")
             f"{field}: eliminating {listed} leaves {len(kept)} equations of rank {r_kept}: "
             f"{len(kept) - r_kept} more must be eliminated (the mechanism has {model.m - r} redundant)")
     return removed, "given"
+
+
+def watch_rows(model) -> tuple[list[int], list[int]]:
+    """(rows watched, rows of the whole rigid Jacobian) of a run's singularity watch
+    (core/watch.c), chosen at the start: the kept equations; under ``redundancy = "min-norm"``
+    (every equation kept) an independent set of them at q0 (pivoted QR,
+    :func:`overcon.analysis.independent_columns`); under ``"compliant"`` the rigid kept ones."""
+    if model.elimination_mode == "min-norm":
+        rows = np.array(analysis.independent_columns(jacobian(model, model.q0).T), int)
+    elif model.compliant_rows.size:
+        rows = np.setdiff1d(model.retained, model.compliant_rows)
+    else:
+        rows = np.asarray(model.retained, int)
+    return [int(r) for r in rows], [int(r) for r in kernel_rigid_rows(model)]

@@ -64,7 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"accuracy target, rtol = atol of the adaptive methods ({_range('solver.tolerance')})")
     s.add_argument("--method", choices=METHODS, help="integrator")
     s.add_argument("--kernel", choices=KERNELS,
-                   help="right-hand side: auto (the compiled kernel where it covers the model), c, numpy")
+                   help="auto or c: the compiled core (every run uses it); numpy: a deprecated alias that warns and "
+                        "runs the core")
     s.add_argument("--singular", choices=SINGULAR,
                    help="at a singular position of the mechanism: stop (default; exit 3) or pass (augmented "
                         "Lagrangian with projections, compiled kernel; a 'singular' event is recorded)")
@@ -277,7 +278,7 @@ def cmd_check(args) -> int:
     from .kernel import refusal
     why = refusal(model, spec.solver)
     if why is not None:
-        return _input_error(f"{args.file}: solver.kernel = 'c': the compiled kernel cannot run: {why}", args)
+        return _input_error(f"{args.file}: the compiled core cannot run this scene: {why}", args)
     from .kernel import singular_refusal
     if (why := singular_refusal(model, spec.solver)) is not None:
         return _input_error(f"{args.file}: {why}", args)
@@ -328,10 +329,13 @@ def cmd_simulate(args) -> int:
     for w in run_warnings(precheck(model, args.file)):
         print(f"overcon: warning: {w}", file=sys.stderr)
     from .kernel import refusal
-    why = refusal(model, spec.solver, here=True)  # a kernel that cannot run here: bad input, not a failed run
+    from .simulate import NUMPY_DEPRECATED
+    if spec.solver.kernel == "numpy":
+        where = "--kernel numpy" if args.kernel else f"{args.file}: solver.kernel = 'numpy'"
+        print(f"overcon: warning: {where}: {NUMPY_DEPRECATED}", file=sys.stderr)
+    why = refusal(model, spec.solver, here=True)  # a core that cannot run here: bad input, not a failed run
     if why is not None:
-        where = "--kernel c" if args.kernel else f"{args.file}: solver.kernel = 'c'"
-        return _input_error(f"{where}: the compiled kernel cannot run: {why}")
+        return _input_error(f"{args.file}: the compiled core cannot run this scene: {why}")
     from .kernel import singular_refusal
     if (why := singular_refusal(model, spec.solver, here=True)) is not None:
         return _input_error(f"{'--singular pass' if args.singular else args.file}: {why}")
@@ -375,7 +379,6 @@ def _run_stats(out, model, res, wall: float) -> str:
             f"eliminated {', '.join('Phi%d' % i for i in model.eliminated) or 'none'} ({model.elimination_mode}); "
             f"{res.steps} steps, {res.evaluations} evaluations, {res.friction_iterations} friction iterations; "
             f"max constraint drift {res.max_drift:.3g}; wall {wall:.2f} s; {res.kernel_note}"
-            + (f" ({res.kernel_repeats} evaluations handed back to numpy)" if res.kernel_repeats else "")
             + _events_note(res))
 
 
@@ -383,12 +386,9 @@ def _failed_run(args, model, spec, exc, wall: float) -> int:
     """A run that stopped (exit 3): the CSV keeps every output point computed before the stop,
     the stats are printed, then the reason, then where the file ends (decided: the file is written
     even when it has no data row, so a script always finds it)."""
-    from .kernel import KernelUnavailable, select
+    from .kernel import library_path
     from .simulate import write_csv
-    try:
-        note = select(model, spec.solver)[1]
-    except KernelUnavailable:
-        note = "right-hand side: numpy"
+    note = f"right-hand side: compiled kernel ({library_path()})"
     partial = exc.partial
     if partial is not None:
         write_csv(partial, args.out)

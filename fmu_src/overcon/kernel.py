@@ -87,7 +87,7 @@ LIBRARY = Path(__file__).resolve().parent / "core" / f"libovercore{_shared_suffi
 
 
 class KernelUnavailable(RuntimeError):
-    """``kernel = "c"`` was asked for and the kernel cannot run (the message says why)."""
+    """The compiled core cannot run here or cannot run this model (the message says why)."""
 
     def __init__(self, reason: str, setting: str = "solver.kernel = 'c'"):
         super().__init__(f"{setting}: {reason}")
@@ -143,6 +143,11 @@ def use_library(path) -> None:
 def disable(reason: str) -> None:
     """No compiled kernel in this process (``auto`` runs numpy; ``reason`` is reported)."""
     _state.update(lib=None, reason=reason, path=None, tried=True)
+
+
+def library_path() -> str | None:
+    """The path of the core loaded in this process (None before :func:`library` found one)."""
+    return _state["path"]
 
 
 def library_name() -> str:
@@ -523,6 +528,37 @@ class Kernel:
         return out, drift.value
 
 
+def _rows_kernel(model):
+    """A :class:`Kernel` of ``model`` for its rows alone (default solver settings: the rows do not
+    depend on them); raises :class:`KernelUnavailable` when the core cannot run here."""
+    from .spec import SolverSpec
+    why = _unavailable(model)
+    if why is not None:
+        raise KernelUnavailable(why)
+    return Kernel(_state["lib"], model, SolverSpec())
+
+
+def rows_at(model, q: np.ndarray, h: np.ndarray | None = None):
+    """(Phi (m,), Phi_h (m, nh), gamma (m,; without Baumgarte)) at the coordinates q (and the
+    velocities h, default zero; gamma needs them), from the compiled core (core/joints*.c): the
+    rows the pre-check, the initial-state checks and ``check --along`` judge. New arrays."""
+    y = np.concatenate([np.asarray(q, float), np.zeros(model.nh) if h is None else np.asarray(h, float)])
+    return _rows_kernel(model).rows(y)
+
+
+def jacobian(model, q: np.ndarray) -> np.ndarray:
+    """Phi_h (m, nh) at the coordinates q (:func:`rows_at`)."""
+    return rows_at(model, q)[1]
+
+
+def rigid_rows(model) -> np.ndarray:
+    """The equations that can lose rank: every one, except the compliant joints' under
+    ``redundancy = "compliant"`` (they are forces)."""
+    if model.compliant_rows.size:
+        return np.setdiff1d(np.arange(model.m), model.compliant_rows)
+    return np.arange(model.m)
+
+
 class ProjectionFailed(ArithmeticError):
     """The step-end projection (core/project.c) could not take the state onto the constraints."""
 
@@ -537,47 +573,31 @@ def _unavailable(model) -> str | None:
     return why
 
 
-def refusal(model, solver, *, here: bool = False) -> str | None:
-    """Why a solver that asks for ``kernel = "c"`` cannot have it, or None (also for another
-    choice): the model is not covered, and with ``here`` (a run in this process) no library is at
-    hand either. ``check`` and ``build`` ask without ``here`` (an FMU carries its own library),
-    ``simulate`` with it: all three refuse such a scene as bad input."""
-    if getattr(solver, "kernel", "auto") != "c":
-        return None
+def refusal(model, solver=None, *, here: bool = False) -> str | None:
+    """Why the compiled core cannot run ``model``, or None: the model is not covered, and with
+    ``here`` (a run in this process) no library is at hand either. ``check`` and ``build`` ask
+    without ``here`` (an FMU carries its own library), ``simulate`` with it: all three refuse such
+    a scene as bad input. Every ``solver.kernel`` runs the core (``numpy`` is a deprecated alias)."""
     return _unavailable(model) if here else support(model)
 
 
 def singular_refusal(model, solver, *, here: bool = False) -> str | None:
-    """Why ``solver.singular = "pass"`` cannot run (it needs the compiled kernel: the numpy path has
-    only the eliminated form), as a whole sentence, or None; ``here`` as :func:`refusal`."""
+    """Why ``solver.singular = "pass"`` cannot run, as a whole sentence, or None; ``here`` as
+    :func:`refusal`."""
     if getattr(solver, "singular", "stop") != "pass":
         return None
-    if getattr(solver, "kernel", "auto") == "numpy":
-        return ("solver.singular = 'pass' runs on the compiled kernel (core/kkt_al.c, core/project.c), not with "
-                "solver.kernel = 'numpy'")
-    why = _unavailable(model) if here else support(model)
-    return None if why is None else f"solver.singular = 'pass' needs the compiled kernel, which cannot run: {why}"
+    why = refusal(model, solver, here=here)
+    return None if why is None else f"solver.singular = 'pass' needs the compiled core, which cannot run: {why}"
 
 
 def select(model, solver):
-    """(a :class:`Kernel` or None, a note saying which path runs and why) for ``solver.kernel``;
-    raises :class:`KernelUnavailable` for ``"c"`` when the kernel cannot run."""
-    choice = getattr(solver, "kernel", "auto")
-    passing = getattr(solver, "singular", "stop") == "pass"
-    if choice == "numpy":
-        if passing:
-            raise KernelUnavailable("it runs on the compiled kernel (the augmented Lagrangian solve and projections of "
-                                    "core/kkt_al.c, core/project.c), not with solver.kernel = 'numpy'",
-                                    "solver.singular = 'pass'")
-        return None, "right-hand side: numpy (solver.kernel = 'numpy')"
+    """(a :class:`Kernel`, a note naming the library) for ``model`` and ``solver``; raises
+    :class:`KernelUnavailable` when the core cannot run here. Every ``solver.kernel`` selects the
+    core (``numpy`` is a deprecated alias)."""
     why = _unavailable(model)
-    if why is not None and passing:
-        raise KernelUnavailable(f"it needs the compiled kernel: {why}", "solver.singular = 'pass'")
     if why is not None:
-        if choice == "c":
-            raise KernelUnavailable(why)
-        return None, f"right-hand side: numpy (solver.kernel = 'auto': {why})"
-    return Kernel(_state["lib"], model, solver), f"right-hand side: compiled kernel ({_state['path']})"
+        raise KernelUnavailable(why, "the compiled core")
+    return Kernel(_state["lib"], model, solver), f"compiled core ({_state['path']})"
 
 
 # ----------------------------------------------------------------------------- a run in C
@@ -586,6 +606,7 @@ C_METHODS = {"dopri5": 0, "rk4": 1, "dop853": 2, "radau": 3}
 """The integrators of overcon.integrators in the core: dopri5, rk4 and dop853 (core/integrate_rk.c:
 the same steps to round-off) and radau (core/integrate_radau.c: its own LU, so the same run within
 the integration tolerance)."""
+BUDGET_STATUS = 11  # OVK_BUDGET: a work budget ran out (STATUS)
 EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
 """The kinds of a run's events, in the order of core/core.h's OVK_EV_* (overcon.simulate.EVENT_KINDS)."""
 INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_drift", "min_ratio", "stiff_steps",

@@ -454,3 +454,13 @@ def _rotations(model: Model, q: np.ndarray) -> np.ndarray:
     angles = np.zeros((nb + 1, 3))
     angles[:nb] = Q[:, 3:]
     return euler_R_rows(angles, cos_sin(angles))
+
+
+def normalized_coordinates(model: Model, q: np.ndarray) -> np.ndarray:
+    """q (n,) with every quaternion replaced by e / |e| (the orientation the dynamics use, and
+    what the position outputs report); other coordinates unchanged (a copy)."""
+    out = np.array(q, float)
+    if model.rotation == "quaternion":
+        E = out.reshape(model.nb, 7)[:, 3:]
+        E /= np.sqrt(((E[:, 0] * E[:, 0] + E[:, 1] * E[:, 1]) + E[:, 2] * E[:, 2]) + E[:, 3] * E[:, 3])[:, None]
+    return out

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 from . import analysis
-from .evaluation import frames, jacobian_h
+from .kernel import jacobian
 from .joints import TYPES
 from .model import Model
 
@@ -37,8 +37,7 @@ def analyse_model(model: Model, methods: str = "auto"):
     """The analysis at q0. ``methods``: ``"svd"``, the one-factorisation test (one SVD of the
     Jacobian, whatever the number of joints), ``"all"``, with the rank and QR tests as a
     cross-check (two SVDs of the Jacobian per joint), or ``"auto"`` (:func:`resolve_methods`)."""
-    f = frames(model, model.q0, model.h0)
-    J = jacobian_h(model, f).T
+    J = jacobian(model, model.q0).T
     compliant = compliant_joints(model)
     if not compliant:
         return analysis.analyse(J, joint_groups(model), methods=resolve_methods(model, methods))

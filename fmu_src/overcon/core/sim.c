@@ -298,6 +298,10 @@ static int pass_singular(ovk_sim *s, double r_before) {
         s->t_prev = rk->t;
         status = OVK_OK;
     }
+    /* The rank and the verdicts were judged at the singular instant (a rank-change event there);
+     * judged again at the step's end, past it, so that they do not keep the instant's values
+     * until the next near-singular step (the watch evaluates them only where r < 1e-3). */
+    if (!status) status = ovk_sim_along(s, rk->t, rk->y, 0, s->msg);
     return status;
 }
 

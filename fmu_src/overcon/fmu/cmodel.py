@@ -42,9 +42,9 @@ import numpy as np
 
 from .. import kernel as kernel_mod
 from ..checks import compile_checked
+from ..checks import watch_rows as _watch_rows
 from ..params import rule_of
 from ..spec import REDUNDANCY_METHODS
-from ..watch import SingularityMonitor
 from .variables import redundancy_methods, redundancy_rule, with_redundancy
 
 FORMAT = 3
@@ -155,12 +155,9 @@ def _param(w: _Out, model, var) -> None:
 
 
 def watch_rows(model) -> tuple[list[int], list[int]]:
-    """(rows watched, rows of the whole rigid Jacobian) of a run's singularity watch at the start
-    (:class:`overcon.watch.SingularityMonitor`: under min-norm an independent set of the rows,
-    under compliant the rigid ones): what the C run's watch (core/watch.c) judges."""
-    y0 = np.concatenate([model.q0, model.h0])
-    rows = SingularityMonitor._watched_rows(None, model, y0)  # a static choice: it reads no instance state
-    return [int(r) for r in rows], [int(r) for r in SingularityMonitor._rigid_rows(model)]
+    """(rows watched, rows of the whole rigid Jacobian) of the C run's watch
+    (:func:`overcon.checks.watch_rows`)."""
+    return _watch_rows(model)
 
 
 def _packed(w: _Out, k) -> None:

@@ -17,8 +17,8 @@ LAYERS = (
               "overcon.friction_laws", "overcon.joints", "overcon.figures", "overcon.verdict", "overcon.plots")),
     ("scene", ("overcon.scene",)),
     ("model", ("overcon.model",)),
-    ("core", ("overcon.evaluation", "overcon.dynamics", "overcon.kernel", "overcon.integrators")),
-    ("simulate/analysis", ("overcon.analysis", "overcon.checks", "overcon.precheck", "overcon.simulate", "overcon.watch",
+    ("core", ("overcon.kernel",)),
+    ("simulate/analysis", ("overcon.analysis", "overcon.checks", "overcon.precheck", "overcon.simulate",
                            "overcon.along", "overcon.paper", "overcon.converge")),
     ("fmu", ("overcon.fmu",)),
     ("tooling", ("overcon.tooling",)),
@@ -27,8 +27,7 @@ LAYERS = (
 """Layer order, lowest first; a module belongs to the layer of its longest listed prefix."""
 
 TOOLING_MUST_NOT_IMPORT = ("overcon.scene", "overcon.model", "overcon.paper", "overcon.simulate", "overcon.kernel",
-                           "overcon.evaluation", "overcon.dynamics", "overcon.checks", "overcon.precheck",
-                           "overcon.integrators")
+                           "overcon.checks", "overcon.precheck")
 """The tooling treats FMUs as black boxes: no scene loader, no engine (its facts come from the FMU)."""
 
 

@@ -1,4 +1,4 @@
-"""The watch over singular positions (overcon.watch): every rank loss seen whatever its
+"""The watch over singular positions (core/watch.c, in every run): every rank loss seen whatever its
 multiplicity, at a time that does not depend on the tolerance; the mechanism told apart from an
 elimination that expires; the kept equations chosen again when the motion does not depend on
 them, and a stop naming the valid eliminations when it does; the events of a run."""
@@ -17,7 +17,6 @@ from overcon import scene as scene_mod
 from overcon.checks import compile_checked
 from overcon.cli import main
 from overcon.simulate import Simulation, SimulationError, output_grid, run
-from overcon.watch import ratio, ratio_and_rate, weighted_rows
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "mechanisms" / "examples"
 
@@ -55,28 +54,6 @@ def test_nfourbar_stops_at_its_first_flat_position_whatever_the_tolerance(tmp_pa
     assert abs(times[0] - times[1]) < 1e-3
     # the flat position itself: crank0 horizontal, from the frictionless run's energy (upright, 1 m/s)
     assert 0.70 < times[0] < 0.73
-
-
-def test_rate_of_the_ratio_is_its_derivative_along_the_motion(tmp_path):
-    """ratio_and_rate's dr/dt (singular vectors and J' along q') against a central difference
-    of r along q'."""
-    spec = _scene(_parallelogram(tmp_path, friction=None, eliminate="[11]"))
-    model = compile_checked(spec)
-    y = np.concatenate([model.q0, model.h0])
-    r, rate = ratio_and_rate(model, y, model.retained)
-    from overcon.evaluation import coordinate_rates
-    qdot = coordinate_rates(model, model.q0, model.h0)
-    d = 1e-5
-
-    def at(s):
-        z = y.copy()
-        z[: model.n] += s * qdot
-        return ratio(weighted_rows(model, z, model.retained))
-
-    central = (at(d) - at(-d)) / (2 * d)
-    assert r == pytest.approx(at(0.0), rel=1e-14)
-    assert rate < -0.01  # the kept set heads for its loss of rank
-    assert rate == pytest.approx(central, rel=1e-4)
 
 
 # ----------------------------------------------------------------------------- an expiring elimination

@@ -7,7 +7,7 @@ samples are its output points (``solver.output_interval``), and each sample runs
 one-factorisation test (:func:`overcon.analysis.analyse` with ``methods = "svd"``: one SVD of the
 whole Jacobian at that configuration) with the pre-check's rank tolerance. What holds between two
 samples is not seen, except that a loss of rank of the kept equations stops the run (the watch
-of :mod:`overcon.watch`), and the stop is reported. The samples are grouped into segments of
+of every run, core/watch.c), and the stop is reported. The samples are grouped into segments of
 constant (rank, friction joints whose reaction is not unique).
 """
 from __future__ import annotations

@@ -1,45 +1,26 @@
-"""The compiled core: one evaluation of Eq. 18, the coordinate rates and the reported outputs in C
-(the stage files in ``core/`` next to this file, see ``core/core.h``), called through ctypes.
+"""The compiled core, the project's one engine (the stage files in ``core/`` next to this file,
+see ``core/core.h``), called through ctypes: an evaluation of Eq. 18, the joint rows, the
+reported outputs, the uniqueness rule, the projections (:class:`Kernel`), and whole runs with
+their integrators, watch and ledgers (:class:`Run`, core/sim.c), which ``overcon simulate`` and
+the FMUs run.
 
-Why: an evaluation in numpy costs 20-30 times its linear algebra (docs/benchmarks.md, "The
-limit"): about a hundred numpy calls on arrays of 2 to 35 entries. The core does the same
-arithmetic in one call.
+Why ctypes (decided here): the core's interface is a handful of C functions over flat arrays,
+called once per run step or per output point, not per arithmetic operation; ctypes needs no
+compiler beyond the core's own build and no CPython ABI, so one ``libovercore`` serves every
+Python version, and the FMU binaries load the same sources without Python.
 
 What it covers (:func:`support`): planar mechanisms of revolute and translational joints, spatial
 mechanisms with z-x-z Euler angles or quaternions and every spatial joint type (spherical,
 revolute, prismatic, cylindrical, universal, fixed); gravity, forces, torques, springs; friction laws ``regularised`` and
 ``stribeck``; up to :data:`MAX_FRICTION` friction joints; every redundancy method of
 :data:`overcon.spec.REDUNDANCY_METHODS` (``min-norm``: core/kkt_minnorm.c; ``compliant``:
-core/compliance.c, packed by :func:`_redundancy_block`). Anything else runs on the numpy path
-(the reason is logged). Within an evaluation, whatever the numpy path reports or falls back on
-(a singular position, the friction solve's fixed-point fallback, an Euler singularity, a spring
-of positive free length whose points coincide, a non-finite number) makes the core return a
-status (:data:`STATUS`) with a message (:attr:`Kernel.last_message`), and that evaluation is
-repeated on the numpy path, which raises or falls back exactly as without the core: the core
-never changes what fails or how, and the robust friction fallback exists once, in
-:mod:`overcon.dynamics`.
+core/compliance.c, packed by :func:`_redundancy_block`). A model outside that is refused with
+the reason. Every failure of the core is a status (:data:`STATUS`) with a message
+(:attr:`Kernel.last_message`).
 
-Selection (decided here): the solver setting ``kernel`` (scene ``[solver] kernel``, FMU parameter
-``solver.kernel``): ``"auto"`` (default) uses the core where it covers the model and the compiled
-library is at hand, else numpy; ``"c"`` requires it (a clear error otherwise); ``"numpy"`` never
-uses it. Both paths implement the same formulas in the same order; they agree to round-off
-(tests/test_kernel.py: <= 1e-12 relative per evaluation, and fixed-step runs without friction;
-adaptive runs differ by the integration error, as on another CPU). A run says which
-path it took (:attr:`overcon.simulate.Simulation.kernel_note`, logged by the FMU at
-instantiation).
-
-Where the library comes from: the package installation compiles it (``setup.py``: ``pip install
--e .`` or ``pip install .``, about 1 s of the install) into :data:`LIBRARY`,
-``overcon/core/libovercore.so`` (``.dylib``, ``.dll``), with ``$CC`` (default: the compiler Python
-was built with) and the flags ``-O2 -ffp-contract=off -fno-fast-math -std=c11 -Wall -Wextra
--Werror``: no fused multiply-add contraction and no reassociation, so the numbers do not depend
-on the CPU's FMA support. Nothing is compiled at run time. A source tree that was never installed
-has no library: ``auto`` then runs numpy and ``c`` refuses, both naming the fix (``pip install -e
-.``). An FMU carries a copy (``binaries/<platform>/overcon_kernel.so``, copied by ``overcon
-build``; the FMU calls :func:`use_library`).
-
-One :class:`Kernel` per model and instance: it owns the core's workspace (``ovk_data``), so two
-instances in one process, or in two threads, never share memory.
+The solver setting ``kernel`` (scene ``[solver] kernel``, ``--kernel``) stays accepted for the
+scripts that set it: ``"auto"`` and ``"c"`` run the core, ``"numpy"`` is a deprecated alias that
+warns and runs the core (the numpy evaluation path is retired).
 """
 from __future__ import annotations
 
@@ -132,7 +113,7 @@ def _bind(path: Path) -> ctypes.CDLL:
 
 def use_library(path) -> None:
     """Use the compiled core at ``path`` (an FMU's shipped library). A library that cannot be
-    loaded is recorded as the reason the kernel is unavailable (``auto`` then runs numpy)."""
+    loaded is recorded as the reason the core is unavailable (runs then refuse to start, naming it)."""
     _state.update(lib=None, reason=None, path=str(path), tried=True)
     try:
         _state["lib"] = _bind(Path(path))
@@ -141,7 +122,7 @@ def use_library(path) -> None:
 
 
 def disable(reason: str) -> None:
-    """No compiled kernel in this process (``auto`` runs numpy; ``reason`` is reported)."""
+    """No compiled core in this process (runs refuse to start; ``reason`` is reported)."""
     _state.update(lib=None, reason=reason, path=None, tried=True)
 
 
@@ -308,9 +289,8 @@ def _pack_redundancy(m: _CModel, red: dict, arr) -> None:
 class Kernel:
     """The kernel bound to one model and solver settings: packed arrays, the core's workspace
     (``ovk_data``: one per instance, so instances never share memory) and output buffers made
-    once. :meth:`evaluate` returns (y', lam, qf, friction iterations) or None when the evaluation
-    must be done on the numpy path (the status is kept in :attr:`last_status`, the core's message in
-    :attr:`last_message`)."""
+    once. :meth:`evaluate` returns (y', lam, qf, friction iterations) or None when the core
+    returned a status (kept in :attr:`last_status`, the core's message in :attr:`last_message`)."""
 
     def __init__(self, lib, model, solver, watch=None):  # watch: see _redundancy_block (a C run's)
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
@@ -433,13 +413,13 @@ class Kernel:
     def newton_failed(self) -> int:
         """The force evaluations of the last call's Newton solves (undamped and damped) if their
         giving up is why it returned None (status 2), else 0 (for
-        :func:`overcon.dynamics.evaluate`'s ``newton_failed``: the fixed-point fallback starts)."""
+        :meth:`evaluate_robust`: the fixed-point fallback starts)."""
         return self._its.value if self.last_status == 2 else 0
 
     def evaluate(self, t: float, y: np.ndarray, lam_guess=None, qf_guess=None):
-        """(y' (n + nh,), lam (m,), qf (ncols,), iterations) at (t, y), warm-started as
-        :func:`overcon.dynamics.evaluate` (qf_guess first, then lam_guess); None: repeat on the
-        numpy path (status in :attr:`last_status`)."""
+        """(y' (n + nh,), lam (m,), qf (ncols,), iterations) at (t, y), warm-started from the
+        friction forces qf_guess, else the multipliers lam_guess; None when the core returned a
+        status (in :attr:`last_status`; status 2: :meth:`evaluate_robust` finishes it)."""
         py, pyd, plam, pqf, pits, pgq, pgl, pdamped = self._ptrs
         self._y[:] = y
         if qf_guess is not None and self._ncols:
@@ -459,9 +439,8 @@ class Kernel:
     def evaluate_robust(self, y: np.ndarray, lam_guess=None):
         """The last :meth:`evaluate` at this ``y`` returned None with status 2 (Newton and damped
         Newton gave up): finish it by the core's robust path (core/friction_robust.c: the fixed
-        point, then Newton with a finite-difference Jacobian, started from ``lam_guess`` as
-        :func:`overcon.dynamics.evaluate`'s robust path), as a run in C does. (y', lam, qf, its)
-        or None (status in :attr:`last_status`)."""
+        point, then Newton with a finite-difference Jacobian, started from ``lam_guess``), as a
+        run in C does. (y', lam, qf, its) or None (status in :attr:`last_status`)."""
         py, pyd, plam, pqf, pits = self._ptrs[:5]
         self._y[:] = y
         start = None
@@ -479,9 +458,7 @@ class Kernel:
         joint in model order: the reaction components of the joint type (planar Fx, Fy, T;
         spherical Fx, Fy, Fz in the auxiliary frame; an axis joint its components in the joint
         frame) then the force in the global frame (dim),
-        zeros after; the friction output of a joint with friction (else 0). As
-        :func:`overcon.evaluation.physical_reactions` and :func:`overcon.evaluation.friction_output`.
-        Views of buffers overwritten by the next call."""
+        zeros after; the friction output of a joint with friction (else 0) (core/outputs.c). Views of buffers overwritten by the next call."""
         plam, preac, pfric = self._out_ptrs
         self._y[:] = y
         self._lam_in[:] = lam
@@ -504,8 +481,7 @@ class Kernel:
 
     def rows(self, y: np.ndarray):
         """(Phi (m,), Phi_h (m, nh), gamma (m,; without Baumgarte)) of the core at y: the joint rows
-        it solves with (:func:`overcon.evaluation.constraints`, ``jacobian_h``, ``gamma``), for
-        checks. New arrays."""
+        it solves with, for checks. New arrays."""
         model = self.model
         phi, J, gam = np.zeros(model.m), np.zeros((model.m, model.nh)), np.zeros(model.m)
         self._y[:] = y
@@ -603,9 +579,9 @@ def select(model, solver):
 # ----------------------------------------------------------------------------- a run in C
 
 C_METHODS = {"dopri5": 0, "rk4": 1, "dop853": 2, "radau": 3}
-"""The integrators of overcon.integrators in the core: dopri5, rk4 and dop853 (core/integrate_rk.c:
-the same steps to round-off) and radau (core/integrate_radau.c: its own LU, so the same run within
-the integration tolerance)."""
+"""The core's integrators by ``solver.method``: dopri5, rk4 and dop853 (core/integrate_rk.c; the
+tableaux of SciPy's RK45/DOP853) and radau (core/integrate_radau.c: Radau IIA of order 5 with its
+own LU, core/lu.c)."""
 BUDGET_STATUS = 11  # OVK_BUDGET: a work budget ran out (STATUS)
 EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
 """The kinds of a run's events, in the order of core/core.h's OVK_EV_* (overcon.simulate.EVENT_KINDS)."""
@@ -627,8 +603,8 @@ class _CSimOpts(ctypes.Structure):
 
 
 class RunStopped(RuntimeError):
-    """A run in C stopped: ``status`` (:data:`STATUS`), the message worded as the Python run's
-    :class:`overcon.simulate.SimulationError`, and rk4's ``stable_step`` when it refused a step."""
+    """A run in C stopped: ``status`` (:data:`STATUS`), the message as
+    :class:`overcon.simulate.SimulationError` carries it, and rk4's ``stable_step`` when it refused a step."""
 
     def __init__(self, status: int, message: str, stable_step: float | None = None):
         super().__init__(message)
@@ -637,17 +613,17 @@ class RunStopped(RuntimeError):
 
 class Run:
     """A whole run in C (core/sim.c: the integrator of core/integrate_rk.c or integrate_radau.c over the core's
-    right-hand side with :class:`overcon.simulate.Simulation`'s warm starts and step-end checks),
-    for the methods of :data:`C_METHODS`. The numpy path's fallbacks are not in it: an evaluation
-    the core hands back stops the run (:class:`RunStopped`). Used by the C FMU and by the tests
-    that hold it equal to the Python run."""
+    right-hand side, with warm starts, the singularity watch, the uniqueness along the motion,
+    the work ledger and the step-end checks), for the methods of :data:`C_METHODS`. A stop is a
+    :class:`RunStopped` with the core's status and message. :class:`overcon.simulate.Simulation`
+    wraps it in process; the C FMU runs the same code (fmu/native/fmu_run.c)."""
 
     def __init__(self, model, solver, *, start_time: float | None = None, max_steps: int | None = None,
                  max_wall_time: float | None = None, ratio_tol: float = 1e-6, detect_stiffness: bool = True,
                  energy: bool | None = None, watch=None):
         """``energy``: keep the work ledger of :meth:`energies` (default: when the model has energy
-        outputs; it costs two evaluations a step with friction, as in the Python run). ``watch``:
-        the watch's rows under min-norm or compliant (:func:`overcon.fmu.cmodel.watch_rows`; the
+        outputs; it costs two evaluations a step with friction). ``watch``: the watch's rows under
+        min-norm or compliant (:func:`overcon.checks.watch_rows`; the
         run refuses to start without them)."""
         lib, reason = library()
         if lib is None:

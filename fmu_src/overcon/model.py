@@ -1,5 +1,5 @@
-"""Compile a scene into an immutable :class:`Model` without evaluating it (evaluation:
-:mod:`overcon.evaluation`; the checks of the compiled model at its initial state and the
+"""Compile a scene into an immutable :class:`Model` without evaluating it (evaluation: the
+compiled core, :mod:`overcon.kernel`; the checks of the compiled model at its initial state and the
 elimination: :mod:`overcon.checks`).
 
 Glossary (paper symbols spelled for code; shapes for b moving bodies, m equations)
@@ -9,8 +9,8 @@ Glossary (paper symbols spelled for code; shapes for b moving bodies, m equation
                     [x, y, z, e0, e1, e2, e3] (spatial, ``rotation = "quaternion"``, n = 7b).
 ``h``      (nh,)    velocities: planar q' (Eq. 2); spatial per body [r' (global), omega (body
                     axes)] (Eq. 3); nh = 3b planar, 6b spatial (nh = n but for quaternions).
-                    ``nq_b``/``nh_b``: coordinates/velocities per body; q' from (q, h) is
-                    :func:`overcon.evaluation.coordinate_rates`.
+                    ``nq_b``/``nh_b``: coordinates/velocities per body; q' from (q, h): the
+                    core's coordinate rates (core/rates.c).
 ``Phi``    (m,)     constraint equations, numbered as in the paper (Eq. 5, 37, 42).
 ``Phi_q``  (m, n)   exact derivative of Phi by q (Eq. 6).
 ``Phi_h``  (m, nh)  derivative by h: planar Phi_q, spatial the modified Jacobian (Eq. 7).
@@ -27,7 +27,7 @@ in its auxiliary frame: ``p' = -A_i (J_X)_i lam_X`` (Eq. 19), as components name
 type (``Fx, Fy, T`` planar, ``Fx, Fy, Fz`` spherical, the non-vanishing ones of
 ``Fx, Fy, Fz, Tx, Ty, Tz`` for the other spatial joints: :mod:`overcon.joints.spatial_rows`);
 units N and N.m. Joint constants may depend on the bodies' rotation matrices at q0
-(:class:`overcon.joints.InitialFrames`, from :func:`overcon.evaluation.frames` of the bodies).
+(:class:`overcon.joints.InitialFrames`, from :func:`_rotations` of the bodies).
 
 Immutability (decided here): a Model is a frozen dataclass whose arrays are read-only
 (``writeable = False``, set by ``Model.__post_init__``, also in its compiled joints, loads and
@@ -439,7 +439,7 @@ def _axis_compliance(c: CompiledJoint, cs, kinds) -> AxisCompliance:
 
 def _rotations(model: Model, q: np.ndarray) -> np.ndarray:
     """Rotation matrices body -> global of every body at q, (nb + 1, d, d), slot -1 the base
-    (identity): the same operations as :func:`overcon.evaluation.frames`, so the same bits."""
+    (identity), for the joint constants and the initial-state messages."""
     nb, k = model.nb, model.nq_b
     Q = q.reshape(nb, k)
     if model.kind == "planar":

@@ -113,7 +113,7 @@ projections after every step (core/kkt_al.c, core/project.c; compiled kernel onl
 through and records a ``singular`` event; where the rank is regular its multipliers are the
 eliminated form's (README, "Singular positions")."""
 """Values of the solver setting ``kernel`` (:mod:`overcon.kernel`)."""
-"""Integrators offered (see :mod:`overcon.integrators`): adaptive explicit ``dopri5`` and
+"""Integrators offered (the core's: core/integrate_rk.c, core/integrate_radau.c): adaptive explicit ``dopri5`` and
 ``dop853``, fixed-step ``rk4``, implicit (stiff) ``radau``."""
 
 

@@ -32,7 +32,7 @@ truncation error, and whether their functions f agree does not depend on the ste
 *stable*, though: beyond rk4's stability boundary (e.g. sticking friction inside a small
 regularisation band) the fixed-step solution chatters, and the chatter amplifies round-off like a
 chaotic map, so a unique group would look non-unique. The rk4 integrator refuses such a step
-(:class:`overcon.integrators.UnstableStep`, whose ``stable_step`` names a stable step, as data: in
+(core/integrate_rk.c's unstable-step status, whose ``stable_step`` names a stable step, as data: in
 process on the ``SimulationError``, from an FMU as its variable ``solver.stable_step`` read after
 the failed run). :class:`LockstepGrid` is the one procedure every comparison follows (``compare``,
 ``reproduce``, ``sweep``, ``figures``): it repeats the group's lockstep runs at

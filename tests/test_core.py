@@ -47,11 +47,22 @@ def test_singular_position():
 
 def assert_solution(k, model, spec, y, got) -> None:
     """got (an evaluation at y) is a solution: the kept acceleration rows hold, the eliminated
-    rows carry lam = 0, and each friction joint's output at lam is its law (the friction fixed
-    point's residual, in forces, within the friction tolerance's reach: EQ_REL)."""
+    rows carry lam = 0, each friction joint's output at lam is its law, and the returned friction
+    forces are a fixed point of the friction solve: warm-started from them, the core's own
+    convergence test (residual <= friction_tol (1 + |x|)) holds at the first check, with lam
+    within 1e3 friction_tol (1 + |lam|) of the returned one."""
     _, acc, elim = equation_residuals(k, model, spec.solver, y, got)
     assert acc <= EQ_REL and elim == 0.0, acc
     check_friction_at(k, model, spec, y, got, assembled=False)
+    limit = k._cmodel.max_iter
+    k._cmodel.max_iter = spec.solver.friction_max_iter
+    try:
+        again = k.evaluate(0.0, y, qf_guess=got[2])
+    finally:
+        k._cmodel.max_iter = limit
+    assert again is not None and again[3] == 1, (k.last_message, again and again[3])
+    bound = 1e3 * spec.solver.friction_tol * (1.0 + float(np.max(np.abs(got[1]))))
+    assert np.max(np.abs(again[1] - got[1])) <= bound
 
 
 @pytest.mark.parametrize("name", ["planar_f145_wo6", "spatial_GHMN_wo18"])

@@ -35,8 +35,9 @@ FD_REL = 1e-7
 1): a thousand times the round-off bound above, and far below a wrong sign or a missing term."""
 EQ_REL = 1e-9
 """The residuals of the equations of motion at the core's y' and lam, relative to the largest
-term: the KKT solve's round-off (eps times cond(S), S's condition below 1e5 at these states) and,
-with friction, the friction solve's tolerance (1e-12 relative on the multipliers)."""
+term: the KKT solve's round-off, eps cond(S) <= 4e-11 at these states (the worst, the example
+four-bar's S, has cond 1.6e5), and with friction the friction solve's tolerance (1e-12 relative
+on the multipliers) times the friction law's slope; a wrong term is of the order of the term."""
 
 
 # ----------------------------------------------------------------------------- definitions
@@ -243,7 +244,7 @@ def equation_residuals(k, model, solver, y, got) -> tuple[np.ndarray, float, flo
 
 
 def force_scale(model, y, got) -> float:
-    J = None
+    """The largest term of M h' = Q + ... (N or N m, at least 1): the scale of EQ_REL."""
     return max(1.0, float(np.max(np.abs(np.asarray(model.M) * got[0][model.n:]))),
                float(np.max(np.abs(applied_forces(model, y)))))
 
@@ -324,8 +325,8 @@ def check_friction_at(k, model, spec, y, got, assembled=True) -> float:
         if c.type == "translational" and not assembled:
             continue
         want, pj = friction_law(model, spec, q, h, c, reac[j], fric[j])
-        scale = max(1.0, c.law.mu_static or c.law.mu) * max(1.0, float(np.max(np.abs(reac[j]))))
-        assert abs(fric[j] - want) <= EQ_REL * scale * 10, (c.name, c.type, fric[j], want)
+        scale = max(1.0, float(np.max(np.abs(reac[j]))))  # (mu <= 0.5 times sizes <= 0.2 m times loads of this order)
+        assert abs(fric[j] - want) <= EQ_REL * scale, (c.name, c.type, fric[j], want)
         power += pj
     return power
 

@@ -8,7 +8,6 @@ refuses is refused with its message."""
 from __future__ import annotations
 
 import ctypes
-import dataclasses
 import threading
 from pathlib import Path
 

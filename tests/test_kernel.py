@@ -5,7 +5,6 @@ it. The stage checks by finite differences and the equations of motion: tests/te
 from __future__ import annotations
 
 import dataclasses
-import os
 import re
 import zipfile
 from pathlib import Path

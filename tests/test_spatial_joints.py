@@ -5,7 +5,6 @@ friction (dissipation, symmetry, hand computations from the reaction outputs) an
 description."""
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import re

@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 
 from overcon import scene
-from overcon.dynamics import evaluate
-from overcon.evaluation import applied_forces, constraints, frames, jacobian_h, physical_reaction
 from overcon.model import ModelError
 from overcon.checks import compile_checked
 from overcon.spec import SolverSpec
 from overcon.precheck import analyse_model
 from overcon.simulate import SimulationError, run_scene
+
+from test_core_rows import applied_forces
+from test_kernel import kernel_for
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
 
@@ -77,14 +78,14 @@ def test_planar_joint1_moment_against_paper(planar_runs):
 
 def test_printed_jacobian_gives_minus_40():
     m = model_of("planar_sliders.toml", eliminate=[4])
-    f = frames(m, m.q0, m.h0)
-    J = jacobian_h(m, f)
-    assert J[4, 5] == pytest.approx(-4.0)  # exact dPhi5/dphi2 at q*
+    y0 = np.concatenate([m.q0, m.h0])
+    J = kernel_for(m, SolverSpec()).rows(y0)[1]
+    assert J[4, 5] == pytest.approx(-4.0)  # exact dPhi5/dphi2 at q* (the core's Phi_h)
     J[4, 5] = 0.0  # as printed in B.8
     R = [i for i in range(12) if i != 3]
     JR = J[R].T
     lam = np.zeros(12)
-    lam[R] = np.linalg.solve(JR.T @ (m.Minv[:, None] * JR), JR.T @ (m.Minv * applied_forces(m, f)))
+    lam[R] = np.linalg.solve(JR.T @ (m.Minv[:, None] * JR), JR.T @ (m.Minv * applied_forces(m, y0)))
     assert -(J[0:2, 2] @ lam[0:2]) == pytest.approx(-40.0)
 
 
@@ -111,7 +112,7 @@ def test_spatial_joint_G_y_reaction_differs(spatial_runs):
 
 def test_spatial_constraints_hold_at_q0():
     m = model_of("spatial_parallelogram.toml")
-    assert np.max(np.abs(constraints(m, frames(m, m.q0)))) < 1e-14
+    assert np.max(np.abs(kernel_for(m, SolverSpec()).rows(np.concatenate([m.q0, m.h0]))[0])) < 1e-14
 
 
 def test_paper_svd_B_at_q_star():
@@ -165,18 +166,18 @@ def test_auto_elimination_reports_choice_and_gives_same_motion(planar_runs):
 
 
 def test_reactions_satisfy_equations_of_motion():
-    """-J lam is the physical reaction: M h' = Q + (-J lam) at a random consistent state."""
+    """-J lam is the physical reaction: the core's M h' = Q + (-J lam) at a random consistent state
+    (Q the loads' Newton-Euler forces, tests/test_core_rows.py), and its reported reaction of
+    joint4 on slider1 is -J_X lam_X on body i's translational columns."""
     m = model_of("planar_sliders.toml", eliminate=[6])
-    f = frames(m, m.q0)
-    Jh = jacobian_h(m, f)
-    h = 0.7 * np.linalg.svd(Jh)[2][-1]
-    ev = evaluate(m, 0.0, m.q0, h, solver=SolverSpec(baumgarte=0.0))
-    f = frames(m, m.q0, h)
-    np.testing.assert_allclose(m.M * ev.hdot, applied_forces(m, f) - Jh.T @ ev.lam, atol=1e-10)
-    # physical reaction of joint4 on slider1 (global force part) is -J_X lam_X restricted to body i
+    k = kernel_for(m, SolverSpec(baumgarte=0.0))
+    Jh = k.rows(np.concatenate([m.q0, m.h0]))[1]
+    y = np.concatenate([m.q0, 0.7 * np.linalg.svd(Jh)[2][-1]])
+    ydot, lam, _, _ = k.evaluate(0.0, y)
+    np.testing.assert_allclose(m.M * ydot[m.n:], applied_forces(m, y) - Jh.T @ lam, atol=1e-10)
     c = m.joints[3]
-    glob = physical_reaction(m, c, f, ev.lam)[3:]
-    np.testing.assert_allclose(glob, -(Jh[list(c.rows)][:, 0:2].T @ ev.lam[list(c.rows)]), atol=1e-12)
+    glob = k.outputs(y, lam)[0][3, 3:5]
+    np.testing.assert_allclose(glob, -(Jh[list(c.rows)][:, 0:2].T @ lam[list(c.rows)]), atol=1e-12)
 
 
 def test_singular_position_detected(tmp_path):

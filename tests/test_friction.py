@@ -3,19 +3,21 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from overcon import scene
-from overcon.dynamics import FrictionSolveError, evaluate
+from overcon import kernel
 from overcon.friction_laws import make_law
-from overcon.evaluation import frames, jacobian_h
 from overcon.model import ModelError
 from overcon.checks import compile_checked
 from overcon.simulate import Simulation, SimulationError, run_scene
 from overcon.spec import FrictionSpec
+
+from test_core_rows import position, rotation
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
 EPS = 1e-3
@@ -95,12 +97,12 @@ def mechanical_energy(model, y):
     """Kinetic + gravity + spring energy (J) of the planar model at state y."""
     q, h = y[: model.n], y[model.n:]
     kinetic = 0.5 * float(h @ (model.M * h))
-    f = frames(model, q)
-    grav = -sum(model.mass[b] * float(model.gravity @ f.r[b]) for b in range(model.nb))
+    grav = -sum(model.mass[b] * float(model.gravity @ position(model, q, b)) for b in range(model.nb))
     spring = 0.0
     for ld in model.loads:
         if ld.type == "spring":
-            d = f.r[ld.bi] + f.R[ld.bi] @ ld.s_i - f.r[ld.bj] - f.R[ld.bj] @ ld.s_j
+            d = (position(model, q, ld.bi) + rotation(model, q, ld.bi) @ ld.s_i - position(model, q, ld.bj)
+                 - rotation(model, q, ld.bj) @ ld.s_j)
             spring += 0.5 * ld.stiffness * (np.linalg.norm(d) - ld.free_length) ** 2
     return kinetic + grav + spring
 
@@ -167,14 +169,25 @@ def test_tiny_regularisation_velocity_is_accurate_not_garbage():
     assert np.max(np.abs(a.column("slider1.x") - b.column("slider1.x"))) < 1e-5
 
 
-def test_friction_solve_failure_names_time_joints_residual():
+def test_friction_solve_failure_names_time_and_residual():
+    """mu = 1 in joints 4 and 5 with friction_max_iter = 1: no stage of the friction solve can
+    finish. The core's evaluation gives up (status 2, Newton and damped Newton counted), its
+    robust path too (the residual and iterations named), and a run in C stops naming the time."""
     sc = scene_with("planar_f45_wo4.toml", mu=1.0)
     model = compile_checked(sc)
-    h = 0.5 * np.linalg.svd(jacobian_h(model, frames(model, model.q0)))[2][-1]  # a consistent velocity
-    with pytest.raises(FrictionSolveError, match=r"t = 1\.25 s") as info:
-        evaluate(model, 1.25, model.q0, h, solver=dataclasses.replace(sc.solver, friction_max_iter=1))
-    msg = str(info.value)
-    assert "t = 1.25 s" in msg and "joint4, joint5" in msg and "residual" in msg
+    solver = dataclasses.replace(sc.solver, friction_max_iter=1, kernel="c")
+    k, _ = kernel.select(model, solver)
+    J = k.rows(np.concatenate([model.q0, model.h0]))[1]
+    y = np.concatenate([model.q0, 0.5 * np.linalg.svd(J)[2][-1]])  # a consistent velocity
+    assert k.evaluate(1.25, y) is None and k.last_status == 2
+    assert k.last_message == ("friction solve gave up: Newton after 1 force evaluations, damped Newton after 1 "
+                              "more (4 friction multipliers)")
+    assert k.evaluate_robust(y) is None and k.last_status == 2
+    assert re.fullmatch(r"friction solve did not converge \(residual \S+ N after 2 iterations of the robust path: "
+                        r"fixed point, then Newton with a finite-difference Jacobian, after Newton and damped "
+                        r"Newton; 4 friction multipliers\)", k.last_message), k.last_message
+    with pytest.raises(kernel.RunStopped, match=r"t = [0-9.e-]+ s: friction solve did not converge \(residual"):
+        kernel.Run(model, solver).advance(0.5)
 
 
 def test_iteration_counts_reported():

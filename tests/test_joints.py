@@ -1,33 +1,30 @@
-"""Analytic derivatives of the joint producers and of the model assembly against finite
-differences (Phi_q, Phi_h = Phi_q T, gamma), reaction transforms (A.1, A.5, A.10), friction
-dissipation (App. A) and generalized forces (virtual work), for the paper's two mechanisms and
-for small random single-type mechanisms."""
+"""The joint types of the paper (planar translational and revolute, spherical with z-x-z Euler
+angles) in the compiled core, on the paper's two mechanisms and on small random single-type
+mechanisms with the base on either side: Phi_h and gamma against finite differences of the core's
+Phi, the reaction outputs against the generalized reaction J_i^T lam by hand (A.1, A.5, A.10),
+friction dissipation and the law at the returned multipliers (App. A), and the loads' generalized
+forces by virtual power. The other spatial types: tests/test_spatial_joints.py, test_core_rows.py."""
 from __future__ import annotations
 
-import dataclasses
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
-from compiled import compiled_models
 
-import reference_joints as ref
-from overcon import evaluation as M
-from overcon.joints import TYPES as JOINT_TYPES
-from overcon.model import Model
+from overcon import kernel
 from overcon.checks import compile_checked
-from overcon.friction_laws import make_law
-from overcon.kinematics import OMEGA, EulerSingularity, cross2, cross3, euler_H, euler_R, rot2
 from overcon.scene import as_scene, load
-from overcon.spec import FrictionSpec
+
+from test_core_rows import (EQ_REL, FD_REL, EPS_FD, applied_forces, check_friction_at, consistent, equation_residuals,
+                            position, rates, rotation, rows_fd_errors, solve)
+from test_kernel import check_reactions, kernel_for, random_planar_model
 
 ROOT = Path(__file__).resolve().parent.parent
 PLANAR = ROOT / "mechanisms" / "planar_sliders.toml"
 SPATIAL = ROOT / "mechanisms" / "spatial_parallelogram.toml"
 SEEDS = [0, 1, 2]
-EPS = 1e-6
-RTOL = 1e-7
+OMEGA = np.array([[0.0, -1.0], [1.0, 0.0]])  # a quarter turn counter-clockwise
 
 
 # ------------------------------------------------------------------------------------- helpers
@@ -35,10 +32,12 @@ RTOL = 1e-7
 _CACHE: dict = {}
 
 
-def compiled(path) -> Model:
-    key = str(path)
+def compiled(path, friction=None):
+    """(spec, model) of a mechanism file (friction: the joints to switch it on for, or none)."""
+    key = (str(path), tuple(friction or ()))
     if key not in _CACHE:
-        _CACHE[key] = compile_checked(as_scene(load(path)))
+        spec = as_scene(load(path), friction=list(friction or ()))
+        _CACHE[key] = spec, compile_checked(spec, check_initial=False)
     return _CACHE[key]
 
 
@@ -59,111 +58,65 @@ def random_h(model, rng) -> np.ndarray:
     return rng.normal(size=model.nh) * 2.0
 
 
-def T_matrix(model, q) -> np.ndarray:
-    """q' = T(q) h: block diagonal, I for positions, H for Euler angles (spatial), I (planar)."""
-    T = np.eye(model.n)
-    if model.kind == "spatial":
-        for b in range(model.nb):
-            s = b * 6
-            T[s + 3: s + 6, s + 3: s + 6] = euler_H(q[s + 3: s + 6])
-    return T
+def check_derivatives(k, model, q, h):
+    eJ, eg = rows_fd_errors(k, model, np.concatenate([q, h]))
+    assert eJ <= FD_REL and eg <= FD_REL, (eJ, eg)
 
 
-def fd_jacobian(fun, x, eps=EPS) -> np.ndarray:
-    cols = []
-    for k in range(x.size):
-        e = np.zeros_like(x)
-        e[k] = eps
-        cols.append((fun(x + e) - fun(x - e)) / (2 * eps))
-    return np.column_stack(cols)
-
-
-def assert_close(a, b, rtol=RTOL, what=""):
-    scale = max(1.0, float(np.max(np.abs(b))) if np.size(b) else 1.0)
-    err = float(np.max(np.abs(a - b))) if np.size(b) else 0.0
-    assert err <= rtol * scale, f"{what}: max error {err:.3g} (scale {scale:.3g})\n{a}\n{b}"
-
-
-def check_jacobian_q(model, q):
-    f = M.frames(model, q)
-    Jq = ref.jacobian(model, f, "jac_q")
-    fd = fd_jacobian(lambda x: M.constraints(model, M.frames(model, x)), q)
-    assert Jq.shape == (model.m, model.n)
-    assert_close(Jq, fd, what="Phi_q vs FD")
-
-
-def check_jacobian_h(model, q):
-    f = M.frames(model, q)
-    Jh = M.jacobian_h(model, f)
-    assert Jh.shape == (model.m, model.nh)
-    assert_close(Jh, ref.jacobian(model, f, "jac_q") @ T_matrix(model, q), rtol=1e-12, what="Phi_h vs Phi_q T")
-
-
-def check_gamma(model, q, h):
-    """q(s) with q' = coordinate_rates(q, h), h constant: d/ds[Phi_h(q(s)) h] = -gamma(q, h)."""
-    qdot = M.coordinate_rates(model, q, h)
-    assert_close(qdot, T_matrix(model, q) @ h, rtol=1e-14, what="coordinate_rates vs T h")
-
-    def phih_h(s):
-        return M.jacobian_h(model, M.frames(model, q + s * qdot)) @ h
-
-    fd = (phih_h(EPS) - phih_h(-EPS)) / (2 * EPS)
-    g = M.gamma(model, M.frames(model, q, h))
-    assert g.shape == (model.m,)
-    assert_close(-g, fd, what="gamma vs -d/ds(Phi_h h)")
-
-
-# ----------------------------------------------------------------- 2. the paper's mechanisms
+# ----------------------------------------------------------------- the paper's mechanisms
 
 PAPER = [pytest.param(PLANAR, id="planar"), pytest.param(SPATIAL, id="spatial")]
 
 
 @pytest.mark.parametrize("path", PAPER)
 def test_paper_q0_satisfies_constraints(path):
-    model = compiled(path)
-    assert np.max(np.abs(M.constraints(model, M.frames(model, model.q0)))) < 1e-12
+    spec, model = compiled(path)
+    k = kernel_for(model, spec.solver)
+    assert np.max(np.abs(k.rows(np.concatenate([model.q0, model.h0]))[0])) < 1e-12
 
 
 @pytest.mark.parametrize("path", PAPER)
 def test_paper_derivatives_at_q0(path):
-    model = compiled(path)
+    """The core's Phi_h and gamma (FD_REL: tests/test_core_rows.py) at q0, with h0 and a random h."""
+    spec, model = compiled(path)
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(99)
-    check_jacobian_q(model, model.q0)
-    check_jacobian_h(model, model.q0)
-    check_gamma(model, model.q0, model.h0)
-    check_gamma(model, model.q0, random_h(model, rng))
+    check_derivatives(k, model, model.q0, model.h0)
+    check_derivatives(k, model, model.q0, random_h(model, rng))
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("path", PAPER)
 def test_paper_derivatives_at_random_configurations(path, seed):
-    model = compiled(path)
+    spec, model = compiled(path)
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(seed)
-    q = random_q(model, rng)
-    check_jacobian_q(model, q)
-    check_jacobian_h(model, q)
-    check_gamma(model, q, random_h(model, rng))
+    check_derivatives(k, model, random_q(model, rng), random_h(model, rng))
 
 
 def test_coordinate_rates_singularity_names_the_body():
-    model = compiled(SPATIAL)
+    """|sin beta| below 1e-3 for one body: the core's rates refuse (status 3) naming that body."""
+    spec, model = compiled(SPATIAL)
+    k = kernel_for(model, spec.solver)
     q = model.q0.copy()
     b = model.body_names.index("link5")
     q[b * 6 + 4] = 1e-5
-    with pytest.raises(EulerSingularity, match="Euler angle singularity of body 'link5'") as exc:
-        M.coordinate_rates(model, q, model.h0 + 1.0)
-    assert "link5" in str(exc.value)
+    assert k.evaluate(0.0, np.concatenate([q, model.h0 + 1.0])) is None and k.last_status == 3
+    assert f"body {b} has |sin beta| = 1e-05" in k.last_message
 
 
-# -------------------------------------------------------- 3. single joint types in isolation
+# -------------------------------------------------------- single joint types in isolation
 
 def _fmt(v) -> str:
     return "[" + ", ".join(repr(float(x)) for x in np.atleast_1d(v)) + "]"
 
 
-def write_single_type(tmp: Path, jtype: str, seed: int) -> Path:
+def write_single_type(tmp: Path, jtype: str, seed: int, friction: str = "") -> Path:
     """Two bodies and three joints of one type: (b1, base), (b1, b2), (base, b2); random points,
-    v and psi; random q0 (not assembled)."""
+    v and psi; random q0 (not assembled); ``friction``: the lines of each joint's
+    ``[joints.friction]`` table (none when empty), and then only two of the three joints (the
+    pair left out chosen by the seed), so that the planar mechanisms move (three planar joints of
+    two rows hold two bodies fixed)."""
     rng = np.random.default_rng(seed)
     kind = "spatial" if jtype == "spherical" else "planar"
     d = 3 if kind == "spatial" else 2
@@ -178,7 +131,10 @@ def write_single_type(tmp: Path, jtype: str, seed: int) -> Path:
             inertia = _fmt(rng.uniform(0.5, 2, 3))
         lines += ["[[bodies]]", f'name = "{b}"', f"mass = {rng.uniform(1, 3)!r}",
                   f"inertia = {inertia}", f"q0 = {_fmt(q0)}", ""]
-    for k, (bi, bj) in enumerate((("b1", "base"), ("b1", "b2"), ("base", "b2"))):
+    pairs = [("b1", "base"), ("b1", "b2"), ("base", "b2")]
+    if friction:
+        del pairs[seed % 3]
+    for k, (bi, bj) in enumerate(pairs):
         lines += ["[[joints]]", f'name = "J{k}"', f'type = "{jtype}"', f'body_i = "{bi}"',
                   f'body_j = "{bj}"']
         if jtype == "translational":
@@ -187,8 +143,10 @@ def write_single_type(tmp: Path, jtype: str, seed: int) -> Path:
                       f"psi = {rng.uniform(-1.5, 1.5)!r}"]
         else:
             lines += [f"s_i = {_fmt(rng.uniform(-1, 1, d))}", f"s_j = {_fmt(rng.uniform(-1, 1, d))}"]
+        if friction:
+            lines += ["[joints.friction]", friction]
         lines.append("")
-    path = tmp / f"single_{jtype}_{seed}.toml"
+    path = tmp / f"single_{jtype}_{seed}{'_f' if friction else ''}.toml"
     path.write_text("\n".join(lines))
     return path
 
@@ -198,252 +156,299 @@ TYPES = ["translational", "revolute", "spherical"]
 
 @pytest.fixture(scope="module")
 def single(tmp_path_factory):
-    return compiled_models(tmp_path_factory.mktemp("single"), write_single_type)
+    """``get(jtype, seed, friction="")``: (spec, model) of write_single_type, compiled once."""
+    tmp = tmp_path_factory.mktemp("single")
+    cache: dict = {}
+
+    def get(jtype: str, seed: int, friction: str = ""):
+        if (jtype, seed, friction) not in cache:
+            path = write_single_type(tmp, jtype, seed, friction)
+            names = [j.name for j in as_scene(load(path)).mechanism.joints] if friction else []
+            spec = as_scene(load(path), friction=names, friction_outputs="all" if friction else "none")
+            cache[jtype, seed, friction] = spec, compile_checked(spec, check_initial=False)
+        return cache[jtype, seed, friction]
+
+    return get
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("jtype", TYPES)
 def test_single_type_derivatives(single, jtype, seed):
-    model = single(jtype, seed)
+    spec, model = single(jtype, seed)
     assert [c.type for c in model.joints] == [jtype] * 3
     assert [(c.bi, c.bj) for c in model.joints] == [(0, -1), (0, 1), (-1, 1)]
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(1000 + seed)
     for q in (model.q0, random_q(model, rng), random_q(model, rng)):
-        check_jacobian_q(model, q)
-        check_jacobian_h(model, q)
-        check_gamma(model, q, random_h(model, rng))
+        check_derivatives(k, model, q, random_h(model, rng))
 
 
 @pytest.mark.parametrize("jtype", TYPES)
-def test_single_type_block_shapes(single, jtype):
-    model = single(jtype, 0)
-    f = M.frames(model, model.q0, model.h0)
-    for c in model.joints:
-        ne, d = JOINT_TYPES[c.type].n_equations, model.plan.single[c.index]
-        for J in (*ref.ref(c).jac_q(c, f), *c.module.jac_h(d, f)):
-            assert J.shape[-2:] == (ne, model.nq_b)
-        assert c.module.phi(d, f).shape == (1, ne)
-        assert c.module.gamma(d, f).shape == (1, ne)
-        assert c.module.reaction(d, f, np.zeros((1, model.nq_b))).shape == (1, len(JOINT_TYPES[c.type].reaction))
+def test_single_type_shapes(single, jtype):
+    """The core's rows: Phi (m), Phi_h (m, nh), gamma (m), each joint its type's equations; its
+    outputs: a row of reaction components per joint, the type's components then zeros."""
+    spec, model = single(jtype, 0)
+    k = kernel_for(model, spec.solver)
+    y = np.concatenate([model.q0, model.h0])
+    phi, J, gam = k.rows(y)
+    ne = {"translational": 2, "revolute": 2, "spherical": 3}[jtype]
+    assert phi.shape == gam.shape == (model.m,) == (3 * ne,) and J.shape == (model.m, model.nh)
+    assert all(len(c.rows) == ne for c in model.joints)
+    reac, fric = k.outputs(y, np.ones(model.m))
+    assert reac.shape == (3, kernel.NREAC) and fric.shape == (3,) and not np.any(fric)
+    for n, c in enumerate(model.joints):
+        assert np.all(reac[n, len(c.components):] == 0.0) and np.any(reac[n, :len(c.components)])
 
 
-# -------------------------------------------------------------------- 4. reaction transforms
+# -------------------------------------------------------------------- reaction transforms
 
-def _random_state(model, rng):
-    q = random_q(model, rng)
-    h = random_h(model, rng)
-    return q, h, M.frames(model, q, h)
+def generalized_on_i(model, J, c, lam) -> np.ndarray:
+    """(J_X)_i^T lam_X: the generalized reaction on body i (force global; moment about the body
+    origin: planar scalar, spatial in body axes) from the core's Phi_h."""
+    kh = model.nh_b
+    rows = list(c.rows)
+    return J[rows][:, c.bi * kh:(c.bi + 1) * kh].T @ lam[rows]
+
+
+def _state(model, rng):
+    return np.concatenate([random_q(model, rng), random_h(model, rng)])
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_revolute_reaction_transform_by_hand(single, seed):
-    model = single("revolute", seed)
+    """Revolute (A.5): the generalized reaction on body i is the force lam at P (no moment about P),
+    and the outputs are the physical reaction -(J_X)_i^T lam: its force in body i axes, the moment
+    about P (0), and the force in global axes."""
+    spec, model = single("revolute", seed)
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(2000 + seed)
-    q, h, f = _random_state(model, rng)
+    y = _state(model, rng)
+    q = y[: model.n]
     lam = rng.normal(size=model.m) * 10
-    for c in model.joints:
-        fi = M.reaction_on_body_i(model, c, f, lam)
-        Ji, _ = one(model, c, "jac_h", f)
-        assert np.allclose(fi, Ji.T @ lam[list(c.rows)])
+    J = k.rows(y)[1]
+    reac = k.outputs(y, lam)[0].copy()
+    check_reactions(k, model, y, lam)
+    for n, c in enumerate(model.joints):
+        if c.bi < 0:
+            continue
+        fi = generalized_on_i(model, J, c, lam)
         F, T_O = fi[:2], fi[2]
-        Ri = rot2(f.phi[c.bi])
-        arm = Ri @ c.p["s_i"]
-        local = one(model, c, "reaction_transform", f) @ fi
-        assert np.allclose(local[:2], Ri.T @ F, atol=1e-12)
-        assert np.isclose(local[2], T_O - cross2(arm, F), atol=1e-12)
-        assert abs(local[2]) < 1e-12  # a revolute joint carries no moment about P
-        # the generalized reaction is the force lam applied at P
-        assert np.allclose(F, lam[list(c.rows)])
-        p = -M.physical_reaction(model, c, f, lam)
-        assert len(p) == len(c.components) == 5
-        assert np.allclose(p, np.r_[local, F])
+        assert np.allclose(F, lam[list(c.rows)], rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(F))))
+        Ri = rotation(model, q, c.bi)
+        arm = Ri @ np.asarray(c.p["s_i"])
+        assert abs(T_O - (arm[0] * F[1] - arm[1] * F[0])) <= 1e-12 * max(1.0, abs(T_O))  # no moment about P
+        want = -np.r_[Ri.T @ F, T_O - (arm[0] * F[1] - arm[1] * F[0]), F]
+        assert np.allclose(reac[n, :5], want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want)))), c.name
+        assert abs(reac[n, 2]) < 1e-12 * max(1.0, np.max(np.abs(F)))
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_translational_reaction_transform_by_hand(single, seed):
-    model = single("translational", seed)
+    """Translational (A.1): the outputs are -(J_X)_i^T lam in the auxiliary frame: components along
+    the guide x' (body j's guide Omega^T v/|v| turned into body i's axes by -psi) and y' = Omega x',
+    the moment about A, then the global force."""
+    spec, model = single("translational", seed)
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(3000 + seed)
-    q, h, f = _random_state(model, rng)
+    y = _state(model, rng)
+    q = y[: model.n]
     lam = rng.normal(size=model.m) * 10
-    for c in model.joints:
-        fi = M.reaction_on_body_i(model, c, f, lam)
+    J = k.rows(y)[1]
+    reac = k.outputs(y, lam)[0].copy()
+    check_reactions(k, model, y, lam)
+    for n, c in enumerate(model.joints):
+        if c.bi < 0:
+            continue
+        fi = generalized_on_i(model, J, c, lam)
         F, T_O = fi[:2], fi[2]
         v = np.asarray(c.p["v"])
-        # guide x' in global: body i axes rotated by -psi from body j's guide OMEGA^T v/|v|
-        e_x = rot2(f.phi[c.bi] - c.p["psi"]) @ (OMEGA.T @ v / np.linalg.norm(v))
+        phi_i = q[3 * c.bi + 2]
+        cs, sn = math.cos(phi_i - c.p["psi"]), math.sin(phi_i - c.p["psi"])
+        e_x = np.array([[cs, -sn], [sn, cs]]) @ (OMEGA.T @ v / np.linalg.norm(v))
         e_y = OMEGA @ e_x
-        arm = rot2(f.phi[c.bi]) @ c.p["s_A"]
-        local = one(model, c, "reaction_transform", f) @ fi
-        assert np.allclose(local[:2], [e_x @ F, e_y @ F], atol=1e-12)
-        assert np.isclose(local[2], T_O - cross2(arm, F), atol=1e-12)
-        p = -M.physical_reaction(model, c, f, lam)
-        assert np.allclose(p, np.r_[local, F])
+        arm = rotation(model, q, c.bi) @ np.asarray(c.p["s_A"])
+        want = -np.r_[e_x @ F, e_y @ F, T_O - (arm[0] * F[1] - arm[1] * F[0]), F]
+        assert np.allclose(reac[n, :5], want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want)))), c.name
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_translational_reaction_normal_to_guide_when_angle_holds(single, seed):
-    """With phi_i - phi_j = psi the frictionless reaction has no component along the guide."""
-    model = single("translational", seed)
+    """With phi_i - phi_j = psi (the joint's angle row Phi = 0) the reaction has no component along
+    the guide (Fx = 0)."""
+    spec, model = single("translational", seed)
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(3500 + seed)
     q = random_q(model, rng)
-    for c in model.joints:
+    for n, c in enumerate(model.joints):
         qc = q.copy()
         if c.bi >= 0:
             phij = 0.0 if c.bj < 0 else qc[3 * c.bj + 2]
             qc[3 * c.bi + 2] = phij + c.p["psi"]
         else:
             qc[3 * c.bj + 2] = -c.p["psi"]
-        f = M.frames(model, qc)
-        assert abs(one(model, c, "phi", f)[1]) < 1e-12
-        lam = rng.normal(size=model.m)
-        local = one(model, c, "reaction_transform", f) @ M.reaction_on_body_i(model, c, f, lam)
-        assert abs(local[0]) < 1e-12
+        y = np.concatenate([qc, model.h0])
+        assert abs(k.rows(y)[0][c.rows[1]]) < 1e-12
+        reac = k.outputs(y, rng.normal(size=model.m))[0]
+        assert abs(reac[n, 0]) < 1e-12
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("which", ["single", "paper"])
 def test_spherical_reaction_transform(single, seed, which):
-    model = single("spherical", seed) if which == "single" else compiled(SPATIAL)
+    """Spherical (A.10): the generalized reaction on body i has no moment about the ball centre,
+    and the outputs are the physical reaction's force in body i axes, then in global axes."""
+    spec, model = single("spherical", seed) if which == "single" else compiled(SPATIAL)
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(4000 + seed)
-    q, h, f = _random_state(model, rng)
+    y = _state(model, rng)
+    q = y[: model.n]
     lam = rng.normal(size=model.m) * 10
-    for c in model.joints:
-        fi = M.reaction_on_body_i(model, c, f, lam)
-        Ri = euler_R(f.angles[c.bi])
-        F_body = Ri.T @ fi[:3]
-        # moment about P of the generalized reaction (body axes) vanishes: A.10 gives [F', 0]
-        assert np.allclose(fi[3:] - cross3(c.p["s_i"], F_body), 0.0, atol=1e-12)
-        A = one(model, c, "reaction_transform", f)
-        assert np.allclose(A @ fi, F_body, atol=1e-12)
-        p = -M.physical_reaction(model, c, f, lam)
-        assert np.allclose(p, np.r_[F_body, fi[:3]])
+    J = k.rows(y)[1]
+    reac = k.outputs(y, lam)[0].copy()
+    check_reactions(k, model, y, lam)
+    for n, c in enumerate(model.joints):
+        if c.bi < 0:
+            continue
+        fi = generalized_on_i(model, J, c, lam)
+        F_body = rotation(model, q, c.bi).T @ fi[:3]
+        scale = max(1.0, float(np.max(np.abs(fi))))
+        assert np.allclose(fi[3:] - np.cross(c.p["s_i"], F_body), 0.0, atol=1e-12 * scale)
+        assert np.allclose(reac[n, :6], -np.r_[F_body, fi[:3]], rtol=0, atol=1e-12 * scale), c.name
 
 
-# ------------------------------------------------------------------------- 5. friction power
+# ------------------------------------------------------------------------- friction power
 
 LAWS = {
-    "regularised": dict(),
-    "stribeck": dict(law="stribeck", mu_static=0.5, v_stribeck=0.01),
-    "coulomb": dict(law="coulomb"),
+    "regularised": 'mu = 0.3\nradius = 0.1\nlength = 0.1\nv_reg = 1e-3',
+    "stribeck": 'law = "stribeck"\nmu = 0.3\nmu_static = 0.5\nv_stribeck = 0.01\nradius = 0.1\nlength = 0.1\nv_reg = 1e-3',
 }
+"""The friction tables of the single-type mechanisms (each type reads its size: radius or length).
+The Coulomb law (variant A) is for analysis only, refused for integration (tests/test_friction.py),
+so the core has no Coulomb friction to evaluate."""
 
 
-def one(model, c, name, f):
-    """The joint module's ``name`` for joint c alone (a batch of one; production code)."""
-    out = getattr(c.module, name)(model.plan.single[c.index], f)
-    return tuple(x[0] for x in out) if isinstance(out, tuple) else out[0]
-
-
-def friction_of(c, f, lam, law):
-    """(Qi, Qj) of joint c with friction law ``law`` at the multipliers lam (all m): the joint
-    module's batched friction for c alone."""
-    d = c.module.stack([dataclasses.replace(c, law=law)])
-    Qi, Qj = c.module.friction(d, c.module.friction_setup(d, f), lam[list(c.rows)][None, :])
-    return Qi[0], Qj[0]
-
-
-def _joint_velocity_null(model, c, f, rng):
-    """A random h with this joint's velocity constraint Phi_h h = 0 (spherical friction assumes a
-    joint whose two ball centres move together)."""
-    Ji, Jj = one(model, c, "jac_h", f)
-    J = np.zeros((len(c.rows), model.nh))
-    for b, blk in ((c.bi, Ji), (c.bj, Jj)):
-        if b >= 0:
-            J[:, model.body_slice(b)] += blk
-    h = random_h(model, rng)
-    return h - np.linalg.pinv(J) @ (J @ h)
-
-
-def friction_power(model, c, f, h, lam, law):
-    Qi, Qj = friction_of(c, f, lam, law)
-    P = 0.0
-    if c.bi >= 0:
-        P += Qi @ h[model.body_slice(c.bi)]
-    if c.bj >= 0:
-        P += Qj @ h[model.body_slice(c.bj)]
-    return P, Qi, Qj
+def friction_table(jtype: str, law: str, mu: float | None = None) -> str:
+    text = LAWS[law].replace("radius = 0.1\n", "" if jtype == "translational" else "radius = 0.1\n")
+    text = text.replace("length = 0.1\n", "length = 0.1\n" if jtype == "translational" else "")
+    return text if mu is None else text.replace("mu = 0.3", f"mu = {mu}")
 
 
 @pytest.mark.parametrize("law", list(LAWS))
 @pytest.mark.parametrize("jtype", TYPES)
 def test_friction_is_dissipative(single, jtype, law):
-    lawobj = make_law(FrictionSpec(mu=0.3, size=0.1, **LAWS[law]))
-    worst = -np.inf
-    n_nonzero = 0
+    """With friction in both joints (the base as body i or j, or two moving bodies), at random
+    states moved onto the constraints and velocities scaled into the laws' linear part too: the friction outputs are
+    their law at the returned multipliers, and the friction forces' power in the equations of
+    motion, h . (M h' + Phi_h^T lam - Q), is the outputs' and <= 0 (tests/test_core_rows.py)."""
+    nonzero = 0
     for seed in SEEDS:
-        model = single(jtype, seed)
+        spec, model = single(jtype, seed, friction_table(jtype, law))
+        assert all(c.law is not None and c.law.name == law for c in model.joints)
+        k = kernel_for(model, spec.solver)
         rng = np.random.default_rng(5000 + seed)
-        for trial in range(20):
-            q = random_q(model, rng)
-            f0 = M.frames(model, q)
-            for c in model.joints:
-                if jtype == "spherical":
-                    h = _joint_velocity_null(model, c, f0, rng)
-                else:
-                    h = random_h(model, rng)
-                h *= 10.0 ** rng.uniform(-5, 0)  # reach the linear part of the regularised law
-                f = M.frames(model, q, h)
-                lam = rng.normal(size=model.m) * 10
-                P, Qi, Qj = friction_power(model, c, f, h, lam, lawobj)
-                worst = max(worst, P)
-                n_nonzero += P < -1e-12
-                assert P <= 1e-12, (c.name, P)
-    assert n_nonzero > 0  # the check is not vacuous
-    assert worst <= 1e-12
+        for trial in range(8):
+            y, assembled = consistent(k, model, _state(model, rng))
+            if not assembled:
+                continue
+            y[model.n:] *= 10.0 ** rng.uniform(-5, 0)  # reach the linear part of the regularised law
+            got = solve(k, y)
+            if got is None:
+                continue
+            Qf, acc, _ = equation_residuals(k, model, spec.solver, y, got)
+            power = check_friction_at(k, model, spec, y, got)
+            h = y[model.n:]
+            P = float(h @ Qf)
+            scale = max(1.0, float(np.max(np.abs(applied_forces(model, y))))) * max(1.0, float(np.max(np.abs(h))))
+            assert abs(P - power) <= EQ_REL * scale and P <= EQ_REL * scale, (P, power)
+            nonzero += power < -1e-9 * scale
+    assert nonzero > 0  # the check is not vacuous
 
 
 @pytest.mark.parametrize("jtype", TYPES)
-def test_friction_power_zero_when_mu_zero(single, jtype):
-    law = make_law(FrictionSpec(mu=0.0, size=0.1))
-    model = single(jtype, 0)
+def test_friction_zero_when_mu_zero(single, jtype):
+    """mu = 0: every friction output is exactly 0 and the equations of motion hold without friction
+    forces (Q_f = 0 to round-off)."""
+    spec, model = single(jtype, 0, friction_table(jtype, "regularised", mu=0.0))
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(6000)
     for _ in range(5):
-        q, h, f = _random_state(model, rng)
-        lam = rng.normal(size=model.m) * 10
-        for c in model.joints:
-            P, Qi, Qj = friction_power(model, c, f, h, lam, law)
-            assert P == 0.0
-            assert not np.any(Qi) and not np.any(Qj)
+        y = _state(model, rng)
+        got = k.evaluate(0.0, y)
+        assert got is not None, k.last_message
+        assert not np.any(k.outputs(y, got[1])[1])
+        Qf = equation_residuals(k, model, spec.solver, y, got)[0]
+        scale = max(1.0, float(np.max(np.abs(applied_forces(model, y)))), float(np.max(np.abs(model.M * got[0][model.n:]))))
+        assert np.max(np.abs(Qf)) <= EQ_REL * scale
 
 
 @pytest.mark.parametrize("path", PAPER)
 def test_friction_dissipative_on_paper_joints(path):
-    model = compiled(path)
-    law = make_law(FrictionSpec(mu=0.3, size=0.1))
+    """The paper's mechanisms with friction in every joint that has a friction table: at states
+    moved onto the constraints, the friction power is the outputs' and <= 0."""
+    spec0, _ = compiled(path)
+    names = [j.name for j in spec0.mechanism.joints if j.friction is not None]
+    spec, model = compiled(path, names)
+    assert model.friction_joints
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(7000)
-    for _ in range(3):
-        q = random_q(model, rng)
-        f0 = M.frames(model, q)
-        for c in model.joints:
-            h = _joint_velocity_null(model, c, f0, rng) if model.kind == "spatial" else random_h(model, rng)
-            f = M.frames(model, q, h)
-            P, _, _ = friction_power(model, c, f, h, rng.normal(size=model.m) * 10, law)
-            assert P <= 1e-12, (c.name, P)
+    checked = 0
+    for _ in range(6):
+        y = np.concatenate([model.q0 + 0.05 * rng.standard_normal(model.n), random_h(model, rng)])
+        y, assembled = consistent(k, model, y)
+        got = solve(k, y) if assembled else None
+        if got is None:
+            continue
+        Qf = equation_residuals(k, model, spec.solver, y, got)[0]
+        power = check_friction_at(k, model, spec, y, got)
+        h = y[model.n:]
+        scale = max(1.0, float(np.max(np.abs(applied_forces(model, y))))) * max(1.0, float(np.max(np.abs(h))))
+        assert abs(float(h @ Qf) - power) <= EQ_REL * scale and power <= EQ_REL * scale
+        checked += 1
+    assert checked >= 3
 
 
-# ----------------------------------------------------------------- 6. generalized forces
+# ----------------------------------------------------------------- generalized forces
 
+def potential(model, y) -> float:
+    """Gravity's and the springs' potential energy (J) at y: -m g . r, k (|d| - L0)^2 / 2."""
+    q = y[: model.n]
+    V = sum(-model.mass[b] * float(np.asarray(model.gravity) @ position(model, q, b)) for b in range(model.nb))
+    for ld in model.loads:
+        if ld.type == "spring":
+            pi = position(model, q, ld.bi) + rotation(model, q, ld.bi) @ np.asarray(ld.s_i, float)
+            pj = position(model, q, ld.bj) + rotation(model, q, ld.bj) @ np.asarray(ld.s_j, float)
+            V += 0.5 * ld.stiffness * (float(np.linalg.norm(pi - pj)) - ld.free_length) ** 2
+    return V
+
+
+@pytest.mark.parametrize("kind", ["planar", "spatial"])
 @pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("path", PAPER)
-def test_generalized_force_virtual_work(path, seed):
-    """Q . h_b == F . p_dot, p_dot the velocity of the material point at p, by central
-    differences along q(s) with q' = coordinate_rates(q, h)."""
-    model = compiled(path)
+def test_generalized_force_virtual_work(tmp_path, kind, seed):
+    """The loads' generalized forces of the core, Q = M h' + Phi_h^T lam (frictionless, random
+    chains with gravity, a force, a torque and two springs, the base on either side), do the
+    loads' work: Q . h = -dV/dt (central differences along the core's rates) + F . v + tau . w
+    (global), the gyroscopic moment doing none; to FD_REL of the largest term. (This also
+    validates tests/test_core_rows.applied_forces, which those tests compare the core with.)"""
+    spec, model = random_planar_model(tmp_path, seed, friction=False, kind=kind)
+    assert {ld.type for ld in model.loads} == {"force", "torque", "spring"}
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(8000 + seed)
-    q, h, f = _random_state(model, rng)
-    qdot = M.coordinate_rates(model, q, h)
-    for b in range(model.nb):
-        point = rng.uniform(-3, 3, model.dim)
-        F = rng.normal(size=model.dim) * 10
-        Q = M.generalized_force(model, f, b, point, F)
-        assert Q.shape == (model.nq_b,)
-        body_point = f.R[b].T @ (point - f.r[b])  # material coordinates of p
-
-        def p_of(s):
-            fs = M.frames(model, q + s * qdot)
-            return fs.r[b] + fs.R[b] @ body_point
-
-        p_dot = (p_of(EPS) - p_of(-EPS)) / (2 * EPS)
-        lhs = Q @ h[model.body_slice(b)]
-        rhs = F @ p_dot
-        assert np.isclose(lhs, rhs, rtol=1e-7, atol=1e-7 * max(1.0, abs(rhs))), (b, lhs, rhs)
+    for _ in range(3):
+        y = np.concatenate([model.q0 + 0.1 * rng.standard_normal(model.n), random_h(model, rng)])
+        q, h = y[: model.n], y[model.n:]
+        got = k.evaluate(0.0, y)
+        assert got is not None, k.last_message
+        Q = np.asarray(model.M) * got[0][model.n:] + k.rows(y)[1].T @ got[1]
+        qd = rates(k, model, q, h)
+        dV = (potential(model, np.r_[q + EPS_FD * qd, h]) - potential(model, np.r_[q - EPS_FD * qd, h])) / (2 * EPS_FD)
+        work = -dV
+        for ld in model.loads:
+            hb = h[ld.bi * model.nh_b:(ld.bi + 1) * model.nh_b]
+            if ld.type == "force":
+                work += float(np.asarray(ld.value, float) @ hb[: model.dim])
+            elif ld.type == "torque":
+                w = hb[2] if model.dim == 2 else rotation(model, q, ld.bi) @ hb[3:]
+                work += float(np.asarray(ld.value, float).reshape(-1) @ np.atleast_1d(w))
+        scale = max(1.0, float(np.max(np.abs(Q * h))), abs(dV))
+        assert abs(float(Q @ h) - work) <= FD_REL * scale, (float(Q @ h), work)
+        assert np.max(np.abs(Q - applied_forces(model, y))) <= EQ_REL * max(1.0, float(np.max(np.abs(Q))))

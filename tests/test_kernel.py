@@ -1,10 +1,10 @@
-"""The compiled core (overcon/core through overcon.kernel) against the numpy path:
-the same numbers per evaluation, the same failures, the selection and its note, and FMUs that
-carry it and still run with numpy alone."""
+"""The compiled core (overcon/core through overcon.kernel) on the paper's, the examples' and random
+mechanisms: one solution whatever the warm start, the friction laws and reactions at the
+returned multipliers, the statuses it hands back; the selection and its note, and FMUs that carry
+it. The stage checks by finite differences and the equations of motion: tests/test_core_rows.py."""
 from __future__ import annotations
 
 import dataclasses
-import os
 import re
 import zipfile
 from pathlib import Path
@@ -13,24 +13,18 @@ import numpy as np
 import pytest
 
 from overcon import kernel, scene as scene_mod
-from overcon.dynamics import FrictionSolveError, evaluate
-from overcon.evaluation import SingularConfiguration, coordinate_rates
-from overcon.kinematics import EulerSingularity
 from overcon.checks import compile_checked
-from overcon.simulate import Simulation, SimulationError, _DerivedPlan, run
+from overcon.simulate import Simulation, SimulationError, run
 
 MECH = Path(__file__).resolve().parent.parent / "mechanisms"
 EXAMPLES = MECH / "examples"
 SCENES = ["planar_none_wo4", "planar_f45_wo4", "planar_f145_wo6", "planar_f1_wo4", "spatial_none_wo5",
           "spatial_MN_wo5", "spatial_GHMN_wo18", "spatial_GH_wo9"]
-REL = 1e-12
-"""Per evaluation, both paths agree to this (relative to the largest entry, at least 1): the same
-formulas in the same order except summation orders (the kernel has no BLAS), so round-off only."""
 REL_OTHER_COUNT = 1e-9
-"""When the two friction solves stop after different numbers of Newton steps (the convergence
-test met on one side of round-off and not the other), each result is within the friction
-tolerance (1e-12 relative on the multipliers) of the solution, not of each other's bits: the
-accelerations then agree to the friction tolerance times the Newton matrix's conditioning."""
+"""Two friction solves of one evaluation from different starts stop after different numbers of
+Newton steps; each result is within the friction tolerance (1e-12 relative on the multipliers)
+of the solution, not of each other's bits: the accelerations then agree to the friction
+tolerance times the Newton matrix's conditioning."""
 
 
 def spec_of(name: str, **solver):
@@ -42,12 +36,6 @@ def kernel_for(model, solver):
     k, note = kernel.select(model, dataclasses.replace(solver, kernel="c"))
     assert k is not None and "compiled kernel" in note
     return k
-
-
-def numpy_eval(model, solver, t, y, lam_guess=None, qf_guess=None):
-    q, h = y[: model.n], y[model.n:]
-    ev = evaluate(model, t, q, h, lam_guess, solver=solver, qf_guess=qf_guess)
-    return np.concatenate([coordinate_rates(model, q, h, ev.frames), ev.hdot]), ev
 
 
 def rel(a, b) -> float:
@@ -65,39 +53,39 @@ def states(model, n=20, seed=0):
 
 @pytest.mark.parametrize("name", SCENES)
 @pytest.mark.parametrize("baumgarte", [10.0, 0.0])
-def test_kernel_equals_numpy_per_evaluation(name, baumgarte):
-    """y' and lam of the kernel equal the numpy path's to 1e-12 (relative) at random states, cold
-    and warm-started (from lam and from friction forces, as the integration does), and the kernel
-    hands back exactly the evaluations where the numpy Newton gives up (its fallback decides)."""
+def test_solution_does_not_depend_on_the_warm_start(name, baumgarte):
+    """y' and lam at random states, cold and warm-started (from lam and from friction forces, as
+    the integration does), are one solution: without friction the same bits (no iteration); with
+    friction within REL_OTHER_COUNT (each solve stops within the friction tolerance of the
+    solution). The equations each solution satisfies: tests/test_core_rows.py."""
     spec = spec_of(name, baumgarte=baumgarte)
     model = compile_checked(spec)
     k = kernel_for(model, spec.solver)
     compared = 0
     for y in states(model):
-        ref, ev = numpy_eval(model, spec.solver, 0.3, y)
-        guesses = [(None, None), (ev.lam * 1.01, None)]
-        if ev.qf is not None:
-            guesses.append((None, ev.qf * 0.99))
+        cold = k.evaluate(0.3, y)
+        if cold is None:
+            assert k.last_status == 2 and k.newton_failed() > 0, kernel.STATUS[k.last_status]
+            continue
+        guesses = [(cold[1] * 1.01, None)] + ([(None, cold[2] * 0.99)] if model.friction_joints else [])
         for lam_guess, qf_guess in guesses:
-            ref, ev = numpy_eval(model, spec.solver, 0.3, y, lam_guess, qf_guess)
             got = k.evaluate(0.3, y, lam_guess, qf_guess)
             if got is None:
-                assert k.last_status == 2 and ev.fallback, kernel.STATUS[k.last_status]
+                assert k.last_status == 2 and k.newton_failed() > 0, kernel.STATUS[k.last_status]
                 continue
-            assert not ev.fallback
-            ydot, lam, qf, iterations = got
-            tol = REL if iterations == ev.iterations else REL_OTHER_COUNT
-            assert rel(ydot, ref) <= tol and rel(lam, ev.lam) <= tol, (rel(ydot, ref), rel(lam, ev.lam))
-            if ev.qf is not None:
-                assert rel(qf, ev.qf) <= tol
+            tol = REL_OTHER_COUNT if model.friction_joints else 0.0
+            assert rel(got[0], cold[0]) <= tol and rel(got[1], cold[1]) <= tol, (rel(got[0], cold[0]),
+                                                                                  rel(got[1], cold[1]))
             compared += 1
     assert compared >= 20
 
 
 def test_kernel_covers_loads_and_friction_laws():
     """The Stribeck law on a revolute and a translational joint, in the planar mechanism with its
-    spring and torque (the spatial one's force and torque: test_kernel_equals_numpy_per_evaluation):
-    per evaluation as the numpy path."""
+    spring and torque: at each evaluation the friction outputs obey the law at the returned
+    multipliers and the kept acceleration rows hold (tests/test_core_rows.py's checks)."""
+    from test_core_rows import check_friction_at, consistent, equation_residuals, solve
+
     spatial = compile_checked(spec_of("spatial_MN_wo5"))
     assert {ld.type for ld in spatial.loads} == {"force", "torque"}
     spec = scene_mod.as_scene(scene_mod.load(MECH / "planar_f145_wo6.toml"))
@@ -107,20 +95,25 @@ def test_kernel_covers_loads_and_friction_laws():
     model = compile_checked(spec)
     assert {ld.type for ld in model.loads} == {"torque", "spring"}
     assert {model.joints[j].type for j in model.friction_joints} == {"revolute", "translational"}
+    assert {model.joints[j].law.name for j in model.friction_joints} == {"stribeck"}
     k = kernel_for(model, spec.solver)
+    checked = 0
     for y in states(model, 15, seed=3):
-        ref, ev = numpy_eval(model, spec.solver, 0.0, y)
-        got = k.evaluate(0.0, y)
+        y = consistent(k, model, y)[0]
+        got = solve(k, y)
         if got is None:
-            assert ev.fallback
+            assert k.last_status == 2
             continue
-        tol = REL if got[3] == ev.iterations else REL_OTHER_COUNT
-        assert rel(got[0], ref) <= tol and rel(got[1], ev.lam) <= tol
+        _, acc, elim = equation_residuals(k, model, spec.solver, y, got)
+        assert acc <= 1e-9 and elim == 0.0
+        assert check_friction_at(k, model, spec, y, got) <= 1e-9
+        checked += 1
+    assert checked >= 10
 
 
-def test_kernel_hands_back_what_numpy_reports():
-    """A non-finite state and an Euler singularity: the kernel returns a status and the numpy
-    path raises its own error, so a run fails as it would without the kernel."""
+def test_kernel_reports_non_finite_states_and_euler_singularities():
+    """A non-finite state and an Euler singularity: the kernel returns its status (the messages:
+    tests/test_core.py)."""
     spec = spec_of("spatial_MN_wo5")
     model = compile_checked(spec)
     k = kernel_for(model, spec.solver)
@@ -128,49 +121,24 @@ def test_kernel_hands_back_what_numpy_reports():
     bad = y.copy()
     bad[0] = np.nan
     assert k.evaluate(0.0, bad) is None and kernel.STATUS[k.last_status] == "non-finite number"
-    with pytest.raises(ValueError, match="infs or NaNs"):
-        numpy_eval(model, spec.solver, 0.0, bad)
     flat = y.copy()
     flat[4] = 1e-4  # beta of the first body: |sin beta| < SIN_BETA_MIN
     assert k.evaluate(0.0, flat) is None and kernel.STATUS[k.last_status] == "Euler angles singular"
-    with pytest.raises(EulerSingularity, match=r"Euler angle singularity of body 'link1': beta = 0\.0001 rad"):
-        numpy_eval(model, spec.solver, 0.0, flat)
+    assert "body 0 has |sin beta| = 0.0001" in k.last_message
 
 
-def test_singular_position_stops_both_paths_alike(tmp_path):
-    """The planar sliders driven into K = L = O: the same error, the same time, either path."""
+def test_singular_position_stops_the_run(tmp_path):
+    """The planar sliders driven into K = L = O (spring of free length 0): the run stops with the
+    singular position named, before the stop time (README "Decisions": within 1 s)."""
     text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
     (tmp_path / "planar_sliders.toml").write_text(text)
     (tmp_path / "s.toml").write_text((MECH / "planar_none_wo4.toml").read_text())
     spec = scene_mod.as_scene(scene_mod.load(tmp_path / "s.toml"), stop_time=2.0)
     model = compile_checked(spec)
-    errors = []
-    for choice in ("numpy", "c"):
-        with pytest.raises(SimulationError, match="singular position") as exc:
-            run(model, dataclasses.replace(spec.solver, kernel=choice), stop_time=2.0)
-        errors.append(str(exc.value))
-    assert errors[0] == errors[1]
-
-
-@pytest.mark.parametrize("name,stop", [("planar_none_wo4", 1.0), ("spatial_none_wo5", 1.0)])
-def test_fixed_step_runs_equal(name, stop):
-    """Without friction, a fixed-step rk4 run takes the same steps on both paths: the outputs
-    (positions, reactions) agree to round-off (1e-12 relative to their scale) over the run."""
-    spec = spec_of(name, method="rk4", step=2e-3)
-    model = compile_checked(spec)
-    out = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=stop).values for c in ("numpy", "c")]
-    assert rel(out[1], out[0]) <= 1e-12
-
-
-def test_adaptive_friction_runs_agree_within_accuracy():
-    """With friction and an adaptive method the step sequences differ by round-off decisions, so
-    the runs differ by the integration error, not by round-off: both stay within 1e-6 m of each
-    other in the positions (the integrator's tolerance is 1e-9; measured 8.2e-10 m)."""
-    spec = spec_of("planar_f45_wo4")
-    model = compile_checked(spec)
-    res = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=2.0) for c in ("numpy", "c")]
-    cols = [i for i, n in enumerate(res[0].names) if n.rsplit(".", 1)[1] in ("x", "y")]
-    assert np.max(np.abs(res[1].values[:, cols] - res[0].values[:, cols])) < 1e-6
+    with pytest.raises(SimulationError, match="singular position") as exc:
+        run(model, dataclasses.replace(spec.solver, kernel="c"), stop_time=2.0)
+    times = [float(x) for x in re.findall(r"t = ([0-9.]+(?:e-?[0-9]+)?) s", str(exc.value))]
+    assert times and 0.0 < times[0] < 1.0, str(exc.value)
 
 
 UNCOVERED = "2 friction joints (the kernel takes at most 1)"
@@ -250,10 +218,9 @@ def test_installed_library_is_the_package_core():
 
 
 @pytest.mark.integration
-def test_kernel_in_fmu_and_numpy_alone(tmp_path):
-    """An FMU carries the kernel next to its binary and logs the path it runs; with the parameter
-    solver.kernel = 'numpy' the same FMU runs on numpy and scipy alone, to round-off the same
-    outputs (frictionless scene, rk4: the same steps)."""
+def test_kernel_in_fmu(tmp_path):
+    """An FMU carries the kernel next to its binary and logs the path it runs (its outputs against
+    the in-process run: tests/test_fmu.py)."""
     import fmpy
 
     from overcon.fmu.build import build_scene
@@ -264,40 +231,66 @@ def test_kernel_in_fmu_and_numpy_alone(tmp_path):
     with zipfile.ZipFile(r.fmu) as zf:
         assert any(n.startswith("binaries/") and n.endswith("/" + kernel.library_name()) for n in zf.namelist())
     unz = Path(fmpy.extract(str(r.fmu), str(tmp_path / "unz")))
-    logs, outs = {}, {}
-    for choice in ("c", "numpy"):
-        logs[choice] = Logs()
-        inst = Instance(unz, name=choice, logs=logs[choice])
-        inst.fmu.setString([inst.vr["solver.kernel"], inst.vr["solver.method"]], [choice, "rk4"])
-        inst.fmu.setReal([inst.vr["solver.step"]], [2e-3])
-        inst.init()
-        outs[choice] = inst.steps(50)
-        inst.free()
-    assert "right-hand side: compiled kernel" in logs["c"].text()
-    assert "right-hand side: numpy (solver.kernel = 'numpy')" in logs["numpy"].text()
-    assert rel(outs["c"], outs["numpy"]) <= 1e-12
+    logs = Logs()
+    inst = Instance(unz, name="c", logs=logs)
+    inst.fmu.setString([inst.vr["solver.kernel"], inst.vr["solver.method"]], ["c", "rk4"])
+    inst.fmu.setReal([inst.vr["solver.step"]], [2e-3])
+    inst.init()
+    out = inst.steps(50)
+    inst.free()
+    assert "right-hand side: compiled kernel" in logs.text()
+    assert np.all(np.isfinite(out))
+
+
+def check_reactions(k, model, y, lam) -> None:
+    """The reported reactions at (y, lam) against the core's Phi_h: each joint's global force
+    (Fx0, Fy0(, Fz0), after its type's components) is the physical reaction on body i,
+    -(Phi_h)_X^T lam_X on body i's translational velocity columns (README "Conventions"; on body j
+    the opposite when body i is the base), its auxiliary- or joint-frame force has the same
+    magnitude (a rotation of it; where the type does not report the axial component, at most
+    that), and a joint with friction switched off reports friction 0."""
+    J = k.rows(y)[1]
+    reac, fric = k.outputs(y, lam)
+    d, kh = model.dim, model.nh_b
+    for n, c in enumerate(model.joints):
+        rows = list(c.rows)
+        nc = len(c.components) - d
+        glob = reac[n, nc: nc + d]
+        if c.bi >= 0:
+            want = -J[rows][:, c.bi * kh: c.bi * kh + d].T @ lam[rows]
+        else:
+            want = J[rows][:, c.bj * kh: c.bj * kh + d].T @ lam[rows]
+        scale = max(1.0, float(np.max(np.abs(lam[rows]))))
+        assert np.max(np.abs(glob - want)) <= 1e-12 * scale, (c.name, glob, want)
+        force = [i for i, name in enumerate(c.components[:nc]) if name.startswith("F")]
+        if len(force) == d:  # all components reported: a rotation of the global force
+            assert abs(np.linalg.norm(reac[n, force]) - np.linalg.norm(glob)) <= 1e-12 * scale, c.name
+        else:  # (prismatic, cylindrical: the axial one, zero on the constraints, is not reported)
+            assert np.linalg.norm(reac[n, force]) <= np.linalg.norm(glob) * (1 + 1e-12) + 1e-12 * scale, c.name
+        assert not np.any(reac[n, nc + d:])
+        if c.law is None:
+            assert fric[n] == 0.0
 
 
 @pytest.mark.parametrize("name", ["planar_f145_wo6", "spatial_GHMN_wo18"])
-def test_kernel_outputs_equal_numpy(name):
-    """The reported reactions (every joint) and friction forces (every friction joint) from the
-    kernel's table equal the numpy path's to 1e-14 (relative) at random states and multipliers."""
-    from overcon.evaluation import frames
-
+def test_kernel_outputs_are_the_reactions_of_the_multipliers(name):
+    """The reported reactions (every joint) at random states and multipliers are the physical
+    reactions of the multipliers (:func:`check_reactions`), and the table the run reports holds
+    them; without reactions (lam = 0) friction is zero (the spherical joint has no contact point)."""
     spec = spec_of(name)
     joints = tuple(j.name for j in spec.mechanism.joints)
     spec = dataclasses.replace(spec, reactions=joints, friction_outputs="all")
     model = compile_checked(spec)
     assert model.friction_outputs and len(model.reaction_joints) == len(joints)
-    sims = {c: Simulation(model, dataclasses.replace(spec.solver, kernel=c)) for c in ("numpy", "c")}
+    sim = Simulation(model, dataclasses.replace(spec.solver, kernel="c"))
     rng = np.random.default_rng(5)
     for y in states(model, 10, seed=5):
         lam = 100.0 * rng.standard_normal(model.m)
-        ref = sims["numpy"]._derived.values(model, frames(model, y[: model.n], y[model.n:]), lam)
-        got = sims["c"]._derived.values_from_kernel(*sims["c"]._kernel.outputs(y, lam))
-        assert rel(got, ref) <= 1e-14
-    zero = np.zeros(model.m)  # no reaction: zero friction (the spherical joint has no contact point)
-    assert not np.any(sims["c"]._derived.values_from_kernel(*sims["c"]._kernel.outputs(y, zero)))
+        check_reactions(sim._kernel, model, y, lam)
+        table = sim._derived.values_from_kernel(*sim._kernel.outputs(y, lam))
+        assert np.all(np.isfinite(table)) and np.any(table)
+    zero = np.zeros(model.m)
+    assert not np.any(sim._derived.values_from_kernel(*sim._kernel.outputs(y, zero)))
 
 
 def test_cli_kernel_flag_and_scene_field(tmp_path, capsys, monkeypatch):
@@ -366,51 +359,53 @@ def _random_mechanism(path: Path, kind: str, seed: int) -> list[str]:
     return names
 
 
+def random_planar_model(tmp_path: Path, seed: int, friction: bool = True, kind: str = "planar"):
+    """(spec, model) of :func:`_random_mechanism` (not checked at q0: random geometry)."""
+    names = _random_mechanism(tmp_path / f"m_{kind}.toml", kind, seed)
+    spec = scene_mod.as_scene(scene_mod.load(tmp_path / f"m_{kind}.toml"), friction=names if friction else [],
+                              friction_outputs="all" if friction else "none")
+    return spec, compile_checked(spec, check_initial=False)
+
+
 @pytest.mark.parametrize("kind", ["planar", "spatial"])
 @pytest.mark.parametrize("seed", range(4))
-def test_random_mechanisms_equal_numpy(tmp_path, kind, seed):
+def test_random_mechanisms(tmp_path, kind, seed):
     """Mechanisms the paper does not have (random geometry, the base as body i or j, forces,
     torques and springs on any body and to the base, Stribeck and regularised friction in every
-    joint): per evaluation as the numpy path, and the reported outputs too."""
-    from overcon.evaluation import frames
+    joint): at each state the kernel solves as a run does (evaluate, then evaluate_robust; or
+    gives up with status 2 where the friction solve has no solution), the kept acceleration rows hold, the friction outputs obey their law
+    (tests/test_core_rows.py) and the reactions are those of the multipliers."""
+    from test_core_rows import check_friction_at, equation_residuals, solve
 
-    names = _random_mechanism(tmp_path / "m.toml", kind, seed)
-    spec = scene_mod.as_scene(scene_mod.load(tmp_path / "m.toml"), friction=names, friction_outputs="all")
-    model = compile_checked(spec, check_initial=False)
+    spec, model = random_planar_model(tmp_path, seed, kind=kind)
     assert {ld.type for ld in model.loads} == {"force", "torque", "spring"} and len(model.friction_joints) == 3
     assert any(c.bi < 0 for c in model.joints) or any(c.bj < 0 for c in model.joints)
     k = kernel_for(model, spec.solver)
-    plan = _DerivedPlan(model)  # (a Simulation would refuse the random q0 off the constraints)
     compared = 0
     for y in states(model, 24, seed=seed):
-        got = k.evaluate(0.0, y)
-        try:
-            ref, ev = numpy_eval(model, spec.solver, 0.0, y)
-        except FrictionSolveError:  # (a random state can couple the joints' friction too strongly)
-            assert got is None and k.last_status == 2
+        got = solve(k, y)
+        if got is None:  # (a random state can couple the joints' friction too strongly)
+            assert k.last_status == 2
             continue
-        if got is None:
-            assert ev.fallback
-            continue
-        tol = REL if got[3] == ev.iterations else REL_OTHER_COUNT
-        assert rel(got[0], ref) <= tol and rel(got[1], ev.lam) <= tol, (rel(got[0], ref), rel(got[1], ev.lam))
-        a = plan.values(model, frames(model, y[: model.n], y[model.n:]), ev.lam)
-        b = plan.values_from_kernel(*k.outputs(y, ev.lam))
-        assert rel(b, a) <= 1e-14
+        _, acc, elim = equation_residuals(k, model, spec.solver, y, got)
+        assert acc <= 1e-9 and elim == 0.0, acc
+        assert check_friction_at(k, model, spec, y, got, assembled=False) <= 1e-9
+        check_reactions(k, model, y, got[1])
         compared += 1
-    assert compared >= 12  # at least half the states (the others: no solution of the friction solve)
+    assert compared >= 12  # at least half the states
 
 
 def test_spring_of_zero_free_length_at_coinciding_points(tmp_path):
-    """A spring of free length 0 pulls with -k d, defined where its points coincide (both paths);
-    with a positive free length coinciding points are refused naming the spring and its bodies."""
-    from overcon.evaluation import applied_forces, frames
+    """A spring of free length 0 pulls with -k d, defined where its points coincide: the evaluation
+    there solves the equations of motion with that spring's force 0; with a positive free length
+    coinciding points are refused (status 5, the message: tests/test_core.py)."""
+    from test_core_rows import equation_residuals, force_scale
 
     text = (MECH / "planar_sliders.toml").read_text()
     assert "free_length = 3.0" in text
     for free, ok in (("0.0", True), ("0.5", False)):
         (tmp_path / "m.toml").write_text(text.replace("free_length = 3.0", f"free_length = {free}"))
-        spec = scene_mod.as_scene(scene_mod.load(tmp_path / "m.toml"), friction=["joint4"])
+        spec = scene_mod.as_scene(scene_mod.load(tmp_path / "m.toml"), friction=[])
         model = compile_checked(spec, check_initial=False)
         n = next(i for i, ld in enumerate(model.loads) if ld.type == "spring")
         ld = model.loads[n]
@@ -419,16 +414,12 @@ def test_spring_of_zero_free_length_at_coinciding_points(tmp_path):
         y = np.concatenate([q, model.h0])
         k = kernel_for(model, spec.solver)
         if ok:
-            Q = applied_forces(model, frames(model, q))
-            assert np.all(np.isfinite(Q))
-            ref, ev = numpy_eval(model, spec.solver, 0.0, y)
             got = k.evaluate(0.0, y)
-            assert got is not None and rel(got[0], ref) <= REL_OTHER_COUNT
+            assert got is not None and np.all(np.isfinite(got[0]))
+            Qf, acc, _ = equation_residuals(k, model, spec.solver, y, got)
+            assert np.max(np.abs(Qf)) <= 1e-9 * force_scale(model, y, got) and acc <= 1e-9
         else:
             assert k.evaluate(0.0, y) is None and kernel.STATUS[k.last_status] == "spring points coincide"
-            with pytest.raises(SingularConfiguration, match=rf"spring loads\[{n}\] \(slider2 - base\): its "
-                                                            r"attachment points coincide while its free length is 0.5 m"):
-                numpy_eval(model, spec.solver, 0.0, y)
 
 
 @pytest.mark.integration
@@ -491,7 +482,6 @@ def test_set_values_outside_their_rule_refused_before_running(tmp_path, capsys):
 
 EXAMPLE_SCENES = ["door_h1_wo_hinge2", "door_none_wo3_4_5_9_10", "carriage_guide_wo_rod", "carriage_none_wo1_2_3_4",
                   "fourbar_A_wo3_4_5", "fourbar_none_wo18_19_20", "loop_A1_wo_A2", "loop_D_wo3_4_5_9_10"]
-EPS = float(np.finfo(float).eps)
 
 
 def example_spec(name: str, **solver):
@@ -499,52 +489,25 @@ def example_spec(name: str, **solver):
     return dataclasses.replace(spec, solver=dataclasses.replace(spec.solver, **solver)) if solver else spec
 
 
+def quat_of_euler(angles) -> np.ndarray:
+    """The unit quaternion (scalar first) of z-x-z angles: the product qz(alpha) qx(beta) qz(gamma)
+    of the three elementary rotations' quaternions (cos(t/2), sin(t/2) axis)."""
+    def mul(p, q):
+        return np.concatenate([[p[0] * q[0] - np.dot(p[1:], q[1:])], p[0] * q[1:] + q[0] * p[1:] + np.cross(p[1:], q[1:])])
+
+    a, b, g = (0.5 * float(x) for x in angles)
+    return mul(mul(np.array([np.cos(a), 0.0, 0.0, np.sin(a)]), np.array([np.cos(b), np.sin(b), 0.0, 0.0])),
+               np.array([np.cos(g), 0.0, 0.0, np.sin(g)]))
+
+
 def quaternion_spec(spec):
     """The scene with its spatial mechanism in quaternions: each body's z-x-z angles in q0 turned
     into the same rotation's unit quaternion (h0, body axes, unchanged)."""
-    from overcon.kinematics import euler_to_quat
-
     mech = spec.mechanism
     assert mech.kind == "spatial" and mech.rotation == "euler_zxz"
-    bodies = tuple(dataclasses.replace(b, q0=tuple(b.q0[:3]) + tuple(float(x) for x in euler_to_quat(b.q0[3:])))
+    bodies = tuple(dataclasses.replace(b, q0=tuple(b.q0[:3]) + tuple(float(x) for x in quat_of_euler(b.q0[3:])))
                    for b in mech.bodies)
     return dataclasses.replace(spec, mechanism=dataclasses.replace(mech, rotation="quaternion", bodies=bodies))
-
-
-def conditioned_tolerance(model, y) -> float:
-    """REL, or eps cond(S) where S = Phi_hR M^-1 Phi_hR^T is worse conditioned than REL / eps
-    (4.5e3): both paths solve with S (the kernel by its own Cholesky, numpy by LAPACK and BLAS),
-    whose round-off bound on the solution is eps cond(S); the rows themselves agree to a few ulp
-    (test_kernel_rows_equal_numpy). The example four-bar (cond 1.6e5) and loop (2.4e4) need it."""
-    from overcon.evaluation import frames, jacobian_h
-
-    JR = jacobian_h(model, frames(model, y[: model.n], y[model.n:]))[model.retained]
-    return max(REL, EPS * float(np.linalg.cond(JR @ (model.Minv[:, None] * JR.T))))
-
-
-def compare_evaluations(model, solver, ys, tol_of=lambda model, y: REL) -> int:
-    """Per state: cold, warm from lam and warm from qf, the kernel's y', lam and qf against the
-    numpy path's (as test_kernel_equals_numpy_per_evaluation); the count compared."""
-    k = kernel_for(model, solver)
-    compared = 0
-    for y in ys:
-        ref, ev = numpy_eval(model, solver, 0.3, y)
-        guesses = [(None, None), (ev.lam * 1.01, None)] + ([(None, ev.qf * 0.99)] if ev.qf is not None else [])
-        base = tol_of(model, y)
-        for lam_guess, qf_guess in guesses:
-            ref, ev = numpy_eval(model, solver, 0.3, y, lam_guess, qf_guess)
-            got = k.evaluate(0.3, y, lam_guess, qf_guess)
-            if got is None:
-                assert k.last_status == 2 and ev.fallback, kernel.STATUS[k.last_status]
-                continue
-            assert not ev.fallback
-            ydot, lam, qf, iterations = got
-            tol = base if iterations == ev.iterations else max(base, REL_OTHER_COUNT)
-            assert rel(ydot, ref) <= tol and rel(lam, ev.lam) <= tol, (rel(ydot, ref), rel(lam, ev.lam), tol)
-            if ev.qf is not None:
-                assert rel(qf, ev.qf) <= tol
-            compared += 1
-    return compared
 
 
 def test_kernel_covers_the_examples_and_their_joint_types():
@@ -561,64 +524,19 @@ def test_kernel_covers_the_examples_and_their_joint_types():
     assert {t for t, jt in TYPES.items() if jt.kind == "spatial"} <= {t for (_, t) in kernel._JOINTS}
 
 
-@pytest.mark.parametrize("name", EXAMPLE_SCENES)
-def test_examples_equal_numpy_per_evaluation(name):
-    """The example mechanisms (quaternions; friction in revolute, prismatic and cylindrical
-    joints and a spherical one): per evaluation as the numpy path, to REL or, where S is ill
-    conditioned, to its round-off bound eps cond(S) (:func:`conditioned_tolerance`)."""
-    spec = example_spec(name)
-    model = compile_checked(spec)
-    assert compare_evaluations(model, spec.solver, states(model), conditioned_tolerance) >= 20
-
-
-@pytest.mark.parametrize("name", ["spatial_none_wo5", "spatial_GH_wo9", "spatial_GHMN_wo18"])
-def test_spherical_joints_in_quaternions_equal_numpy(name):
-    """The paper's spatial mechanism (spherical joints, friction in G, H, M, N) written in
-    quaternions: per evaluation as the numpy path to REL."""
-    spec = quaternion_spec(spec_of(name))
-    model = compile_checked(spec)
-    assert model.rotation == "quaternion" and kernel.support(model) is None
-    assert compare_evaluations(model, spec.solver, states(model)) >= 20
-
-
-@pytest.mark.parametrize("name,stop", [("door_none_wo_hinge2", 1.0), ("carriage_none_wo_rod", 1.0),
-                                       ("loop_D_wo3_4_5_9_10", 0.5)])
-def test_fixed_step_runs_equal_examples(name, stop):
-    """Without friction, a fixed-step rk4 run of the quaternion examples takes the same steps on
-    both paths: the outputs agree to round-off (1e-12 relative to their scale) over the run."""
-    spec = scene_mod.as_scene(example_spec(name, method="rk4", step=2e-3), friction=[])
-    model = compile_checked(spec)
-    assert not model.friction_joints
-    out = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=stop).values for c in ("numpy", "c")]
-    assert rel(out[1], out[0]) <= 1e-12
-
-
-def test_fixed_step_run_equal_spherical_quaternions():
-    """The paper's spatial mechanism without friction in quaternions: rk4 runs agree to 1e-12."""
-    spec = quaternion_spec(spec_of("spatial_none_wo5", method="rk4", step=2e-3))
-    model = compile_checked(spec)
-    out = [run(model, dataclasses.replace(spec.solver, kernel=c), stop_time=1.0).values for c in ("numpy", "c")]
-    assert rel(out[1], out[0]) <= 1e-12
-
-
 @pytest.mark.parametrize("name", ["door_h1_wo_hinge2", "carriage_guide_wo_rod", "loop_A1_wo_A2"])
-def test_example_outputs_equal_numpy(name):
-    """The reported reactions (every joint: the axis joints' components in their joint frame) and
-    friction outputs of the examples from the kernel's table equal the numpy path's to 1e-14."""
-    from overcon.evaluation import frames
-
+def test_example_outputs_are_the_reactions_of_the_multipliers(name):
+    """The reported reactions of the examples (every joint: the axis joints' components in their
+    joint frame) are the physical reactions of random multipliers (:func:`check_reactions`)."""
     spec = example_spec(name)
     joints = tuple(j.name for j in spec.mechanism.joints)
     spec = dataclasses.replace(spec, reactions=joints, friction_outputs="all")
     model = compile_checked(spec)
     assert model.friction_outputs and len(model.reaction_joints) == len(joints)
-    sims = {c: Simulation(model, dataclasses.replace(spec.solver, kernel=c)) for c in ("numpy", "c")}
+    k = kernel_for(model, spec.solver)
     rng = np.random.default_rng(5)
     for y in states(model, 10, seed=5):
-        lam = 100.0 * rng.standard_normal(model.m)
-        ref = sims["numpy"]._derived.values(model, frames(model, y[: model.n], y[model.n:]), lam)
-        got = sims["c"]._derived.values_from_kernel(*sims["c"]._kernel.outputs(y, lam))
-        assert rel(got, ref) <= 1e-14
+        check_reactions(k, model, y, 100.0 * rng.standard_normal(model.m))
 
 
 def _random_axis_mechanism(path: Path, rotation: str, seed: int) -> list[str]:
@@ -626,8 +544,6 @@ def _random_axis_mechanism(path: Path, rotation: str, seed: int) -> list[str]:
     cylindrical, universal, fixed, spherical; in a random order, the base as body i or j), friction
     of both laws in the four types that have it, every load type; in ``rotation``. Returns the
     names of the joints with a friction table."""
-    from overcon.kinematics import euler_to_quat
-
     rng = np.random.default_rng(seed)
     vec = (lambda k: ", ".join(f"{x:.6f}" for x in rng.uniform(-0.5, 0.5, k)))
     types = ["revolute", "prismatic", "cylindrical", "universal", "fixed", "spherical"]
@@ -636,7 +552,7 @@ def _random_axis_mechanism(path: Path, rotation: str, seed: int) -> list[str]:
              'gravity = [0.0, 0.0, -9.81]']
     for b in range(len(types)):
         angles = [rng.uniform(-3, 3), rng.uniform(0.4, 2.7), rng.uniform(-3, 3)]
-        orient = euler_to_quat(angles) if rotation == "quaternion" else angles
+        orient = quat_of_euler(angles) if rotation == "quaternion" else angles
         lines += ['[[bodies]]', f'name = "b{b}"', f'mass = {rng.uniform(0.5, 3):.6f}',
                   f'inertia = [{rng.uniform(0.5, 2):.6f}, {rng.uniform(0.5, 2):.6f}, {rng.uniform(0.5, 2):.6f}]',
                   f'q0 = [{vec(3)}, {", ".join(repr(float(x)) for x in orient)}]']
@@ -673,61 +589,27 @@ def random_axis_model(tmp_path: Path, rotation: str, seed: int, friction: bool =
 
 @pytest.mark.parametrize("rotation", ["euler_zxz", "quaternion"])
 @pytest.mark.parametrize("seed", range(4))
-def test_random_axis_joints_equal_numpy(tmp_path, rotation, seed):
+def test_random_axis_joints(tmp_path, rotation, seed):
     """Every spatial joint type in random geometry, both rotations, with friction of both laws in
-    the revolute, prismatic, cylindrical and spherical joints: per evaluation as the numpy path
-    (REL, or eps cond(S) at the random states where S is ill conditioned), and the reported
-    reactions and friction outputs to 1e-14."""
-    from overcon.evaluation import frames
+    the revolute, prismatic, cylindrical and spherical joints: at each state the kernel solves as a
+    run does (or gives up with status 2), the kept acceleration rows hold, the friction outputs obey their law
+    and the reactions are those of the multipliers (as test_random_mechanisms)."""
+    from test_core_rows import check_friction_at, equation_residuals, solve
 
     spec, model = random_axis_model(tmp_path, rotation, seed)
     assert len(model.friction_joints) == 4 and kernel.support(model) is None
     assert {c.type for c in model.joints} == {"spatial_revolute", "spatial_prismatic", "spatial_cylindrical",
                                                "spatial_universal", "spatial_fixed", "spherical"}
     k = kernel_for(model, spec.solver)
-    plan = _DerivedPlan(model)
     compared = 0
     for y in states(model, 24, seed=seed):
-        got = k.evaluate(0.0, y)
-        try:
-            ref, ev = numpy_eval(model, spec.solver, 0.0, y)
-        except FrictionSolveError:
-            assert got is None and k.last_status == 2
-            continue
+        got = solve(k, y)
         if got is None:
-            assert ev.fallback
+            assert k.last_status == 2
             continue
-        base = conditioned_tolerance(model, y)
-        tol = base if got[3] == ev.iterations else max(base, REL_OTHER_COUNT)
-        assert rel(got[0], ref) <= tol and rel(got[1], ev.lam) <= tol, (rel(got[0], ref), rel(got[1], ev.lam), tol)
-        a = plan.values(model, frames(model, y[: model.n], y[model.n:]), ev.lam)
-        b = plan.values_from_kernel(*k.outputs(y, ev.lam))
-        assert rel(b, a) <= 1e-14
+        _, acc, elim = equation_residuals(k, model, spec.solver, y, got)
+        assert acc <= 1e-9 and elim == 0.0, acc
+        assert check_friction_at(k, model, spec, y, got, assembled=False) <= 1e-9
+        check_reactions(k, model, y, got[1])
         compared += 1
     assert compared >= 12
-
-
-@pytest.mark.parametrize("rotation", ["euler_zxz", "quaternion"])
-def test_random_axis_joints_without_friction_equal_numpy(tmp_path, rotation):
-    """The same chains without friction: y' and lam as the numpy path to REL at every state."""
-    for seed in range(3):
-        spec, model = random_axis_model(tmp_path, rotation, seed, friction=False)
-        assert not model.friction_joints
-        assert compare_evaluations(model, spec.solver, states(model, 10, seed=seed)) == 20
-
-
-@pytest.mark.parametrize("name", EXAMPLE_SCENES[::2] + ["spatial_GH_wo9"])
-def test_kernel_rows_equal_numpy(name):
-    """Phi, Phi_h and gamma of the core (overcon.kernel.Kernel.rows) equal the numpy path's to a
-    few ulp (1e-14 relative) at random states: the same formulas in the same order."""
-    from overcon.evaluation import constraints, frames, gamma, jacobian_h
-
-    spec = example_spec(name) if name in EXAMPLE_SCENES else quaternion_spec(spec_of(name))
-    model = compile_checked(spec)
-    k = kernel_for(model, spec.solver)
-    for y in states(model, 10, seed=2):
-        f = frames(model, y[: model.n], y[model.n:])
-        phi, J, gam = k.rows(y)
-        assert rel(phi, constraints(model, f)) <= 1e-14
-        assert rel(J, jacobian_h(model, f)) <= 1e-14
-        assert rel(gam, gamma(model, f)) <= 1e-14

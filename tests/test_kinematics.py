@@ -1,28 +1,28 @@
-"""Tests of overcon.kinematics: rotation matrices, their derivatives (B.13) and the Euler-rate
-matrix H of B.15 (phi_dot = H omega, omega in body axes), checked against finite differences."""
+"""The compiled core's kinematics: the rotation matrix of z-x-z Euler angles (paper Eq. 40) and of
+a planar angle, read off the core's constraint values, and the Euler-angle rates of B.15
+(phi' = H omega, omega in body axes) against the closed form and finite differences of R; the
+Euler singularity (|sin beta| < 1e-3) refused naming the body.
+
+The probe: one body held to the base by spherical (planar: revolute) joints at its body points
+e_1, e_2(, e_3) and the base origin, so that joint k's Phi is r + R e_k: the core's R, column by
+column, at any coordinates."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from overcon.kinematics import (
-    OMEGA,
-    SIN_BETA_MIN,
-    EulerSingularity,
-    cross2,
-    cross3,
-    euler_dR,
-    euler_H,
-    euler_R,
-    rot2,
-    rx,
-    rz,
-    skew,
-)
+from overcon.checks import compile_checked
+from overcon.scene import as_scene, load
+
+from test_core_rows import EPS_FD, rates, rx, rz
+from test_kernel import kernel_for
 
 SEEDS = [0, 1, 2, 3, 4]
+SIN_BETA_MIN = 1e-3
+"""|sin beta| below which the core refuses z-x-z angles (OVK_EULER)."""
 
 
 def random_angles(rng) -> np.ndarray:
@@ -37,134 +37,121 @@ def vee(W: np.ndarray) -> np.ndarray:
     return np.array([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]]) / 2.0
 
 
-# ------------------------------------------------------------------------------- basics
+def probe(tmp_path: Path, kind: str = "spatial"):
+    """(model, kernel) of the probe mechanism (module docstring); body "link7"."""
+    d = 3 if kind == "spatial" else 2
+    q0 = "[0.1, 0.2, 0.3, 0.4, 1.0, -0.3]" if d == 3 else "[0.1, 0.2, 0.4]"
+    lines = ["[mechanism]", 'name = "probe"', f'kind = "{kind}"', f"gravity = {[0.0] * d}", "",
+             "[[bodies]]", 'name = "link7"', "mass = 1.0", f"inertia = {[1.0] * d if d == 3 else 1.0}", f"q0 = {q0}", ""]
+    jtype = "spherical" if d == 3 else "revolute"
+    for k in range(d):
+        s_i = [1.0 if i == k else 0.0 for i in range(d)]
+        lines += ["[[joints]]", f'name = "P{k}"', f'type = "{jtype}"', 'body_i = "link7"', 'body_j = "base"',
+                  f"s_i = {s_i}", f"s_j = {[0.0] * d}", ""]
+    (tmp_path / "probe.toml").write_text("\n".join(lines))
+    spec = as_scene(load(tmp_path / "probe.toml"))  # (the automatic elimination of the redundant rows)
+    model = compile_checked(spec, check_initial=False)
+    return model, kernel_for(model, spec.solver)
+
+
+def core_R(model, k, q) -> np.ndarray:
+    """The core's rotation matrix body -> global of the probe's body at q."""
+    d = model.dim
+    phi = k.rows(np.concatenate([q, np.zeros(model.nh)]))[0]
+    return np.column_stack([phi[d * j: d * j + d] - q[:d] for j in range(d)])
+
+
+@pytest.fixture(scope="module")
+def spatial(tmp_path_factory):
+    return probe(tmp_path_factory.mktemp("probe3"))
+
+
+# ------------------------------------------------------------------------------- rotations
+
+def test_planar_rotation_and_rates(tmp_path):
+    """Planar: R = [[c, -s], [s, c]] of phi (counter-clockwise), and the rates are h itself."""
+    model, k = probe(tmp_path, "planar")
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        q = rng.uniform(-3, 3, 3)
+        c, s = math.cos(q[2]), math.sin(q[2])
+        assert np.max(np.abs(core_R(model, k, q) - np.array([[c, -s], [s, c]]))) <= 1e-15
+        h = rng.normal(size=3)
+        assert np.array_equal(rates(k, model, q, h), h)
+
 
 @pytest.mark.parametrize("seed", SEEDS)
-def test_rot2_cross2_basics(seed):
-    rng = np.random.default_rng(seed)
-    a, b = rng.uniform(-4, 4, 2)
-    R = rot2(a)
-    assert np.allclose(R.T @ R, np.eye(2), atol=1e-15)
-    assert np.isclose(np.linalg.det(R), 1.0)
-    assert np.allclose(rot2(a) @ rot2(b), rot2(a + b), atol=1e-14)
-    assert np.allclose(R @ [1.0, 0.0], [math.cos(a), math.sin(a)])  # body x axis, ccw positive
-    # dR/dphi = OMEGA R = R OMEGA
-    eps = 1e-6
-    dR = (rot2(a + eps) - rot2(a - eps)) / (2 * eps)
-    assert np.allclose(dR, OMEGA @ R, atol=1e-9)
-    assert np.allclose(OMEGA @ R, R @ OMEGA, atol=1e-15)
-    u, v = rng.normal(size=(2, 2))
-    assert np.isclose(cross2(u, v), np.cross(np.r_[u, 0.0], np.r_[v, 0.0])[2])
-    assert np.isclose(cross2(u, v), (OMEGA @ u) @ v)
-    assert cross2([1.0, 0.0], [0.0, 1.0]) == 1.0
-    assert np.isclose(cross2(u, v), -cross2(v, u))
-
-
-@pytest.mark.parametrize("seed", SEEDS)
-def test_cross3_skew_basics(seed):
-    rng = np.random.default_rng(seed)
-    a, b = rng.normal(size=(2, 3))
-    assert np.allclose(cross3(a, b), np.cross(a, b), atol=1e-14)
-    assert np.allclose(skew(a) @ b, np.cross(a, b), atol=1e-14)
-    assert np.allclose(skew(a).T, -skew(a))
-    assert np.allclose(vee(skew(a)), a)
-    assert np.allclose(cross3([1.0, 0, 0], [0, 1.0, 0]), [0, 0, 1.0])
-    # rotation covariance: R (a x b) = (R a) x (R b)
-    R = euler_R(random_angles(rng))
-    assert np.allclose(R @ cross3(a, b), cross3(R @ a, R @ b), atol=1e-13)
-
-
-def test_elementary_rotations():
-    t = 0.7
-    assert np.allclose(rz(t)[:2, :2], rot2(t)) and rz(t)[2, 2] == 1.0
-    assert np.allclose(rx(t)[1:, 1:], rot2(t)) and rx(t)[0, 0] == 1.0
-
-
-@pytest.mark.parametrize("seed", SEEDS)
-def test_euler_R_is_zxz_rotation(seed):
+def test_euler_R_is_zxz_rotation(spatial, seed):
+    """The core's R of z-x-z angles is Rz(alpha) Rx(beta) Rz(gamma): orthonormal, det 1, its third
+    column (the body z axis) [sin a sin b, -cos a sin b, cos b]; R(0) = I."""
+    model, k = spatial
     rng = np.random.default_rng(seed)
     ang = random_angles(rng)
-    R = euler_R(ang)
+    q = np.r_[rng.uniform(-1, 1, 3), ang]
+    R = core_R(model, k, q)
     assert np.allclose(R.T @ R, np.eye(3), atol=1e-14)
     assert np.isclose(np.linalg.det(R), 1.0)
     a, b, g = ang
-    assert np.allclose(R, rz(a) @ rx(b) @ rz(g))
-    # third column (body z axis in global) of z-x-z: [sin a sin b, -cos a sin b, cos b]
+    assert np.allclose(R, rz(a) @ rx(b) @ rz(g), atol=1e-15)
     assert np.allclose(R[:, 2], [math.sin(a) * math.sin(b), -math.cos(a) * math.sin(b), math.cos(b)])
-    assert np.allclose(euler_R([0.0, 0.0, 0.0]), np.eye(3))
+    assert np.allclose(core_R(model, k, np.r_[0.0, 0.0, 0.0, 0.0, 0.5, 0.0]), rx(0.5), atol=1e-15)
 
 
-# ------------------------------------------------------------------------------- derivatives
+@pytest.mark.parametrize("ang", [[-math.pi / 4, -math.pi / 4, 0.0], [-math.pi / 4, math.pi / 4, 0.0],
+                                 [math.pi / 2, math.pi / 2, 0.0]])
+def test_euler_R_at_paper_angles(spatial, ang):
+    """The paper's link orientations (Sec. 4.2): the core's R is Rz Rx Rz there too."""
+    model, k = spatial
+    a, b, g = ang
+    assert np.max(np.abs(core_R(model, k, np.r_[0.0, 0.0, 0.0, ang]) - rz(a) @ rx(b) @ rz(g))) <= 1e-15
+
+
+# ------------------------------------------------------------------------------- rates
 
 @pytest.mark.parametrize("seed", SEEDS)
-def test_euler_dR_matches_central_differences(seed):
+def test_euler_rates_from_body_omega(spatial, seed):
+    """The core's Euler-angle rates phi' = H omega (B.15): omega_body = vee(R^T dR/dt) along
+    phi + t phi' (central differences of the core's R), and H^-1 phi' = omega with the closed
+    form H^-1 = [[sb sg, cg, 0], [sb cg, -sg, 0], [cb, 0, 1]]."""
+    model, k = spatial
     rng = np.random.default_rng(seed)
     ang = random_angles(rng)
-    eps = 1e-6
-    dRs = euler_dR(ang)
-    assert len(dRs) == 3
-    for k in range(3):
-        e = np.zeros(3)
-        e[k] = eps
-        fd = (euler_R(ang + e) - euler_R(ang - e)) / (2 * eps)
-        assert np.allclose(dRs[k], fd, atol=1e-9, rtol=0), k
+    q = np.r_[rng.uniform(-1, 1, 3), ang]
+    omega = rng.normal(size=3)
+    h = np.r_[rng.normal(size=3), omega]
+    qd = rates(k, model, q, h)
+    assert np.array_equal(qd[:3], h[:3])
+    phi_dot = qd[3:]
+    R = core_R(model, k, q)
+    Rdot = (core_R(model, k, q + EPS_FD * qd) - core_R(model, k, q - EPS_FD * qd)) / (2 * EPS_FD)
+    W = R.T @ Rdot
+    assert np.allclose(W, -W.T, atol=1e-8)
+    assert np.allclose(vee(W), omega, atol=1e-7 * max(1.0, float(np.max(np.abs(phi_dot)))))
+    _, b, g = ang
+    sb, cb, sg, cg = math.sin(b), math.cos(b), math.sin(g), math.cos(g)
+    Hinv = np.array([[sb * sg, cg, 0.0], [sb * cg, -sg, 0.0], [cb, 0.0, 1.0]])
+    assert np.allclose(Hinv @ phi_dot, omega, atol=1e-13 * max(1.0, float(np.max(np.abs(phi_dot)))))
 
 
-def test_euler_dR_at_paper_angles():
-    for ang in ([-math.pi / 4, -math.pi / 4, 0.0], [-math.pi / 4, math.pi / 4, 0.0],
-                [math.pi / 2, math.pi / 2, 0.0], [0.0, 0.0, 0.0]):
-        ang = np.array(ang)
-        eps = 1e-6
-        for k in range(3):
-            e = np.zeros(3)
-            e[k] = eps
-            fd = (euler_R(ang + e) - euler_R(ang - e)) / (2 * eps)
-            assert np.allclose(euler_dR(ang)[k], fd, atol=1e-9, rtol=0)
-
-
-@pytest.mark.parametrize("seed", SEEDS)
-def test_euler_H_rates_from_body_omega(seed):
-    """Along a random angle path phi(t): omega_body = vee(R^T dR/dt) and phi_dot = H(phi) omega."""
-    rng = np.random.default_rng(seed)
-    p0 = random_angles(rng)
-    p1, p2 = rng.normal(size=(2, 3))
-
-    def path(t):
-        return p0 + p1 * t + p2 * t**2
-
-    for t in (0.0, 0.01, -0.02):
-        eps = 1e-6
-        R = euler_R(path(t))
-        Rdot = (euler_R(path(t + eps)) - euler_R(path(t - eps))) / (2 * eps)
-        W = R.T @ Rdot
-        assert np.allclose(W, -W.T, atol=1e-8)  # skew-symmetric up to FD error
-        omega = vee(W)
-        phi_dot = p1 + 2 * p2 * t
-        H = euler_H(path(t))
-        assert np.allclose(H @ omega, phi_dot, atol=1e-7, rtol=0)
-        assert np.allclose(np.linalg.solve(H, phi_dot), omega, atol=1e-7, rtol=0)
-        # the same via the exact partials of B.13: R^T sum_k dR/dphi_k phi_dot_k = skew(omega)
-        Wx = R.T @ sum(dR * pd for dR, pd in zip(euler_dR(path(t)), phi_dot))
-        assert np.allclose(vee(Wx), omega, atol=1e-7)
-
-
-@pytest.mark.parametrize("beta", [0.0, 1e-4, -5e-4, math.pi, math.pi - 2e-4, -math.pi + 1e-5,
-                                  2 * math.pi])
-def test_euler_H_singularity_raised_with_body_name(beta):
+@pytest.mark.parametrize("beta", [0.0, 1e-4, -5e-4, math.pi, math.pi - 2e-4, -math.pi + 1e-5, 2 * math.pi])
+def test_euler_singularity_refused_naming_the_body(spatial, beta):
+    """|sin beta| < 1e-3: the core refuses the rates (status 3, "Euler angles singular") naming the
+    body (its index) and |sin beta|."""
+    model, k = spatial
     assert abs(math.sin(beta)) < SIN_BETA_MIN
-    with pytest.raises(EulerSingularity, match="Euler angle singularity of body 'link7'") as exc:
-        euler_H([0.3, beta, -1.2], "link7")
-    assert "link7" in str(exc.value)
-    with pytest.raises(ArithmeticError, match="Euler angle singularity"):  # EulerSingularity is an ArithmeticError
-        euler_H([0.3, beta, -1.2])
+    y = np.r_[0.0, 0.0, 0.0, 0.3, beta, -1.2, np.ones(6)]
+    assert k.evaluate(0.0, y) is None and k.last_status == 3
+    assert k.last_message.startswith("Euler angles singular: body 0 has |sin beta| = ")
+    assert k.last_message.endswith("< 0.001")
 
 
 @pytest.mark.parametrize("beta", [2 * SIN_BETA_MIN, -2 * SIN_BETA_MIN, math.pi - 2 * SIN_BETA_MIN, 0.3])
-def test_euler_H_finite_just_outside_threshold(beta):
-    H = euler_H([0.3, beta, -1.2], "link7")
-    assert np.all(np.isfinite(H))
-    # H^-1 = the body-omega matrix [[sb sg, cg, 0], [sb cg, -sg, 0], [cb, 0, 1]]
-    a, b, g = 0.3, beta, -1.2
-    sb, cb, sg, cg = math.sin(b), math.cos(b), math.sin(g), math.cos(g)
+def test_euler_rates_finite_just_outside_threshold(spatial, beta):
+    """Just outside the threshold the rates are finite and invert the closed-form H^-1."""
+    model, k = spatial
+    omega = np.array([0.3, -0.2, 0.5])
+    qd = rates(k, model, np.r_[0.0, 0.0, 0.0, 0.3, beta, -1.2], np.r_[0.0, 0.0, 0.0, omega])
+    assert np.all(np.isfinite(qd))
+    sb, cb, sg, cg = math.sin(beta), math.cos(beta), math.sin(-1.2), math.cos(-1.2)
     Hinv = np.array([[sb * sg, cg, 0.0], [sb * cg, -sg, 0.0], [cb, 0.0, 1.0]])
-    assert np.allclose(H @ Hinv, np.eye(3), atol=1e-9)
+    assert np.allclose(Hinv @ qd[3:], omega, atol=1e-9)

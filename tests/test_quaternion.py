@@ -13,15 +13,32 @@ import numpy as np
 import pytest
 
 from overcon.cli import main
-from overcon.evaluation import constraints, coordinate_rates, frames, jacobian_h
-from overcon.kinematics import (QUAT_NORM_RATE, euler_R, euler_to_quat, quat_mul, quat_R_rows,
-                                quat_rates_rows, skew)
 from overcon.model import InconsistentInitialState
 from overcon.checks import compile_checked
 from overcon.scene import SceneError, as_scene, load
 from overcon.simulate import Simulation, run, run_scene
 from overcon.spec import BodySpec, JointSpec, LoadSpec, MechanismSpec, SolverSpec
 from overcon.tooling.fmus import inspect_fmu
+
+from test_core_rows import EPS_FD, FD_REL, quat_mul, rates, rx, rz
+from test_kernel import kernel_for, quaternion_spec, spec_of, states
+from test_kernel import quat_of_euler as euler_to_quat
+
+QUAT_NORM_RATE = 1.0
+"""The quaternion norm stabilisation rate k (1/s; README, core/core.h): d|e|^2/dt = k (1 - |e|^2) |e|^2."""
+
+
+def euler_R(angles) -> np.ndarray:
+    """Rotation body -> global of z-x-z Euler angles (paper Eq. 40)."""
+    return rz(angles[0]) @ rx(angles[1]) @ rz(angles[2])
+
+
+def quat_R(e) -> np.ndarray:
+    """The rotation of the quaternion e (scalar first), normalised."""
+    e0, e1, e2, e3 = np.asarray(e, float) / np.linalg.norm(e)
+    return np.array([[e0 * e0 + e1 * e1 - e2 * e2 - e3 * e3, 2 * (e1 * e2 - e0 * e3), 2 * (e1 * e3 + e0 * e2)],
+                     [2 * (e1 * e2 + e0 * e3), e0 * e0 - e1 * e1 + e2 * e2 - e3 * e3, 2 * (e2 * e3 - e0 * e1)],
+                     [2 * (e1 * e3 - e0 * e2), 2 * (e2 * e3 + e0 * e1), e0 * e0 - e1 * e1 - e2 * e2 + e3 * e3]])
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data" / "quaternion"
@@ -36,57 +53,91 @@ def random_angles(rng):
 
 # ------------------------------------------------------------------------------- kinematics
 
-def test_quaternion_R_equals_euler_R():
-    rng = np.random.default_rng(1)
-    angles = np.array([random_angles(rng) for _ in range(50)])
-    e = np.array([euler_to_quat(a) for a in angles])
-    assert np.max(np.abs(np.linalg.norm(e, axis=1) - 1.0)) <= 1e-15
-    R = quat_R_rows(e)
-    assert np.max(np.abs(R - np.array([euler_R(a) for a in angles]))) <= 1e-15
-    # R is orthonormal, det +1; the identity quaternion gives the identity
-    assert np.max(np.abs(np.matmul(R, R.transpose(0, 2, 1)) - np.eye(3))) <= 1e-15
-    assert np.allclose(np.linalg.det(R), 1.0, rtol=0, atol=1e-15)
-    assert np.array_equal(quat_R_rows(np.array([[1.0, 0.0, 0.0, 0.0]]))[0], np.eye(3))
+def euler_and_quaternion_kernels():
+    """The paper's spatial mechanism (spherical joints) in z-x-z angles and in quaternions: (model,
+    kernel) of each."""
+    out = []
+    for spec in (spec_of("spatial_none_wo5"), quaternion_spec(spec_of("spatial_none_wo5"))):
+        model = compile_checked(spec)
+        out.append((model, kernel_for(model, spec.solver)))
+    return out
+
+
+def as_quaternions(q_euler, nb) -> np.ndarray:
+    return np.concatenate([np.r_[q_euler[6 * b: 6 * b + 3], euler_to_quat(q_euler[6 * b + 3: 6 * b + 6])]
+                           for b in range(nb)])
+
+
+def test_quaternion_and_euler_rows_agree():
+    """The core's rotation of a quaternion is that of the z-x-z angles it was made from: Phi,
+    Phi_h and gamma of the paper's spatial mechanism agree to round-off (1e-13 relative) between
+    the two rotations at random states (the same h: body-axis angular velocities)."""
+    (me, ke), (mq, kq) = euler_and_quaternion_kernels()
+    for y in states(me, 10, seed=1):
+        q, h = y[: me.n], y[me.n:]
+        yq = np.concatenate([as_quaternions(q, me.nb), h])
+        for a, b in zip(ke.rows(y), kq.rows(yq)):
+            assert np.max(np.abs(a - b)) <= 1e-13 * max(1.0, float(np.max(np.abs(a))))
 
 
 def test_quaternion_R_uses_the_normalised_quaternion():
+    """Scaling a body's quaternion changes none of the core's rows (R(e / |e|))."""
+    _, (mq, kq) = euler_and_quaternion_kernels()
     rng = np.random.default_rng(2)
-    e = rng.normal(size=(20, 4))
-    scale = rng.uniform(0.5, 2.0, size=(20, 1))
-    assert np.max(np.abs(quat_R_rows(e * scale) - quat_R_rows(e))) <= 1e-15
+    for y in states(mq, 5, seed=2):
+        z = y.copy()
+        for b in range(mq.nb):
+            z[7 * b + 3: 7 * b + 7] *= rng.uniform(0.5, 2.0)
+        for a, c in zip(kq.rows(y), kq.rows(z)):
+            assert np.max(np.abs(a - c)) <= 1e-14 * max(1.0, float(np.max(np.abs(a))))
 
 
-def test_quaternion_product_composes_rotations():
+def test_quaternion_of_euler_composes_rotations():
+    """The test's conversion (z-x-z angles to the quaternion product of the elementary rotations)
+    gives the Euler angles' rotation, orthonormal; the product composes rotations."""
     rng = np.random.default_rng(3)
-    a, b = euler_to_quat(random_angles(rng)), euler_to_quat(random_angles(rng))
-    R = quat_R_rows(np.array([a, b, quat_mul(a, b)]))
-    assert np.max(np.abs(R[0] @ R[1] - R[2])) <= 1e-15
+    for _ in range(20):
+        a, b = random_angles(rng), random_angles(rng)
+        ea, eb = euler_to_quat(a), euler_to_quat(b)
+        assert abs(np.linalg.norm(ea) - 1.0) <= 1e-15
+        assert np.max(np.abs(quat_R(ea) - euler_R(a))) <= 1e-15
+        assert np.max(np.abs(quat_R(ea) @ quat_R(eb) - quat_R(quat_mul(ea, eb)))) <= 1e-15
 
 
 def test_quaternion_rates_by_finite_differences_of_R():
-    """e' = 1/2 e (x) (0, omega) with omega in body axes: d/dt R(e) = R skew(omega)."""
+    """The core's rates of a unit quaternion, e' = 1/2 e (x) (0, omega) with omega in body axes:
+    d/dt R(e) = R skew(omega) by central differences, and e . e' = 0."""
+    _, (mq, kq) = euler_and_quaternion_kernels()
     rng = np.random.default_rng(4)
-    eps = 1e-6
-    for _ in range(20):
-        e = euler_to_quat(random_angles(rng))
-        w = rng.normal(size=3) * 2.0
-        ed = quat_rates_rows(e[None], w[None])[0]
-        fd = (quat_R_rows((e + eps * ed)[None])[0] - quat_R_rows((e - eps * ed)[None])[0]) / (2 * eps)
-        R = quat_R_rows(e[None])[0]
-        assert np.max(np.abs(fd - R @ skew(w))) <= 1e-8
-        assert abs(e @ ed) <= 1e-15  # a unit quaternion keeps its norm
+    for y in states(mq, 10, seed=4):
+        q, h = y[: mq.n].copy(), 2.0 * rng.normal(size=mq.nh)
+        for b in range(mq.nb):
+            q[7 * b + 3: 7 * b + 7] /= np.linalg.norm(q[7 * b + 3: 7 * b + 7])
+        qd = rates(kq, mq, q, h)
+        for b in range(mq.nb):
+            e, ed, w = q[7 * b + 3: 7 * b + 7], qd[7 * b + 3: 7 * b + 7], h[6 * b + 3: 6 * b + 6]
+            fd = (quat_R(e + EPS_FD * ed) - quat_R(e - EPS_FD * ed)) / (2 * EPS_FD)
+            W = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+            assert np.max(np.abs(fd - quat_R(e) @ W)) <= FD_REL * max(1.0, float(np.max(np.abs(w))))
+            assert abs(e @ ed) <= 1e-15 * max(1.0, float(np.max(np.abs(w))))
 
 
 def test_quaternion_norm_stabilisation_is_radial():
-    """The stabilisation term: d|e|^2/dt = k (1 - |e|^2) |e|^2 (an identity), along e only."""
+    """The core's rates off the unit sphere: d|e|^2/dt = k (1 - |e|^2) |e|^2 (k = QUAT_NORM_RATE),
+    and the difference from 1/2 e (x) (0, omega) lies along e."""
+    _, (mq, kq) = euler_and_quaternion_kernels()
     rng = np.random.default_rng(5)
-    e = rng.normal(size=(10, 4))
-    w = rng.normal(size=(10, 3))
-    ed = quat_rates_rows(e, w)
-    n2 = np.einsum("ij,ij->i", e, e)
-    assert np.allclose(2 * np.einsum("ij,ij->i", e, ed), QUAT_NORM_RATE * (1 - n2) * n2, rtol=1e-13, atol=1e-15)
-    assert np.allclose(ed - quat_rates_rows(e, w, rate=0.0), (0.5 * QUAT_NORM_RATE * (1 - n2))[:, None] * e,
-                       rtol=1e-13, atol=1e-15)
+    q = mq.q0.copy()
+    for b in range(mq.nb):
+        q[7 * b + 3: 7 * b + 7] = rng.normal(size=4)
+    h = rng.normal(size=mq.nh)
+    qd = rates(kq, mq, q, h)
+    for b in range(mq.nb):
+        e, ed, w = q[7 * b + 3: 7 * b + 7], qd[7 * b + 3: 7 * b + 7], h[6 * b + 3: 6 * b + 6]
+        n2 = e @ e
+        assert 2 * (e @ ed) == pytest.approx(QUAT_NORM_RATE * (1 - n2) * n2, rel=1e-13, abs=1e-15)
+        extra = ed - 0.5 * quat_mul(e, np.r_[0.0, w])
+        assert np.max(np.abs(extra - 0.5 * QUAT_NORM_RATE * (1 - n2) * e)) <= 1e-14 * max(1.0, n2)
 
 
 def test_euler_to_quaternion_of_every_orientation_including_the_euler_singularity():
@@ -113,19 +164,20 @@ def pendulum_mech(rotation: str, angles, w_body, *, force=(1.0, 0.0, 0.0), s_i=(
 
 
 def test_jacobian_times_h_is_the_rate_of_phi_along_the_quaternion_flow():
-    """Phi_h h = d/dt Phi(q) with q' = coordinate_rates(q, h) (finite differences), at a
+    """The core's Phi_h h = d/dt Phi(q) with q' its coordinate rates (central differences), at a
     configuration off the constraints too."""
     rng = np.random.default_rng(6)
-    model = compile_checked(as_scene(pendulum_mech("quaternion", random_angles(rng), rng.normal(size=3))),
-                          check_initial=False)
+    scene = as_scene(pendulum_mech("quaternion", random_angles(rng), rng.normal(size=3)))
+    model = compile_checked(scene, check_initial=False)
+    k = kernel_for(model, scene.solver)
     for _ in range(5):
         q = model.q0 + 0.1 * rng.normal(size=model.n)
         q[3:] /= np.linalg.norm(q[3:])
         h = rng.normal(size=model.nh)
-        qd = coordinate_rates(model, q, h)
+        qd = rates(k, model, q, h)
         eps = 1e-6
-        fd = (constraints(model, frames(model, q + eps * qd)) - constraints(model, frames(model, q - eps * qd))) / (2 * eps)
-        assert np.max(np.abs(jacobian_h(model, frames(model, q, h)) @ h - fd)) <= 1e-8
+        fd = (k.rows(np.r_[q + eps * qd, h])[0] - k.rows(np.r_[q - eps * qd, h])[0]) / (2 * eps)
+        assert np.max(np.abs(k.rows(np.r_[q, h])[1] @ h - fd)) <= 1e-8
 
 
 def test_model_splits_coordinates_and_velocities():
@@ -186,7 +238,7 @@ def test_euler_and_quaternion_give_the_same_motion():
     # the orientations agree too: R from the Euler angles against R from the quaternion outputs
     ang = np.column_stack([out["euler_zxz"].column(f"rod.{c}") for c in ("alpha", "beta", "gamma")])
     quat = np.column_stack([out["quaternion"].column(f"rod.e{k}") for k in range(4)])
-    assert np.max(np.abs(np.array([euler_R(x) for x in ang]) - quat_R_rows(quat))) <= 1e-6
+    assert np.max(np.abs(np.array([euler_R(x) for x in ang]) - np.array([quat_R(e) for e in quat]))) <= 1e-6
     assert np.max(np.abs(a[-1] - a[0])) > 0.1  # the rod did move
 
 
@@ -208,7 +260,7 @@ def test_torque_free_asymmetric_body_conserves_energy_momentum_and_quaternion_no
 
     def invariants(y):
         e, w = y[3:7], y[10:13]
-        L = quat_R_rows(e[None])[0] @ (J * w)
+        L = quat_R(e) @ (J * w)
         return 0.5 * w @ (J * w), L, np.linalg.norm(e)
 
     T0, L0, _ = invariants(np.concatenate([model.q0, model.h0]))

@@ -1,10 +1,10 @@
-"""Spatial revolute, prismatic, cylindrical, universal and fixed joints: derivatives by finite
-differences, row order, reactions, initial consistency, simulations, the pre-check on the test
-mechanisms of tests/data/spatial, friction (dissipation, symmetry, hand computations) and the FMU
+"""Spatial revolute, prismatic, cylindrical, universal and fixed joints in the compiled core:
+derivatives by finite differences of its Phi, row order and the rows' formulas, reactions,
+initial consistency, simulations, the pre-check on the test mechanisms of tests/data/spatial,
+friction (dissipation, symmetry, hand computations from the reaction outputs) and the FMU
 description."""
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import re
@@ -15,17 +15,20 @@ import numpy as np
 import pytest
 from compiled import compiled_models
 
-from overcon import cli, evaluation as ev
-from overcon.evaluation import Frames
-from overcon.friction_laws import make_law
+from overcon import cli
 from overcon.joints import TYPES, names, resolve
-from overcon.joints.spatial_rows import completion
-from overcon.kinematics import SIN_BETA_MIN, euler_R
 from overcon.model import InconsistentInitialState
 from overcon.checks import compile_checked
 from overcon.scene import SceneError, as_scene, load
 from overcon.simulate import run
-from overcon.spec import FrictionSpec
+from overcon.spec import SolverSpec
+
+from test_core_rows import (EQ_REL, FD_REL, applied_forces, check_friction_at, consistent, equation_residuals,
+                            friction_law, rotation, rows_fd_errors, rx, rz, solve)
+from test_kernel import kernel_for
+
+SIN_BETA_MIN = 1e-3
+"""|sin beta| below which z-x-z Euler angles are singular (the core's OVK_EULER threshold)."""
 
 DATA = Path(__file__).parent / "data" / "spatial"
 SEEDS = [0, 1, 2]
@@ -42,32 +45,23 @@ def _fmt(v) -> str:
     return "[" + ", ".join(repr(float(x)) for x in np.atleast_1d(v)) + "]"
 
 
-def rodrigues(w: np.ndarray) -> np.ndarray:
-    """exp(skew(w)) (3x3)."""
-    th = float(np.linalg.norm(w))
-    if th == 0.0:
-        return np.eye(3)
-    k = w / th
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
+def euler_R(angles) -> np.ndarray:
+    """Rotation body -> global of z-x-z Euler angles (paper Eq. 40)."""
+    return rz(angles[0]) @ rx(angles[1]) @ rz(angles[2])
+
+
+def completion(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) completing the unit axis a to a right-handed frame (docs/joint-friction.md): x is
+    the standard basis vector least aligned with a (the first on ties) made orthogonal to a,
+    y = a x x."""
+    e = np.eye(3)[int(np.argmin(np.abs(a)))]
+    x = e - (e @ a) * a
+    x /= np.linalg.norm(x)
+    return x, np.cross(a, x)
 
 
 def random_rotation(rng) -> np.ndarray:
     return euler_R((rng.uniform(-3, 3), rng.uniform(0.4, 2.7), rng.uniform(-3, 3)))
-
-
-def make_frames(r, R, v, w) -> Frames:
-    """Frames of the moving bodies (arrays (nb, ...)) with the base appended as slot -1."""
-    nb = len(r)
-    return Frames(r=np.vstack([r, np.zeros((1, 3))]), R=np.concatenate([R, np.eye(3)[None]]),
-                  v=np.vstack([v, np.zeros((1, 3))]), w=np.vstack([w, np.zeros((1, 3))]),
-                  angles=np.zeros((nb + 1, 3)))
-
-
-def moved(r, R, v, w, t) -> Frames:
-    """Frames after moving for a time t with constant h = (v, w): r + t v, R exp(t skew(w))."""
-    Rt = np.array([Rk @ rodrigues(t * wk) for Rk, wk in zip(R, w)])
-    return make_frames(r + t * v, Rt, v, w)
 
 
 def joint_lines(name, jtype, bi, bj, s_i, s_j, a_i=None, a_j=None, friction=None) -> list[str]:
@@ -95,15 +89,21 @@ def random_q0(rng):
     return np.r_[rng.uniform(-1, 1, 3), rng.uniform(-3, 3), rng.uniform(0.4, 2.7), rng.uniform(-3, 3)]
 
 
-def write_single_type(tmp: Path, jtype: str, seed: int) -> Path:
+def write_single_type(tmp: Path, jtype: str, seed: int, friction: str | None = None) -> Path:
     """Two bodies and three joints of one type, (b1, base), (b1, b2), (base, b2), with random
-    points and axes and random q0 (not assembled: derivatives only)."""
+    points and axes and random q0 (not assembled: derivatives only); with ``friction`` (a
+    friction table's lines) only two of them (the pair left out chosen by the seed: three axis
+    joints hold two bodies fixed), each with that friction."""
     rng = np.random.default_rng(seed)
     joints = []
-    for k, (bi, bj) in enumerate((("b1", "base"), ("b1", "b2"), ("base", "b2"))):
+    pairs = [("b1", "base"), ("b1", "b2"), ("base", "b2")]
+    if friction is not None:
+        del pairs[seed % 3]
+    for k, (bi, bj) in enumerate(pairs):
         axes = (rng.normal(size=3), rng.normal(size=3))
-        joints.append(joint_lines(f"J{k}", jtype, bi, bj, rng.uniform(-1, 1, 3), rng.uniform(-1, 1, 3), *axes))
-    path = tmp / f"single_{jtype}_{seed}.toml"
+        joints.append(joint_lines(f"J{k}", jtype, bi, bj, rng.uniform(-1, 1, 3), rng.uniform(-1, 1, 3), *axes,
+                                  friction=friction))
+    path = tmp / f"single_{jtype}_{seed}{'_f' if friction is not None else ''}.toml"
     path.write_text(mechanism_text(f"single_{jtype}", [("b1", random_q0(rng)), ("b2", random_q0(rng))], joints))
     return path
 
@@ -113,10 +113,11 @@ def single(tmp_path_factory):
     return compiled_models(tmp_path_factory.mktemp("spatial_single"), write_single_type)
 
 
-def random_state(rng, nb=2):
-    r = rng.uniform(-1, 1, (nb, 3))
-    R = np.array([random_rotation(rng) for _ in range(nb)])
-    return r, R, rng.normal(size=(nb, 3)), rng.normal(size=(nb, 3))
+def random_state(rng, nb=2) -> np.ndarray:
+    """A random y (Euler angles, h with angular velocities in body axes) of nb bodies."""
+    q = np.concatenate([np.r_[rng.uniform(-1, 1, 3), rng.uniform(-3, 3), rng.uniform(0.4, 2.7), rng.uniform(-3, 3)]
+                        for _ in range(nb)])
+    return np.concatenate([q, rng.normal(size=6 * nb)])
 
 
 # ----------------------------------------------------------------------------- type resolution
@@ -148,51 +149,19 @@ def test_type_not_allowed_names_the_field(tmp_path):
 
 # ----------------------------------------------------------------------------- derivatives
 
-def _fd_jacobian(model, r, R, v, w, eps=1e-4):
-    """Phi_h h by central differences of Phi along the motion (4th order)."""
-    def phi(t):
-        return ev.constraints(model, moved(r, R, v, w, t))
-    return (-phi(2 * eps) + 8 * phi(eps) - 8 * phi(-eps) + phi(-2 * eps)) / (12 * eps)
-
-
-def _fd_second(model, r, R, v, w, eps=1e-3):
-    def phi(t):
-        return ev.constraints(model, moved(r, R, v, w, t))
-    return (-phi(2 * eps) + 16 * phi(eps) - 30 * phi(0.0) + 16 * phi(-eps) - phi(-2 * eps)) / (12 * eps ** 2)
-
-
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("jtype", AXIS_TYPES)
 def test_jacobian_and_gamma_by_finite_differences(single, jtype, seed):
+    """The core's Phi_h (column by column) and gamma against central differences of its Phi along
+    the coordinate rates (tests/test_core_rows.py: FD_REL), the base as body i and as body j."""
     model = single(jtype, seed)
     assert [TYPES[c.type].name for c in model.joints] == [jtype] * 3
     assert model.m == 3 * N_ROWS[jtype]
+    k = kernel_for(model, SolverSpec())
     rng = np.random.default_rng(100 + seed)
     for _ in range(3):
-        r, R, v, w = random_state(rng)
-        f = make_frames(r, R, v, w)
-        h = np.concatenate([np.r_[v[b], w[b]] for b in range(2)])
-        J = ev.jacobian_h(model, f)
-        np.testing.assert_allclose(J @ h, _fd_jacobian(model, r, R, v, w), rtol=0, atol=1e-9)
-        np.testing.assert_allclose(ev.gamma(model, f), -_fd_second(model, r, R, v, w), rtol=0, atol=1e-7)
-
-
-@pytest.mark.parametrize("jtype", AXIS_TYPES)
-def test_batch_equals_single_joints_bit_for_bit(single, jtype):
-    """A joint gets the same numbers in its type's batch as alone (Model.plan.single)."""
-    model = single(jtype, 0)
-    rng = np.random.default_rng(7)
-    f = make_frames(*random_state(rng))
-    (group,) = model.plan.groups
-    mod = group.module
-    fi = rng.normal(size=(3, 6))
-    batch = [mod.phi(group.data, f), *mod.jac_h(group.data, f), mod.gamma(group.data, f),
-             mod.reaction(group.data, f, fi)]
-    for n, c in enumerate(model.joints):
-        d = model.plan.single[c.index]
-        one = [mod.phi(d, f), *mod.jac_h(d, f), mod.gamma(d, f), mod.reaction(d, f, fi[n:n + 1])]
-        for b, o in zip(batch, one):
-            np.testing.assert_array_equal(b[n], o[0])
+        eJ, eg = rows_fd_errors(k, model, random_state(rng))
+        assert eJ <= FD_REL and eg <= FD_REL, (eJ, eg)
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -206,13 +175,16 @@ def test_rows_in_the_contract_order(tmp_path, seed):
     joints = [joint_lines("S", "spherical", "b1", "b2", s_i, s_j)]
     joints += [joint_lines(t[0].upper(), t, "b1", "b2", s_i, s_j, a_i, a_j) for t in AXIS_TYPES]
     (tmp_path / "all.toml").write_text(mechanism_text("all", [("b1", random_q0(rng)), ("b2", random_q0(rng))], joints))
-    model = compile_checked(as_scene(load(tmp_path / "all.toml")), check_initial=False)
+    spec = as_scene(load(tmp_path / "all.toml"))
+    model = compile_checked(spec, check_initial=False)
+    k = kernel_for(model, spec.solver)
     rows = {TYPES[c.type].name: list(c.rows) for c in model.joints}
     assert {k: len(v) for k, v in rows.items()} == N_ROWS
     for _ in range(3):
-        r, R, v, w = random_state(rng)
-        f = make_frames(r, R, v, w)
-        phi, J, g = ev.constraints(model, f), ev.jacobian_h(model, f), ev.gamma(model, f)
+        y = random_state(rng)
+        phi, J, g = k.rows(y)
+        r = [y[0:3], y[6:9]]
+        R = [rotation(model, y, 0), rotation(model, y, 1)]
         for x in (phi, J, g):
             sel = {k: x[v] for k, v in rows.items()}
             np.testing.assert_array_equal(sel["revolute"][:3], sel["spherical"])
@@ -222,7 +194,7 @@ def test_rows_in_the_contract_order(tmp_path, seed):
             np.testing.assert_array_equal(sel["fixed"][:5], sel["revolute"])
             np.testing.assert_array_equal(sel["fixed"][5], sel["prismatic"][4])
         # the formulas of the rows, written out
-        Ri, Rj = R[0], R[1]
+        Ri, Rj = R
         ai, aj = a_i / np.linalg.norm(a_i), a_j / np.linalg.norm(a_j)
         b1, b2 = completion(aj)
         d = r[0] + Ri @ s_i - r[1] - Rj @ s_j
@@ -236,6 +208,8 @@ def test_rows_in_the_contract_order(tmp_path, seed):
 
 
 def test_completion_rule():
+    """The completion rule as docs/joint-friction.md states it (the helper test_rows_in_the_contract_order
+    and test_reaction_components hold the core to)."""
     b1, b2 = completion(np.array([0.0, 0.0, 1.0]))
     np.testing.assert_array_equal(b1, [1.0, 0.0, 0.0])  # e1 and e2 tie: the first
     np.testing.assert_array_equal(b2, [0.0, 1.0, 0.0])
@@ -290,12 +264,14 @@ def test_reaction_components(tmp_path, jtype, seed):
     text = mechanism_text("pair", [("b1", q[0]), ("b2", q[1])],
                           [joint_lines("X", jtype, "b1", "b2", s_i, s_j, a_i, a_j)])
     (tmp_path / "pair.toml").write_text(text)
-    model = compile_checked(as_scene(load(tmp_path / "pair.toml")))  # assembled: q0 accepted
+    spec = as_scene(load(tmp_path / "pair.toml"))
+    model = compile_checked(spec)  # assembled: q0 accepted
     c = model.joints[0]
     comps = TYPES[c.type].reaction_components
-    f = ev.frames(model, model.q0, model.h0)
-    J = ev.jacobian_h(model, f)
-    R1 = f.R[0]
+    k = kernel_for(model, spec.solver)
+    y0 = np.concatenate([model.q0, model.h0])
+    J = k.rows(y0)[1]
+    R1 = rotation(model, model.q0, 0)
     x, y = completion(a_i)
     E = np.column_stack([x, y, a_i])
     for _ in range(5):
@@ -304,8 +280,8 @@ def test_reaction_components(tmp_path, jtype, seed):
         F, T = -fi[:3], -fi[3:]
         F_body = R1.T @ F
         full = dict(zip(("Fx", "Fy", "Fz", "Tx", "Ty", "Tz"), np.r_[E.T @ F_body, E.T @ (T - np.cross(s_i, F_body))]))
-        out = ev.physical_reaction(model, c, f, lam)
-        assert len(out) == len(comps) + 3
+        out = k.outputs(y0, lam)[0][0, : len(comps) + 3]
+        assert len(c.components) == len(comps) + 3
         np.testing.assert_allclose(out[:len(comps)], [full[k] for k in comps], atol=1e-12)
         np.testing.assert_allclose(out[len(comps):], F, atol=1e-12)
         left_out = [k for k in full if k not in comps]
@@ -319,14 +295,16 @@ def test_fixed_joint_axes_optional(tmp_path):
     s_i, s_j, a_i, a_j, q, _ = assembled_pair(rng, "fixed")
     (tmp_path / "f.toml").write_text(mechanism_text("f", [("b1", q[0]), ("b2", q[1])],
                                                     [joint_lines("X", "fixed", "b1", "b2", s_i, s_j)]))
-    model = compile_checked(as_scene(load(tmp_path / "f.toml")))
+    spec = as_scene(load(tmp_path / "f.toml"))
+    model = compile_checked(spec)
     p = model.joints[0].p
     np.testing.assert_array_equal(p["a_i"], [0.0, 0.0, 1.0])
     np.testing.assert_array_equal(p["E"], np.eye(3))  # the joint frame is body i's axes
-    f = ev.frames(model, model.q0)
-    np.testing.assert_allclose(f.R[0] @ p["a_i"], f.R[1] @ p["a_j"], atol=1e-15)
+    np.testing.assert_allclose(rotation(model, model.q0, 0) @ p["a_i"], rotation(model, model.q0, 1) @ p["a_j"],
+                               atol=1e-15)
     # the relative rotation is frozen: rank 6 and the single body pair has no DOF
-    assert np.linalg.matrix_rank(ev.jacobian_h(model, f)) == 6
+    k = kernel_for(model, spec.solver)
+    assert np.linalg.matrix_rank(k.rows(np.concatenate([model.q0, model.h0]))[1]) == 6
     # given axes that are not parallel at q0 are refused like any other constraint
     bad = mechanism_text("f", [("b1", q[0]), ("b2", q[1])],
                          [joint_lines("X", "fixed", "b1", "b2", s_i, s_j, a_i, np.cross(a_j, [0.3, 1, 0]))])
@@ -506,8 +484,8 @@ def test_door_swings_and_stays_on_its_constraints():
     res = run(model, scene.solver, output_interval=0.05)
     assert res.max_drift <= 1e-8
     q_end = np.array([res.column(f"door.{c}")[-1] for c in ("x", "y", "z", "alpha", "beta", "gamma")])
-    f = ev.frames(model, q_end)
-    assert np.abs(ev.constraints(model, f)).max() <= 1e-8
+    phi = kernel_for(model, scene.solver).rows(np.concatenate([q_end, model.h0]))[0]
+    assert np.abs(phi).max() <= 1e-8
     assert np.linalg.norm(q_end[:3] - model.q0[:3]) > 0.05  # it swung
 
 
@@ -562,51 +540,41 @@ def test_incline_friction_gives_the_textbook_acceleration():
 
 # ----------------------------------------------------------------------------- friction
 
-LAWS = {"regularised": dict(), "stribeck": dict(law="stribeck", mu_static=0.5, v_stribeck=0.01)}
-
-
-def law_for(jtype, mu=0.3, **kw):
-    jt = TYPES[resolve("spatial", jtype)]
-    spec = FrictionSpec(mu=mu, size=0.05, v_reg=1e-3,
-                        extra=tuple((k, 0.2 + 0.1 * n) for n, k in enumerate(jt.friction_extra)), **kw)
-    return make_law(spec, jt.friction_sizes(spec))
-
-
-def friction_of(c, f, lam, law):
-    """(Qi, Qj, output) of joint c with ``law`` at the multipliers lam (all m)."""
-    d = c.module.stack([dataclasses.replace(c, law=law)])
-    ctx = c.module.friction_setup(d, f)
-    lam_x = lam[list(c.rows)][None, :]
-    Qi, Qj = c.module.friction(d, ctx, lam_x)
-    return Qi[0], Qj[0], float(c.module.friction_force(d, ctx, lam_x)[0])
-
-
-def power(c, f, Qi, Qj):
-    P = 0.0
-    for b, Q in ((c.bi, Qi), (c.bj, Qj)):
-        if b >= 0:
-            P += Q @ np.r_[f.v[b], f.w[b]]
-    return P
+LAWS = {"regularised": "", "stribeck": 'law = "stribeck"\nmu_static = 0.5\nv_stribeck = 0.01'}
 
 
 @pytest.mark.parametrize("law", list(LAWS))
 @pytest.mark.parametrize("jtype", FRICTION_TYPES)
-def test_friction_dissipates(single, jtype, law):
-    lawobj = law_for(jtype, **LAWS[law])
+def test_friction_dissipates(tmp_path, jtype, law):
+    """Two joints with friction on two bodies (the base as body i or j, or two moving bodies), at
+    random states moved onto the constraints, velocities scaled into the laws' linear part too:
+    the outputs are their law at the returned multipliers (docs/joint-friction.md), and the
+    friction forces' power in the equations of motion, h . (M h' + Phi_h^T lam - Q), is the
+    outputs' and <= 0 (tests/test_core_rows.py), < 0 somewhere."""
+    table = FRICTION_TABLE[jtype] + ("\n" + LAWS[law] if LAWS[law] else "")
     n_negative = 0
     for seed in SEEDS:
-        model = single(jtype, seed)
+        spec = as_scene(load(write_single_type(tmp_path, jtype, seed, table)), friction=["J0", "J1"],
+                        friction_outputs="all")
+        model = compile_checked(spec, check_initial=False)
+        assert [c.law.name for c in model.joints] == [law] * 2
+        k = kernel_for(model, spec.solver)
         rng = np.random.default_rng(400 + seed)
-        for _ in range(20):
-            r, R, v, w = random_state(rng)
-            scale = 10.0 ** rng.uniform(-5, 0)  # reach the linear part of the regularised law
-            f = make_frames(r, R, v * scale, w * scale)
-            lam = rng.normal(size=model.m) * 10
-            for c in model.joints:
-                Qi, Qj, _ = friction_of(c, f, lam, lawobj)
-                P = power(c, f, Qi, Qj)
-                assert P <= 1e-12, (c.name, P)
-                n_negative += P < -1e-12
+        for _ in range(8):
+            y, assembled = consistent(k, model, random_state(rng))
+            if not assembled:
+                continue
+            y[12:] *= 10.0 ** rng.uniform(-5, 0)  # reach the linear part of the regularised law
+            got = solve(k, y)
+            if got is None:
+                continue
+            Qf = equation_residuals(k, model, spec.solver, y, got)[0]
+            power = check_friction_at(k, model, spec, y, got)
+            h = y[12:]
+            P = float(h @ Qf)
+            scale = max(1.0, float(np.max(np.abs(applied_forces(model, y))))) * max(1.0, float(np.max(np.abs(h))))
+            assert abs(P - power) <= EQ_REL * scale and P <= EQ_REL * scale, (P, power)
+            n_negative += power < -1e-9 * scale
     assert n_negative > 0
 
 
@@ -614,22 +582,21 @@ def pair_model(tmp_path, jtype, seed):
     """Bodies b1, b2 assembled for two joints of ``jtype``: X (b1, b2) and Y (b2, b1), the same
     joint with i and j (points, axes) swapped; the joint points coincide (the contact geometry
     of a guide is attached to body i: with P_i != P_j the two descriptions are different
-    guides)."""
+    guides). (spec, model, kernel, rng, the joint's constants)."""
     rng = np.random.default_rng(500 + seed)
     s_i, s_j, a_i, a_j, q, u = assembled_pair(rng, jtype, slide=False)
     fr = FRICTION_TABLE[jtype]
     joints = [joint_lines("X", jtype, "b1", "b2", s_i, s_j, a_i, a_j, fr),
               joint_lines("Y", jtype, "b2", "b1", s_j, s_i, a_j, a_i, fr)]
     (tmp_path / "pair.toml").write_text(mechanism_text("pair", [("b1", q[0]), ("b2", q[1])], joints))
-    scene = as_scene(load(tmp_path / "pair.toml"), friction=["X", "Y"])
+    scene = as_scene(load(tmp_path / "pair.toml"), friction=["X", "Y"], friction_outputs="all")
     model = compile_checked(scene, check_initial=False)
-    return model, rng
+    return scene, model, kernel_for(model, scene.solver), rng, (s_i, s_j, a_i, a_j)
 
 
-def _swap_multipliers(model, f, lam_x):
+def _swap_multipliers(model, J, lam_x):
     """Multipliers of Y whose reaction on its body i (b2) is X's reaction on b2."""
     X, Y = model.joints
-    J = ev.jacobian_h(model, f)
     fj = J[list(X.rows), 6:].T @ lam_x
     JY = J[list(Y.rows), 6:]
     lam_y, *_ = np.linalg.lstsq(JY.T, fj, rcond=None)
@@ -637,107 +604,118 @@ def _swap_multipliers(model, f, lam_x):
     return lam_y
 
 
+def _rotated(q, Q) -> np.ndarray:
+    """The configuration q (Euler angles) turned as a whole by the rotation Q about the origin."""
+    out = q.copy()
+    for b in range(len(q) // 6):
+        out[6 * b: 6 * b + 3] = Q @ q[6 * b: 6 * b + 3]
+        out[6 * b + 3: 6 * b + 6] = _euler_of(Q @ euler_R(q[6 * b + 3: 6 * b + 6]))
+    return out
+
+
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("jtype", FRICTION_TYPES)
 def test_friction_symmetry(tmp_path, jtype, seed):
-    model, rng = pair_model(tmp_path, jtype, seed)
+    """The core's friction output of one joint described from either body: at multipliers giving
+    the same reaction, Y's output is -X's (signed: revolute, prismatic) or X's (cylindrical's
+    magnitude); it is odd in the relative velocity, and unchanged when the whole configuration
+    turns (reaction components and speeds are relative)."""
+    spec, model, k, rng, _ = pair_model(tmp_path, jtype, seed)
     X, Y = model.joints
-    law = X.law
-    f0 = ev.frames(model, model.q0)
-    # a velocity that keeps the joint (null space of X's rows), so the joint stays assembled
-    J = ev.jacobian_h(model, f0)[list(X.rows)]
+    y0 = np.concatenate([model.q0, np.zeros(12)])
+    J = k.rows(y0)[1]
+    JX = J[list(X.rows)]
     h = rng.normal(size=12)
-    h -= np.linalg.pinv(J) @ (J @ h)
-    f = ev.frames(model, model.q0, h * 0.01)
+    h -= np.linalg.pinv(JX) @ (JX @ h)  # a velocity that keeps the joint
+    y = np.concatenate([model.q0, h * 0.01])
     lam = np.zeros(model.m)
     lam[list(X.rows)] = rng.normal(size=len(X.rows)) * 10
-    lam[list(Y.rows)] = _swap_multipliers(model, f, lam[list(X.rows)])
-    QiX, QjX, outX = friction_of(X, f, lam, law)
-    QiY, QjY, outY = friction_of(Y, f, lam, law)
-    assert np.abs(QiX).max() > 1e-6
-    np.testing.assert_allclose(QiY, QjX, atol=1e-9)  # on b2
-    np.testing.assert_allclose(QjY, QiX, atol=1e-9)  # on b1
+    lam[list(Y.rows)] = _swap_multipliers(model, J, lam[list(X.rows)])
+    outX, outY = k.outputs(y, lam)[1].copy()
+    assert abs(outX) > 1e-6
     assert outY == pytest.approx(outX if jtype == "cylindrical" else -outX, abs=1e-9)
-    # odd in the relative velocity
-    fneg = ev.frames(model, model.q0, -h * 0.01)
-    QiN, QjN, outN = friction_of(X, fneg, lam, law)
-    np.testing.assert_allclose(QiN, -QiX, atol=1e-12)
-    np.testing.assert_allclose(QjN, -QjX, atol=1e-12)
-    # rotating the whole configuration rotates the result (global force rotates, body torque not)
+    outN = k.outputs(np.concatenate([model.q0, -h * 0.01]), lam)[1][0]
+    assert outN == pytest.approx(outX if jtype == "cylindrical" else -outX, abs=1e-12)
     Q = random_rotation(rng)
-    fr = Frames(r=f.r @ Q.T, R=np.einsum("ab,kbc->kac", Q, f.R), v=f.v @ Q.T, w=f.w, angles=f.angles)
-    fr.r[-1] = 0.0
-    fr.R[-1] = np.eye(3)
-    fr.v[-1] = 0.0
     lam_r = lam.copy()
     if jtype == "revolute":  # point rows are global components
         for c in model.joints:
             lam_r[list(c.rows)[:3]] = Q @ lam[list(c.rows)[:3]]
-    QiR, QjR, outR = friction_of(X, fr, lam_r, law)
-    np.testing.assert_allclose(QiR[:3], Q @ QiX[:3], atol=1e-9)
-    np.testing.assert_allclose(QiR[3:], QiX[3:], atol=1e-9)
-    np.testing.assert_allclose(QjR[:3], Q @ QjX[:3], atol=1e-9)
-    np.testing.assert_allclose(QjR[3:], QjX[3:], atol=1e-9)
+    h_r = h.copy()
+    for b in range(2):
+        h_r[6 * b: 6 * b + 3] = Q @ h[6 * b: 6 * b + 3]  # global velocities turn, body-axis ones not
+    outR = k.outputs(np.concatenate([_rotated(model.q0, Q), h_r * 0.01]), lam_r)[1][0]
     assert outR == pytest.approx(outX, rel=1e-9, abs=1e-12)
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("jtype", FRICTION_TYPES)
 def test_friction_output_by_hand(tmp_path, jtype, seed):
-    """The output <joint>.friction from the reported reaction by the formulas of
-    docs/joint-friction.md, and the friction's force and torque about the axis."""
-    model, rng = pair_model(tmp_path, jtype, seed)
+    """The output <joint>.friction at random multipliers and velocities from the reported reaction
+    by the formulas of docs/joint-friction.md, written out here (sizes of FRICTION_TABLE, the
+    revolute collar radius defaulting to the radius), and the same by test_core_rows.friction_law."""
+    spec, model, k, rng, (s_i, s_j, a_i, a_j) = pair_model(tmp_path, jtype, seed)
     X = model.joints[0]
     h = rng.normal(size=12) * 0.01
-    f = ev.frames(model, model.q0, h)
+    y = np.concatenate([model.q0, h])
     lam = rng.normal(size=model.m) * 10
-    p = dict(zip(TYPES[X.type].reaction_components, ev.physical_reaction(model, X, f, lam)))
+    reac, fric = k.outputs(y, lam)
+    p = dict(zip(X.components, reac[0]))
     Fx, Fy, Tx, Ty = p["Fx"], p["Fy"], p["Tx"], p["Ty"]
-    u = f.R[0] @ X.p["a_i"]
-    spin = (f.R[1] @ f.w[1] - f.R[0] @ f.w[0]) @ u
-    P = f.r[0] + f.R[0] @ X.p["s_i"]
-    vel = [f.v[b] + np.cross(f.R[b] @ f.w[b], P - f.r[b]) for b in (0, 1)]
+    R = [rotation(model, model.q0, b) for b in (0, 1)]
+    u = R[0] @ (a_i / np.linalg.norm(a_i))
+    spin = (R[1] @ h[9:12] - R[0] @ h[3:6]) @ u
+    P = model.q0[0:3] + R[0] @ s_i
+    vel = [h[6 * b: 6 * b + 3] + np.cross(R[b] @ h[6 * b + 3: 6 * b + 6], P - model.q0[6 * b: 6 * b + 3]) for b in (0, 1)]
     slide = (vel[1] - vel[0]) @ u
     law = X.law
-    Qi, Qj, out = friction_of(X, f, lam, law)
     if jtype == "revolute":
         a, L = 0.02, 0.1
         m = np.array([Ty, -Tx]) / L
         Nr = np.linalg.norm([Fx / 2 + m[0], Fy / 2 + m[1]]) + np.linalg.norm([Fx / 2 - m[0], Fy / 2 - m[1]])
-        expected = law.coefficient(spin) * (a * Nr + a * abs(p["Fz"]))  # collar radius defaults to radius
-        torque_i = f.R[0] @ Qi[3:]
-        np.testing.assert_allclose(torque_i, expected * u, atol=1e-12)
-        np.testing.assert_allclose(Qi[:3], 0.0, atol=0)
+        expected = law.coefficient(spin) * (a * Nr + a * abs(p["Fz"]))
     else:
         l, r = 0.3, 0.05
         fB = np.array([Ty, -Tx]) / l
         fA = np.array([Fx, Fy]) - fB
         N = np.linalg.norm(fA) + np.linalg.norm(fB)
         if jtype == "prismatic":
-            N += abs(p["Tz"]) / r
-            expected = law.coefficient(slide) * N
-            np.testing.assert_allclose(Qi[:3], expected * u, atol=1e-12)
+            expected = law.coefficient(slide) * (N + abs(p["Tz"]) / r)
         else:
-            s = math.hypot(slide, r * spin)
-            expected = law.coefficient(s) * N
-            mos = law.mu_over_speed(s)
-            np.testing.assert_allclose(Qi[:3], mos * N * slide * u, atol=1e-12)
-            np.testing.assert_allclose(f.R[0] @ Qi[3:] - np.cross(f.R[0] @ X.p["s_i"], Qi[:3]),
-                                       mos * N * r * r * spin * u, atol=1e-12)
-    assert out == pytest.approx(expected, rel=1e-12, abs=1e-14)
-    assert abs(out) > 1e-6
-    assert out == pytest.approx(ev.friction_output(model, X, f, lam), rel=0, abs=0)
+            expected = law.coefficient(math.hypot(slide, r * spin)) * N
+    assert fric[0] == pytest.approx(expected, rel=1e-12, abs=1e-14)
+    assert abs(fric[0]) > 1e-6
+    assert friction_law(model, spec, model.q0, h, X, reac[0], fric[0])[0] == pytest.approx(expected, rel=1e-12)
 
 
-def test_revolute_friction_pure_radial_load():
-    """Without bending or axial load the radial load is |F_perp| and T_f = mu a |F_perp|."""
-    from overcon.joints import spatial_rows as sr
-    p = np.array([[3.0, 4.0, 0.0, 0.0, 0.0, 0.0]])
-    assert sr.bearing_radial_load(p, np.array([0.1]))[0] == pytest.approx(5.0)
-    # the prismatic guide reduces to the planar A.2 (|N - T/l| + |T/l|) for a planar load
-    N, T, l = 7.0, 1.2, 0.3
-    planar = np.array([[0.0, N, 0.0, -T, 0.0, 0.0]])  # normal force N along y', moment T in the y'-z plane
-    assert sr.guide_normal_load(planar, np.array([l]))[0] == pytest.approx(abs(N - T / l) + abs(T / l))
+def test_revolute_friction_pure_radial_load(tmp_path):
+    """Without bending or axial load the radial load is |F_perp| and T_f = mu a |F_perp|; the
+    prismatic guide reduces to the planar A.2 (|N - T/l| + |T/l|) for a planar load: the core's
+    outputs at multipliers whose reaction is such a load, sliding fast (mu(v) = mu)."""
+    for jtype, want in (("revolute", lambda F, T: 0.3 * 0.02 * math.hypot(F[0], F[1])),
+                        ("prismatic", lambda F, T: 0.3 * (abs(F[1] + T[0] / 0.3) + abs(T[0] / 0.3)))):
+        spec, model, k, rng, _ = pair_model(tmp_path, jtype, 0)
+        X = model.joints[0]
+        rows = list(X.rows)
+        y0 = np.concatenate([model.q0, np.zeros(12)])
+        J = k.rows(y0)[1]
+        h = rng.normal(size=12)
+        JX = J[rows]
+        h -= np.linalg.pinv(JX) @ (JX @ h)
+        h *= 10.0 / np.linalg.norm(h)
+        y = np.concatenate([model.q0, h])
+        comps = list(X.components[:-3])
+        # the physical reaction on body i (joint frame, about P_i) wanted: F = (3, 4, 0), or the
+        # planar load F = (0, 7, 0), T = (-1.2, 0, 0); the multipliers giving it by least squares
+        F, T = ((np.array([3.0, 4.0, 0.0]), np.zeros(3)) if jtype == "revolute"
+                else (np.array([0.0, 7.0, 0.0]), np.array([-1.2, 0.0, 0.0])))
+        M = np.array([k.outputs(y, np.eye(model.m)[r])[0][0, : len(comps)].copy() for r in rows]).T
+        target = np.array([dict(zip(("Fx", "Fy", "Fz", "Tx", "Ty", "Tz"), np.r_[F, T]))[c] for c in comps])
+        lam = np.zeros(model.m)
+        lam[rows] = np.linalg.lstsq(M, target, rcond=None)[0]
+        reac, fric = k.outputs(y, lam)
+        np.testing.assert_allclose(reac[0, : len(comps)], target, atol=1e-9)
+        assert abs(fric[0]) == pytest.approx(want(F, T), rel=1e-9)
 
 
 # ----------------------------------------------------------------------------- friction fields

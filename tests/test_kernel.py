@@ -155,32 +155,32 @@ def uncovered(tmp_path: Path, monkeypatch) -> Path:
 
 
 def test_selection_and_note(monkeypatch, tmp_path):
-    """auto takes the kernel where it covers the model, else numpy with the reason; c refuses to
-    start without it (naming why); numpy never uses it. The note names the path."""
+    """Every run is the core's: auto, c and the deprecated numpy (which warns) name the compiled
+    kernel; a model the core does not cover, or no library, refuses to start naming why."""
     spec = spec_of("planar_f45_wo4")
     model = compile_checked(spec)
-    assert "compiled kernel" in Simulation(model, spec.solver).kernel_note
-    assert Simulation(model, dataclasses.replace(spec.solver, kernel="numpy")).kernel_note == \
-        "right-hand side: numpy (solver.kernel = 'numpy')"
+    for choice in ("auto", "c"):
+        assert "compiled kernel" in Simulation(model, dataclasses.replace(spec.solver, kernel=choice)).kernel_note
+    with pytest.warns(DeprecationWarning, match="solver.kernel = 'numpy' is deprecated"):
+        sim = Simulation(model, dataclasses.replace(spec.solver, kernel="numpy"))
+    assert "compiled kernel" in sim.kernel_note
     door = compile_checked(scene_mod.as_scene(scene_mod.load(uncovered(tmp_path, monkeypatch))))
-    note = Simulation(door, spec.solver).kernel_note
-    assert note.startswith("right-hand side: numpy (solver.kernel = 'auto': ") and UNCOVERED in note
-    with pytest.raises(SimulationError, match=rf"solver.kernel = 'c': {re.escape(UNCOVERED)}"):
-        Simulation(door, dataclasses.replace(spec.solver, kernel="c"))
+    for choice in ("auto", "c"):
+        with pytest.raises(SimulationError, match=re.escape(UNCOVERED)):
+            Simulation(door, dataclasses.replace(spec.solver, kernel=choice))
     monkeypatch.undo()  # the core's own friction-joint limit again
     saved = dict(kernel._state)
     try:
         kernel.disable("no library here (test)")
-        assert "no compiled kernel: no library here (test)" in Simulation(model, spec.solver).kernel_note
         with pytest.raises(SimulationError, match="no library here"):
-            Simulation(model, dataclasses.replace(spec.solver, kernel="c"))
+            Simulation(model, spec.solver)
     finally:
         kernel._state.update(saved)
 
 
 def test_missing_library_names_the_fix(monkeypatch, tmp_path):
-    """A source tree whose core was never compiled: auto runs numpy and says why, c refuses, and
-    both name the fix (pip install -e .); overcon build refuses naming it too."""
+    """A source tree whose core was never compiled: a run refuses to start and names the fix
+    (pip install -e .); overcon build refuses naming it too."""
     from overcon.fmu.build import BuildError, kernel_library
 
     spec = spec_of("planar_f45_wo4")
@@ -190,11 +190,8 @@ def test_missing_library_names_the_fix(monkeypatch, tmp_path):
     monkeypatch.setattr(kernel, "LIBRARY", missing)
     try:
         kernel._state.update(lib=None, reason=None, path=None, tried=False)
-        note = Simulation(model, spec.solver).kernel_note
-        assert note.startswith("right-hand side: numpy (solver.kernel = 'auto': no compiled kernel: ")
-        assert f"the compiled core {missing} is missing" in note and "run `pip install -e .`" in note
-        with pytest.raises(SimulationError, match=r"is missing .*pip install -e \."):
-            Simulation(model, dataclasses.replace(spec.solver, kernel="c"))
+        with pytest.raises(SimulationError, match=rf"{re.escape(str(missing))} is missing .*pip install -e \."):
+            Simulation(model, spec.solver)
         with pytest.raises(BuildError, match=r"libovercore\.so cannot be read .*pip install -e \."):
             kernel_library()
     finally:
@@ -218,30 +215,6 @@ def test_installed_library_is_the_package_core():
 
 
 @pytest.mark.integration
-def test_kernel_in_fmu(tmp_path):
-    """An FMU carries the kernel next to its binary and logs the path it runs (its outputs against
-    the in-process run: tests/test_fmu.py)."""
-    import fmpy
-
-    from overcon.fmu.build import build_scene
-    from test_fmu import Instance, Logs
-
-    r = build_scene(MECH / "planar_none_wo4.toml", tmp_path, echo=lambda *a: None, runtime="python")
-    assert r.status == "built", r.messages
-    with zipfile.ZipFile(r.fmu) as zf:
-        assert any(n.startswith("binaries/") and n.endswith("/" + kernel.library_name()) for n in zf.namelist())
-    unz = Path(fmpy.extract(str(r.fmu), str(tmp_path / "unz")))
-    logs = Logs()
-    inst = Instance(unz, name="c", logs=logs)
-    inst.fmu.setString([inst.vr["solver.kernel"], inst.vr["solver.method"]], ["c", "rk4"])
-    inst.fmu.setReal([inst.vr["solver.step"]], [2e-3])
-    inst.init()
-    out = inst.steps(50)
-    inst.free()
-    assert "right-hand side: compiled kernel" in logs.text()
-    assert np.all(np.isfinite(out))
-
-
 def check_reactions(k, model, y, lam) -> None:
     """The reported reactions at (y, lam) against the core's Phi_h: each joint's global force
     (Fx0, Fy0(, Fz0), after its type's components) is the physical reaction on body i,
@@ -282,32 +255,34 @@ def test_kernel_outputs_are_the_reactions_of_the_multipliers(name):
     spec = dataclasses.replace(spec, reactions=joints, friction_outputs="all")
     model = compile_checked(spec)
     assert model.friction_outputs and len(model.reaction_joints) == len(joints)
-    sim = Simulation(model, dataclasses.replace(spec.solver, kernel="c"))
+    sim = Simulation(model, spec.solver)
+    k = kernel.Kernel(kernel.library()[0], model, spec.solver)
     rng = np.random.default_rng(5)
     for y in states(model, 10, seed=5):
         lam = 100.0 * rng.standard_normal(model.m)
-        check_reactions(sim._kernel, model, y, lam)
-        table = sim._derived.values_from_kernel(*sim._kernel.outputs(y, lam))
+        check_reactions(k, model, y, lam)
+        table = sim._derived.values_from_kernel(*k.outputs(y, lam))
         assert np.all(np.isfinite(table)) and np.any(table)
     zero = np.zeros(model.m)
-    assert not np.any(sim._derived.values_from_kernel(*sim._kernel.outputs(y, zero)))
+    assert not np.any(sim._derived.values_from_kernel(*k.outputs(y, zero)))
 
 
 def test_cli_kernel_flag_and_scene_field(tmp_path, capsys, monkeypatch):
-    """overcon simulate --kernel: the summary names the path; c where the kernel cannot run is bad
-    input (exit 2) naming the flag and why; a scene's [solver] kernel outside auto|c|numpy is
-    refused naming the field."""
+    """overcon simulate --kernel: the summary names the compiled kernel; the deprecated numpy
+    warns on stderr and runs the core; a scene the core cannot run is bad input (exit 2) naming
+    the file and why; a scene's [solver] kernel outside auto|c|numpy is refused naming the field."""
     from overcon.cli import main
 
     out = tmp_path / "o.csv"
     assert main(["simulate", str(MECH / "planar_f45_wo4.toml"), "--stop-time", "0.2", "--out", str(out),
                  "--kernel", "numpy"]) == 0
-    assert "right-hand side: numpy (solver.kernel = 'numpy')" in capsys.readouterr().out
+    cap = capsys.readouterr()
+    assert "right-hand side: compiled kernel" in cap.out and "--kernel numpy: solver.kernel = 'numpy' is deprecated" in cap.err
     assert main(["simulate", str(MECH / "planar_f45_wo4.toml"), "--stop-time", "0.2", "--out", str(out)]) == 0
     assert "right-hand side: compiled kernel" in capsys.readouterr().out
-    assert main(["simulate", str(uncovered(tmp_path, monkeypatch)), "--stop-time", "0.1", "--out", str(out),
-                 "--kernel", "c"]) == 2
-    assert f"--kernel c: the compiled kernel cannot run: {UNCOVERED}" in capsys.readouterr().err
+    scene_file = uncovered(tmp_path, monkeypatch)
+    assert main(["simulate", str(scene_file), "--stop-time", "0.1", "--out", str(out), "--kernel", "c"]) == 2
+    assert f"{scene_file}: the compiled core cannot run this scene: {UNCOVERED}" in capsys.readouterr().err
     text = (MECH / "planar_f45_wo4.toml").read_text()
     assert "[solver]" in text
     (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
@@ -434,31 +409,10 @@ def test_check_and_build_refuse_a_kernel_that_cannot_run(tmp_path, capsys, monke
                           else text + '\n[solver]\nkernel = "c"\n')
     assert main(["check", str(scene_file)]) == 2
     err = capsys.readouterr().err
-    assert f"solver.kernel = 'c': the compiled kernel cannot run: {UNCOVERED}" in err
+    assert f"the compiled core cannot run this scene: {UNCOVERED}" in err
     assert main(["build", str(scene_file), "--out", str(tmp_path / "out"), "--no-ref"]) == 2
-    assert "solver.kernel = 'c': the compiled kernel cannot run" in capsys.readouterr().err
+    assert "cannot run" in capsys.readouterr().err
     assert not list((tmp_path / "out").glob("*.fmu"))
-
-
-@pytest.mark.integration
-def test_fmu_warns_when_its_library_cannot_be_used(tmp_path):
-    """An FMU whose kernel library is missing runs on numpy and says so as a warning (the model is
-    covered: a silent slow-down would surprise)."""
-    import fmpy
-
-    from overcon.fmu.build import build_scene
-    from test_fmu import Instance, Logs
-
-    r = build_scene(MECH / "planar_none_wo4.toml", tmp_path, echo=lambda *a: None, runtime="python")
-    unz = Path(fmpy.extract(str(r.fmu), str(tmp_path / "unz")))
-    for lib in unz.glob(f"binaries/*/{kernel.library_name()}"):
-        lib.unlink()
-    logs = Logs()
-    inst = Instance(unz, logs=logs).init()
-    inst.steps(3)
-    inst.free()
-    warnings = [m for status, _, m in logs.records if status == 1]
-    assert any("the compiled kernel this FMU carries cannot be used" in m and "cannot load" in m for m in warnings)
 
 
 @pytest.mark.integration

@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from . import analysis
-from .kernel import jacobian, rows_at
+from .kernel import KernelUnavailable, jacobian, rows_at
 from .kernel import rigid_rows as kernel_rigid_rows
 from .joints import TYPES, InitialFrames
 from .joints.spatial_rows import POINT_ROW
@@ -106,6 +106,8 @@ def _rows_q0(model: Model, where: str) -> tuple[np.ndarray, np.ndarray]:
         raise InconsistentInitialState(f"initial coordinates q0 or velocities h0 hold a non-finite value{where}")
     try:
         Phi, Jh, _ = rows_at(model, model.q0, model.h0)
+    except KernelUnavailable:
+        raise
     except RuntimeError as exc:
         raise InconsistentInitialState(f"the constraints cannot be evaluated at q0: {exc}{where}") from None
     return Phi, Jh

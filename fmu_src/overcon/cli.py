@@ -560,6 +560,7 @@ def single_threaded_blas():
 
 
 def main(argv=None) -> int:
+    from .kernel import KernelUnavailable
     from .model import ModelError
     from .scene import SceneError
     from .simulate import InconsistentInitialState
@@ -581,7 +582,8 @@ def main(argv=None) -> int:
         return EXIT_INTERRUPTED
     except SceneError as exc:  # already names file and field
         return _input_error(exc, args)
-    except (ModelError, InconsistentInitialState, ValueError, OSError) as exc:
+    except (ModelError, InconsistentInitialState, KernelUnavailable, ValueError, OSError) as exc:
+        # KernelUnavailable: no compiled core to evaluate the scene with (its message names the fix)
         where = getattr(args, "file", None)
         return _input_error(f"{where}: {exc}" if where else exc, args)
 

@@ -70,7 +70,7 @@ LIBRARY = Path(__file__).resolve().parent / "core" / f"libovercore{_shared_suffi
 class KernelUnavailable(RuntimeError):
     """The compiled core cannot run here or cannot run this model (the message says why)."""
 
-    def __init__(self, reason: str, setting: str = "solver.kernel = 'c'"):
+    def __init__(self, reason: str, setting: str = "the compiled core"):
         super().__init__(f"{setting}: {reason}")
 
 
@@ -506,12 +506,12 @@ class Kernel:
 
 def _rows_kernel(model):
     """A :class:`Kernel` of ``model`` for its rows alone (default solver settings: the rows do not
-    depend on them); raises :class:`KernelUnavailable` when the core cannot run here."""
+    depend on them); raises :class:`KernelUnavailable` when no core can be loaded here."""
     from .spec import SolverSpec
-    why = _unavailable(model)
-    if why is not None:
-        raise KernelUnavailable(why)
-    return Kernel(_state["lib"], model, SolverSpec())
+    lib, reason = library()
+    if lib is None:
+        raise KernelUnavailable(reason, "the compiled core")
+    return Kernel(lib, model, SolverSpec())
 
 
 def rows_at(model, q: np.ndarray, h: np.ndarray | None = None):
@@ -573,7 +573,7 @@ def select(model, solver):
     why = _unavailable(model)
     if why is not None:
         raise KernelUnavailable(why, "the compiled core")
-    return Kernel(_state["lib"], model, solver), f"compiled core ({_state['path']})"
+    return Kernel(_state["lib"], model, solver), f"right-hand side: compiled kernel ({_state['path']})"
 
 
 # ----------------------------------------------------------------------------- a run in C

@@ -113,7 +113,10 @@ class Simulation:
         if model.elimination_mode == "pending":
             raise ModelError("Simulation: the model's elimination is pending: admit the compiled model first "
                              "(overcon.checks.admit, or overcon.checks.compile_checked)")
-        check_initial_state(model)
+        try:
+            check_initial_state(model)
+        except kernel_mod.KernelUnavailable as exc:
+            raise SimulationError(f"cannot start: {exc}") from exc
         for c in model.joints:
             if c.law is not None and c.law.name == "coulomb":
                 raise ModelError(

@@ -591,7 +591,7 @@ EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-
 """The kinds of a run's events, in the order of core/core.h's OVK_EV_* (overcon.simulate.EVENT_KINDS)."""
 INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_drift", "min_ratio", "stiff_steps",
         "stable_step", "wall_time", "singular_passed", "last_singular", "projection_drift", "watch_time",
-        "watch_capped")
+        "watch_capped", "along_time")
 """The entries of ovk_sim_info, in order (core/sim.c)."""
 
 
@@ -673,7 +673,8 @@ class Run:
     @property
     def info(self) -> dict:
         """t, h, nsteps, nfev, evaluations, friction_iterations, max_drift, min_ratio, stiff_steps,
-        stable_step, wall_time (:data:`INFO`)."""
+        stable_step, wall_time, ... (:data:`INFO`); watch_time, along_time: seconds of wall time in
+        the singularity watch and, within it, in the uniqueness along the motion."""
         self._lib.ovk_sim_info(self._sim, self._info.ctypes.data)
         return dict(zip(INFO, self._info.tolist()))
 

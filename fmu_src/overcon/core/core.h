@@ -332,8 +332,9 @@ typedef struct {
     ovk_watch_eig *eig;            /* the watch's tracked extreme singular values (watch_eig.c) */
     double watch_time;             /* s spent in the watch (ovk_sim_monitor), not state */
     long long watch_capped;        /* estimates of r that reached the iteration bound (watch_eig.c) */
+    double along_time;             /* s spent in the uniqueness along the motion (ovk_sim_along), not state */
 } ovk_sim;
-#define OVK_SIM_NINFO 16
+#define OVK_SIM_NINFO 17
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
                              double *ydot, int *its);
 /* energy.c: the energy outputs' ledger */

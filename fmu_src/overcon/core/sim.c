@@ -380,14 +380,15 @@ void ovk_sim_state_vector(const ovk_sim *s, double *y) { memcpy(y, s->rk.y, (siz
  * friction force evaluations, max drift, min ratio, stiff steps, rk4's stable step, wall time,
  * singular positions passed (formulation AL), the time of the last one (0 while none), the largest
  * max |Phi| left by the step-end projections, the wall time of the singularity watch (s), its
- * estimates of r that reached their iteration bound (watch_eig.c). */
+ * estimates of r that reached their iteration bound (watch_eig.c), the wall time of the uniqueness
+ * along the motion (s; at the start and within the watch's). */
 void ovk_sim_info(const ovk_sim *s, double *info) {
     const ovk_rk *rk = &s->rk;
     double v[OVK_SIM_NINFO] = {rk->t, rk->method == OVK_METHOD_RK4 ? rk->step : rk->h, (double)rk->nsteps,
                                (double)rk->nfev, (double)s->evaluations, (double)s->friction_iterations,
                                s->max_drift, s->min_ratio, (double)rk->stiff_steps, rk->stable_step, s->wall_time,
                                (double)s->singular_passed, s->last_singular, s->proj_drift, s->watch_time,
-                               (double)s->watch_capped};
+                               (double)s->watch_capped, s->along_time};
     memcpy(info, v, sizeof v);
 }
 

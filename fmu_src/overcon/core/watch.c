@@ -225,7 +225,7 @@ static int motion_of(const ovk_model *M, const int *u) {
  * (first = 1, at the start: no events), a rank-change event when the rank differs from the last
  * evaluation's and a uniqueness-change event when a friction joint's verdict does (friction
  * joints as "joints[k]", 0-based in model order; the bindings put the names in). */
-int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg) {
+static int along(ovk_sim *s, double t, const double *y, int first, char *msg) {
     const ovk_model *M = s->M;
     int nj = M->nj, rank = 0, *now = s->along_unique + nj, *was = s->along_unique;
     int status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
@@ -257,6 +257,14 @@ int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg) {
     s->along_rank = rank;
     memcpy(was, now, (size_t)nj * sizeof(int));
     return OVK_OK;
+}
+
+/* along, its wall time counted in s->along_time (ovk_sim_info). */
+int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg) {
+    double started = ovk_now();
+    int status = along(s, t, y, first, msg);
+    s->along_time += ovk_now() - started;
+    return status;
 }
 
 /* The watch at (t, y) (SingularityMonitor.check and, first = 1, its start at t0: no minimum

@@ -593,6 +593,8 @@ INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_d
         "stable_step", "wall_time", "singular_passed", "last_singular", "projection_drift", "watch_time",
         "watch_capped", "along_time")
 """The entries of ovk_sim_info, in order (core/sim.c)."""
+WALL_TIMES = ("wall_time", "watch_time", "along_time")
+"""The entries of :data:`INFO` that are wall times: no state, they differ between equal runs."""
 
 
 class _CRkOpts(ctypes.Structure):

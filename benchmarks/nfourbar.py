@@ -5,10 +5,11 @@ evaluation as N grows.
 
     python benchmarks/nfourbar.py [N ...] [--stop-time T] [--c-max N] [--plot docs/nfourbar_cost.png]
                                             (default: 2 10 40 100, 20 s, C runs up to N = 10)
+    python benchmarks/nfourbar.py --watch [N ...] [--stop-time T] [--scenes]
+                                            the C runs only, with their watch's share
 
 For each N the scene (tolerance 1e-9, dopri5) is run in process (one BLAS thread) and, up to
-``--c-max``, as a run in C (core/sim.c, kernel.Run: its watch's one-sided Jacobi SVD in C costs
-minutes for N = 40), and printed side by side:
+``--c-max``, as a run in C (core/sim.c, kernel.Run), and printed side by side:
   - the benchmark's measure, the x coordinate of B0 (the first coupler's left end, the first
     crank's top: crank0.x + 0.5 cos(crank0.phi), m) every 0.01 s, against the tight-tolerance run:
     the parallelogram branch reduced to its one coordinate (every crank at phi, the couplers
@@ -17,10 +18,16 @@ minutes for N = 40), and printed side by side:
     also, for N <= 10, the whole model in process at tolerance 1e-12 against the same reference;
   - the singular events (20 flat positions in 20 s), steps, evaluations, the max drift;
   - wall times: the in-process run, its watch (overcon.watch.SingularityMonitor.check, measured by
-    wrapping it) and its projections, and the C run;
+    wrapping it) and its projections, and the C run with its watch (core/watch.c, watch_eig.c:
+    ``watch_time`` of ovk_sim_info) and, within the watch, the uniqueness along the motion
+    (core/unique.c, ``along_time``);
   - the cost of one evaluation of the right-hand side in the core alone (kernel.Kernel.evaluate
     at 200 states of the run, microseconds; the AL's banded factorisation is O(N) here, the
     assembly of the dense m x nh Jacobian O(N^2)).
+``--watch``: only the C runs, one line per N (wall time, the watch's and the uniqueness's seconds
+and share of it, steps, singular positions passed, estimates of r that hit their iteration bound),
+and with ``--scenes`` the same for spatial_MN_wo5 and the four examples of docs/examples.md over
+10 s (kernel.Run, in process).
 ``--plot``: the core's cost per evaluation and the in-process run's wall time per evaluation
 against N, log-log, with slopes 1 and 3 for reference. The figures go to docs/benchmarks.md
 ("The N-four-bar") by hand.
@@ -99,14 +106,44 @@ def in_process(model, solver, times: np.ndarray) -> dict:
             "states": states}
 
 
-def c_run(model, solver, times: np.ndarray) -> dict:
+def c_run(model, solver, times: np.ndarray, b0: bool = True) -> dict:
     start = time.perf_counter()
     run = kernel.Run(model, solver)
     states = [run.advance(float(t)) for t in times]
     wall = time.perf_counter() - start
     info = run.info
-    return {"x": np.array([_b0_x(model, y) for y in states]), "wall": wall, "evaluations": info["evaluations"],
-            "singular": int(info["singular_passed"]), "drift": info["max_drift"], "states": states}
+    return {"x": np.array([_b0_x(model, y) for y in states]) if b0 else None, "wall": wall,
+            "evaluations": info["evaluations"],
+            "singular": int(info["singular_passed"]), "drift": info["max_drift"], "states": states,
+            "watch": info["watch_time"], "along": info["along_time"], "steps": int(info["nsteps"]),
+            "capped": int(info["watch_capped"])}
+
+
+SCENES = ("mechanisms/spatial_MN_wo5.toml", "mechanisms/examples/door_h1_wo_hinge2.toml",
+          "mechanisms/examples/fourbar_A_wo3_4_5.toml", "mechanisms/examples/loop_D_wo_A2.toml",
+          "mechanisms/examples/carriage_guide_wo_rod.toml")
+
+
+def _watch_line(label: str, c: dict) -> str:
+    return (f"{label:>34} {c['wall']:>8.3f} {c['watch']:>8.3f} {c['watch'] / c['wall']:>6.0%} {c['along']:>8.3f} "
+            f"{c['steps']:>6} {c['singular']:>4} {c['capped']:>6}")
+
+
+def watch_table(ns: list[int], stop: float, scenes: bool) -> None:
+    """The C runs alone: wall time and the watch's share (``--watch``)."""
+    print(f"{'run':>34} {'wall s':>8} {'watch s':>8} {'share':>6} {'along s':>8} {'steps':>6} {'sing':>4} "
+          f"{'capped':>6}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in ns:
+            _, path = _generator().write(n, Path(tmp) / f"n{n}", stop_time=stop, tolerance=1e-9, singular="pass")
+            spec = scene.as_scene(scene.load(path))
+            c = c_run(compile_checked(spec), spec.solver, np.array([stop]))
+            print(_watch_line(f"N-four-bar N = {n}, {stop:g} s", c), flush=True)
+    for name in SCENES if scenes else ():
+        spec = scene.as_scene(scene.load(ROOT / name))
+        end = 10.0
+        c = c_run(compile_checked(spec), spec.solver, np.array([end]), b0=False)
+        print(_watch_line(f"{Path(name).stem}, {end:g} s", c), flush=True)
 
 
 def eval_cost(model, solver, states) -> float:
@@ -165,10 +202,15 @@ def main(argv=None) -> int:
     ap.add_argument("--stop-time", type=float, default=20.0)
     ap.add_argument("--c-max", type=int, default=10, help="largest N also run in C (default 10)")
     ap.add_argument("--plot", type=Path)
+    ap.add_argument("--watch", action="store_true", help="only the C runs, with the watch's share")
+    ap.add_argument("--scenes", action="store_true", help="with --watch: also spatial_MN_wo5 and the examples")
     args = ap.parse_args(argv)
+    if args.watch:
+        watch_table(args.n, args.stop_time, args.scenes)
+        return 0
     print(f"{'N':>4} {'coords':>6} {'eqs':>5} {'sing':>4} {'steps':>6} {'evals':>6} {'drift':>8} {'err py m':>9} "
-          f"{'err C m':>9} {'err 1e-12':>9} {'py s':>7} {'watch s':>7} {'proj s':>6} {'C s':>7} {'us/eval':>8} "
-          f"{'py us/ev':>8}")
+          f"{'err C m':>9} {'err 1e-12':>9} {'py s':>7} {'watch s':>7} {'proj s':>6} {'C s':>7} {'C watch':>7} "
+          f"{'us/eval':>8} {'py us/ev':>8}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.n:
@@ -178,9 +220,10 @@ def main(argv=None) -> int:
             tight = "" if r["err_tight"] is None else f"{r['err_tight']:.2e}"
             err_c = "" if c is None else f"{r['err_c']:.2e}"
             c_wall = "" if c is None else f"{c['wall']:.2f}"
+            c_watch = "" if c is None else f"{c['watch']:.2f}"
             print(f"{n:>4} {r['coords']:>6} {r['eqs']:>5} {py['singular']:>4} {py['steps']:>6} {py['evaluations']:>6} "
                   f"{py['drift']:>8.1e} {r['err_py']:>9.2e} {err_c:>9} {tight:>9} {py['wall']:>7.2f} "
-                  f"{py['watch']:>7.2f} {py['project']:>6.2f} {c_wall:>7} {r['us_eval']:>8.1f} "
+                  f"{py['watch']:>7.2f} {py['project']:>6.2f} {c_wall:>7} {c_watch:>7} {r['us_eval']:>8.1f} "
                   f"{py['wall'] / py['evaluations'] * 1e6:>8.1f}", flush=True)
     if args.plot:
         plot(rows, args.plot, args.stop_time)

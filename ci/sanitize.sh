@@ -16,7 +16,7 @@
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
 # Then the FMI 3.0 layer (fmi3_*.c) the same way through tests/c_host/fmu_host3.c, co-simulation (-S) and
-# Model Exchange (-M). Also compiles the core with clang -Werror when clang is installed. About 40 s.
+# Model Exchange (-M). Every run also calls ovk_sim_watch_extremes (warm and cold) and checks the state is untouched. Also compiles the core with clang -Werror when clang is installed. About 40 s.
 # Usage: bash ci/sanitize.sh   (PYTHON: the installed overcon's interpreter, default .venv/bin/python;
 #                               CC: the compiler, default cc)
 set -euo pipefail

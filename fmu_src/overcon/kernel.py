@@ -105,7 +105,8 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_unique", i, [vp] * 5), ("ovk_sim_uniqueness", i, [vp] * 3),
                             ("ovk_sim_events", i, [vp]),
                             ("ovk_sim_event", ctypes.c_char_p, [vp, i, vp, vp]),
-                            ("ovk_pack_kept", i, [vp, vp, i, vp, vp, vp, vp])):
+                            ("ovk_pack_kept", i, [vp, vp, i, vp, vp, vp, vp]),
+                            ("ovk_sim_watch_extremes", i, [vp, vp, i, vp])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib
@@ -586,8 +587,11 @@ BUDGET_STATUS = 11  # OVK_BUDGET: a work budget ran out (STATUS)
 EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-change", "stopped")
 """The kinds of a run's events, in the order of core/core.h's OVK_EV_* (overcon.simulate.EVENT_KINDS)."""
 INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_drift", "min_ratio", "stiff_steps",
-        "stable_step", "wall_time", "singular_passed", "last_singular", "projection_drift")
+        "stable_step", "wall_time", "singular_passed", "last_singular", "projection_drift", "watch_time",
+        "watch_capped", "along_time")
 """The entries of ovk_sim_info, in order (core/sim.c)."""
+WALL_TIMES = ("wall_time", "watch_time", "along_time")
+"""The entries of :data:`INFO` that are wall times: no state, they differ between equal runs."""
 
 
 class _CRkOpts(ctypes.Structure):
@@ -668,7 +672,8 @@ class Run:
     @property
     def info(self) -> dict:
         """t, h, nsteps, nfev, evaluations, friction_iterations, max_drift, min_ratio, stiff_steps,
-        stable_step, wall_time (:data:`INFO`)."""
+        stable_step, wall_time, ... (:data:`INFO`); watch_time, along_time: seconds of wall time in
+        the singularity watch and, within it, in the uniqueness along the motion."""
         self._lib.ovk_sim_info(self._sim, self._info.ctypes.data)
         return dict(zip(INFO, self._info.tolist()))
 
@@ -676,6 +681,20 @@ class Run:
     def y(self) -> np.ndarray:
         self._lib.ovk_sim_state_vector(self._sim, self._y.ctypes.data)
         return self._y.copy()
+
+    def watch_extremes(self, y: np.ndarray, *, cold: bool = False) -> tuple[float, float]:
+        """(sigma_min, sigma_max) of the watched rows at state ``y`` (Phi_h M^-1/2, unit-norm rows:
+        core/watch_eig.c's estimate, to its relative accuracy 1e-9 with a floor of 1e-13 sigma_max),
+        warm-started from the run's tracked vectors, or from the fixed start with ``cold``; the run
+        is left as it was."""
+        y = np.ascontiguousarray(y, float)
+        if y.shape != (self.ny,):
+            raise ValueError(f"watch_extremes: a state of {self.ny} entries, got shape {y.shape}")
+        out = np.zeros(2)
+        status = self._lib.ovk_sim_watch_extremes(self._sim, y.ctypes.data, int(cold), out.ctypes.data)
+        if status:
+            raise RunStopped(status, self._message())
+        return float(out[0]), float(out[1])
 
     def step(self) -> None:
         status = self._lib.ovk_sim_step(self._sim)

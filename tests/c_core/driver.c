@@ -302,6 +302,23 @@ static void refusals(model_t *m, tally *t) {
     free(qf);
 }
 
+/* ovk_sim_watch_extremes at the run's state y, warm and cold: 0 <= sigma_min <= sigma_max, and the
+ * run left as it was (its state's bytes before and after). */
+static void watch_extremes(ovk_sim *s, const double *y, tally *t) {
+    size_t size = ovk_sim_state_size(s);
+    unsigned char *before = malloc(size ? size : 1), *after = malloc(size ? size : 1);
+    double ex[2] = {0.0, 0.0};
+    if (!before || !after || ovk_sim_get_state(s, before, size)) fail(t, "watch extremes: no state");
+    for (int cold = 0; cold < 2 && before && after; cold++) {
+        if (ovk_sim_watch_extremes(s, y, cold, ex)) fail(t, ovk_sim_message(s));
+        else if (!(ex[0] >= 0.0 && ex[0] <= ex[1] * (1.0 + 1e-12))) fail(t, "watch extremes: sigma_min > sigma_max");
+    }
+    if (before && after && (ovk_sim_get_state(s, after, size) || memcmp(before, after, size)))
+        fail(t, "watch extremes: the run's state changed");
+    free(before);
+    free(after);
+}
+
 /* An 'R' record: the run in C twice, each saving its state half-way, finishing, restoring the
  * state and finishing again; every finish must give the installed core's bits. */
 static int run_sim(reader *r, model_t *m, tally *t) {
@@ -339,6 +356,7 @@ static int run_sim(reader *r, model_t *m, tally *t) {
                 compare(t, "run", "friction", fric, want_fric, n_f);
                 compare(t, "run", "energies", en, want_en, n_en < 4 ? n_en : 4);
             }
+            if (!status && again) watch_extremes(s, y, t);
         }
         if (!saved) fail(t, "run: no state to save");
         free(saved);

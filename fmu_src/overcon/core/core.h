@@ -25,7 +25,9 @@
  *   integrate_radau.c   its implicit Radau IIA of order 5 (radau), collocation dense output
  *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
  *                       work budgets, derived outputs at any point of the last step
- *   svd.c               one-sided Jacobi SVD: singular values, the kept rows' singular vectors
+ *   svd.c               one-sided Jacobi SVD: singular values (the watch's rare whole-Jacobian checks)
+ *   watch_eig.c         the watch's r: the kept rows' extreme singular values tracked from check to
+ *                       check (inverse iterations on the banded G = W W^T)
  *   energy.c            the energy outputs: kinetic, potential, the work ledger of friction and loads
  *   watch.c             the singularity watch of overcon.watch: r and dr/dt after each step, the
  *                       minimum of r inside a step, singular position or expired/degrading elimination;
@@ -245,6 +247,26 @@ OVK_HIDDEN int ovk_radau_constants(const char *name, const double **data, int *r
  * bit for bit: OVK_OK and a pointer to rows x cols doubles (row-major), else OVK_INVALID. */
 OVK_EXPORT int ovk_integrator_constants(int method, const char *name, const double **data, int *rows, int *cols);
 
+/* watch_eig.c: the extreme singular values of the watch's weighted kept rows W (nR x nh, unit-norm
+ * rows J_R M^-1/2, each nonzero on its two bodies' columns only), tracked from check to check. */
+typedef struct {
+    int nR, kh, nb, band; /* rows, velocities per body, bodies, half bandwidth of G in the row order */
+    int have;             /* umin, umax hold the vectors of a past estimate (state: sim_state.c) */
+    int *order;           /* nR: positions in the kept list, in band order */
+    int *rows;            /* nR: the kept equations the order was made for */
+    int *body;            /* 2 nR: each ordered row's bodies, ascending (-1: none) */
+    int *eqbody;          /* 2 m: each equation's two bodies (the joint table's) */
+    int *span;            /* 2 nb: scratch (first, last ordered row touching a body) */
+    long long *key;       /* nR: scratch (the sort) */
+    double *w, *w2;       /* nR x 2 kh each: weighted rows on their bodies' columns (w2: the rate's) */
+    double *scale;        /* nh: sqrt(Minv) */
+    double *umin, *umax;  /* nR: the tracked left singular vectors (state) */
+    double *x, *z;        /* nR, nh: scratch */
+    double *G, *F;        /* nR x nR each at most: the band of G, a shifted copy factored */
+    double *mem;
+    int *imem;
+} ovk_watch_eig;
+
 /* sim.c: a run of the model (overcon.simulate.Simulation without the numpy path): the integrator
  * over ovk_evaluate with the friction warm starts, the step-end checks (singularity monitor,
  * constraint drift, work budgets) and the derived outputs at any point of the last step. */
@@ -284,7 +306,7 @@ typedef struct {
     double *ev_lam, *ev_qf, *guess, *yout; /* scratch: m, ncols, max(m, ncols), ny */
     double *phi, *J, *gam;         /* scratch: m, m nh, m */
     double *W, *W2, *T;            /* watch scratch: weighted rows, their forward difference, Jacobi (m nh each) */
-    double *Q, *sv;                /* watch scratch: left singular vectors (nR nR), singular values (m + nh) */
+    double *sv;                    /* watch scratch: singular values (m + nh) */
     double *ywatch, *ystar, *qwatch; /* watch scratch: states (ny each), coordinate rates (n) */
     double rate, ratio;            /* watch: dr/dt and r of the kept equations at the last check */
     double *qload;                 /* energy: the constant loads' Q (nh) */
@@ -307,8 +329,12 @@ typedef struct {
     long long singular_passed;     /* formulation AL: singular positions the watch found and the run passed */
     double last_singular;          /* the time of the last of them (s; 0 while none) */
     double proj_drift;             /* formulation AL: max |Phi| after the step-end projections */
+    ovk_watch_eig *eig;            /* the watch's tracked extreme singular values (watch_eig.c) */
+    double watch_time;             /* s spent in the watch (ovk_sim_monitor), not state */
+    long long watch_capped;        /* estimates of r that reached the iteration bound (watch_eig.c) */
+    double along_time;             /* s spent in the uniqueness along the motion (ovk_sim_along), not state */
 } ovk_sim;
-#define OVK_SIM_NINFO 14
+#define OVK_SIM_NINFO 17
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
                              double *ydot, int *its);
 /* energy.c: the energy outputs' ledger */
@@ -332,6 +358,15 @@ OVK_HIDDEN int ovk_sim_use_kept(ovk_sim *s, const int *retained);
 /* watch.c: an expired elimination chosen again (or the stop), a degrading one chosen again */
 OVK_HIDDEN int ovk_sim_expired(ovk_sim *s, double t_from, const double *y_from);
 OVK_HIDDEN int ovk_sim_degraded(ovk_sim *s);
+/* watch_eig.c: the tracked extremes (status; their message in msg) */
+OVK_HIDDEN int ovk_eig_make(ovk_sim *s);
+OVK_HIDDEN void ovk_eig_free(ovk_watch_eig *e);
+OVK_HIDDEN int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, char *msg);
+OVK_HIDDEN int ovk_eig_extremes(ovk_sim *s, const double *w, double *smin, double *smax);
+OVK_HIDDEN void ovk_eig_order(ovk_watch_eig *e, const int *rows);
+OVK_HIDDEN void ovk_sim_watch_adopt(ovk_sim *s);
+OVK_HIDDEN double ovk_eig_rate(const ovk_sim *s, const double *u, double sigma, double dt);
+OVK_HIDDEN double ovk_now(void);
 /* svd.c: one-sided Jacobi */
 OVK_HIDDEN int ovk_jacobi_rows(double *B, int k, int r, double *Q);
 OVK_HIDDEN void ovk_singular_values(const double *A, int rows, int cols, double *T, double *sv);
@@ -452,6 +487,8 @@ OVK_HIDDEN int ovk_friction_robust(const ovk_model *M, ovk_data *d, const double
 /* linalg.c */
 OVK_HIDDEN int ovk_cholesky(double *S, int n);
 OVK_HIDDEN void ovk_cho_solve(const double *U, int n, double *b);
+OVK_HIDDEN int ovk_band_cholesky(double *A, int n, int p);
+OVK_HIDDEN void ovk_band_solve(const double *U, int n, int p, double *b);
 OVK_HIDDEN void ovk_cho_solve_many(const double *U, int n, double *B, int nc);
 OVK_HIDDEN int ovk_lu_factor(double *A, int n, int *piv);
 OVK_HIDDEN void ovk_lu_solve(const double *A, int n, const int *piv, double *b);
@@ -500,6 +537,9 @@ OVK_EXPORT int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out
 OVK_EXPORT size_t ovk_sim_state_size(const ovk_sim *s);
 OVK_EXPORT int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size);
 OVK_EXPORT int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size);
+/* watch_eig.c: the watch's sigma_min, sigma_max of the kept rows at y into out[2], warm-started from
+ * the run's tracked vectors (cold = 0) or from the fixed start (1); the run is left as it was */
+OVK_EXPORT int ovk_sim_watch_extremes(ovk_sim *s, const double *y, int cold, double *out);
 /* unique.c, sim.c: uniqueness along the motion; the run's events */
 OVK_EXPORT int ovk_unique(const ovk_model *M, ovk_data *d, const double *y, int *rank, int *unique);
 OVK_EXPORT int ovk_pack_kept(const ovk_model *M, const int *retained, int nR, int *xrows, int *fx, int *rbody,

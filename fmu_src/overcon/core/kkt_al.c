@@ -170,40 +170,15 @@ int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double 
         if (!isfinite(A[e]))
             return ovk_fail(d, OVK_NONFINITE, "non-finite number in M + alpha Phi_h^T Phi_h (coordinate %d)",
                             (int)(e / w));
-    for (int j = 0; j < nh; j++) { /* banded Cholesky: U[k][j] lives at A[k w + j - k] for j - p <= k <= j */
-        double s = A[(size_t)j * w];
-        for (int k = j - p > 0 ? j - p : 0; k < j; k++) s -= A[(size_t)k * w + (j - k)] * A[(size_t)k * w + (j - k)];
-        if (!(s > 0.0))
-            return ovk_fail(d, OVK_SINGULAR, "M + alpha Phi_h^T Phi_h is not positive definite (pivot %d of %d)", j,
-                            nh);
-        double ujj = sqrt(s);
-        A[(size_t)j * w] = ujj;
-        int last = j + p < nh - 1 ? j + p : nh - 1;
-        for (int i = j + 1; i <= last; i++) {
-            double t = A[(size_t)j * w + (i - j)];
-            for (int k = i - p > 0 ? i - p : 0; k < j; k++) t -= A[(size_t)k * w + (j - k)] * A[(size_t)k * w + (i - k)];
-            A[(size_t)j * w + (i - j)] = t / ujj;
-        }
-    }
+    int bad = ovk_band_cholesky(A, nh, p);
+    if (bad)
+        return ovk_fail(d, OVK_SINGULAR, "M + alpha Phi_h^T Phi_h is not positive definite (pivot %d of %d)", bad - 1,
+                        nh);
     return OVK_OK;
 }
 
 /* (U^T U) x = b in place, with the band factor of ovk_al_factor. */
-static void band_solve(const ovk_data *d, int nh, double *b) {
-    int p = d->al_band, w = p + 1;
-    const double *U = d->al;
-    for (int i = 0; i < nh; i++) {
-        double t = b[i];
-        for (int k = i - p > 0 ? i - p : 0; k < i; k++) t -= U[(size_t)k * w + (i - k)] * b[k];
-        b[i] = t / U[(size_t)i * w];
-    }
-    for (int i = nh - 1; i >= 0; i--) {
-        double t = b[i];
-        int last = i + p < nh - 1 ? i + p : nh - 1;
-        for (int k = i + 1; k <= last; k++) t -= U[(size_t)i * w + (k - i)] * b[k];
-        b[i] = t / U[(size_t)i * w];
-    }
-}
+static void band_solve(const ovk_data *d, int nh, double *b) { ovk_band_solve(d->al, nh, d->al_band, b); }
 
 /* The AL iteration (file header) with the factor of ovk_al_factor: x (nh) with M x + J_R^T lam =
  * Q, J_R x = g, and lam (nR) from lam_0 = 0. Iterations in d->al_iterations; d->al_stalled = 1 when

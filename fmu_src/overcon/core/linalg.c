@@ -1,6 +1,7 @@
 /* Dense linear algebra of the core: Cholesky (the KKT matrix S) and LU with partial pivoting (the
- * friction Newton matrix). Fixed summation order and no BLAS: the results do not depend on the
- * CPU's BLAS dispatch. The matrices are at most a few dozen rows. */
+ * friction Newton matrix), and the banded Cholesky of kkt_al.c's M + alpha J^T J and of the
+ * watch's G = W W^T (watch_eig.c). Fixed summation order and no BLAS: the results do not depend on
+ * the CPU's BLAS dispatch. The dense matrices are at most a few dozen rows. */
 #include <math.h>
 #include <stddef.h>
 
@@ -22,6 +23,43 @@ int ovk_cholesky(double *S, int n) {
         }
     }
     return 0;
+}
+
+/* Banded Cholesky A = U^T U in place: A symmetric n x n with half bandwidth p, in band storage
+ * (row k holds columns k..k+p at A[k (p + 1) + (l - k)]; U lives in the same places). 0 on
+ * success, else 1 + the column whose pivot is not positive (or not a number). O(n p^2). */
+int ovk_band_cholesky(double *A, int n, int p) {
+    int w = p + 1;
+    for (int j = 0; j < n; j++) { /* U[k][j] lives at A[k w + j - k] for j - p <= k <= j */
+        double s = A[(size_t)j * w];
+        for (int k = j - p > 0 ? j - p : 0; k < j; k++) s -= A[(size_t)k * w + (j - k)] * A[(size_t)k * w + (j - k)];
+        if (!(s > 0.0)) return j + 1;
+        double ujj = sqrt(s);
+        A[(size_t)j * w] = ujj;
+        int last = j + p < n - 1 ? j + p : n - 1;
+        for (int i = j + 1; i <= last; i++) {
+            double t = A[(size_t)j * w + (i - j)];
+            for (int k = i - p > 0 ? i - p : 0; k < j; k++) t -= A[(size_t)k * w + (j - k)] * A[(size_t)k * w + (i - k)];
+            A[(size_t)j * w + (i - j)] = t / ujj;
+        }
+    }
+    return 0;
+}
+
+/* (U^T U) x = b in place with the factor of ovk_band_cholesky (n, half bandwidth p). */
+void ovk_band_solve(const double *U, int n, int p, double *b) {
+    int w = p + 1;
+    for (int i = 0; i < n; i++) {
+        double t = b[i];
+        for (int k = i - p > 0 ? i - p : 0; k < i; k++) t -= U[(size_t)k * w + (i - k)] * b[k];
+        b[i] = t / U[(size_t)i * w];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double t = b[i];
+        int last = i + p < n - 1 ? i + p : n - 1;
+        for (int k = i + 1; k <= last; k++) t -= U[(size_t)i * w + (k - i)] * b[k];
+        b[i] = t / U[(size_t)i * w];
+    }
 }
 
 void ovk_cho_solve(const double *U, int n, double *b) {

@@ -18,7 +18,7 @@
 
 #include "core.h"
 
-static double now(void) {
+double ovk_now(void) {
     struct timespec ts;
     if (timespec_get(&ts, TIME_UTC) != TIME_UTC) return 0.0;
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
@@ -119,7 +119,7 @@ static int sim_rhs_dense(void *ctx, double t, const double *y, double *ydot) {
 }
 
 /* Lays out the run's arrays in s->mem (sizes in ovk_sim_new). */
-static void layout(ovk_sim *s, size_t nR) {
+static void layout(ovk_sim *s) {
     double *p = s->mem;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh;
     s->lam = p; p += m;
@@ -139,7 +139,6 @@ static void layout(ovk_sim *s, size_t nR) {
     s->W = p; p += m * nh;
     s->W2 = p; p += m * nh;
     s->T = p; p += m * nh;
-    s->Q = p; p += nR * nR;
     s->sv = p; p += m + nh;
     s->ywatch = p; p += ny;
     s->ystar = p; p += ny;
@@ -198,8 +197,8 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->ny = s->n + s->nh;
     s->m = M->m;
     s->ncols = M->ncols;
-    size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh, nR = (size_t)M->nR;
-    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 4 * m * nh + nR * nR + m + nh + (size_t)s->n +
+    size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh;
+    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 4 * m * nh + m + nh + (size_t)s->n +
                   nh + ovk_rk_doubles(o->rk.method, s->ny);
     s->mem = calloc(need, sizeof(double));
     if (!s->mem) {
@@ -207,7 +206,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
         snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (%zu bytes)", need * sizeof(double));
         return s;
     }
-    layout(s, nR);
+    layout(s);
     s->min_ratio = INFINITY;
     s->t_prev = t0;
     s->along_unique = calloc(2 * (size_t)M->nj + 1, sizeof(int));
@@ -217,6 +216,10 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     if (!s->along_unique || !s->along_work || !s->kept || !s->y0) {
         s->status = OVK_NOMEM;
         snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (uniqueness along the motion)");
+        return s;
+    }
+    if ((s->status = ovk_eig_make(s))) {
+        snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (the singularity watch)");
         return s;
     }
     memcpy(s->kept, M->retained, (size_t)M->nR * sizeof(int));
@@ -239,6 +242,7 @@ void ovk_sim_free(ovk_sim *s) {
     free(s->events);
     free(s->kept);
     free(s->y0);
+    ovk_eig_free(s->eig);
     free(s);
 }
 
@@ -249,7 +253,7 @@ const char *ovk_sim_message(const ovk_sim *s) { return s ? s->msg : "no simulati
  * since started), then the run's life. */
 static int check_budget(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
     const ovk_rk *rk = &s->rk;
-    double spent = now() - started;
+    double spent = ovk_now() - started;
     if (call_steps >= 0 && rk->nsteps - n0 > call_steps)
         return snprintf(s->msg, sizeof s->msg, "%lld internal steps > %lld allowed for this step, at t = %.9g s",
                         rk->nsteps - n0, call_steps, rk->t), OVK_BUDGET;
@@ -346,9 +350,9 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
 int ovk_sim_step(ovk_sim *s) {
     if (!s) return OVK_NOMEM;
     if (s->status) return s->status;
-    double started = now();
+    double started = ovk_now();
     int status = step_checked(s, started, s->rk.nsteps, -1, 0.0);
-    s->wall_time += now() - started;
+    s->wall_time += ovk_now() - started;
     return status;
 }
 
@@ -358,11 +362,11 @@ int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max
     if (!s) return OVK_NOMEM;
     if (s->status) return s->status;
     ovk_rk *rk = &s->rk;
-    double eps = 1e-12 * (fabs(t_target) > 1.0 ? fabs(t_target) : 1.0), started = now();
+    double eps = 1e-12 * (fabs(t_target) > 1.0 ? fabs(t_target) : 1.0), started = ovk_now();
     long long n0 = rk->nsteps;
     int status = OVK_OK;
     while (!status && rk->t < t_target - eps) status = step_checked(s, started, n0, max_steps, max_wall_time);
-    s->wall_time += now() - started;
+    s->wall_time += ovk_now() - started;
     if (status) return status;
     if (rk->t - t_target < -eps || !isfinite(t_target))
         return snprintf(s->msg, sizeof s->msg, "could not reach t = %.17g", t_target), OVK_STALLED;
@@ -379,13 +383,16 @@ void ovk_sim_state_vector(const ovk_sim *s, double *y) { memcpy(y, s->rk.y, (siz
 /* t, the next step size, accepted steps, evaluations of the integrator, of the right-hand side,
  * friction force evaluations, max drift, min ratio, stiff steps, rk4's stable step, wall time,
  * singular positions passed (formulation AL), the time of the last one (0 while none), the largest
- * max |Phi| left by the step-end projections. */
+ * max |Phi| left by the step-end projections, the wall time of the singularity watch (s), its
+ * estimates of r that reached their iteration bound (watch_eig.c), the wall time of the uniqueness
+ * along the motion (s; at the start and within the watch's). */
 void ovk_sim_info(const ovk_sim *s, double *info) {
     const ovk_rk *rk = &s->rk;
     double v[OVK_SIM_NINFO] = {rk->t, rk->method == OVK_METHOD_RK4 ? rk->step : rk->h, (double)rk->nsteps,
                                (double)rk->nfev, (double)s->evaluations, (double)s->friction_iterations,
                                s->max_drift, s->min_ratio, (double)rk->stiff_steps, rk->stable_step, s->wall_time,
-                               (double)s->singular_passed, s->last_singular, s->proj_drift};
+                               (double)s->singular_passed, s->last_singular, s->proj_drift, s->watch_time,
+                               (double)s->watch_capped, s->along_time};
     memcpy(info, v, sizeof v);
 }
 

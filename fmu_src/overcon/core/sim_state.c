@@ -12,7 +12,7 @@
 #include "core.h"
 
 #define STATE_MAGIC "OVKSIM"
-#define STATE_VERSION 4
+#define STATE_VERSION 5
 
 typedef struct {
     unsigned char *w;       /* saving: the next byte to write */
@@ -98,6 +98,12 @@ static void io_sim(codec *c, ovk_sim *s) {
     io(c, &s->t_prev, sizeof s->t_prev);
     io(c, &s->rate, sizeof s->rate);
     io(c, &s->ratio, sizeof s->ratio);
+    if (s->eig) { /* the watch's tracked vectors (watch_eig.c): the warm start of its next estimate */
+        io(c, &s->watch_capped, sizeof s->watch_capped);
+        io(c, &s->eig->have, sizeof s->eig->have);
+        io(c, s->eig->umin, (size_t)s->eig->nR * sizeof(double));
+        io(c, s->eig->umax, (size_t)s->eig->nR * sizeof(double));
+    }
     io(c, s->work_t, sizeof s->work_t);
     io(c, s->work_w, sizeof s->work_w);
     io(c, s->work_p, sizeof s->work_p);
@@ -140,7 +146,7 @@ int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size) {
         need = saved >= 0 && (size_t)saved <= (size - fixed) / sizeof(ovk_event)
                    ? fixed + (size_t)saved * sizeof(ovk_event) : 0;
     }
-    if (!s->mem || !buf || size != need)
+    if (!s->mem || !s->eig || !buf || size != need)
         return snprintf(s->msg, sizeof s->msg, "set state: %zu bytes, a state of this run has %zu", size, need),
                OVK_INVALID;
     if (saved > s->cap_events) { /* room for the saved events before anything is overwritten */
@@ -165,6 +171,7 @@ int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size) {
         int status = ovk_sim_use_kept(s, kept);
         if (status) return status;
     }
+    ovk_sim_watch_adopt(s);
     s->status = OVK_OK;
     s->msg[0] = '\0';
     return OVK_OK;

@@ -1,5 +1,5 @@
-/* Singular values (and, for the watch's rate, the extreme singular vectors) of the small matrices
- * of the singularity watch (watch.c), by a one-sided Jacobi SVD (Hestenes): rotations of pairs of
+/* Singular values (and the accumulated rotations, for unique.c's null space and kkt_minnorm.c's
+ * pseudo-inverse) of the small matrices of the core, by a one-sided Jacobi SVD (Hestenes): rotations of pairs of
  * vectors until every pair is orthogonal to working precision; the vectors' norms are then the
  * singular values. Tens of rows: the cyclic sweep is cheap and needs no LAPACK. */
 #include <math.h>

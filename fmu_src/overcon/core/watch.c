@@ -65,13 +65,6 @@ static int weighted(ovk_sim *s, const double *y, const int *rows, int k, double 
     return OVK_OK;
 }
 
-/* sigma_min / sigma_max of the k x nh rows A (watch.ratio: 1 for no rows, 0 for no sigma_max). */
-static double ratio_of(ovk_sim *s, const double *A, int k) {
-    if (!k) return 1.0;
-    ovk_singular_values(A, k, s->nh, s->T, s->sv);
-    return s->sv[0] > 0.0 ? s->sv[k - 1] / s->sv[0] : 0.0;
-}
-
 /* The whole Jacobian's singular values at y into s->sv (min(m, nh) of them, largest first). */
 static int full_values(ovk_sim *s, const double *y, char *msg) {
     int status = weighted(s, y, full_rows(s->M), n_full(s->M), s->W2, msg);
@@ -87,59 +80,39 @@ static int full_rank(ovk_sim *s, const double *y, int *rank, char *msg) {
     return status;
 }
 
-/* u^T D v for D (k x nh), u (k), v (nh). */
-static double bilinear(const double *u, const double *D, const double *v, int k, int nh) {
-    double out = 0.0;
-    for (int a = 0; a < k; a++) {
-        double row = 0.0;
-        for (int c = 0; c < nh; c++) row += D[(size_t)a * nh + c] * v[c];
-        out += u[a] * row;
-    }
-    return out;
-}
-
-/* (r, dr/dt) at y (watch.ratio_and_rate): qdot the coordinate rates (NULL: computed at y). */
+/* (r, dr/dt) at y (watch.ratio_and_rate): r from the tracked extremes (watch_eig.c), and dr/dt
+ * from d sigma/dt = u^T J' v of each (J' by a forward difference of the weighted rows along q');
+ * qdot the coordinate rates (NULL: computed at y). */
 static int ratio_and_rate(ovk_sim *s, const double *y, const double *qdot, double *r, double *rate, char *msg) {
     const ovk_model *M = s->M;
-    int nR = n_kept(M), nh = s->nh, n = s->n;
-    int status = weighted(s, y, kept_rows(M), nR, s->W, msg);
+    int n = s->n;
+    double smin = 1.0, smax = 1.0;
+    int status = ovk_eig_rows(s, y, kept_rows(M), s->eig->w, msg);
     if (!status && !qdot) {
         if ((status = ovk_rates(M, s->d, y, y + n, s->qwatch)))
             return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
         qdot = s->qwatch;
     }
-    if (status) return status;
-    memcpy(s->T, s->W, (size_t)nR * nh * sizeof(double));
-    ovk_jacobi_rows(s->T, nR, nh, s->Q); /* rows: sigma_i v_i; rows of Q: u_i */
-    int lo = 0, hi = 0;
-    for (int i = 0; i < nR; i++) {
-        double *v = s->T + (size_t)i * nh, sv = 0.0;
-        for (int c = 0; c < nh; c++) sv += v[c] * v[c];
-        s->sv[i] = sqrt(sv);
-        for (int c = 0; c < nh; c++) v[c] = s->sv[i] > 0.0 ? v[c] / s->sv[i] : 0.0;
-        if (s->sv[i] < s->sv[lo]) lo = i;
-        if (s->sv[i] > s->sv[hi]) hi = i;
-    }
+    if (status || (status = ovk_eig_extremes(s, s->eig->w, &smin, &smax))) return status;
     double most = 0.0;
     for (int i = 0; i < n; i++) most = fabs(qdot[i]) > most ? fabs(qdot[i]) : most;
     double dt = 1e-7 / (most > 1.0 ? most : 1.0);
     memcpy(s->ywatch, y, (size_t)s->ny * sizeof(double));
     for (int i = 0; i < n; i++) s->ywatch[i] = y[i] + dt * qdot[i];
-    if ((status = weighted(s, s->ywatch, kept_rows(M), nR, s->W2, msg))) return status;
-    for (size_t i = 0; i < (size_t)nR * nh; i++) s->W2[i] = (s->W2[i] - s->W[i]) / dt; /* J' */
-    double ds_min = bilinear(s->Q + (size_t)lo * nR, s->W2, s->T + (size_t)lo * nh, nR, nh);
-    double ds_max = bilinear(s->Q + (size_t)hi * nR, s->W2, s->T + (size_t)hi * nh, nR, nh);
-    double smax = s->sv[hi];
-    *r = smax > 0.0 ? s->sv[lo] / smax : 0.0;
+    if ((status = ovk_eig_rows(s, s->ywatch, kept_rows(M), s->eig->w2, msg))) return status;
+    double ds_min = ovk_eig_rate(s, s->eig->umin, smin, dt), ds_max = ovk_eig_rate(s, s->eig->umax, smax, dt);
+    *r = smax > 0.0 ? smin / smax : 0.0;
     *rate = smax > 0.0 ? (ds_min - *r * ds_max) / smax : 0.0;
     return OVK_OK;
 }
 
 /* r of the kept equations at tau on the last step's dense output (the state into s->ywatch). */
 static int ratio_at(ovk_sim *s, double tau, double *r, char *msg) {
+    double smin = 1.0, smax = 1.0;
     ovk_rk_dense(&s->rk, tau, s->ywatch);
-    int status = weighted(s, s->ywatch, kept_rows(s->M), n_kept(s->M), s->W2, msg);
-    if (!status) *r = ratio_of(s, s->W2, n_kept(s->M));
+    int status = ovk_eig_rows(s, s->ywatch, kept_rows(s->M), s->eig->w, msg);
+    if (!status) status = ovk_eig_extremes(s, s->eig->w, &smin, &smax);
+    if (!status) *r = smax > 0.0 ? smin / smax : 0.0;
     return status;
 }
 
@@ -229,7 +202,8 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
  * Never under min-norm, which keeps every equation. */
 static int degrading(ovk_sim *s, double r, const double *y, char *msg) {
     int nR = n_kept(s->M), k = n_full(s->M) < s->nh ? n_full(s->M) : s->nh;
-    if (r >= DEGRADED_RATIO || s->M->redundancy == OVK_MIN_NORM) return OVK_OK;
+    /* kept rows that are the whole set (no elimination): its ratio is r itself, never 100 r */
+    if (r >= DEGRADED_RATIO || s->M->redundancy == OVK_MIN_NORM || nR == n_full(s->M)) return OVK_OK;
     int status = full_values(s, y, msg);
     if (status) return status;
     double full = k >= nR && s->sv[0] > 0.0 ? s->sv[nR - 1] / s->sv[0] : 0.0;
@@ -251,7 +225,7 @@ static int motion_of(const ovk_model *M, const int *u) {
  * (first = 1, at the start: no events), a rank-change event when the rank differs from the last
  * evaluation's and a uniqueness-change event when a friction joint's verdict does (friction
  * joints as "joints[k]", 0-based in model order; the bindings put the names in). */
-int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg) {
+static int along(ovk_sim *s, double t, const double *y, int first, char *msg) {
     const ovk_model *M = s->M;
     int nj = M->nj, rank = 0, *now = s->along_unique + nj, *was = s->along_unique;
     int status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
@@ -285,9 +259,17 @@ int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg) {
     return OVK_OK;
 }
 
+/* along, its wall time counted in s->along_time (ovk_sim_info). */
+int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg) {
+    double started = ovk_now();
+    int status = along(s, t, y, first, msg);
+    s->along_time += ovk_now() - started;
+    return status;
+}
+
 /* The watch at (t, y) (SingularityMonitor.check and, first = 1, its start at t0: no minimum
  * search, no degrading test); qdot: the integrator's q' at y (NULL: the coordinate rates). */
-int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg) {
+static int monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg) {
     if (!n_kept(s->M)) return OVK_OK;
     double r = 1.0, rate = 0.0;
     int status = ratio_and_rate(s, y, qdot, &r, &rate, msg);
@@ -307,6 +289,41 @@ int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, i
     s->rate = rate;
     if (!first && r < ALONG_RATIO && (status = ovk_sim_along(s, t, y, 0, msg))) return status;
     return first ? OVK_OK : degrading(s, r, y, msg);
+}
+
+/* The watch at (t, y) (monitor), its wall time counted in s->watch_time (ovk_sim_info). */
+int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg) {
+    double started = ovk_now();
+    int status = monitor(s, t, y, qdot, first, msg);
+    s->watch_time += ovk_now() - started;
+    return status;
+}
+
+/* A restored state's kept rows: the tracked vectors saved with it are in their order. */
+void ovk_sim_watch_adopt(ovk_sim *s) {
+    if (s->eig) ovk_eig_order(s->eig, kept_rows(s->M));
+}
+
+/* sigma_min and sigma_max of the watched rows at y (ovk_sim_watch_extremes in core.h): the run's
+ * tracked vectors and its count of capped estimates are put back afterwards. */
+int ovk_sim_watch_extremes(ovk_sim *s, const double *y, int cold, double *out) {
+    if (!s) return OVK_NOMEM;
+    if (!s->eig || !y || !out) return snprintf(s->msg, sizeof s->msg, "watch extremes: no run or no state"), OVK_INVALID;
+    ovk_watch_eig *e = s->eig;
+    int nR = e->nR, have = e->have;
+    long long capped = s->watch_capped;
+    double *keep = s->T; /* scratch of m nh >= 2 nR doubles */
+    memcpy(keep, e->umin, (size_t)nR * sizeof(double));
+    memcpy(keep + nR, e->umax, (size_t)nR * sizeof(double));
+    if (cold) e->have = 0;
+    char msg[OVK_MSG];
+    int status = ovk_eig_rows(s, y, kept_rows(s->M), e->w, msg);
+    if (!status) status = ovk_eig_extremes(s, e->w, out, out + 1);
+    if (status) snprintf(s->msg, sizeof s->msg, "watch extremes: %.900s", msg);
+    memcpy(e->umin, keep, (size_t)nR * sizeof(double));
+    memcpy(e->umax, keep + nR, (size_t)nR * sizeof(double));
+    e->have = have, s->watch_capped = capped;
+    return status;
 }
 
 /* After the step from the accepted state failed with status `failed` (its message in msg):

@@ -185,10 +185,7 @@ def test_the_c_run_counts_the_singular_positions_it_passes(tmp_path):
     info = c_run.info
     singular = [e for e in c_run.events if e[1] == "singular"]
     assert info["singular_passed"] == len(singular) == 3  # flat at 0.71, 1.23 and 2.66 s
-    # the same flat instant, located on the C watch's tracked r (core/watch_eig.c), which below
-    # r = 1e-7 is an upper bound among the small singular values, not LAPACK's: the minimum search
-    # finds it to about 1e-8 / |dr/dt| (measured: 4e-8 s here), not to round-off
-    assert info["last_singular"] == pytest.approx(singular[-1][0], abs=1e-6)
+    assert info["last_singular"] == pytest.approx(singular[-1][0], abs=1e-8)  # the event's time, %.9g
     assert info["projection_drift"] <= kernel.PROJECTION_TOL
 
 

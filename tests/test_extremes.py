@@ -143,8 +143,8 @@ def pendulum(beta0: float) -> SceneSpec:
 
 def test_euler_singularity_detected_not_integrated_through():
     """A q0 at the singularity is refused when the scene is compiled (so check, simulate and build
-    refuse it alike), naming the body and its field; the integration's own test is euler_H's
-    (tests/test_kinematics.py)."""
+    refuse it alike), naming the body and its field; a run reaching it stops with the core's
+    status (core/rates.c)."""
     with pytest.raises(InconsistentInitialState, match=r"body 'rod': bodies\[0\]\.q0 has beta = q0\[4\] = 0\.0001"):
         run_scene(pendulum(1e-4))
     res = run_scene(pendulum(0.8), stop_time=0.2)  # far from beta = 0: fine

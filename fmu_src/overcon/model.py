@@ -25,7 +25,8 @@ generalized reaction of joint X on its bodies is ``f_X = J_X lam_X`` on the left
 *physical* reaction a joint exerts is ``-J_X lam_X``. Reactions are reported on body i of the joint
 in its auxiliary frame: ``p' = -A_i (J_X)_i lam_X`` (Eq. 19), as components named by the joint
 type (``Fx, Fy, T`` planar, ``Fx, Fy, Fz`` spherical, the non-vanishing ones of
-``Fx, Fy, Fz, Tx, Ty, Tz`` for the other spatial joints: :mod:`overcon.joints.spatial_rows`);
+``Fx, Fy, Fz, Tx, Ty, Tz`` for the other spatial joints: :mod:`overcon.joints.spatial_rows`),
+computed by the core (core/outputs.c);
 units N and N.m. Joint constants may depend on the bodies' rotation matrices at q0
 (:class:`overcon.joints.InitialFrames`, from :func:`_rotations` of the bodies).
 
@@ -39,10 +40,9 @@ rank analysis.
 
 Assembly plan: every Model holds an :class:`AssemblyPlan` (``Model.plan``), built by
 ``__post_init__`` from its joints and retained equations (so ``dataclasses.replace`` gives a new
-model a matching plan; there is no cache): per joint type the stacked constants of the joint
-module (``stack``) and flat scatter indices into Phi_h, per joint its constants as a batch of one
-(reported reactions and friction), and for the friction joints the multiplier gather and force
-scatter indices.
+model a matching plan; there is no cache): the friction joints grouped by type, with their
+multiplier gather and force scatter indices, which :class:`overcon.kernel.Kernel` packs for the
+core (the joints' own rows, constants and bodies it packs from ``Model.joints``).
 """
 from __future__ import annotations
 
@@ -84,6 +84,7 @@ class CompiledJoint:
 
     @property
     def module(self):
+        """Its type's module (:mod:`overcon.joints`: the constants and row facts)."""
         return TYPES[self.type].module
 
 
@@ -197,54 +198,27 @@ class Model:
 
 # ----------------------------------------------------------------------------- assembly plan
 
-class _TypedArrays:
-    """Base of the plan's groups (dataclasses with a ``type`` field): the joint type's producer
-    module, and read-only arrays."""
-
-    def __post_init__(self):
-        _freeze_fields(self)
-
-    @property
-    def module(self):
-        return TYPES[self.type].module
-
-
 @dataclass(frozen=True, eq=False)
-class JointGroup(_TypedArrays):
-    """All joints of one type: the module's ``stack`` data and where their blocks go."""
+class FrictionGroup:
+    """The friction joints of one type (model order within the type; the core takes them group
+    by group, ``ovk_model.fj``): where their multipliers are read from the friction multipliers x
+    and where their forces go among the velocities ``AssemblyPlan.friction_cols``."""
 
     type: str
-    data: Mapping[str, object]
-    joints: tuple[int, ...]  # joint indices, in model order
-    rows: np.ndarray  # (k * n_equations,) equation rows, joint by joint
-    sel_i: np.ndarray  # positions (in the group) of the joints whose body i is not the base
-    flat_i: np.ndarray  # flat indices into Phi_h (m, nh) of their (J_X)_i blocks, row-major
-    sel_j: np.ndarray
-    flat_j: np.ndarray
-
-
-@dataclass(frozen=True, eq=False)
-class FrictionGroup(_TypedArrays):
-    """The friction joints of one type: ``stack`` data (laws included), where their
-    multipliers are read from the friction multipliers x and where their forces go among the
-    velocities ``AssemblyPlan.friction_cols``."""
-
-    type: str
-    data: Mapping[str, object]
     joints: tuple[int, ...]
     x_index: np.ndarray  # (k, n_equations) into x = lam_R[friction_xrows], extended by one pad slot
     col_i: np.ndarray  # (k, n_coord) into friction_cols of body i's velocities, extended by one pad slot
     col_j: np.ndarray
-    group: int  # index into AssemblyPlan.groups of the joint group of the same type
-    in_group: np.ndarray  # (k,) positions of these joints in that group (its jac_h rows)
+
+    def __post_init__(self):
+        _freeze_fields(self)
 
 
 @dataclass(frozen=True, eq=False)
 class AssemblyPlan:
-    """Compile-time index data of the batched hot path (built by :func:`build_plan`)."""
+    """Compile-time index data of the friction joints, packed for the core by
+    :class:`overcon.kernel.Kernel` (built by :func:`build_plan`)."""
 
-    groups: tuple[JointGroup, ...]
-    single: tuple[Mapping[str, object], ...]  # per joint (model order): its constants as a batch of one
     friction: tuple[FrictionGroup, ...]
     friction_xrows: np.ndarray  # positions in lam_R of the retained friction rows (joint order)
     friction_cols: np.ndarray  # velocity indices (into h) that friction forces act on, sorted
@@ -270,29 +244,8 @@ def _read_only(x):
 
 
 def build_plan(model: Model) -> AssemblyPlan:
-    """The plan of ``model``'s joints and retained equations (every array read-only)."""
-    k, nh = model.nh_b, model.nh
-    by_type: dict[str, list[int]] = {}
-    for c in model.joints:
-        by_type.setdefault(c.type, []).append(c.index)
-    groups = []
-    for jtype, idx in by_type.items():
-        js = [model.joints[i] for i in idx]
-        blocks = {}
-        for side in ("i", "j"):
-            sel, flat = [], []
-            for pos, c in enumerate(js):
-                b = c.bi if side == "i" else c.bj
-                if b >= 0:
-                    sel.append(pos)
-                    rows = np.array(c.rows)[:, None]
-                    flat.append((rows * nh + b * k + np.arange(k)[None, :]).reshape(-1))
-            blocks[side] = (np.array(sel, np.intp),
-                            np.concatenate(flat).astype(np.intp) if flat else np.zeros(0, np.intp))
-        groups.append(JointGroup(
-            type=jtype, data=_read_only(TYPES[jtype].module.stack(js)), joints=tuple(idx),
-            rows=np.array([r for c in js for r in c.rows], np.intp),
-            sel_i=blocks["i"][0], flat_i=blocks["i"][1], sel_j=blocks["j"][0], flat_j=blocks["j"][1]))
+    """The plan of ``model``'s friction joints and retained equations (every array read-only)."""
+    k = model.nh_b
     retained = model.retained
     pos = {int(row): p for p, row in enumerate(retained)}
     pad = len(retained)  # index of the appended 0.0
@@ -306,19 +259,13 @@ def build_plan(model: Model) -> AssemblyPlan:
     cols = [b * k + i for b in fbodies for i in range(k)]
     cpos = {b: [n * k + i for i in range(k)] for n, b in enumerate(fbodies)}
     cpos[-1] = [len(cols)] * k  # the base: the pad slot
-    friction = []
-    group_of = {gr.type: n for n, gr in enumerate(groups)}
-    for jtype, js in fr_types.items():
-        members = groups[group_of[jtype]].joints
-        friction.append(FrictionGroup(
-            type=jtype, data=_read_only(TYPES[jtype].module.stack(js)), joints=tuple(c.index for c in js),
-            x_index=np.array([[xpos.get(pos.get(r, pad), len(xrows)) for r in c.rows] for c in js], np.intp),
-            col_i=np.array([cpos[c.bi] for c in js], np.intp), col_j=np.array([cpos[c.bj] for c in js], np.intp),
-            group=group_of[jtype], in_group=np.array([members.index(c.index) for c in js], np.intp)))
-    return AssemblyPlan(
-        groups=tuple(groups), single=tuple(_read_only(c.module.stack([c])) for c in model.joints),
-        friction=tuple(friction), friction_xrows=np.array(xrows, np.intp),
-        friction_cols=np.array(cols, np.intp))
+    friction = tuple(FrictionGroup(
+        type=jtype, joints=tuple(c.index for c in js),
+        x_index=np.array([[xpos.get(pos.get(r, pad), len(xrows)) for r in c.rows] for c in js], np.intp),
+        col_i=np.array([cpos[c.bi] for c in js], np.intp), col_j=np.array([cpos[c.bj] for c in js], np.intp))
+        for jtype, js in fr_types.items())
+    return AssemblyPlan(friction=friction, friction_xrows=np.array(xrows, np.intp),
+                        friction_cols=np.array(cols, np.intp))
 
 
 # ----------------------------------------------------------------------------- compile

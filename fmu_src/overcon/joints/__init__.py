@@ -1,51 +1,20 @@
-"""Joint types: one producer module per type (paper Eq. 34, 36, 41; App. A) and ONE table of
-per-type facts, :data:`TYPES`. Adding a joint type is one module plus one entry here (see
-docs/adding-a-joint.md).
+"""Joint types: ONE table of per-type facts, :data:`TYPES`, and one module per type holding what
+compiling a joint needs (paper Eq. 34, 36, 41; App. A). The rows of every type (Phi, Phi_h,
+gamma), its reactions and its friction are evaluated by the compiled core only
+(core/joints_planar.c, core/joints_spherical.c, core/joints_spatial.c, dispatched by
+core/joints.c); :mod:`overcon.kernel` packs each joint's constants for it. Adding a joint type is
+one module, one entry here, its C rows and its packing (docs/adding-a-joint.md).
 
-Every module is batched: it evaluates all joints of its type at once, a single joint being a
-batch of one (there is no separate single-joint form; tests/reference_joints.py keeps a plain
-per-joint reference for the tests). A module offers, with ``f`` the evaluation's
-:class:`overcon.evaluation.Frames` and ``d`` the stacked constants of k joints:
+A type's module offers:
 
 - ``constants(params, init) -> dict``: one joint's constant arrays from the file's fields and
-  ``init`` (:class:`InitialFrames`: the rotation matrices of its bodies at q0) (compile);
-- ``stack(joints) -> d``: the constants of k compiled joints stacked (body slots ``bi``/``bj``,
-  -1 = base; friction laws ``laws``); done once at compile time (``Model.plan``);
-- ``phi(d, f) -> (k, n_eq)``: constraint equations Phi_X;
-- ``jac_h(d, f) -> (Ji, Jj)``, each (k, n_eq, n_coord): derivative by the velocities h_i, h_j
-  (spatial: the modified Jacobian of Eq. 7; planar: Phi_q);
-- ``gamma(d, f) -> (k, n_eq)``: right-hand side of Phi_h h' = gamma (Eq. 11);
-- ``reaction(d, f, fi) -> (k, n_components)``: the physical reaction in the joint's auxiliary
-  frame, ``-A_i fi`` (Eq. 19; A.1, A.5, A.10), given fi = (J_X)_i^T lam_X (k, n_coord), the
-  left-hand-side generalized reaction on body i; the components are the table's ``reaction``.
+  ``init`` (:class:`InitialFrames`: the rotation matrices of its bodies at q0) (compile time;
+  ``CompiledJoint.p``, packed by :func:`overcon.kernel._joint_constants`);
+- optional ``ROW_MEANINGS``: per equation what it holds (:attr:`JointType.row_meanings`);
+- optional ``ROW_KINDS``: per equation translational or rotational (:attr:`JointType.row_kinds`).
 
-Types without friction (``friction_size`` None) need not offer the three friction functions:
-
-- ``friction_setup(d, f, Ji=None) -> ctx``: what friction needs from the frames (once per
-  evaluation); ``Ji``: these joints' (J_X)_i blocks of ``jac_h`` when already computed (the
-  hot path passes its own, :func:`overcon.dynamics.evaluate`), else the module computes them;
-- ``friction(d, ctx, lam) -> (Qi, Qj)``, each (k, n_coord): generalized Coulomb friction forces
-  on bodies i and j (Eq. 20-22) given the joints' multipliers lam (k, n_eq) (once per friction
-  iteration);
-- ``friction_force(d, ctx, lam) -> (k,)``: the friction output ``<joint>.friction`` (unit
-  ``friction_unit``, meaning ``friction_text``).
-- optional ``friction_jacobian(d, ctx, lam) -> (dQi, dQj)``, each (k, n_coord, n_eq): the
-  derivatives of ``friction``'s forces by lam, for the friction solve's Newton step (a type
-  without it gets forward differences of ``friction``; tests/test_friction_newton.py checks each
-  one against central differences).
-
-Geometry that several of these functions need in one evaluation (e.g. R_i s_i for phi, jac_h
-and gamma) may be computed once per evaluation with ``f.cached(name, d, compute)``
-(:meth:`overcon.evaluation.Frames.cached`).
-
-Floating point: stacked ``np.matmul``/``np.vecdot`` run the same kernel per item as the 2-D
-products, so a batch gives each joint the numbers it gets alone (tests/test_hot_path.py checks
-the batches against the per-joint reference, bit for bit for the reported outputs; the spatial
-axis types against their single joints in tests/test_spatial_joints.py).
-
-The spatial axis types (revolute, prismatic, cylindrical, universal, fixed) are tuples of the
-row primitives of :mod:`overcon.joints.spatial_rows`, which also holds their constants, reaction
-frame and friction kinematics.
+The spatial axis types (revolute, prismatic, cylindrical, universal, fixed) share their constants,
+row meanings and reaction frame in :mod:`overcon.joints.spatial_rows`.
 """
 from __future__ import annotations
 
@@ -69,7 +38,7 @@ class InitialFrames:
 @dataclass(frozen=True)
 class JointType:
     """The facts of one joint type, read by the scene loader (fields and shapes), the compiler
-    (equations, reaction components) and the FMU (units, texts).
+    (equations, reaction components, constants from ``module``) and the FMU (units, texts).
 
     ``required``: field -> (shape code, description); ``optional``: field -> (shape code,
     description, default). Shape codes: ``"vec"`` a vector of the mechanism's dimension,
@@ -110,12 +79,11 @@ class JointType:
 
     @property
     def row_meanings(self) -> tuple[str, ...]:
-        """Per equation (in order), what it holds: the module's ``ROWS`` for the spatial axis
-        types (:func:`overcon.joints.spatial_rows.row_meanings`: point, parallel, perpendicular,
-        lock), ``"point"`` for every equation of the other types (a violation at q0 is the
-        coordinates' or the joint points')."""
-        rows = getattr(self.module, "ROWS", None)
-        return spatial_rows.row_meanings(rows) if rows is not None else (spatial_rows.POINT_ROW,) * self.n_equations
+        """Per equation (in order), what it holds: the module's ``ROW_MEANINGS`` for the spatial
+        axis types (point, parallel, perpendicular, lock: :mod:`overcon.joints.spatial_rows`),
+        ``"point"`` for every equation of the other types (a violation at q0 is the coordinates'
+        or the joint points')."""
+        return getattr(self.module, "ROW_MEANINGS", (spatial_rows.POINT_ROW,) * self.n_equations)
 
     @property
     def row_kinds(self) -> tuple[str, ...]:
@@ -220,7 +188,7 @@ TYPES: Mapping[str, JointType] = {
                                     "at q0); default: the image of axis_i at q0", None)},
         friction_size=None, sliding_unit="", friction_unit="", friction_text=""),
 }
-"""Joint type key -> its facts and producer module: the one place a joint type is declared. The
+"""Joint type key -> its facts and module: the one place a joint type is declared. The
 key is internal (CompiledJoint.type, JointSpec.type); files and outputs use ``name``, resolved per
 mechanism kind by :func:`resolve`. The planar and spherical types' keys equal their names."""
 

@@ -95,7 +95,7 @@ def test_plan_follows_replaced_model():
     expected = build_plan(other)
     assert len(other.plan.friction_xrows) == len(model.plan.friction_xrows) - 1  # the eliminated row reads 0
     assert np.array_equal(other.plan.friction_xrows, expected.friction_xrows)
-    for arr in (model.q0, model.M, model.retained, model.joints[0].p["s_A"], model.plan.groups[0].data["s_A"],
-                model.plan.groups[0].flat_i):
+    for arr in (model.q0, model.M, model.retained, model.joints[0].p["s_A"], model.plan.friction[0].x_index,
+                model.plan.friction_xrows):
         with pytest.raises(ValueError, match="read-only"):
             arr[0] = 1.0

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Build one FMI 2.0 co-simulation FMU per scene file:
+"""Build one FMU per scene file (FMI 2.0 or 3.0, co-simulation and Model Exchange; no Python inside):
 
     python build_fmu.py mechanisms/ --out dist/fmus [--allow-nonunique] [--no-ref] [paths...]
 

@@ -957,8 +957,8 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
          "Runtime: every FMU is built with the default C runtime (`overcon build`: the FMI layer, the "
          "integrators and the model's evaluation in C, no Python in the FMU). Steps, evaluations, friction "
          "iterations and the drift (max |Phi| at the step ends) are read from the same run in process "
-         "(`overcon.kernel.Run`, which the C FMU runs bit for bit). The Python runtime against the C runtime: "
-         "`python benchmarks/fmu_runtime.py`.", ""]
+         "(`overcon.kernel.Run`, which the C FMU runs bit for bit). Each FMU run as a user runs it (a fresh "
+         "process): `python benchmarks/fmu_runtime.py`.", ""]
     titles = {"planar_f45_wo4_pos": "Planar friction (joints 4, 5), 0-4 s, positions only",
               "spatial_MN_wo5_pos": "Spatial friction (M, N), 0-10 s, positions only",
               "planar_none_wo4_pos": "Planar frictionless, 0-4 s, positions only"}

@@ -12,7 +12,10 @@
 # Then the FMI layer of the FMUs without Python (fmu_src/overcon/fmu/native/fmu_*.c and fmi2_*.c over the core),
 # compiled with the sanitizers into C-runtime FMUs of a friction scene (also with radau and dop853), a
 # quaternion scene, scenes with energy outputs (the Bricard linkage, the compliant door) (every
-# FMU's model file also carries the packed models of the redundancy parameter's other methods), run
+# FMU's model file also carries the packed models of the redundancy parameter's other methods), 17
+# double pendulums with 34 friction joints (beyond the 32 the core once took on its stack: the
+# friction solve's buffers sized from the model), a
+# parallelogram passing its flat position (solver.singular = "pass" in the model file), run
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
 # Then the FMI 3.0 layer (fmi3_*.c) the same way through tests/c_host/fmu_host3.c, co-simulation (-S) and
@@ -53,15 +56,21 @@ for method in ("radau", "dop853"):
 (scenes / "compliant_door_h1_wo_hinge2.toml").write_text(
     Path("mechanisms/examples/compliant_door_h1_wo_hinge2.toml").read_text().replace('"radau"', '"dopri5"')
     .replace('friction = "all"\n', 'friction = "all"\nenergy = true\n'))
+sys.path.insert(0, "tests")
+from test_fmu_c import pendulums  # noqa: E402
+from test_singular_pass import parallelogram  # noqa: E402
+many, passing = pendulums(17, scenes / "k17"), parallelogram(3, scenes / "pg", 1.0)
 code, _ = build_all(["mechanisms/planar_f45_wo4.toml", "mechanisms/examples/door_h1_wo_hinge2.toml",
                      "tests/data/bricard/bricard_wo2.toml", str(scenes / "f45_radau.toml"),
-                     str(scenes / "f45_dop853.toml"), str(scenes / "compliant_door_h1_wo_hinge2.toml")],
+                     str(scenes / "f45_dop853.toml"), str(scenes / "compliant_door_h1_wo_hinge2.toml"),
+                     str(many), str(passing)],
                     sys.argv[1],
                     refs=False, validate=False, runtime="c", allow_nonunique=True, echo=lambda s: None)
 sys.exit(code)
 PYEOF
 $CC -O2 -Wall -Wextra -Werror "${SAN[@]}" -o "$tmp/fmu_host" tests/c_host/fmu_host.c -ldl -lm  # POSIX (dlopen, realpath): not -std=c11
-for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2 f45_radau f45_dop853 compliant_door_h1_wo_hinge2; do
+for id in planar_f45_wo4 door_h1_wo_hinge2 bricard_wo2 f45_radau f45_dop853 compliant_door_h1_wo_hinge2 \
+          pendulums17_scene pgpass3_scene; do
     mkdir -p "$tmp/$id" && (cd "$tmp/$id" && unzip -q "../fmus/$id.fmu")
     $CC "${FLAGS[@]}" "${SAN[@]}" -shared -fPIC -o "$tmp/$id/binaries/linux64/$id.so" "$FMI"/fmu_*.c "$FMI"/fmi2_*.c "$CORE"/*.c -lm
     guid=$(sed -n 's/.*guid="\([^"]*\)".*/\1/p' "$tmp/$id/modelDescription.xml" | head -n 1)

@@ -206,7 +206,7 @@ def test_spring_points_coincide(tmp_path):
 
 def test_invalid_arguments_and_models_are_refused():
     """An unknown guess mode, or a guess mode without its guess: OVK_INVALID with a message. A
-    packed model outside what the core takes (too many friction joints, a bad body index) gets a
+    packed model outside what the core takes (more friction multipliers than equations, a bad body index) gets a
     workspace that refuses every call with the reason; Kernel raises it."""
     spec = spec_of("planar_f145_wo6")
     model = compile_checked(spec)
@@ -218,7 +218,9 @@ def test_invalid_arguments_and_models_are_refused():
     assert k._fn(k._pm, k._data, 0.0, py, 1, None, pyd, plam, pqf, pits, pdamped) == 7
     assert k._message() == "evaluate: guess_mode 1 without a guess"
     lib, _ = kernel.library()
-    for field, value, said in (("nfj", 33, "model: 33 friction joints with 6 multipliers (the core takes at most 32"),
+    nfj = k._cmodel.nfj  # more multipliers than the friction joints have equations
+    for field, value, said in (("nx", 6 * nfj + 1, f"model: {6 * nfj + 1} friction multipliers for {nfj} friction "
+                                "joints (at most 6 each)"),
                                ("dim", 3, "dim 3 with 3 coordinates and 3 velocities per body")):
         bad = kernel._CModel.from_buffer_copy(k._cmodel)
         setattr(bad, field, value)

@@ -291,19 +291,16 @@ def test_reaction_arrays_equal_the_scalars(kinds, tmp_path):
 
 
 def test_flags(tmp_path):
-    """--fmi 3 and an explicit Model Exchange kind need the C runtime (exit 2 naming --runtime c);
-    the default kind is co-simulation there (said). A C-runtime FMU of a scene with energy outputs
-    is co-simulation only by default (said) and refused with an explicit --kind me. --kind cs and
-    me give one interface; a co-simulation-only FMU refuses Model Exchange instantiation."""
+    """The deprecated --runtime python builds what --runtime c builds with --fmi 3 and every kind
+    (both by default). An FMU of a scene with energy outputs is co-simulation only by default
+    (said) and refused with an explicit --kind me. --kind cs and me give one interface; a
+    co-simulation-only FMU refuses Model Exchange instantiation."""
     planar, energy = MECH / "planar_f45_wo4.toml", ROOT / "tests" / "data" / "bricard" / "bricard_wo2.toml"
-    for kw in ({"fmi": 3}, {"kind": "me"}, {"kind": "both"}):
-        lines = []
-        code, _ = fmu_build.build_all([str(planar)], tmp_path / "py", refs=False, validate=False, echo=lines.append,
-                                      echo_err=lines.append, runtime="python", **kw)
-        assert code == fmu_build.EXIT_INPUT and any("--runtime c" in line for line in lines), lines
-    built, lines = _build([planar], tmp_path / "pydefault", runtime="python", validate=False)
-    assert any("co-simulation only (the Python runtime" in line for line in lines)
-    assert _interfaces(built["planar_f45_wo4"]) == ("2.0", "", "cs")
+    for kw, want in (({"fmi": 3}, ("3.0", "me", "cs")), ({"kind": "me"}, ("2.0", "me", "")), ({}, ("2.0", "me", "cs"))):
+        built, lines = _build([planar], tmp_path / f"py{len(kw)}{kw.get('fmi', kw.get('kind', ''))}", runtime="python",
+                              validate=False, **kw)
+        assert any("--runtime python is deprecated" in line for line in lines), lines
+        assert _interfaces(built["planar_f45_wo4"]) == want
     built, lines = _build([energy], tmp_path / "energy", runtime="c", validate=False)
     assert any("co-simulation only (Model Exchange does not carry the energy" in line for line in lines), lines
     assert _interfaces(built["bricard_wo2"])[1:] == ("", "cs")

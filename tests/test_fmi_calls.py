@@ -32,18 +32,15 @@ pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[1]
 MECH = ROOT / "mechanisms"
-NATIVE = ROOT / "fmu_src" / "overcon" / "fmu" / "native" / "overcon_fmi2.c"
+NATIVE = ROOT / "fmu_src" / "overcon" / "fmu" / "native" / "fmu_inst.c"  # the log categories
 
 
-@pytest.fixture(scope="module", params=fmu_build.RUNTIMES)
-def unz(tmp_path_factory, request):
-    """The co-simulation FMUs of two paper scenes, built with each runtime (the Python slave, and the
-    C layer without Python): every call below behaves alike in both. (Model Exchange and FMI 3.0:
-    test_fmi3_me.py.)"""
-    out = tmp_path_factory.mktemp(f"fmus_calls_{request.param}")
+@pytest.fixture(scope="module")
+def unz(tmp_path_factory):
+    """The co-simulation FMUs of two paper scenes. (Model Exchange and FMI 3.0: test_fmi3_me.py.)"""
+    out = tmp_path_factory.mktemp("fmus_calls")
     code, _ = fmu_build.build_all([str(MECH / "planar_f45_wo4.toml"), str(MECH / "planar_none_wo4.toml")], out,
-                                  refs=False, echo=lambda s: None, echo_err=lambda s: None, runtime=request.param,
-                                  kind="cs")
+                                  refs=False, echo=lambda s: None, echo_err=lambda s: None, kind="cs")
     assert code == 0
     done = {}
 
@@ -51,7 +48,7 @@ def unz(tmp_path_factory, request):
         if name not in done:
             done[name] = Path(fmpy.extract(str(out / f"{name}.fmu"), str(out / f"unz_{name}")))
         return done[name]
-    get.out, get.runtime = out, request.param
+    get.out = out
     return get
 
 
@@ -357,61 +354,6 @@ def test_friction_on_a_joint_whose_equations_are_all_eliminated_is_reported(tmp_
     s.free()
 
 
-def test_setting_solver_tolerance_runs_no_rank_analysis(unz, monkeypatch):
-    """Solver options are not part of the Model: after fmi2Instantiate, fmi2SetReal of
-    solver.tolerance and entering/exiting initialisation build a new Simulation with the new
-    tolerance but neither compile the model nor run any rank analysis (pre-check or
-    elimination). Setting a friction parameter, by contrast, does recompile (the counter works)."""
-    if unz.runtime != "python":
-        pytest.skip("the Python slave's internals, built from the FMU's resources: a C-runtime FMU has no Python slave")
-    import ctypes
-
-    from overcon import analysis
-    from overcon.fmu import slave as slave_mod
-    from overcon.fmu.slave import OverconSlave, Status
-
-    calls = []
-
-    def counted(module, name):
-        original = getattr(module, name)
-
-        def wrapper(*args, **kwargs):
-            calls.append(name)
-            return original(*args, **kwargs)
-        monkeypatch.setattr(module, name, wrapper)
-
-    for name in ("analyse", "numerical_rank", "auto_eliminate"):
-        counted(analysis, name)
-    counted(slave_mod, "compile_checked")
-
-    def set_real(inst, name, value):
-        vr = next(k for k, v in enumerate(inst._vars) if v.name == name)
-        refs, vals = (ctypes.c_uint * 1)(vr), (ctypes.c_double * 1)(value)
-        return inst.set_real(ctypes.addressof(refs), 1, ctypes.addressof(vals))
-
-    def initialise(inst, **params):
-        assert inst.setup_experiment(0, 0.0, 0.0) == Status.OK
-        for name, value in params.items():
-            assert set_real(inst, name, value) == Status.OK
-        assert inst.enter_initialization_mode() == Status.OK
-        assert inst.exit_initialization_mode() == Status.OK, inst.messages
-        assert inst.do_step(0.0, 0.01) == Status.OK, inst.messages
-
-    resources = unz("planar_f45_wo4") / "resources"
-    inst = OverconSlave(resources)
-    assert calls  # instantiating compiles the scene once (its rank analysis included)
-    calls.clear()
-    initialise(inst, **{"solver.tolerance": 1e-7})
-    assert calls == []
-    assert inst._sim.solver.tolerance == 1e-7 and inst._sim.settings["tolerance"] == 1e-7
-    assert inst._sim.model is inst._model0  # the instantiated model, not a recompiled one
-
-    other = OverconSlave(resources)
-    calls.clear()
-    initialise(other, **{"joint4.mu": 0.2})
-    assert "compile_checked" in calls and "numerical_rank" in calls
-
-
 def test_switching_friction_off_by_a_parameter_is_logged(unz):
     """joint4.mu = 0 removes joint 4's friction: the build-time verdict may no longer hold, and the
     FMU says so (a warning, which reaches the host with logging off)."""
@@ -422,70 +364,3 @@ def test_switching_friction_off_by_a_parameter_is_logged(unz):
     s = Slave(unz("planar_f45_wo4")).init(**{"joint4.mu": 0.2})
     assert not any("switched between mu = 0" in m for _, _, m in s.logs.records)
     s.free()
-
-
-def test_outputs_the_host_does_not_read_are_not_computed(unz, monkeypatch):
-    """A host that reads only positions never pays for the reactions (no derived_outputs call
-    in fmi2DoStep); its first read of a reaction computes them at the current point, equal bit
-    for bit to those of a host that read everything every step; from then on fmi2DoStep computes
-    them. Repeated reads of the same list (the cached path) give the same values as a first read."""
-    if unz.runtime != "python":
-        pytest.skip("the Python slave's internals, built from the FMU's resources: a C-runtime FMU has no Python slave")
-    import ctypes
-
-    from overcon import simulate
-    from overcon.fmu.slave import OverconSlave, Status
-
-    calls = []
-    original = simulate.Simulation.derived_outputs
-
-    def counted(self, t, y):
-        calls.append(t)
-        return original(self, t, y)
-    monkeypatch.setattr(simulate.Simulation, "derived_outputs", counted)
-
-    def get_real(inst, refs):
-        vr, vals = (ctypes.c_uint * len(refs))(*refs), (ctypes.c_double * len(refs))()
-        assert inst.get_real(ctypes.addressof(vr), len(refs), ctypes.addressof(vals)) == Status.OK, inst.messages
-        return list(vals)
-
-    resources = unz("planar_f45_wo4") / "resources"
-    full, lazy = OverconSlave(resources), OverconSlave(resources)
-    outputs = [k for k, v in enumerate(full._vars) if v.key and v.key[0] == "output"]
-    positions = [k for k in outputs if full._vars[k].key[1] < len(full._model0.position_outputs)]
-    assert 0 < len(positions) < len(outputs)
-    for inst in (full, lazy):
-        assert inst.setup_experiment(0, 0.0, 0.0) == Status.OK
-        assert inst.enter_initialization_mode() == Status.OK
-        assert inst.exit_initialization_mode() == Status.OK
-    t = 0.0
-    for _ in range(5):
-        assert full.do_step(t, 0.01) == Status.OK and lazy.do_step(t, 0.01) == Status.OK
-        t += 0.01
-        a = get_real(full, outputs)
-        calls.clear()
-        assert get_real(lazy, positions) == get_real(lazy, positions) == [a[outputs.index(k)] for k in positions]
-        assert calls == []
-    assert lazy.do_step(t, 0.01) == Status.OK and full.do_step(t, 0.01) == Status.OK
-    assert calls == [pytest.approx(0.06)]  # the full reader's step
-    t += 0.01
-    calls.clear()
-    assert get_real(lazy, outputs) == get_real(full, outputs) == get_real(lazy, outputs)
-    assert len(calls) == 1  # computed once, at the first read
-    calls.clear()
-    assert lazy.do_step(t, 0.01) == Status.OK
-    assert len(calls) == 1  # now every step computes them
-    # an FMU state saved before any read keeps the skipped point: restored, the read computes it
-    other = OverconSlave(resources)
-    assert other.setup_experiment(0, 0.0, 0.0) == Status.OK
-    assert other.enter_initialization_mode() == Status.OK and other.exit_initialization_mode() == Status.OK
-    assert other.do_step(0.0, 0.01) == Status.OK
-    handle = ctypes.c_void_p(None)
-    assert other.get_fmu_state(ctypes.addressof(handle)) == Status.OK
-    assert other.do_step(0.01, 0.01) == Status.OK
-    assert other.set_fmu_state(handle.value) == Status.OK
-    reference = OverconSlave(resources)
-    assert reference.setup_experiment(0, 0.0, 0.0) == Status.OK
-    assert reference.enter_initialization_mode() == Status.OK and reference.exit_initialization_mode() == Status.OK
-    assert reference.do_step(0.0, 0.01) == Status.OK
-    assert get_real(other, outputs) == get_real(reference, outputs)

@@ -1,12 +1,14 @@
-"""FMUs without Python (``overcon build --runtime c``): the FMI layer over the compiled core
+"""The FMUs (``overcon build``): the FMI layer over the compiled core
 (fmu_src/overcon/fmu/native/fmi2_*.c), compiled once at the package installation. Their results
 equal the in-process run, they carry no Python (no .py file, no libpython needed or loaded: the plain
-C host runs them from an empty environment), their FMU state restores bit for bit, and a scene
-the C layer does not cover is built with the Python runtime, saying so. The FMI calls one by one
-run for both runtimes in test_fmi_calls.py."""
+C host runs them from an empty environment), their FMU state restores bit for bit, they cover any
+number of friction joints and ``solver.singular = "pass"``, a scene that cannot be integrated is
+refused, and ``--runtime python`` is a deprecated alias. The FMI calls one by one are in
+test_fmi_calls.py."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import shutil
 import subprocess
 import zipfile
@@ -170,22 +172,134 @@ def test_rk4_unstable_step_is_readable_as_in_python(built, tmp_path):
     assert any(s == 3 and "rk4 is unstable with the fixed step 0.02 s" in m for s, _, m in logs.records)
 
 
-def test_uncovered_scene_is_built_with_python_and_said(tmp_path, monkeypatch):
-    """A scene the C layer does not cover (here: more friction joints than the core takes, its
-    limit lowered to 1 for the test): the build says so and the FMU embeds Python (and runs)."""
+def pendulums(k: int, out: Path, stop_time: float = 0.5) -> Path:
+    """``k`` identical copies of a double pendulum with friction in both revolute joints (``2 k``
+    friction joints), every copy pinned at the origin and started alike (upper link at 0.3 rad,
+    lower at -0.4 rad, at rest): copies independent of each other whose arithmetic is the same
+    operation for operation (no offset enters one copy's positions), so they move bit for bit alike."""
+    lines = ['[mechanism]', f'name = "pendulums{k}"', 'kind = "planar"', 'gravity = [0.0, -9.81]']
+    c1, s1, c2, s2 = math.cos(0.3), math.sin(0.3), math.cos(-0.4), math.sin(-0.4)
+    for i in range(k):  # link axis along the body's x, 1 m, pin at its -x end
+        lines += ['[[bodies]]', f'name = "upper{i}"', 'mass = 1.0', 'inertia = 0.0833',
+                  f'q0 = [{0.5 * c1!r}, {0.5 * s1!r}, 0.3]',
+                  '[[bodies]]', f'name = "lower{i}"', 'mass = 0.5', 'inertia = 0.04',
+                  f'q0 = [{c1 + 0.5 * c2!r}, {s1 + 0.5 * s2!r}, -0.4]']
+    for i in range(k):
+        for name, bi, bj, sj in ((f"pin{i}", f"upper{i}", "base", "[0.0, 0.0]"),
+                                 (f"knee{i}", f"lower{i}", f"upper{i}", "[0.5, 0.0]")):
+            lines += ['[[joints]]', f'name = "{name}"', 'type = "revolute"', f'body_i = "{bi}"', f'body_j = "{bj}"',
+                      's_i = [-0.5, 0.0]', f's_j = {sj}',
+                      '[joints.friction]', 'law = "regularised"', 'mu = 0.2', 'radius = 0.05', 'v_reg = 1e-3']
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"pendulums{k}.toml").write_text("\n".join(lines) + "\n")
+    joints = ", ".join(f'"{j}{i}"' for i in range(k) for j in ("pin", "knee"))
+    scene = out / f"pendulums{k}_scene.toml"
+    scene.write_text("\n".join([
+        "[scene]", f'name = "pendulums{k}_scene"', f'mechanism = "pendulums{k}.toml"', f"friction = [{joints}]", "eliminate = []",
+        f"stop_time = {stop_time!r}", "[outputs]",
+        "positions = [" + ", ".join(f'"upper{i}.phi", "lower{i}.phi"' for i in range(k)) + "]",
+        "[solver]", "tolerance = 1e-9", "output_interval = 0.05", ""]))
+    return scene
+
+
+def _c_run(path: Path, times, **solver) -> tuple[list[str], np.ndarray]:
+    """(output names, positions at ``times``) of the scene at ``path`` run in process in C
+    (kernel.Run), with the scene's solver settings changed by ``solver``."""
     from overcon import kernel
-    monkeypatch.setattr(kernel, "MAX_FRICTION", 1)
+    spec = scene_mod.as_scene(scene_mod.load(path))
+    model = compile_checked(spec)
+    runner = kernel.Run(model, dataclasses.replace(spec.solver, **solver))
+    names = model.output_names()[:len(model.position_outputs)]
+    cols = [i for _, i in model.position_outputs]
+    return names, np.array([runner.advance(float(t))[cols] for t in times])
+
+
+def test_forty_friction_joints_run_in_process_and_in_the_c_fmu(tmp_path):
+    """20 copies of a double pendulum with friction in both joints: 40 friction joints (80 friction
+    multipliers), beyond the 32 the core once took on its stack. In process (kernel.Run) and
+    through the C FMU in fmpy every copy moves bit for bit as the first (the copies are the same
+    arithmetic); the FMU equals the in-process run at its communication points (the same C run).
+    With rk4's fixed steps (no error norm over all copies to choose the steps; to 0.25 s) the first copy moves
+    bit for bit as the mechanism alone, one copy with 2 friction joints; and friction changed the
+    motion (it differs from the frictionless run by more than 1e-3 rad)."""
+    path = pendulums(20, tmp_path / "k20")
+    lines = []
+    code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, echo=lines.append,
+                                        echo_err=lines.append)
+    assert code == 0 and any(": built " in line and "runtime c)" in line for line in lines), lines
+    got = fmpy.simulate_fmu(str(results[0].fmu), output_interval=0.05)
+    times = got["time"][1:]
+    names, ref = _c_run(path, times)
+    fmu = np.column_stack([got[n][1:] for n in names])
+    assert np.max(np.abs(fmu - ref)) <= 1e-12
+    for pos in (ref, fmu):
+        copies = pos.reshape(len(times), 20, 2)
+        assert np.array_equal(copies, np.broadcast_to(copies[:, :1], copies.shape))
+    early = times[times <= 0.25]  # rk4's fixed steps cost more evaluations than dopri5's
+    _, fixed = _c_run(path, early, method="rk4", step=1e-3)
+    _, alone = _c_run(pendulums(1, tmp_path / "k1"), early, method="rk4", step=1e-3)
+    assert np.array_equal(fixed.reshape(len(early), 20, 2)[:, 0], alone)
+    free = pendulums(1, tmp_path / "free")
+    free.write_text(free.read_text().replace("friction = [", "friction = [] # ["))
+    _, frictionless = _c_run(free, early, method="rk4", step=1e-3)
+    assert np.max(np.abs(alone - frictionless)) > 1e-3
+
+
+def test_singular_pass_runs_in_the_c_fmu(tmp_path):
+    """``solver.singular = "pass"`` (the augmented Lagrangian solve and step-end projections) is in
+    the model file: the parallelogram of three cranks (tests/test_singular_pass.py) goes through
+    both flat positions in the C FMU, equal to the in-process C run at the communication points,
+    every crank at the first one's angle, and the two ``singular`` events logged under logEvents."""
+    from test_singular_pass import parallelogram
+    path = parallelogram(3, tmp_path / "pg", 1.6)
+    code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, echo=lambda s: None,
+                                        echo_err=lambda s: None)
+    assert code == 0
+    d = unzip(results[0].fmu, tmp_path)
+    logs = Logs()
+    fmu, vr = slave(d, logs)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    times = np.linspace(0.05, 1.6, 32)
+    got, t = [], 0.0
+    for t_next in times:
+        fmu.doStep(t, float(t_next) - t)  # fmpy raises on a status other than fmi2OK
+        got.append(fmu.getReal([vr["crank0.phi"]])[0])
+        t = float(t_next)
+    fmu.terminate()
+    fmu.freeInstance()
+    _, ref = _c_run(path, times)
+    assert np.max(np.abs(np.array(got) - ref[:, 0])) <= 1e-12
+    events = [m for _, _, m in logs.records if ": event singular" in m]
+    assert len(events) == 2, logs.text()
+
+
+def test_coulomb_law_is_refused_at_build(tmp_path):
+    """The friction law 'coulomb' (discontinuous at v = 0; overcon simulate refuses to integrate
+    it) gives no FMU: exit 2 naming the joint and the law, nothing written."""
+    (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text()
+                                                  .replace('law = "regularised"', 'law = "coulomb"'))
     path = tmp_path / "f45.toml"
     path.write_text((MECH / "planar_f45_wo4.toml").read_text())
-    (tmp_path / "planar_sliders.toml").write_text((MECH / "planar_sliders.toml").read_text())
     lines = []
-    code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, runtime="c", echo=lines.append,
+    code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, echo=lines.append,
                                         echo_err=lines.append)
-    assert code == 0, lines
-    assert any("runtime python (the FMU embeds Python): the C runtime does not cover 2 friction joints (the kernel "
-               "takes at most 1)" in line for line in lines), lines
-    assert "resources/overcon_python.txt" in zipfile.ZipFile(results[0].fmu).namelist()
-    assert len(fmpy.simulate_fmu(str(results[0].fmu), stop_time=0.05)) > 1
+    assert code == fmu_build.EXIT_INPUT and results[0].status == "invalid"
+    assert any("joint joint4: friction law 'coulomb'" in line and "not for integration" in line for line in lines)
+    assert not (tmp_path / "out" / "planar_f45_wo4.fmu").exists()
+
+
+def test_runtime_python_is_a_deprecated_alias_of_c(tmp_path, capsys):
+    """``overcon build --runtime python`` warns on stderr that it is deprecated and builds the C
+    runtime (no Python file in the FMU; exit 0)."""
+    from overcon.cli import main
+    assert main(["build", str(SCENES["planar_f45_wo4"]), "--out", str(tmp_path), "--no-ref", "--runtime",
+                 "python"]) == 0
+    out, err = capsys.readouterr()
+    assert "--runtime python is deprecated" in err and "runtime c)" in out and "deprecated" not in out
+    names = zipfile.ZipFile(tmp_path / "planar_f45_wo4.fmu").namelist()
+    assert "resources/overcon_model.bin" in names and not [n for n in names if n.endswith(".py")]
 
 
 def test_energy_outputs_are_built_for_the_c_runtime_and_equal_the_in_process_run(tmp_path):

@@ -1,8 +1,7 @@
 """The FMUs outside fmpy: a plain C host (tests/c_host/fmu_host.c) that knows nothing about Python,
 run from an empty environment (no LD_PRELOAD, no PYTHONPATH, no OPENBLAS_* either; the FMU is
-loaded with dlopen RTLD_LOCAL and starts its own interpreter), and libcosim (libcosimpy). These are
-the FMUs of the Python runtime (`overcon build --runtime python`), built as such; the C runtime's
-host tests are in tests/test_fmu_c.py.
+loaded with dlopen RTLD_LOCAL), and libcosim (libcosimpy). The host's check that no libpython is
+loaded and that the FMU state restores bit for bit is in tests/test_fmu_c.py.
 
 Runtime: the C host runs each friction FMU (planar_f45_wo4, spatial_MN_wo5) once over its whole
 default experiment (compared with fmpy from the same empty environment: equal to 1e-12), then
@@ -22,7 +21,6 @@ import pytest
 
 fmpy = pytest.importorskip("fmpy")
 
-from overcon.fmu import pyinfo  # noqa: E402
 from overcon.fmu.build import build_all  # noqa: E402
 
 pytestmark = pytest.mark.integration
@@ -54,8 +52,8 @@ class Fmu:
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     out = tmp_path_factory.mktemp("fmus_hosts")
-    code, _ = build_all([str(MECH / f"{n}.toml") for n in FRICTION], out, refs=False, runtime="python",
-                        echo=lambda s: None, echo_err=lambda s: None)
+    code, _ = build_all([str(MECH / f"{n}.toml") for n in FRICTION], out, refs=False, echo=lambda s: None,
+                        echo_err=lambda s: None)
     assert code == 0
     return {n: Fmu(out / f"{n}.fmu", Path(fmpy.extract(str(out / f"{n}.fmu"), str(out / f"unz_{n}"))))
             for n in FRICTION}
@@ -66,9 +64,6 @@ def host(tmp_path_factory):
     cc = shutil.which("cc")
     if cc is None:
         pytest.skip("needs a C compiler (cc) for the test host")
-    lib, found = pyinfo.libpython()
-    if not found:
-        pytest.skip(f"this Python has no shared libpython ({lib}): a host without Python cannot start it")
     exe = tmp_path_factory.mktemp("c_host") / "fmu_host"
     subprocess.run([cc, "-O2", "-Wall", "-o", str(exe), str(ROOT / "tests" / "c_host" / "fmu_host.c"), "-ldl", "-lm"],
                    check=True, capture_output=True)
@@ -189,38 +184,15 @@ def test_c_host_strict_uses_the_setup_experiment_tolerance(fmus, host):
     assert np.array_equal(parse_csv(both.stdout)[1], runs[1e-9])
 
 
-def test_python_host_frees_the_instance_after_the_interpreter_shut_down(fmus, host):
-    """A Python host that shuts its interpreter down before fmi2FreeInstance (OMSimulator's Python
-    API at exit): the FMU joins the host's interpreter, a call after the shutdown returns
-    fmi2Error with the reason, and fmi2FreeInstance returns without entering Python (exit 0, not
-    a segmentation fault)."""
-    lib, _ = pyinfo.libpython()
+def test_four_slash_resource_uri(fmus, host):
+    """A host that writes the resource URI as "file:///" + an absolute path (four slashes): the FMU
+    finds its model file there and runs (exit 0, every row, the values of the three-slash URI)."""
     f = fmus["planar_f45_wo4"]
-    proc = run_host(host, f.host_args(0.02, "-P", lib), env={"PYTHONHOME": sys.base_prefix})
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert parse_csv(proc.stdout)[1].shape[0] == round(0.02 / f.step) + 1
-    assert ("fmi2DoStep: the Python interpreter of this process has shut down (or is shutting down); this FMU "
-            "runs in it and cannot be called any more") in proc.stderr
-    assert "fmi2FreeInstance: the Python interpreter has shut down" in proc.stderr
-
-
-def test_paths_in_messages_have_one_leading_slash_with_a_four_slash_uri(fmus, host):
-    """A host that writes the resource URI as "file:///" + an absolute path (four slashes): the
-    paths the FMU names in its messages (here the compiled kernel it loaded) start with one slash."""
-    f = fmus["planar_f45_wo4"]
-    proc = run_host(host, f.host_args(0.02, "-4"))
-    assert proc.returncode == 0, proc.stderr
-    assert f"compiled kernel ({f.unz}/binaries/" in proc.stderr
-    assert "//" not in proc.stderr.replace("file://", "")
-
-
-def test_overcon_python_overrides_the_recorded_interpreter(fmus, host):
-    f = fmus["planar_f45_wo4"]
-    proc = run_host(host, f.host_args(0.02, "-q"), env={"OVERCON_PYTHON": sys.executable})
-    assert proc.returncode == 0, proc.stderr
-    proc = run_host(host, f.host_args(0.02, "-q"), env={"OVERCON_PYTHON": "/nonexistent/python3"})
-    assert proc.returncode == 3
-    assert "fmi2Instantiate: cannot start Python: OVERCON_PYTHON=/nonexistent/python3" in proc.stderr
+    four = run_host(host, f.host_args(0.02, "-q", "-4"))
+    three = run_host(host, f.host_args(0.02, "-q"))
+    assert four.returncode == 0 and three.returncode == 0, four.stderr + three.stderr
+    assert np.array_equal(parse_csv(four.stdout)[1], parse_csv(three.stdout)[1])
+    assert parse_csv(four.stdout)[1].shape[0] == round(0.02 / f.step) + 1
 
 
 LIBCOSIM = r'''

@@ -12,7 +12,8 @@ Python version, and the FMU binaries load the same sources without Python.
 What it covers (:func:`support`): planar mechanisms of revolute and translational joints, spatial
 mechanisms with z-x-z Euler angles or quaternions and every spatial joint type (spherical,
 revolute, prismatic, cylindrical, universal, fixed); gravity, forces, torques, springs; friction laws ``regularised`` and
-``stribeck``; up to :data:`MAX_FRICTION` friction joints; every redundancy method of
+``stribeck``; any number of friction joints (the friction solve's buffers are in the workspace,
+sized from the model); every redundancy method of
 :data:`overcon.spec.REDUNDANCY_METHODS` (``min-norm``: core/kkt_minnorm.c; ``compliant``:
 core/compliance.c, packed by :func:`_redundancy_block`). A model outside that is refused with
 the reason. Every failure of the core is a status (:data:`STATUS`) with a message
@@ -21,6 +22,18 @@ the reason. Every failure of the core is a status (:data:`STATUS`) with a messag
 The solver setting ``kernel`` (scene ``[solver] kernel``, ``--kernel``) stays accepted for the
 scripts that set it: ``"auto"`` and ``"c"`` run the core, ``"numpy"`` is a deprecated alias that
 warns and runs the core (the numpy evaluation path is retired).
+
+Where the library comes from: the package installation compiles it (``setup.py``: ``pip install
+-e .`` or ``pip install .``, about 1 s of the install) into :data:`LIBRARY`,
+``overcon/core/libovercore.so`` (``.dylib``, ``.dll``), with ``$CC`` (default: the compiler Python
+was built with) and the flags ``-O2 -ffp-contract=off -fno-fast-math -std=c11 -Wall -Wextra
+-Werror``: no fused multiply-add contraction and no reassociation, so the numbers do not depend
+on the CPU's FMA support. Nothing is compiled at run time. A source tree that was never installed
+has no library: a run refuses to start, naming the fix (``pip install -e .``). An FMU does not load it: its binary is the core compiled with the FMI layer
+(:mod:`overcon.fmu.build`).
+
+One :class:`Kernel` per model and instance: it owns the core's workspace (``ovk_data``), so two
+instances in one process, or in two threads, never share memory.
 """
 from __future__ import annotations
 
@@ -32,7 +45,6 @@ from pathlib import Path
 import numpy as np
 
 ABI = 9  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
-MAX_FRICTION = 32  # OVK_MAX_FRICTION in core/core.h
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
@@ -83,8 +95,6 @@ def _bind(path: Path) -> ctypes.CDLL:
     lib = ctypes.CDLL(str(path))
     if lib.ovk_abi() != ABI:
         raise OSError(f"{path}: core ABI {lib.ovk_abi()}, expected {ABI} (a library of another overcon version)")
-    if lib.ovk_max_friction() != MAX_FRICTION:
-        raise OSError(f"{path}: core built for {lib.ovk_max_friction()} friction joints, expected {MAX_FRICTION}")
     vp, i = ctypes.c_void_p, ctypes.c_int
     for name, res, args in (("ovk_make_data", vp, [vp]), ("ovk_free_data", None, [vp]),
                             ("ovk_message", ctypes.c_char_p, [vp]), ("ovk_data_status", i, [vp]),
@@ -112,16 +122,6 @@ def _bind(path: Path) -> ctypes.CDLL:
     return lib
 
 
-def use_library(path) -> None:
-    """Use the compiled core at ``path`` (an FMU's shipped library). A library that cannot be
-    loaded is recorded as the reason the core is unavailable (runs then refuse to start, naming it)."""
-    _state.update(lib=None, reason=None, path=str(path), tried=True)
-    try:
-        _state["lib"] = _bind(Path(path))
-    except OSError as exc:
-        _state["reason"] = f"cannot load {path}: {exc}"
-
-
 def disable(reason: str) -> None:
     """No compiled core in this process (runs refuse to start; ``reason`` is reported)."""
     _state.update(lib=None, reason=reason, path=None, tried=True)
@@ -132,14 +132,9 @@ def library_path() -> str | None:
     return _state["path"]
 
 
-def library_name() -> str:
-    """The library's file name inside an FMU (``binaries/<platform>/``)."""
-    return "overcon_kernel" + _shared_suffix()
-
-
 def library():
     """(the loaded core library or None, the reason it is None): :data:`LIBRARY`, the one the
-    package installation compiled, in a process that was not given one by :func:`use_library`."""
+    package installation compiled (unless :func:`disable` said otherwise)."""
     if not _state["tried"]:
         _state["tried"] = True
         if not LIBRARY.exists():
@@ -172,8 +167,6 @@ def support(model) -> str | None:
     for ld in model.loads:
         if ld.type not in _LOADS:
             return f"load type {ld.type!r}"
-    if len(model.friction_joints) > MAX_FRICTION:
-        return f"{len(model.friction_joints)} friction joints (the kernel takes at most {MAX_FRICTION})"
     return None
 
 

@@ -250,10 +250,10 @@ done:
 /* What the core must refuse, each with a status and a message. */
 static void refusals(model_t *m, tally *t) {
     ovk_model bad = m->M;
-    bad.nfj = OVK_MAX_FRICTION + 1;
+    bad.nx = OVK_MAXEQ * bad.nfj + 1; /* more friction multipliers than the friction joints have equations */
     ovk_data *d = ovk_make_data(&bad);
     if (!d) { fail(t, "refusals: out of memory"); return; }
-    if (ovk_data_status(d) != OVK_INVALID || !ovk_message(d)[0]) fail(t, "refusals: too many friction joints accepted");
+    if (ovk_data_status(d) != OVK_INVALID || !ovk_message(d)[0]) fail(t, "refusals: more friction multipliers than equations accepted");
     ovk_free_data(d);
     bad = m->M;
     bad.dim = 4;

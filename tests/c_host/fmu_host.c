@@ -13,10 +13,6 @@
  *
  *   -q            debug logging off (the FMU still logs warnings and errors)
  *   -x            exit right after the last step: no fmi2Terminate, fmi2FreeInstance or dlclose
- *   -P LIBPYTHON  a Python host: load LIBPYTHON (RTLD_GLOBAL) and start it before fmi2Instantiate
- *                 (the FMU joins it), shut it down (Py_FinalizeEx) before fmi2FreeInstance, as
- *                 OMSimulator's Python API does at exit; then call fmi2DoStep once more (it must
- *                 return fmi2Error, not crash)
  *   -4            write the resource URI as "file:///" + the absolute path (four slashes), as some
  *                 hosts do, instead of "file://" + the path
  *   -w            strict, as OMSimulator: any status but fmi2OK is a failure (exit 3)
@@ -169,7 +165,6 @@ int main(int argc, char **argv)
 {
     int logging = fmi2True, quick_exit = 0, nset = 0, i = 1, no_python = 0, state_check = 0;
     fmi2Status worst = fmi2Warning;
-    const char *libpython = NULL;
     int four_slashes = 0;
     fmi2ValueReference set_vr[MAX_SETS];
     fmi2Real set_value[MAX_SETS];
@@ -177,9 +172,6 @@ int main(int argc, char **argv)
         if (!strcmp(argv[i], "-q")) {
             logging = fmi2False;
             i += 1;
-        } else if (!strcmp(argv[i], "-P") && i + 1 < argc) {
-            libpython = argv[i + 1];
-            i += 2;
         } else if (!strcmp(argv[i], "-4")) {
             four_slashes = 1;
             i++;
@@ -204,7 +196,7 @@ int main(int argc, char **argv)
         }
     }
     if (argc - i < 8) {
-        fprintf(stderr, "usage: %s [-q] [-x] [-w] [-n] [-4] [-P LIBPYTHON] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
+        fprintf(stderr, "usage: %s [-q] [-x] [-w] [-n] [-4] [-s VR=VALUE]... UNZIPDIR MODEL_ID GUID START STOP STEP TOL "
                         "VR:NAME [VR:NAME ...]\n", argv[0]);
         return 1;
     }
@@ -252,15 +244,6 @@ int main(int argc, char **argv)
     fmi2SetRealTYPE set_real = (fmi2SetRealTYPE)sym(lib, "fmi2SetReal");
     fmi2DoStepTYPE do_step = (fmi2DoStepTYPE)sym(lib, "fmi2DoStep");
 
-    void *pylib = NULL;
-    if (libpython) {
-        pylib = dlopen(libpython, RTLD_NOW | RTLD_GLOBAL);
-        if (!pylib) {
-            fprintf(stderr, "fmu_host: cannot load %s: %s\n", libpython, dlerror());
-            return 2;
-        }
-        ((void (*)(int))sym(pylib, "Py_InitializeEx"))(0);
-    }
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
     fmi2Component c = instantiate("c_host", fmi2CoSimulation, guid, uri, &callbacks, fmi2False, logging);
     if (!c) {
@@ -326,14 +309,6 @@ int main(int argc, char **argv)
     if (quick_exit)
         return 0; /* the FMU must survive a host that just exits */
     check(worst, terminate(c), "fmi2Terminate");
-    if (pylib) {
-        if (((int (*)(void))sym(pylib, "Py_FinalizeEx"))() != 0)
-            fprintf(stderr, "fmu_host: Py_FinalizeEx reported an error\n");
-        if (do_step(c, time, step, fmi2True) != fmi2Error) {
-            fprintf(stderr, "fmu_host: fmi2DoStep after the interpreter's shutdown did not return fmi2Error\n");
-            return 3;
-        }
-    }
     free_instance(c);
     dlclose(lib);
     free(vr);

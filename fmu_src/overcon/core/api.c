@@ -9,7 +9,6 @@
 #include "core.h"
 
 int ovk_abi(void) { return OVK_ABI; }
-int ovk_max_friction(void) { return OVK_MAX_FRICTION; }
 
 int ovk_fail(ovk_data *d, int status, const char *fmt, ...) {
     va_list ap;
@@ -46,9 +45,9 @@ static int check_model(const ovk_model *M, ovk_data *d) {
           (M->dim == 3 && (M->nq_b == 6 || M->nq_b == 7) && M->nh_b == 6)))
         return ovk_fail(d, OVK_INVALID, "model: dim %d with %d coordinates and %d velocities per body "
                         "(planar: 2, 3, 3; spatial: 3, 6 or 7, 6)", M->dim, M->nq_b, M->nh_b);
-    if (M->nfj > OVK_MAX_FRICTION || M->nx > OVK_MAXEQ * M->nfj)
-        return ovk_fail(d, OVK_INVALID, "model: %d friction joints with %d multipliers (the core takes at most %d "
-                        "joints, %d multipliers each)", M->nfj, M->nx, OVK_MAX_FRICTION, OVK_MAXEQ);
+    if (M->nx > OVK_MAXEQ * M->nfj)
+        return ovk_fail(d, OVK_INVALID, "model: %d friction multipliers for %d friction joints (at most %d each)",
+                        M->nx, M->nfj, OVK_MAXEQ);
     if (M->formulation != OVK_FORM_ELIMINATED && M->formulation != OVK_FORM_AL)
         return ovk_fail(d, OVK_INVALID, "model: formulation %d (0 eliminated, 1 augmented Lagrangian)",
                         M->formulation);
@@ -102,13 +101,16 @@ ovk_data *ovk_make_data(const ovk_model *M) {
                   + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols) + ovk_redundancy_doubles(M);
     d->mem = calloc(need ? need : 1, sizeof(double));
     d->ctx = calloc(nfj ? nfj : 1, sizeof(ovk_fctx));
-    if (!d->mem || !d->ctx) {
+    d->piv = calloc(nx ? nx : 1, sizeof(int));
+    if (!d->mem || !d->ctx || !d->piv) {
         free(d->mem);
         free(d->ctx);
+        free(d->piv);
         d->mem = NULL;
         d->ctx = NULL;
+        d->piv = NULL;
         d->status = ovk_fail(d, OVK_NOMEM, "out of memory: the workspace needs %zu bytes",
-                             need * sizeof(double) + nfj * sizeof(ovk_fctx));
+                             need * sizeof(double) + nfj * sizeof(ovk_fctx) + nx * sizeof(int));
         return d;
     }
     double *p = d->mem;
@@ -149,6 +151,7 @@ void ovk_free_data(ovk_data *d) {
     if (!d) return;
     free(d->mem);
     free(d->ctx);
+    free(d->piv);
     free(d->al);
     free(d->al_rows);
     free(d);

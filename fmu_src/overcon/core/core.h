@@ -88,7 +88,6 @@ enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 #define ARMIJO 1e-4
 #define SIN_BETA_MIN 1e-3
 #define QUAT_NORM_RATE 1.0 /* overcon.kinematics.QUAT_NORM_RATE: the quaternion norm stabilisation (1/s) */
-#define OVK_MAX_FRICTION 32 /* friction joints (and OVK_MAXEQ x that multipliers): overcon.kernel.support checks */
 #define OVK_PROJ_TOL 1e-11   /* m or rad: max |Phi| a run's step-end projection reaches (overcon.kernel.PROJECTION_TOL) */
 #define OVK_PROJ_MAX_ITER 20 /* position corrections of that projection at most (overcon.kernel.PROJECTION_MAX_ITER) */
 #define OVK_MSG 1024        /* bytes of the failure message, with its terminating zero */
@@ -193,6 +192,7 @@ typedef struct {
     int al_iterations; /* AL iterations of the last solve; al_stalled: it stopped on stagnation, not on tol */
     int al_stalled;
     int *al_rows;  /* every equation (m), then its two bodies (2 m): the row set of ovk_project */
+    int *piv;      /* nx: the row interchanges of the friction solves' LU (friction.c, friction_robust.c) */
 } ovk_data;
 
 /* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, dop853, rk4);
@@ -506,7 +506,6 @@ OVK_HIDDEN int ovk_rates(const ovk_model *M, ovk_data *d, const double *q, const
 
 /* api.c: the library's entry points */
 OVK_EXPORT int ovk_abi(void);
-OVK_EXPORT int ovk_max_friction(void);
 OVK_EXPORT ovk_data *ovk_make_data(const ovk_model *M);
 OVK_EXPORT void ovk_free_data(ovk_data *d);
 OVK_EXPORT const char *ovk_message(const ovk_data *d);

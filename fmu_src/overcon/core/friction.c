@@ -124,7 +124,7 @@ static int newton_reduced(const ovk_model *M, ovk_data *d, const double *lam0x, 
     int nx = M->nx, nc = M->ncols;
     int n_max = M->max_iter < NEWTON_MAX_ITER ? M->max_iter : NEWTON_MAX_ITER;
     double *r = work, *Dq = r + nx, *Mx = Dq + nc * nx;
-    int piv[OVK_MAX_FRICTION * OVK_MAXEQ], have_lu = 0, growth = 0;
+    int *piv = d->piv, have_lu = 0, growth = 0;
     double prev = INFINITY;
     for (int it = 1; it <= n_max; it++) {
         *iters = it;
@@ -154,7 +154,7 @@ static int damped_newton_reduced(const ovk_model *M, ovk_data *d, const double *
     int n_max = M->max_iter < DAMPED_MAX_ITER ? M->max_iter : DAMPED_MAX_ITER;
     double *r = work, *Dq = r + nx, *Mx = Dq + nc * nx, *dx = Mx + nx * nx, *xn = dx + nx, *qn = xn + nx,
            *rn = qn + nc;
-    int piv[OVK_MAX_FRICTION * OVK_MAXEQ];
+    int *piv = d->piv;
     ovk_forces_reduced(M, d, x, qf);
     int evals = 1;
     residual(nx, nc, lam0x, Wx, qf, x, r);

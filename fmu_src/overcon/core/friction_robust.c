@@ -127,7 +127,7 @@ static void F(const ovk_model *M, ovk_data *d, const double *lam0x, const double
  * converged; *its counts the iterations. */
 static int fd_newton(const ovk_model *M, ovk_data *d, const double *lam0x, const double *Wx, double *x, double *w,
                      int *its) {
-    int nx = M->nx, nc = M->ncols, piv[OVK_MAX_FRICTION * OVK_MAXEQ];
+    int nx = M->nx, nc = M->ncols, *piv = d->piv;
     double *q = w, *g = q + nc, *Fx = g + nx, *xp = Fx + nx, *Fp = xp + nx, *dx = Fp + nx, *Jac = dx + nx;
     F(M, d, lam0x, Wx, x, q, g, Fx);
     for (int it = 1; it <= M->max_iter; it++) {
@@ -202,9 +202,7 @@ int ovk_friction_robust(const ovk_model *M, ovk_data *d, const double *start, do
         }
         for (int a = 0; a < nx; a++) d->lamR[M->xrows[a]] = x[a];
     }
-    double lrx[OVK_MAX_FRICTION * OVK_MAXEQ];
-    memcpy(lrx, lr, (size_t)nx * sizeof(double));
-    ovk_forces_reduced(M, d, lrx, qf);
+    ovk_forces_reduced(M, d, lr, qf); /* reads lr, writes qf and the per-joint buffers only */
     for (int c = 0; c < nc; c++) d->Q[M->cols[c]] += qf[c];
     return OVK_OK;
 }

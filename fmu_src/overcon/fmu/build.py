@@ -1,4 +1,4 @@
-"""Build one FMI 2.0 co-simulation FMU per scene file, with overcon's own C binary.
+"""Build one FMU per scene file, with overcon's own C binary (no Python in the FMU).
 
 :func:`build_all` is the library function behind ``python build_fmu.py`` and ``overcon build``.
 For each scene file (files with a ``[scene]`` table; mechanism files are skipped) it runs the
@@ -7,53 +7,41 @@ refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each F
 ``<out>/<scene name>.fmu`` is self-contained::
 
     modelDescription.xml              overcon.fmu.description (validated with fmpy after writing)
-    binaries/<platform>/<scene>.so    native/overcon_fmi2.c compiled here (C compiler: $CC or cc)
-    binaries/<platform>/overcon_kernel.so
-                                      the compiled core (overcon/core, compiled when the package
-                                      was installed: overcon.kernel.LIBRARY), copied; loaded by
-                                      the FMU's Python
-    resources/overcon_package.txt     name of the package copy below, for the binary
-    resources/overcon_python.txt      the building Python (libpython, home, site-packages),
-                                      written by overcon.fmu.pyinfo, read by the binary
-    resources/overcon_<hash>/         copy of the overcon package source (relative imports)
-    resources/scene/...               the scene file and its mechanism file
+    binaries/<platform>/<scene>.so    the FMI layer over the core (native/fmu_*.c with fmi2_*.c or
+                                      fmi3_*.c, and core/*.c), compiled once at the package
+                                      installation (setup.py): :data:`C_RUNTIME_LIBRARY`,
+                                      :data:`C_RUNTIME_LIBRARY3`, copied; C11 and libm, no libpython
+    resources/overcon_model.bin       the packed model, output plan, variables and parameter rules
+                                      (overcon.fmu.cmodel, its format versioned)
     resources/overcon_fmu.json        GUID, scene path, pre-check verdicts and warnings, binary facts
     resources/overcon_facts.json      the versioned facts the tooling reads (overcon.fmu.facts)
+    resources/scene/...               the scene file and its mechanism file (for the reader; the
+                                      binary reads only the model file)
 
-At run time it needs only a Python with numpy and scipy (the binary finds one: see
-``native/overcon_fmi2.c`` and the README).
+The binary does not depend on the scene, so building needs no C compiler: the package installation
+compiled it. It covers every scene that can be integrated (:func:`overcon.fmu.cmodel.support`:
+every joint type, both rotations, every load, the friction laws ``regularised`` and ``stribeck``,
+any number of friction joints, every redundancy method, ``solver.singular`` "stop" and "pass",
+every integrator: dopri5, dop853, rk4 and radau). A scene with the friction law ``coulomb``
+(discontinuous at v = 0: for analysis only, refused for integration as by ``overcon simulate``) is
+refused as invalid input (exit 2), as is any scene the C runtime would not cover, naming why:
+there is no other runtime to fall back on.
 
-``runtime="c"`` (``overcon build --runtime c``) builds an FMU without Python where the C FMI layer
-covers the model (:func:`overcon.fmu.cmodel.support`: the core's joints and rotations)::
+``runtime`` (``overcon build --runtime``): ``c``; ``python``, the runtime that embedded the
+building Python in the FMU until it was retired, is a deprecated alias that says so on stderr and
+builds the C runtime (the exit codes are those of the build).
 
-    modelDescription.xml              the same variables
-    binaries/<platform>/<scene>.so    the FMI layer over the core (native/fmi2_*.c and core/*.c),
-                                      compiled once at the package installation (setup.py):
-                                      :data:`C_RUNTIME_LIBRARY`, copied; C11 and libm, no libpython
-    resources/overcon_model.bin       the packed model, output plan, variables and parameter rules
-                                      (overcon.fmu.cmodel)
-    resources/overcon_fmu.json, resources/overcon_facts.json, resources/scene/...  as above
-
-FMI version and kind (``fmi``, ``kind``; ``overcon build --fmi 2|3 --kind cs|me|both``, default FMI 2.0
-and both): a C-runtime FMU offers co-simulation, Model Exchange (the continuous states y = [q, h]
-and their derivatives: :mod:`overcon.fmu.variables`, ``native/fmu_me.c``) or both, as FMI 2.0
+FMI version and kind (``fmi``, ``kind``; ``overcon build --fmi 2|3 --kind cs|me|both``, default FMI
+2.0 and both): co-simulation, Model Exchange (the continuous states y = [q, h] and their
+derivatives: :mod:`overcon.fmu.variables`, ``native/fmu_me.c``) or both, as FMI 2.0
 (``binaries/linux64``, :data:`C_RUNTIME_LIBRARY`) or FMI 3.0 (``binaries/x86_64-linux``,
-:data:`C_RUNTIME_LIBRARY3`: ``native/fmi3_*.c`` over the same shared ``native/fmu_*.c``). The
-Python-runtime FMU is FMI 2.0 co-simulation only: ``--fmi 3`` or an explicit ``--kind me|both`` is
-refused there (exit 2, naming ``--runtime c``), the default kind meaning co-simulation (said in the
-build output). Model Exchange does not carry the energy outputs (their work ledger integrates over
-the run's own steps): a scene with energy outputs is built for co-simulation only under the default
-kind (said in the build output) and refused (exit 2) under an explicit ``--kind me|both``.
+:data:`C_RUNTIME_LIBRARY3`). Model Exchange does not carry the energy outputs (their work ledger
+integrates over the run's own steps): a scene with energy outputs is built for co-simulation only
+under the default kind (said in the build output) and refused (exit 2) under an explicit ``--kind
+me|both``.
 
-Its integrators are every method of the Python FMU: dopri5, dop853 and rk4 (core/integrate_rk.c)
-and radau (core/integrate_radau.c). Every redundancy method runs in it (min-norm:
-core/kkt_minnorm.c; compliant: core/compliance.c). A model the C layer does not cover is built
-with the Python runtime, and the build output says so. ``<hash>`` (and the GUID) is a SHA-256 over the scene
-file, the mechanism file, the overcon source (Python, the binary's C) and the compiled core, so FMUs of different scenes (or of
-one scene from different sources) never share module names in one process, and rebuilding
-unchanged inputs gives the same GUID and, with the same compiler and Python, the same bytes. The
-binary is compiled once per source and compiler (:func:`native_binary`); without a C compiler the
-build fails (exit 2) naming the missing compiler: there is no fallback binary.
+The GUID is a SHA-256 over the scene file, the mechanism file, the overcon source (Python) and the
+binary, so rebuilding unchanged inputs gives the same GUID and the same bytes.
 
 Compatibility information (FMI cross-check convention) next to each FMU, unless ``refs=False``:
 ``<scene>_ref.csv`` (time and every Real output, simulated through ``fmpy.simulate_fmu`` at the
@@ -74,9 +62,7 @@ import json
 import os
 import platform
 import posixpath
-import shlex
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -93,22 +79,19 @@ from ..checks import compile_checked
 from ..precheck import PrecheckResult, precheck
 from ..spec import SceneSpec
 from ..precheck import friction_warnings
-from . import cmodel, description, facts, pyinfo, variables
+from . import cmodel, description, facts, variables
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
-NATIVE_SOURCE = Path(__file__).resolve().parent / "native" / "overcon_fmi2.c"
-CFLAGS = ["-shared", "-fPIC", "-O2", "-s", "-fvisibility=hidden", "-Wall", "-Wextra"]
-LIBS = ["-ldl", "-lpthread"]
 FORMAT_VERSION = "overcon-fmu-2"  # bump when the FMU layout changes (enters the GUID)
-RUNTIMES = ("python", "c")
+RUNTIMES = ("c", "python")
+"""The accepted values of ``--runtime``: ``python`` is a deprecated alias of ``c`` (module docstring)."""
 FMI_VERSIONS = (2, 3)
 KINDS = ("cs", "me", "both")
 C_RUNTIME_LIBRARY = Path(__file__).resolve().parent / "native" / f"libovercon_fmi2{kernel_mod._shared_suffix()}"
 """The binary of the FMI 2.0 FMUs without Python, compiled by the package installation (setup.py)."""
 C_RUNTIME_LIBRARY3 = Path(__file__).resolve().parent / "native" / f"libovercon_fmi3{kernel_mod._shared_suffix()}"
 """The binary of the FMI 3.0 FMUs (without Python), compiled by the package installation (setup.py)."""
-_PKG_NAME = __name__.split(".")[0]  # "overcon"
 _DATE = (1980, 1, 1, 0, 0, 0)  # fixed zip timestamps: reproducible FMU bytes
 
 
@@ -139,15 +122,7 @@ def _source_files() -> list[tuple[str, bytes]]:
 
 
 class BuildError(RuntimeError):
-    """The FMU binary cannot be made here (no C compiler, a compile error, an unknown platform)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class NativeBinary:
-    platform: str  # FMI platform folder: linux64, darwin64
-    ext: str
-    data: bytes
-    compiler: str  # command and version line
+    """The FMU binary is not at hand here (a source tree never installed, an unknown platform)."""
 
 
 def _fmi_platform() -> tuple[str, str]:
@@ -159,58 +134,15 @@ def _fmi_platform() -> tuple[str, str]:
     raise BuildError(f"the FMU binary (dlopen, POSIX) is built on Linux and macOS only, not on {sys.platform}")
 
 
-_NATIVE_CACHE: dict[tuple, NativeBinary] = {}
-
-
-def native_binary() -> NativeBinary:
-    """The FMU binary compiled from ``native/overcon_fmi2.c`` with ``$CC`` (default ``cc``);
-    compiled once per process, source and compiler. Raises :class:`BuildError`."""
-    cc = shlex.split(os.environ.get("CC") or "cc")
-    if not cc or shutil.which(cc[0]) is None:
-        raise BuildError(f"no C compiler: {' '.join(cc) or 'cc'} not found (set CC or install one, e.g. gcc): "
-                         "the FMU binary is compiled at build time")
-    source = NATIVE_SOURCE.read_bytes()
-    key = (tuple(cc), hashlib.sha256(source).hexdigest())
-    if key in _NATIVE_CACHE:
-        return _NATIVE_CACHE[key]
-    plat, ext = _fmi_platform()
-    version = subprocess.run([*cc, "--version"], capture_output=True, text=True).stdout.splitlines()
-    with tempfile.TemporaryDirectory() as tmp:
-        shutil.copyfile(NATIVE_SOURCE, Path(tmp) / NATIVE_SOURCE.name)
-        out = f"overcon_fmi2.{ext}"
-        cmd = [*cc, *CFLAGS, "-o", out, NATIVE_SOURCE.name, *LIBS]
-        proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise BuildError(f"compiling {NATIVE_SOURCE.name} failed ({' '.join(cmd)}):\n{proc.stderr.strip()}")
-        if proc.stderr.strip():
-            raise BuildError(f"compiling {NATIVE_SOURCE.name} gave warnings ({' '.join(cmd)}):\n{proc.stderr.strip()}")
-        data = (Path(tmp) / out).read_bytes()
-    nb = NativeBinary(plat, ext, data, f"{' '.join(cc)} ({version[0] if version else 'version unknown'})")
-    _NATIVE_CACHE[key] = nb
-    return nb
-
-
-def kernel_library() -> bytes:
-    """The compiled core the FMU carries next to its binary: the library the package installation
-    compiled (:data:`overcon.kernel.LIBRARY`), copied as it is. Raises :class:`BuildError` naming
-    the fix when it is missing (a source tree that was never built)."""
-    path = kernel_mod.LIBRARY
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise BuildError(f"the compiled core {path} cannot be read ({exc.strerror or exc}): run `pip install -e .` "
-                         "in the project directory, which compiles it") from exc
-
-
 def c_runtime_library(fmi: int = 2) -> bytes:
-    """The FMU binary without Python for FMI ``fmi`` (:data:`C_RUNTIME_LIBRARY`,
+    """The FMU binary for FMI ``fmi`` (:data:`C_RUNTIME_LIBRARY`,
     :data:`C_RUNTIME_LIBRARY3`). Raises :class:`BuildError` naming the fix when it is missing (a
     source tree that was never built)."""
     path = C_RUNTIME_LIBRARY3 if fmi == 3 else C_RUNTIME_LIBRARY
     try:
         return path.read_bytes()
     except OSError as exc:
-        raise BuildError(f"the FMU binary without Python {path} cannot be read ({exc.strerror or exc}): "
+        raise BuildError(f"the FMU binary {path} cannot be read ({exc.strerror or exc}): "
                          "run `pip install -e .` in the project directory, which compiles it") from exc
 
 
@@ -278,10 +210,12 @@ class _NotBuilt(Exception):
 
 
 def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, validate: bool = True,
-                echo=print, sources=None, binary: NativeBinary | None = None, runtime: str = "c",
-                fmi: int = 2, kind: str | None = None) -> BuildResult:
+                echo=print, sources=None, runtime: str = "c", fmi: int = 2, kind: str | None = None) -> BuildResult:
     """Build the FMU of one scene file (see the module docstring); never raises for bad input.
-    ``kind`` None: the default (both with the C runtime, co-simulation with the Python runtime)."""
+    ``runtime``: one of :data:`RUNTIMES`, every one building the C runtime (:func:`build_all` says
+    that ``python`` is deprecated); ``kind`` None: the default (both)."""
+    if runtime not in RUNTIMES:
+        raise ValueError(f"runtime {runtime!r}: one of {', '.join(RUNTIMES)}")
     t0 = time.perf_counter()
     res = BuildResult(source=str(path), status="invalid")
     try:
@@ -294,21 +228,9 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
                                        f"({', '.join(report.friction_on_nonunique)}); the simulated motion "
                                        "would depend on the eliminated equations (--allow-nonunique builds it "
                                        "anyway)")
-        used = runtime
-        if runtime == "c":
-            why = cmodel.support(model)
-            if why is None and spec.solver.singular == "pass":  # the C FMU packs the eliminated form only
-                why = "solver.singular = 'pass'"
-            if why is not None:
-                used = "python"
-                echo(f"{spec.name}: runtime python (the FMU embeds Python): the C runtime does not cover {why}")
-        kinds = _kinds(spec, model, used, fmi, kind, echo)
-        if used == "c":
-            fmu, guid, table = _write_c_fmu(path, out_dir, spec, model, report, sources=sources, validate=validate,
-                                            fmi=fmi, kinds=kinds)
-        else:
-            fmu, guid, table = _write_fmu(path, out_dir, spec, model, report, sources=sources, binary=binary,
-                                          validate=validate)
+        kinds = _kinds(spec, model, fmi, kind, echo)
+        fmu, guid, table = _write_fmu(path, out_dir, spec, model, report, sources=sources, validate=validate,
+                                      fmi=fmi, kinds=kinds)
     except _NotBuilt as exc:
         res.status = exc.status
         res.messages.extend(exc.messages)
@@ -319,22 +241,13 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
     n_out = len(model.output_names())
     n_par = sum(v.causality == "parameter" for v in table)
     echo(f"{spec.name}: built {fmu} ({n_out} outputs, {n_par} parameters, "
-         f"{fmu.stat().st_size // 1024} KiB, runtime {used}) in {res.seconds:.2f} s")
+         f"{fmu.stat().st_size // 1024} KiB, runtime c) in {res.seconds:.2f} s")
     return res
 
 
-def _kinds(spec: SceneSpec, model, runtime: str, fmi: int, kind: str | None, echo) -> tuple[str, ...]:
-    """The interface kinds the FMU offers ("cs", "me"), or :class:`_NotBuilt` ("invalid") for an FMI
-    version or kind the runtime cannot give (module docstring)."""
-    if runtime == "python":
-        if fmi == 3 or kind in ("me", "both"):
-            asked = "--fmi 3" if fmi == 3 else f"--kind {kind}"
-            raise _NotBuilt("invalid", f"{spec.name}: {asked} refused: the FMU with the Python runtime is FMI 2.0 "
-                                       "co-simulation only; FMI 3.0 and Model Exchange need the C runtime "
-                                       "(--runtime c, where it covers the scene)")
-        if kind is None:
-            echo(f"{spec.name}: co-simulation only (the Python runtime has no Model Exchange)")
-        return ("cs",)
+def _kinds(spec: SceneSpec, model, fmi: int, kind: str | None, echo) -> tuple[str, ...]:
+    """The interface kinds the FMU offers ("cs", "me"), or :class:`_NotBuilt` ("invalid") for a kind
+    the scene cannot have (module docstring)."""
     wanted = ("cs", "me") if kind in (None, "both") else (kind,)
     if "me" in wanted and model.energy_outputs:
         if kind is not None:
@@ -367,6 +280,14 @@ def _load_scene(path: Path):
     why = kernel_mod.refusal(model, spec.solver)
     if why is not None:
         raise _NotBuilt("invalid", f"{path}: solver.kernel = 'c': the compiled kernel cannot run: {why}")
+    for c in model.joints:  # the FMU integrates: the law overcon simulate refuses for integration
+        if c.law is not None and c.law.name == "coulomb":
+            raise _NotBuilt("invalid", f"{path}: joint {c.name}: friction law 'coulomb' (paper Fig. 1 variant A, "
+                                       "mu sign(v)) is discontinuous at v = 0: for analysis only, not for "
+                                       "integration, so no FMU; use 'regularised'")
+    why = cmodel.support(model)
+    if why is not None:
+        raise _NotBuilt("invalid", f"{path}: the FMU's runtime (the compiled core) does not cover {why}")
     return spec, model
 
 
@@ -402,66 +323,11 @@ def _finish(path: Path, tmp: Path, fmu: Path, validate: bool) -> None:
     os.replace(tmp, fmu)
 
 
-def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: PrecheckResult, *, sources, binary,
-               validate: bool):
-    """Write ``<out_dir>/<scene>.fmu`` (through a ``.fmu.part`` file, validated with fmpy unless
-    ``validate`` is false). Returns (FMU path, GUID, variable table); :class:`_NotBuilt`
-    ("failed") naming the scene file otherwise."""
-    try:
-        mech_ref = tomllib.loads(path.read_text(encoding="utf-8"))["scene"]["mechanism"]
-        scene_zip, mech_zip = _scene_layout(path, mech_ref)
-        mech_path = path.parent / mech_ref
-        scene_bytes, mech_bytes = path.read_bytes(), mech_path.read_bytes()
-        sources = _source_files() if sources is None else sources
-        binary = native_binary() if binary is None else binary
-
-        kernel_bytes = kernel_library()
-        kernel_zip = f"binaries/{binary.platform}/{kernel_mod.library_name()}"
-        digest = _digest((FORMAT_VERSION.encode(), NATIVE_SOURCE.read_bytes(), kernel_bytes, scene_zip.encode(),
-                          scene_bytes, mech_zip.encode(), mech_bytes), sources)
-        guid = "{" + str(uuid.UUID(digest[:32])) + "}"
-        pkg = f"{_PKG_NAME}_{digest[:16]}"
-        reaction_unique = report.reaction_unique
-        table = variables.table(model, spec.solver, reaction_unique, bool(report.motion_unique), report.rank)
-        overcon_version = _overcon_version()
-        xml = description.model_description(
-            spec, table, guid=guid, version=overcon_version,
-            generation_tool=f"overcon {overcon_version} build_fmu (native binary, Python "
-                            f"{platform.python_version()})")
-        manifest = {"scene": scene_zip, "guid": guid, "package": pkg, "model_identifier": spec.name,
-                    "reaction_unique": reaction_unique, "motion_unique": bool(report.motion_unique),
-                    "precheck_problems": list(report.problems),
-                    "precheck_warnings": list(report.warnings),
-                    "binary": {"platform": binary.platform, "compiler": binary.compiler,
-                               "source": NATIVE_SOURCE.name},
-                    "kernel": {"library": kernel_zip, "source": "overcon/core"}}
-
-        out_dir.mkdir(parents=True, exist_ok=True)
-        fmu = out_dir / f"{spec.name}.fmu"
-        tmp = fmu.with_suffix(".fmu.part")
-        with zipfile.ZipFile(tmp, "w") as zf:
-            _zip_write(zf, "modelDescription.xml", xml)
-            _zip_write(zf, f"binaries/{binary.platform}/{spec.name}.{binary.ext}", binary.data, 0o755)
-            _zip_write(zf, kernel_zip, kernel_bytes, 0o755)
-            _zip_write(zf, "resources/overcon_package.txt", f"{pkg}\n".encode())
-            _zip_write(zf, "resources/overcon_python.txt", pyinfo.text().encode())
-            _zip_write(zf, "resources/overcon_fmu.json", json.dumps(manifest, indent=1).encode())
-            _zip_write(zf, facts.PATH, facts.encode(facts.record(spec, model, report)))
-            _zip_write(zf, f"resources/{scene_zip}", scene_bytes)
-            _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
-            for rel, data in sources:
-                _zip_write(zf, f"resources/{pkg}/{rel}", data)
-        _finish(path, tmp, fmu, validate)
-    except BuildError as exc:
-        raise _NotBuilt("failed", f"{path}: build failed: {exc}") from exc
-    except (OSError, ValueError, KeyError, RuntimeError) as exc:
-        raise _NotBuilt("failed", f"{path}: build failed: {type(exc).__name__}: {exc}") from exc
-    return fmu, guid, table
-
-
-def _write_c_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: PrecheckResult, *, sources,
-                 validate: bool, fmi: int = 2, kinds=("cs", "me")):
-    """Write ``<out_dir>/<scene>.fmu`` with the C runtime (module docstring), as :func:`_write_fmu`."""
+def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: PrecheckResult, *, sources,
+               validate: bool, fmi: int = 2, kinds=("cs", "me")):
+    """Write ``<out_dir>/<scene>.fmu`` (module docstring) through a ``.fmu.part`` file, validated
+    with fmpy unless ``validate`` is false. Returns (FMU path, GUID, variable table);
+    :class:`_NotBuilt` ("failed") naming the scene file otherwise."""
     try:
         mech_ref = tomllib.loads(path.read_text(encoding="utf-8"))["scene"]["mechanism"]
         scene_zip, mech_zip = _scene_layout(path, mech_ref)
@@ -621,10 +487,9 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
               validate: bool = True, jobs: int | None = None, echo=None, echo_err=None,
               runtime: str = "c", fmi: int = 2, kind: str | None = None) -> tuple[int, list[BuildResult]]:
     """Build every scene in ``paths`` (files or directories) into ``out_dir``; print progress with
-    ``echo`` (problems with ``echo_err``). ``runtime``: "python" (the FMU embeds Python) or "c"
-    (without Python where the C runtime covers the scene; module docstring); ``fmi`` 2 or 3 and
-    ``kind`` "cs", "me", "both" or None (the default: both with the C runtime, co-simulation with
-    the Python runtime; module docstring). Returns (exit code, results)."""
+    ``echo`` (problems with ``echo_err``). ``runtime``: "c", or "python", a deprecated alias of it
+    (said through ``echo_err``; module docstring); ``fmi`` 2 or 3 and ``kind`` "cs", "me", "both"
+    or None (the default: both; module docstring). Returns (exit code, results)."""
     if runtime not in RUNTIMES:
         raise ValueError(f"runtime {runtime!r}: one of {', '.join(RUNTIMES)}")
     if fmi not in FMI_VERSIONS or kind not in (None, *KINDS):
@@ -638,21 +503,14 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
     if not files:
         echo_err("build: no scene files given")
         return EXIT_INPUT, results
+    if runtime == "python":
+        echo_err("build: WARNING: --runtime python is deprecated: the FMU that embedded Python is retired, and "
+                 "this builds the C runtime (no Python in the FMU), as --runtime c does")
     sources = _source_files()
-    try:
-        binary = native_binary()
-    except BuildError as exc:
-        echo_err(f"build: {exc}")
-        return EXIT_INPUT, results
-    lib, found = pyinfo.libpython()
-    if not found:
-        echo_err(f"build: WARNING: this Python ({sys.executable}) has no shared libpython ({lib} not found): "
-                 "the FMUs run only in hosts that already contain Python (fmpy, libcosimpy) or with "
-                 "OVERCON_PYTHON set to a Python built with --enable-shared")
     names: dict[str, str] = {}
     for f in files:
         r = build_scene(f, out_dir, allow_nonunique=allow_nonunique, validate=validate, echo=echo,
-                        sources=sources, binary=binary, runtime=runtime, fmi=fmi, kind=kind)
+                        sources=sources, runtime=runtime, fmi=fmi, kind=kind)
         if r.status == "built" and r.name in names:
             r.status = "failed"
             r.messages.append(f"{f}: scene name {r.name} already built from {names[r.name]} "
@@ -722,14 +580,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--jobs", type=_jobs, metavar="N",
                    help="processes for the reference simulations (default: number of CPUs)")
     p.add_argument("--runtime", choices=RUNTIMES, default="c",
-                   help="c (default): the FMU runs the compiled core without Python where it covers the scene, "
-                        "else it is built with the Python runtime and the build output says why; python: the FMU "
-                        "embeds the building Python")
+                   help="c (default): the FMU runs the compiled core, without Python; python: deprecated alias "
+                        "of c (warns on stderr)")
     p.add_argument("--fmi", type=int, choices=FMI_VERSIONS, default=2,
-                   help="FMI version of the FMUs: 2 (FMI 2.0) or 3 (FMI 3.0, C runtime only) (default 2)")
+                   help="FMI version of the FMUs: 2 (FMI 2.0) or 3 (FMI 3.0) (default 2)")
     p.add_argument("--kind", choices=KINDS, default=None,
-                   help="interfaces the FMU offers: cs (co-simulation), me (Model Exchange) or both; me and both "
-                        "need the C runtime (default: both with the C runtime, cs with the Python runtime)")
+                   help="interfaces the FMU offers: cs (co-simulation), me (Model Exchange) or both (default both)")
 
 
 
@@ -744,6 +600,6 @@ def run_args(args) -> int:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(
         prog="build_fmu.py",
-        description="Build one FMI 2.0 co-simulation FMU per scene file (pre-check first).")
+        description="Build one FMU per scene file (pre-check first).")
     add_arguments(p)
     return run_args(p.parse_args(argv))

@@ -14,7 +14,9 @@ terminating zero, then the bytes and the zero; an array an int32 count then the 
    string GUID;
 2. the model: 13 i counts and 2 d (baumgarte, tol) in ``ovk_model`` order, then its 25 arrays
    (int32 or float64 items, in ``ovk_model`` order), then its redundancy block: 5 i counts
-   (:data:`overcon.kernel.REDUNDANCY_COUNTS`) and 10 arrays (:data:`overcon.kernel.REDUNDANCY_ARRAYS`);
+   (:data:`overcon.kernel.REDUNDANCY_COUNTS`) and 10 arrays (:data:`overcon.kernel.REDUNDANCY_ARRAYS`),
+   then i its formulation (:data:`overcon.kernel.FORMULATIONS`: 0 the eliminated form, 1 the
+   augmented Lagrangian solve with step-end projections of ``solver.singular = "pass"``);
    then i the number of other redundancy methods the ``redundancy`` parameter may choose
    (:func:`overcon.fmu.variables.redundancy_methods` but the scene's own), and per method i its
    index in :data:`overcon.spec.REDUNDANCY_METHODS` (``OVK_ELIMINATE`` ...) and its packed model as
@@ -47,7 +49,7 @@ from ..params import rule_of
 from ..spec import REDUNDANCY_METHODS
 from .variables import redundancy_methods, redundancy_rule, with_redundancy
 
-FORMAT = 3
+FORMAT = 4  # 4: each packed model ends with its formulation (solver.singular)
 MAGIC = b"OVKFMU01"
 TYPES = {"Real": 0, "Integer": 1, "Boolean": 2, "String": 3, "Enumeration": 1}  # an Enumeration is an Integer in FMI 2.0's calls
 CAUSALITIES = {"output": 0, "parameter": 1, "local": 2, "independent": 3}
@@ -67,8 +69,9 @@ DOUBLE_FIELDS = {"Minv", "mass", "inertia", "gravity", "jconst", "jlawp", "lp"}
 
 
 def support(model) -> str | None:
-    """None if the C FMU runs ``model``, else the reason (the Python FMU runs it then): the core's
-    coverage (:func:`overcon.kernel.support`); the C layer computes every output kind."""
+    """None if the C FMU runs ``model``, else the reason (``overcon build`` refuses the scene then):
+    the core's coverage (:func:`overcon.kernel.support`); the C layer computes every output kind and
+    runs both formulations (``solver.singular``)."""
     return kernel_mod.support(model)
 
 
@@ -169,11 +172,12 @@ def _packed(w: _Out, k) -> None:
     red = set(kernel_mod.REDUNDANCY_COUNTS + kernel_mod.REDUNDANCY_ARRAYS)
     for name, _ in cm._fields_:
         if name in INT_FIELDS or name in ("baumgarte", "tol", "formulation") or name in red:
-            continue  # formulation: the C FMU runs the eliminated form (0)
+            continue
         (w.doubles if name in DOUBLE_FIELDS else w.ints)(by_address[getattr(cm, name)])
     w.i(*(getattr(cm, n) for n in kernel_mod.REDUNDANCY_COUNTS))
     for name in kernel_mod.REDUNDANCY_ARRAYS:
         (w.doubles if name in kernel_mod.REDUNDANCY_DOUBLES else w.ints)(by_address[getattr(cm, name)])
+    w.i(cm.formulation)
 
 
 def model_file(model, solver, table, guid: str, messages=()) -> bytes:

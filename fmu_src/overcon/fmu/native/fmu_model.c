@@ -11,7 +11,7 @@
 #include "fmu_common.h"
 
 #define MAX_ITEMS (1 << 24)
-#define FMU_FORMAT 3 /* overcon.fmu.cmodel.FORMAT */
+#define FMU_FORMAT 4 /* overcon.fmu.cmodel.FORMAT */
 
 typedef struct {
     const unsigned char *p, *end;
@@ -108,6 +108,7 @@ static void read_packed(reader *r, ovk_model *M, void **arrays) {
         if (!r->bad && !(count == want[k] || (want[k] == 0 && count == 1))) r->bad = 1; /* empty: one zero */
     }
     read_redundancy(r, M, arrays);
+    M->formulation = rd_int(r); /* OVK_FORM_*: checked by the core (ovk_make_data) */
 }
 
 /* The packed models of the redundancy parameter's other methods (at most two). */

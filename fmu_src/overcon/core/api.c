@@ -231,7 +231,7 @@ int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *
 }
 
 /* Phi (m), Phi_h (m x nh, row-major) and gamma (m, without Baumgarte) at y (joints.c): the rows
- * the evaluation solves with, for checks of the joint formulas against the numpy path and finite
+ * the evaluation solves with, for the pre-check, the initial-state checks and the tests' finite
  * differences. */
 int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam) {
     if (!d) return OVK_NOMEM;

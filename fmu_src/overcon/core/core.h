@@ -40,9 +40,8 @@
  *
  * Every failure is a status (OVK_*) plus a message kept in the workspace (ovk_message); the core
  * never aborts or exits, and has no global mutable state (two workspaces never share memory).
- * In a Python run the caller (overcon.kernel) repeats on the numpy path any evaluation that
- * returns a status, so the robust friction fallback and the errors users read exist once, in
- * Python; a run in C (sim.c) stops with that status instead.
+ * A run (sim.c) finishes a friction solve that gave up by the robust path (friction_robust.c)
+ * and stops with any other status, naming it.
  *
  * Arithmetic: a fixed summation order, no BLAS; compiled with -ffp-contract=off -fno-fast-math so
  * the results do not depend on the CPU's FMA support or the BLAS dispatch.
@@ -267,7 +266,7 @@ typedef struct {
     int *imem;
 } ovk_watch_eig;
 
-/* sim.c: a run of the model (overcon.simulate.Simulation without the numpy path): the integrator
+/* sim.c: a run of the model (what overcon.simulate.Simulation and the FMUs run): the integrator
  * over ovk_evaluate with the friction warm starts, the step-end checks (singularity monitor,
  * constraint drift, work budgets) and the derived outputs at any point of the last step. */
 typedef struct {

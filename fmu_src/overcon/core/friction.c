@@ -4,8 +4,7 @@
  * friction forces, find x = lam0x + Wx qf(x). Newton with the analytic Jacobian first (the LU kept
  * while the residual falls fast); if it gives up, damped Newton from the same start (a fresh
  * Jacobian every step, backtracking on the residual's max norm). If that gives up too the status
- * is OVK_FRICTION and a fallback takes over: the numpy path's (overcon.dynamics) in a Python run,
- * friction_robust.c's (the same iteration) in a run in C (ovk_evaluate_robust). */
+ * is OVK_FRICTION and friction_robust.c's fallback takes over (ovk_evaluate_robust). */
 #include <math.h>
 #include <string.h>
 

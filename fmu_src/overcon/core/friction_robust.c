@@ -2,9 +2,7 @@
  * damped Newton gave up (friction.c returned OVK_FRICTION, its reduced problem still in the
  * workspace): the Anderson-accelerated fixed point x <- lam0x + Wx qf(x) (depth 3, least squares
  * by a small Jacobi SVD with the relative cut-off 1e-12 of numpy's lstsq), then Newton with a
- * finite-difference Jacobian and backtracking on the residual's 2-norm. The same iteration as
- * the numpy path, so the two fail and succeed alike (the results agree to the friction
- * tolerance, the least squares being another implementation). */
+ * finite-difference Jacobian and backtracking on the residual's 2-norm. */
 #include <math.h>
 #include <string.h>
 

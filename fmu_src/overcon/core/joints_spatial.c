@@ -1,10 +1,9 @@
-/* Stage: spatial axis joints (overcon.joints.spatial_revolute, .prismatic, .cylindrical, .universal,
- * .fixed), each a tuple of the row primitives of overcon.joints.spatial_rows (POINT: P_i - P_j, 3
- * rows; DOT: (R_i a)·(R_j b); POINTDOT: (P_i - P_j)·(R_j b)), in the numpy path's order and with
- * its formulas; the reaction in the joint frame (spatial_rows.frame_reaction) and the friction of
- * the revolute (bearing and collar torque), prismatic (guide force) and cylindrical (slip along
- * (v_rel, a omega_rel)) joints. Like the numpy path these types have no analytic friction Jacobian:
- * forward differences of the forces, step 1e-7 max(1, |lam|) (dynamics._fd_friction_jacobian).
+/* Stage: spatial axis joints (revolute, prismatic, cylindrical, universal, fixed; their constants
+ * from overcon.joints.spatial_rows), each a tuple of row primitives (POINT: P_i - P_j, 3 rows;
+ * DOT: (R_i a)·(R_j b); POINTDOT: (P_i - P_j)·(R_j b)); the reaction in the joint frame and the
+ * friction of the revolute (bearing and collar torque), prismatic (guide force) and cylindrical
+ * (slip along (v_rel, a omega_rel)) joints. These types have no analytic friction Jacobian:
+ * forward differences of the forces, step 1e-7 max(1, |lam|).
  *
  * Constants per joint (jconst, packed by overcon.kernel): s_i [0:3], s_j [3:6], a_i [6:9],
  * a_j [9:12], b1_j [12:15], b2_j [15:18], c_i [18:21], E [21:30] (row-major: columns x, y, z of the

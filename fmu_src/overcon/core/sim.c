@@ -80,7 +80,7 @@ int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, cons
     }
     int status = ovk_evaluate(s->M, s->d, t, y, mode, mode ? g : NULL, ydot, s->ev_lam, s->ev_qf, its, &damped);
     s->robust = 0;
-    if (status == OVK_FRICTION) { /* the robust path, started from lam as the numpy path's */
+    if (status == OVK_FRICTION) { /* the robust path, started from lam */
         int more = 0;
         status = ovk_evaluate_robust(s->M, s->d, y, lam, ydot, s->ev_lam, s->ev_qf, &more);
         *its += more;

@@ -184,11 +184,12 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
         return snprintf(msg, OVK_MSG, "%s: the mechanism's constraint Jacobian is rank deficient (rank %d < %d; "
                         "kept equations' sigma_min/sigma_max %s, below %g)", where, full, nR, rs, s->o.ratio_tol),
                OVK_SINGULAR_POSITION;
-    if (s->M->redundancy == OVK_MIN_NORM) /* the Python run chooses the watched set again; the dynamics never used it */
+    if (s->M->redundancy == OVK_MIN_NORM) /* the watched set is chosen at the start only (checks.watch_rows) */
         return say(msg, OVK_ELIMINATION, "%s: the equations watched under redundancy 'min-norm' are no longer "
                         "independent (their sigma_min/sigma_max %s, below %g), while the mechanism is regular there "
-                        "(all equations keep rank %d): the C runtime does not choose the watched equations again: "
-                        "build with --runtime python", where, rs, s->o.ratio_tol, full);
+                        "(all equations keep rank %d): the run does not choose the watched equations again; "
+                        "redundancy 'eliminate' (eliminate = \"auto\") chooses the kept equations again and goes on",
+                        where, rs, s->o.ratio_tol, full);
     s->expired_t = t;
     memmove(s->ystar, y, (size_t)s->ny * sizeof(double));
     return say(msg, OVK_ELIMINATION, "%s: the kept equations are no longer independent (their sigma_min/sigma_max %s, "

@@ -107,3 +107,24 @@ def test_check_of_a_1000_body_chain(tmp_path, capsys):
     report = json.loads(capsys.readouterr().out)
     assert (report["n_coordinates"], report["rank"], report["dof"]) == (3000, 2000, 1000)
     assert report["methods_run"] == ["svd"] and all(j["unique"] for j in report["joints"])
+
+
+@pytest.mark.parametrize("kind,shape,n,loops", [("planar", "chain", 60, 0), ("spatial", "loops", 40, 4),
+                                               ("planar", "forest", 45, 0)], ids=lambda v: str(v))
+def test_left_inverse_norms_bound_the_peeled_part(tmp_path, kind, shape, n, loops):
+    """1 / sigma_min(B) <= ||L||_F <= the one-pass bound, B the peeled rows x peeled columns."""
+    model = _model(linkage(np.random.default_rng(n), kind, shape, n, tmp_path / "m.toml", loops))
+    A = an.equilibrate(jacobian_h(model, frames(model, model.q0, model.h0)).T)[0]
+    rr, cc = np.nonzero(A)
+    rows_of, cols_of = [[] for _ in range(A.shape[1])], [[] for _ in range(A.shape[0])]
+    for i, c in zip(rr.tolist(), cc.tolist()):
+        rows_of[c].append(i)
+        cols_of[i].append(c)
+    steps, _, _ = an._peel(A, rows_of, cols_of, an.DEFAULT_RTOL * np.linalg.norm(A))
+    assert steps
+    R = [i for rows, _, _ in steps for i in rows]
+    C = [c for _, cols, _ in steps for c in cols]
+    B = A[np.ix_(R, C)]
+    assert np.all(A[np.ix_(R, sorted(set(range(A.shape[1])) - set(C)))] == 0.0)  # A = [[B, 0], [X, A']]
+    exact, bound = an._left_inverse_norm(A, steps, cols_of), an._left_inverse_bound(A, steps, cols_of)
+    assert 1.0 / np.linalg.svd(B, compute_uv=False)[-1] <= exact * (1 + 1e-12) and exact <= bound * (1 + 1e-12)

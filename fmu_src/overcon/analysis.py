@@ -205,15 +205,23 @@ def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     d_r, d_c = np.ones(n), np.ones(m)
     if A.size == 0:
         return A, d_r, d_c
-    amax = float(np.abs(A).max())
+    # everything below touches the nonzeros only (a large mechanism's J is very sparse): the same
+    # maxima, and the same products in the same order, as on the dense array
+    rr, cc = np.nonzero(A)  # row-major: rr ascending
+    v = np.abs(A[rr, cc])
+    amax = float(v.max()) if v.size else 0.0
     if amax == 0.0:
         return A, d_r, d_c
     floor = NOISE_FACTOR * max(n, m) * EPS * amax
-    A[np.abs(A).max(axis=1) <= floor, :] = 0.0
-    A[:, np.abs(A).max(axis=0) <= floor] = 0.0
-    # the sweeps touch the nonzeros only (a large mechanism's J is very sparse); the same
-    # products in the same order as on the dense array, so the result is that of the dense sweeps
-    rr, cc = np.nonzero(A)  # row-major: rr ascending
+    rmax = np.zeros(n)
+    np.maximum.at(rmax, rr, v)
+    v[(rmax <= floor)[rr]] = 0.0
+    cmax = np.zeros(m)
+    np.maximum.at(cmax, cc, v)
+    v[(cmax <= floor)[cc]] = 0.0
+    A[rr, cc] = np.where(v == 0.0, 0.0, A[rr, cc])
+    keep = v != 0.0
+    rr, cc = rr[keep], cc[keep]
     v = A[rr, cc]
     by_col = np.argsort(cc, kind="stable")
     r_at, r_start = np.unique(rr, return_index=True)
@@ -402,6 +410,24 @@ def _peel(A: np.ndarray, rows_of: list, cols_of: list, floor: float):
     return steps, live_r, live_c
 
 
+def _left_inverse_bound(A: np.ndarray, steps: list, cols_of: list) -> float:
+    """An upper bound of ||L||_F (L: :func:`_left_inverse_norm`) from row norms, in one pass: row
+    k of a step's block of L is row k of D^+ E minus sum_p (D^+ X)_kp times the rows of the
+    earlier columns p it touches, so its norm is at most ||(D^+)_k|| + sum_p |(D^+ X)_kp| l_p,
+    l_p the earlier rows' bounds (triangle inequality). Exact for a single step; on a chain of
+    equal links it grows like the chain's length, where the exact norm costs p_r x p_c."""
+    bound: dict[int, float] = {}
+    for R, C, P in steps:
+        Cs = set(C)
+        prev = sorted({c for i in R for c in cols_of[i] if c not in Cs})
+        rows = np.sqrt(np.sum(P * P, axis=1))
+        if prev:
+            rows = rows + np.abs(P @ A[np.ix_(R, prev)]) @ np.array([bound[c] for c in prev])
+        for c, b in zip(C, rows.tolist()):
+            bound[c] = b
+    return float(np.sqrt(sum(b * b for b in bound.values())))
+
+
 def _left_inverse_norm(A: np.ndarray, steps: list, cols_of: list) -> float:
     """||L||_F of the left inverse L of B = A[peeled rows, peeled columns] by block forward
     substitution: nu_C = D^+ (y_R - A[R, earlier columns] nu_earlier), step by step (B is block
@@ -482,7 +508,8 @@ def _sigma1_bounds(A: np.ndarray, rr: np.ndarray, cc: np.ndarray) -> tuple[float
     return lo, max(lo, hi)
 
 
-def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bool = True) -> _Factorisation:
+def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bool = True,
+               nonzeros: tuple | None = None) -> _Factorisation:
     """Rank, null basis and singular values of A (n, m) from its structure, exactly as one dense
     SVD of A decides them (the SVD test, B.11), at the cost of the structure's blocks.
 
@@ -510,14 +537,14 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     fails, the dense route runs: one SVD of the whole A (the previous method). With ranks equal,
     the two null spaces are the same in exact arithmetic; numerically each is accurate to its
     own round-off bound (``kappa`` here is that of the computed blocks, Wedin's bound for the
-    basis computed)."""
+    basis computed). ``nonzeros``: ``np.nonzero(A)`` when the caller has it."""
     n, m = A.shape
-    if A.size == 0 or not np.any(A):
+    rr, cc = np.nonzero(A) if nonzeros is None else nonzeros  # row-major order
+    if rr.size == 0:
         return _Factorisation(sigma1=0.0, tol=0.0 if tol is None else float(tol), r=0, N=np.eye(m),
                               sigma=np.zeros(min(n, m)), kappa=1.0, peeled=(), blocks=(), ranks=(),
                               route="blocks")
     rtol_eff = max(rtol, max(n, m) * EPS)
-    rr, cc = np.nonzero(A)
     rows_of: list = [[] for _ in range(m)]
     cols_of: list = [[] for _ in range(n)]
     for i, c in zip(rr.tolist(), cc.tolist()):
@@ -538,7 +565,9 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
         t_hi = t
     route = "blocks"
     if steps:
-        beta = 1.0 / _left_inverse_norm(A, steps, cols_of)
+        beta = 1.0 / _left_inverse_bound(A, steps, cols_of)
+        if not beta > 2.0 * t_hi:  # the one-pass bound is too loose here: the exact ||L||_F
+            beta = 1.0 / _left_inverse_norm(A, steps, cols_of)
         peeled_c = np.zeros(m, dtype=bool)
         peeled_r = np.zeros(n, dtype=bool)
         for R, C, _ in steps:
@@ -681,6 +710,18 @@ class _Context:
     methods: tuple = _METHODS  # the tests run (METHOD_SETS)
     _lazy: dict = field(default_factory=dict)  # the other bases, computed once when a method needs them
 
+    def block(self, cols) -> np.ndarray:
+        """A[:, cols] without its zero rows (the rows no column of ``cols`` touches): the same
+        singular values, R factor and B row norms, at the size of the joint, not of the mechanism."""
+        if "col_rows" not in self._lazy:
+            rr, cc = self._lazy["nonzeros"] if "nonzeros" in self._lazy else np.nonzero(self.A)
+            order = np.argsort(cc, kind="stable")
+            self._lazy["col_rows"] = (rr[order], np.searchsorted(cc[order], np.arange(self.A.shape[1] + 1)))
+        rows_sorted, ptr = self._lazy["col_rows"]
+        idx = list(cols)
+        rows = np.unique(np.concatenate([rows_sorted[ptr[c]:ptr[c + 1]] for c in idx])) if idx else np.zeros(0, int)
+        return self.A[np.ix_(rows, idx)]
+
     @property
     def cross_check(self) -> bool:
         """The rank and QR tests run too (``methods="all"``)."""
@@ -714,10 +755,13 @@ def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> 
     basis), and with the cross-check (``methods="all"``) one dense SVD of it for the rank and QR
     tests' rank, tolerance and kappa."""
     run = _method_set(methods)
-    J = _readonly(_as_matrix(J).copy())
+    J = _as_matrix(J)
+    # the raw J is read again only by the cross-check's reports, or as A when not equilibrated
+    J = _readonly(J.copy() if "rank" in run or not use_equilibration else J.view())
     rt = _rtol(rtol)
-    A = _readonly(_decision_matrix(J, use_equilibration).copy())
-    f = _factorise(A, rt)
+    A = _readonly(_decision_matrix(J, use_equilibration))  # a new array, or the read-only J itself
+    nonzeros = np.nonzero(A)
+    f = _factorise(A, rt, nonzeros=nonzeros)
     brt = _b_rtol(rt, A.shape, f.kappa) if b_rtol is None else _rtol(b_rtol, "b_rtol")
     sigma, tol, r, qr_brt = f.sigma, f.tol, f.r, brt
     if "rank" in run:
@@ -727,7 +771,8 @@ def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> 
         if b_rtol is None:
             qr_brt = _b_rtol(rt, A.shape, float(sigma[0] / sigma[r - 1]) if r > 0 else 1.0)
     return _Context(J=J, A=A, sigma=_readonly(np.array(sigma, dtype=float)), tol=tol, r=r, b_rtol=brt,
-                    N_svd=_readonly(f.N), sigma1=f.sigma1, qr_b_rtol=qr_brt, route=f.route, methods=run)
+                    N_svd=_readonly(f.N), sigma1=f.sigma1, qr_b_rtol=qr_brt, route=f.route, methods=run,
+                    _lazy={"nonzeros": nonzeros})
 
 
 def _svd_full(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -780,7 +825,7 @@ def _rank_defect(ctx: _Context, member_columns: Sequence[tuple[int, ...]]) -> in
     total = 0
     for cols in member_columns:
         in_k[list(cols)] = True
-        total += _rank_abs(ctx.A[:, list(cols)], ctx.tol)
+        total += _rank_abs(ctx.block(cols), ctx.tol)
     return total + _rank_abs(ctx.A[:, ~in_k], ctx.tol) - ctx.r
 
 
@@ -796,12 +841,12 @@ def _b_defect(ctx: _Context, cols: tuple[int, ...], unique: bool) -> int:
         return 0
     limit = ctx.b_rtol * ctx.sigma1
     idx = list(cols)
-    R = np.linalg.qr(ctx.A[:, idx], mode="r")
+    R = np.linalg.qr(ctx.block(idx), mode="r")
     return max(1, int(np.count_nonzero(_svdvals(R @ ctx.N_svd[idx, :]) > limit)))
 
 
 def _joint(ctx: _Context, cols: tuple[int, ...]) -> JointVerdict:
-    B = _B(ctx.A, ctx.N_svd, cols)
+    B = _readonly(ctx.block(cols) @ ctx.N_svd[list(cols), :])  # B_P's nonzero rows: its row norms
     ratio_svd = _b_ratio(ctx, B)
     methods = {"svd": ratio_svd <= 1.0}
     ratio_qr, defect = 0.0, _b_defect(ctx, cols, ratio_svd <= 1.0)
@@ -818,7 +863,7 @@ def _joint(ctx: _Context, cols: tuple[int, ...]) -> JointVerdict:
         B_qr=_B(ctx.J, ctx.basis("qr_raw"), cols) if ctx.cross_check else None,
         agree=len(set(methods.values())) == 1,
         columns=cols,
-        rank_P=_rank_abs(ctx.A[:, list(cols)], ctx.tol),
+        rank_P=_rank_abs(ctx.block(cols), ctx.tol),
         b_ratio_svd=ratio_svd,
         b_ratio_qr=ratio_qr,
     )

@@ -6,8 +6,9 @@ factorisation), side by side where the dense SVD ends in reasonable time.
     python benchmarks/precheck_scale.py [--quick]
 
 Everything runs in process with one BLAS thread (overcon.cli.single_threaded_blas). Per mechanism:
-coordinates n, equations m, the peeled columns and the largest block left; then wall seconds
-(median of 3 runs; 1 run above 20 s) of
+coordinates n, equations m, the peeled columns and the largest block left; then wall seconds and,
+for check and analysis, this process's CPU seconds (``time.process_time``: what other jobs on a
+loaded machine change least), medians of 3 runs (1 run above 20 s), of
   check      ``overcon.cli.main(["check", FILE, "--json", "--friction", "none"])``: loading,
              compiling (the elimination's rank and independent columns), the Jacobian, the
              analysis, the report;
@@ -57,15 +58,17 @@ def cases(tmp: Path, quick: bool) -> list[tuple[str, Path]]:
     return out
 
 
-def timed(fn, repeat: int = 3) -> float:
-    times = []
+def timed(fn, repeat: int = 3) -> tuple[float, float]:
+    """Median wall and CPU seconds of ``fn()``."""
+    wall, cpu = [], []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
-        times.append(time.perf_counter() - t0)
-        if times[-1] > 20.0:
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+        if wall[-1] > 20.0:
             break
-    return statistics.median(times)
+    return statistics.median(wall), statistics.median(cpu)
 
 
 def check(path: Path) -> None:
@@ -77,8 +80,8 @@ def check(path: Path) -> None:
 
 def main_(quick: bool) -> None:
     with tempfile.TemporaryDirectory() as tmp, single_threaded_blas():
-        print(f"{'mechanism':<40} {'n':>5} {'m':>5} {'peeled':>6} {'block':>11} {'check s':>8} "
-              f"{'analysis s':>10} {'dense s':>8}")
+        print(f"{'mechanism':<40} {'n':>5} {'m':>5} {'peeled':>6} {'block':>11} {'check s':>8} {'(cpu)':>7} "
+              f"{'analysis s':>10} {'(cpu)':>7} {'dense s':>8}")
         for label, path in cases(Path(tmp), quick):
             model = compile_checked(scene.as_scene(scene.load(path)))
             J = jacobian_h(model, frames(model, model.q0, model.h0)).T
@@ -88,11 +91,12 @@ def main_(quick: bool) -> None:
             t_check = timed(lambda: check(path))
             t_an = timed(lambda: analysis.analyse(J, groups, methods="svd"))
             if min(J.shape) <= DENSE_LIMIT:
-                t_dense = f"{timed(lambda: analysis._svd_full(analysis.equilibrate(J)[0])):8.3f}"
+                t_dense = f"{timed(lambda: analysis._svd_full(analysis.equilibrate(J)[0]))[0]:8.3f}"
             else:
                 t_dense = f"{'-':>8}"
             print(f"{label:<40} {J.shape[0]:>5} {J.shape[1]:>5} {len(f.peeled):>6} "
-                  f"{f'{block[0]}x{block[1]}':>11} {t_check:8.3f} {t_an:10.3f} {t_dense}", flush=True)
+                  f"{f'{block[0]}x{block[1]}':>11} {t_check[0]:8.3f} {t_check[1]:7.3f} {t_an[0]:10.3f} "
+                  f"{t_an[1]:7.3f} {t_dense}", flush=True)
 
 
 if __name__ == "__main__":

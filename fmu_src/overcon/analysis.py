@@ -35,6 +35,22 @@ QR (B.12)
     ``null(J)``.  ``Q_P`` = rows of Q of joint P, ``J_P Q_P = [D_P | B_P]``, unique iff ``B_P == 0``.
     The same r (from the SVD) is used by all three methods.
 
+The one factorisation (how the SVD test's null basis is computed: :func:`_factorise`)
+-------------------------------------------------------------------------------------
+Not one dense SVD of the whole matrix (O(n m min(n, m)), 20 s for a 1000-body chain) but one of
+each block that is left after two exact reductions: (1) peeling: a set of coordinates (rows)
+touched only by equations (columns) C on which they have full column rank forces every null
+vector to vanish on C (a leaf body held by its joint; then whatever has become a leaf), so C is
+dropped with those rows; (2) splitting: what is left falls apart into blocks that share no
+coordinate and no equation, whose singular values together are the matrix's and whose null
+spaces add up to its null space. The threshold is the whole matrix's (``tol`` below, with
+||A||_2 bounded from both sides), and a certificate (sigma_min of the peeled part against the
+blocks' singular values near ``tol``) proves the rank is the one one dense SVD of the whole
+matrix gives; when it cannot, that dense SVD runs. A tree mechanism peels whole (no SVD at
+all); a parallelogram linkage is one block. ``methods="all"`` also runs one dense SVD of the
+whole matrix for the rank and QR tests (rank, tolerance and their kappa), so the cross-check
+compares the one factorisation with independent computations.
+
 Both B matrices are ``J_P`` times an orthonormal basis of the same null space, so
 ``B_qr = B_svd W`` for an orthogonal W: entries differ (and a null vector's sign is arbitrary),
 but the row norms of B are identical in exact arithmetic.  The zero test below uses row norms.
@@ -70,7 +86,9 @@ rank
 B_P == 0 (SVD and QR)
     ``max_i ||B_P[i, :]||_2 <= b_rtol * sigma_1`` with
     ``b_rtol = max(rtol, B_NOISE_FACTOR * max(n, m) * eps * kappa)``, ``B_NOISE_FACTOR = 100``,
-    ``kappa = sigma_1 / sigma_r``.  The second term bounds the round-off of a computed null-space
+    ``kappa = sigma_1 / sigma_r``, sigma_r the smallest singular value above tol of the matrices
+    factorised (the SVD test: the blocks of the one factorisation, the whole matrix when nothing
+    was peeled; the QR test: the whole matrix).  The second term bounds the round-off of a computed null-space
     basis (Wedin: angle error ~ eps * sigma_1 / sigma_r), so near-singular but non-singular
     configurations give no spurious nonzero B.  The row 2-norm is invariant to the choice of
     orthonormal null basis, so the SVD and QR B's are measured identically.  ``b_rtol`` can be
@@ -521,10 +539,11 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
        diagonal after permutation, so its singular values are the union of the blocks' and its
        null space the direct sum of theirs. One dense SVD per block (LAPACK gesdd, full V).
     3. The threshold is the SVD test's, ``tol = max(rtol, max(n, m) * eps) * ||A||_2``, with
-       ||A||_2 of the whole A (:func:`_sigma1` when anything was peeled, else the largest block
-       singular value), applied to every block: the rank is the number of peeled columns plus
-       the blocks' singular values above tol; the null basis is the blocks' right singular
-       vectors at or below tol, zero on the peeled columns.
+       ||A||_2 of the whole A (when anything was peeled, the lower bound lo of
+       :func:`_sigma1_bounds`, 7e-5 low at worst on a long chain of equal links, else exactly
+       the largest block singular value), applied to every block: the rank is the number of
+       peeled columns plus the blocks' singular values above tol; the null basis is the blocks'
+       right singular vectors at or below tol, zero on the peeled columns.
 
     The certificate (why the verdicts are those of one SVD of A, with the tolerance): write
     A = [[B, 0], [X, A']] (peeled rows and columns first). A null-ish vector of A'
@@ -532,9 +551,12 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     values <= tol as A'. Conversely, if ||A nu|| <= tol ||nu||, then ||nu_B|| <= tol ||nu|| /
     beta (beta = sigma_min(B)) and ||A' nu'|| <= c tol ||nu'|| with c = (1 + ||X|| / beta) / (1 -
     tol / beta), so A has at most as many as A' has <= c tol. Both counts agree unless A' has a
-    singular value in (tol, c tol], or beta <= tol. beta >= 1 / ||L||_F
-    (:func:`_left_inverse_norm`) and ||X||_2 <= ||X||_F make c computable; when the certificate
-    fails, the dense route runs: one SVD of the whole A (the previous method). With ranks equal,
+    singular value in (tol, c tol], or beta <= tol. With ||A||_2 known only within [lo, hi],
+    the dense tolerance lies in [tol_lo, tol_hi] and the certificate is: beta > tol_hi and no
+    singular value of A' in (tol_lo, c(tol_hi) tol_hi]. beta >= 1 / ||L||_F
+    (:func:`_left_inverse_bound`, else the exact :func:`_left_inverse_norm`) and ||X||_2 <=
+    ||X||_F make c computable; when the certificate fails, the dense route runs: one SVD of the
+    whole A (the previous method). With ranks equal,
     the two null spaces are the same in exact arithmetic; numerically each is accurate to its
     own round-off bound (``kappa`` here is that of the computed blocks, Wedin's bound for the
     basis computed). ``nonzeros``: ``np.nonzero(A)`` when the caller has it."""
@@ -899,7 +921,9 @@ class Analysis:
                                           n_equations  m (columns of J)
     rank           r = rank(J)            dof          n - r
     redundant      m - r                  joints       name -> JointVerdict, in insertion order
-    singular_values  of the decision matrix (equilibrated J unless equilibrate=False), descending
+    singular_values  of the decision matrix (equilibrated J unless equilibrate=False), descending;
+                   with ``methods="svd"`` those the one factorisation computed (its blocks'; all
+                   of them when nothing was peeled)
     rank_tol       absolute rank threshold on that matrix
     b_rtol         threshold of the ``B_P == 0`` test (relative to its sigma_1)
     """
@@ -969,8 +993,9 @@ def analyse(
     ``groups`` maps joint name -> its 0-based columns of J.  Groups must not overlap; columns in
     no group (e.g. driving constraints) are part of every ``J_-P`` and of Y in ``set_unique``.
     Tolerances and equilibration: see the module docstring. ``methods`` (:data:`METHOD_SETS`):
-    ``"all"`` runs the three tests; ``"svd"`` only the one-factorisation test (one SVD of J in
-    all, then O(n * len(columns) * (m - r)) per joint instead of two SVDs of J per joint).
+    ``"all"`` runs the three tests; ``"svd"`` only the one-factorisation test (one SVD per block
+    of J left after peeling, :func:`_factorise`, then O(rows of P * len(columns) * (m - r)) per
+    joint instead of two SVDs of J per joint).
     """
     ctx = _context(J, rtol, b_rtol, equilibrate, methods)
     n, m = ctx.J.shape

@@ -567,11 +567,7 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
                               sigma=np.zeros(min(n, m)), kappa=1.0, peeled=(), blocks=(), ranks=(),
                               route="blocks")
     rtol_eff = max(rtol, max(n, m) * EPS)
-    rows_of: list = [[] for _ in range(m)]
-    cols_of: list = [[] for _ in range(n)]
-    for i, c in zip(rr.tolist(), cc.tolist()):
-        rows_of[c].append(i)
-        cols_of[i].append(c)
+    rows_of, cols_of = _pattern(rr, cc, n, m)
     # ||A||_F >= ||A||_2, so this floor is at least tol: a peeled D is of full rank above tol
     floor = float(tol) if tol is not None else rtol_eff * float(np.sqrt(np.sum(A[rr, cc] ** 2)))
     steps, live_r, live_c = _peel(A, rows_of, cols_of, floor)
@@ -585,24 +581,7 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     else:
         sigma1, t = float("nan"), float(tol)
         t_hi = t
-    route = "blocks"
-    if steps:
-        beta = 1.0 / _left_inverse_bound(A, steps, cols_of)
-        if not beta > 2.0 * t_hi:  # the one-pass bound is too loose here: the exact ||L||_F
-            beta = 1.0 / _left_inverse_norm(A, steps, cols_of)
-        peeled_c = np.zeros(m, dtype=bool)
-        peeled_r = np.zeros(n, dtype=bool)
-        for R, C, _ in steps:
-            peeled_c[C] = True
-            peeled_r[R] = True
-        sel = peeled_c[cc] & ~peeled_r[rr]
-        x_f = float(np.sqrt(np.sum(A[rr[sel], cc[sel]] ** 2)))
-        ok = beta > t_hi
-        if ok:
-            c = (1.0 + x_f / beta) / (1.0 - t_hi / beta)
-            ok = not any(np.any((s > t) & (s <= c * t_hi)) for s in sigma_blocks)
-        if not ok:
-            route = "dense"
+    route = "blocks" if not steps or _certified(A, rr, cc, steps, cols_of, sigma_blocks, t, t_hi) else "dense"
     if route == "dense":
         s, vh = _svd_full(A) if vectors else (_svdvals(A), None)
         if tol is None:
@@ -626,6 +605,36 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     kappa = float(sigma1 / above[-1]) if above.size and np.isfinite(sigma1) else 1.0
     return _Factorisation(sigma1=sigma1, tol=t, r=r, N=N, sigma=sigma, kappa=kappa, peeled=peeled,
                           blocks=tuple(blocks), ranks=tuple(ranks), route=route)
+
+
+def _pattern(rr: np.ndarray, cc: np.ndarray, n: int, m: int) -> tuple[list, list]:
+    """(rows of each column, columns of each row) of the nonzeros at (rr, cc)."""
+    rows_of: list = [[] for _ in range(m)]
+    cols_of: list = [[] for _ in range(n)]
+    for i, c in zip(rr.tolist(), cc.tolist()):
+        rows_of[c].append(i)
+        cols_of[i].append(c)
+    return rows_of, cols_of
+
+
+def _certified(A, rr, cc, steps, cols_of, sigma_blocks, t, t_hi) -> bool:
+    """The certificate of :func:`_factorise`: beta > t_hi and no block singular value in
+    (t, c t_hi], c = (1 + ||X||_F / beta) / (1 - t_hi / beta), beta = 1 / (a bound of ||L||_F)."""
+    n, m = A.shape
+    beta = 1.0 / _left_inverse_bound(A, steps, cols_of)
+    if not beta > 2.0 * t_hi:  # the one-pass bound is too loose here: the exact ||L||_F
+        beta = 1.0 / _left_inverse_norm(A, steps, cols_of)
+    if not beta > t_hi:
+        return False
+    peeled_c = np.zeros(m, dtype=bool)
+    peeled_r = np.zeros(n, dtype=bool)
+    for R, C, _ in steps:
+        peeled_c[C] = True
+        peeled_r[R] = True
+    sel = peeled_c[cc] & ~peeled_r[rr]  # X = A[rows left, peeled columns]
+    x_f = float(np.sqrt(np.sum(A[rr[sel], cc[sel]] ** 2)))
+    c = (1.0 + x_f / beta) / (1.0 - t_hi / beta)
+    return not any(np.any((s > t) & (s <= c * t_hi)) for s in sigma_blocks)
 
 
 def _blocks(A: np.ndarray, live_r: np.ndarray, live_c: np.ndarray, rows_of: list, vectors: bool = True):

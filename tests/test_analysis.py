@@ -602,3 +602,37 @@ def test_one_factorisation_equals_the_three_tests_on_random_structures():
             assert (t.unique, t.rank_defect) == (s.unique, s.rank_defect), (trial, names)
     with pytest.raises(ValueError, match=r"methods must be one of \['all', 'svd'\], got 'fast'"):
         analyse(np.eye(2), {"a": [0]}, methods="fast")
+
+
+def _equilibrate_dense(J):
+    """The Ruiz sweeps on the whole dense array (equilibrate's definition, for comparison)."""
+    A = np.array(J, dtype=float)
+    n, m = A.shape
+    d_r, d_c = np.ones(n), np.ones(m)
+    amax = float(np.abs(A).max()) if A.size else 0.0
+    if amax == 0.0:
+        return A, d_r, d_c
+    floor = an.NOISE_FACTOR * max(n, m) * EPS * amax
+    A[np.abs(A).max(axis=1) <= floor, :] = 0.0
+    A[:, np.abs(A).max(axis=0) <= floor] = 0.0
+    for _ in range(50):
+        rn, cn = np.abs(A).max(axis=1), np.abs(A).max(axis=0)
+        if max(np.abs(1 - rn[rn > 0]).max(initial=0.0), np.abs(1 - cn[cn > 0]).max(initial=0.0)) <= 1e-3:
+            break
+        sr = np.where(rn > 0, 1 / np.sqrt(np.where(rn > 0, rn, 1)), 1.0)
+        sc = np.where(cn > 0, 1 / np.sqrt(np.where(cn > 0, cn, 1)), 1.0)
+        A = sr[:, None] * A * sc[None, :]
+        d_r, d_c = d_r * sr, d_c * sc
+    return A, d_r, d_c
+
+
+def test_equilibrate_on_the_nonzeros_is_the_dense_sweeps_bit_for_bit():
+    rng = np.random.default_rng(11)
+    for trial in range(200):
+        n, m = rng.integers(1, 25, 2)
+        A = rng.standard_normal((n, m)) * 10.0 ** rng.integers(-8, 8, (n, 1)) * 10.0 ** rng.integers(-5, 5, (1, m))
+        A[rng.random((n, m)) < 0.6] = 0.0
+        if trial % 3 == 0:
+            A[rng.integers(0, n)] *= 1e-16  # a round-off row
+        for got, want in zip(equilibrate(A), _equilibrate_dense(A)):
+            np.testing.assert_array_equal(got, want)

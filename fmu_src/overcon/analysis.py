@@ -35,6 +35,22 @@ QR (B.12)
     ``null(J)``.  ``Q_P`` = rows of Q of joint P, ``J_P Q_P = [D_P | B_P]``, unique iff ``B_P == 0``.
     The same r (from the SVD) is used by all three methods.
 
+The one factorisation (how the SVD test's null basis is computed: :func:`_factorise`)
+-------------------------------------------------------------------------------------
+Not one dense SVD of the whole matrix (O(n m min(n, m)), 20 s for a 1000-body chain) but one of
+each block that is left after two exact reductions: (1) peeling: a set of coordinates (rows)
+touched only by equations (columns) C on which they have full column rank forces every null
+vector to vanish on C (a leaf body held by its joint; then whatever has become a leaf), so C is
+dropped with those rows; (2) splitting: what is left falls apart into blocks that share no
+coordinate and no equation, whose singular values together are the matrix's and whose null
+spaces add up to its null space. The threshold is the whole matrix's (``tol`` below, with
+||A||_2 bounded from both sides), and a certificate (sigma_min of the peeled part against the
+blocks' singular values near ``tol``) proves the rank is the one one dense SVD of the whole
+matrix gives; when it cannot, that dense SVD runs. A tree mechanism peels whole (no SVD at
+all); a parallelogram linkage is one block. ``methods="all"`` also runs one dense SVD of the
+whole matrix for the rank and QR tests (rank, tolerance and their kappa), so the cross-check
+compares the one factorisation with independent computations.
+
 Both B matrices are ``J_P`` times an orthonormal basis of the same null space, so
 ``B_qr = B_svd W`` for an orthogonal W: entries differ (and a null vector's sign is arbitrary),
 but the row norms of B are identical in exact arithmetic.  The zero test below uses row norms.
@@ -70,7 +86,9 @@ rank
 B_P == 0 (SVD and QR)
     ``max_i ||B_P[i, :]||_2 <= b_rtol * sigma_1`` with
     ``b_rtol = max(rtol, B_NOISE_FACTOR * max(n, m) * eps * kappa)``, ``B_NOISE_FACTOR = 100``,
-    ``kappa = sigma_1 / sigma_r``.  The second term bounds the round-off of a computed null-space
+    ``kappa = sigma_1 / sigma_r``, sigma_r the smallest singular value above tol of the matrices
+    factorised (the SVD test: the blocks of the one factorisation, the whole matrix when nothing
+    was peeled; the QR test: the whole matrix).  The second term bounds the round-off of a computed null-space
     basis (Wedin: angle error ~ eps * sigma_1 / sigma_r), so near-singular but non-singular
     configurations give no spurious nonzero B.  The row 2-norm is invariant to the choice of
     orthonormal null basis, so the SVD and QR B's are measured identically.  ``b_rtol`` can be
@@ -175,7 +193,7 @@ def rank_tolerance(A, rtol: float | None = None) -> float:
     level ``max(n, m) * eps``.  0.0 for an empty or all-zero matrix.
     """
     A = _as_matrix(A)
-    return _tol_from(_svdvals(A), A.shape, _rtol(rtol))
+    return _factorise(A, _rtol(rtol), vectors=False).tol
 
 
 def numerical_rank(A, rtol: float | None = None, *, tol: float | None = None) -> int:
@@ -183,13 +201,13 @@ def numerical_rank(A, rtol: float | None = None, *, tol: float | None = None) ->
 
     ``tol`` (absolute) defaults to ``rank_tolerance(A, rtol)``; pass it explicitly to rank a
     submatrix against the scale of a larger matrix (as the uniqueness tests do).  No
-    equilibration here: this is the plain numerical rank of the given array.
+    equilibration here: this is the plain numerical rank of the given array, from the one
+    factorisation (:func:`_factorise`: the rank one SVD of A gives, at the cost of A's structure).
     """
     A = _as_matrix(A)
     if tol is None:
-        s = _svdvals(A)
-        return int(np.count_nonzero(s > _tol_from(s, A.shape, _rtol(rtol))))
-    return _rank_abs(A, float(tol))
+        return _factorise(A, _rtol(rtol), vectors=False).r
+    return _factorise(A, DEFAULT_RTOL, tol=float(tol), vectors=False).r
 
 
 def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -205,15 +223,34 @@ def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     d_r, d_c = np.ones(n), np.ones(m)
     if A.size == 0:
         return A, d_r, d_c
-    amax = float(np.abs(A).max())
+    # everything below touches the nonzeros only (a large mechanism's J is very sparse): the same
+    # maxima, and the same products in the same order, as on the dense array
+    rr, cc = np.nonzero(A)  # row-major: rr ascending
+    v = np.abs(A[rr, cc])
+    amax = float(v.max()) if v.size else 0.0
     if amax == 0.0:
         return A, d_r, d_c
     floor = NOISE_FACTOR * max(n, m) * EPS * amax
-    A[np.abs(A).max(axis=1) <= floor, :] = 0.0
-    A[:, np.abs(A).max(axis=0) <= floor] = 0.0
+    rmax = np.zeros(n)
+    np.maximum.at(rmax, rr, v)
+    v[(rmax <= floor)[rr]] = 0.0
+    cmax = np.zeros(m)
+    np.maximum.at(cmax, cc, v)
+    v[(cmax <= floor)[cc]] = 0.0
+    A[rr, cc] = np.where(v == 0.0, 0.0, A[rr, cc])
+    keep = v != 0.0
+    rr, cc = rr[keep], cc[keep]
+    v = A[rr, cc]
+    by_col = np.argsort(cc, kind="stable")
+    r_at, r_start = np.unique(rr, return_index=True)
+    c_at, c_start = np.unique(cc[by_col], return_index=True)
     for _ in range(_RUIZ_SWEEPS):
-        rn = np.abs(A).max(axis=1)
-        cn = np.abs(A).max(axis=0)
+        a = np.abs(v)
+        rn = np.zeros(n)
+        cn = np.zeros(m)
+        if a.size:
+            rn[r_at] = np.maximum.reduceat(a, r_start)
+            cn[c_at] = np.maximum.reduceat(a[by_col], c_start)
         dev = max(
             float(np.abs(1.0 - rn[rn > 0]).max(initial=0.0)),
             float(np.abs(1.0 - cn[cn > 0]).max(initial=0.0)),
@@ -222,9 +259,10 @@ def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             break
         sr = np.where(rn > 0, 1.0 / np.sqrt(np.where(rn > 0, rn, 1.0)), 1.0)
         sc = np.where(cn > 0, 1.0 / np.sqrt(np.where(cn > 0, cn, 1.0)), 1.0)
-        A = sr[:, None] * A * sc[None, :]
+        v = sr[rr] * v * sc[cc]
         d_r *= sr
         d_c *= sc
+    A[rr, cc] = v
     return A, d_r, d_c
 
 
@@ -262,29 +300,36 @@ def _decision_matrix(J: np.ndarray, use_equilibration: bool) -> np.ndarray:
 def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = True) -> list[int]:
     """A maximal linearly independent set of columns (equations) of ``J``, sorted, 0-based.
 
-    The first r pivots of the column-pivoted QR (``scipy.linalg.qr(..., pivoting=True)``) of the
-    equilibrated J (raw J if ``equilibrate=False``), r = the rank ``analyse`` reports.  Any
-    maximal independent set is valid and the reactions of unique joints do not depend on the
-    choice.  The result is verified to have rank r (greedy fallback in pivot order otherwise).
+    From the one factorisation of the equilibrated J (raw J if ``equilibrate=False``;
+    :func:`_factorise`): every peeled column (it is in no dependency, so in every maximal
+    independent set), and in each block of rank r_k < its width the first r_k pivots of the
+    column-pivoted QR (``scipy.linalg.qr(..., pivoting=True)``) of that block (all its columns
+    when r_k is its width). Blocks share no rows, so this is what the pivoted QR of the whole
+    matrix picks in each block when nothing is peeled. Any maximal independent set is valid and
+    the reactions of unique joints do not depend on the choice. Each block's pick is verified to
+    have rank r_k (greedy fallback in pivot order otherwise).
     """
     A = _decision_matrix(_as_matrix(J), equilibrate)
-    s = _svdvals(A)
-    tol = _tol_from(s, A.shape, _rtol(rtol))
-    r = int(np.count_nonzero(s > tol))
-    if r == 0:
-        return []
-    _, piv = scipy.linalg.qr(A, mode="r", pivoting=True)
-    chosen = sorted(int(c) for c in piv[:r])
-    if _rank_abs(A[:, chosen], tol) == r:
-        return chosen
-    chosen = []  # pragma: no cover - pivoted QR failed to reveal the rank (Kahan-type matrix)
-    for c in piv:  # pragma: no cover
-        trial = chosen + [int(c)]
-        if _rank_abs(A[:, trial], tol) == len(trial):
-            chosen = trial
-        if len(chosen) == r:
-            break
-    return sorted(chosen)  # pragma: no cover
+    f = _factorise(A, _rtol(rtol), vectors=False)
+    chosen = list(f.peeled)
+    for (rows, cols), rk in zip(f.blocks, f.ranks):
+        if rk == 0:
+            continue
+        if rk == len(cols):
+            chosen += cols
+            continue
+        sub = A[np.ix_(rows, cols)]
+        _, piv = scipy.linalg.qr(sub, mode="r", pivoting=True)
+        pick = [int(p) for p in piv[:rk]]
+        if _rank_abs(sub[:, pick], f.tol) != rk:  # pragma: no cover - pivoted QR failed to reveal the rank (Kahan-type matrix)
+            pick = []
+            for p in piv:
+                if _rank_abs(sub[:, pick + [int(p)]], f.tol) == len(pick) + 1:
+                    pick.append(int(p))
+                if len(pick) == rk:
+                    break
+        chosen += [cols[p] for p in pick]
+    return sorted(chosen)
 
 
 def auto_eliminate(J, rtol: float | None = None, *, equilibrate: bool = True) -> list[int]:
@@ -293,6 +338,339 @@ def auto_eliminate(J, rtol: float | None = None, *, equilibrate: bool = True) ->
     J = _as_matrix(J)
     keep = set(independent_columns(J, rtol, equilibrate=equilibrate))
     return [c for c in range(J.shape[1]) if c not in keep]
+
+
+# --------------------------------------------------------------------------- the one factorisation
+
+
+#: Peeling looks at rows with at most this many live columns (a spatial body has 6 coordinates).
+_PEEL_WIDTH = 6
+#: Entries of the left inverse held at once when bounding ||L||_F (8 bytes each: 64 MB).
+_CHUNK = 1 << 23
+#: Lanczos steps of the lower bound on ||A||_2 when something was peeled (:func:`_sigma1_bounds`).
+_LANCZOS_STEPS = 100
+
+
+@dataclass(frozen=True, eq=False)
+class _Factorisation:
+    """The one factorisation of a decision matrix A (n, m): see :func:`_factorise`.
+
+    sigma1   ||A||_2                   tol      absolute rank threshold
+    r        rank of A                 N        (m, m - r) orthonormal null basis
+    sigma    the singular values computed (those of the diagonal blocks; all of A's when nothing
+             was peeled or the dense route ran), descending
+    kappa    sigma1 / (smallest computed singular value above tol), 1.0 if none
+    peeled   columns whose null-space component is zero (coloops), in peeling order
+    blocks   [(rows, cols)] of the decoupled blocks left after peeling, with each block's rank
+             ``ranks`` and its right singular vectors' V^T ``vhs`` (dense route: one block, A)
+    route    "blocks" or "dense" (the peeling certificate failed: one SVD of A)
+    """
+
+    sigma1: float
+    tol: float
+    r: int
+    N: np.ndarray
+    sigma: np.ndarray
+    kappa: float
+    peeled: tuple
+    blocks: tuple
+    ranks: tuple
+    route: str
+
+
+def _peel(A: np.ndarray, rows_of: list, cols_of: list, floor: float):
+    """Peel coloops off A (n, m), given its nonzero pattern (``rows_of[c]``: rows of column c;
+    ``cols_of[i]``: columns of row i).
+
+    One step: a live row i with at most :data:`_PEEL_WIDTH` live columns C; R = the live rows
+    whose live columns all lie in C; if |R| >= |C| and the smallest singular value of D = A[R, C]
+    exceeds ``floor``, rows R and columns C are peeled. Repeated until no row qualifies (rows
+    are visited smallest-support first, then by index: deterministic). Returns the steps
+    [(R, C, D^+)] and the live row and column masks.
+
+    Why it is exact (exact arithmetic): R's rows have nonzeros only in C and in earlier peeled
+    columns, so for nu in null(A) the rows R of A nu = 0 read D nu_C + (earlier terms) = 0; the
+    earlier steps' columns have nu = 0 already (induction), so D nu_C = 0, and D has full column
+    rank, so nu_C = 0. Hence null(A) = {nu: nu_peeled = 0, A' nu_live = 0}, A' = A[live, live]
+    (the peeled rows have no live column: a row with a live column outside C is not in R)."""
+    import heapq
+
+    n, m = A.shape
+    live_r = np.ones(n, dtype=bool)
+    live_c = np.ones(m, dtype=bool)
+    count = np.array([len(c) for c in cols_of], dtype=int)
+    heap = [(int(count[i]), i) for i in range(n) if 0 < count[i] <= _PEEL_WIDTH]
+    heapq.heapify(heap)
+    steps = []
+    while heap:
+        k, i = heapq.heappop(heap)
+        if not live_r[i] or count[i] != k:
+            continue  # stale entry
+        C = [c for c in cols_of[i] if live_c[c]]
+        cand = sorted({j for c in C for j in rows_of[c] if live_r[j]})
+        Cs = set(C)
+        R = [j for j in cand if all(c in Cs for c in cols_of[j] if live_c[c])]
+        if len(R) < len(C):
+            continue
+        D = A[np.ix_(R, C)]
+        u, sv, vt = np.linalg.svd(D, full_matrices=False)
+        if sv[-1] <= floor:
+            continue
+        steps.append((R, C, (vt.T / sv) @ u.T))  # D^+ (D has full column rank)
+        live_r[R] = False
+        live_c[C] = False
+        for c in C:
+            for j in rows_of[c]:
+                if live_r[j]:
+                    count[j] -= 1
+                    if 0 < count[j] <= _PEEL_WIDTH:
+                        heapq.heappush(heap, (int(count[j]), j))
+    return steps, live_r, live_c
+
+
+def _left_inverse_bound(A: np.ndarray, steps: list, cols_of: list) -> float:
+    """An upper bound of ||L||_F (L: :func:`_left_inverse_norm`) from row norms, in one pass: row
+    k of a step's block of L is row k of D^+ E minus sum_p (D^+ X)_kp times the rows of the
+    earlier columns p it touches, so its norm is at most ||(D^+)_k|| + sum_p |(D^+ X)_kp| l_p,
+    l_p the earlier rows' bounds (triangle inequality). Exact for a single step; on a chain of
+    equal links it grows like the chain's length, where the exact norm costs p_r x p_c."""
+    bound: dict[int, float] = {}
+    for R, C, P in steps:
+        Cs = set(C)
+        prev = sorted({c for i in R for c in cols_of[i] if c not in Cs})
+        rows = np.sqrt(np.sum(P * P, axis=1))
+        if prev:
+            rows = rows + np.abs(P @ A[np.ix_(R, prev)]) @ np.array([bound[c] for c in prev])
+        for c, b in zip(C, rows.tolist()):
+            bound[c] = b
+    return float(np.sqrt(sum(b * b for b in bound.values())))
+
+
+def _left_inverse_norm(A: np.ndarray, steps: list, cols_of: list) -> float:
+    """||L||_F of the left inverse L of B = A[peeled rows, peeled columns] by block forward
+    substitution: nu_C = D^+ (y_R - A[R, earlier columns] nu_earlier), step by step (B is block
+    lower triangular in peeling order and each D has full column rank, so L B = I). Then
+    sigma_min(B) >= 1 / ||L||_2 >= 1 / ||L||_F. Applied to the identity, at most :data:`_CHUNK`
+    entries of L at once; the columns of a chunk are zero before the step of their row."""
+    col_pos: dict[int, int] = {}
+    row_pos: dict[int, int] = {}
+    for R, C, _ in steps:
+        for c in C:
+            col_pos[c] = len(col_pos)
+        for i in R:
+            row_pos[i] = len(row_pos)
+    plan = []
+    for R, C, P in steps:
+        Cs = set(C)
+        prev = sorted({c for i in R for c in cols_of[i] if c not in Cs})
+        plan.append((np.array([row_pos[i] for i in R]), np.array([col_pos[c] for c in C]), P,
+                     [col_pos[c] for c in prev], A[np.ix_(R, prev)] if prev else None))
+    p_r, p_c = len(row_pos), len(col_pos)
+    width = max(1, min(p_r, _CHUNK // max(p_c, 1)))
+    total = 0.0
+    for start in range(0, p_r, width):
+        w = min(width, p_r - start)
+        nu = np.zeros((p_c, w))
+        hi = 0  # columns [hi, w) of the chunk are still zero (their rows come in later steps)
+        for rpos, cpos, P, prev, X in plan:
+            inside = (rpos >= start) & (rpos < start + w)
+            if inside.any():
+                hi = max(hi, int(rpos[inside].max()) - start + 1)
+            if hi == 0:
+                continue
+            y = np.zeros((len(rpos), hi))
+            y[np.flatnonzero(inside), rpos[inside] - start] = 1.0
+            if X is not None:
+                y -= X @ nu[prev, :hi]
+            nu[cpos, :hi] = P @ y
+        total += float(np.sum(nu * nu))
+    return float(np.sqrt(total))
+
+
+def _sigma1_bounds(A: np.ndarray, rr: np.ndarray, cc: np.ndarray) -> tuple[float, float]:
+    """Bounds lo <= ||A||_2 <= hi from A's nonzeros (rows rr, columns cc). lo = ||A y|| for the
+    unit Ritz vector y of the largest Ritz value of :data:`_LANCZOS_STEPS` Lanczos steps on
+    A^T A from (1, ..., 1) (full reorthogonalisation; any unit y gives a lower bound, the Ritz
+    vector a close one even when the top of the spectrum is clustered, as in a chain of equal
+    links); hi = min(||A||_F, sqrt(||A||_1 ||A||_inf)) (both are upper bounds)."""
+    import scipy.sparse
+
+    n, m = A.shape
+    vals = A[rr, cc]
+    S = scipy.sparse.csr_matrix((vals, (rr, cc)), shape=(n, m))
+    St = S.T.tocsr()
+    k = min(m, _LANCZOS_STEPS)
+    Q = np.zeros((m, k))
+    alpha, beta = np.zeros(k), np.zeros(k)
+    q = np.ones(m) / np.sqrt(m)
+    used = 0
+    for j in range(k):
+        Q[:, j] = q
+        used = j + 1
+        w = St @ (S @ q)
+        alpha[j] = float(q @ w)
+        for _ in range(2):  # full reorthogonalisation, twice is enough
+            w -= Q[:, :used] @ (Q[:, :used].T @ w)
+        beta[j] = float(np.linalg.norm(w))
+        if beta[j] <= EPS * max(abs(alpha[j]), 1.0) or used == k:
+            break
+        q = w / beta[j]
+    T = np.diag(alpha[:used]) + np.diag(beta[:used - 1], 1) + np.diag(beta[:used - 1], -1)
+    _, vecs = np.linalg.eigh(T)
+    y = Q[:, :used] @ vecs[:, -1]
+    lo = float(np.linalg.norm(S @ y)) / float(np.linalg.norm(y))
+    a = np.abs(vals)
+    norm1 = float(np.bincount(cc, a, minlength=m).max())
+    norminf = float(np.bincount(rr, a, minlength=n).max())
+    hi = min(float(np.sqrt(np.sum(a * a))), float(np.sqrt(norm1 * norminf)))
+    return lo, max(lo, hi)
+
+
+def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bool = True,
+               nonzeros: tuple | None = None) -> _Factorisation:
+    """Rank, null basis and singular values of A (n, m) from its structure, exactly as one dense
+    SVD of A decides them (the SVD test, B.11), at the cost of the structure's blocks.
+
+    1. Peel (:func:`_peel`): columns whose null-space component is zero in exact arithmetic (a
+       leaf body held by a joint of full rank on its coordinates, and everything that becomes a
+       leaf when it is gone; a tree mechanism peels whole).
+    2. Split what is left, A' = A[live rows, live columns], into the connected components of its
+       row-column graph (two equations are coupled when they share a coordinate). A' is block
+       diagonal after permutation, so its singular values are the union of the blocks' and its
+       null space the direct sum of theirs. One dense SVD per block (LAPACK gesdd, full V).
+    3. The threshold is the SVD test's, ``tol = max(rtol, max(n, m) * eps) * ||A||_2``, with
+       ||A||_2 of the whole A (when anything was peeled, the lower bound lo of
+       :func:`_sigma1_bounds`, 7e-5 low at worst on a long chain of equal links, else exactly
+       the largest block singular value), applied to every block: the rank is the number of
+       peeled columns plus the blocks' singular values above tol; the null basis is the blocks'
+       right singular vectors at or below tol, zero on the peeled columns.
+
+    The certificate (why the verdicts are those of one SVD of A, with the tolerance): write
+    A = [[B, 0], [X, A']] (peeled rows and columns first). A null-ish vector of A'
+    (||A' v|| <= tol ||v||) padded with zeros is one of A, so A has at least as many singular
+    values <= tol as A'. Conversely, if ||A nu|| <= tol ||nu||, then ||nu_B|| <= tol ||nu|| /
+    beta (beta = sigma_min(B)) and ||A' nu'|| <= c tol ||nu'|| with c = (1 + ||X|| / beta) / (1 -
+    tol / beta), so A has at most as many as A' has <= c tol. Both counts agree unless A' has a
+    singular value in (tol, c tol], or beta <= tol. With ||A||_2 known only within [lo, hi],
+    the dense tolerance lies in [tol_lo, tol_hi] and the certificate is: beta > tol_hi and no
+    singular value of A' in (tol_lo, c(tol_hi) tol_hi]. beta >= 1 / ||L||_F
+    (:func:`_left_inverse_bound`, else the exact :func:`_left_inverse_norm`) and ||X||_2 <=
+    ||X||_F make c computable; when the certificate fails, the dense route runs: one SVD of the
+    whole A (the previous method). With ranks equal,
+    the two null spaces are the same in exact arithmetic; numerically each is accurate to its
+    own round-off bound (``kappa`` here is that of the computed blocks, Wedin's bound for the
+    basis computed). ``nonzeros``: ``np.nonzero(A)`` when the caller has it."""
+    n, m = A.shape
+    rr, cc = np.nonzero(A) if nonzeros is None else nonzeros  # row-major order
+    if rr.size == 0:
+        return _Factorisation(sigma1=0.0, tol=0.0 if tol is None else float(tol), r=0, N=np.eye(m),
+                              sigma=np.zeros(min(n, m)), kappa=1.0, peeled=(), blocks=(), ranks=(),
+                              route="blocks")
+    rtol_eff = max(rtol, max(n, m) * EPS)
+    rows_of, cols_of = _pattern(rr, cc, n, m)
+    # ||A||_F >= ||A||_2, so this floor is at least tol: a peeled D is of full rank above tol
+    floor = float(tol) if tol is not None else rtol_eff * float(np.sqrt(np.sum(A[rr, cc] ** 2)))
+    steps, live_r, live_c = _peel(A, rows_of, cols_of, floor)
+    blocks, svds = _blocks(A, live_r, live_c, rows_of, vectors)
+    sigma_blocks = [s for s, _ in svds]
+    top = max((float(s[0]) for s in sigma_blocks if s.size), default=0.0)
+    if tol is None:
+        lo, hi = _sigma1_bounds(A, rr, cc) if steps else (top, top)
+        sigma1 = max(lo, top)
+        t, t_hi = rtol_eff * sigma1, rtol_eff * max(hi, top)
+    else:
+        sigma1, t = float("nan"), float(tol)
+        t_hi = t
+    route = "blocks" if not steps or _certified(A, rr, cc, steps, cols_of, sigma_blocks, t, t_hi) else "dense"
+    if route == "dense":
+        s, vh = _svd_full(A) if vectors else (_svdvals(A), None)
+        if tol is None:
+            sigma1 = float(s[0]) if s.size else 0.0
+            t = rtol_eff * sigma1
+        blocks = ((tuple(range(n)), tuple(range(m))),)
+        svds, steps = [(s, vh)], []
+    peeled = tuple(c for _, C, _ in steps for c in C)
+    ranks, parts = [], []
+    for (rows, cols), (s, vh) in zip(blocks, svds):
+        rk = int(np.count_nonzero(s > t))
+        ranks.append(rk)
+        if vectors and len(cols) > rk:
+            part = np.zeros((m, len(cols) - rk))
+            part[list(cols), :] = vh.T[:, rk:]
+            parts.append(part)
+    r = len(peeled) + sum(ranks)
+    N = np.hstack(parts) if parts else np.zeros((m, 0))
+    sigma = np.sort(np.concatenate([np.zeros(0)] + [s for s, _ in svds]))[::-1]
+    above = sigma[sigma > t]
+    kappa = float(sigma1 / above[-1]) if above.size and np.isfinite(sigma1) else 1.0
+    return _Factorisation(sigma1=sigma1, tol=t, r=r, N=N, sigma=sigma, kappa=kappa, peeled=peeled,
+                          blocks=tuple(blocks), ranks=tuple(ranks), route=route)
+
+
+def _pattern(rr: np.ndarray, cc: np.ndarray, n: int, m: int) -> tuple[list, list]:
+    """(rows of each column, columns of each row) of the nonzeros at (rr, cc)."""
+    rows_of: list = [[] for _ in range(m)]
+    cols_of: list = [[] for _ in range(n)]
+    for i, c in zip(rr.tolist(), cc.tolist()):
+        rows_of[c].append(i)
+        cols_of[i].append(c)
+    return rows_of, cols_of
+
+
+def _certified(A, rr, cc, steps, cols_of, sigma_blocks, t, t_hi) -> bool:
+    """The certificate of :func:`_factorise`: beta > t_hi and no block singular value in
+    (t, c t_hi], c = (1 + ||X||_F / beta) / (1 - t_hi / beta), beta = 1 / (a bound of ||L||_F)."""
+    n, m = A.shape
+    beta = 1.0 / _left_inverse_bound(A, steps, cols_of)
+    if not beta > 2.0 * t_hi:  # the one-pass bound is too loose here: the exact ||L||_F
+        beta = 1.0 / _left_inverse_norm(A, steps, cols_of)
+    if not beta > t_hi:
+        return False
+    peeled_c = np.zeros(m, dtype=bool)
+    peeled_r = np.zeros(n, dtype=bool)
+    for R, C, _ in steps:
+        peeled_c[C] = True
+        peeled_r[R] = True
+    sel = peeled_c[cc] & ~peeled_r[rr]  # X = A[rows left, peeled columns]
+    x_f = float(np.sqrt(np.sum(A[rr[sel], cc[sel]] ** 2)))
+    c = (1.0 + x_f / beta) / (1.0 - t_hi / beta)
+    return not any(np.any((s > t) & (s <= c * t_hi)) for s in sigma_blocks)
+
+
+def _blocks(A: np.ndarray, live_r: np.ndarray, live_c: np.ndarray, rows_of: list, vectors: bool = True):
+    """Connected components of the live rows and columns of A (an edge per nonzero), in order of
+    their smallest column; a live column with no live row is a block of its own (0 rows). Each
+    with its dense SVD (singular values, and V^T if ``vectors``, else None)."""
+    import scipy.sparse
+    import scipy.sparse.csgraph
+
+    n, m = A.shape
+    cols = np.flatnonzero(live_c)
+    if cols.size == 0:
+        return [], []
+    e_r, e_c = [], []
+    for c in cols.tolist():
+        for i in rows_of[c]:
+            if live_r[i]:
+                e_r.append(i)
+                e_c.append(n + c)
+    g = scipy.sparse.coo_matrix((np.ones(len(e_r)), (e_r, e_c)), shape=(n + m, n + m))
+    _, label = scipy.sparse.csgraph.connected_components(g, directed=False)
+    groups: dict[int, tuple[list, list]] = {}
+    for c in cols.tolist():
+        groups.setdefault(int(label[n + c]), ([], []))[1].append(c)
+    for i in np.flatnonzero(live_r).tolist():
+        if int(label[i]) in groups:
+            groups[int(label[i])][0].append(i)
+    blocks, svds = [], []
+    for rows, bcols in groups.values():
+        blocks.append((tuple(rows), tuple(bcols)))
+        if not rows:
+            svds.append((np.zeros(0), np.eye(len(bcols))))
+        else:
+            sub = A[np.ix_(rows, bcols)]
+            svds.append(_svd_full(sub) if vectors else (_svdvals(sub), None))
+    return blocks, svds
 
 
 # --------------------------------------------------------------------------- verdict types
@@ -352,13 +730,28 @@ class SetVerdict:
 class _Context:
     J: np.ndarray  # raw, for the reported B matrices
     A: np.ndarray  # matrix the decisions are made on (equilibrated J, or J)
-    sigma: np.ndarray  # singular values of A
+    sigma: np.ndarray  # singular values of A reported (all of them with the cross-check)
     tol: float  # absolute rank threshold on A
-    r: int
-    b_rtol: float
-    N_svd: np.ndarray  # null basis of A (decisions): the one factorisation every method needs
+    r: int  # rank of A (the rank test's, from one SVD of A, with the cross-check)
+    b_rtol: float  # the B_P == 0 threshold of the SVD test, relative to sigma1
+    N_svd: np.ndarray  # null basis of A from the one factorisation (the SVD test)
+    sigma1: float = 0.0  # ||A||_2
+    qr_b_rtol: float = 0.0  # the QR test's threshold (from the dense SVD's kappa)
+    route: str = "blocks"  # the one factorisation's route (_Factorisation.route)
     methods: tuple = _METHODS  # the tests run (METHOD_SETS)
     _lazy: dict = field(default_factory=dict)  # the other bases, computed once when a method needs them
+
+    def block(self, cols) -> np.ndarray:
+        """A[:, cols] without its zero rows (the rows no column of ``cols`` touches): the same
+        singular values, R factor and B row norms, at the size of the joint, not of the mechanism."""
+        if "col_rows" not in self._lazy:
+            rr, cc = self._lazy["nonzeros"] if "nonzeros" in self._lazy else np.nonzero(self.A)
+            order = np.argsort(cc, kind="stable")
+            self._lazy["col_rows"] = (rr[order], np.searchsorted(cc[order], np.arange(self.A.shape[1] + 1)))
+        rows_sorted, ptr = self._lazy["col_rows"]
+        idx = list(cols)
+        rows = np.unique(np.concatenate([rows_sorted[ptr[c]:ptr[c + 1]] for c in idx])) if idx else np.zeros(0, int)
+        return self.A[np.ix_(rows, idx)]
 
     @property
     def cross_check(self) -> bool:
@@ -384,25 +777,38 @@ def _method_set(methods: str) -> tuple:
     return METHOD_SETS[methods]
 
 
+def _b_rtol(rt: float, shape: tuple[int, int], kappa: float) -> float:
+    return max(rt, B_NOISE_FACTOR * max(shape) * EPS * kappa)
+
+
 def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> _Context:
-    J = _readonly(_as_matrix(J).copy())
+    """The one factorisation of the decision matrix (:func:`_factorise`: the SVD test's null
+    basis), and with the cross-check (``methods="all"``) one dense SVD of it for the rank and QR
+    tests' rank, tolerance and kappa."""
+    run = _method_set(methods)
+    J = _as_matrix(J)
+    # the raw J is read again only by the cross-check's reports, or as A when not equilibrated
+    J = _readonly(J.copy() if "rank" in run or not use_equilibration else J.view())
     rt = _rtol(rtol)
-    A = _readonly(_decision_matrix(J, use_equilibration).copy())
-    s, vh = _svd_full(A)
-    tol = _tol_from(s, A.shape, rt)
-    r = int(np.count_nonzero(s > tol))
-    if b_rtol is None:
-        kappa = float(s[0] / s[r - 1]) if r > 0 else 1.0
-        brt = max(rt, B_NOISE_FACTOR * max(A.shape) * EPS * kappa)
-    else:
-        brt = _rtol(b_rtol, "b_rtol")
-    m = A.shape[1]
-    N = np.eye(m) if r <= 0 else np.zeros((m, 0)) if r >= m else vh.T[:, r:].copy()
-    return _Context(J=J, A=A, sigma=_readonly(s), tol=tol, r=r, b_rtol=brt, N_svd=N, methods=_method_set(methods))
+    A = _readonly(_decision_matrix(J, use_equilibration))  # a new array, or the read-only J itself
+    nonzeros = np.nonzero(A)
+    f = _factorise(A, rt, nonzeros=nonzeros)
+    brt = _b_rtol(rt, A.shape, f.kappa) if b_rtol is None else _rtol(b_rtol, "b_rtol")
+    sigma, tol, r, qr_brt = f.sigma, f.tol, f.r, brt
+    if "rank" in run:
+        sigma = _svdvals(A)
+        tol = _tol_from(sigma, A.shape, rt)
+        r = int(np.count_nonzero(sigma > tol))
+        if b_rtol is None:
+            qr_brt = _b_rtol(rt, A.shape, float(sigma[0] / sigma[r - 1]) if r > 0 else 1.0)
+    return _Context(J=J, A=A, sigma=_readonly(np.array(sigma, dtype=float)), tol=tol, r=r, b_rtol=brt,
+                    N_svd=_readonly(f.N), sigma1=f.sigma1, qr_b_rtol=qr_brt, route=f.route, methods=run,
+                    _lazy={"nonzeros": nonzeros})
 
 
 def _svd_full(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Singular values and V^T (m, m) of A from one SVD: the one factorisation of the analysis."""
+    """Singular values and V^T (m, m) of A from one dense SVD (a block of the one factorisation,
+    or the whole A on its dense route)."""
     n, m = A.shape
     if A.size == 0:
         return np.zeros(0), np.eye(m)
@@ -433,11 +839,11 @@ def _B(M: np.ndarray, N: np.ndarray, cols: tuple[int, ...]) -> np.ndarray:
     return _readonly(M[:, idx] @ N[idx, :])
 
 
-def _b_ratio(ctx: _Context, B: np.ndarray) -> float:
+def _b_ratio(ctx: _Context, B: np.ndarray, test: str = "svd") -> float:
     if B.size == 0:
         return 0.0
     peak = float(np.linalg.norm(B, axis=1).max())
-    limit = ctx.b_rtol * (float(ctx.sigma[0]) if ctx.sigma.size else 0.0)
+    limit = ctx.b_rtol * ctx.sigma1 if test == "svd" else ctx.qr_b_rtol * (float(ctx.sigma[0]) if ctx.sigma.size else 0.0)
     if peak == 0.0:
         return 0.0
     return peak / limit if limit > 0.0 else float("inf")
@@ -450,7 +856,7 @@ def _rank_defect(ctx: _Context, member_columns: Sequence[tuple[int, ...]]) -> in
     total = 0
     for cols in member_columns:
         in_k[list(cols)] = True
-        total += _rank_abs(ctx.A[:, list(cols)], ctx.tol)
+        total += _rank_abs(ctx.block(cols), ctx.tol)
     return total + _rank_abs(ctx.A[:, ~in_k], ctx.tol) - ctx.r
 
 
@@ -464,20 +870,20 @@ def _b_defect(ctx: _Context, cols: tuple[int, ...], unique: bool) -> int:
     pre-check one factorisation of J plus small work per joint)."""
     if unique:
         return 0
-    limit = ctx.b_rtol * (float(ctx.sigma[0]) if ctx.sigma.size else 0.0)
+    limit = ctx.b_rtol * ctx.sigma1
     idx = list(cols)
-    R = np.linalg.qr(ctx.A[:, idx], mode="r")
+    R = np.linalg.qr(ctx.block(idx), mode="r")
     return max(1, int(np.count_nonzero(_svdvals(R @ ctx.N_svd[idx, :]) > limit)))
 
 
 def _joint(ctx: _Context, cols: tuple[int, ...]) -> JointVerdict:
-    B = _B(ctx.A, ctx.N_svd, cols)
+    B = _readonly(ctx.block(cols) @ ctx.N_svd[list(cols), :])  # B_P's nonzero rows: its row norms
     ratio_svd = _b_ratio(ctx, B)
     methods = {"svd": ratio_svd <= 1.0}
     ratio_qr, defect = 0.0, _b_defect(ctx, cols, ratio_svd <= 1.0)
     if ctx.cross_check:
         defect = _rank_defect(ctx, [cols])
-        ratio_qr = _b_ratio(ctx, _B(ctx.A, ctx.basis("qr"), cols))
+        ratio_qr = _b_ratio(ctx, _B(ctx.A, ctx.basis("qr"), cols), "qr")
         methods = {"rank": defect <= 0, "svd": methods["svd"], "qr": ratio_qr <= 1.0}
     methods = {k: bool(v) for k, v in methods.items()}
     return JointVerdict(
@@ -488,7 +894,7 @@ def _joint(ctx: _Context, cols: tuple[int, ...]) -> JointVerdict:
         B_qr=_B(ctx.J, ctx.basis("qr_raw"), cols) if ctx.cross_check else None,
         agree=len(set(methods.values())) == 1,
         columns=cols,
-        rank_P=_rank_abs(ctx.A[:, list(cols)], ctx.tol),
+        rank_P=_rank_abs(ctx.block(cols), ctx.tol),
         b_ratio_svd=ratio_svd,
         b_ratio_qr=ratio_qr,
     )
@@ -524,7 +930,9 @@ class Analysis:
                                           n_equations  m (columns of J)
     rank           r = rank(J)            dof          n - r
     redundant      m - r                  joints       name -> JointVerdict, in insertion order
-    singular_values  of the decision matrix (equilibrated J unless equilibrate=False), descending
+    singular_values  of the decision matrix (equilibrated J unless equilibrate=False), descending;
+                   with ``methods="svd"`` those the one factorisation computed (its blocks'; all
+                   of them when nothing was peeled)
     rank_tol       absolute rank threshold on that matrix
     b_rtol         threshold of the ``B_P == 0`` test (relative to its sigma_1)
     """
@@ -594,8 +1002,9 @@ def analyse(
     ``groups`` maps joint name -> its 0-based columns of J.  Groups must not overlap; columns in
     no group (e.g. driving constraints) are part of every ``J_-P`` and of Y in ``set_unique``.
     Tolerances and equilibration: see the module docstring. ``methods`` (:data:`METHOD_SETS`):
-    ``"all"`` runs the three tests; ``"svd"`` only the one-factorisation test (one SVD of J in
-    all, then O(n * len(columns) * (m - r)) per joint instead of two SVDs of J per joint).
+    ``"all"`` runs the three tests; ``"svd"`` only the one-factorisation test (one SVD per block
+    of J left after peeling, :func:`_factorise`, then O(rows of P * len(columns) * (m - r)) per
+    joint instead of two SVDs of J per joint).
     """
     ctx = _context(J, rtol, b_rtol, equilibrate, methods)
     n, m = ctx.J.shape

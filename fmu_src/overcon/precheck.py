@@ -34,9 +34,11 @@ def resolve_methods(model: Model, methods: str = "auto") -> str:
 
 
 def analyse_model(model: Model, methods: str = "auto"):
-    """The analysis at q0. ``methods``: ``"svd"``, the one-factorisation test (one SVD of the
-    Jacobian, whatever the number of joints), ``"all"``, with the rank and QR tests as a
-    cross-check (two SVDs of the Jacobian per joint), or ``"auto"`` (:func:`resolve_methods`)."""
+    """The analysis at q0. ``methods``: ``"svd"``, the one-factorisation test (one factorisation
+    of the Jacobian for every joint: the joints whose reaction is decided locally peeled off,
+    one SVD per independent block of loops left, :func:`overcon.analysis._factorise`),
+    ``"all"``, with the rank and QR tests as a cross-check (two SVDs of the Jacobian per joint),
+    or ``"auto"`` (:func:`resolve_methods`)."""
     J = jacobian(model, model.q0).T
     compliant = compliant_joints(model)
     if not compliant:

@@ -1,0 +1,130 @@
+"""The one factorisation at scale (:func:`overcon.analysis._factorise`): on large generated
+linkages it gives the rank, the null space and the SVD test's verdicts of one dense SVD of the
+whole Jacobian; its certificate sends a matrix whose loops are too close to the rank threshold
+to the dense SVD; the pre-check of a 1000-body chain runs through ``overcon check``."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from overcon import analysis as an
+from overcon.cli import main
+from overcon.evaluation import frames, jacobian_h
+from overcon.precheck import joint_groups
+from test_precheck_methods import _model, linkage
+
+EPS = np.finfo(float).eps
+
+
+def _dense(A: np.ndarray, rtol: float = an.DEFAULT_RTOL):
+    """Rank, tolerance, null basis and kappa of one dense SVD of A (the SVD test before)."""
+    s, vh = an._svd_full(A)
+    tol = max(rtol, max(A.shape) * EPS) * s[0]
+    r = int(np.count_nonzero(s > tol))
+    return r, tol, vh.T[:, r:], s[0] / s[r - 1]
+
+
+CASES = [("planar", "chain", 300, 0), ("spatial", "chain", 120, 0), ("planar", "loops", 200, 12),
+         ("spatial", "loops", 100, 8), ("planar", "cranks", 80, 0), ("planar", "forest", 240, 0),
+         ("spatial", "forest", 90, 0), ("planar", "tree", 250, 0)]
+
+
+@pytest.mark.parametrize("kind,shape,n,loops", CASES, ids=lambda v: str(v))
+def test_structured_factorisation_is_the_dense_svd_on_large_linkages(tmp_path, kind, shape, n, loops):
+    model = _model(linkage(np.random.default_rng(n), kind, shape, n, tmp_path / "m.toml", loops))
+    J = jacobian_h(model, frames(model, model.q0, model.h0)).T
+    A = an.equilibrate(J)[0]
+    f = an._factorise(A, an.DEFAULT_RTOL)
+    r, tol, N, kappa = _dense(A)
+    assert f.route == "blocks" and f.r == r
+    # ||A||_2 from Lanczos (a lower bound): 7e-5 low on a chain of equal links, whose top
+    # singular values cluster; the rank above does not depend on it (the certificate's band)
+    assert tol * (1 - 1e-3) <= f.tol <= tol * (1 + 1e-12)
+    # the same subspace: the projectors agree to the basis round-off bound of the B test
+    bound = an.B_NOISE_FACTOR * max(A.shape) * EPS * kappa
+    assert np.abs(f.N @ f.N.T - N @ N.T).max() <= bound
+    assert f.N.shape == N.shape and np.allclose(f.N.T @ f.N, np.eye(N.shape[1]), atol=1e-12)
+    if shape != "cranks":
+        assert f.peeled  # the structure is used: a leaf was peeled
+    # the SVD test's verdicts, joint by joint, from the dense basis and from the analysis
+    a = an.analyse(J, joint_groups(model), methods="svd")
+    assert a.rank == r
+    limit = max(an.DEFAULT_RTOL, an.B_NOISE_FACTOR * max(A.shape) * EPS * kappa) * np.linalg.norm(A, 2)
+    for name, cols in joint_groups(model).items():
+        B = A[:, cols] @ N[cols, :]
+        dense_unique = B.size == 0 or np.linalg.norm(B, axis=1).max() <= limit
+        assert a.joints[name].unique == dense_unique, name
+
+
+def _coupled(delta: float) -> np.ndarray:
+    """Row 0 peels column 0 (a leaf: D = [1], so sigma_min of the peeled part is 1); rows 1-2 x
+    columns 1-3 are a loop block (wide: it cannot peel) with rows [1, 1, 1] and [1, 1, 1 + delta],
+    its smallest singular value ~ 0.4 delta, coupled to column 0 by row 1."""
+    A = np.zeros((3, 4))
+    A[0, 0] = A[1, 0] = 1.0
+    A[1, 1:] = 1.0
+    A[2, 1:] = [1.0, 1.0, 1.0 + delta]
+    return A
+
+
+def test_certificate_sends_a_loop_near_the_threshold_to_the_dense_svd():
+    tol = an.DEFAULT_RTOL * np.linalg.norm(_coupled(0.0), 2)
+    per_delta = np.linalg.svd(_coupled(1e-6)[1:, 1:], compute_uv=False)[-1] / 1e-6
+    near = _coupled(1.5 * tol / per_delta)  # block singular value 1.5 tol: inside (tol, c tol], c ~ 2
+    f = an._factorise(near, an.DEFAULT_RTOL)
+    assert f.route == "dense" and f.r == _dense(near)[0]
+    far = _coupled(1e-3)  # far above the threshold: the blocks decide
+    f = an._factorise(far, an.DEFAULT_RTOL)
+    assert f.route == "blocks" and f.peeled == (0,) and f.r == _dense(far)[0] == 3
+    exact = _coupled(0.0)  # a true redundancy in the loop block: row 1 = row 0 + row 2
+    f = an._factorise(exact, an.DEFAULT_RTOL)
+    assert f.route == "blocks" and f.r == _dense(exact)[0] == 2 and f.N.shape == (4, 2)
+    assert np.all(f.N[0] == 0.0) and np.abs(exact @ f.N).max() <= 1e-15
+
+
+def test_decoupled_blocks_and_zero_columns():
+    """A loop of rank 1, a leaf that peels, and an equation with an all-zero column: the loop's
+    singular values are computed, the leaf's columns have no null component, and the zero
+    column is a null vector of its own."""
+    A = np.zeros((4, 5))
+    A[:2, :2] = [[1.0, 2.0], [2.0, 4.0]]  # rank 1
+    A[2:, 2:4] = [[3.0, 1.0], [1.0, 2.0]]  # rank 2: peels
+    f = an._factorise(A, an.DEFAULT_RTOL)
+    assert f.route == "blocks" and sorted(f.peeled) == [2, 3] and f.r == 3 == _dense(A)[0]
+    np.testing.assert_allclose(f.sigma, [5.0, 0.0], atol=1e-15)
+    assert f.N.shape == (5, 2) and np.abs(A @ f.N).max() <= 1e-15 and np.all(f.N[2:4] == 0.0)
+    assert [abs(x) for x in f.N[4]] in ([0.0, 1.0], [1.0, 0.0])
+    assert an.numerical_rank(A) == 3 and an.independent_columns(A) in ([0, 2, 3], [1, 2, 3])
+
+
+def test_check_of_a_1000_body_chain(tmp_path, capsys):
+    """The pre-check at the body limit answers (all joints unique: a chain has no redundancy)."""
+    from test_robust import chain
+    path = chain(1000, tmp_path / "chain.toml")
+    assert main(["check", str(path), "--json", "--friction", "none"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert (report["n_coordinates"], report["rank"], report["dof"]) == (3000, 2000, 1000)
+    assert report["methods_run"] == ["svd"] and all(j["unique"] for j in report["joints"])
+
+
+@pytest.mark.parametrize("kind,shape,n,loops", [("planar", "chain", 60, 0), ("spatial", "loops", 40, 4),
+                                               ("planar", "forest", 45, 0)], ids=lambda v: str(v))
+def test_left_inverse_norms_bound_the_peeled_part(tmp_path, kind, shape, n, loops):
+    """1 / sigma_min(B) <= ||L||_F <= the one-pass bound, B the peeled rows x peeled columns."""
+    model = _model(linkage(np.random.default_rng(n), kind, shape, n, tmp_path / "m.toml", loops))
+    A = an.equilibrate(jacobian_h(model, frames(model, model.q0, model.h0)).T)[0]
+    rr, cc = np.nonzero(A)
+    rows_of, cols_of = [[] for _ in range(A.shape[1])], [[] for _ in range(A.shape[0])]
+    for i, c in zip(rr.tolist(), cc.tolist()):
+        rows_of[c].append(i)
+        cols_of[i].append(c)
+    steps, _, _ = an._peel(A, rows_of, cols_of, an.DEFAULT_RTOL * np.linalg.norm(A))
+    assert steps
+    R = [i for rows, _, _ in steps for i in rows]
+    C = [c for _, cols, _ in steps for c in cols]
+    B = A[np.ix_(R, C)]
+    assert np.all(A[np.ix_(R, sorted(set(range(A.shape[1])) - set(C)))] == 0.0)  # A = [[B, 0], [X, A']]
+    exact, bound = an._left_inverse_norm(A, steps, cols_of), an._left_inverse_bound(A, steps, cols_of)
+    assert 1.0 / np.linalg.svd(B, compute_uv=False)[-1] <= exact * (1 + 1e-12) and exact <= bound * (1 + 1e-12)

@@ -13,7 +13,7 @@ import pytest
 from overcon import scene
 from overcon.checks import compile_checked
 from overcon.cli import main
-from overcon.kinematics import quat_R_rows, rot2
+from overcon.kinematics import quat_R_rows, rot2_rows
 from overcon.precheck import AUTO_ALL_JOINTS, precheck
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,7 +44,7 @@ def linkage(rng: np.random.Generator, kind: str, shape: str, n: int, path: Path,
     r = rng.uniform(-3.0, 3.0, (n, dim))
     if planar:
         ang = rng.uniform(-np.pi, np.pi, n)
-        rot = [rot2(a) for a in ang]
+        rot = list(rot2_rows(np.asarray(ang, float)))
         q0 = [list(r[k]) + [ang[k]] for k in range(n)]
     else:
         e = rng.standard_normal((n, 4))

@@ -11,7 +11,7 @@ import pytest
 
 from overcon import analysis as an
 from overcon.cli import main
-from overcon.evaluation import frames, jacobian_h
+from overcon.kernel import jacobian
 from overcon.precheck import joint_groups
 from test_precheck_methods import _model, linkage
 
@@ -34,7 +34,7 @@ CASES = [("planar", "chain", 300, 0), ("spatial", "chain", 120, 0), ("planar", "
 @pytest.mark.parametrize("kind,shape,n,loops", CASES, ids=lambda v: str(v))
 def test_structured_factorisation_is_the_dense_svd_on_large_linkages(tmp_path, kind, shape, n, loops):
     model = _model(linkage(np.random.default_rng(n), kind, shape, n, tmp_path / "m.toml", loops))
-    J = jacobian_h(model, frames(model, model.q0, model.h0)).T
+    J = jacobian(model, model.q0).T
     A = an.equilibrate(J)[0]
     f = an._factorise(A, an.DEFAULT_RTOL)
     r, tol, N, kappa = _dense(A)
@@ -114,7 +114,7 @@ def test_check_of_a_1000_body_chain(tmp_path, capsys):
 def test_left_inverse_norms_bound_the_peeled_part(tmp_path, kind, shape, n, loops):
     """1 / sigma_min(B) <= ||L||_F <= the one-pass bound, B the peeled rows x peeled columns."""
     model = _model(linkage(np.random.default_rng(n), kind, shape, n, tmp_path / "m.toml", loops))
-    A = an.equilibrate(jacobian_h(model, frames(model, model.q0, model.h0)).T)[0]
+    A = an.equilibrate(jacobian(model, model.q0).T)[0]
     rr, cc = np.nonzero(A)
     rows_of, cols_of = [[] for _ in range(A.shape[1])], [[] for _ in range(A.shape[0])]
     for i, c in zip(rr.tolist(), cc.tolist()):

@@ -345,16 +345,7 @@ def test_radau_newton_failures_collapse_the_step():
     assert f"t = {run.info['t']:.9g} s" in lead
 
 
-def _singular_sliders(tmp_path):
-    """The sliders driven through K = L = O (free length 0): the Jacobian loses rank there."""
-    text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
-    (tmp_path / "l0.toml").write_text(text)
-    sc = scene_mod.as_scene(scene_mod.load(tmp_path / "l0.toml"), stop_time=2.0)
-    return compile_checked(sc), dataclasses.replace(sc.solver, kernel="c")
-
-
-def _instant(msg: str) -> float:
-    return float(msg.split("t = ")[1].split(" s")[0])
+from test_core_integrate import _instant, _singular_sliders  # noqa: E402  (the sliders driven through K = L = O)
 
 
 def test_radau_stops_at_a_singular_position_where_dop853_does(tmp_path):

@@ -214,20 +214,26 @@ def _state(model, rng):
     return np.concatenate([random_q(model, rng), random_h(model, rng)])
 
 
+def _reaction_case(single, jtype: str, seed: int, base: int):
+    """A single ``jtype`` joint at a random state with random multipliers, its reactions already
+    checked against Phi_h (:func:`check_reactions`): (model, q, lam, Phi_h, the reaction table)."""
+    spec, model = single(jtype, seed)
+    k = kernel_for(model, spec.solver)
+    rng = np.random.default_rng(base + seed)
+    y = _state(model, rng)
+    lam = rng.normal(size=model.m) * 10
+    J = k.rows(y)[1]
+    reac = k.outputs(y, lam)[0].copy()
+    check_reactions(k, model, y, lam)
+    return model, y[: model.n], lam, J, reac
+
+
 @pytest.mark.parametrize("seed", SEEDS)
 def test_revolute_reaction_transform_by_hand(single, seed):
     """Revolute (A.5): the generalized reaction on body i is the force lam at P (no moment about P),
     and the outputs are the physical reaction -(J_X)_i^T lam: its force in body i axes, the moment
     about P (0), and the force in global axes."""
-    spec, model = single("revolute", seed)
-    k = kernel_for(model, spec.solver)
-    rng = np.random.default_rng(2000 + seed)
-    y = _state(model, rng)
-    q = y[: model.n]
-    lam = rng.normal(size=model.m) * 10
-    J = k.rows(y)[1]
-    reac = k.outputs(y, lam)[0].copy()
-    check_reactions(k, model, y, lam)
+    model, q, lam, J, reac = _reaction_case(single, "revolute", seed, 2000)
     for n, c in enumerate(model.joints):
         if c.bi < 0:
             continue
@@ -247,15 +253,7 @@ def test_translational_reaction_transform_by_hand(single, seed):
     """Translational (A.1): the outputs are -(J_X)_i^T lam in the auxiliary frame: components along
     the guide x' (body j's guide Omega^T v/|v| turned into body i's axes by -psi) and y' = Omega x',
     the moment about A, then the global force."""
-    spec, model = single("translational", seed)
-    k = kernel_for(model, spec.solver)
-    rng = np.random.default_rng(3000 + seed)
-    y = _state(model, rng)
-    q = y[: model.n]
-    lam = rng.normal(size=model.m) * 10
-    J = k.rows(y)[1]
-    reac = k.outputs(y, lam)[0].copy()
-    check_reactions(k, model, y, lam)
+    model, q, lam, J, reac = _reaction_case(single, "translational", seed, 3000)
     for n, c in enumerate(model.joints):
         if c.bi < 0:
             continue

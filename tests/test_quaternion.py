@@ -213,7 +213,7 @@ def test_identity_orientation_simulates_with_quaternions_and_conserves_energy():
     for t in np.linspace(0.1, 2.0, 20):
         y = sim.advance(t)
         worst = max(worst, abs(energy(y) - E0))
-    steps = sim._integrator.nsteps
+    steps = sim.steps
     # local error per step <= tol (1 + |y|) per component; |y| <= 3 here; energy gradient <= 10
     assert worst <= steps * tol * 4 * 10
     assert sim.max_drift <= 1e-8
@@ -271,7 +271,7 @@ def test_torque_free_asymmetric_body_conserves_energy_momentum_and_quaternion_no
         T, L, n = invariants(y)
         dT, dL, dn = max(dT, abs(T - T0)), max(dL, np.max(np.abs(L - L0))), max(dn, abs(n - 1.0))
         w_min = min(w_min, y[11])
-    steps = sim._integrator.nsteps
+    steps = sim.steps
     scale = 1.0 + 4.0  # |y| <= 4 here (|omega| <= 2.01, |e| = 1)
     assert dT <= steps * tol * scale * 6  # |dT/dw| <= |J w| <= 6
     assert dL <= steps * tol * scale * 6 * 2  # |L| <= 6, through R and J w

@@ -286,7 +286,9 @@ class Kernel:
     once. :meth:`evaluate` returns (y', lam, qf, friction iterations) or None when the core
     returned a status (kept in :attr:`last_status`, the core's message in :attr:`last_message`)."""
 
-    def __init__(self, lib, model, solver, watch=None):  # watch: see _redundancy_block (a C run's)
+    def __init__(self, lib, model, solver, watch=None, rows_only: bool = False):
+        # watch: see _redundancy_block (a C run's); rows_only: the rows are all it is for (a law
+        # the core cannot integrate, coulomb, is then packed as none: the rows do not read it)
         self.model, self._fn, self._out_fn, self._msg_fn = model, lib.ovk_evaluate, lib.ovk_outputs, lib.ovk_message
         self._rows_fn, self._project_fn = lib.ovk_rows, lib.ovk_project
         self._lib_unique = lib.ovk_unique
@@ -330,7 +332,8 @@ class Kernel:
         m.jbi, m.jbj = arr([c.bi for c in joints], I32), arr([c.bj for c in joints], I32)
         m.jneq, m.jrows = arr([len(c.rows) for c in joints], I32), arr(rows, I32)
         m.jconst = arr([_joint_constants(model, c) for c in joints], float)
-        m.jlaw = arr([_LAWS[c.law.name] if c.law is not None else 0 for c in joints], I32)
+        m.jlaw = arr([0 if c.law is None else _LAWS.get(c.law.name, 0) if rows_only else _LAWS[c.law.name]
+                      for c in joints], I32)
         m.jlawp = arr([_law_constants(c.law) for c in joints], float)
         m.ltype = arr([_LOADS[ld.type] for ld in model.loads], I32)
         m.lbi, m.lbj = arr([ld.bi for ld in model.loads], I32), arr([ld.bj for ld in model.loads], I32)
@@ -505,7 +508,7 @@ def _rows_kernel(model):
     lib, reason = library()
     if lib is None:
         raise KernelUnavailable(reason, "the compiled core")
-    return Kernel(lib, model, SolverSpec())
+    return Kernel(lib, model, SolverSpec(), rows_only=True)
 
 
 def rows_at(model, q: np.ndarray, h: np.ndarray | None = None):

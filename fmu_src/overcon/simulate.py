@@ -110,6 +110,7 @@ class Simulation:
                 raise ValueError(f"Simulation({name}={value!r}): {reason}")
         self.solver = dataclasses.replace(solver, **{k: v for k, v in given.items() if v is not None})
         self.method = self.solver.method
+        self.settings = {k: getattr(self.solver, k) for k in ("tolerance", "step", "max_step")}
         if model.elimination_mode == "pending":
             raise ModelError("Simulation: the model's elimination is pending: admit the compiled model first "
                              "(overcon.checks.admit, or overcon.checks.compile_checked)")

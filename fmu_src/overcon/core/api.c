@@ -18,6 +18,16 @@ int ovk_fail(ovk_data *d, int status, const char *fmt, ...) {
     return status;
 }
 
+void ovk_friction_joint_list(const ovk_model *M, char *out, size_t size) {
+    size_t used = 0;
+    if (size) out[0] = '\0';
+    for (int k = 0; k < M->nfj && used < size; k++) {
+        int w = snprintf(out + used, size - used, "%sjoints[%d]", k ? ", " : "", M->fj[k]);
+        if (w < 0) break;
+        used += (size_t)w;
+    }
+}
+
 #define OVK_MAX_COUNT (1 << 20) /* any count of the model: far above any mechanism, far below overflow */
 
 static int in_range(const int *a, int n, int lo, int hi) { /* every a[i] in [lo, hi) */

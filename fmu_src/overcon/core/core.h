@@ -376,6 +376,9 @@ OVK_HIDDEN int ovk_fail(ovk_data *d, int status, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)))
 #endif
     ;
+/* The friction joints as "joints[a], joints[b], ..." into out (size bytes, cut there; the
+ * bindings put the names in), for the messages of a friction solve that failed. */
+OVK_HIDDEN void ovk_friction_joint_list(const ovk_model *M, char *out, size_t size);
 
 /* frames.c */
 OVK_HIDDEN int ovk_slot(const ovk_model *M, int b);

@@ -217,9 +217,12 @@ int ovk_friction(const ovk_model *M, ovk_data *d, int guess_mode, const double *
         int ok = damped_newton_reduced(M, d, lam0x, Wx, x, qf, &more, nwork);
         *iterations = first + more;
         *damped = 1;
-        if (!ok)
+        if (!ok) {
+            char names[160];
+            ovk_friction_joint_list(M, names, sizeof names);
             return ovk_fail(d, OVK_FRICTION, "friction solve gave up: Newton after %d force evaluations, damped "
-                            "Newton after %d more (%d friction multipliers)", first, more, nx);
+                            "Newton after %d more (%d friction multipliers of %s)", first, more, nx, names);
+        }
     }
     for (int i = 0; i < nR; i++) {
         double acc = 0.0;

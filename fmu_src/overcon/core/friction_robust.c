@@ -176,9 +176,11 @@ int ovk_friction_robust(const ovk_model *M, ovk_data *d, const double *start, do
         double *q = w, *r = w + nc;
         G(M, d, lam0x, Wx, x, q, r);
         for (int a = 0; a < nx; a++) r[a] -= x[a];
+        char names[160];
+        ovk_friction_joint_list(M, names, sizeof names);
         return ovk_fail(d, OVK_FRICTION, "friction solve did not converge (residual %.3g N after %d iterations of the "
                         "robust path: fixed point, then Newton with a finite-difference Jacobian, after Newton and "
-                        "damped Newton; %d friction multipliers)", maxabs(r, nx), *iterations, nx);
+                        "damped Newton; %d friction multipliers of %s)", maxabs(r, nx), *iterations, nx, names);
     }
     /* lam_R: the map at the last iterate (the fixed point) or the Newton iterate on the friction
      * rows; the forces at lam_R's friction rows (overcon.dynamics._robust_friction's return) */

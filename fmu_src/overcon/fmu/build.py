@@ -272,19 +272,16 @@ def _load_scene(path: Path):
         model = compile_checked(spec)
     except scene_mod.SceneError as exc:
         raise _NotBuilt("invalid", *(str(p) for p in exc.problems)) from exc
-    except (ModelError, ValueError, OSError) as exc:
+    except (ModelError, kernel_mod.KernelUnavailable, ValueError, OSError) as exc:
         raise _NotBuilt("invalid", f"{path}: {exc}") from exc
-    why = kernel_mod.singular_refusal(model, spec.solver)
-    if why is not None:
-        raise _NotBuilt("invalid", f"{path}: {why}")
-    why = kernel_mod.refusal(model, spec.solver)
-    if why is not None:
-        raise _NotBuilt("invalid", f"{path}: solver.kernel = 'c': the compiled kernel cannot run: {why}")
     for c in model.joints:  # the FMU integrates: the law overcon simulate refuses for integration
         if c.law is not None and c.law.name == "coulomb":
             raise _NotBuilt("invalid", f"{path}: joint {c.name}: friction law 'coulomb' (paper Fig. 1 variant A, "
                                        "mu sign(v)) is discontinuous at v = 0: for analysis only, not for "
                                        "integration, so no FMU; use 'regularised'")
+    why = kernel_mod.refusal(model, spec.solver)
+    if why is not None:
+        raise _NotBuilt("invalid", f"{path}: the compiled core cannot run this scene: {why}")
     why = cmodel.support(model)
     if why is not None:
         raise _NotBuilt("invalid", f"{path}: the FMU's runtime (the compiled core) does not cover {why}")

@@ -1022,8 +1022,9 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
     L += ["", "### Where the time goes", ""]
     if limits:
         ratios = [m["ratio"] for m in limits]
-        L.append(f"- The limit table: one evaluation of Eq. 18 in the core costs {min(ratios):.1f} to "
-                 f"{max(ratios):.1f} times its linear algebra alone with LAPACK.")
+        L.append(f"- The limit table: one evaluation of Eq. 18 in the core (one call) costs {min(ratios):.1f} to "
+                 f"{max(ratios):.1f} times the LAPACK calls of its linear algebra made one by one through scipy; at "
+                 "these sizes those calls' own Python overhead is a large part of their figure.")
     L += [
           "- At a 1 ms output interval fmpy's own work per communication point (the empty FMU's figure above) is "
           "a fixed cost of every run: 4000 (planar) or 10000 (spatial) points.",

@@ -1032,8 +1032,8 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
           "state (the multipliers of a step are exact only at its end, where they are reused): 4001 (planar) or "
           "10001 (spatial) extra evaluations, more than the integration's own. A host that reads positions only "
           "does not pay for them.",
-          "- The singularity watch (an SVD of the kept Jacobian after every accepted step) costs about as much as "
-          "the step's evaluations on the small paper mechanisms."]
+          "- The singularity watch (core/watch.c, after every accepted step) is part of every run: its share of "
+          "the core's time per paper scene is printed by `python benchmarks/hot_path.py`."]
     L += ["", "![error vs wall time](pareto.png)", ""]
     return "\n".join(L)
 

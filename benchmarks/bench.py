@@ -3,7 +3,7 @@
     python benchmarks/bench.py                 # ~6-9 min on the 2-core reference machine
     python benchmarks/bench.py --quick         # 1 repetition, short ladders (a smoke test, ~1.5 min)
     python benchmarks/bench.py --joints        # per joint type: one evaluation in the core, and the
-                                               # example scenes in process (~1 min; printed only)
+                                               # example scenes in process (a few s; printed only)
     python benchmarks/bench.py --c-runtime     # C-runtime FMUs: FMI overhead per doStep against an empty
                                                # C FMU, the examples through fmpy (~20 s; printed only)
     python benchmarks/bench.py --integrators   # dop853 and radau in process: the core's run in C,
@@ -388,7 +388,7 @@ def exudyn_rows(ref: np.ndarray, repeat: int):
 
 # ------------------------------------------------------------------------------------ the limit
 
-def limit_row(scene_path: Path, stop: float, method: str, tol: float, repeat: int) -> dict:
+def limit_row(scene_path: Path, stop: float, method: str, tol: float) -> dict:
     """In process, one scene: the time of one right-hand-side evaluation in the core
     (:meth:`overcon.kernel.Kernel.evaluate`, one ctypes call) beside what the linear algebra alone
     costs with LAPACK at the same state: the Cholesky factorisation of S = J_R^T M^-1 J_R
@@ -397,8 +397,7 @@ def limit_row(scene_path: Path, stop: float, method: str, tol: float, repeat: in
     calls (``timeit``). The state is the end of the first accepted step after ``stop / 2`` of the
     run in C, the evaluation warm-started from the friction forces at the step before it (as a run
     warm-starts from its previous evaluation); the friction iterations per evaluation are the
-    whole run's (:class:`overcon.kernel.Run`). ``repeat`` is unused: the timeit figures are best
-    of 5 already."""
+    whole run's (:class:`overcon.kernel.Run`)."""
     import timeit
 
     from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
@@ -407,7 +406,6 @@ def limit_row(scene_path: Path, stop: float, method: str, tol: float, repeat: in
     from overcon import scene as scene_mod
     from overcon.checks import compile_checked, watch_rows
 
-    del repeat
     spec = scene_mod.load(scene_path)
     model = compile_checked(spec)
     solver = replace(spec.solver, method=method, tolerance=tol)
@@ -876,7 +874,7 @@ def main(argv=None) -> int:
 
         limits = []
         for n, (method, tol) in LIMIT_CASES.items():
-            limits.append(limit_row(paths[n], SCENES[n][1], method, tol, repeat))
+            limits.append(limit_row(paths[n], SCENES[n][1], method, tol))
             log(f"limit {n}: {limits[-1]['per_eval_us']:.0f} us per evaluation, linear algebra "
                 f"{limits[-1]['linalg_us']:.1f} us")
 

@@ -1,7 +1,7 @@
 """Speed against accuracy, measured through fmpy as a user runs the FMUs (issue 6).
 
-    python benchmarks/bench.py                 # ~6-9 min on the 2-core reference machine
-    python benchmarks/bench.py --quick         # 1 repetition, short ladders (a smoke test, ~1.5 min)
+    python benchmarks/bench.py                 # ~35 s on the 2-core reference machine
+    python benchmarks/bench.py --quick         # 1 repetition, short ladders (a smoke test, ~10 s)
     python benchmarks/bench.py --joints        # per joint type: one evaluation in the core, and the
                                                # example scenes in process (a few s; printed only)
     python benchmarks/bench.py --c-runtime     # C-runtime FMUs: FMI overhead per doStep against an empty

@@ -1,13 +1,13 @@
 """Speed against accuracy, measured through fmpy as a user runs the FMUs (issue 6).
 
-    python benchmarks/bench.py                 # ~6-9 min on the 2-core reference machine
-    python benchmarks/bench.py --quick         # 1 repetition, short ladders (a smoke test, ~1.5 min)
-    python benchmarks/bench.py --joints        # per joint type: one evaluation, core against numpy,
-                                               # and the example scenes in process (~1 min; printed only)
+    python benchmarks/bench.py                 # ~35 s on the 2-core reference machine
+    python benchmarks/bench.py --quick         # 1 repetition, short ladders (a smoke test, ~10 s)
+    python benchmarks/bench.py --joints        # per joint type: one evaluation in the core, and the
+                                               # example scenes in process (a few s; printed only)
     python benchmarks/bench.py --c-runtime     # C-runtime FMUs: FMI overhead per doStep against an empty
                                                # C FMU, the examples through fmpy (~20 s; printed only)
-    python benchmarks/bench.py --integrators   # dop853 and radau in process: the Python integrator loop
-                                               # against the core's run in C (~1 min; printed only)
+    python benchmarks/bench.py --integrators   # dop853 and radau in process: the core's run in C,
+                                               # wall time and steps per method (printed only)
 
 Prints Markdown tables and writes ``docs/benchmarks.md`` and ``docs/pareto.png`` (``--out DIR``
 elsewhere). Figures are printed, never asserted.
@@ -388,48 +388,45 @@ def exudyn_rows(ref: np.ndarray, repeat: int):
 
 # ------------------------------------------------------------------------------------ the limit
 
-def limit_row(scene_path: Path, stop: float, method: str, tol: float, repeat: int) -> dict:
-    """In process, one scene run: CPU time per right-hand-side evaluation (time inside
-    ``Simulation._rhs``, median over ``repeat`` runs) beside what the linear algebra alone costs
-    at a state of that run: the Cholesky factorisation of S = J_R^T M^-1 J_R (dpotrf), the solve
-    for lam0 and the multi-column solve for W (dpotrs), and per friction iteration the small
-    Newton solve (dgetrf/dgetrs), timed with ``timeit`` on the same arrays; numbers in us."""
+def limit_row(scene_path: Path, stop: float, method: str, tol: float) -> dict:
+    """In process, one scene: the time of one right-hand-side evaluation in the core
+    (:meth:`overcon.kernel.Kernel.evaluate`, one ctypes call) beside what the linear algebra alone
+    costs with LAPACK at the same state: the Cholesky factorisation of S = J_R^T M^-1 J_R
+    (dpotrf), the solve for lam0 and the multi-column solve for W (dpotrs), and per friction
+    iteration the small Newton solve (dgetrf/dgetrs); numbers in us, each the best of 5 x 2000
+    calls (``timeit``). The state is the end of the first accepted step after ``stop / 2`` of the
+    run in C, the evaluation warm-started from the friction forces at the step before it (as a run
+    warm-starts from its previous evaluation); the friction iterations per evaluation are the
+    whole run's (:class:`overcon.kernel.Run`)."""
     import timeit
 
     from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
 
+    from overcon import kernel
     from overcon import scene as scene_mod
-    from overcon import simulate
-    from overcon.evaluation import frames, jacobian_h
-    from overcon.checks import compile_checked
+    from overcon.checks import compile_checked, watch_rows
 
     spec = scene_mod.load(scene_path)
     model = compile_checked(spec)
-    per_eval, res = {"c": [], "numpy": []}, None
-    orig = simulate.Simulation._rhs
-    for kernel in ("c", "numpy"):
-        solver = replace(spec.solver, kernel=kernel)
-        for _ in range(repeat):
-            acc = [0.0]
-
-            def timed(sim, t, y):
-                t0 = time.process_time()
-                try:
-                    return orig(sim, t, y)
-                finally:
-                    acc[0] += time.process_time() - t0
-
-            simulate.Simulation._rhs = timed
-            try:
-                res = simulate.run(model, solver, stop_time=stop, output_interval=INTERVAL, method=method,
-                                   tolerance=tol)
-            finally:
-                simulate.Simulation._rhs = orig
-            per_eval[kernel].append(1e6 * acc[0] / res.evaluations)
-    sim = simulate.Simulation(model, spec.solver, method=method, tolerance=tol)
-    y = sim.advance(stop / 2)
-    f = frames(model, y[: model.n], y[model.n:])
-    JR = jacobian_h(model, f)[model.retained].T
+    solver = replace(spec.solver, method=method, tolerance=tol)
+    whole = kernel.Run(model, solver, watch=watch_rows(model))
+    whole.advance(stop)
+    info = whole.info
+    mid = kernel.Run(model, solver, watch=watch_rows(model))
+    mid.advance(stop / 2)
+    y_before = mid.y
+    mid.step()
+    y, t = mid.y, mid.info["t"]
+    k = kernel.Kernel(kernel.library()[0], model, solver, watch_rows(model))
+    first = k.evaluate(stop / 2, y_before)
+    if first is None:
+        raise RuntimeError(f"{scene_path.name}: the core's evaluation at t = {stop / 2:g} s returned status "
+                           f"{k.last_status}: {k.last_message}")
+    qf = first[2]
+    if k.evaluate(t, y, qf_guess=qf) is None:
+        raise RuntimeError(f"{scene_path.name}: the core's evaluation at t = {t:g} s returned status "
+                           f"{k.last_status}: {k.last_message}")
+    JR = kernel.jacobian(model, y[: model.n])[model.retained].T
     MinvJ = model.Minv[:, None] * JR
     S = JR.T @ MinvJ
     c, _ = dpotrf(S)
@@ -442,17 +439,18 @@ def limit_row(scene_path: Path, stop: float, method: str, tol: float, repeat: in
     def us(stmt):
         return 1e6 * min(timeit.repeat(stmt, number=n, repeat=5)) / n
 
+    per_eval = us(lambda: k.evaluate(t, y, qf_guess=qf))
     factor = us(lambda: dpotrf(S))
     solves = us(lambda: dpotrs(c, b)) + us(lambda: dpotrs(c, B))
     lu, piv, _ = dgetrf(A)
     newton = us(lambda: dgetrf(A)) + us(lambda: dgetrs(lu, piv, np.ones(nx)))
-    its = res.friction_iterations / res.evaluations
+    evaluations = int(info["evaluations"])
+    its = info["friction_iterations"] / evaluations
     linalg = factor + solves + its * newton
-    c_us, np_us = statistics.median(per_eval["c"]), statistics.median(per_eval["numpy"])
     return {"scene": scene_path.stem, "method": method, "tol": tol, "size": S.shape[0], "nx": nx,
-            "per_eval_us": c_us, "numpy_us": np_us, "evaluations": res.evaluations, "its": its,
+            "per_eval_us": per_eval, "evaluations": evaluations, "its": its,
             "factor_us": factor, "solves_us": solves, "newton_us": newton, "linalg_us": linalg,
-            "ratio": c_us / linalg, "numpy_ratio": np_us / linalg}
+            "ratio": per_eval / linalg}
 
 
 # ------------------------------------------------------------------------------------ report
@@ -604,35 +602,24 @@ def repeat_float(x) -> str:
     return repr(float(x))
 
 
-def per_evaluation(model, solver, y, n: int) -> tuple[float, float]:
-    """(core, numpy) microseconds of one evaluation (y' as the integrator asks for it), the best
-    of 5 medians of n calls each."""
+def per_evaluation(model, solver, y, n: int) -> float:
+    """Microseconds of one evaluation in the core (y' as the integrator asks for it,
+    :meth:`overcon.kernel.Kernel.evaluate`, cold: no warm start), the best of 5 medians of n calls."""
     from overcon import kernel
-    from overcon.dynamics import evaluate
-    from overcon.evaluation import coordinate_rates
 
-    k, _note = kernel.select(model, replace(solver, kernel="c"))
-    q, h = y[: model.n], y[model.n:]
-
-    def numpy_call():
-        ev = evaluate(model, 0.0, q, h, solver=solver)
-        coordinate_rates(model, q, h, ev.frames)
-
-    out = []
-    for call in (lambda: k.evaluate(0.0, y), numpy_call):
-        best = []
-        for _ in range(5):
-            t0 = time.perf_counter()
-            for _ in range(n):
-                call()
-            best.append((time.perf_counter() - t0) / n * 1e6)
-        out.append(min(best))
-    return out[0], out[1]
+    k, _note = kernel.select(model, solver)
+    best = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for _ in range(n):
+            k.evaluate(0.0, y)
+        best.append((time.perf_counter() - t0) / n * 1e6)
+    return min(best)
 
 
 def joint_rows(n: int) -> list[tuple]:
     """Per joint type and rotation, with and without friction: (kind, type, rotation, friction,
-    core us, numpy us), at a state near q0 with velocities (so friction slides)."""
+    equations, core us), at a state near q0 with velocities (so friction slides)."""
     from overcon import scene as scene_mod
     from overcon.checks import compile_checked
 
@@ -647,55 +634,52 @@ def joint_rows(n: int) -> list[tuple]:
                 spec = scene_mod.as_scene(scene_mod.load(path), friction=["J0", "J1", "J2"] if friction else [])
                 model = compile_checked(spec, check_initial=False)
                 y = np.concatenate([model.q0 + 0.001, model.h0 + 0.3])
-                core, num = per_evaluation(model, spec.solver, y, n)
-                rows.append((kind, jtype, rotation or "", friction, model.m, core, num))
-                log(f"{kind} {jtype} {rotation or ''} friction={friction}: core {core:.1f} us, numpy {num:.1f} us")
+                core = per_evaluation(model, spec.solver, y, n)
+                rows.append((kind, jtype, rotation or "", friction, model.m, core))
+                log(f"{kind} {jtype} {rotation or ''} friction={friction}: core {core:.1f} us")
     return rows
 
 
 def example_runs(repeat: int) -> list[tuple]:
     """The example scenes (quaternions) integrated in process as shipped (``overcon simulate``'s
-    path: overcon.simulate.run), solver.kernel = "c" and "numpy": (scene, path note, core s,
-    numpy s, evaluations), the median of ``repeat`` runs."""
+    path: overcon.simulate.run, the core's run): (scene, stop time s, wall s, steps, evaluations),
+    the median wall time of ``repeat`` runs."""
     from overcon import scene as scene_mod
     from overcon.checks import compile_checked
-    from overcon.simulate import Simulation, run
+    from overcon.simulate import run
 
     rows = []
     for name in EXAMPLE_RUNS:
         spec = scene_mod.as_scene(scene_mod.load(MECH / "examples" / f"{name}.toml"))
         model = compile_checked(spec)
-        note = Simulation(model, spec.solver).kernel_note
-        walls, evals = {}, 0
-        for choice in ("c", "numpy"):
-            times = []
-            for _ in range(repeat):
-                t0 = time.perf_counter()
-                res = run(model, replace(spec.solver, kernel=choice), stop_time=spec.stop_time)
-                times.append(time.perf_counter() - t0)
-            walls[choice] = statistics.median(times)
-            evals = res.evaluations
-        rows.append((name, spec.stop_time, short_path(note), walls["c"], walls["numpy"], evals))
-        log(f"{name}: core {walls['c']:.2f} s, numpy {walls['numpy']:.2f} s")
+        times = []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            res = run(model, spec.solver, stop_time=spec.stop_time)
+            times.append(time.perf_counter() - t0)
+        wall = statistics.median(times)
+        rows.append((name, spec.stop_time, wall, res.steps, res.evaluations))
+        log(f"{name}: {wall:.2f} s")
     return rows
 
 
 def joints_report(rows, runs, n: int, repeat: int) -> str:
-    out = ["## Per joint type: one evaluation, compiled core and numpy (`python benchmarks/bench.py --joints`)", "",
+    out = ["## Per joint type: one evaluation in the compiled core (`python benchmarks/bench.py --joints`)", "",
            f"{machine()}. A chain of three bodies joined by three joints of the type (the first to the base), "
            "friction (regularised, mu 0.1) in all three where the type has it, at a state near q0 with "
-           f"velocities; one evaluation = y' (Eq. 18 with the elimination, the friction solve, the rates); best of 5 "
-           f"medians of {n} calls, in process (no FMI).", "",
-           "| kind | joint | rotation | friction | equations | core (us) | numpy (us) | numpy / core |",
-           "|---|---|---|---|---:|---:|---:|---:|"]
-    for kind, jtype, rot, fr, m, core, num in rows:
-        out.append(f"| {kind} | {jtype} | {rot} | {'yes' if fr else 'no'} | {m} | {core:.1f} | {num:.1f} | "
-                   f"{num / core:.0f} |")
-    out += ["", f"The example scenes as shipped, integrated in process (`overcon simulate`'s path, median of {repeat}):",
-            "", "| scene | stop (s) | path with auto | compiled (s) | numpy (s) | numpy / compiled | evaluations |",
-            "|---|---:|---|---:|---:|---:|---:|"]
-    for name, stop, note, c, num, ev in runs:
-        out.append(f"| {name} | {stop:g} | {note} | {c:.2f} | {num:.2f} | {num / c:.1f} | {ev} |")
+           f"velocities; one evaluation = y' (Eq. 18 with the elimination, the friction solve from a cold start, "
+           f"the rates), `overcon.kernel.Kernel.evaluate` (one ctypes call); best of 5 medians of {n} calls, "
+           "in process (no FMI).", "",
+           "| kind | joint | rotation | friction | equations | core (us) |",
+           "|---|---|---|---|---:|---:|"]
+    for kind, jtype, rot, fr, m, core in rows:
+        out.append(f"| {kind} | {jtype} | {rot} | {'yes' if fr else 'no'} | {m} | {core:.1f} |")
+    out += ["", f"The example scenes as shipped, integrated in process (`overcon simulate`'s path: "
+            f"`overcon.simulate.run`, outputs at the scene's interval; median of {repeat}):",
+            "", "| scene | stop (s) | wall (s) | steps | evaluations |",
+            "|---|---:|---:|---:|---:|"]
+    for name, stop, wall, steps, ev in runs:
+        out.append(f"| {name} | {stop:g} | {wall:.3f} | {steps} | {ev} |")
     return "\n".join(out) + "\n"
 
 
@@ -738,14 +722,14 @@ def _timed_runs(make, stop: float, repeat: int):
 
 
 def integrator_rows(repeat: int) -> list[tuple]:
-    """Per scene and method (dop853, radau at the scene's tolerance): the in-process Python loop
-    (overcon.simulate.Simulation: the integrator of overcon.integrators, its right-hand side the
-    core where it covers the model) against the whole run in C (overcon.kernel.Run), to the stop
-    time without outputs on the way."""
+    """Per scene and method (dop853, radau at the scene's tolerance): the whole run in C
+    (overcon.kernel.Run: core/sim.c with core/integrate_rk.c or core/integrate_radau.c, what the C
+    FMU and overcon.simulate run), to the stop time without outputs on the way: (label, stop s,
+    method, tolerance, median wall s or None, (steps, final state) or the reason it stopped,
+    evaluations)."""
     from overcon import kernel
     from overcon import scene as scene_mod
-    from overcon.checks import compile_checked
-    from overcon.simulate import Simulation
+    from overcon.checks import compile_checked, watch_rows
 
     rows = []
     for label, path, stop, friction in INTEGRATOR_RUNS:
@@ -757,45 +741,33 @@ def integrator_rows(repeat: int) -> list[tuple]:
         model = compile_checked(spec)
         for method in ("dop853", "radau"):
             solver = replace(spec.solver, method=method)
-
-            def python_loop(t, solver=solver):
-                sim = Simulation(model, solver, max_wall_time=INTEGRATOR_WALL)
-                y = sim.advance(t)
-                return sim._integrator.nsteps, y
+            evaluations = [0]
 
             def c_run(t, solver=solver):
-                run = kernel.Run(model, solver, max_wall_time=INTEGRATOR_WALL)
+                run = kernel.Run(model, solver, max_wall_time=INTEGRATOR_WALL, watch=watch_rows(model))
                 y = run.advance(t)
+                evaluations[0] = int(run.info["evaluations"])
                 return int(run.info["nsteps"]), y
 
-            note = Simulation(model, solver).kernel_note.split(" (")[0].replace("right-hand side: ", "")
-            py, py_last = _timed_runs(python_loop, stop, repeat)
             c, c_last = _timed_runs(c_run, stop, repeat)
-            diff = (float(np.max(np.abs(py_last[1] - c_last[1]))) if py is not None and c is not None else None)
-            rows.append((label, stop, method, solver.tolerance, note, py, py_last, c, c_last, diff))
-            log(f"{label} {method}: python loop {py}, C {c}")
+            rows.append((label, stop, method, solver.tolerance, c, c_last, evaluations[0]))
+            log(f"{label} {method}: C run {c}")
     return rows
 
 
 def integrators_report(rows, repeat: int) -> str:
-    out = ["## dop853 and radau in process: the Python loop against the run in C "
-           "(`python benchmarks/bench.py --integrators`)", "",
-           f"{machine()}. Median wall time of {repeat} runs from the start to the stop time, no outputs on the way. "
-           "Python loop: overcon.simulate.Simulation (the integrator of overcon.integrators in Python, each "
-           "right-hand side one call of the compiled core where it covers the model, else numpy); C: "
+    out = ["## dop853 and radau in process: the run in C (`python benchmarks/bench.py --integrators`)", "",
+           f"{machine()}. Median wall time of {repeat} runs from the start to the stop time, no outputs on the way: "
            "overcon.kernel.Run (core/sim.c with core/integrate_rk.c or core/integrate_radau.c: what the C FMU "
-           "runs). |dy|: the largest difference of the two final states.", "",
-           "| scene | stop (s) | method | tolerance | rhs of the Python loop | Python loop (s) | steps | C run (s) "
-           "| steps | Python / C | \\|dy\\| |",
-           "|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|"]
-    for label, stop, method, tol, note, py, py_last, c, c_last, diff in rows:
-        py_s = f"{py:.3f}" if py is not None else py_last
-        c_s = f"{c:.3f}" if c is not None else c_last
-        out.append(f"| {label} | {stop:g} | {method} | {tol:g} | {note} | {py_s} | "
-                   f"{py_last[0] if py is not None else ''} | {c_s} | {c_last[0] if c is not None else ''} | "
-                   f"{py / c:.1f} | {diff:.1e} |" if py is not None and c is not None else
-                   f"| {label} | {stop:g} | {method} | {tol:g} | {note} | {py_s} | "
-                   f"{py_last[0] if py is not None else ''} | {c_s} | {c_last[0] if c is not None else ''} | | |")
+           "and `overcon simulate` run). The comparison with the Python integrator loop was removed with that "
+           "loop (the numpy path's retirement).", "",
+           "| scene | stop (s) | method | tolerance | C run (s) | steps | evaluations |",
+           "|---|---:|---|---:|---:|---:|---:|"]
+    for label, stop, method, tol, c, c_last, ev in rows:
+        if c is None:
+            out.append(f"| {label} | {stop:g} | {method} | {tol:g} | {c_last} | | |")
+        else:
+            out.append(f"| {label} | {stop:g} | {method} | {tol:g} | {c:.3f} | {c_last[0]} | {ev} |")
     return "\n".join(out) + "\n"
 
 
@@ -827,14 +799,14 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "docs"), help="where benchmarks.md and pareto.png go")
     ap.add_argument("--no-exudyn", action="store_true")
     ap.add_argument("--joints", action="store_true",
-                    help="only the per-joint-type evaluation cost (core and numpy) and the example scenes in "
+                    help="only the per-joint-type evaluation cost in the core and the example scenes in "
                          "process (printed, nothing written)")
     ap.add_argument("--c-runtime", action="store_true",
                     help="only the C-runtime FMUs: the FMI overhead per doStep against an empty C FMU, and the "
                          "example scenes through fmpy (benchmarks/fmu_runtime.py; printed, nothing written)")
     ap.add_argument("--integrators", action="store_true",
-                    help="only dop853 and radau in process: the Python integrator loop against the run in C "
-                         "(printed, nothing written)")
+                    help="only dop853 and radau in process: the run in C (kernel.Run), wall time and steps "
+                         "per method (printed, nothing written)")
     args = ap.parse_args(argv)
     repeat = 1 if args.quick else max(1, args.repeat)
     if args.joints:
@@ -902,7 +874,7 @@ def main(argv=None) -> int:
 
         limits = []
         for n, (method, tol) in LIMIT_CASES.items():
-            limits.append(limit_row(paths[n], SCENES[n][1], method, tol, repeat))
+            limits.append(limit_row(paths[n], SCENES[n][1], method, tol))
             log(f"limit {n}: {limits[-1]['per_eval_us']:.0f} us per evaluation, linear algebra "
                 f"{limits[-1]['linalg_us']:.1f} us")
 
@@ -934,12 +906,6 @@ def fmu_overhead_table(ovh: dict) -> str:
     import fmu_runtime
 
     return fmu_runtime.overhead_table(ovh)
-
-
-def short_path(note: str) -> str:
-    """'compiled kernel' or 'numpy (why)' from a Simulation.kernel_note."""
-    note = note.removeprefix("right-hand side: ")
-    return "compiled kernel" if note.startswith("compiled kernel") else note
 
 
 def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, args, total, shipped=(),
@@ -1013,24 +979,22 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
           fmu_overhead_table(ovh), ""]
     if limits:
         L += ["## The limit: time per evaluation against the linear algebra", "",
-              "In process (no FMI), positions only: CPU time inside `Simulation._rhs` per right-hand-side "
-              "evaluation, median of the runs, beside the cost of the linear algebra one evaluation "
-              "needs at a state from the middle of the run, timed alone on the same arrays (best of 5 x "
-              "2000 calls): the Cholesky factorisation of S = J_R^T M^-1 J_R (LAPACK dpotrf), the "
-              "back-substitutions for lam0 and for the friction columns W (dpotrs), and per friction "
-              "iteration the Newton matrix's LU factorisation and solve (dgetrf/dgetrs). Everything "
-              "else (building Phi_h, gamma, Q and the friction forces in numpy, and the Python "
-              "between the calls) is the overhead that remains.", "",
-              "| scene | solver | S size | friction unknowns | friction it./eval | us per evaluation, kernel | "
-              "us per evaluation, numpy | dpotrf (us) | dpotrs x2 (us) | Newton LU per it. (us) | linear algebra (us) | "
-              "ratio kernel | ratio numpy |",
-              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              "In process (no FMI), positions only: one right-hand-side evaluation in the core "
+              "(`overcon.kernel.Kernel.evaluate`, one ctypes call, at the end of the first step after the "
+              "middle of the run, warm-started from the friction forces at the step before) beside the cost "
+              "of the linear algebra one evaluation needs at that state, with LAPACK on the same arrays: the "
+              "Cholesky factorisation of S = J_R^T M^-1 J_R (dpotrf), the back-substitutions for lam0 and for "
+              "the friction columns W (dpotrs), and per friction iteration (the whole run's mean) the Newton "
+              "matrix's LU factorisation and solve (dgetrf/dgetrs); best of 5 x 2000 calls each.", "",
+              "| scene | solver | S size | friction unknowns | friction it./eval | us per evaluation, core | "
+              "dpotrf (us) | dpotrs x2 (us) | Newton LU per it. (us) | linear algebra (us) | ratio |",
+              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for m in limits:
             L.append(f"| {m['scene']} | {m['method']} tol = {m['tol']:g} | {m['size']} | {m['nx']} | {m['its']:.2f} | "
-                     f"{m['per_eval_us']:.0f} | {m['numpy_us']:.0f} | {m['factor_us']:.1f} | {m['solves_us']:.1f} | "
-                     f"{m['newton_us']:.1f} | {m['linalg_us']:.1f} | {m['ratio']:.1f} | {m['numpy_ratio']:.0f} |")
-        L += ["", "The kernel's time per evaluation includes the ctypes call and the copies into and out of "
-              "its buffers (a few us), and, in the few evaluations it hands back, the numpy path's."]
+                     f"{m['per_eval_us']:.1f} | {m['factor_us']:.1f} | {m['solves_us']:.1f} | "
+                     f"{m['newton_us']:.1f} | {m['linalg_us']:.1f} | {m['ratio']:.1f} |")
+        L += ["", "Both columns include a Python call each (a few us for the core's evaluation through ctypes, "
+              "about 1 us per scipy LAPACK call); the core does its own factorisations, not LAPACK's."]
         L.append("")
     L += ["## Targets (issue 14)", ""]
     for n, limit in TARGETS.items():
@@ -1053,16 +1017,21 @@ def report(ladders, declared, stiff, ovh, exu, exu_note, ref_checks, repeat, arg
     ratio = ovh['ours_us'] / ovh['empty_us']
     L.append(f"- FMI overhead per doStep, target <= {OVERHEAD_RATIO:g}x an empty C FMU's: {ovh['ours_us']:.1f} us vs "
              f"{ovh['empty_us']:.1f} us: ratio {ratio:.2f} -> {'met' if ratio <= OVERHEAD_RATIO else 'NOT met'}")
-    L += ["", "### Where the time goes", "",
-          "- The limit table: one evaluation of Eq. 18 in the core costs a few times its linear algebra.",
+    L += ["", "### Where the time goes", ""]
+    if limits:
+        ratios = [m["ratio"] for m in limits]
+        L.append(f"- The limit table: one evaluation of Eq. 18 in the core (one call) costs {min(ratios):.1f} to "
+                 f"{max(ratios):.1f} times the LAPACK calls of its linear algebra made one by one through scipy; at "
+                 "these sizes those calls' own Python overhead is a large part of their figure.")
+    L += [
           "- At a 1 ms output interval fmpy's own work per communication point (the empty FMU's figure above) is "
           "a fixed cost of every run: 4000 (planar) or 10000 (spatial) points.",
           "- As shipped, every output point with reactions needs one evaluation of Eq. 18 at the interpolated "
           "state (the multipliers of a step are exact only at its end, where they are reused): 4001 (planar) or "
           "10001 (spatial) extra evaluations, more than the integration's own. A host that reads positions only "
           "does not pay for them.",
-          "- The singularity watch (an SVD of the kept Jacobian after every accepted step) costs about as much as "
-          "the step's evaluations on the small paper mechanisms."]
+          "- The singularity watch (core/watch.c, after every accepted step) is part of every run: its share of "
+          "the core's time per paper scene is printed by `python benchmarks/hot_path.py`."]
     L += ["", "![error vs wall time](pareto.png)", ""]
     return "\n".join(L)
 

@@ -9,6 +9,7 @@ and their ratio; the figures go to docs/benchmarks.md ("BLAS threads") by hand.
 """
 from __future__ import annotations
 
+import argparse
 import statistics
 import sys
 import tempfile
@@ -48,6 +49,9 @@ def timed(model, solver, limit: bool) -> float:
 
 
 def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("scenes", nargs="*", help="scene files (default: spatial_MN_wo5 and a parallelogram of 20 cranks)")
+    argv = ap.parse_args(argv).scenes
     threads = sorted({i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"})
     print(f"BLAS threads by default: {threads}")
     with tempfile.TemporaryDirectory() as tmp:

@@ -9,7 +9,7 @@ At stiffness k every compliant value is scaled by overcon.converge's rule (stiff
 dampings by sqrt(k / k0), k0 = 1e8 N/m the file's), written as a scene file next to a copy of the
 mechanism. The FMU is built once (``overcon build``: no Python in it) and run with each integrator
 it has (solver.method set through fmpy's start values); a run that stops prints its reason. The
-reference is the FMU's run with radau (the scene's method, the first row). Printed per
+reference is the FMU's run with radau (the scene's method; its own row shows 0). Printed per
 run: wall time of simulate_fmu (median of --repeat), and the largest position difference from
 the reference (m). With ``--energy`` the scene has ``[outputs] energy = true`` and the table adds
 the energy balance: the drift of kinetic + potential + dissipated - applied over the run (J) and

@@ -1,10 +1,12 @@
-"""Hot-path benchmark of the right-hand side (dynamics.evaluate via simulate.Simulation._rhs).
+"""Hot path of an in-process run (overcon.simulate.Simulation over the core's run, core/sim.c).
 
-Runs four paper scenes (planar 0-4 s, spatial 0-10 s, dopri5, tolerance 1e-8) and prints a Markdown
-table: wall time of the whole run (median of ``--repeat`` runs), right-hand-side evaluations, wall time
-per evaluation, time spent inside ``Simulation._rhs`` per evaluation (median), friction iterations
-per evaluation. The wall time also contains the output points (one extra evaluation and the
-reactions each) and the singularity monitor (one SVD per step).
+Runs four paper scenes (planar 0-4 s, spatial 0-10 s, dopri5, tolerance 1e-8) with outputs at the
+scene's interval, as ``overcon.simulate.run`` does, and prints a Markdown table: wall time of the
+whole run (median of ``--repeat`` runs), right-hand-side evaluations, wall time per evaluation, the
+core's time inside ``Simulation.advance`` per evaluation (``info["wall_time"]``: the integration,
+its evaluations and the singularity watch, without the output points), the watch's share of that
+(``info["watch_time"]``), friction iterations per evaluation. The rest of the wall time is the
+output points (one evaluation of Eq. 18 and the reactions each) and the Python between the calls.
 
     python benchmarks/hot_path.py [--repeat 3] [--mechanisms mechanisms] [--save runs.npz]
 
@@ -21,48 +23,27 @@ import numpy as np
 
 from overcon import scene as scene_mod
 from overcon.checks import compile_checked
-from overcon import simulate
-from overcon.simulate import run
+from overcon.simulate import Simulation, output_grid
 
 SCENES = (("planar_none_wo4", 4.0), ("planar_f45_wo4", 4.0),
           ("spatial_none_wo5", 10.0), ("spatial_MN_wo5", 10.0))
 
 
-class _RhsTimer:
-    """Wraps Simulation._rhs to accumulate the time spent in right-hand-side evaluations."""
-
-    def __init__(self):
-        self.total = 0.0
-        self._orig = simulate.Simulation._rhs
-
-    def __enter__(self):
-        orig, timer = self._orig, self
-
-        def timed(sim, t, y):
-            t0 = time.perf_counter()
-            try:
-                return orig(sim, t, y)
-            finally:
-                timer.total += time.perf_counter() - t0
-
-        simulate.Simulation._rhs = timed
-        return self
-
-    def __exit__(self, *exc):
-        simulate.Simulation._rhs = self._orig
-
-
 def bench(path: Path, stop: float, repeat: int):
+    """(median wall s, median core s inside advance, median watch s, the last run's Simulation,
+    its output matrix)."""
     spec = scene_mod.as_scene(scene_mod.load(path), stop_time=stop, tolerance=1e-8, source=str(path))
     model = compile_checked(spec)
-    walls, rhs, res = [], [], None
+    grid = output_grid(spec.start_time, stop, spec.solver.output_interval)
+    walls, core, watch, sim, values = [], [], [], None, None
     for _ in range(repeat):
-        with _RhsTimer() as timer:
-            t0 = time.perf_counter()
-            res = run(model, spec.solver, stop_time=stop)
-            walls.append(time.perf_counter() - t0)
-        rhs.append(timer.total)
-    return statistics.median(walls), statistics.median(rhs), res
+        t0 = time.perf_counter()
+        sim = Simulation(model, spec.solver)
+        values = np.array([sim.outputs(t, sim.advance(t)) for t in grid])
+        walls.append(time.perf_counter() - t0)
+        core.append(sim.info["wall_time"])
+        watch.append(sim.info["watch_time"])
+    return statistics.median(walls), statistics.median(core), statistics.median(watch), sim, values
 
 
 def main(argv=None) -> None:
@@ -72,14 +53,15 @@ def main(argv=None) -> None:
     ap.add_argument("--save", help="write the output matrices to this .npz file")
     args = ap.parse_args(argv)
     saved = {}
-    print("| scene | t (s) | wall (s) | evaluations | wall ms/eval | rhs ms/eval | friction it./eval |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    print("| scene | t (s) | wall (s) | evaluations | wall ms/eval | core ms/eval (advance) | watch share | "
+          "friction it./eval |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for name, stop in SCENES:
-        wall, rhs, res = bench(Path(args.mechanisms) / f"{name}.toml", stop, args.repeat)
-        ev = res.evaluations
-        print(f"| {name} | 0-{stop:g} | {wall:.3f} | {ev} | {1e3 * wall / ev:.4f} | {1e3 * rhs / ev:.4f} | "
-              f"{res.friction_iterations / ev:.2f} |", flush=True)
-        saved[name] = res.values
+        wall, core, watch, sim, values = bench(Path(args.mechanisms) / f"{name}.toml", stop, args.repeat)
+        ev = sim.evaluations
+        print(f"| {name} | 0-{stop:g} | {wall:.3f} | {ev} | {1e3 * wall / ev:.4f} | {1e3 * core / ev:.4f} | "
+              f"{watch / core:.0%} | {sim.friction_iterations / ev:.2f} |", flush=True)
+        saved[name] = values
     if args.save:
         np.savez(args.save, **saved)
 

@@ -8,8 +8,10 @@ evaluation as N grows.
     python benchmarks/nfourbar.py --watch [N ...] [--stop-time T] [--scenes]
                                             the C runs only, with their watch's share
 
-For each N the scene (tolerance 1e-9, dopri5) is run in process (one BLAS thread) and, up to
-``--c-max``, as a run in C (core/sim.c, kernel.Run), and printed side by side:
+For each N the scene (tolerance 1e-9, dopri5) is run in process (one BLAS thread) through
+``overcon.simulate.Simulation`` (``overcon simulate``'s path: the core's run, core/sim.c, behind
+the Python interface) and, up to ``--c-max``, as a bare ``kernel.Run`` (the same run without the
+Python wrapper: its wall time, and its states compared with the Simulation's), printed side by side:
   - the benchmark's measure, the x coordinate of B0 (the first coupler's left end, the first
     crank's top: crank0.x + 0.5 cos(crank0.phi), m) every 0.01 s, against the tight-tolerance run:
     the parallelogram branch reduced to its one coordinate (every crank at phi, the couplers
@@ -17,10 +19,10 @@ For each N the scene (tolerance 1e-9, dopri5) is run in process (one BLAS thread
     DOP853 at 1e-13, which is the motion of the benchmark's branch itself (B0's x = cos phi);
     also, for N <= 10, the whole model in process at tolerance 1e-12 against the same reference;
   - the singular events (20 flat positions in 20 s), steps, evaluations, the max drift;
-  - wall times: the in-process run, its watch (overcon.watch.SingularityMonitor.check, measured by
-    wrapping it) and its projections, and the C run with its watch (core/watch.c, watch_eig.c:
-    ``watch_time`` of ovk_sim_info) and, within the watch, the uniqueness along the motion
-    (core/unique.c, ``along_time``);
+  - wall times: the in-process run, its watch (core/watch.c, watch_eig.c: ``watch_time`` of
+    ovk_sim_info) and, within the watch, the uniqueness along the motion (core/unique.c,
+    ``along_time``), and the bare C run with its watch; the projections (core/project.c) have no
+    timer of their own in the core and are not reported;
   - the cost of one evaluation of the right-hand side in the core alone (kernel.Kernel.evaluate
     at 200 states of the run, microseconds; the AL's banded factorisation is O(N) here, the
     assembly of the dense m x nh Jacobian O(N^2)).
@@ -49,8 +51,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 from overcon import kernel  # noqa: E402
 from overcon import scene  # noqa: E402
-from overcon import watch  # noqa: E402
-from overcon.checks import compile_checked  # noqa: E402
+from overcon.checks import compile_checked, watch_rows  # noqa: E402
 from overcon.cli import single_threaded_blas  # noqa: E402
 from overcon.simulate import Simulation  # noqa: E402
 
@@ -78,37 +79,23 @@ def _b0_x(model, y: np.ndarray) -> float:
 
 
 def in_process(model, solver, times: np.ndarray) -> dict:
-    spent = {"watch": 0.0, "project": 0.0}
-
-    def timed(name, fn):
-        def wrapper(*a, **kw):
-            start = time.perf_counter()
-            try:
-                return fn(*a, **kw)
-            finally:
-                spent[name] += time.perf_counter() - start
-        return wrapper
-
-    check, project = watch.SingularityMonitor.check, Simulation._project
-    watch.SingularityMonitor.check = timed("watch", check)
-    Simulation._project = timed("project", project)
-    try:
-        with single_threaded_blas():
-            start = time.perf_counter()
-            sim = Simulation(model, solver)
-            states = [sim.advance(float(t)) for t in times]
-            wall = time.perf_counter() - start
-            x = np.array([_b0_x(model, y) for y in states])
-    finally:
-        watch.SingularityMonitor.check, Simulation._project = check, project
-    return {"x": x, "wall": wall, "steps": sim._integrator.nsteps, "evaluations": sim.evaluations,
-            "drift": sim.max_drift, "singular": sum(1 for e in sim.events if e[1] == "singular"), **spent,
-            "states": states}
+    """The run through overcon.simulate.Simulation (the core's run), its watch's wall times from
+    the core's counters."""
+    with single_threaded_blas():
+        start = time.perf_counter()
+        sim = Simulation(model, solver)
+        states = [sim.advance(float(t)) for t in times]
+        wall = time.perf_counter() - start
+    info = sim.info
+    return {"x": np.array([_b0_x(model, y) for y in states]), "wall": wall, "steps": sim.steps,
+            "evaluations": sim.evaluations, "drift": sim.max_drift,
+            "singular": sum(1 for e in sim.events if e[1] == "singular"), "watch": info["watch_time"],
+            "along": info["along_time"], "states": states}
 
 
 def c_run(model, solver, times: np.ndarray, b0: bool = True) -> dict:
     start = time.perf_counter()
-    run = kernel.Run(model, solver)
+    run = kernel.Run(model, solver, watch=watch_rows(model))
     states = [run.advance(float(t)) for t in times]
     wall = time.perf_counter() - start
     info = run.info
@@ -170,6 +157,7 @@ def measure(n: int, tmp: Path, stop: float, c_max: int) -> dict:
     return {"N": n, "coords": model.nh, "eqs": model.m, "py": py, "c": c,
             "err_py": float(np.max(np.abs(py["x"] - ref))),
             "err_c": None if c is None else float(np.max(np.abs(c["x"] - ref))),
+            "dy_c": None if c is None else float(max(np.max(np.abs(a - b)) for a, b in zip(py["states"], c["states"]))),
             "err_tight": None if tight is None else float(np.max(np.abs(tight["x"] - ref))),
             "us_eval": eval_cost(model, spec.solver, py["states"])}
 
@@ -200,7 +188,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("n", type=int, nargs="*", default=[2, 10, 40, 100])
     ap.add_argument("--stop-time", type=float, default=20.0)
-    ap.add_argument("--c-max", type=int, default=10, help="largest N also run in C (default 10)")
+    ap.add_argument("--c-max", type=int, default=10,
+                    help="largest N also run as a bare kernel.Run beside the Simulation (default 10)")
     ap.add_argument("--plot", type=Path)
     ap.add_argument("--watch", action="store_true", help="only the C runs, with the watch's share")
     ap.add_argument("--scenes", action="store_true", help="with --watch: also spatial_MN_wo5 and the examples")
@@ -209,7 +198,8 @@ def main(argv=None) -> int:
         watch_table(args.n, args.stop_time, args.scenes)
         return 0
     print(f"{'N':>4} {'coords':>6} {'eqs':>5} {'sing':>4} {'steps':>6} {'evals':>6} {'drift':>8} {'err py m':>9} "
-          f"{'err C m':>9} {'err 1e-12':>9} {'py s':>7} {'watch s':>7} {'proj s':>6} {'C s':>7} {'C watch':>7} "
+          f"{'err C m':>9} {'|dy| C':>8} {'err 1e-12':>9} {'py s':>7} {'watch s':>7} {'along s':>7} {'C s':>7} "
+          f"{'C watch':>7} "
           f"{'us/eval':>8} {'py us/ev':>8}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -219,11 +209,12 @@ def main(argv=None) -> int:
             py, c = r["py"], r["c"]
             tight = "" if r["err_tight"] is None else f"{r['err_tight']:.2e}"
             err_c = "" if c is None else f"{r['err_c']:.2e}"
+            dy_c = "" if c is None else f"{r['dy_c']:.1e}"
             c_wall = "" if c is None else f"{c['wall']:.2f}"
             c_watch = "" if c is None else f"{c['watch']:.2f}"
             print(f"{n:>4} {r['coords']:>6} {r['eqs']:>5} {py['singular']:>4} {py['steps']:>6} {py['evaluations']:>6} "
-                  f"{py['drift']:>8.1e} {r['err_py']:>9.2e} {err_c:>9} {tight:>9} {py['wall']:>7.2f} "
-                  f"{py['watch']:>7.2f} {py['project']:>6.2f} {c_wall:>7} {c_watch:>7} {r['us_eval']:>8.1f} "
+                  f"{py['drift']:>8.1e} {r['err_py']:>9.2e} {err_c:>9} {dy_c:>8} {tight:>9} {py['wall']:>7.2f} "
+                  f"{py['watch']:>7.2f} {py['along']:>7.2f} {c_wall:>7} {c_watch:>7} {r['us_eval']:>8.1f} "
                   f"{py['wall'] / py['evaluations'] * 1e6:>8.1f}", flush=True)
     if args.plot:
         plot(rows, args.plot, args.stop_time)

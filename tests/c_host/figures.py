@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Figures quoted in the README (FMUs): wall time of one fmi2DoStep(0, 1e6) under the default work
 budget, of the C host (fmu_host.c) per process from an empty environment, and the FMI overhead per
-communication point through fmpy (20000 points of 1e-5 s, minus the same in-process run).
+communication point through fmpy (20000 points of 1e-5 s, minus the same run in process: kernel.Run's
+advance and its outputs' table per point, two ctypes calls as fmpy makes two FMI calls).
 
     python tests/c_host/figures.py [--runs N] [SCENE ...]     (default: planar_none_wo4 planar_f45_wo4)
 
@@ -44,9 +45,9 @@ def huge_step(unz: str) -> str:
 
 
 def overhead(unz: str, scene: str, n: int = 20000, h: float = 1e-5) -> str:
+    from overcon import kernel
     from overcon import scene as scene_mod
-    from overcon.checks import compile_checked
-    from overcon.simulate import Simulation
+    from overcon.checks import compile_checked, watch_rows
 
     md = fmpy.read_model_description(unz)
     outs = [v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
@@ -66,14 +67,15 @@ def overhead(unz: str, scene: str, n: int = 20000, h: float = 1e-5) -> str:
     s.terminate()
     s.freeInstance()
     spec = scene_mod.load(ROOT / "mechanisms" / f"{scene}.toml")
-    sim = Simulation(compile_checked(spec), spec.solver)
+    model = compile_checked(spec)
+    run = kernel.Run(model, spec.solver, watch=watch_rows(model))
     t0 = time.perf_counter()
     for k in range(n):
         t_next = (k + 1) * h
-        sim.outputs(t_next, sim.advance(t_next))
+        run.outputs(t_next, run.advance(t_next))
     engine = time.perf_counter() - t0
     return (f"{scene}: {len(outs)} outputs, {fmu / n * 1e6:.1f} us per communication point through fmpy, "
-            f"{engine / n * 1e6:.1f} us in process: FMI overhead {(fmu - engine) / n * 1e6:.1f} us")
+            f"{engine / n * 1e6:.1f} us in process (kernel.Run): FMI overhead {(fmu - engine) / n * 1e6:.1f} us")
 
 
 def host_runs(host: Path, unz: str, runs: int) -> str:

@@ -106,7 +106,8 @@ def test_newton_gives_up_and_damped_newton_finishes():
 def test_friction_solve_gives_up():
     """friction_max_iter = 2: neither Newton can finish in two force evaluations. The core returns
     OVK_FRICTION with the damped flag and both counts (``newton_failed``: the total), which is
-    where a run goes on with the robust path (test_robust_path_stages)."""
+    where a run goes on with the robust path (test_robust_path_stages); the message names the
+    friction joints (planar_f45_wo4: joints 4 and 5, 0-based 3 and 4)."""
     spec = spec_of("planar_f45_wo4", friction_max_iter=2)
     model = compile_checked(spec)
     k = kernel_for(model, spec.solver)
@@ -119,7 +120,7 @@ def test_friction_solve_gives_up():
         gave_up += 1
         assert k.last_status == 2 and k.damped and k.newton_failed() == 4
         assert k.last_message == ("friction solve gave up: Newton after 2 force evaluations, damped Newton "
-                                  "after 2 more (4 friction multipliers)")
+                                  "after 2 more (4 friction multipliers of joints[3], joints[4])")
     assert gave_up == 2
 
 

@@ -16,6 +16,7 @@
 The helpers are shared with the other tests of the core (tests/test_kernel.py, test_core.py, ...)."""
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -249,6 +250,16 @@ def force_scale(model, y, got) -> float:
                float(np.max(np.abs(applied_forces(model, y)))))
 
 
+def law_mu(law, v: float) -> float:
+    """The paper's Fig. 1 law B (``regularised``) or C (``stribeck``) at the sliding velocity v:
+    mu clip(v / v_reg, -1, 1), for C with mu + (mu_static - mu) exp(-(v / v_stribeck)^2) in place
+    of mu; the expected value the core's friction outputs are held to."""
+    magnitude = law.mu
+    if law.name == "stribeck":
+        magnitude = law.mu + (law.mu_static - law.mu) * math.exp(-(abs(v) / law.v_stribeck) ** 2)
+    return min(max(v / law.v_reg, -1.0), 1.0) * magnitude
+
+
 def friction_law(model, spec, q, h, c, reac, output) -> tuple[float, float]:
     """(the friction output joint c must have, the friction power of joint c) from its law at its
     reaction outputs ``reac`` (the components of its type, then the global force) and its
@@ -258,7 +269,7 @@ def friction_law(model, spec, q, h, c, reac, output) -> tuple[float, float]:
     ``output`` (the core's) only enters the power."""
     law, p = c.law, c.p
     bi, bj = c.bi, c.bj
-    coef = law.coefficient
+    coef = functools.partial(law_mu, law)
     if c.type == "revolute":
         w = h[bj * 3 + 2] if bj >= 0 else 0.0
         w -= h[bi * 3 + 2] if bi >= 0 else 0.0

@@ -1,9 +1,8 @@
 """The compiled core's friction solve (core/friction.c, friction_robust.c): its Newton path gives
 the solution of the paper's fixed point (the core's robust path, a different iteration, at the
 same state), within a bound that follows from the friction tolerance, and each is a solution
-(the law holds at its multipliers: tests/test_core_rows.py); warm starts at or near the solution;
-the friction laws' ``mu_over_speed_slope`` (Newton's Jacobian) against finite differences. The
-stages forced one by one: tests/test_core.py."""
+(the law holds at its multipliers: tests/test_core_rows.py); warm starts at or near the solution.
+The stages forced one by one: tests/test_core.py."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -12,9 +11,7 @@ import numpy as np
 import pytest
 
 from overcon import scene as scene_mod
-from overcon.friction_laws import make_law
 from overcon.checks import compile_checked
-from overcon.spec import FrictionSpec
 
 from test_core_rows import check_friction_at, equation_residuals
 from test_kernel import kernel_for
@@ -31,15 +28,6 @@ def random_states(model, n, seed, scale):
     rng = np.random.default_rng(seed)
     for _ in range(n):
         yield np.concatenate([model.q0 + scale * rng.standard_normal(model.n), 2.0 * rng.standard_normal(model.nh)])
-
-
-@pytest.mark.parametrize("kw", [{"law": "regularised"}, {"law": "stribeck", "mu_static": 0.5, "v_stribeck": 2e-3}])
-def test_mu_over_speed_slope_matches_differences(kw):
-    law = make_law(FrictionSpec(mu=0.3, size=0.1, v_reg=1e-3, **kw))
-    for s in (2e-4, 7e-4, 1.5e-3, 3e-3, 0.2, 4.0):
-        d = 1e-6 * s
-        fd = (law.mu_over_speed(s + d) - law.mu_over_speed(s - d)) / (2 * d)
-        assert abs(fd - law.mu_over_speed_slope(s)) <= 1e-6 * max(1.0, abs(fd))
 
 
 def agree(got, ref, model, solver):

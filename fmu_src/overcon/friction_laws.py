@@ -7,17 +7,15 @@
 
 ``v`` is the sliding velocity of body j relative to body i (m/s, or rad/s for the revolute
 joint's relative angular velocity); the law is odd in v, so friction on body i acts along v and
-never adds energy. The vector form used by spherical joints (A.14) is
-``F = mu_over_speed(|v|) |N| v`` with ``mu_over_speed(s) = coefficient(s)/s`` (finite at s = 0
-for B, C).
+never adds energy. The vector form used by spherical joints (A.14) is ``F = (mu(|v|)/|v|) |N| v``
+(finite at |v| = 0 for B, C). The laws are evaluated in the compiled core (core/friction.c); this
+module holds their constants for packing.
 
 Names (decided here): one coefficient has one name on its way from the file to the solver, ``mu``
-(file key, :class:`overcon.spec.FrictionSpec`, the FMU parameter ``<joint>.mu``, :class:`Law`);
-the velocity-dependent value is the method :meth:`Law.coefficient`.
+(file key, :class:`overcon.spec.FrictionSpec`, the FMU parameter ``<joint>.mu``, :class:`Law`).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from .spec import FrictionSpec
@@ -41,40 +39,6 @@ class Law:
     def size_of(self, key: str) -> float:
         """The friction size ``key`` (m)."""
         return dict(self.sizes)[key]
-
-    def _magnitude(self, speed: float) -> float:
-        if self.name == "stribeck":
-            return self.mu + (self.mu_static - self.mu) * math.exp(-(speed / self.v_stribeck) ** 2)
-        return self.mu
-
-    def coefficient(self, v: float) -> float:
-        """Signed friction coefficient mu(v) at the sliding velocity v."""
-        if self.name == "coulomb":
-            return math.copysign(self.mu, v) if v != 0.0 else 0.0
-        return min(max(v / self.v_reg, -1.0), 1.0) * self._magnitude(abs(v))
-
-    def mu_over_speed(self, speed: float) -> float:
-        """mu(s)/s for s >= 0 (1/(m/s)); for law A it is infinite at s = 0 (raises)."""
-        if self.name == "coulomb":
-            if speed == 0.0:
-                raise ZeroDivisionError("Coulomb law (variant A) has no finite mu(v)/v at v = 0")
-            return self.mu / speed
-        return self._magnitude(speed) / max(speed, self.v_reg)
-
-    def mu_over_speed_slope(self, speed: float) -> float:
-        """d(mu_over_speed)/ds at s >= 0 (1/(m/s)^2), the one-sided derivative from above at the
-        kink s = v_reg (for the friction solve's Newton Jacobian; law A: raises at s = 0)."""
-        if self.name == "coulomb":
-            if speed == 0.0:
-                raise ZeroDivisionError("Coulomb law (variant A) has no finite mu(v)/v at v = 0")
-            return -self.mu / (speed * speed)
-        slope = 0.0
-        if self.name == "stribeck":
-            x = speed / self.v_stribeck
-            slope = -2.0 * x / self.v_stribeck * (self.mu_static - self.mu) * math.exp(-x * x)
-        if speed < self.v_reg:
-            return slope / self.v_reg
-        return (slope - self._magnitude(speed) / speed) / speed
 
 
 def make_law(spec: FrictionSpec, sizes=None) -> Law:

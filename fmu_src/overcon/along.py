@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .analysis import analyse, numerical_rank
-from .kernel import jacobian
+from .kernel import rows_kernel
 from .precheck import compliant_joints, frictionless
 from .simulate import Simulation, SimulationError, output_grid
 
@@ -57,13 +57,17 @@ def _friction_names(model) -> list[str]:
             if not frictionless(model.joints[j].law) and model.joints[j].name not in compliant]
 
 
-def sample(model, q: np.ndarray, names: list[str]) -> tuple[int, tuple[str, ...]]:
+def sample(model, q: np.ndarray, names: list[str], rows=None) -> tuple[int, tuple[str, ...]]:
     """(rank of the rigid equations' Jacobian, friction joints ``names`` whose reaction is not
-    unique) at the coordinates q."""
-    rigid = [i for i in range(model.m) if i not in set(int(r) for r in model.compliant_rows)]
-    J = jacobian(model, q).T[:, rigid]
+    unique) at the coordinates q. ``rows``: the model's :func:`overcon.kernel.rows_kernel`, made
+    once for a run's samples (default: one made here)."""
+    kern = rows_kernel(model) if rows is None else rows
+    compliant = set(int(r) for r in model.compliant_rows)
+    rigid = [i for i in range(model.m) if i not in compliant]
+    J = kern.rows(np.concatenate([q, np.zeros(model.nh)]))[1].T[:, rigid]
     position = {row: k for k, row in enumerate(rigid)}
-    groups = {c.name: [position[r] for r in c.rows] for c in model.joints if c.name in set(names)}
+    wanted = set(names)
+    groups = {c.name: [position[r] for r in c.rows] for c in model.joints if c.name in wanted}
     rank = numerical_rank(J)
     if not groups:
         return rank, ()
@@ -87,12 +91,12 @@ def along(model, solver, stop_time: float) -> AlongReport:
     if not stop_time > start:
         raise ValueError(f"--along {stop_time:g}: must be after the scene's start time {start:g} s")
     names = _friction_names(model)
-    sim = Simulation(model, solver)
+    sim, rows = Simulation(model, solver), rows_kernel(model)
     samples, stopped = [], None
     try:
         for t in output_grid(start, stop_time, solver.output_interval):
             y = sim.advance(t)
-            samples.append((float(t), *sample(model, y[: model.n], names)))
+            samples.append((float(t), *sample(model, y[: model.n], names, rows)))
     except SimulationError as exc:
         stopped = str(exc)
     return AlongReport(stop_time, solver.output_interval, _segments(samples), stopped)

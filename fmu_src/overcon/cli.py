@@ -279,9 +279,6 @@ def cmd_check(args) -> int:
     why = refusal(model, spec.solver)
     if why is not None:
         return _input_error(f"{args.file}: the compiled core cannot run this scene: {why}", args)
-    from .kernel import singular_refusal
-    if (why := singular_refusal(model, spec.solver)) is not None:
-        return _input_error(f"{args.file}: {why}", args)
     report = precheck(model, args.file, args.methods)
     path = None if args.along is None else _along(args, spec, model)
     if isinstance(path, int):
@@ -336,9 +333,6 @@ def cmd_simulate(args) -> int:
     why = refusal(model, spec.solver, here=True)  # a core that cannot run here: bad input, not a failed run
     if why is not None:
         return _input_error(f"{args.file}: the compiled core cannot run this scene: {why}")
-    from .kernel import singular_refusal
-    if (why := singular_refusal(model, spec.solver, here=True)) is not None:
-        return _input_error(f"{'--singular pass' if args.singular else args.file}: {why}")
     start = time.perf_counter()
     try:
         with single_threaded_blas():

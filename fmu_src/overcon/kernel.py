@@ -501,7 +501,7 @@ class Kernel:
         return out, drift.value
 
 
-def _rows_kernel(model):
+def rows_kernel(model):
     """A :class:`Kernel` of ``model`` for its rows alone (default solver settings: the rows do not
     depend on them); raises :class:`KernelUnavailable` when no core can be loaded here."""
     from .spec import SolverSpec
@@ -516,7 +516,7 @@ def rows_at(model, q: np.ndarray, h: np.ndarray | None = None):
     velocities h, default zero; gamma needs them), from the compiled core (core/joints*.c): the
     rows the pre-check, the initial-state checks and ``check --along`` judge. New arrays."""
     y = np.concatenate([np.asarray(q, float), np.zeros(model.nh) if h is None else np.asarray(h, float)])
-    return _rows_kernel(model).rows(y)
+    return rows_kernel(model).rows(y)
 
 
 def jacobian(model, q: np.ndarray) -> np.ndarray:
@@ -552,15 +552,6 @@ def refusal(model, solver=None, *, here: bool = False) -> str | None:
     without ``here`` (an FMU carries its own library), ``simulate`` with it: all three refuse such
     a scene as bad input. Every ``solver.kernel`` runs the core (``numpy`` is a deprecated alias)."""
     return _unavailable(model) if here else support(model)
-
-
-def singular_refusal(model, solver, *, here: bool = False) -> str | None:
-    """Why ``solver.singular = "pass"`` cannot run, as a whole sentence, or None; ``here`` as
-    :func:`refusal`."""
-    if getattr(solver, "singular", "stop") != "pass":
-        return None
-    why = refusal(model, solver, here=here)
-    return None if why is None else f"solver.singular = 'pass' needs the compiled core, which cannot run: {why}"
 
 
 def select(model, solver):

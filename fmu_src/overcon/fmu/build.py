@@ -19,7 +19,7 @@ refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each F
                                       binary reads only the model file)
 
 The binary does not depend on the scene, so building needs no C compiler: the package installation
-compiled it. It covers every scene that can be integrated (:func:`overcon.fmu.cmodel.support`:
+compiled it. It covers every scene that can be integrated (:func:`overcon.kernel.support`:
 every joint type, both rotations, every load, the friction laws ``regularised`` and ``stribeck``,
 any number of friction joints, every redundancy method, ``solver.singular`` "stop" and "pass",
 every integrator: dopri5, dop853, rk4 and radau). A scene with the friction law ``coulomb``
@@ -279,12 +279,9 @@ def _load_scene(path: Path):
             raise _NotBuilt("invalid", f"{path}: joint {c.name}: friction law 'coulomb' (paper Fig. 1 variant A, "
                                        "mu sign(v)) is discontinuous at v = 0: for analysis only, not for "
                                        "integration, so no FMU; use 'regularised'")
-    why = kernel_mod.refusal(model, spec.solver)
+    why = kernel_mod.support(model)  # the FMU's binary is the core: its coverage is the core's
     if why is not None:
         raise _NotBuilt("invalid", f"{path}: the compiled core cannot run this scene: {why}")
-    why = cmodel.support(model)
-    if why is not None:
-        raise _NotBuilt("invalid", f"{path}: the FMU's runtime (the compiled core) does not cover {why}")
     return spec, model
 
 

@@ -68,13 +68,6 @@ INT_FIELDS = ("dim", "nb", "nq_b", "nh_b", "m", "nR", "nj", "nl", "nx", "ncols",
 DOUBLE_FIELDS = {"Minv", "mass", "inertia", "gravity", "jconst", "jlawp", "lp"}
 
 
-def support(model) -> str | None:
-    """None if the C FMU runs ``model``, else the reason (``overcon build`` refuses the scene then):
-    the core's coverage (:func:`overcon.kernel.support`); the C layer computes every output kind and
-    runs both formulations (``solver.singular``)."""
-    return kernel_mod.support(model)
-
-
 class _Out:
     def __init__(self):
         self.parts: list[bytes] = []

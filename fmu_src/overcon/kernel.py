@@ -116,7 +116,8 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_sim_events", i, [vp]),
                             ("ovk_sim_event", ctypes.c_char_p, [vp, i, vp, vp]),
                             ("ovk_pack_kept", i, [vp, vp, i, vp, vp, vp, vp]),
-                            ("ovk_sim_watch_extremes", i, [vp, vp, i, vp])):
+                            ("ovk_sim_watch_extremes", i, [vp, vp, i, vp]),
+                            ("ovk_band_svd", i, [vp, i, i, i, ctypes.c_double, vp, vp])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib
@@ -522,6 +523,23 @@ def rows_at(model, q: np.ndarray, h: np.ndarray | None = None):
 def jacobian(model, q: np.ndarray) -> np.ndarray:
     """Phi_h (m, nh) at the coordinates q (:func:`rows_at`)."""
     return rows_at(model, q)[1]
+
+
+def band_svd(B: np.ndarray, p: int = 0, mu: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+    """The singular values of the rows B (k, n), largest first, by the core's banded route
+    (core/bandsvd.c: windowed QR, band-to-bidiagonal, bisection), and with p > 0 an orthonormal
+    basis (k, p) of the right singular vectors of the p smallest (inverse iteration with the
+    factor of [R; mu I]). Dimensionless: B as given."""
+    lib, reason = library()
+    if lib is None:
+        raise KernelUnavailable(reason, "the compiled core")
+    B = np.ascontiguousarray(B, dtype=float)
+    k, n = B.shape
+    sv, N = np.zeros(max(k, 1)), np.zeros((max(k, 1), max(p, 1)))
+    status = lib.ovk_band_svd(B.ctypes.data, k, n, p, float(mu), sv.ctypes.data, N.ctypes.data)
+    if status:
+        raise ValueError(f"band_svd: {STATUS.get(status, status)} ({k} x {n} rows, p = {p})")
+    return sv[:k], (N[:k, :p] if p else None)
 
 
 def rigid_rows(model) -> np.ndarray:

@@ -304,8 +304,7 @@ typedef struct {
     double max_drift, min_ratio, t_prev, wall_time;
     double *ev_lam, *ev_qf, *guess, *yout; /* scratch: m, ncols, max(m, ncols), ny */
     double *phi, *J, *gam;         /* scratch: m, m nh, m */
-    double *W, *W2, *T;            /* watch scratch: weighted rows, their forward difference, Jacobi (m nh each) */
-    double *sv;                    /* watch scratch: singular values (m + nh) */
+    double *W, *W2, *T;            /* watch scratch: weighted rows, their forward difference, a spare (m nh each) */
     double *ywatch, *ystar, *qwatch; /* watch scratch: states (ny each), coordinate rates (n) */
     double rate, ratio;            /* watch: dr/dt and r of the kept equations at the last check */
     double *qload;                 /* energy: the constant loads' Q (nh) */
@@ -317,6 +316,7 @@ typedef struct {
     int along_rank;                /* the whole Jacobian's rank at the last evaluation (pre-check rule) */
     int *along_unique;             /* nj: each joint's reaction unique there */
     double *along_work;            /* ovk_unique_doubles(m, nh) */
+    double *bsv_work;              /* ovk_bsv_doubles(m, nh): the watch's whole-Jacobian ranks (bandsvd.c) */
     ovk_event *events;             /* nevents of cap_events, in the order they happened */
     int nevents, cap_events;
     /* the kept equations chosen again during the run (watch.c, sim.c) */
@@ -368,7 +368,20 @@ OVK_HIDDEN double ovk_eig_rate(const ovk_sim *s, const double *u, double sigma, 
 OVK_HIDDEN double ovk_now(void);
 /* svd.c: one-sided Jacobi */
 OVK_HIDDEN int ovk_jacobi_rows(double *B, int k, int r, double *Q);
-OVK_HIDDEN void ovk_singular_values(const double *A, int rows, int cols, double *T, double *sv);
+/* bandsvd.c: the singular values and trailing right singular vectors of rows with narrow windows */
+typedef struct {
+    int k, rows, w;        /* rows given, A's rows (max(n, k)), R's upper band */
+    double *A, *d, *e;     /* A = Q R (R in A's upper triangle, columns in `order`), the bidiagonal */
+    double *basis, *v;     /* scratch of ovk_bsv_null */
+    int *order;            /* order[c]: the given row that is A's column c */
+    double bound;          /* an upper bound of sigma_1 (Gershgorin on the Golub-Kahan matrix) */
+} ovk_bsv;
+OVK_HIDDEN size_t ovk_bsv_doubles(int k, int n);
+OVK_HIDDEN int ovk_bsv_factor(const double *B, int k, int n, double *work, ovk_bsv *f);
+OVK_HIDDEN int ovk_bsv_below(const ovk_bsv *f, double x);
+OVK_HIDDEN double ovk_bsv_value(const ovk_bsv *f, int i);
+OVK_HIDDEN int ovk_bsv_null(ovk_bsv *f, int p, double mu, double *N);
+OVK_EXPORT int ovk_band_svd(const double *B, int k, int n, int p, double mu, double *sv, double *N);
 
 /* failures: the status, with its message written into d->msg (printf format) */
 OVK_HIDDEN int ovk_fail(ovk_data *d, int status, const char *fmt, ...)

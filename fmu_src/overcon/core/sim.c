@@ -139,7 +139,6 @@ static void layout(ovk_sim *s) {
     s->W = p; p += m * nh;
     s->W2 = p; p += m * nh;
     s->T = p; p += m * nh;
-    s->sv = p; p += m + nh;
     s->ywatch = p; p += ny;
     s->ystar = p; p += ny;
     s->qwatch = p; p += (size_t)s->n;
@@ -198,7 +197,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->m = M->m;
     s->ncols = M->ncols;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh;
-    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 4 * m * nh + m + nh + (size_t)s->n +
+    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 4 * m * nh + (size_t)s->n +
                   nh + ovk_rk_doubles(o->rk.method, s->ny);
     s->mem = calloc(need, sizeof(double));
     if (!s->mem) {
@@ -211,9 +210,10 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->t_prev = t0;
     s->along_unique = calloc(2 * (size_t)M->nj + 1, sizeof(int));
     s->along_work = malloc(ovk_unique_doubles(s->m, s->nh) * sizeof(double) + 1);
+    s->bsv_work = malloc(ovk_bsv_doubles(s->m, s->nh) * sizeof(double) + 1);
     s->kept = calloc(8 * (size_t)s->m + 2 * OVK_MAXEQ * (size_t)M->nfj + (size_t)M->nj + 1, sizeof(int));
     s->y0 = malloc((size_t)s->ny * sizeof(double) + 1);
-    if (!s->along_unique || !s->along_work || !s->kept || !s->y0) {
+    if (!s->along_unique || !s->along_work || !s->bsv_work || !s->kept || !s->y0) {
         s->status = OVK_NOMEM;
         snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (uniqueness along the motion)");
         return s;
@@ -239,6 +239,7 @@ void ovk_sim_free(ovk_sim *s) {
     free(s->mem);
     free(s->along_unique);
     free(s->along_work);
+    free(s->bsv_work);
     free(s->events);
     free(s->kept);
     free(s->y0);

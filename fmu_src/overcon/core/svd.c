@@ -1,5 +1,5 @@
-/* Singular values (and the accumulated rotations, for unique.c's null space and kkt_minnorm.c's
- * pseudo-inverse) of the small matrices of the core, by a one-sided Jacobi SVD (Hestenes): rotations of pairs of
+/* Singular values and the accumulated rotations (kkt_minnorm.c's pseudo-inverse) of the small
+ * matrices of the core, by a one-sided Jacobi SVD (Hestenes): rotations of pairs of
  * vectors until every pair is orthogonal to working precision; the vectors' norms are then the
  * singular values. Tens of rows: the cyclic sweep is cheap and needs no LAPACK. */
 #include <math.h>
@@ -54,28 +54,4 @@ int ovk_jacobi_rows(double *B, int k, int r, double *Q) {
         converged = !rotated;
     }
     return !converged;
-}
-
-/* The singular values of A (rows x cols, row-major; not changed) into sv (min(rows, cols)),
- * largest first; T: scratch of rows * cols doubles. Jacobi runs on the shorter side (A's rows,
- * or its columns) so that no vector is forced to zero. A non-finite value gives zeros. */
-void ovk_singular_values(const double *A, int rows, int cols, double *T, double *sv) {
-    int k = rows <= cols ? rows : cols, len = rows <= cols ? cols : rows;
-    if (rows <= cols) {
-        memcpy(T, A, (size_t)rows * (size_t)cols * sizeof(double));
-    } else {
-        for (int i = 0; i < rows; i++)
-            for (int j = 0; j < cols; j++) T[(size_t)j * rows + i] = A[(size_t)i * cols + j];
-    }
-    ovk_jacobi_rows(T, k, len, NULL);
-    for (int i = 0; i < k; i++) {
-        double v = sqrt(dotn(T + (size_t)i * len, T + (size_t)i * len, len));
-        sv[i] = isfinite(v) ? v : 0.0;
-    }
-    for (int i = 1; i < k; i++) /* insertion sort, largest first */
-        for (int j = i; j > 0 && sv[j] > sv[j - 1]; j--) {
-            double x = sv[j];
-            sv[j] = sv[j - 1];
-            sv[j - 1] = x;
-        }
 }

@@ -10,12 +10,16 @@
  *   N = the right singular vectors of the m - r other singular values (a basis of null(A));
  *   joint P unique iff max_i ||(A_P N_P)[i, :]||_2 <= b_rtol sigma_1 with
  *   b_rtol = max(1e-9, 100 max(n, m) eps sigma_1 / sigma_r) (analysis.B_NOISE_FACTOR).
- * The SVD is one-sided Jacobi on the rows of A^T (svd.c) with the rotations accumulated: the
- * rows of the rotation are V's columns, the norms of the rotated rows the singular values. The
- * decisions are the same as numpy's LAPACK SVD wherever a verdict is not a tie at the
+ * The factorisation is bandsvd.c's: A's columns (the equations) each touch their joint's two
+ * bodies, so with the bodies listed along a chain a windowed QR keeps a narrow band, the singular
+ * values come from its bidiagonal by bisection (an absolute accuracy of a few eps sigma_1, what
+ * the thresholds above need) and N by inverse iteration, at O(m w^2 + m^2 w) for a band w
+ * instead of a dense SVD's O(m^2 nh) a sweep; the equilibration visits each row's two bodies
+ * only. The decisions are the same as numpy's LAPACK SVD wherever a verdict is not a tie at the
  * thresholds (tests/test_uniqueness_along.py holds them equal on every mechanism of the
- * repository and on random linkages). Dimensionless. ovk_unique_rows works in the caller's
- * buffer (ovk_unique_doubles); ovk_unique, for a caller without one, allocates it per call. */
+ * repository and on random linkages; tests/test_bandsvd.py the values and bases themselves).
+ * Dimensionless. ovk_unique_rows works in the caller's buffer (ovk_unique_doubles); ovk_unique,
+ * for a caller without one, allocates it per call. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -28,37 +32,43 @@
 #define RUIZ_TOL 1e-3          /* analysis._RUIZ_TOL */
 #define EPS 2.220446049250313e-16
 
+/* The equilibrated A^T (m x nh: kept for ovk_choose_kept), the factorisation's scratch (also
+ * ovk_choose_kept's m x nh), the null basis (m x m at most), the Ruiz scratch (m + nh). */
 size_t ovk_unique_doubles(int m, int nh) {
-    size_t M = (size_t)m, n = (size_t)nh;
-    return 2 * M * n + M * M + 2 * M + n;
+    size_t M = (size_t)m, n = (size_t)nh, f = ovk_bsv_doubles(m, nh);
+    return M * n + (f > M * n ? f : M * n) + M * M + M + n + 1;
 }
 
-/* B = A^T (m rows of nh): round-off rows and columns of A zeroed, then Ruiz. cn (m) and rn (nh):
- * scratch for the max-norms of A's columns (B's rows) and A's rows (B's columns). */
-static void equilibrate(double *B, int m, int nh, double *cn, double *rn) {
+/* B = A^T (m rows of nh): round-off rows and columns of A zeroed, then Ruiz. Row e is nonzero
+ * only in the columns of its joint's bodies blk[2e], blk[2e + 1] (kh each; -1: none, the ground),
+ * so only those are visited. cn (m) and rn (nh): scratch for the max-norms of A's columns (B's
+ * rows) and A's rows (B's columns). */
+#define IN_BLOCKS(e, c, body)                                                                           \
+    for (int t_ = 0; t_ < 2; t_++)                                                                     \
+        if ((body = blk[2 * (e) + t_]) >= 0 && !(t_ == 1 && body == blk[2 * (e)]))                      \
+            for (int c = body * kh; c < (body + 1) * kh; c++)
+static void equilibrate(double *B, int m, int nh, int kh, const int *blk, double *cn, double *rn) {
     double amax = 0.0;
-    for (size_t i = 0; i < (size_t)m * nh; i++) amax = fabs(B[i]) > amax ? fabs(B[i]) : amax;
+    int body;
+    for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) amax = fabs(B[(size_t)e * nh + c]) > amax ? fabs(B[(size_t)e * nh + c]) : amax;
     if (amax == 0.0) return;
     double floor = UNIQUE_NOISE * (m > nh ? m : nh) * EPS * amax;
-    for (int c = 0; c < nh; c++) { /* A's rows: coordinates */
+    for (int c = 0; c < nh; c++) rn[c] = 0.0;
+    for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) rn[c] = fabs(B[(size_t)e * nh + c]) > rn[c] ? fabs(B[(size_t)e * nh + c]) : rn[c];
+    for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) /* A's rows (coordinates) of round-off only */
+        if (rn[c] <= floor) B[(size_t)e * nh + c] = 0.0;
+    for (int e = 0; e < m; e++) { /* A's columns (equations) of round-off only */
         double x = 0.0;
-        for (int e = 0; e < m; e++) x = fabs(B[(size_t)e * nh + c]) > x ? fabs(B[(size_t)e * nh + c]) : x;
-        if (x <= floor)
-            for (int e = 0; e < m; e++) B[(size_t)e * nh + c] = 0.0;
-    }
-    for (int e = 0; e < m; e++) { /* A's columns: equations */
-        double x = 0.0, *row = B + (size_t)e * nh;
-        for (int c = 0; c < nh; c++) x = fabs(row[c]) > x ? fabs(row[c]) : x;
-        if (x <= floor) memset(row, 0, (size_t)nh * sizeof(double));
+        IN_BLOCKS(e, c, body) x = fabs(B[(size_t)e * nh + c]) > x ? fabs(B[(size_t)e * nh + c]) : x;
+        if (x <= floor) IN_BLOCKS(e, c, body) B[(size_t)e * nh + c] = 0.0;
     }
     for (int sweep = 0; sweep < RUIZ_SWEEPS; sweep++) {
         double dev = 0.0;
         for (int c = 0; c < nh; c++) rn[c] = 0.0;
         for (int e = 0; e < m; e++) {
-            const double *row = B + (size_t)e * nh;
             cn[e] = 0.0;
-            for (int c = 0; c < nh; c++) {
-                double a = fabs(row[c]);
+            IN_BLOCKS(e, c, body) {
+                double a = fabs(B[(size_t)e * nh + c]);
                 cn[e] = a > cn[e] ? a : cn[e];
                 rn[c] = a > rn[c] ? a : rn[c];
             }
@@ -70,10 +80,7 @@ static void equilibrate(double *B, int m, int nh, double *cn, double *rn) {
         if (dev <= RUIZ_TOL) break;
         for (int c = 0; c < nh; c++) rn[c] = rn[c] > 0.0 ? 1.0 / sqrt(rn[c]) : 1.0;
         for (int e = 0; e < m; e++) cn[e] = cn[e] > 0.0 ? 1.0 / sqrt(cn[e]) : 1.0;
-        for (int e = 0; e < m; e++) {
-            double *row = B + (size_t)e * nh;
-            for (int c = 0; c < nh; c++) row[c] = rn[c] * row[c] * cn[e];
-        }
+        for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) B[(size_t)e * nh + c] = rn[c] * B[(size_t)e * nh + c] * cn[e];
     }
 }
 
@@ -105,50 +112,49 @@ static int judged_count(const ovk_model *M) {
 int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank, int *unique) {
     int nh = M->nb * M->nh_b;
     int m = judged_count(M), big = m > nh ? m : nh;
-    double *A = work, *B = A + (size_t)m * nh, *Q = B + (size_t)m * nh, *sv = Q + (size_t)m * m, *cn = sv + m;
-    double *rn = cn + m;
-    for (size_t i = 0; i < (size_t)M->m * nh; i++)
-        if (!isfinite(J[i])) return OVK_NONFINITE;
+    size_t fd = ovk_bsv_doubles(m, nh), scratch = fd > (size_t)m * nh ? fd : (size_t)m * nh;
+    double *A = work, *F = A + (size_t)m * nh, *N = F + scratch, *cn = N + (size_t)m * m, *rn = cn + m;
+    int *blk = (int *)N, kh = M->nh_b, body; /* the judged rows' bodies, in N until the null basis */
     /* under "compliant" the compliant equations are forces, not constraints: the rigid rest is
      * judged (precheck.analyse_model) and a compliant joint's reaction is unique (its deformation) */
-    for (int e = 0, k = 0; e < M->m; e++)
-        if (judged_position(M, e) >= 0) memcpy(B + (size_t)k++ * nh, J + (size_t)e * nh, (size_t)nh * sizeof(double));
-    equilibrate(B, m, nh, cn, rn);
-    memcpy(A, B, (size_t)m * nh * sizeof(double)); /* A^T equilibrated, kept for the joints' A_P */
-    ovk_jacobi_rows(B, m, nh, Q); /* rows of Q B: sigma_k u_k^T; rows of Q: v_k (V's columns) */
-    double smax = 0.0;
-    for (int k = 0; k < m; k++) {
-        double s2 = 0.0;
-        for (int c = 0; c < nh; c++) s2 += B[(size_t)k * nh + c] * B[(size_t)k * nh + c];
-        sv[k] = sqrt(s2);
-        smax = sv[k] > smax ? sv[k] : smax;
-    }
-    double tol = (UNIQUE_RTOL > big * EPS ? UNIQUE_RTOL : big * EPS) * smax, smin_kept = smax;
-    int r = 0;
-    for (int k = 0; k < m; k++)
-        if (sv[k] > tol) {
-            r++;
-            smin_kept = sv[k] < smin_kept ? sv[k] : smin_kept;
+    for (int j = 0; j < M->nj; j++)
+        for (int e = 0; e < M->jneq[j]; e++) {
+            int k = judged_position(M, M->jrows[(size_t)j * OVK_MAXEQ + e]);
+            if (k < 0) continue;
+            blk[2 * k] = M->jbi[j], blk[2 * k + 1] = M->jbj[j];
+            memcpy(A + (size_t)k * nh, J + (size_t)M->jrows[(size_t)j * OVK_MAXEQ + e] * nh, (size_t)nh * sizeof(double));
+            IN_BLOCKS(k, c, body) if (!isfinite(A[(size_t)k * nh + c])) return OVK_NONFINITE;
         }
+    equilibrate(A, m, nh, kh, blk, cn, rn); /* A^T equilibrated: its rows are the equations */
+    ovk_bsv f;
+    int status = ovk_bsv_factor(A, m, nh, F, &f);
+    if (status) return status;
+    double smax = ovk_bsv_value(&f, 0);
+    double tol = (UNIQUE_RTOL > big * EPS ? UNIQUE_RTOL : big * EPS) * smax;
+    int p = smax > 0.0 ? ovk_bsv_below(&f, tol) : m, r = m - p; /* p: the dependencies (null(A)) */
+    double smin_kept = r > 0 ? ovk_bsv_value(&f, r - 1) : smax;
     double kappa = r > 0 && smin_kept > 0.0 ? smax / smin_kept : 1.0;
     double brt = UNIQUE_NOISE * big * EPS * kappa;
     brt = brt > UNIQUE_RTOL ? brt : UNIQUE_RTOL;
     double limit = brt * smax;
+    if (p > 0 && smax > 0.0) ovk_bsv_null(&f, p, 0.1 * tol, N); /* N (m x p): a basis of null(A) */
     for (int j = 0; j < M->nj; j++) {
         const int *rows = M->jrows + (size_t)j * OVK_MAXEQ;
-        int cols[OVK_MAXEQ], compliant = 0;
-        for (int e = 0; e < M->jneq[j]; e++) compliant |= (cols[e] = judged_position(M, rows[e])) < 0;
-        if (compliant) {
+        int cols[OVK_MAXEQ], compliant = 0, ne = M->jneq[j];
+        for (int e = 0; e < ne; e++) compliant |= (cols[e] = judged_position(M, rows[e])) < 0;
+        if (compliant || !p || !(smax > 0.0)) { /* no dependency (or A = 0): every reaction is unique */
             unique[j] = 1;
             continue;
         }
         double peak = 0.0;
-        for (int i = 0; i < nh; i++) { /* row i of B_P = A_P N_P over the null vectors */
+        for (int i = 0; i < nh; i++) { /* row i of B_P = A_P N_P, where A_P has an entry */
+            int any = 0;
+            for (int e = 0; e < ne; e++) any |= A[(size_t)cols[e] * nh + i] != 0.0;
+            if (!any) continue;
             double norm2 = 0.0;
-            for (int k = 0; k < m; k++) {
-                if (sv[k] > tol) continue;
+            for (int c = 0; c < p; c++) {
                 double b = 0.0;
-                for (int e = 0; e < M->jneq[j]; e++) b += A[(size_t)cols[e] * nh + i] * Q[(size_t)k * m + cols[e]];
+                for (int e = 0; e < ne; e++) b += A[(size_t)cols[e] * nh + i] * N[(size_t)cols[e] * p + c];
                 norm2 += b * b;
             }
             peak = sqrt(norm2) > peak ? sqrt(norm2) : peak;

@@ -65,18 +65,24 @@ static int weighted(ovk_sim *s, const double *y, const int *rows, int k, double 
     return OVK_OK;
 }
 
-/* The whole Jacobian's singular values at y into s->sv (min(m, nh) of them, largest first). */
-static int full_values(ovk_sim *s, const double *y, char *msg) {
+/* The whole Jacobian's weighted rows at y factored (bandsvd.c) into *f. */
+static int full_values(ovk_sim *s, const double *y, ovk_bsv *f, char *msg) {
     int status = weighted(s, y, full_rows(s->M), n_full(s->M), s->W2, msg);
-    if (!status) ovk_singular_values(s->W2, n_full(s->M), s->nh, s->T, s->sv);
+    if (!status && (status = ovk_bsv_factor(s->W2, n_full(s->M), s->nh, s->bsv_work, f)))
+        snprintf(msg, OVK_MSG, "the singularity watch: a non-finite constraint Jacobian");
     return status;
 }
 
-/* The whole Jacobian's numerical rank at y (watch.numerical_rank with ratio_tol). */
+/* The whole Jacobian's numerical rank at y (watch.numerical_rank with ratio_tol): the singular
+ * values at or above ratio_tol sigma_1. */
 static int full_rank(ovk_sim *s, const double *y, int *rank, char *msg) {
-    int status = full_values(s, y, msg), k = n_full(s->M) < s->nh ? n_full(s->M) : s->nh;
+    ovk_bsv f;
+    int status = full_values(s, y, &f, msg);
     *rank = 0;
-    for (int i = 0; !status && i < k; i++) *rank += s->sv[i] >= s->o.ratio_tol * s->sv[0];
+    if (!status) {
+        double smax = ovk_bsv_value(&f, 0);
+        *rank = smax > 0.0 ? n_full(s->M) - ovk_bsv_below(&f, s->o.ratio_tol * smax) : 0;
+    }
     return status;
 }
 
@@ -205,9 +211,10 @@ static int degrading(ovk_sim *s, double r, const double *y, char *msg) {
     int nR = n_kept(s->M), k = n_full(s->M) < s->nh ? n_full(s->M) : s->nh;
     /* kept rows that are the whole set (no elimination): its ratio is r itself, never 100 r */
     if (r >= DEGRADED_RATIO || s->M->redundancy == OVK_MIN_NORM || nR == n_full(s->M)) return OVK_OK;
-    int status = full_values(s, y, msg);
+    ovk_bsv f;
+    int status = full_values(s, y, &f, msg);
     if (status) return status;
-    double full = k >= nR && s->sv[0] > 0.0 ? s->sv[nR - 1] / s->sv[0] : 0.0;
+    double s1 = ovk_bsv_value(&f, 0), full = k >= nR && s1 > 0.0 ? ovk_bsv_value(&f, nR - 1) / s1 : 0.0;
     s->degrading = full >= DEGRADED_MARGIN * r;
     return OVK_OK;
 }
@@ -359,19 +366,19 @@ int ovk_sim_expiring(ovk_sim *s, int failed, char *msg) {
 /* ------------------------------------------------------------------ the elimination chosen again */
 
 /* The numerical rank of the rows `rows` (count k; all m for NULL) of the raw J (m x nh) by
- * analysis.numerical_rank: singular values above max(1e-9, max(k, nh) eps) sigma_1 (s->W, s->T,
- * s->sv are scratch). */
+ * analysis.numerical_rank: singular values above max(1e-9, max(k, nh) eps) sigma_1 (s->W and
+ * s->bsv_work are scratch). */
 static int raw_rank(ovk_sim *s, const double *J, const int *skip_flags, int *count) {
     int nh = s->nh, k = 0;
     for (int r = 0; r < s->m; r++)
         if (!skip_flags || !skip_flags[r]) memcpy(s->W + (size_t)k++ * nh, J + (size_t)r * nh, (size_t)nh * sizeof(double));
     *count = k;
     if (!k) return 0;
-    ovk_singular_values(s->W, k, nh, s->T, s->sv);
-    int n = k < nh ? k : nh, big = k > nh ? k : nh, rank = 0;
-    double rt = 1e-9 > big * 2.220446049250313e-16 ? 1e-9 : big * 2.220446049250313e-16;
-    for (int i = 0; i < n; i++) rank += s->sv[i] > rt * s->sv[0];
-    return rank;
+    ovk_bsv f;
+    if (ovk_bsv_factor(s->W, k, nh, s->bsv_work, &f)) return 0; /* a non-finite J: no rank to match */
+    int big = k > nh ? k : nh;
+    double rt = 1e-9 > big * 2.220446049250313e-16 ? 1e-9 : big * 2.220446049250313e-16, s1 = ovk_bsv_value(&f, 0);
+    return s1 > 0.0 ? k - ovk_bsv_below(&f, rt * s1) : 0;
 }
 
 /* "[a, b]": the 1-based equations of the m flags `gone`, into out. */

@@ -116,7 +116,8 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_sim_events", i, [vp]),
                             ("ovk_sim_event", ctypes.c_char_p, [vp, i, vp, vp]),
                             ("ovk_pack_kept", i, [vp, vp, i, vp, vp, vp, vp]),
-                            ("ovk_sim_watch_extremes", i, [vp, vp, i, vp])):
+                            ("ovk_sim_watch_extremes", i, [vp, vp, i, vp]),
+                            ("ovk_law_eval", i, [vp, i, ctypes.c_double, vp, vp])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib

@@ -161,6 +161,9 @@ def test_c_run_of_min_norm_needs_the_watch_rows(tmp_path):
 
 fmpy = pytest.importorskip("fmpy")
 
+from _fmpy_logger import simulate_logged  # noqa: E402
+from test_fmu import Logs  # noqa: E402
+
 
 def _fmu(path: Path, out: Path, runtime: str) -> Path:
     from overcon.fmu import build as fmu_build
@@ -203,10 +206,10 @@ def test_redundancy_parameter_runs_as_the_scene_key(tmp_path):
 
 def test_compliant_is_refused_without_compliant_joints(tmp_path):
     fmu = _fmu(_fmu_scene(tmp_path, "[4]"), tmp_path / "e", "c")
-    said = []
+    logs = Logs()
     with pytest.raises(Exception, match="fmi2SetInteger"):
-        fmpy.simulate_fmu(str(fmu), stop_time=0.05, start_values={"redundancy": 3},
-                          logger=lambda *a: said.append(a[-1].decode() if isinstance(a[-1], bytes) else str(a[-1])))
+        simulate_logged(fmu, logs, stop_time=0.05, start_values={"redundancy": 3})
+    said = [m for _, _, m in logs.records]
     assert any("parameter redundancy = 3 refused: must be one of 1 (eliminate), 2 (min-norm), got 3 (3 (compliant) "
                "needs a joint with a [joints.compliance] table: mechanism planar_sliders has none)" in s
                for s in said), said

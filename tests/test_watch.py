@@ -189,18 +189,16 @@ def test_check_along_reports_the_uniqueness_at_every_output_point(tmp_path, caps
 def test_the_fmu_chooses_again_and_logs_the_event(tmp_path):
     """The FMU runs the same watch: an elimination that expires is chosen again, the event is
     logged (category logEvents), and the positions equal the in-process run's."""
-    fmpy = pytest.importorskip("fmpy")
+    pytest.importorskip("fmpy")
+    from _fmpy_logger import simulate_logged
     from overcon.fmu.build import build_scene
+    from test_fmu import Logs
     scene = _parallelogram(tmp_path, None, "[11]")
     res = build_scene(scene, tmp_path / "out", echo=lambda s: None)
     assert res.status == "built", res.messages
-    messages = []
-
-    def logger(env, instance, status, category, message):
-        messages.append((category.decode(), message.decode()))
-
-    out = fmpy.simulate_fmu(str(res.fmu), stop_time=0.6, output_interval=0.01, logger=logger, debug_logging=True)
-    events = [m for c, m in messages if "event elimination-reselected" in m]
+    logs = Logs()
+    out = simulate_logged(res.fmu, logs, debug_logging=True, stop_time=0.6, output_interval=0.01)
+    events = [m for _, c, m in logs.records if c == "logEvents" and "event elimination-reselected" in m]
     assert len(events) == 1 and events[0].startswith("t = 0.19") and "eliminated [11] -> [" in events[0]
     ref = run(compile_checked(_scene(scene)), _scene(scene).solver)
     assert np.max(np.abs(out["crank0.phi"] - ref.column("crank0.phi"))) <= 1e-9

@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 9  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
+ABI = 10  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
@@ -117,7 +117,8 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_sim_event", ctypes.c_char_p, [vp, i, vp, vp]),
                             ("ovk_pack_kept", i, [vp, vp, i, vp, vp, vp, vp]),
                             ("ovk_sim_watch_extremes", i, [vp, vp, i, vp]),
-                            ("ovk_band_svd", i, [vp, i, i, i, ctypes.c_double, vp, vp])):
+                            ("ovk_band_svd", i, [vp, i, i, i, ctypes.c_double, vp, vp]),
+                            ("ovk_law_eval", i, [vp, i, ctypes.c_double, vp, vp])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib

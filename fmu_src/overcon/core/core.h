@@ -51,7 +51,7 @@
 
 #include <stddef.h>
 
-#define OVK_ABI 9 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+#define OVK_ABI 10 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
     OVK_OK = 0,
@@ -491,6 +491,7 @@ OVK_HIDDEN double ovk_law_magnitude(const double *lp, int law, double speed);
 OVK_HIDDEN double ovk_law_coefficient(const double *lp, int law, double v);
 OVK_HIDDEN double ovk_law_mu_over_speed(const double *lp, int law, double s);
 OVK_HIDDEN double ovk_law_mu_over_speed_slope(const double *lp, int law, double s);
+OVK_EXPORT int ovk_law_eval(const double *lp, int law, double s, double *mu_over_s, double *slope);
 OVK_HIDDEN int ovk_friction(const ovk_model *M, ovk_data *d, int guess_mode, const double *guess, double *qf,
                             int *iterations, int *damped);
 OVK_HIDDEN void ovk_forces_reduced(const ovk_model *M, ovk_data *d, const double *x, double *qf);

@@ -44,6 +44,18 @@ double ovk_law_mu_over_speed_slope(const double *lp, int law, double s) {
     return (slope - ovk_law_magnitude(lp, law, s) / s) / s;
 }
 
+/* The law's mu(s) / max(s, v_reg) and its slope d/ds at the slip speed s >= 0 (lp: NLP doubles), as
+ * the spherical joint's Newton uses them: the entry point that lets them be checked on their own.
+ * OVK_INVALID (outputs untouched) for a law other than regularised or stribeck, a negative or
+ * non-finite s, or a null pointer. */
+int ovk_law_eval(const double *lp, int law, double s, double *mu_over_s, double *slope) {
+    if (!lp || !mu_over_s || !slope || (law != LAW_REGULARISED && law != LAW_STRIBECK) || !(s >= 0.0) || !isfinite(s))
+        return OVK_INVALID;
+    *mu_over_s = ovk_law_mu_over_speed(lp, law, s);
+    *slope = ovk_law_mu_over_speed_slope(lp, law, s);
+    return OVK_OK;
+}
+
 /* ------------------------------------------------------------------------------ the reduced problem */
 
 /* qf (ncols): the friction forces at the friction multipliers x (nx), group by group; each joint's

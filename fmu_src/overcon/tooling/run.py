@@ -249,6 +249,30 @@ def _held(instance, md, names: list[str]) -> dict | None:
         return None
 
 
+_PRINTER: list = []  # fmpy's printLogMessage as an fmi2 logger callback, made once, kept for the process
+
+
+def _release_logging_proxy() -> None:
+    """Point fmpy's native logging proxy back at fmpy's own printer, as fmpy left it at import.
+    The proxy keeps the ctypes callback of the last ``logger`` given to ``instantiate_fmu`` or
+    ``simulate_fmu`` (FMI 1.0 and 2.0) in one static pointer; that callback is freed with the run's
+    FMU object, and the next FMU in the process that logs through fmpy's default callbacks would
+    call freed memory (a segmentation fault). The worker leaves with ``os._exit`` right after its
+    run; this keeps :func:`simulate` safe when called in process."""
+    from ctypes import byref
+
+    from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, printLogMessage
+    try:
+        from fmpy.logging import addLoggerProxy
+    except (ImportError, OSError, AttributeError):  # no proxy library: fmpy installed no proxy either
+        return
+    if not _PRINTER:
+        _PRINTER.append(fmi2CallbackLoggerTYPE(printLogMessage))
+    callbacks = fmi2CallbackFunctions()  # read once by the proxy (it copies the logger's address)
+    callbacks.logger = _PRINTER[0]
+    addLoggerProxy(byref(callbacks))
+
+
 def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, step: float,
              outputs: list[str], progress: bool = True, label: str = "", start_values: dict | None = None,
              along: bool = False) -> dict:
@@ -305,6 +329,8 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
         why = "; ".join(messages[-3:])
         raise SimulationFailed(f"{fmu}: fmpy.simulate_fmu failed: {type(exc).__name__}: {exc}"
                                + (f" (FMU log: {why})" if why else ""), stable_step=stable) from exc
+    finally:
+        _release_logging_proxy()
     sim_seconds = time.perf_counter() - t0
     last_time = float(result["time"][-1]) if len(result) else start
     if last_time < stop - 1e-9 * max(1.0, abs(stop)):

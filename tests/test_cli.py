@@ -4,6 +4,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -179,6 +180,9 @@ def test_a_run_stopped_by_its_budget_keeps_its_rows_and_prints_its_stats(tmp_pat
     assert np.allclose(np.diff(times), 0.01, rtol=0, atol=1e-12)  # the scene's output grid, no gap
     assert f"{out}: {len(times)} rows x " in captured.out and "100 steps, " in captured.out
     assert "work budget exhausted: 100 internal steps" in captured.err
+    # every output point the 100 steps reached is in the file, the one inside the last step too
+    reached = float(re.search(r"reached t = ([-+0-9.e]+) s", captured.err).group(1))
+    assert times[-1] <= reached < times[-1] + 0.01
     assert f"overcon: {out} ends early at t = {times[-1]:.9g} s (its last output point before the stop)" in captured.err
 
 

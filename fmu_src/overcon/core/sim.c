@@ -250,14 +250,17 @@ void ovk_sim_free(ovk_sim *s) {
 int ovk_sim_status(const ovk_sim *s) { return s ? s->status : OVK_NOMEM; }
 const char *ovk_sim_message(const ovk_sim *s) { return s ? s->msg : "no simulation (out of memory)"; }
 
-/* The budgets after a step (Simulation._check_budget): this call's (steps since n0, wall time
- * since started), then the run's life. */
+/* The budgets before a step is taken (Simulation._check_budget): this call's (steps since n0,
+ * wall time since started), then the run's life. Checked before, not after, a step: every step
+ * taken is accepted with its checks and its output points are delivered (a stopped run's CSV and
+ * an FMU's last outputs end at the last step), and the run stops when it needs one more step than
+ * the budget allows. */
 static int check_budget(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
     const ovk_rk *rk = &s->rk;
     double spent = ovk_now() - started;
-    if (call_steps >= 0 && rk->nsteps - n0 > call_steps)
+    if (call_steps >= 0 && rk->nsteps - n0 >= call_steps)
         return snprintf(s->msg, sizeof s->msg, "%lld internal steps > %lld allowed for this step, at t = %.9g s",
-                        rk->nsteps - n0, call_steps, rk->t), OVK_BUDGET;
+                        rk->nsteps - n0 + 1, call_steps, rk->t), OVK_BUDGET;
     if (call_wall > 0.0 && spent > call_wall)
         return snprintf(s->msg, sizeof s->msg, "%.3g s wall time > %g s allowed for this step, at t = %.9g s",
                         spent, call_wall, rk->t), OVK_BUDGET;
@@ -314,7 +317,9 @@ static int pass_singular(ovk_sim *s, double r_before) {
 static int step_checked(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
     ovk_rk *rk = &s->rk;
     double t_before = rk->t;
-    int status = ovk_rk_step(rk, sim_rhs, s, s->msg);
+    int status = check_budget(s, started, n0, call_steps, call_wall);
+    if (status) return stopped(s, status, "integration stopped", rk->t);
+    status = ovk_rk_step(rk, sim_rhs, s, s->msg);
     if (!status && !(rk->t > t_before)) {
         snprintf(s->msg, sizeof s->msg, "t = %.9g s: time does not advance (step below the resolution of t)",
                  t_before);
@@ -343,8 +348,6 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     for (int r = 0; r < s->m; r++)
         if (fabs(s->phi[r]) > s->max_drift) s->max_drift = fabs(s->phi[r]);
     if (s->degrading && (status = ovk_sim_degraded(s))) return stopped(s, status, "integration stopped", rk->t);
-    if ((status = check_budget(s, started, n0, call_steps, call_wall)))
-        return stopped(s, status, "integration stopped", rk->t);
     return OVK_OK;
 }
 

@@ -594,7 +594,7 @@ EVENT_KINDS = ("singular", "elimination-reselected", "rank-change", "uniqueness-
 """The kinds of a run's events, in the order of core/core.h's OVK_EV_* (overcon.simulate.EVENT_KINDS)."""
 INFO = ("t", "h", "nsteps", "nfev", "evaluations", "friction_iterations", "max_drift", "min_ratio", "stiff_steps",
         "stable_step", "wall_time", "singular_passed", "last_singular", "projection_drift", "watch_time",
-        "watch_capped", "along_time")
+        "watch_capped", "along_time", "along_certified")
 """The entries of ovk_sim_info, in order (core/sim.c)."""
 WALL_TIMES = ("wall_time", "watch_time", "along_time")
 """The entries of :data:`INFO` that are wall times: no state, they differ between equal runs."""

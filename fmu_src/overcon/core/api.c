@@ -243,13 +243,18 @@ int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *
 /* Phi (m), Phi_h (m x nh, row-major) and gamma (m, without Baumgarte) at y (joints.c): the rows
  * the evaluation solves with, for the pre-check, the initial-state checks and the tests' finite
  * differences. */
-int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam) {
+int ovk_rows_in(const ovk_model *M, ovk_data *d, const double *y) {
     if (!d) return OVK_NOMEM;
     if (d->status) return d->status;
     d->msg[0] = '\0';
-    int n = M->nb * M->nq_b, nh = M->nb * M->nh_b;
-    ovk_frames_build(M, y, y + n, &d->f);
+    ovk_frames_build(M, y, y + M->nb * M->nq_b, &d->f);
     ovk_constraint_rows(M, d, y);
+    return OVK_OK;
+}
+
+int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam) {
+    int status = ovk_rows_in(M, d, y), nh = M->nb * M->nh_b;
+    if (status) return status;
     for (int r = 0; r < M->m; r++) {
         phi[r] = d->phi[r];
         gam[r] = d->gam[r];

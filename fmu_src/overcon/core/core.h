@@ -262,6 +262,7 @@ typedef struct {
     double *umin, *umax;  /* nR: the tracked left singular vectors (state) */
     double *x, *z;        /* nR, nh: scratch */
     double *G, *F;        /* nR x nR each at most: the band of G, a shifted copy factored */
+    double smin_low, smax_up; /* the last estimate's certified bounds: sigma_min >= smin_low (0: none), sigma_max <= smax_up */
     double *mem;
     int *imem;
 } ovk_watch_eig;
@@ -332,8 +333,9 @@ typedef struct {
     double watch_time;             /* s spent in the watch (ovk_sim_monitor), not state */
     long long watch_capped;        /* estimates of r that reached the iteration bound (watch_eig.c) */
     double along_time;             /* s spent in the uniqueness along the motion (ovk_sim_along), not state */
+    long long along_certified;     /* its evaluations the watch's bounds decided (unique.c) */
 } ovk_sim;
-#define OVK_SIM_NINFO 17
+#define OVK_SIM_NINFO 18
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
                              double *ydot, int *its);
 /* energy.c: the energy outputs' ledger */
@@ -345,12 +347,15 @@ OVK_HIDDEN void ovk_compliant_energy(const ovk_model *M, ovk_data *d, const doub
 OVK_HIDDEN int ovk_sim_monitor(ovk_sim *s, double t, const double *y, const double *qdot, int first, char *msg);
 OVK_HIDDEN int ovk_sim_expiring(ovk_sim *s, int failed, char *msg);
 /* watch.c: uniqueness along the motion at (t, y), events when it changed; sim.c: an event recorded */
-OVK_HIDDEN int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg);
+OVK_HIDDEN int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, double wmin_low, double wmax_up,
+                             char *msg);
 OVK_HIDDEN int ovk_sim_push_event(ovk_sim *s, double t, int kind, const char *detail);
 /* unique.c: rank and per-joint reaction uniqueness from the whole Jacobian (the pre-check's rule) */
 OVK_HIDDEN size_t ovk_unique_doubles(int m, int nh);
 OVK_HIDDEN int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank, int *unique);
 OVK_HIDDEN int ovk_choose_kept(const ovk_model *M, const double *J, double *work, int *iwork, int *kept, int *rank);
+OVK_HIDDEN int ovk_unique_judged(const ovk_model *M);
+OVK_HIDDEN int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up);
 /* sim.c: the run goes on from (t, y) under the kept equations `kept` (m flags), its integrator anew */
 OVK_HIDDEN int ovk_sim_restart(ovk_sim *s, const int *kept, double t, const double *y);
 OVK_HIDDEN int ovk_sim_use_kept(ovk_sim *s, const int *retained);
@@ -529,6 +534,9 @@ OVK_EXPORT int ovk_data_status(const ovk_data *d);
 OVK_EXPORT int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int guess_mode,
                             const double *guess, double *ydot, double *lam, double *qf, int *iterations, int *damped);
 OVK_EXPORT int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam);
+/* ovk_rows without the copies: Phi, Phi_h, gamma at y left in d->phi, d->J, d->gam (until the next
+ * evaluation in d), for the core's own callers that read them at once */
+OVK_HIDDEN int ovk_rows_in(const ovk_model *M, ovk_data *d, const double *y);
 OVK_EXPORT int ovk_evaluate_robust(const ovk_model *M, ovk_data *d, const double *y, const double *start, double *ydot,
                                    double *lam, double *qf, int *iterations);
 OVK_EXPORT int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,

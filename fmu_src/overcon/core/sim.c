@@ -227,7 +227,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     int status = ovk_rk_start(&s->rk, &o->rk, s->ny, s->rk.y, t0, y0, sim_rhs, s, s->msg);
     s->rk.dense_fun = sim_rhs_dense, s->rk.dense_ctx = s;
     if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, NULL, 1, s->msg);
-    if (!status) status = ovk_sim_along(s, t0, s->rk.y, 1, s->msg);
+    if (!status) status = ovk_sim_along(s, t0, s->rk.y, 1, 0.0, INFINITY, s->msg);
     if (!status) status = ovk_sim_energy_start(s, t0, s->rk.y);
     if (status) s->status = stopped(s, status, "cannot start", t0);
     return s;
@@ -309,7 +309,7 @@ static int pass_singular(ovk_sim *s, double r_before) {
     /* The rank and the verdicts were judged at the singular instant (a rank-change event there);
      * judged again at the step's end, past it, so that they do not keep the instant's values
      * until the next near-singular step (the watch evaluates them only where r < 1e-3). */
-    if (!status) status = ovk_sim_along(s, rk->t, rk->y, 0, s->msg);
+    if (!status) status = ovk_sim_along(s, rk->t, rk->y, 0, 0.0, INFINITY, s->msg);
     return status;
 }
 
@@ -341,12 +341,12 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
         status = rk->dense_status, memcpy(s->msg, rk->dense_msg, sizeof s->msg);
     if (status) return stopped(s, status, "integration stopped", rk->t);
     if (s->warm.count) hist_push(&s->step_warm, s->ncols, rk->t, s->warm.q[0]);
-    if ((status = ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam))) {
+    if ((status = ovk_rows_in(s->M, s->d, rk->y))) {
         snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d));
         return stopped(s, status, "integration stopped", rk->t);
     }
     for (int r = 0; r < s->m; r++)
-        if (fabs(s->phi[r]) > s->max_drift) s->max_drift = fabs(s->phi[r]);
+        if (fabs(s->d->phi[r]) > s->max_drift) s->max_drift = fabs(s->d->phi[r]);
     if (s->degrading && (status = ovk_sim_degraded(s))) return stopped(s, status, "integration stopped", rk->t);
     return OVK_OK;
 }
@@ -389,14 +389,15 @@ void ovk_sim_state_vector(const ovk_sim *s, double *y) { memcpy(y, s->rk.y, (siz
  * singular positions passed (formulation AL), the time of the last one (0 while none), the largest
  * max |Phi| left by the step-end projections, the wall time of the singularity watch (s), its
  * estimates of r that reached their iteration bound (watch_eig.c), the wall time of the uniqueness
- * along the motion (s; at the start and within the watch's). */
+ * along the motion (s; at the start and within the watch's) and how many of its evaluations the
+ * watch's certified bounds decided without a factorisation (unique.c, ovk_unique_certified). */
 void ovk_sim_info(const ovk_sim *s, double *info) {
     const ovk_rk *rk = &s->rk;
     double v[OVK_SIM_NINFO] = {rk->t, rk->method == OVK_METHOD_RK4 ? rk->step : rk->h, (double)rk->nsteps,
                                (double)rk->nfev, (double)s->evaluations, (double)s->friction_iterations,
                                s->max_drift, s->min_ratio, (double)rk->stiff_steps, rk->stable_step, s->wall_time,
                                (double)s->singular_passed, s->last_singular, s->proj_drift, s->watch_time,
-                               (double)s->watch_capped, s->along_time};
+                               (double)s->watch_capped, s->along_time, (double)s->along_certified};
     memcpy(info, v, sizeof v);
 }
 

@@ -111,6 +111,7 @@ static void io_sim(codec *c, ovk_sim *s) {
     io(c, kept, (size_t)s->Mrun.nR * sizeof(int)); /* the kept equations (chosen again during the run) */
     io(c, &s->along_rank, sizeof s->along_rank);
     io(c, s->along_unique, (size_t)s->M->nj * sizeof(int));
+    io(c, &s->along_certified, sizeof s->along_certified);
     io(c, &s->nevents, sizeof s->nevents); /* last: a load sizes the list from it (ovk_sim_set_state) */
     for (int k = 0; k < s->nevents && !c->bad; k++) io(c, &s->events[k], sizeof s->events[k]);
 }

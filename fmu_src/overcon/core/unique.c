@@ -47,9 +47,14 @@ size_t ovk_unique_doubles(int m, int nh) {
     for (int t_ = 0; t_ < 2; t_++)                                                                     \
         if ((body = blk[2 * (e) + t_]) >= 0 && !(t_ == 1 && body == blk[2 * (e)]))                      \
             for (int c = body * kh; c < (body + 1) * kh; c++)
-static void equilibrate(double *B, int m, int nh, int kh, const int *blk, double *cn, double *rn) {
+static void equilibrate(double *B, int m, int nh, int kh, const int *blk, double *cn, double *rn, double *dc,
+                        double *dr) {
     double amax = 0.0;
     int body;
+    if (dc) /* the scalings applied so far, B = diag(dc) B_given diag(dr); 0 marks a zeroed row or column */
+        for (int e = 0; e < m; e++) dc[e] = 1.0;
+    if (dr)
+        for (int c = 0; c < nh; c++) dr[c] = 1.0;
     for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) amax = fabs(B[(size_t)e * nh + c]) > amax ? fabs(B[(size_t)e * nh + c]) : amax;
     if (amax == 0.0) return;
     double floor = UNIQUE_NOISE * (m > nh ? m : nh) * EPS * amax;
@@ -57,10 +62,13 @@ static void equilibrate(double *B, int m, int nh, int kh, const int *blk, double
     for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) rn[c] = fabs(B[(size_t)e * nh + c]) > rn[c] ? fabs(B[(size_t)e * nh + c]) : rn[c];
     for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) /* A's rows (coordinates) of round-off only */
         if (rn[c] <= floor) B[(size_t)e * nh + c] = 0.0;
+    for (int c = 0; dr && c < nh; c++)
+        if (rn[c] <= floor) dr[c] = 0.0;
     for (int e = 0; e < m; e++) { /* A's columns (equations) of round-off only */
         double x = 0.0;
         IN_BLOCKS(e, c, body) x = fabs(B[(size_t)e * nh + c]) > x ? fabs(B[(size_t)e * nh + c]) : x;
         if (x <= floor) IN_BLOCKS(e, c, body) B[(size_t)e * nh + c] = 0.0;
+        if (x <= floor && dc) dc[e] = 0.0;
     }
     for (int sweep = 0; sweep < RUIZ_SWEEPS; sweep++) {
         double dev = 0.0;
@@ -81,6 +89,8 @@ static void equilibrate(double *B, int m, int nh, int kh, const int *blk, double
         for (int c = 0; c < nh; c++) rn[c] = rn[c] > 0.0 ? 1.0 / sqrt(rn[c]) : 1.0;
         for (int e = 0; e < m; e++) cn[e] = cn[e] > 0.0 ? 1.0 / sqrt(cn[e]) : 1.0;
         for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) B[(size_t)e * nh + c] = rn[c] * B[(size_t)e * nh + c] * cn[e];
+        for (int e = 0; dc && e < m; e++) dc[e] *= cn[e];
+        for (int c = 0; dr && c < nh; c++) dr[c] *= rn[c];
     }
 }
 
@@ -103,18 +113,16 @@ static int judged_position(const ovk_model *M, int e) {
 }
 
 /* The number of rows the uniqueness judges. */
-static int judged_count(const ovk_model *M) {
+int ovk_unique_judged(const ovk_model *M) {
     int k = 0;
     for (int e = 0; e < M->m; e++) k += judged_position(M, e) >= 0;
     return M->redundancy == OVK_COMPLIANT ? k : M->m;
 }
 
-int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank, int *unique) {
-    int nh = M->nb * M->nh_b;
-    int m = judged_count(M), big = m > nh ? m : nh;
-    size_t fd = ovk_bsv_doubles(m, nh), scratch = fd > (size_t)m * nh ? fd : (size_t)m * nh;
-    double *A = work, *F = A + (size_t)m * nh, *N = F + scratch, *cn = N + (size_t)m * m, *rn = cn + m;
-    int *blk = (int *)N, kh = M->nh_b, body; /* the judged rows' bodies, in N until the null basis */
+/* The judged rows of J into A (m x nh, in judged order) and each one's two bodies into blk (2 m);
+ * 1 when one is not finite on its bodies' columns (the only ones a row fills). */
+static int judged_rows(const ovk_model *M, const double *J, double *A, int *blk) {
+    int nh = M->nb * M->nh_b, kh = M->nh_b, body;
     /* under "compliant" the compliant equations are forces, not constraints: the rigid rest is
      * judged (precheck.analyse_model) and a compliant joint's reaction is unique (its deformation) */
     for (int j = 0; j < M->nj; j++)
@@ -123,9 +131,67 @@ int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank
             if (k < 0) continue;
             blk[2 * k] = M->jbi[j], blk[2 * k + 1] = M->jbj[j];
             memcpy(A + (size_t)k * nh, J + (size_t)M->jrows[(size_t)j * OVK_MAXEQ + e] * nh, (size_t)nh * sizeof(double));
-            IN_BLOCKS(k, c, body) if (!isfinite(A[(size_t)k * nh + c])) return OVK_NONFINITE;
+            IN_BLOCKS(k, c, body) if (!isfinite(A[(size_t)k * nh + c])) return 1;
         }
-    equilibrate(A, m, nh, kh, blk, cn, rn); /* A^T equilibrated: its rows are the equations */
+    return 0;
+}
+
+/* Whether the rule's answer at J is known without the factorisation: the judged rows are the
+ * equations W holds (the watch's kept rows, W = their rows of Phi_h M^-1/2 scaled to unit norm),
+ * and W's certified singular value bounds at the same state (wmin_low <= sigma_min(W),
+ * wmax_up >= sigma_max(W); watch_eig.c) prove every singular value of the equilibrated A^T above
+ * ten times the rank threshold: then the rank is m, null(A) is empty and every reaction is unique,
+ * which is what ovk_unique_rows would find. The proof: A^T = diag(L) (W P) diag(R) with L = the
+ * equilibration's row scalings times W's row norms, R = its column scalings over sqrt(Minv), P
+ * the projection off the columns the equilibration zeroed (each of round-off only), so
+ * sigma_min(A^T) >= min L min R (wmin_low - |W (I - P)|_F) and sigma_1(A^T) <= max L max R
+ * wmax_up. 1 when proven; 0 when not (then the factorisation decides). O(m nh) for the copy,
+ * O(m nh_b) the rest. */
+int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up) {
+    int nh = M->nb * M->nh_b, kh = M->nh_b, m = ovk_unique_judged(M), big = m > nh ? m : nh, body;
+    if (!(wmin_low > 0.0) || !(wmax_up < INFINITY) || m > nh || !m) return 0;
+    double *A = work, *cn = A + (size_t)m * nh, *rn = cn + m, *dc = rn + nh, *dr = dc + m, *wn = dr + nh;
+    int *blk = (int *)(wn + m);
+    if (judged_rows(M, J, A, blk)) return 0;
+    double amax = 0.0;
+    for (int e = 0; e < m; e++) { /* W's row norms |Phi_h,e M^-1/2| and A's largest entry, as given */
+        double n2 = 0.0;
+        IN_BLOCKS(e, c, body) {
+            n2 += A[(size_t)e * nh + c] * A[(size_t)e * nh + c] * M->Minv[c];
+            amax = fabs(A[(size_t)e * nh + c]) > amax ? fabs(A[(size_t)e * nh + c]) : amax;
+        }
+        wn[e] = sqrt(n2);
+        if (!(wn[e] > 0.0)) return 0;
+    }
+    double floor = UNIQUE_NOISE * big * EPS * amax; /* equilibrate's: a zeroed column's entries are below it */
+    equilibrate(A, m, nh, kh, blk, cn, rn, dc, dr);
+    double lmin = INFINITY, lmax = 0.0, rmin = INFINITY, rmax = 0.0, zf2 = 0.0;
+    for (int e = 0; e < m; e++) {
+        if (dc[e] == 0.0) return 0; /* a row of round-off only: the rank is not m */
+        double l = dc[e] * wn[e];
+        lmin = l < lmin ? l : lmin, lmax = l > lmax ? l : lmax;
+        IN_BLOCKS(e, c, body) {
+            if (dr[c] == 0.0) { /* W's entry in a zeroed column, bounded by the floor */
+                zf2 += floor * floor * M->Minv[c] / (wn[e] * wn[e]);
+                continue;
+            }
+            double r = dr[c] / sqrt(M->Minv[c]);
+            rmin = r < rmin ? r : rmin, rmax = r > rmax ? r : rmax;
+        }
+    }
+    double low = wmin_low - sqrt(zf2), rt = UNIQUE_RTOL > big * EPS ? UNIQUE_RTOL : big * EPS;
+    if (!(low > 0.0) || !(rmax > 0.0)) return 0;
+    return lmin * rmin * low > 10.0 * rt * (lmax * rmax * wmax_up);
+}
+
+int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank, int *unique) {
+    int nh = M->nb * M->nh_b;
+    int m = ovk_unique_judged(M), big = m > nh ? m : nh;
+    size_t fd = ovk_bsv_doubles(m, nh), scratch = fd > (size_t)m * nh ? fd : (size_t)m * nh;
+    double *A = work, *F = A + (size_t)m * nh, *N = F + scratch, *cn = N + (size_t)m * m, *rn = cn + m;
+    int *blk = (int *)N, kh = M->nh_b; /* the judged rows' bodies, in N until the null basis */
+    if (judged_rows(M, J, A, blk)) return OVK_NONFINITE;
+    equilibrate(A, m, nh, kh, blk, cn, rn, NULL, NULL); /* A^T equilibrated: its rows are the equations */
     ovk_bsv f;
     int status = ovk_bsv_factor(A, m, nh, F, &f);
     if (status) return status;

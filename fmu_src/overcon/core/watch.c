@@ -50,10 +50,10 @@ static int say(char *msg, int status, const char *fmt, ...) {
  * into out (k x nh) (watch.weighted_rows). The frames at y stay in the workspace. */
 static int weighted(ovk_sim *s, const double *y, const int *rows, int k, double *out, char *msg) {
     const ovk_model *M = s->M;
-    int nh = s->nh, status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
+    int nh = s->nh, status = ovk_rows_in(M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
     for (int i = 0; i < k; i++) {
-        const double *row = s->J + (size_t)(rows ? rows[i] : i) * nh;
+        const double *row = s->d->J + (size_t)(rows ? rows[i] : i) * nh;
         double *o = out + (size_t)i * nh, norm2 = 0.0;
         for (int c = 0; c < nh; c++) {
             o[c] = row[c] * sqrt(M->Minv[c]);
@@ -185,7 +185,7 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
     int full = 0, nR = n_kept(s->M), status = full_rank(s, y, &full, msg);
     if (status) return status;
     shown(r, rs, sizeof rs);
-    if (full < nR && (status = ovk_sim_along(s, t, y, 0, msg))) return status; /* the events at that instant */
+    if (full < nR && (status = ovk_sim_along(s, t, y, 0, 0.0, INFINITY, msg))) return status; /* the events at that instant */
     if (full < nR)
         return snprintf(msg, OVK_MSG, "%s: the mechanism's constraint Jacobian is rank deficient (rank %d < %d; "
                         "kept equations' sigma_min/sigma_max %s, below %g)", where, full, nR, rs, s->o.ratio_tol),
@@ -233,12 +233,17 @@ static int motion_of(const ovk_model *M, const int *u) {
  * (first = 1, at the start: no events), a rank-change event when the rank differs from the last
  * evaluation's and a uniqueness-change event when a friction joint's verdict does (friction
  * joints as "joints[k]", 0-based in model order; the bindings put the names in). */
-static int along(ovk_sim *s, double t, const double *y, int first, char *msg) {
+static int along(ovk_sim *s, double t, const double *y, int first, double wmin_low, double wmax_up, char *msg) {
     const ovk_model *M = s->M;
     int nj = M->nj, rank = 0, *now = s->along_unique + nj, *was = s->along_unique;
-    int status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
+    int status = ovk_rows_in(M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
-    if ((status = ovk_unique_rows(M, s->J, s->along_work, &rank, now)))
+    const double *J = s->d->J;
+    if (n_kept(M) == ovk_unique_judged(M) && ovk_unique_certified(M, J, s->along_work, wmin_low, wmax_up)) {
+        rank = n_kept(M); /* the kept rows are every judged one and certified regular: no dependency */
+        for (int j = 0; j < nj; j++) now[j] = 1;
+        s->along_certified++;
+    } else if ((status = ovk_unique_rows(M, J, s->along_work, &rank, now)))
         return say(msg, status, "t = %.9g s: uniqueness along the motion: a non-finite constraint Jacobian", t);
     if (!first && rank != s->along_rank) {
         char text[64];
@@ -268,9 +273,9 @@ static int along(ovk_sim *s, double t, const double *y, int first, char *msg) {
 }
 
 /* along, its wall time counted in s->along_time (ovk_sim_info). */
-int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, char *msg) {
+int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, double wmin_low, double wmax_up, char *msg) {
     double started = ovk_now();
-    int status = along(s, t, y, first, msg);
+    int status = along(s, t, y, first, wmin_low, wmax_up, msg);
     s->along_time += ovk_now() - started;
     return status;
 }
@@ -282,6 +287,7 @@ static int monitor(ovk_sim *s, double t, const double *y, const double *qdot, in
     double r = 1.0, rate = 0.0;
     int status = ratio_and_rate(s, y, qdot, &r, &rate, msg);
     if (status) return status;
+    double wmin_low = s->eig->smin_low, wmax_up = s->eig->smax_up; /* at y: the searches below move them */
     s->ratio = r;
     if (!first && s->rate < 0.0 && 0.0 < rate && t > s->t_prev) {
         double t_min = t, r_min = r;
@@ -295,7 +301,7 @@ static int monitor(ovk_sim *s, double t, const double *y, const double *qdot, in
     if ((status = judge(s, t, r, y, 0, 0.0, 0.0, msg))) return status;
     s->t_prev = t;
     s->rate = rate;
-    if (!first && r < ALONG_RATIO && (status = ovk_sim_along(s, t, y, 0, msg))) return status;
+    if (!first && r < ALONG_RATIO && (status = ovk_sim_along(s, t, y, 0, wmin_low, wmax_up, msg))) return status;
     return first ? OVK_OK : degrading(s, r, y, msg);
 }
 

@@ -54,6 +54,7 @@
 #define TAU 1e-13         /* sigma_min's last shift: G + TAU l_max I, factored whatever the rank */
 #define LADDER 7          /* shifts tried at SHIFT_REL 4^k from the quotient before the last one */
 #define CERT_FLOOR 1e-12  /* sigma_min is certified the smallest down to l_min = CERT_FLOOR l_max */
+#define CERT_ROUND 1e-13  /* G's round-off taken off the certified bounds, relative to l_max (many eps) */
 
 int ovk_eig_make(ovk_sim *s) {
     const ovk_model *M = s->M;
@@ -146,12 +147,12 @@ void ovk_eig_order(ovk_watch_eig *e, const int *rows) {
  * bodies' columns in band order, into w (nR x 2 nh_b). The frames at y stay in the workspace. */
 int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, char *msg) {
     ovk_watch_eig *e = s->eig;
-    int nR = e->nR, kh = e->kh, nh = s->nh, status = ovk_rows(s->M, s->d, y, s->phi, s->J, s->gam);
+    int nR = e->nR, kh = e->kh, nh = s->nh, status = ovk_rows_in(s->M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
     if (memcmp(rows, e->rows, (size_t)nR * sizeof(int))) /* other kept rows: their order, a cold start */
         make_order(e, rows), e->have = 0;
     for (int k = 0; k < nR; k++) {
-        const double *row = s->J + (size_t)rows[e->order[k]] * nh;
+        const double *row = s->d->J + (size_t)rows[e->order[k]] * nh;
         double *o = w + (size_t)k * 2 * kh, norm2 = 0.0;
         for (int t = 0; t < 2; t++) {
             int b = e->body[2 * k + t];
@@ -249,7 +250,8 @@ static void cold_start(double *u, int n) {
  * largest, else the smallest (lmax: G's largest eigenvalue, for its last shift and the floor).
  * *sigma the estimate; 0 when it met the accuracy and the certificate, 1 at the iteration bound,
  * -1 when no shifted matrix could be factored (sigma: u's quotient as it is). */
-static int track(ovk_watch_eig *e, const double *w, double *u, int nh, int top, double lmax, double *sigma) {
+static int track(ovk_watch_eig *e, const double *w, double *u, int nh, int top, double lmax, double *sigma,
+                 double *bound) {
     int nR = e->nR, factored = 0;
     double s = 0.0, sign = top ? -1.0 : 1.0, dir = top ? 1.0 : -1.0, before = 0.0; /* F = sign (G - s I) */
     for (int it = 0;; it++) {
@@ -264,8 +266,10 @@ static int track(ovk_watch_eig *e, const double *w, double *u, int nh, int top, 
             double margin = top ? 2.0 * EIG_REL * rho : fmax(2.0 * EIG_REL * rho, CERT_FLOOR * lmax);
             double cert = rho + dir * margin;
             if (!top && cert <= 0.0) return 0;                  /* l_min in [0, rho]: nothing to certify */
-            if (factored && dir * (cert - s) >= 0.0) return 0;  /* the factor at hand certifies it */
-            if (shifted(e, sign, -sign * cert)) return 0;       /* l_max < cert, or l_min > cert */
+            if ((factored && dir * (cert - s) >= 0.0) || shifted(e, sign, -sign * cert)) {
+                *bound = cert;                                  /* l_max < cert, or l_min > cert */
+                return 0;                                       /* (the factor at hand, or a new one) */
+            }
             factored = 0;                                       /* the extreme lies beyond: on */
         }
         if (it == EIG_MAX_ITER) return 1;
@@ -300,10 +304,15 @@ int ovk_eig_extremes(ovk_sim *s, const double *w, double *smin, double *smax) {
     }
     e->have = 1;
     gram(e, w);
-    int top = track(e, w, e->umax, s->nh, 1, 0.0, smax);
+    double cmax = INFINITY, cmin = 0.0; /* the certified bounds of l_max and l_min, to G's round-off */
+    int top = track(e, w, e->umax, s->nh, 1, 0.0, smax, &cmax);
     double lmax = *smax * *smax;
-    int low = track(e, w, e->umin, s->nh, 0, lmax, smin);
+    int low = track(e, w, e->umin, s->nh, 0, lmax, smin, &cmin);
     if (low < 0) *smin = 0.0;
+    /* G's round-off (a few eps l_max for unit rows) off the bounds: what is left holds for W itself */
+    cmin -= CERT_ROUND * cmax;
+    e->smin_low = top == 0 && low == 0 && cmin > 0.0 ? sqrt(cmin) : 0.0;
+    e->smax_up = top == 0 && isfinite(cmax) ? sqrt(cmax * (1.0 + CERT_ROUND)) : INFINITY;
     s->watch_capped += (top != 0) + (low != 0);
     return OVK_OK;
 }

@@ -138,7 +138,7 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     size_t need = n_frames + m * nh + 2 * m + nS + nR * (nc ? nc : 1) + 2 * nR + nh + nR * nc
                   + 6 * OVK_MAXEQ * nj + n_work + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols)
                   + ovk_redundancy_doubles(M);
-    d->mem = calloc(need ? need : 1, sizeof(double));
+    d->mem = calloc(need ? need : 1, sizeof(double)); /* zeros: Phi_h outside its rows' blocks stays so (joints.c) */
     d->ctx = calloc(nfj ? nfj : 1, sizeof(ovk_fctx));
     d->piv = calloc(nx ? nx : 1, sizeof(int));
     if (!d->mem || !d->ctx || !d->piv) {

@@ -26,8 +26,8 @@ Python wrapper: its wall time, and its states compared with the Simulation's), p
     ``along_time``), and the bare C run with its watch; the projections (core/project.c) have no
     timer of their own in the core and are not reported;
   - the cost of one evaluation of the right-hand side in the core alone (kernel.Kernel.evaluate
-    at 200 states of the run, microseconds; the AL's banded factorisation is O(N) here, the
-    assembly of the dense m x nh Jacobian O(N^2)).
+    at 200 states of the run, microseconds; the AL's banded factorisation is O(N) here, and the
+    assembly of Phi_h writes each row's two bodies' blocks only, O(N) too).
 ``--watch``: only the C runs, one line per N (wall time, the watch's and the uniqueness's seconds
 and share of it, steps, singular positions passed, estimates of r that hit their iteration bound),
 and with ``--scenes`` the same for spatial_MN_wo5 and the four examples of docs/examples.md over

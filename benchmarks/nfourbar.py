@@ -7,6 +7,8 @@ evaluation as N grows.
                                             (default: 2 10 40 100, 20 s, C runs up to N = 10)
     python benchmarks/nfourbar.py --watch [N ...] [--stop-time T] [--scenes]
                                             the C runs only, with their watch's share
+    python benchmarks/nfourbar.py --q0-cost [N ...] [--repeat R]
+                                            the core's evaluation at q0 only, both acceleration solves
 
 For each N the scene (tolerance 1e-9, dopri5) is run in process (one BLAS thread) through
 ``overcon.simulate.Simulation`` (``overcon simulate``'s path: the core's run, core/sim.c, behind
@@ -24,12 +26,17 @@ Python wrapper: its wall time, and its states compared with the Simulation's), p
     ``along_time``), and the bare C run with its watch; the projections (core/project.c) have no
     timer of their own in the core and are not reported;
   - the cost of one evaluation of the right-hand side in the core alone (kernel.Kernel.evaluate
-    at 200 states of the run, microseconds; the AL's banded factorisation is O(N) here, the
-    assembly of the dense m x nh Jacobian O(N^2)).
+    at 200 states of the run, microseconds; the AL's banded factorisation is O(N) here, and the
+    assembly of Phi_h writes each row's two bodies' blocks only, O(N) too).
 ``--watch``: only the C runs, one line per N (wall time, the watch's and the uniqueness's seconds
 and share of it, steps, singular positions passed, estimates of r that hit their iteration bound),
 and with ``--scenes`` the same for spatial_MN_wo5 and the four examples of docs/examples.md over
 10 s (kernel.Run, in process).
+``--q0-cost``: microseconds per evaluation of the core alone at the initial state, in the
+eliminated form (``[solver] singular = "stop"``: S = J_R M^-1 J_R^T in band order and its banded
+Cholesky factor, core/kkt.c) and in the augmented Lagrangian form (``"pass"``, core/kkt_al.c),
+one line per N: the best of 5 rounds of R evaluations (default 300), so that a busy machine's
+slower rounds do not count. The main table prints the same two figures (``elim q0``, ``AL q0``).
 ``--plot``: the core's cost per evaluation and the in-process run's wall time per evaluation
 against N, log-log, with slopes 1 and 3 for reference. The figures go to docs/benchmarks.md
 ("The N-four-bar") by hand.
@@ -143,6 +150,36 @@ def eval_cost(model, solver, states) -> float:
     return (time.perf_counter() - start) / len(picks) * 1e6
 
 
+def q0_cost(n: int, tmp: Path, singular: str, repeat: int = 300, rounds: int = 5) -> float:
+    """Microseconds per evaluation of the core alone at the N-four-bar's initial state with
+    ``[solver] singular = singular`` ("stop": the eliminated form, "pass": the AL): the best of
+    ``rounds`` rounds of ``repeat`` evaluations."""
+    _, path = _generator().write(n, tmp / f"q0_{singular}_{n}", singular=singular)
+    spec = scene.as_scene(scene.load(path))
+    model = compile_checked(spec)
+    k = kernel.Kernel(kernel.library()[0], model, spec.solver)
+    y0 = np.concatenate([model.q0, model.h0])
+    if k.evaluate(0.0, y0) is None:
+        raise RuntimeError(f"N = {n}, singular = {singular!r}: the core refused q0: {k.last_message}")
+    best = math.inf
+    for _ in range(rounds):
+        start = time.perf_counter()
+        for _ in range(repeat):
+            k.evaluate(0.0, y0)
+        best = min(best, (time.perf_counter() - start) / repeat * 1e6)
+    return best
+
+
+def q0_table(ns: list[int], repeat: int) -> None:
+    """``--q0-cost``: the core's evaluation at q0 in both forms, one line per N."""
+    print(f"{'N':>4} {'coords':>6} {'eqs':>5} {'elim us':>9} {'AL us':>9} {'elim/AL':>7}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in ns:
+            elim, al = q0_cost(n, Path(tmp), "stop", repeat), q0_cost(n, Path(tmp), "pass", repeat)
+            print(f"{n:>4} {3 * (2 * n + 1):>6} {2 * (3 * n + 1):>5} {elim:>9.1f} {al:>9.1f} {elim / al:>7.2f}",
+                  flush=True)
+
+
 def measure(n: int, tmp: Path, stop: float, c_max: int) -> dict:
     _, path = _generator().write(n, tmp / f"n{n}", stop_time=stop, tolerance=1e-9, singular="pass")
     spec = scene.as_scene(scene.load(path))
@@ -159,7 +196,8 @@ def measure(n: int, tmp: Path, stop: float, c_max: int) -> dict:
             "err_c": None if c is None else float(np.max(np.abs(c["x"] - ref))),
             "dy_c": None if c is None else float(max(np.max(np.abs(a - b)) for a, b in zip(py["states"], c["states"]))),
             "err_tight": None if tight is None else float(np.max(np.abs(tight["x"] - ref))),
-            "us_eval": eval_cost(model, spec.solver, py["states"])}
+            "us_eval": eval_cost(model, spec.solver, py["states"]),
+            "us_elim_q0": q0_cost(n, tmp, "stop"), "us_al_q0": q0_cost(n, tmp, "pass")}
 
 
 def plot(rows: list[dict], path: Path, stop: float) -> None:
@@ -193,14 +231,20 @@ def main(argv=None) -> int:
     ap.add_argument("--plot", type=Path)
     ap.add_argument("--watch", action="store_true", help="only the C runs, with the watch's share")
     ap.add_argument("--scenes", action="store_true", help="with --watch: also spatial_MN_wo5 and the examples")
+    ap.add_argument("--q0-cost", action="store_true",
+                    help="only the core's evaluation at q0, eliminated form and AL (microseconds)")
+    ap.add_argument("--repeat", type=int, default=300, help="with --q0-cost: evaluations per round (default 300)")
     args = ap.parse_args(argv)
+    if args.q0_cost:
+        q0_table(args.n, args.repeat)
+        return 0
     if args.watch:
         watch_table(args.n, args.stop_time, args.scenes)
         return 0
     print(f"{'N':>4} {'coords':>6} {'eqs':>5} {'sing':>4} {'steps':>6} {'evals':>6} {'drift':>8} {'err py m':>9} "
           f"{'err C m':>9} {'|dy| C':>8} {'err 1e-12':>9} {'py s':>7} {'watch s':>7} {'along s':>7} {'C s':>7} "
           f"{'C watch':>7} "
-          f"{'us/eval':>8} {'py us/ev':>8}")
+          f"{'us/eval':>8} {'py us/ev':>8} {'elim q0':>8} {'AL q0':>8}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.n:
@@ -215,7 +259,8 @@ def main(argv=None) -> int:
             print(f"{n:>4} {r['coords']:>6} {r['eqs']:>5} {py['singular']:>4} {py['steps']:>6} {py['evaluations']:>6} "
                   f"{py['drift']:>8.1e} {r['err_py']:>9.2e} {err_c:>9} {dy_c:>8} {tight:>9} {py['wall']:>7.2f} "
                   f"{py['watch']:>7.2f} {py['along']:>7.2f} {c_wall:>7} {c_watch:>7} {r['us_eval']:>8.1f} "
-                  f"{py['wall'] / py['evaluations'] * 1e6:>8.1f}", flush=True)
+                  f"{py['wall'] / py['evaluations'] * 1e6:>8.1f} {r['us_elim_q0']:>8.1f} {r['us_al_q0']:>8.1f}",
+                  flush=True)
     if args.plot:
         plot(rows, args.plot, args.stop_time)
     return 0

@@ -96,20 +96,49 @@ static int check_model(const ovk_model *M, ovk_data *d) {
     return ovk_check_redundancy(M, d);
 }
 
+/* The band orders of S's rows (kkt.c): the retained rows, and under "compliant" the rigid ones
+ * (compliance.c's view), fixed per model. The status. */
+static int band_orders(const ovk_model *M, ovk_data *d) {
+    size_t nR = (size_t)M->nR, nrig = M->redundancy == OVK_COMPLIANT ? (size_t)M->nrig : 0;
+    d->sb_mem = malloc((3 * nR + 3 * nrig + 1) * sizeof(int));
+    long long *key = malloc((nR + 1) * sizeof(long long));
+    int *span = malloc((2 * (size_t)M->nb + 1) * sizeof(int));
+    if (!d->sb_mem || !key || !span) {
+        free(key);
+        free(span);
+        return ovk_fail(d, OVK_NOMEM, "out of memory: the band order of S needs %zu bytes",
+                        (3 * nR + 3 * nrig + 1) * sizeof(int) + (nR + 1) * sizeof(long long) +
+                        (2 * (size_t)M->nb + 1) * sizeof(int));
+    }
+    d->sb.order = d->sb_mem, d->sb.body = d->sb.order + nR;
+    d->sb_rigid.order = d->sb.body + 2 * nR, d->sb_rigid.body = d->sb_rigid.order + nrig;
+    d->sb.band = ovk_band_order(M->nR, M->nb, M->rbody, NULL, 1, d->sb.order, d->sb.body, key, span);
+    if (nrig)
+        d->sb_rigid.band = ovk_band_order(M->nrig, M->nb, M->rigbody, NULL, 1, d->sb_rigid.order, d->sb_rigid.body,
+                                          key, span);
+    free(key);
+    free(span);
+    return OVK_OK;
+}
+
 ovk_data *ovk_make_data(const ovk_model *M) {
     ovk_data *d = calloc(1, sizeof(ovk_data));
     if (!d) return NULL;
     if (!M) { d->status = ovk_fail(d, OVK_INVALID, "model: a null pointer"); return d; }
     if ((d->status = check_model(M, d))) return d;
+    if ((d->status = band_orders(M, d))) return d;
     size_t nb = (size_t)M->nb, dim = (size_t)M->dim, wd = dim == 2 ? 1 : 3, m = (size_t)M->m, nR = (size_t)M->nR;
     size_t nh = nb * (size_t)M->nh_b, nc = (size_t)M->ncols, nx = (size_t)M->nx, nj = (size_t)M->nj;
-    size_t nfj = (size_t)M->nfj;
+    size_t nfj = (size_t)M->nfj, nrig = M->redundancy == OVK_COMPLIANT ? (size_t)M->nrig : 0;
+    size_t nS = M->redundancy == OVK_MIN_NORM ? nR * nR : nR * (size_t)(d->sb.band + 1); /* S: band storage */
+    if (nrig * (size_t)(d->sb_rigid.band + 1) > nS) nS = nrig * (size_t)(d->sb_rigid.band + 1);
     size_t n_frames = (nb + 1) * (2 * dim + dim * dim + wd) + 4 * nb;
     size_t n_work = 4 * nx + nx * nc                          /* lam0x, x, x0, Wx */
                     + 4 * nx + nc * nx + nx * nx + nc + nx;   /* r, Dq, Mx, dx, xn, qn, rn (damped Newton) */
-    size_t need = n_frames + m * nh + 2 * m + nR * nR + 2 * nR + nh + nR * nc + 6 * OVK_MAXEQ * nj + n_work
-                  + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols) + ovk_redundancy_doubles(M);
-    d->mem = calloc(need ? need : 1, sizeof(double));
+    size_t need = n_frames + m * nh + 2 * m + nS + nR * (nc ? nc : 1) + 2 * nR + nh + nR * nc
+                  + 6 * OVK_MAXEQ * nj + n_work + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols)
+                  + ovk_redundancy_doubles(M);
+    d->mem = calloc(need ? need : 1, sizeof(double)); /* zeros: Phi_h outside its rows' blocks stays so (joints.c) */
     d->ctx = calloc(nfj ? nfj : 1, sizeof(ovk_fctx));
     d->piv = calloc(nx ? nx : 1, sizeof(int));
     if (!d->mem || !d->ctx || !d->piv) {
@@ -132,7 +161,8 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->J = p; p += m * nh;
     d->phi = p; p += m;
     d->gam = p; p += m;
-    d->S = p; p += nR * nR;
+    d->S = p; p += nS;
+    d->Sx = p; p += nR * (nc ? nc : 1);
     d->g = p; p += nR;
     d->lamR = p; p += nR;
     d->Q = p; p += nh;
@@ -164,6 +194,7 @@ void ovk_free_data(ovk_data *d) {
     free(d->piv);
     free(d->al);
     free(d->al_rows);
+    free(d->sb_mem);
     free(d);
 }
 

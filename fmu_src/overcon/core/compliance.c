@@ -11,8 +11,9 @@
  * those reactions: the friction stage reads lam_R at their rows, where W is zero.
  * The rigid retained rows are then the eliminated problem of kkt.c with those forces applied:
  * ovk_kkt_solve and ovk_kkt_friction_columns run on a view of the model and workspace restricted
- * to the rigid rows (packed: rigpos, rigrows, rigbody), so S, its Cholesky factor and W have one
- * implementation. h' = M^-1 (Q - J_R^T lam_R) over all retained rows (kkt.c) then holds both. */
+ * to the rigid rows (packed: rigpos, rigrows, rigbody; their band order d->sb_rigid), so S, its
+ * banded Cholesky factor and W have one implementation. h' = M^-1 (Q - J_R^T lam_R) over all
+ * retained rows (kkt.c) then holds both. */
 #include <math.h>
 #include <string.h>
 
@@ -127,7 +128,8 @@ static void axis_forces(const ovk_model *M, ovk_data *d, int a, const double *h)
 }
 
 /* The view of M and d restricted to the rigid retained rows: the problem of kkt.c, with d's
- * buffers for S, J and the frames, and the scratch g_r, lam_r, Q - J_c^T lam_c, W_r. */
+ * buffers for S, its right-hand sides, J and the frames, the rigid rows' band order, and the
+ * scratch g_r, lam_r, Q - J_c^T lam_c, W_r. */
 static void rigid_view(const ovk_model *M, ovk_data *d, ovk_model *Mr, ovk_data *dr) {
     int nrig = M->nrig, nh = M->nb * M->nh_b;
     *Mr = *M;
@@ -136,6 +138,7 @@ static void rigid_view(const ovk_model *M, ovk_data *d, ovk_model *Mr, ovk_data 
     Mr->rbody = M->rigbody;
     Mr->redundancy = OVK_ELIMINATE;
     *dr = *d;
+    dr->sb = d->sb_rigid;
     dr->g = d->red;
     dr->lamR = dr->g + nrig;
     dr->Q = dr->lamR + nrig;
@@ -143,7 +146,8 @@ static void rigid_view(const ovk_model *M, ovk_data *d, ovk_model *Mr, ovk_data 
 }
 
 /* d->lamR: the compliant rows' spring-damper multipliers and the rigid rows' solve with those
- * forces applied (module docstring); d->S the rigid rows' Cholesky factor. Statuses as
+ * forces applied (module docstring); d->S the rigid rows' banded Cholesky factor (in their band
+ * order d->sb_rigid). Statuses as
  * ovk_kkt_solve's (a singular position of the rigid rows), with its message. */
 int ovk_compliant_solve(const ovk_model *M, ovk_data *d, const double *h) {
     int nR = M->nR, nh = M->nb * M->nh_b, kh = M->nh_b;

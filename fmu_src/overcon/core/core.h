@@ -11,13 +11,14 @@
  *   joints_spatial.c    spatial axis joints (revolute, prismatic, cylindrical, universal, fixed): the
  *                       row primitives of overcon.joints.spatial_rows, reactions, friction
  *   loads.c             applied forces: gravity, gyroscopic, force, torque, spring
- *   kkt.c               the KKT solve with the scene's elimination (Cholesky of S) and h'
+ *   kkt.c               the KKT solve with the scene's elimination (banded Cholesky of S) and h'
  *   kkt_minnorm.c       redundancy "min-norm": S^+ by a rank-revealing SVD in place of the Cholesky factor
  *   compliance.c        redundancy "compliant": spring-damper multipliers of compliant joints, rigid rest
  *   kkt_al.c            formulation AL: the augmented Lagrangian solve of the kept rows (banded Cholesky)
  *   project.c           formulation AL: mass-orthogonal projections of a state onto the constraints
  *   friction.c          friction laws, the reduced friction fixed point, Newton and damped Newton
- *   linalg.c            dense Cholesky and LU (fixed summation order, no BLAS)
+ *   linalg.c            banded Cholesky, the band order of rows on two bodies, LU (fixed summation
+ *                       order, no BLAS)
  *   lu.c                complex LU with partial pivoting (radau's complex Newton matrix)
  *   outputs.c           reported reactions and friction forces
  *   rates.c             coordinate rates q' from h
@@ -163,6 +164,14 @@ typedef struct {
     double spin, slide, mu, mos; /* axis joints: omega_rel, v_rel, mu(v), mu(|s|)/|s| (cylindrical) */
 } ovk_fctx;
 
+/* Rows in band order (linalg.c ovk_band_order): order[k] the position (in retained order) of the
+ * row at band position k, body[2 k], body[2 k + 1] its bodies (lower first, -1 none), band the
+ * half bandwidth of S in that order. */
+typedef struct {
+    int band;
+    int *order, *body;
+} ovk_srows;
+
 /* The workspace of one instance: every buffer of an evaluation, sized from the model by
  * ovk_make_data, and the last failure's message. */
 typedef struct {
@@ -170,7 +179,12 @@ typedef struct {
     double *J;     /* m x nh: Phi_h */
     double *phi;   /* m */
     double *gam;   /* m */
-    double *S;     /* nR x nR: S = J_R M^-1 J_R^T, then its Cholesky factor */
+    double *S;     /* S = J_R M^-1 J_R^T in band order (band storage of linalg.c: nR x (sb.band + 1)),
+                    * then its banded Cholesky factor; min-norm: S^+ (nR x nR, kkt_minnorm.c) */
+    ovk_srows sb;  /* the retained rows in band order (kkt.c), fixed per model */
+    ovk_srows sb_rigid; /* compliant: the rigid retained rows in band order (compliance.c's view) */
+    int *sb_mem;   /* the one allocation behind sb's and sb_rigid's arrays */
+    double *Sx;    /* nR x max(ncols, 1): right-hand sides of S in band order (kkt.c) */
     double *g;     /* nR: gamma_R (with Baumgarte) */
     double *lamR;  /* nR: retained multipliers */
     double *Q;     /* nh: applied (and friction) forces */
@@ -506,11 +520,11 @@ OVK_HIDDEN size_t ovk_robust_doubles(int nx, int nc);
 OVK_HIDDEN int ovk_friction_robust(const ovk_model *M, ovk_data *d, const double *start, double *qf, int *iterations);
 
 /* linalg.c */
-OVK_HIDDEN int ovk_cholesky(double *S, int n);
-OVK_HIDDEN void ovk_cho_solve(const double *U, int n, double *b);
+OVK_HIDDEN int ovk_band_order(int n, int nb, const int *bodies, const int *rows, int keep, int *order, int *obody,
+                              long long *key, int *span);
 OVK_HIDDEN int ovk_band_cholesky(double *A, int n, int p);
 OVK_HIDDEN void ovk_band_solve(const double *U, int n, int p, double *b);
-OVK_HIDDEN void ovk_cho_solve_many(const double *U, int n, double *B, int nc);
+OVK_HIDDEN void ovk_band_solve_many(const double *U, int n, int p, double *B, int nc);
 OVK_HIDDEN int ovk_lu_factor(double *A, int n, int *piv);
 OVK_HIDDEN void ovk_lu_solve(const double *A, int n, const int *piv, double *b);
 

@@ -16,12 +16,25 @@ void ovk_joint_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi,
     }
 }
 
+/* Zeros in joint j's rows of Phi_h (m x nh) at its two bodies' columns. */
+static void clear_blocks(const ovk_model *M, double *J, int j) {
+    int nh = M->nb * M->nh_b, kh = M->nh_b;
+    for (int e = 0; e < M->jneq[j]; e++) {
+        int row = M->jrows[OVK_MAXEQ * j + e];
+        if (M->jbi[j] >= 0) memset(J + (size_t)row * nh + (size_t)M->jbi[j] * kh, 0, sizeof(double) * kh);
+        if (M->jbj[j] >= 0) memset(J + (size_t)row * nh + (size_t)M->jbj[j] * kh, 0, sizeof(double) * kh);
+    }
+}
+
 /* d->phi, d->J (Phi_h), d->gam from the frames in d->f, and every joint's (J_X)_i block in
- * d->Jblk (the friction setup needs it). */
+ * d->Jblk (the friction setup needs it). Each row of Phi_h is nonzero on its joint's two bodies'
+ * columns only, and only these blocks are written here (nothing else writes d->J): they are
+ * cleared, all of them before any is filled, and the rest of the array keeps the zeros of the
+ * workspace's allocation (ovk_make_data), so the cost is the blocks', not m x nh. */
 void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
     int nh = M->nb * M->nh_b, kh = M->nh_b;
     double *J = d->J;
-    memset(J, 0, sizeof(double) * M->m * nh);
+    for (int j = 0; j < M->nj; j++) clear_blocks(M, J, j);
     double blkJ[6 * OVK_MAXEQ], ph[OVK_MAXEQ], gm[OVK_MAXEQ];
     for (int j = 0; j < M->nj; j++) {
         int ne = M->jneq[j];

@@ -1,7 +1,15 @@
 /* Stage: the KKT solve with the scene's elimination (overcon.dynamics.evaluate). Only the retained
  * rows R of Phi_h enter: S = J_R M^-1 J_R^T (M diagonal, kept as Minv), lam_R = S^-1 (J_R M^-1 Q -
  * gamma_R), h' = M^-1 (Q - J_R^T lam_R). Each retained row touches at most two bodies (rbody), so
- * the products run over those bodies' coordinates only. */
+ * the products run over those bodies' coordinates only, and S_ab is nonzero only when rows a and
+ * b share a body: S is built and factored in the band order of the workspace (d->sb, made once
+ * per model by linalg.c ovk_band_order), where it is banded with half bandwidth p (a few rows for
+ * a chain whose bodies are numbered along it, up to nR - 1 otherwise): O(nR p) entries, a banded
+ * Cholesky in O(nR p^2), and O(nR p) a solve. The right-hand sides go into band order and the
+ * solutions back (d->Sx); lam_R, W and the messages keep the retained order. A model whose
+ * retained order is no wider keeps it (ovk_band_order's keep): then the entries (each summed as
+ * row b's bodies in rbody's order, b the later row), the factor and the solves are those of a
+ * dense Cholesky in that order to the bit, the terms outside the band being exact zeros. */
 #include <math.h>
 #include <string.h>
 
@@ -27,34 +35,48 @@ void ovk_kkt_rhs(const ovk_model *M, ovk_data *d, const double *h) {
     }
 }
 
-/* S, its Cholesky factor (in d->S) and lam_R without friction (d->lamR). OVK_SINGULAR when S is not
- * positive definite (a singular position), OVK_NONFINITE on a non-finite S or right-hand side. */
+/* B (nR x nc, retained order) := S^-1 B with the band factor in d->S: gathered into band order in
+ * d->Sx, solved, scattered back. */
+static void band_solve(const ovk_model *M, ovk_data *d, double *B, int nc) {
+    int nR = M->nR;
+    const int *order = d->sb.order;
+    for (int a = 0; a < nR; a++)
+        memcpy(d->Sx + (size_t)a * nc, B + (size_t)order[a] * nc, sizeof(double) * nc);
+    ovk_band_solve_many(d->S, nR, d->sb.band, d->Sx, nc);
+    for (int a = 0; a < nR; a++)
+        memcpy(B + (size_t)order[a] * nc, d->Sx + (size_t)a * nc, sizeof(double) * nc);
+}
+
+/* S in band order, its banded Cholesky factor (in d->S) and lam_R without friction (d->lamR).
+ * OVK_SINGULAR when S is not positive definite (a singular position), OVK_NONFINITE on a
+ * non-finite S or right-hand side; both name the retained row (its equation) where it showed. */
 int ovk_kkt_solve(const ovk_model *M, ovk_data *d) {
-    int nR = M->nR, nh = M->nb * M->nh_b, kh = M->nh_b;
-    const int *rb = M->rbody;
+    int nR = M->nR, nh = M->nb * M->nh_b, kh = M->nh_b, p = d->sb.band, w = p + 1;
+    const int *rb = M->rbody, *order = d->sb.order, *body = d->sb.body;
     const double *J = d->J;
     double *S = d->S;
-    for (int i = 0; i < nR; i++) {
-        const double *Ji = J + (size_t)M->retained[i] * nh;
-        for (int k2 = 0; k2 <= i; k2++) {
-            const double *Jk = J + (size_t)M->retained[k2] * nh;
+    for (int a = 0; a < nR; a++) { /* row a of the band: columns a..a+p */
+        const double *Ja = J + (size_t)M->retained[order[a]] * nh;
+        int last = a + p < nR - 1 ? a + p : nR - 1;
+        for (int b = a; b <= last; b++) { /* S_ab over the bodies of row b (rbody's order) that row a shares */
+            int i = order[b];
+            const double *Jb = J + (size_t)M->retained[i] * nh;
             double s = 0.0;
-            for (int s2 = 0; s2 < 2; s2++) { /* bodies shared by the two rows */
-                int b = rb[2 * i + s2];
-                if (b < 0 || (s2 == 1 && b == rb[2 * i])) continue;
-                if (b != rb[2 * k2] && b != rb[2 * k2 + 1]) continue;
-                for (int k = b * kh; k < (b + 1) * kh; k++) s += Ji[k] * (M->Minv[k] * Jk[k]);
+            for (int s2 = 0; s2 < 2; s2++) {
+                int c = rb[2 * i + s2];
+                if (c < 0 || (s2 == 1 && c == rb[2 * i]) || (c != body[2 * a] && c != body[2 * a + 1])) continue;
+                for (int k = c * kh; k < (c + 1) * kh; k++) s += Jb[k] * (M->Minv[k] * Ja[k]);
             }
-            S[i * nR + k2] = S[k2 * nR + i] = s;
+            if (!isfinite(s))
+                return ovk_fail(d, OVK_NONFINITE, "non-finite number in S = Phi_h M^-1 Phi_h^T (row %d)",
+                                M->retained[order[a]]);
+            S[(size_t)a * w + (b - a)] = s;
         }
     }
-    for (int i = 0; i < nR * nR; i++)
-        if (!isfinite(S[i]))
-            return ovk_fail(d, OVK_NONFINITE, "non-finite number in S = Phi_h M^-1 Phi_h^T (row %d)", i / nR);
-    int col = M->redundancy == OVK_MIN_NORM ? 0 : ovk_cholesky(S, nR), status; /* redundancy: min-norm */
+    int col = M->redundancy == OVK_MIN_NORM ? 0 : ovk_band_cholesky(S, nR, p), status; /* redundancy: min-norm */
     if (col)
         return ovk_fail(d, OVK_SINGULAR, "singular position: S = Phi_h M^-1 Phi_h^T is not positive definite "
-                        "(Cholesky pivot %d of %d, retained row %d)", col - 1, nR, M->retained[col - 1]);
+                        "(Cholesky pivot %d of %d, retained row %d)", col - 1, nR, M->retained[order[col - 1]]);
     if (M->redundancy == OVK_MIN_NORM && (status = ovk_minnorm_factor(M, d))) return status; /* S^+ in d->S */
     for (int i = 0; i < nR; i++) {
         const double *Ji = J + (size_t)M->retained[i] * nh;
@@ -73,7 +95,7 @@ int ovk_kkt_solve(const ovk_model *M, ovk_data *d) {
     if (M->redundancy == OVK_MIN_NORM)
         ovk_minnorm_solve_many(M, d, d->lamR, 1);
     else
-        ovk_cho_solve(S, nR, d->lamR);
+        band_solve(M, d, d->lamR, 1);
     return OVK_OK;
 }
 
@@ -97,7 +119,7 @@ void ovk_kkt_friction_columns(const ovk_model *M, ovk_data *d) {
     if (M->redundancy == OVK_MIN_NORM)
         ovk_minnorm_solve_many(M, d, d->W, nc);
     else
-        ovk_cho_solve_many(d->S, nR, d->W, nc);
+        band_solve(M, d, d->W, nc);
 }
 
 /* lam (m: lam_R at the retained rows, zeros at the eliminated ones) and h' = M^-1 (Q - J_R^T lam_R). */

@@ -104,37 +104,10 @@ void ovk_eig_free(ovk_watch_eig *e) {
     free(e);
 }
 
-static int by_key(const void *a, const void *b) {
-    long long x = *(const long long *)a, y = *(const long long *)b;
-    return (x > y) - (x < y);
-}
-
-/* The band order of the kept rows `rows` and its half bandwidth (file header). */
+/* The band order of the kept rows `rows` and its half bandwidth (file header; linalg.c). */
 static void make_order(ovk_watch_eig *e, const int *rows) {
-    int nR = e->nR, nb = e->nb;
-    for (int i = 0; i < nR; i++) {
-        int a = e->eqbody[2 * rows[i]], b = e->eqbody[2 * rows[i] + 1];
-        int lo = a < 0 ? b : b < 0 ? a : a < b ? a : b, hi = a < 0 || b < 0 || a == b ? -1 : a < b ? b : a;
-        e->key[i] = ((long long)(lo + 1) * (nb + 1) + (hi + 1)) * nR + i;
-    }
-    qsort(e->key, (size_t)nR, sizeof *e->key, by_key);
-    for (int b = 0; b < nb; b++) e->span[2 * b] = nR, e->span[2 * b + 1] = -1;
-    e->band = 0;
-    for (int k = 0; k < nR; k++) {
-        int i = (int)(e->key[k] % nR), a = e->eqbody[2 * rows[i]], b = e->eqbody[2 * rows[i] + 1];
-        e->order[k] = i;
-        e->body[2 * k] = a < 0 ? b : b < 0 ? a : a < b ? a : b;
-        e->body[2 * k + 1] = a < 0 || b < 0 || a == b ? -1 : a < b ? b : a;
-        for (int t = 0; t < 2; t++) {
-            int c = e->body[2 * k + t];
-            if (c < 0) continue;
-            if (k < e->span[2 * c]) e->span[2 * c] = k;
-            if (k > e->span[2 * c + 1]) e->span[2 * c + 1] = k;
-        }
-    }
-    for (int b = 0; b < nb; b++)
-        if (e->span[2 * b + 1] - e->span[2 * b] > e->band) e->band = e->span[2 * b + 1] - e->span[2 * b];
-    memcpy(e->rows, rows, (size_t)nR * sizeof(int));
+    e->band = ovk_band_order(e->nR, e->nb, e->eqbody, rows, 0, e->order, e->body, e->key, e->span);
+    memcpy(e->rows, rows, (size_t)e->nR * sizeof(int));
 }
 
 /* The order for the kept rows `rows` (a restored state's), the tracked vectors kept: they were

@@ -204,6 +204,7 @@ typedef struct {
     int al_band;   /* the half bandwidth of M + alpha J_R^T J_R in velocity coordinates */
     int al_iterations; /* AL iterations of the last solve; al_stalled: it stopped on stagnation, not on tol */
     int al_stalled;
+    int al_direct;     /* the last AL-form solve was kkt.c's direct one (its S factor stands; kkt_al.c) */
     int *al_rows;  /* every equation (m), then its two bodies (2 m): the row set of ovk_project */
     int *piv;      /* nx: the row interchanges of the friction solves' LU (friction.c, friction_robust.c) */
 } ovk_data;
@@ -473,6 +474,7 @@ OVK_HIDDEN void ovk_spring_points(const ovk_model *M, const ovk_frames *f, const
 OVK_HIDDEN void ovk_kkt_rhs(const ovk_model *M, ovk_data *d, const double *h);
 OVK_HIDDEN int ovk_kkt_solve(const ovk_model *M, ovk_data *d);
 OVK_HIDDEN void ovk_kkt_friction_columns(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN void ovk_kkt_refine(const ovk_model *M, ovk_data *d, double *r);
 OVK_HIDDEN void ovk_kkt_accelerations(const ovk_model *M, ovk_data *d, double *lam, double *hdot);
 
 /* kkt_minnorm.c, compliance.c: redundancy "min-norm" and "compliant" */

@@ -99,10 +99,14 @@ int ovk_kkt_solve(const ovk_model *M, ovk_data *d) {
     return OVK_OK;
 }
 
+/* r (nR, retained order) := S^-1 r with the band factor of the last ovk_kkt_solve (kkt_al.c's
+ * refinement of a direct solve). */
+void ovk_kkt_refine(const ovk_model *M, ovk_data *d, double *r) { band_solve(M, d, r, 1); }
+
 /* d->W = S^-1 J_R M^-1 [:, cols]: how the retained multipliers answer a unit friction force on
  * each friction velocity (one column per entry of cols). */
 void ovk_kkt_friction_columns(const ovk_model *M, ovk_data *d) {
-    if (M->formulation == OVK_FORM_AL) { /* kkt_al.c: the same columns by the AL solve */
+    if (M->formulation == OVK_FORM_AL && !d->al_direct) { /* kkt_al.c: the same columns by the AL solve */
         ovk_kkt_al_columns(M, d);
         return;
     }

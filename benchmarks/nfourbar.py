@@ -3,14 +3,16 @@ over the benchmark's 20 s with ``[solver] singular = "pass"`` (the augmented Lag
 projections of core/kkt_al.c and core/project.c): its error, its wall time and the cost of an
 evaluation as N grows.
 
-    python benchmarks/nfourbar.py [N ...] [--stop-time T] [--c-max N] [--plot docs/nfourbar_cost.png]
-                                            (default: 2 10 40 100, 20 s, C runs up to N = 10)
+    python benchmarks/nfourbar.py [N ...] [--stop-time T] [--tolerance TOL] [--c-max N]
+                                  [--plot docs/nfourbar_cost.png]
+                                            (default: 2 10 40 100, 20 s, tolerance 1e-9, C runs up
+                                            to N = 10)
     python benchmarks/nfourbar.py --watch [N ...] [--stop-time T] [--scenes]
                                             the C runs only, with their watch's share
     python benchmarks/nfourbar.py --q0-cost [N ...] [--repeat R]
                                             the core's evaluation at q0 only, both acceleration solves
 
-For each N the scene (tolerance 1e-9, dopri5) is run in process (one BLAS thread) through
+For each N the scene (tolerance 1e-9 or --tolerance, dopri5) is run in process (one BLAS thread) through
 ``overcon.simulate.Simulation`` (``overcon simulate``'s path: the core's run, core/sim.c, behind
 the Python interface) and, up to ``--c-max``, as a bare ``kernel.Run`` (the same run without the
 Python wrapper: its wall time, and its states compared with the Simulation's), printed side by side:
@@ -123,13 +125,13 @@ def _watch_line(label: str, c: dict) -> str:
             f"{c['steps']:>6} {c['singular']:>4} {c['capped']:>6}")
 
 
-def watch_table(ns: list[int], stop: float, scenes: bool) -> None:
+def watch_table(ns: list[int], stop: float, scenes: bool, tolerance: float = 1e-9) -> None:
     """The C runs alone: wall time and the watch's share (``--watch``)."""
     print(f"{'run':>34} {'wall s':>8} {'watch s':>8} {'share':>6} {'along s':>8} {'steps':>6} {'sing':>4} "
           f"{'capped':>6}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in ns:
-            _, path = _generator().write(n, Path(tmp) / f"n{n}", stop_time=stop, tolerance=1e-9, singular="pass")
+            _, path = _generator().write(n, Path(tmp) / f"n{n}", stop_time=stop, tolerance=tolerance, singular="pass")
             spec = scene.as_scene(scene.load(path))
             c = c_run(compile_checked(spec), spec.solver, np.array([stop]))
             print(_watch_line(f"N-four-bar N = {n}, {stop:g} s", c), flush=True)
@@ -180,8 +182,8 @@ def q0_table(ns: list[int], repeat: int) -> None:
                   flush=True)
 
 
-def measure(n: int, tmp: Path, stop: float, c_max: int) -> dict:
-    _, path = _generator().write(n, tmp / f"n{n}", stop_time=stop, tolerance=1e-9, singular="pass")
+def measure(n: int, tmp: Path, stop: float, c_max: int, tolerance: float = 1e-9) -> dict:
+    _, path = _generator().write(n, tmp / f"n{n}", stop_time=stop, tolerance=tolerance, singular="pass")
     spec = scene.as_scene(scene.load(path))
     model = compile_checked(spec)
     times = np.round(np.arange(1, int(round(stop / 0.01)) + 1) * 0.01, 10)
@@ -200,7 +202,7 @@ def measure(n: int, tmp: Path, stop: float, c_max: int) -> dict:
             "us_elim_q0": q0_cost(n, tmp, "stop"), "us_al_q0": q0_cost(n, tmp, "pass")}
 
 
-def plot(rows: list[dict], path: Path, stop: float) -> None:
+def plot(rows: list[dict], path: Path, stop: float, tolerance: float) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -214,7 +216,7 @@ def plot(rows: list[dict], path: Path, stop: float) -> None:
         ax.loglog(ns, core[0] * (ns / ns[0]) ** slope, "k" + style, lw=0.8, label=f"slope {slope}")
     ax.set_xlabel("N (loops)")
     ax.set_ylabel("microseconds per evaluation")
-    ax.set_title(f"N-four-bar, singular = \"pass\", 0-{stop:g} s, tolerance 1e-9")
+    ax.set_title(f"N-four-bar, singular = \"pass\", 0-{stop:g} s, tolerance {tolerance:g}")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", lw=0.3)
     fig.tight_layout()
@@ -226,6 +228,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("n", type=int, nargs="*", default=[2, 10, 40, 100])
     ap.add_argument("--stop-time", type=float, default=20.0)
+    ap.add_argument("--tolerance", type=float, default=1e-9,
+                    help="the runs' tolerance (default 1e-9; the 1e-12 column stays at 1e-12)")
     ap.add_argument("--c-max", type=int, default=10,
                     help="largest N also run as a bare kernel.Run beside the Simulation (default 10)")
     ap.add_argument("--plot", type=Path)
@@ -239,7 +243,7 @@ def main(argv=None) -> int:
         q0_table(args.n, args.repeat)
         return 0
     if args.watch:
-        watch_table(args.n, args.stop_time, args.scenes)
+        watch_table(args.n, args.stop_time, args.scenes, args.tolerance)
         return 0
     print(f"{'N':>4} {'coords':>6} {'eqs':>5} {'sing':>4} {'steps':>6} {'evals':>6} {'drift':>8} {'err py m':>9} "
           f"{'err C m':>9} {'|dy| C':>8} {'err 1e-12':>9} {'py s':>7} {'watch s':>7} {'along s':>7} {'C s':>7} "
@@ -248,7 +252,7 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.n:
-            r = measure(n, Path(tmp), args.stop_time, args.c_max)
+            r = measure(n, Path(tmp), args.stop_time, args.c_max, args.tolerance)
             rows.append(r)
             py, c = r["py"], r["c"]
             tight = "" if r["err_tight"] is None else f"{r['err_tight']:.2e}"
@@ -262,7 +266,7 @@ def main(argv=None) -> int:
                   f"{py['wall'] / py['evaluations'] * 1e6:>8.1f} {r['us_elim_q0']:>8.1f} {r['us_al_q0']:>8.1f}",
                   flush=True)
     if args.plot:
-        plot(rows, args.plot, args.stop_time)
+        plot(rows, args.plot, args.stop_time, args.tolerance)
     return 0
 
 

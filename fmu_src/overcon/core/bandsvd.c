@@ -195,7 +195,7 @@ int ovk_bsv_below(const ovk_bsv *f, double x) {
         q = -x - o * o / q;
         count += q < 0.0;
     }
-    return count - k;
+    return count > k ? count - k : 0; /* round-off cannot make a count negative */
 }
 
 double ovk_bsv_value(const ovk_bsv *f, int i) {

@@ -165,6 +165,23 @@ def test_nfourbar_2_completes_20_s_with_20_singular_events_at_the_flat_instants(
     assert np.max(np.abs(_singular_times(sim) - flats)) < 2e-5
 
 
+@pytest.mark.parametrize("tolerance", [1e-12, 1e-6])
+def test_nfourbar_2_passes_its_flat_positions_at_tight_and_loose_tolerances(tmp_path, tolerance):
+    """The acceleration solve changes method near a flat position (the direct solve of S where
+    the kept rows are regular, the AL iteration near and at the flat position: kkt_al.c); a jump
+    in y' there would stop a tight-tolerance run at its first flat position (step size below the
+    minimum). Through three flat positions at 1e-12 and at 1e-6, on the branch."""
+    _, path = _nfourbar().write(2, tmp_path, stop_time=3.0, singular="pass")
+    spec = _scene(path)
+    model = compile_checked(spec)
+    times = np.linspace(0.05, 3.0, 60)
+    ref, flats = one_dof(1 + 2, 1.5 + 2, times)
+    sim = Simulation(model, dataclasses.replace(spec.solver, tolerance=tolerance), max_steps=200_000)
+    phis = _crank_angles(sim, model, [*times], [model.body_names.index(f"crank{i}") for i in range(3)])
+    assert len(flats) == 3
+    _branch(phis, ref, sim, 3, 1e-3 if tolerance > 1e-9 else 1e-4)
+
+
 @pytest.mark.parametrize("n, stop, flats", [(10, 20.0, 20), (40, 1.6, 2)])
 def test_nfourbar_10_and_40_pass_their_flat_positions_on_the_parallelogram_branch(tmp_path, n, stop, flats):
     """N = 10 over the benchmark's 20 s; N = 40 through its first two flat positions (0.71 and

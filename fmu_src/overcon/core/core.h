@@ -505,7 +505,7 @@ OVK_HIDDEN double *ovk_al_slot(const ovk_model *M, const ovk_data *d, int which)
 #define OVK_PROJ_SLACK 10.0   /* project.c: |Phi| up to this times tol is accepted once the corrections stall */
 OVK_HIDDEN int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double alpha_rel);
 OVK_HIDDEN void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const double *Q, const double *g,
-                             double *x, double *lam);
+                             double *x, double *lam, int warm);
 
 /* friction.c */
 OVK_HIDDEN double ovk_law_magnitude(const double *lp, int law, double speed);

@@ -110,7 +110,6 @@ from dataclasses import dataclass, field
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
-import scipy.linalg
 
 __all__ = [
     "DEFAULT_RTOL",
@@ -122,6 +121,8 @@ __all__ = [
     "null_space",
     "independent_columns",
     "auto_eliminate",
+    "Factored",
+    "factorise",
     "JointVerdict",
     "SetVerdict",
     "Analysis",
@@ -276,6 +277,8 @@ def _null_basis(J: np.ndarray, r: int, method: str) -> np.ndarray:
         _, _, vh = np.linalg.svd(J, full_matrices=True)
         return vh.T[:, r:].copy()
     if method == "qr":
+        import scipy.linalg
+
         q, _, _ = scipy.linalg.qr(J.T, mode="full", pivoting=True)
         return q[:, r:].copy()
     raise ValueError(f"unknown null-space method {method!r} (use 'svd' or 'qr')")
@@ -297,11 +300,62 @@ def _decision_matrix(J: np.ndarray, use_equilibration: bool) -> np.ndarray:
     return equilibrate(J)[0] if use_equilibration else J
 
 
+@dataclass(frozen=True, eq=False)
+class Factored:
+    """One factorisation of a Jacobian J (n, m), made once and read by :func:`independent_columns`
+    (so :func:`auto_eliminate`) and :func:`analyse`: the raw J and the decision matrix A
+    (equilibrated J, or J) held sparse (a large mechanism's J is nearly all zeros), and
+    :func:`_factorise` of A with its null basis. Made by :func:`factorise`; passing it instead of
+    J gives exactly the numbers passing J with the same ``rtol`` and ``equilibrate`` gives."""
+
+    J: object  # scipy.sparse.csr_matrix of the raw J
+    A: object  # scipy.sparse.csr_matrix of the decision matrix
+    f: "_Factorisation"
+    rtol: float
+    equilibrate: bool
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.A.shape
+
+    def nonzeros(self) -> tuple[np.ndarray, np.ndarray]:
+        """``np.nonzero`` of A (row-major, columns ascending in a row), from its sparse form."""
+        rr = np.repeat(np.arange(self.A.shape[0]), np.diff(self.A.indptr))
+        return rr, self.A.indices.astype(np.intp)
+
+
+def factorise(J, rtol: float | None = None, *, equilibrate: bool = True) -> Factored:
+    """:class:`Factored` of ``J``: the one factorisation (with its null basis) of the decision
+    matrix, for :func:`independent_columns` and :func:`analyse` to share."""
+    import scipy.sparse
+
+    J = _as_matrix(J)
+    rt = _rtol(rtol)
+    A = _decision_matrix(J, equilibrate)
+    sparse_a = scipy.sparse.csr_matrix(A)
+    sparse_a.sort_indices()
+    fz = Factored(J=scipy.sparse.csr_matrix(J), A=sparse_a, f=None, rtol=rt, equilibrate=equilibrate)
+    object.__setattr__(fz, "f", _factorise(A, rt, nonzeros=fz.nonzeros()))
+    return fz
+
+
+def _factored(J, rtol: float | None, equilibrate: bool) -> Factored | None:
+    """``J`` itself when it is a :class:`Factored` made with this ``rtol`` (None: any) and
+    ``equilibrate``, else None (the caller factorises)."""
+    if not isinstance(J, Factored):
+        return None
+    if (rtol is not None and _rtol(rtol) != J.rtol) or equilibrate != J.equilibrate:
+        raise ValueError(f"a Factored made with rtol={J.rtol}, equilibrate={J.equilibrate} was given with "
+                         f"rtol={rtol}, equilibrate={equilibrate}")
+    return J
+
+
 def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = True) -> list[int]:
     """A maximal linearly independent set of columns (equations) of ``J``, sorted, 0-based.
 
     From the one factorisation of the equilibrated J (raw J if ``equilibrate=False``;
-    :func:`_factorise`): every peeled column (it is in no dependency, so in every maximal
+    :func:`_factorise`; ``J`` may be its :class:`Factored`): every peeled column (it is in no
+    dependency, so in every maximal
     independent set), and in each block of rank r_k < its width the first r_k pivots of the
     column-pivoted QR (``scipy.linalg.qr(..., pivoting=True)``) of that block (all its columns
     when r_k is its width). Blocks share no rows, so this is what the pivoted QR of the whole
@@ -309,8 +363,14 @@ def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = Tru
     the reactions of unique joints do not depend on the choice. Each block's pick is verified to
     have rank r_k (greedy fallback in pivot order otherwise).
     """
-    A = _decision_matrix(_as_matrix(J), equilibrate)
-    f = _factorise(A, _rtol(rtol), vectors=False)
+    import scipy.linalg
+
+    fz = _factored(J, rtol, equilibrate)
+    if fz is None:
+        A = _decision_matrix(_as_matrix(J), equilibrate)
+        f = _factorise(A, _rtol(rtol), vectors=False)
+    else:
+        A, f = fz.A, fz.f
     chosen = list(f.peeled)
     for (rows, cols), rk in zip(f.blocks, f.ranks):
         if rk == 0:
@@ -318,7 +378,7 @@ def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = Tru
         if rk == len(cols):
             chosen += cols
             continue
-        sub = A[np.ix_(rows, cols)]
+        sub = _dense(A, rows, cols)
         _, piv = scipy.linalg.qr(sub, mode="r", pivoting=True)
         pick = [int(p) for p in piv[:rk]]
         if _rank_abs(sub[:, pick], f.tol) != rk:  # pragma: no cover - pivoted QR failed to reveal the rank (Kahan-type matrix)
@@ -332,12 +392,20 @@ def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = Tru
     return sorted(chosen)
 
 
+def _dense(A, rows, cols) -> np.ndarray:
+    """A[rows][:, cols] as a dense array, A dense or scipy.sparse."""
+    if isinstance(A, np.ndarray):
+        return A[np.ix_(list(rows), list(cols))]
+    return A[list(rows), :][:, list(cols)].toarray()
+
+
 def auto_eliminate(J, rtol: float | None = None, *, equilibrate: bool = True) -> list[int]:
     """Equations an automatic elimination removes: the complement of ``independent_columns``,
     sorted, 0-based (``m - rank`` of them)."""
-    J = _as_matrix(J)
-    keep = set(independent_columns(J, rtol, equilibrate=equilibrate))
-    return [c for c in range(J.shape[1]) if c not in keep]
+    fz = _factored(J, rtol, equilibrate)
+    m = fz.shape[1] if fz is not None else _as_matrix(J).shape[1]
+    keep = set(independent_columns(J if fz is not None else _as_matrix(J), rtol, equilibrate=equilibrate))
+    return [c for c in range(m) if c not in keep]
 
 
 # --------------------------------------------------------------------------- the one factorisation
@@ -728,7 +796,7 @@ class SetVerdict:
 
 @dataclass(frozen=True, eq=False)
 class _Context:
-    J: np.ndarray  # raw, for the reported B matrices
+    J: object  # raw, for the reported B matrices (dense with the cross-check, else sparse: its shape)
     A: np.ndarray  # matrix the decisions are made on (equilibrated J, or J)
     sigma: np.ndarray  # singular values of A reported (all of them with the cross-check)
     tol: float  # absolute rank threshold on A
@@ -783,16 +851,17 @@ def _b_rtol(rt: float, shape: tuple[int, int], kappa: float) -> float:
 
 def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> _Context:
     """The one factorisation of the decision matrix (:func:`_factorise`: the SVD test's null
-    basis), and with the cross-check (``methods="all"``) one dense SVD of it for the rank and QR
-    tests' rank, tolerance and kappa."""
+    basis; ``J`` may be its :class:`Factored`), and with the cross-check (``methods="all"``) one
+    dense SVD of it for the rank and QR tests' rank, tolerance and kappa."""
     run = _method_set(methods)
-    J = _as_matrix(J)
-    # the raw J is read again only by the cross-check's reports, or as A when not equilibrated
-    J = _readonly(J.copy() if "rank" in run or not use_equilibration else J.view())
-    rt = _rtol(rtol)
-    A = _readonly(_decision_matrix(J, use_equilibration))  # a new array, or the read-only J itself
-    nonzeros = np.nonzero(A)
-    f = _factorise(A, rt, nonzeros=nonzeros)
+    fz = _factored(J, rtol, use_equilibration)
+    if fz is None:
+        fz = factorise(J, rtol, equilibrate=use_equilibration)
+    rt = fz.rtol
+    # the raw J is read dense only by the cross-check's reports, or as A when not equilibrated
+    J = _readonly(fz.J.toarray()) if "rank" in run or not use_equilibration else fz.J
+    A = _readonly(fz.A.toarray()) if use_equilibration else J
+    f = fz.f
     brt = _b_rtol(rt, A.shape, f.kappa) if b_rtol is None else _rtol(b_rtol, "b_rtol")
     sigma, tol, r, qr_brt = f.sigma, f.tol, f.r, brt
     if "rank" in run:
@@ -803,7 +872,7 @@ def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> 
             qr_brt = _b_rtol(rt, A.shape, float(sigma[0] / sigma[r - 1]) if r > 0 else 1.0)
     return _Context(J=J, A=A, sigma=_readonly(np.array(sigma, dtype=float)), tol=tol, r=r, b_rtol=brt,
                     N_svd=_readonly(f.N), sigma1=f.sigma1, qr_b_rtol=qr_brt, route=f.route, methods=run,
-                    _lazy={"nonzeros": nonzeros})
+                    _lazy={"nonzeros": fz.nonzeros()})
 
 
 def _svd_full(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

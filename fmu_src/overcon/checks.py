@@ -42,11 +42,40 @@ def admit(model: Model, *, check_initial: bool = True, eliminate_field: str = "s
         check_initial_state(model)
     if model.scene.redundancy == "min-norm":  # every equation kept; the solve is rank-revealing
         return replace(model, retained=np.arange(model.m), eliminated=(), elimination_mode="min-norm")
+    fz = None
     if model.scene.redundancy == "compliant":
-        eliminated, mode = rigid_elimination(model), "compliant"
+        fz = factored_q0(model)
+        eliminated, mode = rigid_elimination(model, fz), "compliant"
+    elif model.scene.eliminate == "auto":
+        fz = factored_q0(model)
+        eliminated, mode = resolve_elimination(model, "auto", eliminate_field, fz)
     else:
         eliminated, mode = resolve_elimination(model, model.scene.eliminate, eliminate_field)
-    return with_eliminated(model, eliminated, mode)
+    admitted = with_eliminated(model, eliminated, mode)
+    if fz is not None:  # the pre-check reads the same factorisation (precheck.analyse_model)
+        object.__setattr__(admitted, "factored_q0", fz)
+    return admitted
+
+
+def analysed_rows(model: Model) -> list[int] | None:
+    """The equations (0-based) the pre-check analyses: under redundancy "compliant" the rigid ones
+    (the compliant joints' equations are forces), else all (None)."""
+    if not model.compliant_rows.size:
+        return None
+    compliant = set(int(r) for r in model.compliant_rows)
+    return [i for i in range(model.m) if i not in compliant]
+
+
+def factored_q0(model: Model) -> analysis.Factored:
+    """The one factorisation (:func:`overcon.analysis.factorise`) of Phi_h^T at q0, of its
+    :func:`analysed_rows` columns: the one admission made when it chose the elimination
+    (``auto``, or the rigid equations' under "compliant"), else made now. Elimination and
+    pre-check read the same matrix with the same rule, so they share it."""
+    if model.factored_q0 is not None:
+        return model.factored_q0
+    J = _jacobian_q0(model)
+    rows = analysed_rows(model)
+    return analysis.factorise(J if rows is None else J[:, rows])
 
 
 def with_eliminated(model: Model, eliminated, mode: str | None = None) -> Model:
@@ -156,27 +185,28 @@ def check_euler_q0(model: Model) -> None:
             f"in [mechanism] (no singularity) (bodies' q0 in {mech.source or mech.name})")
 
 
-def rigid_elimination(model: Model) -> list[int]:
+def rigid_elimination(model: Model, fz: analysis.Factored | None = None) -> list[int]:
     """Redundancy "compliant": the rigid equations (those of joints without compliance) that are
     dependent among themselves at q0, chosen like ``"auto"`` (1-based). The compliant equations
-    are kept: they are forces, not constraints."""
-    J = _jacobian_q0(model)
-    compliant = set(int(r) for r in model.compliant_rows)
-    rigid = [i for i in range(model.m) if i not in compliant]
+    are kept: they are forces, not constraints. ``fz``: :func:`factored_q0`, when made."""
+    rigid = analysed_rows(model)
+    if rigid is None:
+        rigid = list(range(model.m))
     if not rigid:
         return []
-    return sorted(rigid[k] + 1 for k in analysis.auto_eliminate(J[:, rigid]))
+    return sorted(rigid[k] + 1 for k in analysis.auto_eliminate(factored_q0(model) if fz is None else fz))
 
 
-def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate") -> tuple[list[int], str]:
+def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate",
+                        fz: analysis.Factored | None = None) -> tuple[list[int], str]:
     """Check (or choose, for "auto") the eliminated equations at q0. Returns 1-based indices.
     Raises ModelError naming ``field`` (where ``eliminate`` was given) for an elimination the
-    mechanism does not admit."""
+    mechanism does not admit. ``fz``: :func:`factored_q0`, when made (``"auto"`` reads it)."""
+    if eliminate == "auto":
+        removed = sorted(i + 1 for i in analysis.auto_eliminate(factored_q0(model) if fz is None else fz))
+        return removed, "auto"
     J = _jacobian_q0(model)
     r = analysis.numerical_rank(J)
-    if eliminate == "auto":
-        removed = sorted(i + 1 for i in analysis.auto_eliminate(J))
-        return removed, "auto"
     removed = sorted(eliminate)
     kept = [i for i in range(model.m) if i + 1 not in set(removed)]
     r_kept = analysis.numerical_rank(J[:, kept]) if kept else 0

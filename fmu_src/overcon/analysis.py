@@ -110,6 +110,7 @@ from dataclasses import dataclass, field
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
+import scipy.linalg  # loaded with its BLAS at import: a caller's thread limit (threadpoolctl) then covers it
 
 __all__ = [
     "DEFAULT_RTOL",
@@ -277,8 +278,6 @@ def _null_basis(J: np.ndarray, r: int, method: str) -> np.ndarray:
         _, _, vh = np.linalg.svd(J, full_matrices=True)
         return vh.T[:, r:].copy()
     if method == "qr":
-        import scipy.linalg
-
         q, _, _ = scipy.linalg.qr(J.T, mode="full", pivoting=True)
         return q[:, r:].copy()
     raise ValueError(f"unknown null-space method {method!r} (use 'svd' or 'qr')")
@@ -363,8 +362,6 @@ def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = Tru
     the reactions of unique joints do not depend on the choice. Each block's pick is verified to
     have rank r_k (greedy fallback in pivot order otherwise).
     """
-    import scipy.linalg
-
     fz = _factored(J, rtol, equilibrate)
     if fz is None:
         A = _decision_matrix(_as_matrix(J), equilibrate)
@@ -381,15 +378,21 @@ def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = Tru
         sub = _dense(A, rows, cols)
         _, piv = scipy.linalg.qr(sub, mode="r", pivoting=True)
         pick = [int(p) for p in piv[:rk]]
-        if _rank_abs(sub[:, pick], f.tol) != rk:  # pragma: no cover - pivoted QR failed to reveal the rank (Kahan-type matrix)
+        if _rank_at(sub[:, pick], f.tol) != rk:  # pragma: no cover - pivoted QR failed to reveal the rank (Kahan-type matrix)
             pick = []
             for p in piv:
-                if _rank_abs(sub[:, pick + [int(p)]], f.tol) == len(pick) + 1:
+                if _rank_at(sub[:, pick + [int(p)]], f.tol) == len(pick) + 1:
                     pick.append(int(p))
                 if len(pick) == rk:
                     break
         chosen += [cols[p] for p in pick]
     return sorted(chosen)
+
+
+def _rank_at(A: np.ndarray, tol: float) -> int:
+    """The count of singular values of A above the absolute ``tol`` (the one factorisation: a
+    pick of a loop block's columns keeps its hubs)."""
+    return _factorise(A, DEFAULT_RTOL, tol=tol, vectors=False).r
 
 
 def _dense(A, rows, cols) -> np.ndarray:
@@ -605,13 +608,18 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     2. Split what is left, A' = A[live rows, live columns], into the connected components of its
        row-column graph (two equations are coupled when they share a coordinate). A' is block
        diagonal after permutation, so its singular values are the union of the blocks' and its
-       null space the direct sum of theirs. One dense SVD per block (LAPACK gesdd, full V).
+       null space the direct sum of theirs. One dense SVD per block (LAPACK gesdd, full V),
+       except a block with hub rows (a body many joints share, :func:`_hub`), which is factorised
+       through its hubs: one small SVD per part left when the hub rows are set aside, and one of
+       the hub rows on those parts' null vectors (:meth:`_Hub.finish`, with its own certificate;
+       its dense SVD when that fails).
     3. The threshold is the SVD test's, ``tol = max(rtol, max(n, m) * eps) * ||A||_2``, with
-       ||A||_2 of the whole A (when anything was peeled, the lower bound lo of
-       :func:`_sigma1_bounds`, 7e-5 low at worst on a long chain of equal links, else exactly
-       the largest block singular value), applied to every block: the rank is the number of
-       peeled columns plus the blocks' singular values above tol; the null basis is the blocks'
-       right singular vectors at or below tol, zero on the peeled columns.
+       ||A||_2 of the whole A (when anything was peeled or a block went through its hubs, the
+       lower bound lo of :func:`_sigma1_bounds`, 7e-5 low at worst on a long chain of equal
+       links, else exactly the largest block singular value), applied to every block: the rank
+       is the number of peeled columns plus the blocks' ranks; the null basis is the blocks'
+       null bases (a dense block's right singular vectors at or below tol), zero on the peeled
+       columns.
 
     The certificate (why the verdicts are those of one SVD of A, with the tolerance): write
     A = [[B, 0], [X, A']] (peeled rows and columns first). A null-ish vector of A'
@@ -621,7 +629,9 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     tol / beta), so A has at most as many as A' has <= c tol. Both counts agree unless A' has a
     singular value in (tol, c tol], or beta <= tol. With ||A||_2 known only within [lo, hi],
     the dense tolerance lies in [tol_lo, tol_hi] and the certificate is: beta > tol_hi and no
-    singular value of A' in (tol_lo, c(tol_hi) tol_hi]. beta >= 1 / ||L||_F
+    singular value of A' in (tol_lo, T], T = c(tol_hi) tol_hi (a block through its hubs: its
+    count of singular values <= tau is the same for every tau in [tol_lo, T], :meth:`_Hub.finish`).
+    beta >= 1 / ||L||_F
     (:func:`_left_inverse_bound`, else the exact :func:`_left_inverse_norm`) and ||X||_2 <=
     ||X||_F make c computable; when the certificate fails, the dense route runs: one SVD of the
     whole A (the previous method). With ranks equal,
@@ -639,36 +649,52 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     # ||A||_F >= ||A||_2, so this floor is at least tol: a peeled D is of full rank above tol
     floor = float(tol) if tol is not None else rtol_eff * float(np.sqrt(np.sum(A[rr, cc] ** 2)))
     steps, live_r, live_c = _peel(A, rows_of, cols_of, floor)
-    blocks, svds = _blocks(A, live_r, live_c, rows_of, vectors)
-    sigma_blocks = [s for s, _ in svds]
-    top = max((float(s[0]) for s in sigma_blocks if s.size), default=0.0)
+    blocks = _blocks(A, live_r, live_c, rows_of)
+    parts: list = []  # per block: its dense SVD (s, V^T or None), or a _Hub
+    for rows, cols in blocks:
+        hub = _hub(A, rows, cols, rows_of, cols_of, live_c)
+        parts.append(hub if hub is not None else _block_svd(A, rows, cols, vectors))
+    hubs = [b for b, p in enumerate(parts) if isinstance(p, _Hub)]
+    top = max((float(s[0]) for p in parts for s in (p.sigmas() if isinstance(p, _Hub) else [p[0]]) if s.size),
+              default=0.0)
     if tol is None:
-        lo, hi = _sigma1_bounds(A, rr, cc) if steps else (top, top)
+        lo, hi = _sigma1_bounds(A, rr, cc) if steps or hubs else (top, top)
         sigma1 = max(lo, top)
         t, t_hi = rtol_eff * sigma1, rtol_eff * max(hi, top)
     else:
         sigma1, t = float("nan"), float(tol)
         t_hi = t
-    route = "blocks" if not steps or _certified(A, rr, cc, steps, cols_of, sigma_blocks, t, t_hi) else "dense"
+    T = _peel_margin(A, rr, cc, steps, cols_of, t_hi) if steps else t_hi
+    if T is not None:
+        for b in hubs:
+            parts[b] = parts[b].finish(A, blocks[b][1], t, T) or _block_svd(A, *blocks[b], vectors)
+    dense = [p for p in parts if not isinstance(p, _HubFactors)]
+    route = "blocks" if T is not None and not any(np.any((s > t) & (s <= T)) for s, _ in dense) else "dense"
     if route == "dense":
         s, vh = _svd_full(A) if vectors else (_svdvals(A), None)
         if tol is None:
             sigma1 = float(s[0]) if s.size else 0.0
             t = rtol_eff * sigma1
         blocks = ((tuple(range(n)), tuple(range(m))),)
-        svds, steps = [(s, vh)], []
+        parts, steps = [(s, vh)], []
     peeled = tuple(c for _, C, _ in steps for c in C)
-    ranks, parts = [], []
-    for (rows, cols), (s, vh) in zip(blocks, svds):
-        rk = int(np.count_nonzero(s > t))
+    ranks, nulls, sigmas = [], [], []
+    for (rows, cols), p in zip(blocks, parts):
+        if isinstance(p, _HubFactors):
+            rk, null, s = p.rank, p.N, p.sigma
+        else:
+            s, vh = p
+            rk = int(np.count_nonzero(s > t))
+            null = vh.T[:, rk:] if vectors and len(cols) > rk else None
         ranks.append(rk)
+        sigmas.append(s)
         if vectors and len(cols) > rk:
             part = np.zeros((m, len(cols) - rk))
-            part[list(cols), :] = vh.T[:, rk:]
-            parts.append(part)
+            part[list(cols), :] = null
+            nulls.append(part)
     r = len(peeled) + sum(ranks)
-    N = np.hstack(parts) if parts else np.zeros((m, 0))
-    sigma = np.sort(np.concatenate([np.zeros(0)] + [s for s, _ in svds]))[::-1]
+    N = np.hstack(nulls) if nulls else np.zeros((m, 0))
+    sigma = np.sort(np.concatenate([np.zeros(0)] + sigmas))[::-1]
     above = sigma[sigma > t]
     kappa = float(sigma1 / above[-1]) if above.size and np.isfinite(sigma1) else 1.0
     return _Factorisation(sigma1=sigma1, tol=t, r=r, N=N, sigma=sigma, kappa=kappa, peeled=peeled,
@@ -685,15 +711,15 @@ def _pattern(rr: np.ndarray, cc: np.ndarray, n: int, m: int) -> tuple[list, list
     return rows_of, cols_of
 
 
-def _certified(A, rr, cc, steps, cols_of, sigma_blocks, t, t_hi) -> bool:
-    """The certificate of :func:`_factorise`: beta > t_hi and no block singular value in
-    (t, c t_hi], c = (1 + ||X||_F / beta) / (1 - t_hi / beta), beta = 1 / (a bound of ||L||_F)."""
+def _peel_margin(A, rr, cc, steps, cols_of, t_hi) -> float | None:
+    """T = c t_hi of the certificate of :func:`_factorise`, c = (1 + ||X||_F / beta) / (1 - t_hi
+    / beta), beta = 1 / (a bound of ||L||_F); None when beta <= t_hi (the certificate fails)."""
     n, m = A.shape
     beta = 1.0 / _left_inverse_bound(A, steps, cols_of)
     if not beta > 2.0 * t_hi:  # the one-pass bound is too loose here: the exact ||L||_F
         beta = 1.0 / _left_inverse_norm(A, steps, cols_of)
     if not beta > t_hi:
-        return False
+        return None
     peeled_c = np.zeros(m, dtype=bool)
     peeled_r = np.zeros(n, dtype=bool)
     for R, C, _ in steps:
@@ -701,44 +727,146 @@ def _certified(A, rr, cc, steps, cols_of, sigma_blocks, t, t_hi) -> bool:
         peeled_r[R] = True
     sel = peeled_c[cc] & ~peeled_r[rr]  # X = A[rows left, peeled columns]
     x_f = float(np.sqrt(np.sum(A[rr[sel], cc[sel]] ** 2)))
-    c = (1.0 + x_f / beta) / (1.0 - t_hi / beta)
-    return not any(np.any((s > t) & (s <= c * t_hi)) for s in sigma_blocks)
+    return (1.0 + x_f / beta) / (1.0 - t_hi / beta) * t_hi
 
 
-def _blocks(A: np.ndarray, live_r: np.ndarray, live_c: np.ndarray, rows_of: list, vectors: bool = True):
-    """Connected components of the live rows and columns of A (an edge per nonzero), in order of
-    their smallest column; a live column with no live row is a block of its own (0 rows). Each
-    with its dense SVD (singular values, and V^T if ``vectors``, else None)."""
-    import scipy.sparse
-    import scipy.sparse.csgraph
-
+def _blocks(A: np.ndarray, live_r: np.ndarray, live_c: np.ndarray, rows_of: list) -> list:
+    """Connected components [(rows, cols)] of the live rows and columns of A (an edge per
+    nonzero), in order of their smallest column; a live column with no live row is a block of
+    its own (0 rows)."""
     n, m = A.shape
     cols = np.flatnonzero(live_c)
     if cols.size == 0:
-        return [], []
-    e_r, e_c = [], []
-    for c in cols.tolist():
-        for i in rows_of[c]:
-            if live_r[i]:
-                e_r.append(i)
-                e_c.append(n + c)
-    g = scipy.sparse.coo_matrix((np.ones(len(e_r)), (e_r, e_c)), shape=(n + m, n + m))
-    _, label = scipy.sparse.csgraph.connected_components(g, directed=False)
+        return []
+    label = _components(n + m, [(i, n + c) for c in cols.tolist() for i in rows_of[c] if live_r[i]])
     groups: dict[int, tuple[list, list]] = {}
     for c in cols.tolist():
         groups.setdefault(int(label[n + c]), ([], []))[1].append(c)
     for i in np.flatnonzero(live_r).tolist():
         if int(label[i]) in groups:
             groups[int(label[i])][0].append(i)
-    blocks, svds = [], []
-    for rows, bcols in groups.values():
-        blocks.append((tuple(rows), tuple(bcols)))
-        if not rows:
-            svds.append((np.zeros(0), np.eye(len(bcols))))
-        else:
-            sub = A[np.ix_(rows, bcols)]
-            svds.append(_svd_full(sub) if vectors else (_svdvals(sub), None))
-    return blocks, svds
+    return [(tuple(rows), tuple(bcols)) for rows, bcols in groups.values()]
+
+
+def _components(nodes: int, edges: list) -> np.ndarray:
+    """The connected component label of each of ``nodes`` nodes joined by ``edges`` [(a, b)]."""
+    import scipy.sparse
+    import scipy.sparse.csgraph
+
+    a = np.array([e[0] for e in edges], dtype=int)
+    b = np.array([e[1] for e in edges], dtype=int)
+    g = scipy.sparse.coo_matrix((np.ones(len(edges)), (a, b)), shape=(nodes, nodes))
+    return scipy.sparse.csgraph.connected_components(g, directed=False)[1]
+
+
+def _block_svd(A: np.ndarray, rows, cols, vectors: bool = True) -> tuple:
+    """The dense SVD of A[rows, cols]: singular values, and V^T if ``vectors`` (else None)."""
+    if not rows:
+        return np.zeros(0), np.eye(len(cols))
+    sub = A[np.ix_(list(rows), list(cols))]
+    return _svd_full(sub) if vectors else (_svdvals(sub), None)
+
+
+#: A row (coordinate) of a block touched by more than this many equations is a hub: a body that
+#: many joints share (the coupler on k cranks: 2k equations), set aside by :func:`_hub`.
+_HUB_DEGREE = 12
+
+
+@dataclass(frozen=True, eq=False)
+class _HubFactors:
+    """A block factorised through its hubs (:meth:`_Hub.finish`): rank, null basis (the block's
+    columns x its nullity) and the singular values computed (its parts' above tol, the hub
+    rows' matrix G's)."""
+
+    rank: int
+    N: np.ndarray
+    sigma: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class _Hub:
+    """A block with hub rows S (:func:`_hub`): the parts [(rows_k, cols_k)] the block falls into
+    without S, each with its dense SVD (s_k, V_k^T)."""
+
+    S: tuple
+    parts: tuple
+    svds: tuple
+
+    def sigmas(self) -> list:
+        return [s for s, _ in self.svds]
+
+    def finish(self, A: np.ndarray, cols: tuple, t: float, T: float) -> _HubFactors | None:
+        """The block's rank and null basis at the threshold t, or None when the certificate
+        cannot show them to be one dense SVD's of the block for every threshold in [t, T].
+
+        With V = diag(V_k) (orthogonal), A_b V = [[D, E], [F, G]] (rows: the parts', then S;
+        columns: each part's right singular vectors above t, then those at or below): D =
+        diag(U_k Sigma_k) of full column rank, beta = sigma_min(D) its parts' smallest singular
+        value above t; E the parts' singular values at or below t, ||E||_2 = e; F, G = A[S, C_k]
+        V_k. In exact arithmetic with E = 0, null(A_b) = diag(V_k null) null(G) (D x = 0 forces
+        x = 0) and rank = sum rank_k + rank(G). Numerically (Weyl, then the argument of
+        :func:`_factorise` with B = D, X = F, A' = G): for tau in [t, T] the count of singular
+        values of A_b <= tau lies between G's count <= t - e and G's count <= c (T + e), c = (1
+        + ||F|| / beta) / (1 - (T + e) / beta); the certificate is beta > T + e and no singular
+        value of G in (t - e, c (T + e)]. ||F||_2 <= ||A[S, block]||_F."""
+        pos = {c: p for p, c in enumerate(cols)}
+        rank, e, beta, nulls, g_parts = 0, 0.0, np.inf, [], []
+        S = list(self.S)
+        for (_, cols_k), (s, vh) in zip(self.parts, self.svds):
+            rk = int(np.count_nonzero(s > t))
+            rank += rk
+            if rk:
+                beta = min(beta, float(s[rk - 1]))
+            if s.size > rk:
+                e = max(e, float(s[rk]))
+            vn = vh.T[:, rk:]
+            nulls.append(vn)
+            g_parts.append(A[np.ix_(S, list(cols_k))] @ vn)
+        G = np.hstack(g_parts)
+        s_g, vh_g = _svd_full(G)
+        r_g = int(np.count_nonzero(s_g > t))
+        if not beta > T + e:
+            return None
+        c = 1.0 if np.isinf(beta) else (1.0 + _frobenius(A, S, cols) / beta) / (1.0 - (T + e) / beta)
+        if np.any((s_g > t - e) & (s_g <= c * (T + e))):
+            return None
+        n_g = vh_g.T[:, r_g:]
+        N = np.zeros((len(cols), n_g.shape[1]))
+        at = 0
+        for (_, cols_k), vn in zip(self.parts, nulls):
+            N[[pos[c] for c in cols_k], :] = vn @ n_g[at:at + vn.shape[1]]
+            at += vn.shape[1]
+        above = [s[s > t] for s, _ in self.svds]
+        return _HubFactors(rank=rank + r_g, N=N, sigma=np.concatenate(above + [s_g]))
+
+
+def _frobenius(A: np.ndarray, rows: list, cols) -> float:
+    return float(np.sqrt(np.sum(A[np.ix_(rows, list(cols))] ** 2)))
+
+
+def _hub(A: np.ndarray, rows: tuple, cols: tuple, rows_of: list, cols_of: list, live_c: np.ndarray) -> _Hub | None:
+    """The block (rows, cols) as a :class:`_Hub`: S = its rows with more than :data:`_HUB_DEGREE`
+    live columns, and the parts its other rows and its columns fall into without S (a column
+    touching S alone is a part of its own, with no rows), each with its dense SVD; None when no
+    row is a hub or some part keeps more than half the block's columns (nothing to gain)."""
+    S = [i for i in rows if sum(1 for c in cols_of[i] if live_c[c]) > _HUB_DEGREE]
+    if not S or len(cols) < 4:
+        return None
+    hub_rows = set(S)
+    rest = [i for i in rows if i not in hub_rows]
+    rpos = {i: k for k, i in enumerate(rest)}
+    base = len(rest)
+    label = _components(base + len(cols), [(rpos[i], base + k) for k, c in enumerate(cols)
+                                           for i in rows_of[c] if i in rpos])
+    groups: dict[int, tuple[list, list]] = {}
+    for k, c in enumerate(cols):
+        groups.setdefault(int(label[base + k]), ([], []))[1].append(c)
+    for i in rest:
+        groups[int(label[rpos[i]])][0].append(i)  # every row of the block has a column in it
+    parts = tuple((tuple(r), tuple(c)) for r, c in groups.values())
+    if len(parts) < 2 or max(len(c) for _, c in parts) > len(cols) // 2:
+        return None
+    return _Hub(S=tuple(S), parts=parts, svds=tuple(_block_svd(A, r, c) for r, c in parts))
 
 
 # --------------------------------------------------------------------------- verdict types

@@ -27,7 +27,7 @@ def _dense(A: np.ndarray, rtol: float = an.DEFAULT_RTOL):
 
 
 CASES = [("planar", "chain", 300, 0), ("spatial", "chain", 120, 0), ("planar", "loops", 200, 12),
-         ("spatial", "loops", 100, 8), ("planar", "cranks", 80, 0), ("planar", "forest", 240, 0),
+         ("spatial", "loops", 100, 8), ("planar", "cranks", 80, 0), ("spatial", "cranks", 40, 0), ("planar", "forest", 240, 0),
          ("spatial", "forest", 90, 0), ("planar", "tree", 250, 0)]
 
 
@@ -82,6 +82,45 @@ def test_certificate_sends_a_loop_near_the_threshold_to_the_dense_svd():
     f = an._factorise(exact, an.DEFAULT_RTOL)
     assert f.route == "blocks" and f.r == _dense(exact)[0] == 2 and f.N.shape == (4, 2)
     assert np.all(f.N[0] == 0.0) and np.abs(exact @ f.N).max() <= 1e-15
+
+
+def _star(parts: int, delta: float) -> np.ndarray:
+    """A hub row (row 0) on ``parts`` parts, part k row k + 1 = [1, 1] on columns 2k, 2k + 1 (its
+    null vector (1, -1) / sqrt 2); the hub row reads [1, 1 + delta] on each part, so the hub
+    rows' matrix G on the parts' null vectors is delta / sqrt 2 per part (rank 1 unless 0)."""
+    A = np.zeros((parts + 1, 2 * parts))
+    for k in range(parts):
+        A[k + 1, 2 * k:2 * k + 2] = 1.0
+        A[0, 2 * k:2 * k + 2] = [1.0, 1.0 + delta]
+    return A
+
+
+def test_hub_block_is_the_dense_svd_and_its_certificate_refuses_near_the_threshold():
+    """A block with a hub row (more than _HUB_DEGREE equations on it) goes through its hubs: far
+    from the threshold the certificate holds and the rank and null space are the dense SVD's.
+    With G's singular value 1.5 tol the parts and G alone would say rank parts + 1, but A's
+    smallest singular value is 0.53 tol (the coupling F): the certificate refuses and the dense
+    SVD of the block decides (rank parts)."""
+    parts = an._HUB_DEGREE // 2 + 1
+    tol = an.DEFAULT_RTOL * np.linalg.norm(_star(parts, 0.0), 2)
+    near = 1.5 * tol / np.sqrt(parts / 2)  # ||G|| = delta sqrt(parts / 2)
+    for delta, certified, rank in [(0.5, True, parts + 1), (0.0, True, parts), (near, False, parts)]:
+        A = _star(parts, delta)
+        n, m = A.shape
+        rr, cc = np.nonzero(A)
+        rows_of, cols_of = an._pattern(rr, cc, n, m)
+        hub = an._hub(A, tuple(range(n)), tuple(range(m)), rows_of, cols_of, np.ones(m, bool))
+        assert hub is not None and hub.S == (0,) and len(hub.parts) == parts
+        t = max(an.DEFAULT_RTOL, max(n, m) * EPS) * np.linalg.norm(A, 2)
+        got = hub.finish(A, tuple(range(m)), t, t)
+        assert (got is not None) == certified
+        r, _, N, kappa = _dense(A)
+        f = an._factorise(A, an.DEFAULT_RTOL)
+        assert f.r == r == rank
+        bound = an.B_NOISE_FACTOR * max(n, m) * EPS * kappa
+        assert np.abs(f.N @ f.N.T - N @ N.T).max() <= bound
+        if certified:
+            assert got.rank == r and got.N.shape == N.shape and np.abs(got.N @ got.N.T - N @ N.T).max() <= bound
 
 
 def test_decoupled_blocks_and_zero_columns():

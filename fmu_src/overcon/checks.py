@@ -38,16 +38,15 @@ def admit(model: Model, *, check_initial: bool = True, eliminate_field: str = "s
     (before the elimination is checked: a rank at an inconsistent q0 means nothing).
     ``check_initial=False`` skips that check: only for evaluating kinematics at arbitrary
     configurations (tests); a Simulation checks again."""
-    if check_initial:
-        check_initial_state(model)
+    J = check_initial_state(model).T if check_initial else None  # Phi_h^T at q0, read once
     if model.scene.redundancy == "min-norm":  # every equation kept; the solve is rank-revealing
         return replace(model, retained=np.arange(model.m), eliminated=(), elimination_mode="min-norm")
     fz = None
     if model.scene.redundancy == "compliant":
-        fz = factored_q0(model)
+        fz = factored_q0(model, J)
         eliminated, mode = rigid_elimination(model, fz), "compliant"
     elif model.scene.eliminate == "auto":
-        fz = factored_q0(model)
+        fz = factored_q0(model, J)
         eliminated, mode = resolve_elimination(model, "auto", eliminate_field, fz)
     else:
         eliminated, mode = resolve_elimination(model, model.scene.eliminate, eliminate_field)
@@ -66,14 +65,15 @@ def analysed_rows(model: Model) -> list[int] | None:
     return [i for i in range(model.m) if i not in compliant]
 
 
-def factored_q0(model: Model) -> analysis.Factored:
+def factored_q0(model: Model, J: np.ndarray | None = None) -> analysis.Factored:
     """The one factorisation (:func:`overcon.analysis.factorise`) of Phi_h^T at q0, of its
     :func:`analysed_rows` columns: the one admission made when it chose the elimination
-    (``auto``, or the rigid equations' under "compliant"), else made now. Elimination and
-    pre-check read the same matrix with the same rule, so they share it."""
+    (``auto``, or the rigid equations' under "compliant"), else made now (``J``: Phi_h^T at q0
+    when the caller has it). Elimination and pre-check read the same matrix with the same rule,
+    so they share it."""
     if model.factored_q0 is not None:
         return model.factored_q0
-    J = _jacobian_q0(model)
+    J = _jacobian_q0(model) if J is None else J
     rows = analysed_rows(model)
     return analysis.factorise(J if rows is None else J[:, rows])
 
@@ -87,12 +87,12 @@ def with_eliminated(model: Model, eliminated, mode: str | None = None) -> Model:
                    elimination_mode=model.elimination_mode if mode is None else mode)
 
 
-def check_initial_state(model: Model, tol: float = 1e-9) -> None:
+def check_initial_state(model: Model, tol: float = 1e-9) -> np.ndarray:
     """Refuse q0/h0 off the constraint manifold: |Phi| or |Phi_h h0| above tol (m or rad; m/s
     or rad/s), scaled by max(1, max |q0|) (max(1, max |h0|)); a non-finite value is refused too.
     Raises :class:`InconsistentInitialState` naming the violated equations, their joints and
     the mechanism file that holds q0/h0; first, for z-x-z Euler bodies, a q0 at the Euler
-    singularity (:func:`check_euler_q0`)."""
+    singularity (:func:`check_euler_q0`). Returns Phi_h (m, nh) at q0, which it evaluated."""
     check_euler_q0(model)
     joint_of = {r + 1: c.name for c in model.joints for r in c.rows}
     mech = model.scene.mechanism
@@ -125,6 +125,7 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> None:
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(vel) <= tol * hscale))]
     if bad:
         raise InconsistentInitialState(f"initial velocities h0 violate the velocity constraints {eqs(bad)}{where}")
+    return Jh
 
 
 def _rows_q0(model: Model, where: str) -> tuple[np.ndarray, np.ndarray]:

@@ -326,16 +326,26 @@ class Factored:
 def factorise(J, rtol: float | None = None, *, equilibrate: bool = True) -> Factored:
     """:class:`Factored` of ``J``: the one factorisation (with its null basis) of the decision
     matrix, for :func:`independent_columns` and :func:`analyse` to share."""
-    import scipy.sparse
-
     J = _as_matrix(J)
     rt = _rtol(rtol)
-    A = _decision_matrix(J, equilibrate)
-    sparse_a = scipy.sparse.csr_matrix(A)
-    sparse_a.sort_indices()
-    fz = Factored(J=scipy.sparse.csr_matrix(J), A=sparse_a, f=None, rtol=rt, equilibrate=equilibrate)
-    object.__setattr__(fz, "f", _factorise(A, rt, nonzeros=fz.nonzeros()))
-    return fz
+    A, nonzeros, f = _decide(J, rt, equilibrate)
+    return Factored(J=_csr(J, np.nonzero(J)), A=_csr(A, nonzeros), f=f, rtol=rt, equilibrate=equilibrate)
+
+
+def _decide(J: np.ndarray, rt: float, use_equilibration: bool) -> tuple[np.ndarray, tuple, "_Factorisation"]:
+    """(decision matrix A, its nonzeros, :func:`_factorise` of A with its null basis)."""
+    A = _decision_matrix(J, use_equilibration)
+    nonzeros = np.nonzero(A)
+    return A, nonzeros, _factorise(A, rt, nonzeros=nonzeros)
+
+
+def _csr(A: np.ndarray, nonzeros: tuple):
+    """A as a scipy.sparse.csr_matrix, from its nonzeros (row-major, as ``np.nonzero`` gives them)."""
+    import scipy.sparse
+
+    rr, cc = nonzeros
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rr, minlength=A.shape[0]))])
+    return scipy.sparse.csr_matrix((A[rr, cc], cc, indptr), shape=A.shape)
 
 
 def _factored(J, rtol: float | None, equilibrate: bool) -> Factored | None:
@@ -984,12 +994,16 @@ def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> 
     run = _method_set(methods)
     fz = _factored(J, rtol, use_equilibration)
     if fz is None:
-        fz = factorise(J, rtol, equilibrate=use_equilibration)
-    rt = fz.rtol
-    # the raw J is read dense only by the cross-check's reports, or as A when not equilibrated
-    J = _readonly(fz.J.toarray()) if "rank" in run or not use_equilibration else fz.J
-    A = _readonly(fz.A.toarray()) if use_equilibration else J
-    f = fz.f
+        J = _as_matrix(J)
+        # the raw J is read again only by the cross-check's reports, or as A when not equilibrated
+        J = _readonly(J.copy() if "rank" in run or not use_equilibration else J.view())
+        rt = _rtol(rtol)
+        A, nonzeros, f = _decide(J, rt, use_equilibration)
+        A = _readonly(A)  # a new array, or the read-only J itself
+    else:
+        rt, f, nonzeros = fz.rtol, fz.f, fz.nonzeros()
+        J = _readonly(fz.J.toarray()) if "rank" in run or not use_equilibration else fz.J  # sparse: its shape
+        A = _readonly(fz.A.toarray()) if use_equilibration else J
     brt = _b_rtol(rt, A.shape, f.kappa) if b_rtol is None else _rtol(b_rtol, "b_rtol")
     sigma, tol, r, qr_brt = f.sigma, f.tol, f.r, brt
     if "rank" in run:
@@ -1000,7 +1014,7 @@ def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> 
             qr_brt = _b_rtol(rt, A.shape, float(sigma[0] / sigma[r - 1]) if r > 0 else 1.0)
     return _Context(J=J, A=A, sigma=_readonly(np.array(sigma, dtype=float)), tol=tol, r=r, b_rtol=brt,
                     N_svd=_readonly(f.N), sigma1=f.sigma1, qr_b_rtol=qr_brt, route=f.route, methods=run,
-                    _lazy={"nonzeros": fz.nonzeros()})
+                    _lazy={"nonzeros": nonzeros})
 
 
 def _svd_full(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

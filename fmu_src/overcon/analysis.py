@@ -47,7 +47,10 @@ spaces add up to its null space. The threshold is the whole matrix's (``tol`` be
 ||A||_2 bounded from both sides), and a certificate (sigma_min of the peeled part against the
 blocks' singular values near ``tol``) proves the rank is the one one dense SVD of the whole
 matrix gives; when it cannot, that dense SVD runs. A tree mechanism peels whole (no SVD at
-all); a parallelogram linkage is one block. ``methods="all"`` also runs one dense SVD of the
+all); a parallelogram linkage is one block, whose coupler's rows are hubs (more than
+:data:`_HUB_DEGREE` equations on them): set aside, the block falls into one small part per crank,
+factorised one by one, and the hub rows on those parts' null vectors are factorised last
+(:meth:`_Hub.finish`, with its own certificate, the block's dense SVD when that fails). ``methods="all"`` also runs one dense SVD of the
 whole matrix for the rank and QR tests (rank, tolerance and their kappa), so the cross-check
 compares the one factorisation with independent computations.
 
@@ -778,7 +781,8 @@ def _block_svd(A: np.ndarray, rows, cols, vectors: bool = True) -> tuple:
 
 
 #: A row (coordinate) of a block touched by more than this many equations is a hub: a body that
-#: many joints share (the coupler on k cranks: 2k equations), set aside by :func:`_hub`.
+#: many joints share (the coupler on k planar cranks: 2k equations), set aside by :func:`_hub`.
+#: 12 is two full spatial joints: a body of an ordinary loop (two or three joints) is no hub.
 _HUB_DEGREE = 12
 
 

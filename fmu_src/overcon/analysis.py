@@ -225,16 +225,26 @@ def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     A = _as_matrix(J).copy()
     n, m = A.shape
-    d_r, d_c = np.ones(n), np.ones(m)
     if A.size == 0:
-        return A, d_r, d_c
+        return A, np.ones(n), np.ones(m)
     # everything below touches the nonzeros only (a large mechanism's J is very sparse): the same
     # maxima, and the same products in the same order, as on the dense array
     rr, cc = np.nonzero(A)  # row-major: rr ascending
-    v = np.abs(A[rr, cc])
+    keep, v, d_r, d_c = _ruiz(rr, cc, A[rr, cc], n, m)
+    A[rr[~keep], cc[~keep]] = 0.0
+    A[rr[keep], cc[keep]] = v
+    return A, d_r, d_c
+
+
+def _ruiz(rr: np.ndarray, cc: np.ndarray, vals: np.ndarray, n: int, m: int):
+    """:func:`equilibrate` on the nonzeros ``vals`` at (rr, cc) (row-major) of an (n, m) matrix:
+    (mask of the nonzeros kept, the kept ones' scaled values, d_r, d_c); the others are
+    round-off set to zero."""
+    d_r, d_c = np.ones(n), np.ones(m)
+    v = np.abs(vals)
     amax = float(v.max()) if v.size else 0.0
     if amax == 0.0:
-        return A, d_r, d_c
+        return np.ones(vals.size, dtype=bool), vals.copy(), d_r, d_c
     floor = NOISE_FACTOR * max(n, m) * EPS * amax
     rmax = np.zeros(n)
     np.maximum.at(rmax, rr, v)
@@ -242,10 +252,9 @@ def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     cmax = np.zeros(m)
     np.maximum.at(cmax, cc, v)
     v[(cmax <= floor)[cc]] = 0.0
-    A[rr, cc] = np.where(v == 0.0, 0.0, A[rr, cc])
     keep = v != 0.0
     rr, cc = rr[keep], cc[keep]
-    v = A[rr, cc]
+    v = vals[keep]
     by_col = np.argsort(cc, kind="stable")
     r_at, r_start = np.unique(rr, return_index=True)
     c_at, c_start = np.unique(cc[by_col], return_index=True)
@@ -267,8 +276,66 @@ def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         v = sr[rr] * v * sc[cc]
         d_r *= sr
         d_c *= sc
-    A[rr, cc] = v
-    return A, d_r, d_c
+    return keep, v, d_r, d_c
+
+
+class _Sparse:
+    """A matrix held by its nonzeros, row-major (CSR: ``indptr``, ``indices``, ``data``): what the
+    one factorisation gathers from (:func:`_sub`), without the dense n x m array."""
+
+    def __init__(self, shape: tuple[int, int], rr: np.ndarray, cc: np.ndarray, vals: np.ndarray):
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(rr, minlength=self.shape[0]))]).astype(np.intp)
+        self.indices = np.asarray(cc, dtype=np.intp)
+        self.data = np.asarray(vals, dtype=float)
+        self.data.setflags(write=False)
+
+    def nonzeros(self) -> tuple[np.ndarray, np.ndarray]:
+        """``np.nonzero`` of the matrix (row-major, columns ascending in a row)."""
+        return np.repeat(np.arange(self.shape[0]), np.diff(self.indptr)), self.indices
+
+    def toarray(self) -> np.ndarray:
+        out = np.zeros(self.shape)
+        rr, cc = self.nonzeros()
+        out[rr, cc] = self.data
+        return out
+
+    def sub(self, R, C) -> np.ndarray:
+        """The dense submatrix of rows R x columns C (in their order)."""
+        R, C = np.asarray(R, dtype=np.intp).reshape(-1), np.asarray(C, dtype=np.intp).reshape(-1)
+        out = np.zeros((R.size, C.size))
+        if not R.size or not C.size:
+            return out
+        starts = self.indptr[R]
+        lens = self.indptr[R + 1] - starts
+        at = np.repeat(starts - np.cumsum(lens) + lens, lens) + np.arange(int(lens.sum()))
+        row = np.repeat(np.arange(R.size), lens)
+        order = np.argsort(C, kind="stable")
+        k = np.minimum(np.searchsorted(C[order], self.indices[at]), C.size - 1)
+        hit = C[order][k] == self.indices[at]
+        out[row[hit], order[k[hit]]] = self.data[at[hit]]
+        return out
+
+
+def _sub(A, R, C) -> np.ndarray:
+    """A[R][:, C] as a dense array, A dense or :class:`_Sparse`."""
+    if isinstance(A, np.ndarray):
+        return A[np.ix_(list(R), list(C))]
+    return A.sub(R, C)
+
+
+def _nonzeros(A) -> tuple[np.ndarray, np.ndarray]:
+    """``np.nonzero`` of A, dense or :class:`_Sparse`."""
+    return np.nonzero(A) if isinstance(A, np.ndarray) else A.nonzeros()
+
+
+def _values(A, rr: np.ndarray, cc: np.ndarray) -> np.ndarray:
+    """A's values at its nonzeros (rr, cc) (for a :class:`_Sparse`, its own, in its order)."""
+    return A[rr, cc] if isinstance(A, np.ndarray) else A.data
+
+
+def _full(A) -> np.ndarray:
+    return A if isinstance(A, np.ndarray) else A.toarray()
 
 
 def _null_basis(J: np.ndarray, r: int, method: str) -> np.ndarray:
@@ -310,8 +377,8 @@ class Factored:
     :func:`_factorise` of A with its null basis. Made by :func:`factorise`; passing it instead of
     J gives exactly the numbers passing J with the same ``rtol`` and ``equilibrate`` gives."""
 
-    J: object  # scipy.sparse.csr_matrix of the raw J
-    A: object  # scipy.sparse.csr_matrix of the decision matrix
+    J: "_Sparse"  # the raw J
+    A: "_Sparse"  # the decision matrix
     f: "_Factorisation"
     rtol: float
     equilibrate: bool
@@ -321,18 +388,26 @@ class Factored:
         return self.A.shape
 
     def nonzeros(self) -> tuple[np.ndarray, np.ndarray]:
-        """``np.nonzero`` of A (row-major, columns ascending in a row), from its sparse form."""
-        rr = np.repeat(np.arange(self.A.shape[0]), np.diff(self.A.indptr))
-        return rr, self.A.indices.astype(np.intp)
+        """``np.nonzero`` of A (row-major, columns ascending in a row)."""
+        return self.A.nonzeros()
 
 
 def factorise(J, rtol: float | None = None, *, equilibrate: bool = True) -> Factored:
     """:class:`Factored` of ``J``: the one factorisation (with its null basis) of the decision
-    matrix, for :func:`independent_columns` and :func:`analyse` to share."""
+    matrix, for :func:`independent_columns` and :func:`analyse` to share. Past reading J's
+    nonzeros, nothing here is n x m: the decision matrix is equilibrated and factorised on them."""
     J = _as_matrix(J)
     rt = _rtol(rtol)
-    A, nonzeros, f = _decide(J, rt, equilibrate)
-    return Factored(J=_csr(J, np.nonzero(J)), A=_csr(A, nonzeros), f=f, rtol=rt, equilibrate=equilibrate)
+    n, m = J.shape
+    rr, cc = np.nonzero(J)
+    vals = J[rr, cc]
+    raw = _Sparse(J.shape, rr, cc, vals)
+    A = raw
+    if equilibrate:
+        keep, v, _, _ = _ruiz(rr, cc, vals, n, m)
+        live = v != 0.0  # a scaled value that underflowed is a zero of the dense equilibrate's A too
+        A = _Sparse(J.shape, rr[keep][live], cc[keep][live], v[live])
+    return Factored(J=raw, A=A, f=_factorise(A, rt, nonzeros=A.nonzeros()), rtol=rt, equilibrate=equilibrate)
 
 
 def _decide(J: np.ndarray, rt: float, use_equilibration: bool) -> tuple[np.ndarray, tuple, "_Factorisation"]:
@@ -340,15 +415,6 @@ def _decide(J: np.ndarray, rt: float, use_equilibration: bool) -> tuple[np.ndarr
     A = _decision_matrix(J, use_equilibration)
     nonzeros = np.nonzero(A)
     return A, nonzeros, _factorise(A, rt, nonzeros=nonzeros)
-
-
-def _csr(A: np.ndarray, nonzeros: tuple):
-    """A as a scipy.sparse.csr_matrix, from its nonzeros (row-major, as ``np.nonzero`` gives them)."""
-    import scipy.sparse
-
-    rr, cc = nonzeros
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rr, minlength=A.shape[0]))])
-    return scipy.sparse.csr_matrix((A[rr, cc], cc, indptr), shape=A.shape)
 
 
 def _factored(J, rtol: float | None, equilibrate: bool) -> Factored | None:
@@ -388,7 +454,7 @@ def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = Tru
         if rk == len(cols):
             chosen += cols
             continue
-        sub = _dense(A, rows, cols)
+        sub = _sub(A, rows, cols)
         _, piv = scipy.linalg.qr(sub, mode="r", pivoting=True)
         pick = [int(p) for p in piv[:rk]]
         if _rank_at(sub[:, pick], f.tol) != rk:  # pragma: no cover - pivoted QR failed to reveal the rank (Kahan-type matrix)
@@ -406,13 +472,6 @@ def _rank_at(A: np.ndarray, tol: float) -> int:
     """The count of singular values of A above the absolute ``tol`` (the one factorisation: a
     pick of a loop block's columns keeps its hubs)."""
     return _factorise(A, DEFAULT_RTOL, tol=tol, vectors=False).r
-
-
-def _dense(A, rows, cols) -> np.ndarray:
-    """A[rows][:, cols] as a dense array, A dense or scipy.sparse."""
-    if isinstance(A, np.ndarray):
-        return A[np.ix_(list(rows), list(cols))]
-    return A[list(rows), :][:, list(cols)].toarray()
 
 
 def auto_eliminate(J, rtol: float | None = None, *, equilibrate: bool = True) -> list[int]:
@@ -496,7 +555,7 @@ def _peel(A: np.ndarray, rows_of: list, cols_of: list, floor: float):
         R = [j for j in cand if all(c in Cs for c in cols_of[j] if live_c[c])]
         if len(R) < len(C):
             continue
-        D = A[np.ix_(R, C)]
+        D = _sub(A, R, C)
         u, sv, vt = np.linalg.svd(D, full_matrices=False)
         if sv[-1] <= floor:
             continue
@@ -524,7 +583,7 @@ def _left_inverse_bound(A: np.ndarray, steps: list, cols_of: list) -> float:
         prev = sorted({c for i in R for c in cols_of[i] if c not in Cs})
         rows = np.sqrt(np.sum(P * P, axis=1))
         if prev:
-            rows = rows + np.abs(P @ A[np.ix_(R, prev)]) @ np.array([bound[c] for c in prev])
+            rows = rows + np.abs(P @ _sub(A, R, prev)) @ np.array([bound[c] for c in prev])
         for c, b in zip(C, rows.tolist()):
             bound[c] = b
     return float(np.sqrt(sum(b * b for b in bound.values())))
@@ -548,7 +607,7 @@ def _left_inverse_norm(A: np.ndarray, steps: list, cols_of: list) -> float:
         Cs = set(C)
         prev = sorted({c for i in R for c in cols_of[i] if c not in Cs})
         plan.append((np.array([row_pos[i] for i in R]), np.array([col_pos[c] for c in C]), P,
-                     [col_pos[c] for c in prev], A[np.ix_(R, prev)] if prev else None))
+                     [col_pos[c] for c in prev], _sub(A, R, prev) if prev else None))
     p_r, p_c = len(row_pos), len(col_pos)
     width = max(1, min(p_r, _CHUNK // max(p_c, 1)))
     total = 0.0
@@ -571,7 +630,7 @@ def _left_inverse_norm(A: np.ndarray, steps: list, cols_of: list) -> float:
     return float(np.sqrt(total))
 
 
-def _sigma1_bounds(A: np.ndarray, rr: np.ndarray, cc: np.ndarray) -> tuple[float, float]:
+def _sigma1_bounds(A, rr: np.ndarray, cc: np.ndarray) -> tuple[float, float]:
     """Bounds lo <= ||A||_2 <= hi from A's nonzeros (rows rr, columns cc). lo = ||A y|| for the
     unit Ritz vector y of the largest Ritz value of :data:`_LANCZOS_STEPS` Lanczos steps on
     A^T A from (1, ..., 1) (full reorthogonalisation; any unit y gives a lower bound, the Ritz
@@ -580,7 +639,7 @@ def _sigma1_bounds(A: np.ndarray, rr: np.ndarray, cc: np.ndarray) -> tuple[float
     import scipy.sparse
 
     n, m = A.shape
-    vals = A[rr, cc]
+    vals = _values(A, rr, cc)
     S = scipy.sparse.csr_matrix((vals, (rr, cc)), shape=(n, m))
     St = S.T.tocsr()
     k = min(m, _LANCZOS_STEPS)
@@ -621,18 +680,14 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     2. Split what is left, A' = A[live rows, live columns], into the connected components of its
        row-column graph (two equations are coupled when they share a coordinate). A' is block
        diagonal after permutation, so its singular values are the union of the blocks' and its
-       null space the direct sum of theirs. One dense SVD per block (LAPACK gesdd, full V),
-       except a block with hub rows (a body many joints share, :func:`_hub`), which is factorised
-       through its hubs: one small SVD per part left when the hub rows are set aside, and one of
-       the hub rows on those parts' null vectors (:meth:`_Hub.finish`, with its own certificate;
-       its dense SVD when that fails).
+       null space the direct sum of theirs. One dense SVD per block (LAPACK gesdd, full V), but
+       a block with hub rows goes through them (:func:`_hub`, :meth:`_Hub.finish`).
     3. The threshold is the SVD test's, ``tol = max(rtol, max(n, m) * eps) * ||A||_2``, with
-       ||A||_2 of the whole A (when anything was peeled or a block went through its hubs, the
-       lower bound lo of :func:`_sigma1_bounds`, 7e-5 low at worst on a long chain of equal
-       links, else exactly the largest block singular value), applied to every block: the rank
-       is the number of peeled columns plus the blocks' ranks; the null basis is the blocks'
-       null bases (a dense block's right singular vectors at or below tol), zero on the peeled
-       columns.
+       ||A||_2 of the whole A (when anything was peeled or went through hubs, the lower bound lo
+       of :func:`_sigma1_bounds`, 7e-5 low at worst on a long chain of equal links, else exactly
+       the largest block singular value), applied to every block: the rank is the number of
+       peeled columns plus the blocks' ranks; the null basis is the blocks' (:func:`_assemble`),
+       zero on the peeled columns.
 
     The certificate (why the verdicts are those of one SVD of A, with the tolerance): write
     A = [[B, 0], [X, A']] (peeled rows and columns first). A null-ish vector of A'
@@ -642,17 +697,15 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     tol / beta), so A has at most as many as A' has <= c tol. Both counts agree unless A' has a
     singular value in (tol, c tol], or beta <= tol. With ||A||_2 known only within [lo, hi],
     the dense tolerance lies in [tol_lo, tol_hi] and the certificate is: beta > tol_hi and no
-    singular value of A' in (tol_lo, T], T = c(tol_hi) tol_hi (a block through its hubs: its
-    count of singular values <= tau is the same for every tau in [tol_lo, T], :meth:`_Hub.finish`).
-    beta >= 1 / ||L||_F
-    (:func:`_left_inverse_bound`, else the exact :func:`_left_inverse_norm`) and ||X||_2 <=
-    ||X||_F make c computable; when the certificate fails, the dense route runs: one SVD of the
-    whole A (the previous method). With ranks equal,
-    the two null spaces are the same in exact arithmetic; numerically each is accurate to its
-    own round-off bound (``kappa`` here is that of the computed blocks, Wedin's bound for the
-    basis computed). ``nonzeros``: ``np.nonzero(A)`` when the caller has it."""
+    singular value of A' in (tol_lo, T], T = c(tol_hi) tol_hi (through hubs: :meth:`_Hub.finish`).
+    beta >= 1 / ||L||_F (:func:`_left_inverse_bound`, else the exact :func:`_left_inverse_norm`)
+    and ||X||_2 <= ||X||_F make c computable; when the certificate fails, the dense route runs:
+    one SVD of the whole A (the previous method). With ranks equal, the two null spaces are the
+    same in exact arithmetic; numerically each is accurate to its own round-off bound (``kappa``
+    here is that of the computed blocks, Wedin's bound for the basis computed). ``A``: dense or
+    :class:`_Sparse`; ``nonzeros``: ``np.nonzero(A)`` when the caller has it."""
     n, m = A.shape
-    rr, cc = np.nonzero(A) if nonzeros is None else nonzeros  # row-major order
+    rr, cc = _nonzeros(A) if nonzeros is None else nonzeros  # row-major order
     if rr.size == 0:
         return _Factorisation(sigma1=0.0, tol=0.0 if tol is None else float(tol), r=0, N=np.eye(m),
                               sigma=np.zeros(min(n, m)), kappa=1.0, peeled=(), blocks=(), ranks=(),
@@ -660,13 +713,12 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     rtol_eff = max(rtol, max(n, m) * EPS)
     rows_of, cols_of = _pattern(rr, cc, n, m)
     # ||A||_F >= ||A||_2, so this floor is at least tol: a peeled D is of full rank above tol
-    floor = float(tol) if tol is not None else rtol_eff * float(np.sqrt(np.sum(A[rr, cc] ** 2)))
+    floor = float(tol) if tol is not None else rtol_eff * float(np.sqrt(np.sum(_values(A, rr, cc) ** 2)))
     steps, live_r, live_c = _peel(A, rows_of, cols_of, floor)
     blocks = _blocks(A, live_r, live_c, rows_of)
-    parts: list = []  # per block: its dense SVD (s, V^T or None), or a _Hub
-    for rows, cols in blocks:
-        hub = _hub(A, rows, cols, rows_of, cols_of, live_c)
-        parts.append(hub if hub is not None else _block_svd(A, rows, cols, vectors))
+    # per block: a _Hub, or its dense SVD (s, V^T or None)
+    parts = [_hub(A, rows, cols, rows_of, cols_of, live_c) or _block_svd(A, rows, cols, vectors)
+             for rows, cols in blocks]
     hubs = [b for b, p in enumerate(parts) if isinstance(p, _Hub)]
     top = max((float(s[0]) for p in parts for s in (p.sigmas() if isinstance(p, _Hub) else [p[0]]) if s.size),
               default=0.0)
@@ -684,15 +736,26 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     dense = [p for p in parts if not isinstance(p, _HubFactors)]
     route = "blocks" if T is not None and not any(np.any((s > t) & (s <= T)) for s, _ in dense) else "dense"
     if route == "dense":
-        s, vh = _svd_full(A) if vectors else (_svdvals(A), None)
+        s, vh = _svd_full(_full(A)) if vectors else (_svdvals(_full(A)), None)
         if tol is None:
             sigma1 = float(s[0]) if s.size else 0.0
             t = rtol_eff * sigma1
         blocks = ((tuple(range(n)), tuple(range(m))),)
         parts, steps = [(s, vh)], []
     peeled = tuple(c for _, C, _ in steps for c in C)
+    ranks, N, sigma = _assemble(blocks, parts, t, m, vectors)
+    r = len(peeled) + sum(ranks)
+    above = sigma[sigma > t]
+    kappa = float(sigma1 / above[-1]) if above.size and np.isfinite(sigma1) else 1.0
+    return _Factorisation(sigma1=sigma1, tol=t, r=r, N=N, sigma=sigma, kappa=kappa, peeled=peeled,
+                          blocks=tuple(blocks), ranks=tuple(ranks), route=route)
+
+
+def _assemble(blocks, parts, t: float, m: int, vectors: bool):
+    """(each block's rank, the null basis (m, m - r) on the blocks' columns, the singular values
+    computed, descending) from the blocks' factors: a dense SVD (s, V^T) or :class:`_HubFactors`."""
     ranks, nulls, sigmas = [], [], []
-    for (rows, cols), p in zip(blocks, parts):
+    for (_, cols), p in zip(blocks, parts):
         if isinstance(p, _HubFactors):
             rk, null, s = p.rank, p.N, p.sigma
         else:
@@ -705,13 +768,8 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
             part = np.zeros((m, len(cols) - rk))
             part[list(cols), :] = null
             nulls.append(part)
-    r = len(peeled) + sum(ranks)
     N = np.hstack(nulls) if nulls else np.zeros((m, 0))
-    sigma = np.sort(np.concatenate([np.zeros(0)] + sigmas))[::-1]
-    above = sigma[sigma > t]
-    kappa = float(sigma1 / above[-1]) if above.size and np.isfinite(sigma1) else 1.0
-    return _Factorisation(sigma1=sigma1, tol=t, r=r, N=N, sigma=sigma, kappa=kappa, peeled=peeled,
-                          blocks=tuple(blocks), ranks=tuple(ranks), route=route)
+    return ranks, N, np.sort(np.concatenate([np.zeros(0)] + sigmas))[::-1]
 
 
 def _pattern(rr: np.ndarray, cc: np.ndarray, n: int, m: int) -> tuple[list, list]:
@@ -739,7 +797,7 @@ def _peel_margin(A, rr, cc, steps, cols_of, t_hi) -> float | None:
         peeled_c[C] = True
         peeled_r[R] = True
     sel = peeled_c[cc] & ~peeled_r[rr]  # X = A[rows left, peeled columns]
-    x_f = float(np.sqrt(np.sum(A[rr[sel], cc[sel]] ** 2)))
+    x_f = float(np.sqrt(np.sum(_values(A, rr, cc)[sel] ** 2)))
     return (1.0 + x_f / beta) / (1.0 - t_hi / beta) * t_hi
 
 
@@ -776,7 +834,7 @@ def _block_svd(A: np.ndarray, rows, cols, vectors: bool = True) -> tuple:
     """The dense SVD of A[rows, cols]: singular values, and V^T if ``vectors`` (else None)."""
     if not rows:
         return np.zeros(0), np.eye(len(cols))
-    sub = A[np.ix_(list(rows), list(cols))]
+    sub = _sub(A, rows, cols)
     return _svd_full(sub) if vectors else (_svdvals(sub), None)
 
 
@@ -835,7 +893,7 @@ class _Hub:
                 e = max(e, float(s[rk]))
             vn = vh.T[:, rk:]
             nulls.append(vn)
-            g_parts.append(A[np.ix_(S, list(cols_k))] @ vn)
+            g_parts.append(_sub(A, S, cols_k) @ vn)
         G = np.hstack(g_parts)
         s_g, vh_g = _svd_full(G)
         r_g = int(np.count_nonzero(s_g > t))
@@ -855,7 +913,7 @@ class _Hub:
 
 
 def _frobenius(A: np.ndarray, rows: list, cols) -> float:
-    return float(np.sqrt(np.sum(A[np.ix_(rows, list(cols))] ** 2)))
+    return float(np.sqrt(np.sum(_sub(A, rows, cols) ** 2)))
 
 
 def _hub(A: np.ndarray, rows: tuple, cols: tuple, rows_of: list, cols_of: list, live_c: np.ndarray) -> _Hub | None:
@@ -939,7 +997,7 @@ class SetVerdict:
 @dataclass(frozen=True, eq=False)
 class _Context:
     J: object  # raw, for the reported B matrices (dense with the cross-check, else sparse: its shape)
-    A: np.ndarray  # matrix the decisions are made on (equilibrated J, or J)
+    A: object  # matrix the decisions are made on (equilibrated J, or J): dense, or _Sparse without the cross-check
     sigma: np.ndarray  # singular values of A reported (all of them with the cross-check)
     tol: float  # absolute rank threshold on A
     r: int  # rank of A (the rank test's, from one SVD of A, with the cross-check)
@@ -961,7 +1019,7 @@ class _Context:
         rows_sorted, ptr = self._lazy["col_rows"]
         idx = list(cols)
         rows = np.unique(np.concatenate([rows_sorted[ptr[c]:ptr[c + 1]] for c in idx])) if idx else np.zeros(0, int)
-        return self.A[np.ix_(rows, idx)]
+        return _sub(self.A, rows, idx)
 
     @property
     def cross_check(self) -> bool:
@@ -1006,8 +1064,9 @@ def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> 
         A = _readonly(A)  # a new array, or the read-only J itself
     else:
         rt, f, nonzeros = fz.rtol, fz.f, fz.nonzeros()
-        J = _readonly(fz.J.toarray()) if "rank" in run or not use_equilibration else fz.J  # sparse: its shape
-        A = _readonly(fz.A.toarray()) if use_equilibration else J
+        # dense only for the cross-check (its dense SVDs and reports); the SVD test gathers
+        J = _readonly(fz.J.toarray()) if "rank" in run else fz.J
+        A = J if not use_equilibration else _readonly(fz.A.toarray()) if "rank" in run else fz.A
     brt = _b_rtol(rt, A.shape, f.kappa) if b_rtol is None else _rtol(b_rtol, "b_rtol")
     sigma, tol, r, qr_brt = f.sigma, f.tol, f.r, brt
     if "rank" in run:

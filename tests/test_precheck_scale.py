@@ -5,6 +5,7 @@ to the dense SVD; the pre-check of a 1000-body chain runs through ``overcon chec
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -167,3 +168,23 @@ def test_left_inverse_norms_bound_the_peeled_part(tmp_path, kind, shape, n, loop
     assert np.all(A[np.ix_(R, sorted(set(range(A.shape[1])) - set(C)))] == 0.0)  # A = [[B, 0], [X, A']]
     exact, bound = an._left_inverse_norm(A, steps, cols_of), an._left_inverse_bound(A, steps, cols_of)
     assert 1.0 / np.linalg.svd(B, compute_uv=False)[-1] <= exact * (1 + 1e-12) and exact <= bound * (1 + 1e-12)
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).parents[1] / "mechanisms").glob("*.toml")) + ["cranks", "spatial"],
+                         ids=lambda p: p if isinstance(p, str) else p.stem)
+def test_the_cores_sparse_rows_are_the_dense_rows_nonzeros(tmp_path, path):
+    """kernel.rows_sparse (core/rows_sparse.c), what admission and the pre-check read, gives Phi
+    and exactly the nonzeros of the dense Phi_h of kernel.rows_at, in np.nonzero's order."""
+    from overcon.kernel import rows_at, rows_sparse
+    if path == "cranks":
+        path = linkage(np.random.default_rng(5), "planar", "cranks", 30, tmp_path / "m.toml")
+    elif path == "spatial":
+        path = linkage(np.random.default_rng(6), "spatial", "loops", 40, tmp_path / "m.toml", 4)
+    model = _model(path, check_initial=False)
+    rng = np.random.default_rng(0)
+    for h in (model.h0, rng.standard_normal(model.nh)):
+        phi, J, _ = rows_at(model, model.q0, h)
+        phi_s, (rr, cc, vals) = rows_sparse(model, model.q0, h)
+        r0, c0 = np.nonzero(J)
+        assert np.array_equal(phi, phi_s) and np.array_equal(rr, r0) and np.array_equal(cc, c0)
+        assert np.array_equal(vals, J[r0, c0])

@@ -127,6 +127,7 @@ __all__ = [
     "auto_eliminate",
     "Factored",
     "factorise",
+    "factorise_nonzeros",
     "JointVerdict",
     "SetVerdict",
     "Analysis",
@@ -394,19 +395,29 @@ class Factored:
 
 def factorise(J, rtol: float | None = None, *, equilibrate: bool = True) -> Factored:
     """:class:`Factored` of ``J``: the one factorisation (with its null basis) of the decision
-    matrix, for :func:`independent_columns` and :func:`analyse` to share. Past reading J's
-    nonzeros, nothing here is n x m: the decision matrix is equilibrated and factorised on them."""
+    matrix, for :func:`independent_columns` and :func:`analyse` to share."""
     J = _as_matrix(J)
-    rt = _rtol(rtol)
-    n, m = J.shape
     rr, cc = np.nonzero(J)
-    vals = J[rr, cc]
-    raw = _Sparse(J.shape, rr, cc, vals)
+    return factorise_nonzeros(J.shape, rr, cc, J[rr, cc], rtol, equilibrate=equilibrate)
+
+
+def factorise_nonzeros(shape: tuple[int, int], rr, cc, vals, rtol: float | None = None, *,
+                       equilibrate: bool = True) -> Factored:
+    """:func:`factorise` of the (n, m) matrix whose nonzeros are ``vals`` at rows ``rr`` and
+    columns ``cc``, row-major (columns ascending in a row, as ``np.nonzero`` gives them): nothing
+    here is n x m, the decision matrix is equilibrated and factorised on them."""
+    n, m = int(shape[0]), int(shape[1])
+    rr, cc = np.asarray(rr, dtype=np.intp), np.asarray(cc, dtype=np.intp)
+    vals = np.asarray(vals, dtype=float)
+    if not np.all(np.isfinite(vals)):
+        raise ValueError("matrix contains NaN or inf")
+    rt = _rtol(rtol)
+    raw = _Sparse((n, m), rr, cc, vals)
     A = raw
     if equilibrate:
         keep, v, _, _ = _ruiz(rr, cc, vals, n, m)
         live = v != 0.0  # a scaled value that underflowed is a zero of the dense equilibrate's A too
-        A = _Sparse(J.shape, rr[keep][live], cc[keep][live], v[live])
+        A = _Sparse((n, m), rr[keep][live], cc[keep][live], v[live])
     return Factored(J=raw, A=A, f=_factorise(A, rt, nonzeros=A.nonzeros()), rtol=rt, equilibrate=equilibrate)
 
 

@@ -1,5 +1,5 @@
 """Admit a compiled :class:`overcon.model.Model` at its initial state: the checks that evaluate it
-(the compiled core's rows, :func:`overcon.kernel.rows_at`), run after :func:`overcon.model.compile_model` and before any run.
+(the compiled core's rows, :func:`overcon.kernel.rows_sparse`), run after :func:`overcon.model.compile_model` and before any run.
 
 - :func:`check_initial_state` (with :func:`check_euler_q0`): q0/h0 on the constraint manifold;
 - :func:`resolve_elimination`: the eliminated equations checked (or chosen, ``"auto"``) from the
@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from . import analysis
-from .kernel import KernelUnavailable, jacobian, rows_at
+from .kernel import KernelUnavailable, jacobian, rows_sparse
 from .kernel import rigid_rows as kernel_rigid_rows
 from .joints import TYPES, InitialFrames
 from .joints.spatial_rows import POINT_ROW
@@ -38,15 +38,15 @@ def admit(model: Model, *, check_initial: bool = True, eliminate_field: str = "s
     (before the elimination is checked: a rank at an inconsistent q0 means nothing).
     ``check_initial=False`` skips that check: only for evaluating kinematics at arbitrary
     configurations (tests); a Simulation checks again."""
-    J = check_initial_state(model).T if check_initial else None  # Phi_h^T at q0, read once
+    rows = check_initial_state(model) if check_initial else None  # Phi_h at q0, read once
     if model.scene.redundancy == "min-norm":  # every equation kept; the solve is rank-revealing
         return replace(model, retained=np.arange(model.m), eliminated=(), elimination_mode="min-norm")
     fz = None
     if model.scene.redundancy == "compliant":
-        fz = factored_q0(model, J)
+        fz = factored_q0(model, rows)
         eliminated, mode = rigid_elimination(model, fz), "compliant"
     elif model.scene.eliminate == "auto":
-        fz = factored_q0(model, J)
+        fz = factored_q0(model, rows)
         eliminated, mode = resolve_elimination(model, "auto", eliminate_field, fz)
     else:
         eliminated, mode = resolve_elimination(model, model.scene.eliminate, eliminate_field)
@@ -65,17 +65,25 @@ def analysed_rows(model: Model) -> list[int] | None:
     return [i for i in range(model.m) if i not in compliant]
 
 
-def factored_q0(model: Model, J: np.ndarray | None = None) -> analysis.Factored:
-    """The one factorisation (:func:`overcon.analysis.factorise`) of Phi_h^T at q0, of its
-    :func:`analysed_rows` columns: the one admission made when it chose the elimination
-    (``auto``, or the rigid equations' under "compliant"), else made now (``J``: Phi_h^T at q0
-    when the caller has it). Elimination and pre-check read the same matrix with the same rule,
-    so they share it."""
+def factored_q0(model: Model, rows: tuple | None = None) -> analysis.Factored:
+    """The one factorisation (:func:`overcon.analysis.factorise_nonzeros`) of Phi_h^T at q0, of
+    its :func:`analysed_rows` columns: the one admission made when it chose the elimination
+    (``auto``, or the rigid equations' under "compliant"), else made now (``rows``: Phi_h at q0
+    by its nonzeros, :func:`overcon.kernel.rows_sparse`, when the caller has it). Elimination and
+    pre-check read the same matrix with the same rule, so they share it. Phi_h is never dense
+    here: its nonzeros are transposed and factorised as they are."""
     if model.factored_q0 is not None:
         return model.factored_q0
-    J = _jacobian_q0(model) if J is None else J
-    rows = analysed_rows(model)
-    return analysis.factorise(J if rows is None else J[:, rows])
+    eq, col, val = rows_sparse(model, model.q0)[1] if rows is None else rows  # equation, coordinate, value
+    kept = analysed_rows(model)
+    m = model.m
+    if kept is not None:  # the rigid equations, numbered in their order
+        position = np.full(model.m, -1)
+        position[kept] = np.arange(len(kept))
+        sel = position[eq] >= 0
+        eq, col, val, m = position[eq[sel]], col[sel], val[sel], len(kept)
+    order = np.lexsort((eq, col))  # Phi_h^T row-major: coordinates, then equations
+    return analysis.factorise_nonzeros((model.nh, m), col[order], eq[order], val[order])
 
 
 def with_eliminated(model: Model, eliminated, mode: str | None = None) -> Model:
@@ -87,12 +95,13 @@ def with_eliminated(model: Model, eliminated, mode: str | None = None) -> Model:
                    elimination_mode=model.elimination_mode if mode is None else mode)
 
 
-def check_initial_state(model: Model, tol: float = 1e-9) -> np.ndarray:
+def check_initial_state(model: Model, tol: float = 1e-9) -> tuple:
     """Refuse q0/h0 off the constraint manifold: |Phi| or |Phi_h h0| above tol (m or rad; m/s
     or rad/s), scaled by max(1, max |q0|) (max(1, max |h0|)); a non-finite value is refused too.
     Raises :class:`InconsistentInitialState` naming the violated equations, their joints and
     the mechanism file that holds q0/h0; first, for z-x-z Euler bodies, a q0 at the Euler
-    singularity (:func:`check_euler_q0`). Returns Phi_h (m, nh) at q0, which it evaluated."""
+    singularity (:func:`check_euler_q0`). Returns Phi_h at q0, which it evaluated, by its
+    nonzeros (:func:`overcon.kernel.rows_sparse`: equations, coordinates, values)."""
     check_euler_q0(model)
     joint_of = {r + 1: c.name for c in model.joints for r in c.rows}
     mech = model.scene.mechanism
@@ -101,7 +110,7 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> np.ndarray:
     def eqs(numbers) -> str:
         return ", ".join(f"Phi{i} (joint {joint_of.get(i, '?')})" for i in numbers)
 
-    Phi, Jh = _rows_q0(model, where)
+    Phi, (eq, col, val) = _rows_q0(model, where)
     with np.errstate(all="ignore"):
         scale = max(1.0, float(np.max(np.abs(model.q0))))
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(Phi) <= tol * scale))]
@@ -120,22 +129,23 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> np.ndarray:
                 parts.append(f"joint {c.name} (joints[{j}]): {text}: {', '.join(f'Phi{i}' for i in rows)} "
                              f"(joints[{j}].axis_i, joints[{j}].axis_j or the bodies' q0 are wrong)")
             raise InconsistentInitialState("; ".join(parts) + where)
-        vel = Jh @ model.h0
+        vel = np.bincount(eq, val * np.asarray(model.h0, float)[col], minlength=model.m)  # Phi_h h0
         hscale = max(1.0, float(np.max(np.abs(model.h0))))
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(vel) <= tol * hscale))]
     if bad:
         raise InconsistentInitialState(f"initial velocities h0 violate the velocity constraints {eqs(bad)}{where}")
-    return Jh
+    return eq, col, val
 
 
-def _rows_q0(model: Model, where: str) -> tuple[np.ndarray, np.ndarray]:
-    """(Phi, Phi_h) at q0 from the compiled core; a q0 or h0 it cannot evaluate (a non-finite
-    value) is an :class:`InconsistentInitialState` naming the mechanism file (``where``)."""
+def _rows_q0(model: Model, where: str) -> tuple[np.ndarray, tuple]:
+    """(Phi, Phi_h by its nonzeros) at q0 from the compiled core (:func:`overcon.kernel.rows_sparse`);
+    a q0 or h0 it cannot evaluate (a non-finite value) is an :class:`InconsistentInitialState`
+    naming the mechanism file (``where``)."""
     y = np.concatenate([model.q0, model.h0])
     if not np.all(np.isfinite(y)):
         raise InconsistentInitialState(f"initial coordinates q0 or velocities h0 hold a non-finite value{where}")
     try:
-        Phi, Jh, _ = rows_at(model, model.q0, model.h0)
+        Phi, Jh = rows_sparse(model, model.q0, model.h0)
     except KernelUnavailable:
         raise
     except RuntimeError as exc:

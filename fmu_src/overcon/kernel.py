@@ -519,6 +519,30 @@ def rows_at(model, q: np.ndarray, h: np.ndarray | None = None):
     return rows_kernel(model).rows(y)
 
 
+def rows_sparse(model, q: np.ndarray, h: np.ndarray | None = None):
+    """(Phi (m,), Phi_h (m, nh) by its nonzeros: (rows, columns, values), row-major with the
+    columns ascending in a row, as ``np.nonzero`` of the dense Phi_h gives them) at the
+    coordinates q (velocities h, default zero) from the compiled core (core/rows_sparse.c): the
+    values of :func:`rows_at` without the dense m x nh matrix (each equation is nonzero on its
+    joint's two bodies only)."""
+    kern = rows_kernel(model)
+    lib = library()[0]
+    fn = lib.ovk_rows_sparse
+    fn.restype, fn.argtypes = ctypes.c_int, [ctypes.c_void_p] * 6
+    w = 2 * model.nh_b
+    phi, cols, vals = np.zeros(model.m), np.full((model.m, w), -1, np.intc), np.zeros((model.m, w))
+    y = np.concatenate([np.asarray(q, float), np.zeros(model.nh) if h is None else np.asarray(h, float)])
+    kern._y[:] = y
+    status = fn(kern._pm, kern._data, kern._ptrs[0], phi.ctypes.data, cols.ctypes.data, vals.ctypes.data)
+    if status:
+        raise RuntimeError(f"the compiled core's rows failed ({STATUS.get(status, status)}): {kern._message()}")
+    rows = np.repeat(np.arange(model.m), w).reshape(model.m, w)
+    keep = (cols >= 0) & (vals != 0.0)
+    rr, cc, vv = rows[keep], cols[keep].astype(np.intp), vals[keep]
+    order = np.lexsort((cc, rr))
+    return phi, (rr[order], cc[order], vv[order])
+
+
 def jacobian(model, q: np.ndarray) -> np.ndarray:
     """Phi_h (m, nh) at the coordinates q (:func:`rows_at`)."""
     return rows_at(model, q)[1]

@@ -35,7 +35,8 @@
  *   unique.c            the whole Jacobian's rank and each joint's reaction uniqueness (the pre-check's
  *                       one-factorisation rule)
  *   sim_state.c         a run's state as plain bytes (FMI get/set/serialize FMU state)
- *   api.c               the exported entry points (ovk_*), the only symbols of the library
+ *   rows_sparse.c       Phi and Phi_h by their nonzeros (the pre-check's Jacobian), exported
+ *   api.c               the other exported entry points (ovk_*), the only symbols of the library
  * Units and signs: SI, the paper's conventions (those of overcon.evaluation and overcon.joints).
  *
  * Every failure is a status (OVK_*) plus a message kept in the workspace (ovk_message); the core
@@ -515,6 +516,9 @@ OVK_EXPORT int ovk_data_status(const ovk_data *d);
 OVK_EXPORT int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int guess_mode,
                             const double *guess, double *ydot, double *lam, double *qf, int *iterations, int *damped);
 OVK_EXPORT int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam);
+/* rows_sparse.c: Phi (m) and Phi_h at y as m x 2 nh_b entries (columns, -1 unused; values): the
+ * equations' two bodies' columns, the values of ovk_rows */
+OVK_EXPORT int ovk_rows_sparse(const ovk_model *M, ovk_data *d, const double *y, double *phi, int *cols, double *vals);
 OVK_EXPORT int ovk_evaluate_robust(const ovk_model *M, ovk_data *d, const double *y, const double *start, double *ydot,
                                    double *lam, double *qf, int *iterations);
 OVK_EXPORT int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,

@@ -1,29 +1,39 @@
-"""The pre-check at scale: ``overcon check`` of generated linkages, and the analysis alone, with
-the one factorisation (:func:`overcon.analysis._factorise`: peeled coloops, decoupled blocks,
-one dense SVD per block) against one dense SVD of the whole Jacobian (the former test's
-factorisation), side by side where the dense SVD ends in reasonable time.
+"""The pre-check at scale: ``overcon check`` of generated linkages, from the command line and in
+process, and the analysis alone, with the one factorisation (:func:`overcon.analysis._factorise`:
+peeled coloops, decoupled blocks, one dense SVD per block or, for a block with hub rows, one
+small SVD per part and one of the hub rows) against one dense SVD of the whole Jacobian (the
+first test's factorisation), side by side where the dense SVD ends in reasonable time.
 
-    python benchmarks/precheck_scale.py [--quick]
+    python benchmarks/precheck_scale.py [--quick] [--only SUBSTRING ...]
 
-Everything runs in process with one BLAS thread (overcon.cli.single_threaded_blas). Per mechanism:
-coordinates n, equations m, the peeled columns and the largest block left; then wall seconds and,
-for check and analysis, this process's CPU seconds (``time.process_time``: what other jobs on a
-loaded machine change least), medians of 3 runs (1 run above 20 s), of
-  check      ``overcon.cli.main(["check", FILE, "--json", "--friction", "none"])``: loading,
-             compiling (the elimination's rank and independent columns), the Jacobian, the
-             analysis, the report;
-  analysis   ``overcon.analysis.analyse(J, groups, methods="svd")`` on the Jacobian at q0;
-  dense      ``equilibrate`` plus one dense SVD of the whole J (``_svd_full``): the
-             factorisation the analysis ran before, without its per-joint work (a lower bound
-             of the former analysis' time), or "-" where min(n, m) > 2500 (minutes).
-The figures go to docs/benchmarks.md ("Pre-check at scale") and the README by hand.
+Per mechanism: coordinates n, equations m, the peeled columns, the largest block left and how
+it was factorised (``dense``: its SVD; ``hubs``: through its hub rows); then wall seconds and,
+where said, CPU seconds (what other jobs on a loaded machine change least), medians of 3 runs
+(1 run above 20 s), of
+  cli        ``python -m overcon.cli check FILE --json --friction none`` in a fresh process
+             (the user's figure: starting Python and importing included); CPU: the child's
+             user + system time;
+  check      ``overcon.cli.main(["check", FILE, "--json", "--friction", "none"])`` in process:
+             loading, compiling, admitting (q0 on the constraints, the elimination chosen from
+             the factorisation), the analysis, the report; CPU ``time.process_time``;
+  analysis   ``overcon.analysis.analyse(J, groups, methods="svd")`` on the Jacobian at q0, one
+             BLAS thread (``overcon.cli.single_threaded_blas``, as ``check`` runs);
+  dense      ``equilibrate`` plus one dense SVD of the whole J (``_svd_full``), one BLAS thread:
+             the factorisation of the first test, without its per-joint work, or "-" where
+             min(n, m) > 2500 (minutes).
+The code measured is the ``overcon`` this Python imports: ``PYTHONPATH=OTHER/fmu_src`` measures
+another checkout (with its compiled core). The figures go to docs/benchmarks.md ("Pre-check at
+scale") and the README by hand.
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
 import io
+import os
+import resource
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -54,7 +64,7 @@ def cases(tmp: Path, quick: bool) -> list[tuple[str, Path]]:
     if not quick:
         out.append(("spatial chain 500 bodies", linkage(rng(3), "spatial", "chain", 500, tmp / "sc500.toml")))
         out.append(("parallelogram 250 cranks (500 joints)", parallelogram(250, tmp / "p250.toml")))
-        out.append(("parallelogram 500 cranks (1000 joints)", parallelogram(500, tmp / "p500.toml")))
+    out.append(("parallelogram 500 cranks (1000 joints)", parallelogram(500, tmp / "p500.toml")))
     return out
 
 
@@ -71,6 +81,24 @@ def timed(fn, repeat: int = 3) -> tuple[float, float]:
     return statistics.median(wall), statistics.median(cpu)
 
 
+def cli(path: Path, repeat: int = 3) -> tuple[float, float]:
+    """Median wall and CPU (user + system) seconds of ``overcon check`` in a fresh process."""
+    wall, cpu = [], []
+    for _ in range(repeat):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        done = subprocess.run([sys.executable, "-m", "overcon.cli", "check", str(path), "--json", "--friction", "none"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=os.environ.copy())
+        wall.append(time.perf_counter() - t0)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+        if done.returncode not in (0, 1):
+            raise RuntimeError(f"overcon check {path}: exit {done.returncode}: {done.stderr.decode()[-500:]}")
+        if wall[-1] > 20.0:
+            break
+    return statistics.median(wall), statistics.median(cpu)
+
+
 def check(path: Path) -> None:
     with contextlib.redirect_stdout(io.StringIO()):
         code = main(["check", str(path), "--json", "--friction", "none"])
@@ -78,29 +106,53 @@ def check(path: Path) -> None:
         raise RuntimeError(f"overcon check {path}: exit {code}")
 
 
-def main_(quick: bool) -> None:
-    with tempfile.TemporaryDirectory() as tmp, single_threaded_blas():
-        print(f"{'mechanism':<40} {'n':>5} {'m':>5} {'peeled':>6} {'block':>11} {'check s':>8} {'(cpu)':>7} "
-              f"{'analysis s':>10} {'(cpu)':>7} {'dense s':>8}")
+def largest_block(A: np.ndarray) -> str:
+    """The largest block left after peeling (rows x columns) and how it is factorised."""
+    f = analysis._factorise(A, analysis.DEFAULT_RTOL)
+    if not f.blocks:
+        return f"{len(f.peeled)} 0x0 -"
+    rows, cols = max(f.blocks, key=lambda b: len(b[0]) * len(b[1]))
+    how = "dense"
+    if getattr(analysis, "_hub", None) is not None and f.route == "blocks":
+        rr, cc = np.nonzero(A)
+        rows_of, cols_of = analysis._pattern(rr, cc, *A.shape)
+        live = np.zeros(A.shape[1], bool)
+        live[list(cols)] = True
+        if analysis._hub(A, rows, cols, rows_of, cols_of, live) is not None:
+            how = "hubs"
+    return f"{len(f.peeled)} {len(rows)}x{len(cols)} {how}"
+
+
+def main_(quick: bool, only: list[str]) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        print(f"{'mechanism':<40} {'n':>5} {'m':>5} {'peeled':>6} {'block':>9} {'how':>5} {'cli s':>7} {'(cpu)':>7} "
+              f"{'check s':>8} {'(cpu)':>7} {'analysis s':>10} {'(cpu)':>7} {'dense s':>8}", flush=True)
         for label, path in cases(Path(tmp), quick):
-            model = compile_checked(scene.as_scene(scene.load(path)))
-            J = kernel.jacobian(model, model.q0).T  # Phi_h^T at q0: (n_h coordinates, m equations)
-            groups = joint_groups(model)
-            f = analysis._factorise(analysis.equilibrate(J)[0], analysis.DEFAULT_RTOL)
-            block = max(((len(r), len(c)) for r, c in f.blocks), default=(0, 0))
+            if only and not any(o in label for o in only):
+                continue
+            with single_threaded_blas():
+                model = compile_checked(scene.as_scene(scene.load(path)))
+                J = kernel.jacobian(model, model.q0).T  # Phi_h^T at q0: (n_h coordinates, m equations)
+                groups = joint_groups(model)
+                peeled, block, how = largest_block(analysis.equilibrate(J)[0]).split()
+            t_cli = cli(path)
             t_check = timed(lambda: check(path))
-            t_an = timed(lambda: analysis.analyse(J, groups, methods="svd"))
-            if min(J.shape) <= DENSE_LIMIT:
-                t_dense = f"{timed(lambda: analysis._svd_full(analysis.equilibrate(J)[0]))[0]:8.3f}"
-            else:
-                t_dense = f"{'-':>8}"
-            print(f"{label:<40} {J.shape[0]:>5} {J.shape[1]:>5} {len(f.peeled):>6} "
-                  f"{f'{block[0]}x{block[1]}':>11} {t_check[0]:8.3f} {t_check[1]:7.3f} {t_an[0]:10.3f} "
-                  f"{t_an[1]:7.3f} {t_dense}", flush=True)
+            with single_threaded_blas():
+                t_an = timed(lambda: analysis.analyse(J, groups, methods="svd"))
+                if min(J.shape) <= DENSE_LIMIT:
+                    t_dense = f"{timed(lambda: analysis._svd_full(analysis.equilibrate(J)[0]))[0]:8.3f}"
+                else:
+                    t_dense = f"{'-':>8}"
+            print(f"{label:<40} {J.shape[0]:>5} {J.shape[1]:>5} {peeled:>6} {block:>9} {how:>5} {t_cli[0]:7.3f} "
+                  f"{t_cli[1]:7.3f} {t_check[0]:8.3f} {t_check[1]:7.3f} {t_an[0]:10.3f} {t_an[1]:7.3f} {t_dense}",
+                  flush=True)
 
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer and smaller mechanisms (chains of 100 and 1000 "
-                    "bodies, the parallelogram of 99 cranks, the two trees with loops)")
-    main_(ap.parse_args().quick)
+                    "bodies, the parallelograms of 99 and 500 cranks, the two trees with loops)")
+    ap.add_argument("--only", nargs="*", default=[], metavar="SUBSTRING",
+                    help="only the mechanisms whose label contains one of these")
+    args = ap.parse_args()
+    main_(args.quick, args.only)

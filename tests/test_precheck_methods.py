@@ -135,8 +135,10 @@ def test_one_factorisation_agrees_with_the_three_tests_on_every_repository_mecha
     assert _verdicts(one) == _verdicts(three)
 
 
-@pytest.mark.parametrize("k", [3, 12, 30])
+@pytest.mark.parametrize("k", [3, 12, 30, 60])
 def test_one_factorisation_agrees_on_generated_parallelograms(tmp_path, k):
+    """From 7 cranks on, the coupler's coordinates are hub rows (analysis._HUB_DEGREE): the block
+    of loops is factorised through them, and the verdicts are still the three tests'."""
     model = _model(parallelogram(k, tmp_path / "p.toml"))
     one, three = precheck(model, "", "svd"), precheck(model, "", "all")
     assert (one.rank, one.dof, one.redundant) == (3 * k + 2, 1, k - 2)
@@ -180,3 +182,29 @@ def test_one_factorisation_agrees_with_the_three_tests_on_random_linkages(tmp_pa
     assert three.methods_agree, [j for j in three.joints if not j.agree]
     assert (one.rank, one.dof, one.redundant) == (three.rank, three.dof, three.redundant)
     assert _verdicts(one) == _verdicts(three)
+
+
+def test_check_factorises_the_jacobian_once(tmp_path, capsys, monkeypatch):
+    """``check`` of a scene whose elimination is chosen ("auto") factorises Phi_h^T at q0 once:
+    the elimination's independent columns and the analysis read the same factorisation."""
+    from overcon import analysis
+    calls = []
+    made = analysis.factorise_nonzeros  # every factorisation of a Factored goes through it
+    monkeypatch.setattr(analysis, "factorise_nonzeros", lambda *a, **k: calls.append(1) or made(*a, **k))
+    path = parallelogram(30, tmp_path / "p.toml")
+    assert main(["check", str(path), "--json", "--friction", "none"]) == 0
+    assert len(calls) == 1 and '"redundant": 28' in capsys.readouterr().out
+
+
+def test_a_factorisation_is_read_with_its_own_rule():
+    """A Factored gives what its J gives with the same rtol and equilibration, and refuses another."""
+    from overcon import analysis
+    J = np.array([[1.0, 1.0, 0.0], [0.0, 1.0, 1.0], [1.0, 2.0, 1.0]])
+    fz = analysis.factorise(J)
+    assert analysis.auto_eliminate(fz) == analysis.auto_eliminate(J)
+    groups = {"a": [0], "b": [1, 2]}
+    assert analysis.to_json(analysis.analyse(fz, groups)) == analysis.to_json(analysis.analyse(J, groups))
+    with pytest.raises(ValueError, match="rtol"):
+        analysis.analyse(fz, groups, rtol=1e-6)
+    with pytest.raises(ValueError, match="equilibrate"):
+        analysis.independent_columns(fz, equilibrate=False)

@@ -5,6 +5,7 @@ to the dense SVD; the pre-check of a 1000-body chain runs through ``overcon chec
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,7 +28,7 @@ def _dense(A: np.ndarray, rtol: float = an.DEFAULT_RTOL):
 
 
 CASES = [("planar", "chain", 300, 0), ("spatial", "chain", 120, 0), ("planar", "loops", 200, 12),
-         ("spatial", "loops", 100, 8), ("planar", "cranks", 80, 0), ("planar", "forest", 240, 0),
+         ("spatial", "loops", 100, 8), ("planar", "cranks", 80, 0), ("spatial", "cranks", 40, 0), ("planar", "forest", 240, 0),
          ("spatial", "forest", 90, 0), ("planar", "tree", 250, 0)]
 
 
@@ -84,6 +85,45 @@ def test_certificate_sends_a_loop_near_the_threshold_to_the_dense_svd():
     assert np.all(f.N[0] == 0.0) and np.abs(exact @ f.N).max() <= 1e-15
 
 
+def _star(parts: int, delta: float) -> np.ndarray:
+    """A hub row (row 0) on ``parts`` parts, part k row k + 1 = [1, 1] on columns 2k, 2k + 1 (its
+    null vector (1, -1) / sqrt 2); the hub row reads [1, 1 + delta] on each part, so the hub
+    rows' matrix G on the parts' null vectors is delta / sqrt 2 per part (rank 1 unless 0)."""
+    A = np.zeros((parts + 1, 2 * parts))
+    for k in range(parts):
+        A[k + 1, 2 * k:2 * k + 2] = 1.0
+        A[0, 2 * k:2 * k + 2] = [1.0, 1.0 + delta]
+    return A
+
+
+def test_hub_block_is_the_dense_svd_and_its_certificate_refuses_near_the_threshold():
+    """A block with a hub row (more than _HUB_DEGREE equations on it) goes through its hubs: far
+    from the threshold the certificate holds and the rank and null space are the dense SVD's.
+    With G's singular value 1.5 tol the parts and G alone would say rank parts + 1, but A's
+    smallest singular value is 0.53 tol (the coupling F): the certificate refuses and the dense
+    SVD of the block decides (rank parts)."""
+    parts = an._HUB_DEGREE // 2 + 1
+    tol = an.DEFAULT_RTOL * np.linalg.norm(_star(parts, 0.0), 2)
+    near = 1.5 * tol / np.sqrt(parts / 2)  # ||G|| = delta sqrt(parts / 2)
+    for delta, certified, rank in [(0.5, True, parts + 1), (0.0, True, parts), (near, False, parts)]:
+        A = _star(parts, delta)
+        n, m = A.shape
+        rr, cc = np.nonzero(A)
+        rows_of, cols_of = an._pattern(rr, cc, n, m)
+        hub = an._hub(A, tuple(range(n)), tuple(range(m)), rows_of, cols_of, np.ones(m, bool))
+        assert hub is not None and hub.S == (0,) and len(hub.parts) == parts
+        t = max(an.DEFAULT_RTOL, max(n, m) * EPS) * np.linalg.norm(A, 2)
+        got = hub.finish(A, tuple(range(m)), t, t)
+        assert (got is not None) == certified
+        r, _, N, kappa = _dense(A)
+        f = an._factorise(A, an.DEFAULT_RTOL)
+        assert f.r == r == rank
+        bound = an.B_NOISE_FACTOR * max(n, m) * EPS * kappa
+        assert np.abs(f.N @ f.N.T - N @ N.T).max() <= bound
+        if certified:
+            assert got.rank == r and got.N.shape == N.shape and np.abs(got.N @ got.N.T - N @ N.T).max() <= bound
+
+
 def test_decoupled_blocks_and_zero_columns():
     """A loop of rank 1, a leaf that peels, and an equation with an all-zero column: the loop's
     singular values are computed, the leaf's columns have no null component, and the zero
@@ -128,3 +168,23 @@ def test_left_inverse_norms_bound_the_peeled_part(tmp_path, kind, shape, n, loop
     assert np.all(A[np.ix_(R, sorted(set(range(A.shape[1])) - set(C)))] == 0.0)  # A = [[B, 0], [X, A']]
     exact, bound = an._left_inverse_norm(A, steps, cols_of), an._left_inverse_bound(A, steps, cols_of)
     assert 1.0 / np.linalg.svd(B, compute_uv=False)[-1] <= exact * (1 + 1e-12) and exact <= bound * (1 + 1e-12)
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).parents[1] / "mechanisms").glob("*.toml")) + ["cranks", "spatial"],
+                         ids=lambda p: p if isinstance(p, str) else p.stem)
+def test_the_cores_sparse_rows_are_the_dense_rows_nonzeros(tmp_path, path):
+    """kernel.rows_sparse (core/rows_sparse.c), what admission and the pre-check read, gives Phi
+    and exactly the nonzeros of the dense Phi_h of kernel.rows_at, in np.nonzero's order."""
+    from overcon.kernel import rows_at, rows_sparse
+    if path == "cranks":
+        path = linkage(np.random.default_rng(5), "planar", "cranks", 30, tmp_path / "m.toml")
+    elif path == "spatial":
+        path = linkage(np.random.default_rng(6), "spatial", "loops", 40, tmp_path / "m.toml", 4)
+    model = _model(path, check_initial=False)
+    rng = np.random.default_rng(0)
+    for h in (model.h0, rng.standard_normal(model.nh)):
+        phi, J, _ = rows_at(model, model.q0, h)
+        phi_s, (rr, cc, vals) = rows_sparse(model, model.q0, h)
+        r0, c0 = np.nonzero(J)
+        assert np.array_equal(phi, phi_s) and np.array_equal(rr, r0) and np.array_equal(cc, c0)
+        assert np.array_equal(vals, J[r0, c0])

@@ -47,7 +47,10 @@ spaces add up to its null space. The threshold is the whole matrix's (``tol`` be
 ||A||_2 bounded from both sides), and a certificate (sigma_min of the peeled part against the
 blocks' singular values near ``tol``) proves the rank is the one one dense SVD of the whole
 matrix gives; when it cannot, that dense SVD runs. A tree mechanism peels whole (no SVD at
-all); a parallelogram linkage is one block. ``methods="all"`` also runs one dense SVD of the
+all); a parallelogram linkage is one block, whose coupler's rows are hubs (more than
+:data:`_HUB_DEGREE` equations on them): set aside, the block falls into one small part per crank,
+factorised one by one, and the hub rows on those parts' null vectors are factorised last
+(:meth:`_Hub.finish`, with its own certificate, the block's dense SVD when that fails). ``methods="all"`` also runs one dense SVD of the
 whole matrix for the rank and QR tests (rank, tolerance and their kappa), so the cross-check
 compares the one factorisation with independent computations.
 
@@ -110,7 +113,7 @@ from dataclasses import dataclass, field
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
-import scipy.linalg
+import scipy.linalg  # loaded with its BLAS at import: a caller's thread limit (threadpoolctl) then covers it
 
 __all__ = [
     "DEFAULT_RTOL",
@@ -122,6 +125,9 @@ __all__ = [
     "null_space",
     "independent_columns",
     "auto_eliminate",
+    "Factored",
+    "factorise",
+    "factorise_nonzeros",
     "JointVerdict",
     "SetVerdict",
     "Analysis",
@@ -220,16 +226,26 @@ def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     A = _as_matrix(J).copy()
     n, m = A.shape
-    d_r, d_c = np.ones(n), np.ones(m)
     if A.size == 0:
-        return A, d_r, d_c
+        return A, np.ones(n), np.ones(m)
     # everything below touches the nonzeros only (a large mechanism's J is very sparse): the same
     # maxima, and the same products in the same order, as on the dense array
     rr, cc = np.nonzero(A)  # row-major: rr ascending
-    v = np.abs(A[rr, cc])
+    keep, v, d_r, d_c = _ruiz(rr, cc, A[rr, cc], n, m)
+    A[rr[~keep], cc[~keep]] = 0.0
+    A[rr[keep], cc[keep]] = v
+    return A, d_r, d_c
+
+
+def _ruiz(rr: np.ndarray, cc: np.ndarray, vals: np.ndarray, n: int, m: int):
+    """:func:`equilibrate` on the nonzeros ``vals`` at (rr, cc) (row-major) of an (n, m) matrix:
+    (mask of the nonzeros kept, the kept ones' scaled values, d_r, d_c); the others are
+    round-off set to zero."""
+    d_r, d_c = np.ones(n), np.ones(m)
+    v = np.abs(vals)
     amax = float(v.max()) if v.size else 0.0
     if amax == 0.0:
-        return A, d_r, d_c
+        return np.ones(vals.size, dtype=bool), vals.copy(), d_r, d_c
     floor = NOISE_FACTOR * max(n, m) * EPS * amax
     rmax = np.zeros(n)
     np.maximum.at(rmax, rr, v)
@@ -237,10 +253,9 @@ def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     cmax = np.zeros(m)
     np.maximum.at(cmax, cc, v)
     v[(cmax <= floor)[cc]] = 0.0
-    A[rr, cc] = np.where(v == 0.0, 0.0, A[rr, cc])
     keep = v != 0.0
     rr, cc = rr[keep], cc[keep]
-    v = A[rr, cc]
+    v = vals[keep]
     by_col = np.argsort(cc, kind="stable")
     r_at, r_start = np.unique(rr, return_index=True)
     c_at, c_start = np.unique(cc[by_col], return_index=True)
@@ -262,8 +277,66 @@ def equilibrate(J) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         v = sr[rr] * v * sc[cc]
         d_r *= sr
         d_c *= sc
-    A[rr, cc] = v
-    return A, d_r, d_c
+    return keep, v, d_r, d_c
+
+
+class _Sparse:
+    """A matrix held by its nonzeros, row-major (CSR: ``indptr``, ``indices``, ``data``): what the
+    one factorisation gathers from (:func:`_sub`), without the dense n x m array."""
+
+    def __init__(self, shape: tuple[int, int], rr: np.ndarray, cc: np.ndarray, vals: np.ndarray):
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(rr, minlength=self.shape[0]))]).astype(np.intp)
+        self.indices = np.asarray(cc, dtype=np.intp)
+        self.data = np.asarray(vals, dtype=float)
+        self.data.setflags(write=False)
+
+    def nonzeros(self) -> tuple[np.ndarray, np.ndarray]:
+        """``np.nonzero`` of the matrix (row-major, columns ascending in a row)."""
+        return np.repeat(np.arange(self.shape[0]), np.diff(self.indptr)), self.indices
+
+    def toarray(self) -> np.ndarray:
+        out = np.zeros(self.shape)
+        rr, cc = self.nonzeros()
+        out[rr, cc] = self.data
+        return out
+
+    def sub(self, R, C) -> np.ndarray:
+        """The dense submatrix of rows R x columns C (in their order)."""
+        R, C = np.asarray(R, dtype=np.intp).reshape(-1), np.asarray(C, dtype=np.intp).reshape(-1)
+        out = np.zeros((R.size, C.size))
+        if not R.size or not C.size:
+            return out
+        starts = self.indptr[R]
+        lens = self.indptr[R + 1] - starts
+        at = np.repeat(starts - np.cumsum(lens) + lens, lens) + np.arange(int(lens.sum()))
+        row = np.repeat(np.arange(R.size), lens)
+        order = np.argsort(C, kind="stable")
+        k = np.minimum(np.searchsorted(C[order], self.indices[at]), C.size - 1)
+        hit = C[order][k] == self.indices[at]
+        out[row[hit], order[k[hit]]] = self.data[at[hit]]
+        return out
+
+
+def _sub(A, R, C) -> np.ndarray:
+    """A[R][:, C] as a dense array, A dense or :class:`_Sparse`."""
+    if isinstance(A, np.ndarray):
+        return A[np.ix_(list(R), list(C))]
+    return A.sub(R, C)
+
+
+def _nonzeros(A) -> tuple[np.ndarray, np.ndarray]:
+    """``np.nonzero`` of A, dense or :class:`_Sparse`."""
+    return np.nonzero(A) if isinstance(A, np.ndarray) else A.nonzeros()
+
+
+def _values(A, rr: np.ndarray, cc: np.ndarray) -> np.ndarray:
+    """A's values at its nonzeros (rr, cc) (for a :class:`_Sparse`, its own, in its order)."""
+    return A[rr, cc] if isinstance(A, np.ndarray) else A.data
+
+
+def _full(A) -> np.ndarray:
+    return A if isinstance(A, np.ndarray) else A.toarray()
 
 
 def _null_basis(J: np.ndarray, r: int, method: str) -> np.ndarray:
@@ -297,11 +370,81 @@ def _decision_matrix(J: np.ndarray, use_equilibration: bool) -> np.ndarray:
     return equilibrate(J)[0] if use_equilibration else J
 
 
+@dataclass(frozen=True, eq=False)
+class Factored:
+    """One factorisation of a Jacobian J (n, m), made once and read by :func:`independent_columns`
+    (so :func:`auto_eliminate`) and :func:`analyse`: the raw J and the decision matrix A
+    (equilibrated J, or J) held sparse (a large mechanism's J is nearly all zeros), and
+    :func:`_factorise` of A with its null basis. Made by :func:`factorise`; passing it instead of
+    J gives exactly the numbers passing J with the same ``rtol`` and ``equilibrate`` gives."""
+
+    J: "_Sparse"  # the raw J
+    A: "_Sparse"  # the decision matrix
+    f: "_Factorisation"
+    rtol: float
+    equilibrate: bool
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.A.shape
+
+    def nonzeros(self) -> tuple[np.ndarray, np.ndarray]:
+        """``np.nonzero`` of A (row-major, columns ascending in a row)."""
+        return self.A.nonzeros()
+
+
+def factorise(J, rtol: float | None = None, *, equilibrate: bool = True) -> Factored:
+    """:class:`Factored` of ``J``: the one factorisation (with its null basis) of the decision
+    matrix, for :func:`independent_columns` and :func:`analyse` to share."""
+    J = _as_matrix(J)
+    rr, cc = np.nonzero(J)
+    return factorise_nonzeros(J.shape, rr, cc, J[rr, cc], rtol, equilibrate=equilibrate)
+
+
+def factorise_nonzeros(shape: tuple[int, int], rr, cc, vals, rtol: float | None = None, *,
+                       equilibrate: bool = True) -> Factored:
+    """:func:`factorise` of the (n, m) matrix whose nonzeros are ``vals`` at rows ``rr`` and
+    columns ``cc``, row-major (columns ascending in a row, as ``np.nonzero`` gives them): nothing
+    here is n x m, the decision matrix is equilibrated and factorised on them."""
+    n, m = int(shape[0]), int(shape[1])
+    rr, cc = np.asarray(rr, dtype=np.intp), np.asarray(cc, dtype=np.intp)
+    vals = np.asarray(vals, dtype=float)
+    if not np.all(np.isfinite(vals)):
+        raise ValueError("matrix contains NaN or inf")
+    rt = _rtol(rtol)
+    raw = _Sparse((n, m), rr, cc, vals)
+    A = raw
+    if equilibrate:
+        keep, v, _, _ = _ruiz(rr, cc, vals, n, m)
+        live = v != 0.0  # a scaled value that underflowed is a zero of the dense equilibrate's A too
+        A = _Sparse((n, m), rr[keep][live], cc[keep][live], v[live])
+    return Factored(J=raw, A=A, f=_factorise(A, rt, nonzeros=A.nonzeros()), rtol=rt, equilibrate=equilibrate)
+
+
+def _decide(J: np.ndarray, rt: float, use_equilibration: bool) -> tuple[np.ndarray, tuple, "_Factorisation"]:
+    """(decision matrix A, its nonzeros, :func:`_factorise` of A with its null basis)."""
+    A = _decision_matrix(J, use_equilibration)
+    nonzeros = np.nonzero(A)
+    return A, nonzeros, _factorise(A, rt, nonzeros=nonzeros)
+
+
+def _factored(J, rtol: float | None, equilibrate: bool) -> Factored | None:
+    """``J`` itself when it is a :class:`Factored` made with this ``rtol`` (None: any) and
+    ``equilibrate``, else None (the caller factorises)."""
+    if not isinstance(J, Factored):
+        return None
+    if (rtol is not None and _rtol(rtol) != J.rtol) or equilibrate != J.equilibrate:
+        raise ValueError(f"a Factored made with rtol={J.rtol}, equilibrate={J.equilibrate} was given with "
+                         f"rtol={rtol}, equilibrate={equilibrate}")
+    return J
+
+
 def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = True) -> list[int]:
     """A maximal linearly independent set of columns (equations) of ``J``, sorted, 0-based.
 
     From the one factorisation of the equilibrated J (raw J if ``equilibrate=False``;
-    :func:`_factorise`): every peeled column (it is in no dependency, so in every maximal
+    :func:`_factorise`; ``J`` may be its :class:`Factored`): every peeled column (it is in no
+    dependency, so in every maximal
     independent set), and in each block of rank r_k < its width the first r_k pivots of the
     column-pivoted QR (``scipy.linalg.qr(..., pivoting=True)``) of that block (all its columns
     when r_k is its width). Blocks share no rows, so this is what the pivoted QR of the whole
@@ -309,8 +452,12 @@ def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = Tru
     the reactions of unique joints do not depend on the choice. Each block's pick is verified to
     have rank r_k (greedy fallback in pivot order otherwise).
     """
-    A = _decision_matrix(_as_matrix(J), equilibrate)
-    f = _factorise(A, _rtol(rtol), vectors=False)
+    fz = _factored(J, rtol, equilibrate)
+    if fz is None:
+        A = _decision_matrix(_as_matrix(J), equilibrate)
+        f = _factorise(A, _rtol(rtol), vectors=False)
+    else:
+        A, f = fz.A, fz.f
     chosen = list(f.peeled)
     for (rows, cols), rk in zip(f.blocks, f.ranks):
         if rk == 0:
@@ -318,13 +465,13 @@ def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = Tru
         if rk == len(cols):
             chosen += cols
             continue
-        sub = A[np.ix_(rows, cols)]
+        sub = _sub(A, rows, cols)
         _, piv = scipy.linalg.qr(sub, mode="r", pivoting=True)
         pick = [int(p) for p in piv[:rk]]
-        if _rank_abs(sub[:, pick], f.tol) != rk:  # pragma: no cover - pivoted QR failed to reveal the rank (Kahan-type matrix)
+        if _rank_at(sub[:, pick], f.tol) != rk:  # pragma: no cover - pivoted QR failed to reveal the rank (Kahan-type matrix)
             pick = []
             for p in piv:
-                if _rank_abs(sub[:, pick + [int(p)]], f.tol) == len(pick) + 1:
+                if _rank_at(sub[:, pick + [int(p)]], f.tol) == len(pick) + 1:
                     pick.append(int(p))
                 if len(pick) == rk:
                     break
@@ -332,12 +479,19 @@ def independent_columns(J, rtol: float | None = None, *, equilibrate: bool = Tru
     return sorted(chosen)
 
 
+def _rank_at(A: np.ndarray, tol: float) -> int:
+    """The count of singular values of A above the absolute ``tol`` (the one factorisation: a
+    pick of a loop block's columns keeps its hubs)."""
+    return _factorise(A, DEFAULT_RTOL, tol=tol, vectors=False).r
+
+
 def auto_eliminate(J, rtol: float | None = None, *, equilibrate: bool = True) -> list[int]:
     """Equations an automatic elimination removes: the complement of ``independent_columns``,
     sorted, 0-based (``m - rank`` of them)."""
-    J = _as_matrix(J)
-    keep = set(independent_columns(J, rtol, equilibrate=equilibrate))
-    return [c for c in range(J.shape[1]) if c not in keep]
+    fz = _factored(J, rtol, equilibrate)
+    m = fz.shape[1] if fz is not None else _as_matrix(J).shape[1]
+    keep = set(independent_columns(J if fz is not None else _as_matrix(J), rtol, equilibrate=equilibrate))
+    return [c for c in range(m) if c not in keep]
 
 
 # --------------------------------------------------------------------------- the one factorisation
@@ -412,7 +566,7 @@ def _peel(A: np.ndarray, rows_of: list, cols_of: list, floor: float):
         R = [j for j in cand if all(c in Cs for c in cols_of[j] if live_c[c])]
         if len(R) < len(C):
             continue
-        D = A[np.ix_(R, C)]
+        D = _sub(A, R, C)
         u, sv, vt = np.linalg.svd(D, full_matrices=False)
         if sv[-1] <= floor:
             continue
@@ -440,7 +594,7 @@ def _left_inverse_bound(A: np.ndarray, steps: list, cols_of: list) -> float:
         prev = sorted({c for i in R for c in cols_of[i] if c not in Cs})
         rows = np.sqrt(np.sum(P * P, axis=1))
         if prev:
-            rows = rows + np.abs(P @ A[np.ix_(R, prev)]) @ np.array([bound[c] for c in prev])
+            rows = rows + np.abs(P @ _sub(A, R, prev)) @ np.array([bound[c] for c in prev])
         for c, b in zip(C, rows.tolist()):
             bound[c] = b
     return float(np.sqrt(sum(b * b for b in bound.values())))
@@ -464,7 +618,7 @@ def _left_inverse_norm(A: np.ndarray, steps: list, cols_of: list) -> float:
         Cs = set(C)
         prev = sorted({c for i in R for c in cols_of[i] if c not in Cs})
         plan.append((np.array([row_pos[i] for i in R]), np.array([col_pos[c] for c in C]), P,
-                     [col_pos[c] for c in prev], A[np.ix_(R, prev)] if prev else None))
+                     [col_pos[c] for c in prev], _sub(A, R, prev) if prev else None))
     p_r, p_c = len(row_pos), len(col_pos)
     width = max(1, min(p_r, _CHUNK // max(p_c, 1)))
     total = 0.0
@@ -487,7 +641,7 @@ def _left_inverse_norm(A: np.ndarray, steps: list, cols_of: list) -> float:
     return float(np.sqrt(total))
 
 
-def _sigma1_bounds(A: np.ndarray, rr: np.ndarray, cc: np.ndarray) -> tuple[float, float]:
+def _sigma1_bounds(A, rr: np.ndarray, cc: np.ndarray) -> tuple[float, float]:
     """Bounds lo <= ||A||_2 <= hi from A's nonzeros (rows rr, columns cc). lo = ||A y|| for the
     unit Ritz vector y of the largest Ritz value of :data:`_LANCZOS_STEPS` Lanczos steps on
     A^T A from (1, ..., 1) (full reorthogonalisation; any unit y gives a lower bound, the Ritz
@@ -496,7 +650,7 @@ def _sigma1_bounds(A: np.ndarray, rr: np.ndarray, cc: np.ndarray) -> tuple[float
     import scipy.sparse
 
     n, m = A.shape
-    vals = A[rr, cc]
+    vals = _values(A, rr, cc)
     S = scipy.sparse.csr_matrix((vals, (rr, cc)), shape=(n, m))
     St = S.T.tocsr()
     k = min(m, _LANCZOS_STEPS)
@@ -537,13 +691,14 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     2. Split what is left, A' = A[live rows, live columns], into the connected components of its
        row-column graph (two equations are coupled when they share a coordinate). A' is block
        diagonal after permutation, so its singular values are the union of the blocks' and its
-       null space the direct sum of theirs. One dense SVD per block (LAPACK gesdd, full V).
+       null space the direct sum of theirs. One dense SVD per block (LAPACK gesdd, full V), but
+       a block with hub rows goes through them (:func:`_hub`, :meth:`_Hub.finish`).
     3. The threshold is the SVD test's, ``tol = max(rtol, max(n, m) * eps) * ||A||_2``, with
-       ||A||_2 of the whole A (when anything was peeled, the lower bound lo of
-       :func:`_sigma1_bounds`, 7e-5 low at worst on a long chain of equal links, else exactly
+       ||A||_2 of the whole A (when anything was peeled or went through hubs, the lower bound lo
+       of :func:`_sigma1_bounds`, 7e-5 low at worst on a long chain of equal links, else exactly
        the largest block singular value), applied to every block: the rank is the number of
-       peeled columns plus the blocks' singular values above tol; the null basis is the blocks'
-       right singular vectors at or below tol, zero on the peeled columns.
+       peeled columns plus the blocks' ranks; the null basis is the blocks' (:func:`_assemble`),
+       zero on the peeled columns.
 
     The certificate (why the verdicts are those of one SVD of A, with the tolerance): write
     A = [[B, 0], [X, A']] (peeled rows and columns first). A null-ish vector of A'
@@ -553,15 +708,15 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     tol / beta), so A has at most as many as A' has <= c tol. Both counts agree unless A' has a
     singular value in (tol, c tol], or beta <= tol. With ||A||_2 known only within [lo, hi],
     the dense tolerance lies in [tol_lo, tol_hi] and the certificate is: beta > tol_hi and no
-    singular value of A' in (tol_lo, c(tol_hi) tol_hi]. beta >= 1 / ||L||_F
-    (:func:`_left_inverse_bound`, else the exact :func:`_left_inverse_norm`) and ||X||_2 <=
-    ||X||_F make c computable; when the certificate fails, the dense route runs: one SVD of the
-    whole A (the previous method). With ranks equal,
-    the two null spaces are the same in exact arithmetic; numerically each is accurate to its
-    own round-off bound (``kappa`` here is that of the computed blocks, Wedin's bound for the
-    basis computed). ``nonzeros``: ``np.nonzero(A)`` when the caller has it."""
+    singular value of A' in (tol_lo, T], T = c(tol_hi) tol_hi (through hubs: :meth:`_Hub.finish`).
+    beta >= 1 / ||L||_F (:func:`_left_inverse_bound`, else the exact :func:`_left_inverse_norm`)
+    and ||X||_2 <= ||X||_F make c computable; when the certificate fails, the dense route runs:
+    one SVD of the whole A (the previous method). With ranks equal, the two null spaces are the
+    same in exact arithmetic; numerically each is accurate to its own round-off bound (``kappa``
+    here is that of the computed blocks, Wedin's bound for the basis computed). ``A``: dense or
+    :class:`_Sparse`; ``nonzeros``: ``np.nonzero(A)`` when the caller has it."""
     n, m = A.shape
-    rr, cc = np.nonzero(A) if nonzeros is None else nonzeros  # row-major order
+    rr, cc = _nonzeros(A) if nonzeros is None else nonzeros  # row-major order
     if rr.size == 0:
         return _Factorisation(sigma1=0.0, tol=0.0 if tol is None else float(tol), r=0, N=np.eye(m),
                               sigma=np.zeros(min(n, m)), kappa=1.0, peeled=(), blocks=(), ranks=(),
@@ -569,42 +724,63 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     rtol_eff = max(rtol, max(n, m) * EPS)
     rows_of, cols_of = _pattern(rr, cc, n, m)
     # ||A||_F >= ||A||_2, so this floor is at least tol: a peeled D is of full rank above tol
-    floor = float(tol) if tol is not None else rtol_eff * float(np.sqrt(np.sum(A[rr, cc] ** 2)))
+    floor = float(tol) if tol is not None else rtol_eff * float(np.sqrt(np.sum(_values(A, rr, cc) ** 2)))
     steps, live_r, live_c = _peel(A, rows_of, cols_of, floor)
-    blocks, svds = _blocks(A, live_r, live_c, rows_of, vectors)
-    sigma_blocks = [s for s, _ in svds]
-    top = max((float(s[0]) for s in sigma_blocks if s.size), default=0.0)
+    blocks = _blocks(A, live_r, live_c, rows_of)
+    # per block: a _Hub, or its dense SVD (s, V^T or None)
+    parts = [_hub(A, rows, cols, rows_of, cols_of, live_c) or _block_svd(A, rows, cols, vectors)
+             for rows, cols in blocks]
+    hubs = [b for b, p in enumerate(parts) if isinstance(p, _Hub)]
+    top = max((float(s[0]) for p in parts for s in (p.sigmas() if isinstance(p, _Hub) else [p[0]]) if s.size),
+              default=0.0)
     if tol is None:
-        lo, hi = _sigma1_bounds(A, rr, cc) if steps else (top, top)
+        lo, hi = _sigma1_bounds(A, rr, cc) if steps or hubs else (top, top)
         sigma1 = max(lo, top)
         t, t_hi = rtol_eff * sigma1, rtol_eff * max(hi, top)
     else:
         sigma1, t = float("nan"), float(tol)
         t_hi = t
-    route = "blocks" if not steps or _certified(A, rr, cc, steps, cols_of, sigma_blocks, t, t_hi) else "dense"
+    T = _peel_margin(A, rr, cc, steps, cols_of, t_hi) if steps else t_hi
+    if T is not None:
+        for b in hubs:
+            parts[b] = parts[b].finish(A, blocks[b][1], t, T) or _block_svd(A, *blocks[b], vectors)
+    dense = [p for p in parts if not isinstance(p, _HubFactors)]
+    route = "blocks" if T is not None and not any(np.any((s > t) & (s <= T)) for s, _ in dense) else "dense"
     if route == "dense":
-        s, vh = _svd_full(A) if vectors else (_svdvals(A), None)
+        s, vh = _svd_full(_full(A)) if vectors else (_svdvals(_full(A)), None)
         if tol is None:
             sigma1 = float(s[0]) if s.size else 0.0
             t = rtol_eff * sigma1
         blocks = ((tuple(range(n)), tuple(range(m))),)
-        svds, steps = [(s, vh)], []
+        parts, steps = [(s, vh)], []
     peeled = tuple(c for _, C, _ in steps for c in C)
-    ranks, parts = [], []
-    for (rows, cols), (s, vh) in zip(blocks, svds):
-        rk = int(np.count_nonzero(s > t))
-        ranks.append(rk)
-        if vectors and len(cols) > rk:
-            part = np.zeros((m, len(cols) - rk))
-            part[list(cols), :] = vh.T[:, rk:]
-            parts.append(part)
+    ranks, N, sigma = _assemble(blocks, parts, t, m, vectors)
     r = len(peeled) + sum(ranks)
-    N = np.hstack(parts) if parts else np.zeros((m, 0))
-    sigma = np.sort(np.concatenate([np.zeros(0)] + [s for s, _ in svds]))[::-1]
     above = sigma[sigma > t]
     kappa = float(sigma1 / above[-1]) if above.size and np.isfinite(sigma1) else 1.0
     return _Factorisation(sigma1=sigma1, tol=t, r=r, N=N, sigma=sigma, kappa=kappa, peeled=peeled,
                           blocks=tuple(blocks), ranks=tuple(ranks), route=route)
+
+
+def _assemble(blocks, parts, t: float, m: int, vectors: bool):
+    """(each block's rank, the null basis (m, m - r) on the blocks' columns, the singular values
+    computed, descending) from the blocks' factors: a dense SVD (s, V^T) or :class:`_HubFactors`."""
+    ranks, nulls, sigmas = [], [], []
+    for (_, cols), p in zip(blocks, parts):
+        if isinstance(p, _HubFactors):
+            rk, null, s = p.rank, p.N, p.sigma
+        else:
+            s, vh = p
+            rk = int(np.count_nonzero(s > t))
+            null = vh.T[:, rk:] if vectors and len(cols) > rk else None
+        ranks.append(rk)
+        sigmas.append(s)
+        if vectors and len(cols) > rk:
+            part = np.zeros((m, len(cols) - rk))
+            part[list(cols), :] = null
+            nulls.append(part)
+    N = np.hstack(nulls) if nulls else np.zeros((m, 0))
+    return ranks, N, np.sort(np.concatenate([np.zeros(0)] + sigmas))[::-1]
 
 
 def _pattern(rr: np.ndarray, cc: np.ndarray, n: int, m: int) -> tuple[list, list]:
@@ -617,60 +793,163 @@ def _pattern(rr: np.ndarray, cc: np.ndarray, n: int, m: int) -> tuple[list, list
     return rows_of, cols_of
 
 
-def _certified(A, rr, cc, steps, cols_of, sigma_blocks, t, t_hi) -> bool:
-    """The certificate of :func:`_factorise`: beta > t_hi and no block singular value in
-    (t, c t_hi], c = (1 + ||X||_F / beta) / (1 - t_hi / beta), beta = 1 / (a bound of ||L||_F)."""
+def _peel_margin(A, rr, cc, steps, cols_of, t_hi) -> float | None:
+    """T = c t_hi of the certificate of :func:`_factorise`, c = (1 + ||X||_F / beta) / (1 - t_hi
+    / beta), beta = 1 / (a bound of ||L||_F); None when beta <= t_hi (the certificate fails)."""
     n, m = A.shape
     beta = 1.0 / _left_inverse_bound(A, steps, cols_of)
     if not beta > 2.0 * t_hi:  # the one-pass bound is too loose here: the exact ||L||_F
         beta = 1.0 / _left_inverse_norm(A, steps, cols_of)
     if not beta > t_hi:
-        return False
+        return None
     peeled_c = np.zeros(m, dtype=bool)
     peeled_r = np.zeros(n, dtype=bool)
     for R, C, _ in steps:
         peeled_c[C] = True
         peeled_r[R] = True
     sel = peeled_c[cc] & ~peeled_r[rr]  # X = A[rows left, peeled columns]
-    x_f = float(np.sqrt(np.sum(A[rr[sel], cc[sel]] ** 2)))
-    c = (1.0 + x_f / beta) / (1.0 - t_hi / beta)
-    return not any(np.any((s > t) & (s <= c * t_hi)) for s in sigma_blocks)
+    x_f = float(np.sqrt(np.sum(_values(A, rr, cc)[sel] ** 2)))
+    return (1.0 + x_f / beta) / (1.0 - t_hi / beta) * t_hi
 
 
-def _blocks(A: np.ndarray, live_r: np.ndarray, live_c: np.ndarray, rows_of: list, vectors: bool = True):
-    """Connected components of the live rows and columns of A (an edge per nonzero), in order of
-    their smallest column; a live column with no live row is a block of its own (0 rows). Each
-    with its dense SVD (singular values, and V^T if ``vectors``, else None)."""
-    import scipy.sparse
-    import scipy.sparse.csgraph
-
+def _blocks(A: np.ndarray, live_r: np.ndarray, live_c: np.ndarray, rows_of: list) -> list:
+    """Connected components [(rows, cols)] of the live rows and columns of A (an edge per
+    nonzero), in order of their smallest column; a live column with no live row is a block of
+    its own (0 rows)."""
     n, m = A.shape
     cols = np.flatnonzero(live_c)
     if cols.size == 0:
-        return [], []
-    e_r, e_c = [], []
-    for c in cols.tolist():
-        for i in rows_of[c]:
-            if live_r[i]:
-                e_r.append(i)
-                e_c.append(n + c)
-    g = scipy.sparse.coo_matrix((np.ones(len(e_r)), (e_r, e_c)), shape=(n + m, n + m))
-    _, label = scipy.sparse.csgraph.connected_components(g, directed=False)
+        return []
+    label = _components(n + m, [(i, n + c) for c in cols.tolist() for i in rows_of[c] if live_r[i]])
     groups: dict[int, tuple[list, list]] = {}
     for c in cols.tolist():
         groups.setdefault(int(label[n + c]), ([], []))[1].append(c)
     for i in np.flatnonzero(live_r).tolist():
         if int(label[i]) in groups:
             groups[int(label[i])][0].append(i)
-    blocks, svds = [], []
-    for rows, bcols in groups.values():
-        blocks.append((tuple(rows), tuple(bcols)))
-        if not rows:
-            svds.append((np.zeros(0), np.eye(len(bcols))))
-        else:
-            sub = A[np.ix_(rows, bcols)]
-            svds.append(_svd_full(sub) if vectors else (_svdvals(sub), None))
-    return blocks, svds
+    return [(tuple(rows), tuple(bcols)) for rows, bcols in groups.values()]
+
+
+def _components(nodes: int, edges: list) -> np.ndarray:
+    """The connected component label of each of ``nodes`` nodes joined by ``edges`` [(a, b)]."""
+    import scipy.sparse
+    import scipy.sparse.csgraph
+
+    a = np.array([e[0] for e in edges], dtype=int)
+    b = np.array([e[1] for e in edges], dtype=int)
+    g = scipy.sparse.coo_matrix((np.ones(len(edges)), (a, b)), shape=(nodes, nodes))
+    return scipy.sparse.csgraph.connected_components(g, directed=False)[1]
+
+
+def _block_svd(A: np.ndarray, rows, cols, vectors: bool = True) -> tuple:
+    """The dense SVD of A[rows, cols]: singular values, and V^T if ``vectors`` (else None)."""
+    if not rows:
+        return np.zeros(0), np.eye(len(cols))
+    sub = _sub(A, rows, cols)
+    return _svd_full(sub) if vectors else (_svdvals(sub), None)
+
+
+#: A row (coordinate) of a block touched by more than this many equations is a hub: a body that
+#: many joints share (the coupler on k planar cranks: 2k equations), set aside by :func:`_hub`.
+#: 12 is two full spatial joints: a body of an ordinary loop (two or three joints) is no hub.
+_HUB_DEGREE = 12
+
+
+@dataclass(frozen=True, eq=False)
+class _HubFactors:
+    """A block factorised through its hubs (:meth:`_Hub.finish`): rank, null basis (the block's
+    columns x its nullity) and the singular values computed (its parts' above tol, the hub
+    rows' matrix G's)."""
+
+    rank: int
+    N: np.ndarray
+    sigma: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class _Hub:
+    """A block with hub rows S (:func:`_hub`): the parts [(rows_k, cols_k)] the block falls into
+    without S, each with its dense SVD (s_k, V_k^T)."""
+
+    S: tuple
+    parts: tuple
+    svds: tuple
+
+    def sigmas(self) -> list:
+        return [s for s, _ in self.svds]
+
+    def finish(self, A: np.ndarray, cols: tuple, t: float, T: float) -> _HubFactors | None:
+        """The block's rank and null basis at the threshold t, or None when the certificate
+        cannot show them to be one dense SVD's of the block for every threshold in [t, T].
+
+        With V = diag(V_k) (orthogonal), A_b V = [[D, E], [F, G]] (rows: the parts', then S;
+        columns: each part's right singular vectors above t, then those at or below): D =
+        diag(U_k Sigma_k) of full column rank, beta = sigma_min(D) its parts' smallest singular
+        value above t; E the parts' singular values at or below t, ||E||_2 = e; F, G = A[S, C_k]
+        V_k. In exact arithmetic with E = 0, null(A_b) = diag(V_k null) null(G) (D x = 0 forces
+        x = 0) and rank = sum rank_k + rank(G). Numerically (Weyl, then the argument of
+        :func:`_factorise` with B = D, X = F, A' = G): for tau in [t, T] the count of singular
+        values of A_b <= tau lies between G's count <= t - e and G's count <= c (T + e), c = (1
+        + ||F|| / beta) / (1 - (T + e) / beta); the certificate is beta > T + e and no singular
+        value of G in (t - e, c (T + e)]. ||F||_2 <= ||A[S, block]||_F."""
+        pos = {c: p for p, c in enumerate(cols)}
+        rank, e, beta, nulls, g_parts = 0, 0.0, np.inf, [], []
+        S = list(self.S)
+        for (_, cols_k), (s, vh) in zip(self.parts, self.svds):
+            rk = int(np.count_nonzero(s > t))
+            rank += rk
+            if rk:
+                beta = min(beta, float(s[rk - 1]))
+            if s.size > rk:
+                e = max(e, float(s[rk]))
+            vn = vh.T[:, rk:]
+            nulls.append(vn)
+            g_parts.append(_sub(A, S, cols_k) @ vn)
+        G = np.hstack(g_parts)
+        s_g, vh_g = _svd_full(G)
+        r_g = int(np.count_nonzero(s_g > t))
+        if not beta > T + e:
+            return None
+        c = 1.0 if np.isinf(beta) else (1.0 + _frobenius(A, S, cols) / beta) / (1.0 - (T + e) / beta)
+        if np.any((s_g > t - e) & (s_g <= c * (T + e))):
+            return None
+        n_g = vh_g.T[:, r_g:]
+        N = np.zeros((len(cols), n_g.shape[1]))
+        at = 0
+        for (_, cols_k), vn in zip(self.parts, nulls):
+            N[[pos[c] for c in cols_k], :] = vn @ n_g[at:at + vn.shape[1]]
+            at += vn.shape[1]
+        above = [s[s > t] for s, _ in self.svds]
+        return _HubFactors(rank=rank + r_g, N=N, sigma=np.concatenate(above + [s_g]))
+
+
+def _frobenius(A: np.ndarray, rows: list, cols) -> float:
+    return float(np.sqrt(np.sum(_sub(A, rows, cols) ** 2)))
+
+
+def _hub(A: np.ndarray, rows: tuple, cols: tuple, rows_of: list, cols_of: list, live_c: np.ndarray) -> _Hub | None:
+    """The block (rows, cols) as a :class:`_Hub`: S = its rows with more than :data:`_HUB_DEGREE`
+    live columns, and the parts its other rows and its columns fall into without S (a column
+    touching S alone is a part of its own, with no rows), each with its dense SVD; None when no
+    row is a hub or some part keeps more than half the block's columns (nothing to gain)."""
+    S = [i for i in rows if sum(1 for c in cols_of[i] if live_c[c]) > _HUB_DEGREE]
+    if not S or len(cols) < 4:
+        return None
+    hub_rows = set(S)
+    rest = [i for i in rows if i not in hub_rows]
+    rpos = {i: k for k, i in enumerate(rest)}
+    base = len(rest)
+    label = _components(base + len(cols), [(rpos[i], base + k) for k, c in enumerate(cols)
+                                           for i in rows_of[c] if i in rpos])
+    groups: dict[int, tuple[list, list]] = {}
+    for k, c in enumerate(cols):
+        groups.setdefault(int(label[base + k]), ([], []))[1].append(c)
+    for i in rest:
+        groups[int(label[rpos[i]])][0].append(i)  # every row of the block has a column in it
+    parts = tuple((tuple(r), tuple(c)) for r, c in groups.values())
+    if len(parts) < 2 or max(len(c) for _, c in parts) > len(cols) // 2:
+        return None
+    return _Hub(S=tuple(S), parts=parts, svds=tuple(_block_svd(A, r, c) for r, c in parts))
 
 
 # --------------------------------------------------------------------------- verdict types
@@ -728,8 +1007,8 @@ class SetVerdict:
 
 @dataclass(frozen=True, eq=False)
 class _Context:
-    J: np.ndarray  # raw, for the reported B matrices
-    A: np.ndarray  # matrix the decisions are made on (equilibrated J, or J)
+    J: object  # raw, for the reported B matrices (dense with the cross-check, else sparse: its shape)
+    A: object  # matrix the decisions are made on (equilibrated J, or J): dense, or _Sparse without the cross-check
     sigma: np.ndarray  # singular values of A reported (all of them with the cross-check)
     tol: float  # absolute rank threshold on A
     r: int  # rank of A (the rank test's, from one SVD of A, with the cross-check)
@@ -751,7 +1030,7 @@ class _Context:
         rows_sorted, ptr = self._lazy["col_rows"]
         idx = list(cols)
         rows = np.unique(np.concatenate([rows_sorted[ptr[c]:ptr[c + 1]] for c in idx])) if idx else np.zeros(0, int)
-        return self.A[np.ix_(rows, idx)]
+        return _sub(self.A, rows, idx)
 
     @property
     def cross_check(self) -> bool:
@@ -783,16 +1062,22 @@ def _b_rtol(rt: float, shape: tuple[int, int], kappa: float) -> float:
 
 def _context(J, rtol, b_rtol, use_equilibration: bool, methods: str = "all") -> _Context:
     """The one factorisation of the decision matrix (:func:`_factorise`: the SVD test's null
-    basis), and with the cross-check (``methods="all"``) one dense SVD of it for the rank and QR
-    tests' rank, tolerance and kappa."""
+    basis; ``J`` may be its :class:`Factored`), and with the cross-check (``methods="all"``) one
+    dense SVD of it for the rank and QR tests' rank, tolerance and kappa."""
     run = _method_set(methods)
-    J = _as_matrix(J)
-    # the raw J is read again only by the cross-check's reports, or as A when not equilibrated
-    J = _readonly(J.copy() if "rank" in run or not use_equilibration else J.view())
-    rt = _rtol(rtol)
-    A = _readonly(_decision_matrix(J, use_equilibration))  # a new array, or the read-only J itself
-    nonzeros = np.nonzero(A)
-    f = _factorise(A, rt, nonzeros=nonzeros)
+    fz = _factored(J, rtol, use_equilibration)
+    if fz is None:
+        J = _as_matrix(J)
+        # the raw J is read again only by the cross-check's reports, or as A when not equilibrated
+        J = _readonly(J.copy() if "rank" in run or not use_equilibration else J.view())
+        rt = _rtol(rtol)
+        A, nonzeros, f = _decide(J, rt, use_equilibration)
+        A = _readonly(A)  # a new array, or the read-only J itself
+    else:
+        rt, f, nonzeros = fz.rtol, fz.f, fz.nonzeros()
+        # dense only for the cross-check (its dense SVDs and reports); the SVD test gathers
+        J = _readonly(fz.J.toarray()) if "rank" in run else fz.J
+        A = J if not use_equilibration else _readonly(fz.A.toarray()) if "rank" in run else fz.A
     brt = _b_rtol(rt, A.shape, f.kappa) if b_rtol is None else _rtol(b_rtol, "b_rtol")
     sigma, tol, r, qr_brt = f.sigma, f.tol, f.r, brt
     if "rank" in run:

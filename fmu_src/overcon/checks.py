@@ -1,5 +1,5 @@
 """Admit a compiled :class:`overcon.model.Model` at its initial state: the checks that evaluate it
-(the compiled core's rows, :func:`overcon.kernel.rows_at`), run after :func:`overcon.model.compile_model` and before any run.
+(the compiled core's rows, :func:`overcon.kernel.rows_sparse`), run after :func:`overcon.model.compile_model` and before any run.
 
 - :func:`check_initial_state` (with :func:`check_euler_q0`): q0/h0 on the constraint manifold;
 - :func:`resolve_elimination`: the eliminated equations checked (or chosen, ``"auto"``) from the
@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from . import analysis
-from .kernel import KernelUnavailable, jacobian, rows_at
+from .kernel import KernelUnavailable, jacobian, rows_sparse
 from .kernel import rigid_rows as kernel_rigid_rows
 from .joints import TYPES, InitialFrames
 from .joints.spatial_rows import POINT_ROW
@@ -38,15 +38,52 @@ def admit(model: Model, *, check_initial: bool = True, eliminate_field: str = "s
     (before the elimination is checked: a rank at an inconsistent q0 means nothing).
     ``check_initial=False`` skips that check: only for evaluating kinematics at arbitrary
     configurations (tests); a Simulation checks again."""
-    if check_initial:
-        check_initial_state(model)
+    rows = check_initial_state(model) if check_initial else None  # Phi_h at q0, read once
     if model.scene.redundancy == "min-norm":  # every equation kept; the solve is rank-revealing
         return replace(model, retained=np.arange(model.m), eliminated=(), elimination_mode="min-norm")
+    fz = None
     if model.scene.redundancy == "compliant":
-        eliminated, mode = rigid_elimination(model), "compliant"
+        fz = factored_q0(model, rows)
+        eliminated, mode = rigid_elimination(model, fz), "compliant"
+    elif model.scene.eliminate == "auto":
+        fz = factored_q0(model, rows)
+        eliminated, mode = resolve_elimination(model, "auto", eliminate_field, fz)
     else:
         eliminated, mode = resolve_elimination(model, model.scene.eliminate, eliminate_field)
-    return with_eliminated(model, eliminated, mode)
+    admitted = with_eliminated(model, eliminated, mode)
+    if fz is not None:  # the pre-check reads the same factorisation (precheck.analyse_model)
+        object.__setattr__(admitted, "factored_q0", fz)
+    return admitted
+
+
+def analysed_rows(model: Model) -> list[int] | None:
+    """The equations (0-based) the pre-check analyses: under redundancy "compliant" the rigid ones
+    (the compliant joints' equations are forces), else all (None)."""
+    if not model.compliant_rows.size:
+        return None
+    compliant = set(int(r) for r in model.compliant_rows)
+    return [i for i in range(model.m) if i not in compliant]
+
+
+def factored_q0(model: Model, rows: tuple | None = None) -> analysis.Factored:
+    """The one factorisation (:func:`overcon.analysis.factorise_nonzeros`) of Phi_h^T at q0, of
+    its :func:`analysed_rows` columns: the one admission made when it chose the elimination
+    (``auto``, or the rigid equations' under "compliant"), else made now (``rows``: Phi_h at q0
+    by its nonzeros, :func:`overcon.kernel.rows_sparse`, when the caller has it). Elimination and
+    pre-check read the same matrix with the same rule, so they share it. Phi_h is never dense
+    here: its nonzeros are transposed and factorised as they are."""
+    if model.factored_q0 is not None:
+        return model.factored_q0
+    eq, col, val = rows_sparse(model, model.q0)[1] if rows is None else rows  # equation, coordinate, value
+    kept = analysed_rows(model)
+    m = model.m
+    if kept is not None:  # the rigid equations, numbered in their order
+        position = np.full(model.m, -1)
+        position[kept] = np.arange(len(kept))
+        sel = position[eq] >= 0
+        eq, col, val, m = position[eq[sel]], col[sel], val[sel], len(kept)
+    order = np.lexsort((eq, col))  # Phi_h^T row-major: coordinates, then equations
+    return analysis.factorise_nonzeros((model.nh, m), col[order], eq[order], val[order])
 
 
 def with_eliminated(model: Model, eliminated, mode: str | None = None) -> Model:
@@ -58,12 +95,13 @@ def with_eliminated(model: Model, eliminated, mode: str | None = None) -> Model:
                    elimination_mode=model.elimination_mode if mode is None else mode)
 
 
-def check_initial_state(model: Model, tol: float = 1e-9) -> None:
+def check_initial_state(model: Model, tol: float = 1e-9) -> tuple:
     """Refuse q0/h0 off the constraint manifold: |Phi| or |Phi_h h0| above tol (m or rad; m/s
     or rad/s), scaled by max(1, max |q0|) (max(1, max |h0|)); a non-finite value is refused too.
     Raises :class:`InconsistentInitialState` naming the violated equations, their joints and
     the mechanism file that holds q0/h0; first, for z-x-z Euler bodies, a q0 at the Euler
-    singularity (:func:`check_euler_q0`)."""
+    singularity (:func:`check_euler_q0`). Returns Phi_h at q0, which it evaluated, by its
+    nonzeros (:func:`overcon.kernel.rows_sparse`: equations, coordinates, values)."""
     check_euler_q0(model)
     joint_of = {r + 1: c.name for c in model.joints for r in c.rows}
     mech = model.scene.mechanism
@@ -72,7 +110,7 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> None:
     def eqs(numbers) -> str:
         return ", ".join(f"Phi{i} (joint {joint_of.get(i, '?')})" for i in numbers)
 
-    Phi, Jh = _rows_q0(model, where)
+    Phi, (eq, col, val) = _rows_q0(model, where)
     with np.errstate(all="ignore"):
         scale = max(1.0, float(np.max(np.abs(model.q0))))
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(Phi) <= tol * scale))]
@@ -91,21 +129,23 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> None:
                 parts.append(f"joint {c.name} (joints[{j}]): {text}: {', '.join(f'Phi{i}' for i in rows)} "
                              f"(joints[{j}].axis_i, joints[{j}].axis_j or the bodies' q0 are wrong)")
             raise InconsistentInitialState("; ".join(parts) + where)
-        vel = Jh @ model.h0
+        vel = np.bincount(eq, val * np.asarray(model.h0, float)[col], minlength=model.m)  # Phi_h h0
         hscale = max(1.0, float(np.max(np.abs(model.h0))))
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(vel) <= tol * hscale))]
     if bad:
         raise InconsistentInitialState(f"initial velocities h0 violate the velocity constraints {eqs(bad)}{where}")
+    return eq, col, val
 
 
-def _rows_q0(model: Model, where: str) -> tuple[np.ndarray, np.ndarray]:
-    """(Phi, Phi_h) at q0 from the compiled core; a q0 or h0 it cannot evaluate (a non-finite
-    value) is an :class:`InconsistentInitialState` naming the mechanism file (``where``)."""
+def _rows_q0(model: Model, where: str) -> tuple[np.ndarray, tuple]:
+    """(Phi, Phi_h by its nonzeros) at q0 from the compiled core (:func:`overcon.kernel.rows_sparse`);
+    a q0 or h0 it cannot evaluate (a non-finite value) is an :class:`InconsistentInitialState`
+    naming the mechanism file (``where``)."""
     y = np.concatenate([model.q0, model.h0])
     if not np.all(np.isfinite(y)):
         raise InconsistentInitialState(f"initial coordinates q0 or velocities h0 hold a non-finite value{where}")
     try:
-        Phi, Jh, _ = rows_at(model, model.q0, model.h0)
+        Phi, Jh = rows_sparse(model, model.q0, model.h0)
     except KernelUnavailable:
         raise
     except RuntimeError as exc:
@@ -156,27 +196,28 @@ def check_euler_q0(model: Model) -> None:
             f"in [mechanism] (no singularity) (bodies' q0 in {mech.source or mech.name})")
 
 
-def rigid_elimination(model: Model) -> list[int]:
+def rigid_elimination(model: Model, fz: analysis.Factored | None = None) -> list[int]:
     """Redundancy "compliant": the rigid equations (those of joints without compliance) that are
     dependent among themselves at q0, chosen like ``"auto"`` (1-based). The compliant equations
-    are kept: they are forces, not constraints."""
-    J = _jacobian_q0(model)
-    compliant = set(int(r) for r in model.compliant_rows)
-    rigid = [i for i in range(model.m) if i not in compliant]
+    are kept: they are forces, not constraints. ``fz``: :func:`factored_q0`, when made."""
+    rigid = analysed_rows(model)
+    if rigid is None:
+        rigid = list(range(model.m))
     if not rigid:
         return []
-    return sorted(rigid[k] + 1 for k in analysis.auto_eliminate(J[:, rigid]))
+    return sorted(rigid[k] + 1 for k in analysis.auto_eliminate(factored_q0(model) if fz is None else fz))
 
 
-def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate") -> tuple[list[int], str]:
+def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate",
+                        fz: analysis.Factored | None = None) -> tuple[list[int], str]:
     """Check (or choose, for "auto") the eliminated equations at q0. Returns 1-based indices.
     Raises ModelError naming ``field`` (where ``eliminate`` was given) for an elimination the
-    mechanism does not admit."""
+    mechanism does not admit. ``fz``: :func:`factored_q0`, when made (``"auto"`` reads it)."""
+    if eliminate == "auto":
+        removed = sorted(i + 1 for i in analysis.auto_eliminate(factored_q0(model) if fz is None else fz))
+        return removed, "auto"
     J = _jacobian_q0(model)
     r = analysis.numerical_rank(J)
-    if eliminate == "auto":
-        removed = sorted(i + 1 for i in analysis.auto_eliminate(J))
-        return removed, "auto"
     removed = sorted(eliminate)
     kept = [i for i in range(model.m) if i + 1 not in set(removed)]
     r_kept = analysis.numerical_rank(J[:, kept]) if kept else 0

@@ -274,12 +274,13 @@ def _input_error(exc, args=None) -> int:
 def cmd_check(args) -> int:
     from .precheck import format_table, precheck
 
-    spec, model = _load(args)  # refuses an inconsistent q0/h0 (exit 2), as simulate and build do
-    from .kernel import refusal
-    why = refusal(model, spec.solver)
-    if why is not None:
-        return _input_error(f"{args.file}: the compiled core cannot run this scene: {why}", args)
-    report = precheck(model, args.file, args.methods)
+    with single_threaded_blas():  # the factorisations: BLAS threads cost 3x here (docs/benchmarks.md)
+        spec, model = _load(args)  # refuses an inconsistent q0/h0 (exit 2), as simulate and build do
+        from .kernel import refusal
+        why = refusal(model, spec.solver)
+        if why is not None:
+            return _input_error(f"{args.file}: the compiled core cannot run this scene: {why}", args)
+        report = precheck(model, args.file, args.methods)
     path = None if args.along is None else _along(args, spec, model)
     if isinstance(path, int):
         return path

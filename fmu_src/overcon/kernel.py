@@ -100,6 +100,7 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_message", ctypes.c_char_p, [vp]), ("ovk_data_status", i, [vp]),
                             ("ovk_evaluate", i, [vp, vp, ctypes.c_double, vp, i, vp, vp, vp, vp, vp, vp]),
                             ("ovk_outputs", i, [vp] * 6), ("ovk_rows", i, [vp] * 6),
+                            ("ovk_rows_sparse", i, [vp] * 6),
                             ("ovk_evaluate_robust", i, [vp] * 8),
                             ("ovk_project", i, [vp, vp, ctypes.c_double, vp, ctypes.c_double, i, vp]),
                             ("ovk_sim_new", vp, [vp, vp, ctypes.c_double, vp]), ("ovk_sim_free", None, [vp]),
@@ -519,6 +520,28 @@ def rows_at(model, q: np.ndarray, h: np.ndarray | None = None):
     rows the pre-check, the initial-state checks and ``check --along`` judge. New arrays."""
     y = np.concatenate([np.asarray(q, float), np.zeros(model.nh) if h is None else np.asarray(h, float)])
     return rows_kernel(model).rows(y)
+
+
+def rows_sparse(model, q: np.ndarray, h: np.ndarray | None = None):
+    """(Phi (m,), Phi_h (m, nh) by its nonzeros: (rows, columns, values), row-major with the
+    columns ascending in a row, as ``np.nonzero`` of the dense Phi_h gives them) at the
+    coordinates q (velocities h, default zero) from the compiled core (core/rows_sparse.c): the
+    values of :func:`rows_at` without the dense m x nh matrix (each equation is nonzero on its
+    joint's two bodies only)."""
+    kern = rows_kernel(model)
+    w = 2 * model.nh_b
+    phi, cols, vals = np.zeros(model.m), np.full((model.m, w), -1, np.intc), np.zeros((model.m, w))
+    y = np.concatenate([np.asarray(q, float), np.zeros(model.nh) if h is None else np.asarray(h, float)])
+    kern._y[:] = y
+    status = library()[0].ovk_rows_sparse(kern._pm, kern._data, kern._ptrs[0], phi.ctypes.data, cols.ctypes.data,
+                                          vals.ctypes.data)
+    if status:
+        raise RuntimeError(f"the compiled core's rows failed ({STATUS.get(status, status)}): {kern._message()}")
+    rows = np.repeat(np.arange(model.m), w).reshape(model.m, w)
+    keep = (cols >= 0) & (vals != 0.0)
+    rr, cc, vv = rows[keep], cols[keep].astype(np.intp), vals[keep]
+    order = np.lexsort((cc, rr))
+    return phi, (rr[order], cc[order], vv[order])
 
 
 def jacobian(model, q: np.ndarray) -> np.ndarray:

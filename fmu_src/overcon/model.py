@@ -162,6 +162,9 @@ class Model:
     # row_stiffness and row_damping are 0)
     compliance_axes: tuple[AxisCompliance, ...] = ()
     plan: "AssemblyPlan" = field(init=False, repr=False, compare=False)  # built by __post_init__
+    # the pre-check's factorisation of the Jacobian at q0 (overcon.analysis.Factored), kept when
+    # admission made it to choose the elimination (overcon.checks.admit); a replaced model has none
+    factored_q0: object = field(init=False, repr=False, compare=False, default=None)
 
     def __post_init__(self):
         for name in ("mass", "inertia", "M", "Minv", "gravity", "q0", "h0", "retained", "compliant_rows",

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 from . import analysis
-from .kernel import jacobian
+from .checks import analysed_rows, factored_q0
 from .joints import TYPES
 from .model import Model
 
@@ -39,15 +39,15 @@ def analyse_model(model: Model, methods: str = "auto"):
     one SVD per independent block of loops left, :func:`overcon.analysis._factorise`),
     ``"all"``, with the rank and QR tests as a cross-check (two SVDs of the Jacobian per joint),
     or ``"auto"`` (:func:`resolve_methods`)."""
-    J = jacobian(model, model.q0).T
-    compliant = compliant_joints(model)
-    if not compliant:
-        return analysis.analyse(J, joint_groups(model), methods=resolve_methods(model, methods))
+    fz = factored_q0(model)  # shared with the elimination's choice when admission made it
+    rows = analysed_rows(model)
+    if rows is None:
+        return analysis.analyse(fz, joint_groups(model), methods=resolve_methods(model, methods))
     # redundancy "compliant": the compliant joints' equations are forces; the rigid rest is analysed
-    rigid = [i for i in range(model.m) if i not in set(int(r) for r in model.compliant_rows)]
-    position = {row: k for k, row in enumerate(rigid)}
+    compliant = compliant_joints(model)
+    position = {row: k for k, row in enumerate(rows)}
     groups = {c.name: [position[r] for r in c.rows] for c in model.joints if c.name not in compliant}
-    return analysis.analyse(J[:, rigid], groups, methods=resolve_methods(model, methods))
+    return analysis.analyse(fz, groups, methods=resolve_methods(model, methods))
 
 
 def compliant_joints(model: Model) -> set[str]:

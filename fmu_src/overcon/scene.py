@@ -1247,14 +1247,16 @@ MAX_LOADS = 1000
 """Largest numbers of bodies, joints and loads of a mechanism (bounded work and memory). The
 pre-check's one factorisation (:func:`overcon.analysis._factorise`, ``methods="svd"``) peels the
 joints whose reaction is decided locally (a tree mechanism entirely) and runs one dense SVD per
-independent block of loops left, so its cost is the largest loop block's, not the mechanism's:
-measured (docs/benchmarks.md, "Pre-check at scale") a 1000-body chain or a 980-body tree with
-20 loops is checked in about 2 s, and the worst case within these limits, one block of 1000
-joints (a coupler on 500 parallel cranks, 1503 coordinates x 2000 equations), in the time and
-memory of that block's SVD (figures there). What ends first beyond them is memory: the
-Jacobian is held dense (n coordinates x m equations, 8 n m bytes per copy, a few copies: 0.2 GB
-per copy for 1000 spatial bodies with 4000 equations) and a block of loops costs 8 (n_b m_b +
-m_b^2) bytes and O(n_b m_b min(n_b, m_b)) time. The three tests' cross-check (``--methods
+independent block of loops left (a block with hub rows, a body many joints share, one small SVD
+per part left without them), so its cost is the largest loop block's, not the mechanism's:
+measured (docs/benchmarks.md, "Pre-check at scale") a 1000-body chain, a 980-body tree with
+20 loops or a 990-body spatial tree with 10 loops is checked from the command line in about
+1 s, and one block of 1000 joints (a coupler on 500 parallel cranks, 1503 coordinates x 2000
+equations, factorised through the coupler's rows) in about 1.6 s. A block of loops without
+hubs costs its dense SVD. What ends first beyond them is memory: the pre-check reads the
+Jacobian by its nonzeros, but the core's workspace holds it dense (n coordinates x m
+equations, 8 n m bytes: 0.2 GB for 1000 spatial bodies with 4000 equations), and a block of
+loops costs 8 (n_b m_b + m_b^2) bytes and O(n_b m_b min(n_b, m_b)) time. The three tests' cross-check (``--methods
 all``) costs two SVDs per joint and is the default only up to
 :data:`overcon.precheck.AUTO_ALL_JOINTS` joints. The paper's mechanisms have 4 and 7 bodies.
 Loads cost one short loop each per evaluation."""

@@ -36,7 +36,8 @@
  *   unique.c            the whole Jacobian's rank and each joint's reaction uniqueness (the pre-check's
  *                       one-factorisation rule)
  *   sim_state.c         a run's state as plain bytes (FMI get/set/serialize FMU state)
- *   api.c               the exported entry points (ovk_*), the only symbols of the library
+ *   rows_sparse.c       Phi and Phi_h by their nonzeros (the pre-check's Jacobian), exported
+ *   api.c               the other exported entry points (ovk_*), the only symbols of the library
  * Units and signs: SI, the paper's conventions (those of overcon.evaluation and overcon.joints).
  *
  * Every failure is a status (OVK_*) plus a message kept in the workspace (ovk_message); the core
@@ -553,6 +554,9 @@ OVK_EXPORT int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double
 /* ovk_rows without the copies: Phi, Phi_h, gamma at y left in d->phi, d->J, d->gam (until the next
  * evaluation in d), for the core's own callers that read them at once */
 OVK_HIDDEN int ovk_rows_in(const ovk_model *M, ovk_data *d, const double *y);
+/* rows_sparse.c: Phi (m) and Phi_h at y as m x 2 nh_b entries (columns, -1 unused; values): the
+ * equations' two bodies' columns, the values of ovk_rows */
+OVK_EXPORT int ovk_rows_sparse(const ovk_model *M, ovk_data *d, const double *y, double *phi, int *cols, double *vals);
 OVK_EXPORT int ovk_evaluate_robust(const ovk_model *M, ovk_data *d, const double *y, const double *start, double *ydot,
                                    double *lam, double *qf, int *iterations);
 OVK_EXPORT int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,

@@ -193,7 +193,8 @@ def test_nfourbar_10_and_40_pass_their_flat_positions_on_the_parallelogram_branc
 def test_the_c_run_counts_the_singular_positions_it_passes(tmp_path):
     """core/sim.c under formulation AL (projection, FSAL again, the watch going on) counts the
     singular positions it records as events, names the last, and keeps the projection's drift
-    within its tolerance."""
+    within its tolerance (the one it has near a singular position, where its corrections converge
+    linearly: OVK_PROJ_SLACK times OVK_PROJ_TOL, core/project.c; measured 1.3e-11)."""
     _, path = _nfourbar().write(2, tmp_path, stop_time=3.0, singular="pass")
     spec = _scene(path)
     model = compile_checked(spec)
@@ -203,7 +204,7 @@ def test_the_c_run_counts_the_singular_positions_it_passes(tmp_path):
     singular = [e for e in c_run.events if e[1] == "singular"]
     assert info["singular_passed"] == len(singular) == 3  # flat at 0.71, 1.23 and 2.66 s
     assert info["last_singular"] == pytest.approx(singular[-1][0], abs=1e-8)  # the event's time, %.9g
-    assert info["projection_drift"] <= kernel.PROJECTION_TOL
+    assert info["projection_drift"] <= kernel.PROJECTION_SLACK * kernel.PROJECTION_TOL
 
 
 @pytest.mark.parametrize("name", ["planar_f45_wo4", "planar_f1_wo6", "spatial_GHMN_wo5", "examples/door_h1_wo_hinge2",

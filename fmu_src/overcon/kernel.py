@@ -57,6 +57,8 @@ FORMULATIONS = {"stop": 0, "pass": 1}
 the augmented Lagrangian solve of the kept rows with step-end projections (kkt_al.c, project.c)."""
 PROJECTION_TOL = 1e-11  # m or rad: OVK_PROJ_TOL of core/core.h, the step-end projection's max |Phi|
 PROJECTION_MAX_ITER = 20  # OVK_PROJ_MAX_ITER of core/core.h: its position corrections at most
+PROJECTION_SLACK = 10.0  # OVK_PROJ_SLACK of core/core.h: near a singular position, where the corrections
+# converge linearly, max |Phi| up to this times PROJECTION_TOL once a correction no longer halves it
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,

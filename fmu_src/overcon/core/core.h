@@ -205,6 +205,7 @@ typedef struct {
     int al_band;   /* the half bandwidth of M + alpha J_R^T J_R in velocity coordinates */
     int al_iterations; /* AL iterations of the last solve; al_stalled: it stopped on stagnation, not on tol */
     int al_stalled;
+    int al_allow_direct; /* a run's step may take the AL form's direct solve (sim.c, OVK_DIRECT_RATIO) */
     int al_direct;     /* the last AL-form solve was kkt.c's direct one (its S factor stands; kkt_al.c) */
     int *al_rows;  /* every equation (m), then its two bodies (2 m): the row set of ovk_project */
     int *piv;      /* nx: the row interchanges of the friction solves' LU (friction.c, friction_robust.c) */
@@ -503,10 +504,11 @@ enum { OVK_AL_SLOT_BASE, OVK_AL_SLOT_RHS, OVK_AL_SLOT_X, OVK_AL_SLOT_UNIT, OVK_A
        OVK_AL_SLOT_END };
 OVK_HIDDEN double *ovk_al_slot(const ovk_model *M, const ovk_data *d, int which);
 #define OVK_AL_ALPHA_PROJ 1e6 /* the projections' penalty, relative to M over J^T J (kkt_al.c) */
+#define OVK_DIRECT_RATIO 1e-3 /* sim.c: the watch's r at a step's start above which kkt_al.c may solve directly */
 #define OVK_PROJ_SLACK 10.0   /* project.c: |Phi| up to this times tol is accepted once the corrections stall */
 OVK_HIDDEN int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double alpha_rel);
 OVK_HIDDEN void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const double *Q, const double *g,
-                             double *x, double *lam, int warm);
+                             double *x, double *lam);
 
 /* friction.c */
 OVK_HIDDEN double ovk_law_magnitude(const double *lp, int law, double speed);

@@ -181,15 +181,14 @@ int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double 
 static void band_solve(const ovk_data *d, int nh, double *b) { ovk_band_solve(d->al, nh, d->al_band, b); }
 
 /* The AL iteration (file header) with the factor of ovk_al_factor: x (nh) with M x + J_R^T lam =
- * Q, J_R x = g, and lam (nR) from lam_0 = 0, or from lam as given when warm. Iterations in
- * d->al_iterations; d->al_stalled = 1 when it stopped on stagnation (the rank is being lost) or at
- * AL_MAX_ITER rather than at AL_TOL. */
+ * Q, J_R x = g, and lam (nR) from lam_0 = 0. Iterations in d->al_iterations; d->al_stalled = 1 when
+ * it stopped on stagnation (the rank is being lost) or at AL_MAX_ITER rather than at AL_TOL. */
 void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const double *Q, const double *g, double *x,
-                  double *lam, int warm) {
+                  double *lam) {
     int nh = M->nb * M->nh_b, nR = rs->n;
     double *base = slot(M, d, SLOT_BASE), *rhs = slot(M, d, SLOT_RHS), *res = slot(M, d, SLOT_RES);
     double a = d->al_alpha, prev = INFINITY;
-    if (!warm) memset(lam, 0, sizeof(double) * (size_t)nR);
+    memset(lam, 0, sizeof(double) * (size_t)nR);
     memcpy(base, Q, sizeof(double) * (size_t)nh); /* Q + alpha J_R^T g: the part that does not change */
     rows_t_add(M, d, rs, g, a, base);
     d->al_stalled = 0;
@@ -242,43 +241,44 @@ static void residual(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, cons
  * cost on a long chain (the iteration contracts by 1 / (1 + alpha s) a step on S's small
  * eigenvalues s: a dozen band solves at the N-four-bar's regular positions). Refined by at most
  * DIRECT_REFINE solves with the same factor (S d = J_R h' - g, lam_R += d), it is taken when it
- * meets the AL's own stopping test (the residual at most AL_TOL of its scale): DIRECT_TAKEN, with
- * d->al_direct set (the friction columns use the same factor). Where it does not (near a singular
- * position S's round-off grows), it is the iteration's start: DIRECT_START, so that the
- * multipliers change continuously where the test starts or stops being met (an iteration from 0
- * would stall, near a singular position, at a different point: a jump in y' that a tight
- * tolerance cannot step over). Where S has no Cholesky factor (at a singular position; and under
- * another redundancy than "eliminate"), or its pivots spread by more than 1 / DIRECT_PIVOT (near
- * one: a direct lam's error along the directions losing rank grows as 1 / pivot, and J_R^T
- * carries what it cannot cancel into y'; measured: without this bound the N-four-bar at tolerance
- * 1e-12 could not step past its first flat position), the iteration from lam = 0 decides, as it
- * would alone, and tends to the minimum-norm multipliers: DIRECT_NONE. */
+ * meets the AL's own stopping test (the residual at most AL_TOL of its scale): 1, with
+ * d->al_direct set (the friction columns use the same factor). It is tried only where the run
+ * allows it for the whole step (d->al_allow_direct: sim.c, from the watch's r at the step's start,
+ * OVK_DIRECT_RATIO), so that every stage of a step near a singular position has the same
+ * right-hand side (decided per evaluation, the switches between the two solves inside steps were
+ * jumps in y' that a tolerance of 1e-12 could not step over, and the passages lost accuracy:
+ * measured on the N-four-bar N = 2, B0's x 4e-2 m off after 20 s instead of 1.6e-5 m); a
+ * Kernel outside a run keeps the iteration. 0 when not allowed, when S has no Cholesky factor or
+ * its pivots spread by more than 1 / DIRECT_PIVOT (a direct lam's error along the directions
+ * losing rank grows as 1 / pivot, and J_R^T carries into y' what it cannot cancel), or when the
+ * test is not met: the iteration from lam = 0 decides, as it would alone (the minimum-norm
+ * multipliers at a singular position). Only under redundancy "eliminate" (the AL's rows). */
 #define DIRECT_REFINE 2
 #define DIRECT_PIVOT 1e-8 /* the smallest pivot^2 against the largest for S's factor to be used at all */
-enum { DIRECT_NONE = 0, DIRECT_TAKEN = 1, DIRECT_START = 2 };
 static int direct(const ovk_model *M, ovk_data *d, const ovk_rowset *kept) {
     d->al_direct = 0;
+    if (!d->al_allow_direct) return 0;
     if (M->redundancy != OVK_ELIMINATE || ovk_kkt_solve(M, d)) {
         d->msg[0] = '\0'; /* a failed factor is no failure here: the iteration takes over */
-        return DIRECT_NONE;
+        return 0;
     }
     double lo = INFINITY, hi = 0.0; /* S's Cholesky pivots: their spread bounds how far S is from singular */
     for (int a = 0; a < M->nR; a++) {
         double u = d->S[(size_t)a * (d->sb.band + 1)];
         lo = u * u < lo ? u * u : lo, hi = u * u > hi ? u * u : hi;
     }
-    if (!(lo >= DIRECT_PIVOT * hi)) return DIRECT_NONE;
+    if (!(lo >= DIRECT_PIVOT * hi)) return 0;
     double *x = slot(M, d, SLOT_X), *res = slot(M, d, SLOT_RES), rmax = 0.0, scale = 0.0;
     for (int k = 0;; k++) {
         residual(M, d, kept, d->lamR, x, res, &rmax, &scale);
-        if (!isfinite(rmax)) return DIRECT_NONE;
+        if (!isfinite(rmax)) return 0;
         if (!(rmax > AL_TOL * scale)) break;
-        if (k == DIRECT_REFINE) return DIRECT_START;
+        if (k == DIRECT_REFINE) return 0;
         ovk_kkt_refine(M, d, res); /* J_R h' - g = J_R M^-1 Q - g - S lam_R: lam_R += S^-1 res */
         for (int i = 0; i < kept->n; i++) d->lamR[i] += res[i];
     }
     d->al_direct = 1, d->al_iterations = 0, d->al_stalled = 0;
-    return DIRECT_TAKEN;
+    return 1;
 }
 
 /* Formulation AL in place of ovk_kkt_solve: the factor and lam_R without friction (d->lamR), from
@@ -286,11 +286,10 @@ static int direct(const ovk_model *M, ovk_data *d, const ovk_rowset *kept) {
  * never OVK_SINGULAR at a singular position. */
 int ovk_kkt_al_solve(const ovk_model *M, ovk_data *d) {
     ovk_rowset kept = ovk_al_kept(M);
-    int start = direct(M, d, &kept);
-    if (start == DIRECT_TAKEN) return OVK_OK;
+    if (direct(M, d, &kept)) return OVK_OK;
     int status = ovk_al_factor(M, d, &kept, AL_ALPHA_DYN);
     if (status) return status;
-    ovk_al_solve(M, d, &kept, d->Q, d->g, slot(M, d, SLOT_X), d->lamR, start == DIRECT_START);
+    ovk_al_solve(M, d, &kept, d->Q, d->g, slot(M, d, SLOT_X), d->lamR);
     for (int i = 0; i < M->nR; i++)
         if (!isfinite(d->lamR[i]))
             return ovk_fail(d, OVK_NONFINITE, "non-finite number in the multipliers (AL, row %d)", M->retained[i]);
@@ -308,7 +307,7 @@ void ovk_kkt_al_columns(const ovk_model *M, ovk_data *d) {
     memset(zero, 0, sizeof(double) * (size_t)nR);
     for (int c = 0; c < nc; c++) {
         unit[M->cols[c]] = 1.0;
-        ovk_al_solve(M, d, &kept, unit, zero, x, lamc, 0);
+        ovk_al_solve(M, d, &kept, unit, zero, x, lamc);
         unit[M->cols[c]] = 0.0;
         for (int i = 0; i < nR; i++) d->W[i * nc + c] = lamc[i];
     }

@@ -58,7 +58,7 @@ int ovk_project(const ovk_model *M, ovk_data *d, double t, double *y, double tol
             return ovk_fail(d, OVK_PROJECTION, "t = %.9g s: the projection onto the constraints left max |Phi| = %.3g "
                             "after %d corrections (tolerance %g)", t, err, max_iter, tol);
         if ((status = ovk_al_factor(M, d, &all, OVK_AL_ALPHA_PROJ))) return status;
-        ovk_al_solve(M, d, &all, zero, g, dh, mu, 0);
+        ovk_al_solve(M, d, &all, zero, g, dh, mu);
         if ((status = ovk_rates(M, d, q, dh, dq)) || (status = ovk_rates(M, d, q, zero, q0dot))) return status;
         for (int k = 0; k < n; k++) q[k] += dq[k] - q0dot[k];
     }
@@ -72,7 +72,7 @@ int ovk_project(const ovk_model *M, ovk_data *d, double t, double *y, double tol
         for (int k = 0; k < nh; k++) s += Ji[k] * h[k];
         g[i] = -s;
     }
-    ovk_al_solve(M, d, &all, zero, g, dh, mu, 0);
+    ovk_al_solve(M, d, &all, zero, g, dh, mu);
     for (int k = 0; k < nh; k++) h[k] += dh[k];
     for (int k = 0; k < n + nh; k++)
         if (!isfinite(y[k])) return ovk_fail(d, OVK_NONFINITE, "project: t = %.9g s: non-finite state (entry %d)", t, k);

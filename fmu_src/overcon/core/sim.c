@@ -318,6 +318,7 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     ovk_rk *rk = &s->rk;
     double t_before = rk->t;
     int status = check_budget(s, started, n0, call_steps, call_wall);
+    s->d->al_allow_direct = s->ratio >= OVK_DIRECT_RATIO; /* the step's solve, the same at every stage */
     if (status) return stopped(s, status, "integration stopped", rk->t);
     status = ovk_rk_step(rk, sim_rhs, s, s->msg);
     if (!status && !(rk->t > t_before)) {

@@ -88,36 +88,31 @@ int ovk_band_cholesky(double *A, int n, int p) {
     return 0;
 }
 
-/* (U^T U) X = B in place with the factor of ovk_band_cholesky (n, half bandwidth p) for nc
- * columns at once (B row-major n x nc, the columns the inner loop); each entry's sum runs over k
- * ascending, as a single column's would. */
-void ovk_band_solve_many(const double *U, int n, int p, double *B, int nc) {
+/* One column b (entries b[0], b[stride], ...) of ovk_band_solve_many, each sum over k ascending,
+ * in a local (a store through b at every term would be kept: b may alias U for the compiler). */
+static void band_solve_strided(const double *U, int n, int p, double *b, size_t stride) {
     int w = p + 1;
-    for (int i = 0; i < n; i++) { /* U^T Y = B */
-        double *Bi = B + (size_t)i * nc;
-        for (int k = i - p > 0 ? i - p : 0; k < i; k++) {
-            double u = U[(size_t)k * w + (i - k)];
-            const double *Bk = B + (size_t)k * nc;
-            for (int c = 0; c < nc; c++) Bi[c] -= u * Bk[c];
-        }
-        double d = U[(size_t)i * w];
-        for (int c = 0; c < nc; c++) Bi[c] /= d;
+    for (int i = 0; i < n; i++) { /* U^T y = b */
+        double t = b[(size_t)i * stride];
+        for (int k = i - p > 0 ? i - p : 0; k < i; k++) t -= U[(size_t)k * w + (i - k)] * b[(size_t)k * stride];
+        b[(size_t)i * stride] = t / U[(size_t)i * w];
     }
-    for (int i = n - 1; i >= 0; i--) { /* U X = Y */
-        double *Bi = B + (size_t)i * nc;
+    for (int i = n - 1; i >= 0; i--) { /* U x = y */
+        double t = b[(size_t)i * stride];
         int last = i + p < n - 1 ? i + p : n - 1;
-        for (int k = i + 1; k <= last; k++) {
-            double u = U[(size_t)i * w + (k - i)];
-            const double *Bk = B + (size_t)k * nc;
-            for (int c = 0; c < nc; c++) Bi[c] -= u * Bk[c];
-        }
-        double d = U[(size_t)i * w];
-        for (int c = 0; c < nc; c++) Bi[c] /= d;
+        for (int k = i + 1; k <= last; k++) t -= U[(size_t)i * w + (k - i)] * b[(size_t)k * stride];
+        b[(size_t)i * stride] = t / U[(size_t)i * w];
     }
 }
 
+/* (U^T U) X = B in place with the factor of ovk_band_cholesky (n, half bandwidth p) for nc
+ * columns (B row-major n x nc), one column after the other. */
+void ovk_band_solve_many(const double *U, int n, int p, double *B, int nc) {
+    for (int c = 0; c < nc; c++) band_solve_strided(U, n, p, B + c, (size_t)nc);
+}
+
 /* (U^T U) x = b in place: one column of ovk_band_solve_many. */
-void ovk_band_solve(const double *U, int n, int p, double *b) { ovk_band_solve_many(U, n, p, b, 1); }
+void ovk_band_solve(const double *U, int n, int p, double *b) { band_solve_strided(U, n, p, b, 1); }
 
 /* LU with partial pivoting (dgetrf semantics: fails, returning nonzero, only on an exact zero pivot). */
 int ovk_lu_factor(double *A, int n, int *piv) {

@@ -207,6 +207,29 @@ def test_the_c_run_counts_the_singular_positions_it_passes(tmp_path):
     assert info["projection_drift"] <= kernel.PROJECTION_SLACK * kernel.PROJECTION_TOL
 
 
+def test_the_certified_skip_decides_as_the_factorisation(tmp_path):
+    """Between flat positions the watch's certified bounds decide the uniqueness along the motion
+    without a factorisation (unique.c, ovk_unique_certified): after every interval in which it
+    did, the run reports full rank and every reaction unique, and the whole rule (Kernel.unique,
+    the banded factorisation) says the same at the run's step end; and the skip is taken."""
+    _, path = _nfourbar().write(10, tmp_path, stop_time=1.5, singular="pass")
+    spec = _scene(path)
+    model = compile_checked(spec)
+    run = kernel.Run(model, spec.solver)
+    k = kernel.Kernel(kernel.library()[0], model, spec.solver)
+    checked, before = 0, 0
+    for t in np.arange(0.01, 1.5, 0.01):
+        run.advance(float(t))
+        certified = run.info["along_certified"]
+        if certified > before:  # an evaluation in this interval was decided by the certificate
+            rank, unique, _ = run.uniqueness()
+            full, verdicts = k.unique(run.y)  # the step end the run's last evaluation is at, or after
+            assert rank == full == model.m and all(verdicts) and all(unique.values())
+            checked += 1
+        before = certified
+    assert run.info["along_certified"] > 10 and checked > 0
+
+
 @pytest.mark.parametrize("name", ["planar_f45_wo4", "planar_f1_wo6", "spatial_GHMN_wo5", "examples/door_h1_wo_hinge2",
                                   "examples/carriage_guide_wo_rod", "examples/loop_A1_wo_A2"])
 def test_where_the_rank_is_regular_the_multipliers_are_the_eliminated_forms(name):

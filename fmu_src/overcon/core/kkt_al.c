@@ -180,6 +180,22 @@ int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double 
 /* (U^T U) x = b in place, with the band factor of ovk_al_factor. */
 static void band_solve(const ovk_data *d, int nh, double *b) { ovk_band_solve(d->al, nh, d->al_band, b); }
 
+/* The acceleration residual of x: res := J_R x - g (rs->n) and its largest entry, with the scale
+ * it is judged against, max_i max(|g_i|, |(J_R x)_i|): the AL iteration's stopping test, also the
+ * direct solve's (below). */
+static void residual(const ovk_model *M, const ovk_data *d, const ovk_rowset *rs, const double *x, const double *g,
+                     double *res, double *rmax, double *scale) {
+    rows_times(M, d, rs, x, res);
+    *rmax = 0.0, *scale = 0.0;
+    for (int i = 0; i < rs->n; i++) {
+        double gi = fabs(g[i]), ji = fabs(res[i]);
+        if (gi > *scale) *scale = gi;
+        if (ji > *scale) *scale = ji;
+        res[i] -= g[i];
+        if (fabs(res[i]) > *rmax) *rmax = fabs(res[i]);
+    }
+}
+
 /* The AL iteration (file header) with the factor of ovk_al_factor: x (nh) with M x + J_R^T lam =
  * Q, J_R x = g, and lam (nR) from lam_0 = 0. Iterations in d->al_iterations; d->al_stalled = 1 when
  * it stopped on stagnation (the rank is being lost) or at AL_MAX_ITER rather than at AL_TOL. */
@@ -197,16 +213,9 @@ void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const d
         rows_t_add(M, d, rs, lam, -1.0, rhs);
         band_solve(d, nh, rhs);
         memcpy(x, rhs, sizeof(double) * (size_t)nh);
-        rows_times(M, d, rs, x, res);
         double rmax = 0.0, scale = 0.0;
-        for (int i = 0; i < nR; i++) {
-            double gi = fabs(g[i]), ji = fabs(res[i]);
-            if (gi > scale) scale = gi;
-            if (ji > scale) scale = ji;
-            res[i] -= g[i];
-            if (fabs(res[i]) > rmax) rmax = fabs(res[i]);
-            lam[i] += a * res[i];
-        }
+        residual(M, d, rs, x, g, res, &rmax, &scale);
+        for (int i = 0; i < nR; i++) lam[i] += a * res[i];
         d->al_iterations = it;
         if (!(rmax > AL_TOL * scale)) break; /* also nR = 0, and a NaN the caller's check reports */
         if (it >= AL_MAX_ITER || (it > 3 && rmax > AL_STALL * prev)) {
@@ -214,25 +223,6 @@ void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const d
             break;
         }
         prev = rmax;
-    }
-}
-
-/* The largest |J_R h' - g_i| and its scale max(|g_i|, |(J_R h')_i|), with h' = M^-1 (Q - J_R^T lam)
- * (x: nh scratch, res: nR scratch): the AL iteration's stopping test, applied to any lam. */
-static void residual(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const double *lam, double *x,
-                     double *res, double *rmax, double *scale) {
-    int nh = M->nb * M->nh_b;
-    memcpy(x, d->Q, sizeof(double) * (size_t)nh);
-    rows_t_add(M, d, rs, lam, -1.0, x);
-    for (int k = 0; k < nh; k++) x[k] *= M->Minv[k];
-    rows_times(M, d, rs, x, res);
-    *rmax = 0.0, *scale = 0.0;
-    for (int i = 0; i < rs->n; i++) {
-        double gi = fabs(d->g[i]), ji = fabs(res[i]);
-        if (gi > *scale) *scale = gi;
-        if (ji > *scale) *scale = ji;
-        res[i] -= d->g[i];
-        if (fabs(res[i]) > *rmax) *rmax = fabs(res[i]);
     }
 }
 
@@ -268,9 +258,11 @@ static int direct(const ovk_model *M, ovk_data *d, const ovk_rowset *kept) {
         lo = u * u < lo ? u * u : lo, hi = u * u > hi ? u * u : hi;
     }
     if (!(lo >= DIRECT_PIVOT * hi)) return 0;
-    double *x = slot(M, d, SLOT_X), *res = slot(M, d, SLOT_RES), rmax = 0.0, scale = 0.0;
-    for (int k = 0;; k++) {
-        residual(M, d, kept, d->lamR, x, res, &rmax, &scale);
+    double *x = slot(M, d, SLOT_X), *res = slot(M, d, SLOT_RES), *lam = slot(M, d, SLOT_LAMC), rmax = 0.0,
+           scale = 0.0;
+    for (int k = 0;; k++) { /* h' of these multipliers (kkt.c), then the stopping test */
+        ovk_kkt_accelerations(M, d, lam, x);
+        residual(M, d, kept, x, d->g, res, &rmax, &scale);
         if (!isfinite(rmax)) return 0;
         if (!(rmax > AL_TOL * scale)) break;
         if (k == DIRECT_REFINE) return 0;

@@ -42,13 +42,14 @@ size_t ovk_unique_doubles(int m, int nh) {
 /* B = A^T (m rows of nh): round-off rows and columns of A zeroed, then Ruiz. Row e is nonzero
  * only in the columns of its joint's bodies blk[2e], blk[2e + 1] (kh each; -1: none, the ground),
  * so only those are visited. cn (m) and rn (nh): scratch for the max-norms of A's columns (B's
- * rows) and A's rows (B's columns). */
+ * rows) and A's rows (B's columns). Returns the round-off floor (0 for A = 0): every entry of a
+ * zeroed row or column was at most that. */
 #define IN_BLOCKS(e, c, body)                                                                           \
     for (int t_ = 0; t_ < 2; t_++)                                                                     \
         if ((body = blk[2 * (e) + t_]) >= 0 && !(t_ == 1 && body == blk[2 * (e)]))                      \
             for (int c = body * kh; c < (body + 1) * kh; c++)
-static void equilibrate(double *B, int m, int nh, int kh, const int *blk, double *cn, double *rn, double *dc,
-                        double *dr) {
+static double equilibrate(double *B, int m, int nh, int kh, const int *blk, double *cn, double *rn, double *dc,
+                          double *dr) {
     double amax = 0.0;
     int body;
     if (dc) /* the scalings applied so far, B = diag(dc) B_given diag(dr); 0 marks a zeroed row or column */
@@ -56,7 +57,7 @@ static void equilibrate(double *B, int m, int nh, int kh, const int *blk, double
     if (dr)
         for (int c = 0; c < nh; c++) dr[c] = 1.0;
     for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) amax = fabs(B[(size_t)e * nh + c]) > amax ? fabs(B[(size_t)e * nh + c]) : amax;
-    if (amax == 0.0) return;
+    if (amax == 0.0) return 0.0;
     double floor = UNIQUE_NOISE * (m > nh ? m : nh) * EPS * amax;
     for (int c = 0; c < nh; c++) rn[c] = 0.0;
     for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) rn[c] = fabs(B[(size_t)e * nh + c]) > rn[c] ? fabs(B[(size_t)e * nh + c]) : rn[c];
@@ -92,6 +93,7 @@ static void equilibrate(double *B, int m, int nh, int kh, const int *blk, double
         for (int e = 0; dc && e < m; e++) dc[e] *= cn[e];
         for (int c = 0; dr && c < nh; c++) dr[c] *= rn[c];
     }
+    return floor;
 }
 
 /* Under "compliant", whether equation e is a compliant one (its retained position's ckind). */
@@ -153,18 +155,13 @@ int ovk_unique_certified(const ovk_model *M, const double *J, double *work, doub
     double *A = work, *cn = A + (size_t)m * nh, *rn = cn + m, *dc = rn + nh, *dr = dc + m, *wn = dr + nh;
     int *blk = (int *)(wn + m);
     if (judged_rows(M, J, A, blk)) return 0;
-    double amax = 0.0;
-    for (int e = 0; e < m; e++) { /* W's row norms |Phi_h,e M^-1/2| and A's largest entry, as given */
+    for (int e = 0; e < m; e++) { /* W's row norms |Phi_h,e M^-1/2|, as given */
         double n2 = 0.0;
-        IN_BLOCKS(e, c, body) {
-            n2 += A[(size_t)e * nh + c] * A[(size_t)e * nh + c] * M->Minv[c];
-            amax = fabs(A[(size_t)e * nh + c]) > amax ? fabs(A[(size_t)e * nh + c]) : amax;
-        }
+        IN_BLOCKS(e, c, body) n2 += A[(size_t)e * nh + c] * A[(size_t)e * nh + c] * M->Minv[c];
         wn[e] = sqrt(n2);
         if (!(wn[e] > 0.0)) return 0;
     }
-    double floor = UNIQUE_NOISE * big * EPS * amax; /* equilibrate's: a zeroed column's entries are below it */
-    equilibrate(A, m, nh, kh, blk, cn, rn, dc, dr);
+    double floor = equilibrate(A, m, nh, kh, blk, cn, rn, dc, dr); /* a zeroed column's entries are below it */
     double lmin = INFINITY, lmax = 0.0, rmin = INFINITY, rmax = 0.0, zf2 = 0.0;
     for (int e = 0; e < m; e++) {
         if (dc[e] == 0.0) return 0; /* a row of round-off only: the rank is not m */

@@ -322,7 +322,8 @@ typedef struct {
     double max_drift, min_ratio, t_prev, wall_time;
     double *ev_lam, *ev_qf, *guess, *yout; /* scratch: m, ncols, max(m, ncols), ny */
     double *phi, *J, *gam;         /* scratch: m, m nh, m */
-    double *W, *W2, *T;            /* watch scratch: weighted rows, their forward difference, a spare (m nh each) */
+    double *W, *W2;                /* watch scratch: weighted rows, their forward difference (m nh each) */
+    double *T;                     /* watch scratch: the tracked vectors kept aside (2 m) */
     double *ywatch, *ystar, *qwatch; /* watch scratch: states (ny each), coordinate rates (n) */
     double rate, ratio;            /* watch: dr/dt and r of the kept equations at the last check */
     double *qload;                 /* energy: the constant loads' Q (nh) */

@@ -138,7 +138,7 @@ static void layout(ovk_sim *s) {
     s->gam = p; p += m;
     s->W = p; p += m * nh;
     s->W2 = p; p += m * nh;
-    s->T = p; p += m * nh;
+    s->T = p; p += 2 * m;
     s->ywatch = p; p += ny;
     s->ystar = p; p += ny;
     s->qwatch = p; p += (size_t)s->n;
@@ -197,7 +197,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->m = M->m;
     s->ncols = M->ncols;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh;
-    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 4 * m * nh + (size_t)s->n +
+    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 3 * m * nh + 2 * m + (size_t)s->n +
                   nh + ovk_rk_doubles(o->rk.method, s->ny);
     s->mem = calloc(need, sizeof(double));
     if (!s->mem) {

@@ -326,7 +326,7 @@ int ovk_sim_watch_extremes(ovk_sim *s, const double *y, int cold, double *out) {
     ovk_watch_eig *e = s->eig;
     int nR = e->nR, have = e->have;
     long long capped = s->watch_capped;
-    double *keep = s->T; /* scratch of m nh >= 2 nR doubles */
+    double *keep = s->T; /* 2 m >= 2 nR doubles */
     memcpy(keep, e->umin, (size_t)nR * sizeof(double));
     memcpy(keep + nR, e->umax, (size_t)nR * sizeof(double));
     if (cold) e->have = 0;

@@ -205,8 +205,20 @@ submitted again before its row records the cancellation."""
 
 
 def _cancelled(fut) -> bool:
-    """The task was cancelled by the scheduler (not failed by the run): status ``cancelled``."""
-    return getattr(fut, "status", "") == "cancelled"
+    """The task was cancelled by the scheduler (not failed by the run): status ``cancelled``, or a
+    finished future whose outcome is a cancellation (``as_completed`` can hand a future over before
+    its status reads ``cancelled``; its result then raises FutureCancelledError, a CancelledError,
+    and the row was lost: seen once in the suite with a worker killed under load)."""
+    from concurrent.futures import CancelledError
+
+    if getattr(fut, "status", "") == "cancelled":
+        return True
+    try:
+        return isinstance(fut.exception(), CancelledError)
+    except CancelledError:
+        return True
+    except Exception:  # noqa: BLE001 -- any other outcome is the run's, recorded by _collect
+        return False
 
 
 def _collect(sw: Sweep, sets: _Sets, writer: RowWriter, where, fut, echo, on_rows, client, resubmit) -> int:

@@ -323,28 +323,19 @@ def output_grid(start: float, stop: float, interval: float) -> np.ndarray:
     return grid
 
 
-INPUT_INTERPOLATIONS = ("hold", "linear")
-"""How ``run`` feeds an input table between output points: ``hold`` the table's value at the
-interval's start over the interval (an FMU's co-simulation, the host setting inputs at each
-communication point), ``linear`` the chord from the value at its start to the value at its end
-(the FMU when the host sets first input derivatives, fmi2SetRealInputDerivatives)."""
-
-
-def input_values(table, names, t: float) -> np.ndarray:
-    """The inputs ``names`` at time t from ``table`` = (time (k,), values (k, len(names))): linear
-    between its rows, the first (last) row before (after) them (as fmpy's input)."""
-    time, values = table
-    return np.array([np.interp(t, time, values[:, c]) for c in range(len(names))])
-
-
 def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, output_interval: float | None = None,
         inputs=None, input_interpolation: str = "hold", **settings) -> Result:
     """Simulate ``model`` with the solver options ``solver`` from the scene's start to ``stop_time``
     (default the scene's), outputs every ``output_interval`` (default ``solver.output_interval``);
-    ``inputs`` (time (k,), values (k, len(model.inputs)), columns in ``model.inputs`` order) fed by
-    ``input_interpolation`` (:data:`INPUT_INTERPOLATIONS`); ``settings`` go to :class:`Simulation`."""
-    if input_interpolation not in INPUT_INTERPOLATIONS:
-        raise ValueError(f"run(input_interpolation={input_interpolation!r}): one of {', '.join(INPUT_INTERPOLATIONS)}")
+    ``inputs`` an input table (:class:`overcon.tooling.inputs.InputTable`, a column per input of
+    ``model.inputs``) set at every output point as a co-simulation host sets them at its
+    communication points, ``input_interpolation`` "hold" (the default: the value there, held over the
+    interval) or "linear" (with fmpy's first derivative there: :meth:`InputTable.step`); the outputs
+    at an output point see the values of the interval that ends there (the start's: its own), as an
+    FMU's after fmi2DoStep; ``settings`` go to :class:`Simulation`."""
+    if inputs is not None:
+        from .tooling.inputs import check_interpolation
+        check_interpolation(input_interpolation)
     scene = model.scene
     stop = scene.stop_time if stop_time is None else stop_time
     interval = solver.output_interval if output_interval is None else output_interval
@@ -374,13 +365,9 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
 
 
 def _feed(sim: Simulation, table, names, grid, k: int, interpolation: str) -> None:
-    """The inputs over the output interval from grid[k]: held at the table's value there, or
-    linear to the value at grid[k + 1]."""
-    u = input_values(table, names, grid[k])
-    slopes = None
-    if interpolation == "linear" and k + 1 < len(grid):
-        slopes = (input_values(table, names, grid[k + 1]) - u) / (grid[k + 1] - grid[k])
-    sim.set_inputs(u, slopes)
+    """The inputs over the output interval from grid[k] (:meth:`InputTable.step`)."""
+    value, slope = table.step(grid[k], interpolation)
+    sim.set_inputs([value[n] for n in names], [slope[n] for n in names] if interpolation == "linear" else None)
 
 
 def _result(model: Model, sim: Simulation, time: np.ndarray, rows: list) -> Result:

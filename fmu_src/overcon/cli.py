@@ -77,6 +77,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--events", metavar="EVENTS.csv",
                    help="also write the run's events (time, kind, detail): singular positions, eliminations "
                         "chosen again, the stop")
+    s.add_argument("--input", metavar="INPUTS.csv",
+                   help="input table: a time column and one column per scene input ([[inputs]] name), set at every "
+                        "output point as a co-simulation host sets an FMU's inputs")
+    s.add_argument("--input-interpolation", choices=("hold", "linear"), default="hold",
+                   help="hold (default): each input held over each output interval (co-simulation); linear: linear "
+                        "inside it (the FMU when the host sets input derivatives)")
     s.add_argument("--friction-outputs", metavar="all|none|J1,J2",
                    help="friction force outputs <joint>.friction (overrides the scene's outputs.friction)")
     s.add_argument("--max-steps", type=_jobs, metavar="N",
@@ -350,11 +356,20 @@ def cmd_simulate(args) -> int:
     why = refusal(model, spec.solver, here=True)  # a core that cannot run here: bad input, not a failed run
     if why is not None:
         return _input_error(f"{args.file}: the compiled core cannot run this scene: {why}")
+    table = None
+    if getattr(args, "input", None):
+        from .tooling import InputError
+        from .tooling.inputs import read_input_table
+        try:
+            table = read_input_table(args.input, [u.name for u in model.inputs])
+        except InputError as exc:
+            return _input_error(f"--input {exc}")
     start = time.perf_counter()
     try:
         with single_threaded_blas():
             res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS,
-                      max_wall_time=args.max_wall_time or MAX_WALL_TIME)
+                      max_wall_time=args.max_wall_time or MAX_WALL_TIME, inputs=table,
+                      input_interpolation=args.input_interpolation)
     except SimulationError as exc:
         return _failed_run(args, model, spec, exc, time.perf_counter() - start)
     wall = time.perf_counter() - start

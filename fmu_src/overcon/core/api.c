@@ -90,6 +90,17 @@ static int check_model(const ovk_model *M, ovk_data *d) {
         (M->nfg >= 0 && M->fgroup[M->nfg] != M->nfj) || !in_range(M->fx, OVK_MAXEQ * M->nfj, 0, M->nx + 1) ||
         !in_range(M->fci, 6 * M->nfj, 0, M->ncols + 1) || !in_range(M->fcj, 6 * M->nfj, 0, M->ncols + 1))
         return ovk_fail(d, OVK_INVALID, "model: an index of the elimination or the friction plan is out of range");
+    if (M->nu < 0 || M->nu > OVK_MAX_COUNT)
+        return ovk_fail(d, OVK_INVALID, "model: nu = %d is out of range [0, %d]", M->nu, OVK_MAX_COUNT);
+    for (int k = 0; k < M->nu; k++) {
+        int kind = M->ukind[k], j = M->uidx[3 * k], bi = M->uidx[3 * k + 1], bj = M->uidx[3 * k + 2];
+        int joint = kind == OVK_IN_JOINT_TORQUE || kind == OVK_IN_JOINT_FORCE;
+        double frame = M->up[OVK_NUP * k + 6];
+        if (!isfinite(M->up[OVK_NUP * k + 7]) || kind < OVK_IN_JOINT_TORQUE || kind > OVK_IN_TORQUE || bi < 0 || bi >= M->nb || bj < -1 || bj >= M->nb ||
+            (joint ? j < 0 || j >= M->nj : j != -1) || !(frame == 0.0 || frame == 1.0 || frame == 2.0))
+            return ovk_fail(d, OVK_INVALID, "model: input %d (kind %d, joint %d, bodies %d and %d, frame %g) is not "
+                            "one the core takes", k, kind, j, bi, bj, frame);
+    }
     for (int g = 0; g < M->nfg; g++)
         if (M->fgroup[g] > M->fgroup[g + 1])
             return ovk_fail(d, OVK_INVALID, "model: friction group %d starts after the next one", g);
@@ -179,11 +190,13 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->al_band = ovk_al_half_band(M); /* the AL band and vectors: formulation AL and ovk_project */
     d->al = calloc(ovk_al_doubles(M), sizeof(double));
     d->al_rows = calloc(3 * m + 1, sizeof(int));
-    if (!d->al || !d->al_rows)
+    d->u = calloc(2 * (size_t)M->nu + 1, sizeof(double)); /* the inputs' values: zero until set */
+    if (!d->al || !d->al_rows || !d->u)
         d->status = ovk_fail(d, OVK_NOMEM, "out of memory: the augmented Lagrangian workspace needs %zu bytes",
                              ovk_al_doubles(M) * sizeof(double) + (3 * m + 1) * sizeof(int));
     else
         ovk_al_make_rows(M, d);
+    for (int k = 0; d->u && k < M->nu; k++) d->u[k] = M->up[OVK_NUP * k + 7]; /* the start values */
     return d;
 }
 
@@ -195,6 +208,7 @@ void ovk_free_data(ovk_data *d) {
     free(d->al);
     free(d->al_rows);
     free(d->sb_mem);
+    free(d->u);
     free(d);
 }
 
@@ -206,10 +220,9 @@ static int finish(const ovk_model *M, ovk_data *d, const double *y, double *ydot
 /* y = [q (nb nq_b), h (nb nh_b)] -> ydot, lam (m; zeros at eliminated rows), qf (ncols; friction
  * forces, the next evaluation's warm start), *iterations (friction force evaluations), *damped
  * (the damped Newton ran). guess_mode: 0 none (x0 = lam0), 1 guess = qf of a nearby evaluation
- * (ncols), 2 guess = lam (m). t is unused (no load depends on time). */
+ * (ncols), 2 guess = lam (m). t: the time the inputs' values are taken at (inputs.c). */
 int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int guess_mode, const double *guess,
                  double *ydot, double *lam, double *qf, int *iterations, int *damped) {
-    (void)t;
     if (!d) return OVK_NOMEM;
     if (d->status) return d->status;
     d->msg[0] = '\0';
@@ -224,7 +237,7 @@ int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int
     ovk_frames_build(M, q, h, &d->f);
     ovk_constraint_rows(M, d, q);
     ovk_kkt_rhs(M, d, h);
-    if ((status = ovk_loads(M, d))) return status;
+    if ((status = ovk_loads(M, d, t))) return status;
     status = M->redundancy == OVK_COMPLIANT       ? ovk_compliant_solve(M, d, h)
              : M->formulation == OVK_FORM_AL          ? ovk_kkt_al_solve(M, d)
                                                       : ovk_kkt_solve(M, d);

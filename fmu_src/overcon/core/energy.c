@@ -49,7 +49,7 @@ void ovk_compliant_energy(const ovk_model *M, ovk_data *d, const double *q, cons
 }
 
 /* [power dissipated by joint friction and the compliant joints' dampers (W, >= 0), power of the
- * constant forces and torques (W)] at (t, y) (Simulation._powers). */
+ * constant forces and torques and of the inputs at t (W)] at (t, y) (Simulation._powers). */
 static int powers(ovk_sim *s, double t, const double *y, double *p) {
     const ovk_model *M = s->M;
     int kh = M->nh_b, dim = M->dim, n = s->n;
@@ -69,6 +69,7 @@ static int powers(ovk_sim *s, double t, const double *y, double *p) {
             for (int i = 0; i < 3; i++) s->qload[bi * kh + 3 + i] += tb[i];
         }
     }
+    if (M->nu) ovk_input_forces(M, s->d, t, s->qload);
     double applied = 0.0, elastic, damper;
     for (int k = 0; k < s->nh; k++) applied += h[k] * s->qload[k];
     ovk_compliant_energy(M, s->d, y, h, &elastic, &damper);
@@ -117,6 +118,13 @@ int ovk_sim_energy_step(ovk_sim *s) {
     memcpy(s->work_w[1], w, sizeof w);
     memcpy(s->work_p[1], pe, sizeof pe);
     return OVK_OK;
+}
+
+/* After the inputs changed at the last step's end: the powers there with their new values, the
+ * start of the next step's Simpson rule (the work so far stays). */
+int ovk_sim_energy_inputs(ovk_sim *s) {
+    if (!s->o.energy) return OVK_OK;
+    return powers(s, s->work_t[1], s->rk.y, s->work_p[1]);
 }
 
 /* The work [dissipated, applied] at t inside the last step (_WorkLedger.at). */

@@ -172,6 +172,12 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->M = &s->Mrun;
     s->o = *o;
     if ((s->status = check_opts(s, o))) return s;
+    if (M->nu && o->rk.method == OVK_METHOD_RK4) {
+        s->status = OVK_INVALID;
+        snprintf(s->msg, sizeof s->msg, "cannot start: rk4's fixed steps would step over the instants where the "
+                 "inputs change: use dopri5, dop853 or radau with inputs");
+        return s;
+    }
     s->d = ovk_make_data(M);
     if (!s->d || ovk_data_status(s->d)) {
         s->status = s->d ? ovk_data_status(s->d) : OVK_NOMEM;
@@ -370,7 +376,9 @@ int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max
     double eps = 1e-12 * (fabs(t_target) > 1.0 ? fabs(t_target) : 1.0), started = ovk_now();
     long long n0 = rk->nsteps;
     int status = OVK_OK;
+    if (s->M->nu && t_target > rk->t) rk->t_bound = t_target; /* the inputs may change there */
     while (!status && rk->t < t_target - eps) status = step_checked(s, started, n0, max_steps, max_wall_time);
+    rk->t_bound = INFINITY;
     s->wall_time += ovk_now() - started;
     if (status) return status;
     if (rk->t - t_target < -eps || !isfinite(t_target))
@@ -482,10 +490,37 @@ int ovk_sim_use_kept(ovk_sim *s, const int *retained) {
         ovk_free_data(d);
         return status;
     }
+    memcpy(d->u, s->d->u, (2 * (size_t)R->nu + 1) * sizeof(double)); /* the inputs' values stay */
     ovk_free_data(s->d);
     s->d = d;
     *R = next;
     return OVK_OK;
+}
+
+/* The inputs' values u (nu) and slopes du (nu, per s; NULL: held) from the run's time on
+ * (inputs.c): an integrator step never ends past the target of ovk_sim_advance while the model
+ * has inputs, so the run stands at the communication point where they change. When they change,
+ * the right-hand side there (the first stage of the next step, the multipliers of the outputs)
+ * and the ledger's powers are evaluated again with them; equal values cost nothing. */
+int ovk_sim_set_inputs(ovk_sim *s, const double *u, const double *du) {
+    if (!s) return OVK_NOMEM;
+    if (s->status) return s->status;
+    const ovk_model *M = s->M;
+    int nu = M->nu, same = 1;
+    if (!nu) return OVK_OK;
+    double *cur = s->d->u, t = s->rk.t;
+    for (int k = 0; k < nu && same; k++) {
+        double now = cur[k] + cur[nu + k] * (t - cur[2 * nu]);
+        same = now == u[k] && cur[nu + k] == (du ? du[k] : 0.0);
+    }
+    if (same) return OVK_OK;
+    int status = ovk_set_inputs(M, s->d, u, du, t);
+    if (status) return snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d)), status;
+    status = sim_rhs(s, t, s->rk.y, s->rk.f);
+    s->rk.dense_ready = 0;
+    if (!status) status = ovk_sim_energy_inputs(s);
+    if (status) s->status = stopped(s, status, "inputs", t);
+    return status;
 }
 
 /* Goes on from (t, y) under the kept equations `kept` (m flags; as many as before) as

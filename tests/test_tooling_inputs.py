@@ -1,0 +1,110 @@
+"""``overcon run/compare/sweep --input``: the table reaches the FMU's inputs through fmpy's
+``input=`` at every communication point with the documented semantics, an input's start value is
+set like a parameter, and a bad table or a bad combination is bad input (exit 2, named).
+
+The FMU with inputs here is the coupling example's PI controller (pythonfmu, built into tmp): its
+output is a known function of its inputs, so the values the host applied can be read back.
+The overcon door with a motor input is exercised in tests/test_coupling_system.py."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from overcon.cli import main
+from overcon.tooling.inputs import InputTable, read_input_table
+from overcon.tooling.run import read_series
+
+pytestmark = pytest.mark.integration
+
+fmpy = pytest.importorskip("fmpy")
+pytest.importorskip("pythonfmu")
+
+KP, KI, KD, SETPOINT = 290.0, 390.0, 73.0, 0.5  # the controller's defaults (controller.py)
+TABLE = "time,angle,rate\n0,0.1,0\n0.025,0.2,1\n0.05,0.0,-2\n"  # rows off the 10 ms grid
+
+
+@pytest.fixture(scope="module")
+def controller(tmp_path_factory):
+    from overcon.tooling.cosim import build_controller
+
+    return build_controller(tmp_path_factory.mktemp("ctl"))
+
+
+def expected_torque(table: InputTable, times: np.ndarray) -> np.ndarray:
+    """The controller's output at ``times`` (a uniform grid) when the host sets the inputs to
+    the table's u(t_n) at every communication point t_n and holds them (controller.py's law: the
+    output after the step from t_n uses the inputs read at t_n)."""
+    h = times[1] - times[0]
+    u = [table.at(t) for t in times]
+    out, integral = [], 0.0
+    for n in range(len(times)):
+        if n == 0:
+            a, r = u[0]["angle"], u[0]["rate"]
+        else:
+            a, r = u[n - 1]["angle"], u[n - 1]["rate"]
+            integral += (SETPOINT - a) * h
+        out.append(KP * (SETPOINT - a) + KI * integral - KD * r)
+    return np.array(out)
+
+
+def test_run_applies_the_table_at_every_communication_point(controller, tmp_path):
+    (tmp_path / "in.csv").write_text(TABLE)
+    code = main(["run", str(controller), "--input", str(tmp_path / "in.csv"), "--step", "0.01", "--stop-time",
+                 "0.08", "--out", str(tmp_path / "res")])
+    assert code == 0
+    s = read_series(tmp_path / "res" / "DoorController.csv")
+    table = read_input_table(tmp_path / "in.csv", ["angle", "rate"])
+    want = expected_torque(table, s.time)
+    assert np.max(np.abs(s.values["torque"] - want)) <= 1e-12 * np.max(np.abs(want))
+    # the interpolated values matter: reading the rows as a staircase would give other torques
+    stair = InputTable(table.time, {n: v for n, v in table.values.items()})
+    stair_at = lambda t: {n: float(v[np.searchsorted(table.time, t, side="right") - 1])  # noqa: E731
+                          for n, v in stair.values.items()}
+    object.__setattr__(stair, "at", stair_at)
+    assert np.max(np.abs(expected_torque(stair, s.time) - want)) > 1.0
+
+
+def test_compare_with_a_reference_runs_the_fmu_with_the_table(controller, tmp_path):
+    (tmp_path / "in.csv").write_text(TABLE)
+    t = np.round(np.arange(9) * 0.01, 12)
+    want = expected_torque(read_input_table(tmp_path / "in.csv", ["angle", "rate"]), t)
+    ref = tmp_path / "ref.csv"
+    ref.write_text('"time","torque"\n' + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(t, want)))
+    base = ["compare", str(controller), "--ref", str(ref), "--tolerance", "1e-9"]
+    assert main(base + ["--input", str(tmp_path / "in.csv"), "--out", str(tmp_path / "c1")]) == 0
+    assert main(base + ["--out", str(tmp_path / "c2")]) == 1  # inputs at their start values: another torque
+
+
+def test_set_gives_an_input_its_start_value(controller, tmp_path):
+    assert main(["run", str(controller), "--set", "angle=0.3", "--step", "0.01", "--stop-time", "0.02",
+                 "--out", str(tmp_path / "r")]) == 0
+    s = read_series(tmp_path / "r" / "DoorController.csv")
+    assert s.values["torque"][0] == KP * (SETPOINT - 0.3)
+
+
+@pytest.mark.parametrize("table, args, message", [
+    ("time,angle\n0,0.1\n", [], ["in.csv", "no column", "rate"]),
+    ("time,angle,rate,brake\n0,0.1,0,1\n", [], ["in.csv", "'brake'", "not an input"]),
+    ("time,angle,rate\n0,0.1,0\n0.01,nan,0\n", [], ["in.csv", "'angle'", "row 3", "non-finite"]),
+    ("time,angle,rate\n0,0.1,0\n0,0.2,0\n", [], ["in.csv", "'time'", "row 3"]),
+    (TABLE, ["--set", "angle=0.3"], ["angle", "start value", "in.csv"]),
+    (TABLE, ["--input-interpolation", "linear"], ["canInterpolateInputs", "hold"]),
+    (None, ["--input-interpolation", "linear"], ["without an --input table"]),
+    (None, ["--set", "angle=nan"], ["angle", "finite"]),
+])
+def test_bad_input_exits_2_naming_what(controller, tmp_path, capsys, table, args, message):
+    extra = []
+    if table is not None:
+        (tmp_path / "in.csv").write_text(table)
+        extra = ["--input", str(tmp_path / "in.csv")]
+    ref = tmp_path / "ref.csv"
+    ref.write_text('"time","torque"\n0.0,0.0\n0.01,0.0\n0.02,0.0\n')
+    commands = [["run", str(controller), "--out", str(tmp_path / "r")]]
+    if "--set" not in args:  # compare --ref takes no --set
+        commands.append(["compare", str(controller), "--ref", str(ref), "--out", str(tmp_path / "c")])
+    for cmd in commands:
+        assert main(cmd + extra + args) == 2
+        err = capsys.readouterr().err
+        for m in message:
+            assert m in err, err
+    assert not (tmp_path / "r").exists() and not (tmp_path / "c").exists()  # refused before any run

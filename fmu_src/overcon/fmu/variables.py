@@ -45,7 +45,18 @@ from dataclasses import dataclass
 
 from ..joints import TYPES
 from ..params import check_param, rule_of
-from ..spec import COORDINATE_UNITS, ENERGY_OUTPUTS, REDUNDANCY_METHODS, VELOCITY_OUTPUTS, coordinates
+from ..spec import (COORDINATE_UNITS, ENERGY_OUTPUTS, JOINT_SENSORS, REDUNDANCY_METHODS, VELOCITY_OUTPUTS,
+                    coordinates)
+
+SENSOR_NAMES = ("angle", "rate", "displacement", "speed")  # by the core's sensor index (overcon.model.SENSOR_INDEX)
+SENSOR_TEXT = {"angle": "rotation of body i relative to body j about the joint axis, from q0",
+               "rate": "rotation rate of body i relative to body j about the joint axis",
+               "displacement": "displacement of body i relative to body j along the joint axis, from q0",
+               "speed": "sliding speed of body i relative to body j along the joint axis"}
+INPUT_TEXT = {"joint_torque": "torque about the joint axis on body i (its reaction on body j)",
+              "joint_force": "force along the joint axis on body i (its reaction on body j)",
+              "force": "force on a body (signed magnitude along its direction)",
+              "torque": "torque on a body (signed magnitude about its direction)"}
 
 UNITS: dict[str, dict[str, int]] = {
     "1": {},
@@ -211,6 +222,12 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
                        f"friction {TYPES[c.type].friction_text} of joint {c.name} on body {body_of.get(c.bi, 'base')} "
                        f"({c.law.name} law)", unit=unit, key=("output", k)))
         k += 1
+    for name, j, what in model.sensor_outputs:
+        sensor = SENSOR_NAMES[what]
+        out.append(Var(name, "Real", "output", "continuous", "calculated",
+                       f"joint {model.joints[j].name}: {SENSOR_TEXT[sensor]}", unit=JOINT_SENSORS[sensor],
+                       key=("output", k)))
+        k += 1
     friction = set(model.friction_joints)
     for j in model.reaction_joints:
         name = model.joints[j].name
@@ -249,6 +266,8 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
                    unit="s", key=("stable_step", None)))
     out.append(redundancy_var(model))
     out += _along_outputs(model, reaction_unique, rank)
+    out += [Var(u.name, "Real", "input", "continuous", "", f"input: {INPUT_TEXT[u.type]}", unit=u.unit,
+                start=float(u.start), key=("input", n)) for n, u in enumerate(model.inputs)]
     return out + _interface_variables(model, out, states, fmi3)
 
 

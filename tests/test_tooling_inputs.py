@@ -19,7 +19,7 @@ pytestmark = pytest.mark.integration
 fmpy = pytest.importorskip("fmpy")
 pytest.importorskip("pythonfmu")
 
-KP, KI, KD, SETPOINT = 290.0, 390.0, 73.0, 0.5  # the controller's defaults (controller.py)
+KP, KI, KD, SETPOINT = 2000.0, 8000.0, 150.0, 0.5  # the controller's defaults (controller.py)
 TABLE = "time,angle,rate\n0,0.1,0\n0.025,0.2,1\n0.05,0.0,-2\n"  # rows off the 10 ms grid
 
 

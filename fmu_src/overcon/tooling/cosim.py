@@ -222,16 +222,22 @@ def _main(argv=None) -> int:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(0)  # the pythonfmu library is never unloaded (module docstring)
-    out = Path(args.out or tempfile.mkdtemp(prefix="overcon-coupling-"))
+    if args.out is None:
+        with tempfile.TemporaryDirectory(prefix="overcon-coupling-") as tmp:
+            return _example(Path(tmp), args.stop, args.png)
+    return _example(Path(args.out), args.stop, args.png)
+
+
+def _example(out: Path, stop: float, png) -> int:
     system = build_example(out)
-    times, values = run_osp_isolated(system, args.stop)
+    times, values = run_osp_isolated(system, stop)
     write_series(out / "system.csv", times, values)
     angle = values["door:hinge1.angle"]
     print(f"system {system}: {len(times)} steps to t = {times[-1]:g} s; angle at the end {float(angle[-1])!r} rad "
           f"(set point {SETPOINT}); within 1e-3 rad from t = {settling(times, angle):g} s; "
           f"torque at the end {values['controller:torque'][-1]:.6g} N·m; CSV {out / 'system.csv'}")
-    if args.png:
-        print(f"plot {plot(times, values, args.png, 'door + PI controller in libcosim (OSP system structure)')}")
+    if png:
+        print(f"plot {plot(times, values, png, 'door + PI controller in libcosim (OSP system structure)')}")
     return 0
 
 

@@ -108,3 +108,82 @@ def test_bad_input_exits_2_naming_what(controller, tmp_path, capsys, table, args
         for m in message:
             assert m in err, err
     assert not (tmp_path / "r").exists() and not (tmp_path / "c").exists()  # refused before any run
+
+
+# ---------------------------------------------------------------------------------------------
+# an overcon FMU with an input: the coupling example's door (motor on hinge1)
+
+RAMP = "time,motor\n-0.1,-1.0\n0.1,1.0\n0.2,3.0\n0.3,3.0\n"  # rows on the 0.01 s grid (and one before it)
+
+
+@pytest.fixture(scope="module")
+def door(tmp_path_factory):
+    from overcon.tooling.cosim import build_door
+
+    return build_door(tmp_path_factory.mktemp("door"))
+
+
+@pytest.mark.parametrize("interpolation", ["hold", "linear"])
+def test_run_input_equals_simulate_input(door, tmp_path, interpolation):
+    """``overcon run FMU --input T`` (fmpy's input=, with set_input_derivatives for linear) gives
+    the positions of ``overcon simulate SCENE --input T`` in process, to 1e-10 m."""
+    from overcon.tooling.cosim import EXAMPLE
+
+    table = tmp_path / "ramp.csv"
+    table.write_text(RAMP)
+    flags = ["--input", str(table), "--input-interpolation", interpolation]
+    assert main(["run", str(door), "--stop-time", "0.3", "--out", str(tmp_path / "r"), *flags]) == 0
+    assert main(["simulate", str(EXAMPLE / "door_motor.toml"), "--stop-time", "0.3", "--out",
+                 str(tmp_path / "sim.csv"), *flags]) == 0
+    fmu = read_series(tmp_path / "r" / "coupled_door.csv")
+    sim = read_series(tmp_path / "sim.csv")
+    assert np.allclose(fmu.time, sim.time, rtol=0, atol=1e-12) and len(fmu.time) == 31
+    for name in ("door.x", "door.y", "door.z"):
+        assert np.max(np.abs(fmu.values[name] - sim.values[name])) <= 1e-10, name
+    # the input did act: without it the door moves otherwise
+    assert main(["run", str(door), "--stop-time", "0.3", "--out", str(tmp_path / "free")]) == 0
+    free = read_series(tmp_path / "free" / "coupled_door.csv")
+    assert np.max(np.abs(free.values["door.x"] - fmu.values["door.x"])) > 1e-6
+
+
+def test_sweep_varies_an_input_start_and_passes_a_table(door, tmp_path):
+    """``sweep --param motor=...`` sets the input's start value per set (a constant torque): the
+    runs differ; with ``--input`` every run gets the table; a swept input that the table also
+    sets is bad input."""
+    import dataclasses
+
+    from overcon.tooling import InputError, sweep
+    from overcon.tooling.sweep.worker import run_task
+
+    quiet = dict(echo=lambda s: None)
+    # adaptive runs (--lockstep-step 0): the door FMU refuses rk4 (the lockstep method) with inputs
+    sw = sweep.prepare(tmp_path / "s1", inputs=[str(door)], params=["motor=0,20"], stop_time=0.1, lockstep_step=0,
+                       **quiet)
+    f = sw.fmus[0]
+    finals = []
+    for _, values in sw.sets:
+        ex = sweep._experiment(sw, f, values)
+        assert dict(ex.start_values)["motor"] == values["motor"] and ex.input_table is None
+        res = run_task(f.data, f.sha, f.info, ex)
+        assert res["status"] == "ok", res["status"]
+        finals.append(res["values"]["door.x"][-1])
+    assert abs(finals[1] - finals[0]) > 1e-5
+    table = tmp_path / "in.csv"
+    table.write_text("time,motor\n0,20\n")  # the same constant torque, from a table
+    sw2 = sweep.prepare(tmp_path / "s2", inputs=[str(door)], params=["solver.tolerance=1e-9"], stop_time=0.1,
+                        input_table=str(table), lockstep_step=0, **quiet)
+    ex = sweep._experiment(sw2, sw2.fmus[0], sw2.sets[0][1])
+    assert ex.input_table is not None and ex.input_table.names == ["motor"]
+    # the table's constant 20 N·m and the start value 20 N·m: one run
+    ex_start = dataclasses.replace(sweep._experiment(sw, f, {"motor": 20.0, "solver.tolerance": 1e-9}), stop=ex.stop)
+    a = run_task(f.data, f.sha, f.info, ex)
+    b = run_task(f.data, f.sha, f.info, ex_start)
+    assert a["status"] == b["status"] == "ok"
+    assert np.array_equal(a["values"]["door.x"], b["values"]["door.x"])
+    assert sweep.prepare(tmp_path / "s2", resume=True, **quiet).experiments[f.info.model].input_table is not None
+    table.write_text("time,motor\n0,21\n")
+    with pytest.raises(InputError, match="changed since the sweep started"):
+        sweep.prepare(tmp_path / "s2", resume=True, **quiet)
+    with pytest.raises(InputError, match="motor"):
+        sweep.prepare(tmp_path / "s3", inputs=[str(door)], params=["motor=0,20"], input_table=str(table),
+                      lockstep_step=0, **quiet)

@@ -319,6 +319,33 @@ def _release_logging_proxy() -> None:
     addLoggerProxy(byref(callbacks))
 
 
+@contextlib.contextmanager
+def _input_derivatives_buffers():
+    """fmpy's input derivatives for any number of inputs. fmpy (0.3.32: ``fmpy.simulation.Input``)
+    sizes the buffer of the derivatives it passes to ``fmi2SetRealInputDerivatives`` for exactly 9
+    inputs, so ``set_input_derivatives=True`` fails with "Can only assign sequence of same size"
+    for any other count. For the duration of a run, ``simulate_fmu`` builds its ``Input`` from a
+    subclass that sizes each buffer to its inputs (nothing else changes); a fixed fmpy already
+    sizes them so and is left alone."""
+    import fmpy.simulation as sim
+
+    base = sim.Input
+
+    class Input(base):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            if getattr(self, "t", None) is None:
+                return
+            self.continuous = [info._replace(derivatives=(info.derivatives._type_ * len(info.vrs))())
+                               if len(info.derivatives) != len(info.vrs) else info for info in self.continuous]
+
+    sim.Input = Input
+    try:
+        yield
+    finally:
+        sim.Input = base
+
+
 def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, step: float,
              outputs: list[str], progress: bool = True, label: str = "", start_values: dict | None = None,
              along: bool = False, input_table: InputTable | None = None, interpolation: str = "hold") -> dict:
@@ -363,7 +390,7 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
         kw.update(input=input_table.structured(), set_input_derivatives=check_interpolation(interpolation) == "linear")
     stable = None
     try:
-        with _instance(fmu, logger) as (where, md, instance, stable_step):
+        with _instance(fmu, logger) as (where, md, instance, stable_step), _input_derivatives_buffers():
             try:
                 result = fmpy.simulate_fmu(where, model_description=md, fmu_instance=instance, **kw) \
                     if instance is not None else fmpy.simulate_fmu(where, logger=logger, debug_logging=True, **kw)

@@ -2,7 +2,7 @@
 FMI 2.0 co-simulation, C runtime). Figures are printed, never asserted (docs/benchmarks.md,
 "FMU inputs").
 
-    python benchmarks/inputs.py --door [--repeat 3]
+    python benchmarks/inputs.py --door [--repeat 3] [--intervals]
     python benchmarks/inputs.py --paper --base DIR [--repeat 3] [--scenes NAME ...]
 
 ``--door``: the door of the coupling example (mechanisms/examples/coupling/door_motor.toml: motor
@@ -61,7 +61,7 @@ def _timed(path: str, **kw) -> float:
     return time.perf_counter() - t0
 
 
-def door(repeat: int) -> None:
+def door(repeat: int, intervals: bool = False) -> None:
     from overcon.tooling.inputs import InputTable
     from overcon.tooling.run import _input_derivatives_buffers
 
@@ -93,6 +93,18 @@ def door(repeat: int) -> None:
             for _ in range(repeat):
                 for k, f in variants.items():
                     times[k].append(f())
+        if intervals:  # the FMU without inputs against the one with its input unset, per communication step
+            print(f"door, 0-2 s, without inputs / with the input unset, median of {repeat}\n")
+            print("| communication step (s) | without (s) | with (s) | ratio |")
+            print("|---:|---:|---:|---:|")
+            for dt in (1e-3, 1e-2, 1e-1):
+                a, b = [], []
+                for _ in range(repeat):
+                    a.append(_timed(d_out, stop_time=2.0, output_interval=dt))
+                    b.append(_timed(d_in, stop_time=2.0, output_interval=dt))
+                ma, mb = statistics.median(a), statistics.median(b)
+                print(f"| {dt:g} | {ma:.3f} | {mb:.3f} | {mb / ma:.2f} |")
+            print()
         base = statistics.median(times[next(iter(variants))])
         print(f"door, 0-2 s, 2000 communication points (1 ms), fmpy.simulate_fmu, median of {repeat}\n")
         print("| FMU | wall (s) | ratio |")
@@ -129,12 +141,13 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--door", action="store_true")
+    ap.add_argument("--intervals", action="store_true", help="--door: also the ratio at 1, 10 and 100 ms steps")
     ap.add_argument("--paper", action="store_true")
     ap.add_argument("--base", type=Path, help="--paper: the tree of the commit to compare with (C core compiled)")
     ap.add_argument("--scenes", nargs="+", metavar="NAME", help="--paper: only these scenes (e.g. spatial_MN_wo9)")
     args = ap.parse_args(argv)
     if args.door:
-        door(args.repeat)
+        door(args.repeat, args.intervals)
     if args.paper:
         if args.base is None:
             ap.error("--paper needs --base DIR")

@@ -21,7 +21,7 @@ from overcon.tooling.inputs import read_input_table
 
 ROOT = Path(__file__).resolve().parents[1]
 DOOR = ROOT / "mechanisms" / "examples" / "door.toml"
-DOOR_MOTOR = ROOT / "mechanisms" / "examples" / "door_motor.toml"
+DOOR_MOTOR = ROOT / "mechanisms" / "examples" / "motor_door.toml"
 
 
 def _door_scene(tmp_path: Path, *, friction: str = "[]", eliminate: str = '["hinge2"]', inputs: str | None = None,

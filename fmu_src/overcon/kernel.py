@@ -62,7 +62,8 @@ PROJECTION_SLACK = 10.0  # OVK_PROJ_SLACK of core/core.h: near a singular positi
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
-           ("spatial", "spatial_cylindrical"): 6, ("spatial", "spatial_universal"): 7, ("spatial", "spatial_fixed"): 8}
+           ("spatial", "spatial_cylindrical"): 6, ("spatial", "spatial_universal"): 7, ("spatial", "spatial_fixed"): 8,
+           ("planar", "driver"): 9, ("spatial", "driver"): 9}
 _ROTATIONS = ("euler_zxz", "quaternion")
 _AXIS_SIZES = {"spatial_revolute": ("radius", "length", "collar_radius"), "spatial_prismatic": ("length", "radius"),
                "spatial_cylindrical": ("length", "radius")}
@@ -124,7 +125,8 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_law_eval", i, [vp, i, ctypes.c_double, vp, vp]),
                             ("ovk_set_inputs", i, [vp, vp, vp, vp, ctypes.c_double]),
                             ("ovk_sensors", i, [vp, vp, vp, vp, i, vp]),
-                            ("ovk_sim_set_inputs", i, [vp, vp, vp])):
+                            ("ovk_sim_set_inputs", i, [vp, vp, vp]),
+                            ("ovk_set_time", i, [vp, ctypes.c_double]), ("ovk_phi_t", i, [vp, vp, vp])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib
@@ -254,7 +256,11 @@ def _redundancy_block(model, watch=None) -> dict:
 def _joint_constants(model, c) -> np.ndarray:
     out = np.zeros(NJC)
     p = c.p
-    if c.type == "translational":
+    if c.type == "driver":  # core/drivers.c: the layout ([8], the coordinate at q0, set by Kernel)
+        out[0], out[1], out[2] = p["joint"], p["coordinate"], p["motion"]
+        params = list(p["params"]) + ([p["start_time"]] if p["motion"] == 1 else [])
+        out[3:3 + len(params)] = params
+    elif c.type == "translational":
         out[0:2], out[2:4], out[4:6] = p["s_A"], p["s_B"], p["v"]
         out[6] = p["psi"]
         out[7:11] = np.asarray(p["B"], float).reshape(-1)
@@ -351,7 +357,9 @@ class Kernel:
         m.jtype = arr([_JOINTS[(model.kind, c.type)] for c in joints], I32)
         m.jbi, m.jbj = arr([c.bi for c in joints], I32), arr([c.bj for c in joints], I32)
         m.jneq, m.jrows = arr([len(c.rows) for c in joints], I32), arr(rows, I32)
-        m.jconst = arr([_joint_constants(model, c) for c in joints], float)
+        jconst = np.array([_joint_constants(model, c) for c in joints], float).reshape(-1, NJC)
+        m.jconst = arr(jconst, float)
+        jconst = keep[-1]  # the packed copy the core reads (a driver's reference is written into it below)
         m.jlaw = arr([0 if c.law is None else _LAWS.get(c.law.name, 0) if rows_only else _LAWS[c.law.name]
                       for c in joints], I32)
         m.jlawp = arr([_law_constants(c.law) for c in joints], float)
@@ -370,6 +378,7 @@ class Kernel:
         self._cmodel = m
         self._pm = ctypes.addressof(m)
         self._data = self._workspace(lib)
+        lib.ovk_set_time(self._data, float(model.scene.start_time))  # the drivers' equations at the start
         n_y = model.n + model.nh
         self._y = np.zeros(n_y)
         self._ydot = np.zeros(n_y)
@@ -388,6 +397,11 @@ class Kernel:
         self._fric = np.zeros(len(joints))
         self._lam_in = np.zeros(model.m)
         self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
+        y0 = np.concatenate([model.q0, model.h0])
+        for c in joints:  # a driver's reference: its coordinate's raw value at q0 (core/inputs.c ovk_sensors)
+            if c.type == "driver" and not (model.dim == 3 and c.p["coordinate"] == 0):
+                raw = self.sensors(y0, None, c.p["joint"])
+                jconst[c.index * NJC + 8] = raw[0] if c.p["coordinate"] == 0 else raw[2]
 
     @staticmethod
     def _pack_kept(lib, m, retained) -> tuple:
@@ -499,12 +513,23 @@ class Kernel:
 
     def sensors(self, y: np.ndarray, y0: np.ndarray, j: int) -> np.ndarray:
         """Joint j's [angle (rad), rate (rad/s), displacement (m), speed (m/s)] at y from their
-        values at y0 (core/inputs.c ovk_sensors)."""
+        values at y0 (None: the raw values) (core/inputs.c ovk_sensors)."""
         out = np.zeros(4)
-        yy, y00 = np.ascontiguousarray(y, float), np.ascontiguousarray(y0, float)
-        status = self._lib.ovk_sensors(self._pm, self._data, yy.ctypes.data, y00.ctypes.data, int(j), out.ctypes.data)
+        yy = np.ascontiguousarray(y, float)
+        y00 = None if y0 is None else np.ascontiguousarray(y0, float)
+        status = self._lib.ovk_sensors(self._pm, self._data, yy.ctypes.data, None if y00 is None else y00.ctypes.data,
+                                       int(j), out.ctypes.data)
         if status:
             raise RuntimeError(f"the compiled core's sensors failed ({STATUS.get(status, status)}): {self._message()}")
+        return out
+
+    def phi_t(self, t: float, y: np.ndarray) -> np.ndarray:
+        """Phi_t (m,) of the drivers' equations at (t, y) (0 for the other equations; core/drivers.c)."""
+        self._lib.ovk_set_time(self._data, float(t))
+        self.rows(y)
+        out = np.zeros(self.model.m)
+        self._lib.ovk_phi_t(self._pm, self._data, out.ctypes.data)
+        self._lib.ovk_set_time(self._data, float(self.model.scene.start_time))
         return out
 
     def unique(self, y: np.ndarray) -> tuple[int, np.ndarray]:

@@ -55,6 +55,7 @@ from .friction_laws import Law, make_law
 from .joints import TYPES, InitialFrames
 from .kinematics import cos_sin, euler_R_rows, quat_R_rows, rot2_rows
 from .scene import SENSOR_JOINTS
+from .spec import DRIVER_MOTIONS
 from .spec import BASE, ENERGY_OUTPUTS, VELOCITIES_PER_BODY, VELOCITY_OUTPUTS, MechanismSpec, SceneSpec, coordinates
 
 
@@ -82,6 +83,10 @@ class CompiledJoint:
     p: Mapping[str, object]
     law: Law | None  # friction switched on (None: frictionless)
     components: tuple[str, ...]
+
+    @property
+    def is_driver(self) -> bool:
+        return self.type == "driver"
 
     @property
     def module(self):
@@ -368,10 +373,21 @@ def compile_model(scene: SceneSpec) -> Model:
     joint_index = {c.name: c.index for c in joints}
     sensors = tuple((f"{name}.{what}", joint_index[name], SENSOR_INDEX[what]) for name in scene.sensors
                     for what in SENSOR_JOINTS[joints[joint_index[name]].type])
+    n_mech = len(joints)
+    for k, dv in enumerate(scene.drivers):  # one equation each, after the joints' (their efforts: outputs)
+        c = joints[joint_index[dv.joint]]
+        joints.append(CompiledJoint(
+            name=dv.name, type=DRIVER, index=n_mech + k, bi=c.bi, bj=c.bj, rows=(row,),
+            p=_read_only({"joint": c.index, "coordinate": 0 if dv.coordinate == "angle" else 1,
+                          "motion": DRIVER_MOTION_CODES[dv.motion],
+                          "params": tuple(float(dv.params[key]) for key in DRIVER_MOTIONS[dv.motion]),
+                          "start_time": float(scene.start_time)}),
+            law=None, components=("effort",)))
+        row += 1
     base = replace(
         bodies, joints=tuple(joints), m=row, retained=np.arange(row), **_compliance(scene, joints, row),
         friction_joints=tuple(c.index for c in joints if c.law is not None),
-        reaction_joints=tuple(joint_index[j] for j in scene.reactions),
+        reaction_joints=tuple(joint_index[j] for j in scene.reactions) + tuple(range(n_mech, len(joints))),
         friction_outputs=tuple(joint_index[j] for j in
                                (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
         inputs=tuple(_compile_input(u, joints, joint_index, slot) for u in scene.inputs), sensor_outputs=sensors,
@@ -380,6 +396,11 @@ def compile_model(scene: SceneSpec) -> Model:
 
 
 SENSOR_INDEX = {"angle": 0, "rate": 1, "displacement": 2, "speed": 3}
+DRIVER = "driver"
+"""``CompiledJoint.type`` of a driver (scene ``[[drivers]]``): one rheonomic equation on a joint's
+coordinate (core/drivers.c), its reaction the effort; not a mechanism joint type
+(:data:`overcon.joints.TYPES`)."""
+DRIVER_MOTION_CODES = {"constant_speed": 1, "ramp": 2, "harmonic": 3}
 """The entries of the core's sensors of a joint (core/inputs.c ovk_sensors)."""
 
 

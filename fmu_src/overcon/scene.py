@@ -1014,7 +1014,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     """The scene file's document checked section by section (its mechanism file too); None if
     either has problems (all in ``problems``)."""
     n_problems = len(problems)
-    _unknown_keys(ctx, doc, "", ("scene", "outputs", "solver", "inputs"))
+    _unknown_keys(ctx, doc, "", ("scene", "outputs", "solver", "inputs", "drivers"))
     st = doc.get("scene")
     if _table(ctx, st, "scene") is None:
         return None
@@ -1042,7 +1042,11 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     positions, reactions, friction_out, velocities, energy = _scene_outputs(ctx, doc, mech, joints, friction)
     sensors = _scene_sensors(ctx, doc, mech)
     inputs = _scene_inputs(ctx, doc, mech)
+    drivers = _scene_drivers(ctx, doc, mech, {u.name for u in inputs})
     solver_kw = _scene_solver(ctx, doc, problems, start_time, stop_time)
+    if drivers and (redundancy == "compliant" or solver_kw.get("singular") == "pass"):
+        ctx.add("drivers", "drivers run under the eliminated or min-norm solve with solver.singular = \"stop\" (the "
+                           "compliant and augmented Lagrangian solves do not carry a rheonomic equation yet)")
     if inputs and solver_kw.get("method") == "rk4":
         ctx.add("solver.method", "rk4 with [[inputs]]: its fixed steps would step over the instants where the inputs "
                                  "change (co-simulation holds them over each communication step); use dopri5, dop853 "
@@ -1061,7 +1065,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
                      friction_outputs=friction_out, velocities=velocities, energy=energy,
                      start_time=start_time, stop_time=stop_time,
                      solver=SolverSpec(**solver_kw), group=group, description=description,
-                     source=ctx.file, inputs=inputs, sensors=sensors)
+                     source=ctx.file, inputs=inputs, sensors=sensors, drivers=drivers)
 
 
 def _scene_redundancy(ctx: _Ctx, st: dict, mech: MechanismSpec | None):
@@ -1314,6 +1318,85 @@ def _scene_inputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None) -> tuple:
                 ok = False
         if ok:
             out.append(S.InputSpec(name=name, type=typ, start=float(start), **fields))
+    return tuple(out)
+
+
+DRIVER_JOINTS = {"angle": ("revolute", "spatial_revolute", "spatial_cylindrical"),
+                 "displacement": ("translational", "spatial_prismatic", "spatial_cylindrical")}
+"""The joint types a driver's coordinate is prescribed on (rotation about, displacement along the axis)."""
+MAX_DRIVERS = 1000
+_DRIVER_KEYS = ("name", "joint", "motion", "coordinate", "speed", "from", "to", "t0", "t1", "amplitude", "frequency",
+                "phase", "offset")
+_DRIVER_DEFAULTS = {"phase": 0.0, "offset": 0.0}
+
+
+def _scene_drivers(ctx: _Ctx, doc: dict, mech: MechanismSpec | None, input_names: set) -> tuple:
+    """``[[drivers]]`` (:class:`overcon.spec.DriverSpec`): names identifiers, unique, not a joint's
+    or an input's name nor reserved; ``joint`` a joint of a type of :data:`DRIVER_JOINTS` (a
+    cylindrical joint: ``coordinate`` "angle" (default) or "displacement"), at most one driver per
+    joint and coordinate; ``motion`` in :data:`overcon.spec.DRIVER_MOTIONS` with exactly its
+    parameters, finite (a ramp's t1 > t0, a harmonic's frequency > 0). Whether the motion starts at
+    the coordinate's value at q0 (zero) with its rate is checked with q0 and h0
+    (:func:`overcon.checks.check_initial_state`)."""
+    items = _array_of_tables(ctx, doc, "drivers", False, MAX_DRIVERS)
+    out, seen, driven = [], {}, set()
+    joints = {j.name: j.type for j in mech.joints} if mech is not None else None
+    for k, it in items:
+        p = f"drivers[{k}]"
+        name = _get(ctx, it, "name", p)
+        name = None if name is _MISSING else _ident(ctx, name, f"{p}.name")
+        if name is not None and (name in RESERVED_NAMES or name in input_names or (joints and name in joints)):
+            ctx.add(f"{p}.name", f"'{name}' is already the name of a joint, an input or another FMU variable")
+            name = None
+        name = _register_name(ctx, name, f"{p}.name", seen, p, "driver")
+        motion = _get(ctx, it, "motion", p)
+        motion = None if motion is _MISSING else _choice(ctx, motion, f"{p}.motion", tuple(S.DRIVER_MOTIONS))
+        allowed = ("name", "joint", "motion", "coordinate") + (S.DRIVER_MOTIONS[motion] if motion else
+                                                                _DRIVER_KEYS[4:])
+        _unknown_keys(ctx, it, p, allowed)
+        ok = name is not None and motion is not None
+        v = _get(ctx, it, "joint", p)
+        jn = None if v is _MISSING else _str(ctx, v, f"{p}.joint")
+        coordinate = "angle"
+        if "coordinate" in it:
+            coordinate = _choice(ctx, it["coordinate"], f"{p}.coordinate", tuple(DRIVER_JOINTS))
+        if jn is not None and joints is not None:
+            if jn not in joints:
+                ctx.add(f"{p}.joint", f"unknown joint {_short(jn)}")
+                jn = None
+            else:
+                jt = joints[jn]
+                if "coordinate" not in it and jt not in DRIVER_JOINTS["angle"]:
+                    coordinate = "displacement"
+                if coordinate is not None and jt not in DRIVER_JOINTS[coordinate]:
+                    kinds = ", ".join(sorted({JOINT_TYPES[t].name for t in DRIVER_JOINTS[coordinate]}))
+                    ctx.add(f"{p}.joint", f"joint '{jn}' is a {JOINT_TYPES[jt].name} joint: a driver's {coordinate} "
+                                          f"is that of a {kinds} joint")
+                    jn = None
+                elif (jn, coordinate) in driven:
+                    ctx.add(f"{p}.joint", f"joint '{jn}' has a driver of its {coordinate} already")
+                    jn = None
+                else:
+                    driven.add((jn, coordinate))
+        ok = ok and jn is not None and coordinate is not None
+        params = {}
+        for key in (S.DRIVER_MOTIONS[motion] if motion else ()):
+            if key not in it and key in _DRIVER_DEFAULTS:
+                params[key] = _DRIVER_DEFAULTS[key]
+                continue
+            v = _get(ctx, it, key, p)
+            x = None if v is _MISSING else _num(ctx, v, f"{p}.{key}")
+            if x is None:
+                ok = False
+            params[key] = x
+        if motion == "ramp" and ok and not params["t1"] > params["t0"]:
+            ctx.add(f"{p}.t1", f"must be > t0 ({params['t0']!r}), got {params['t1']!r}")
+            ok = False
+        if motion == "harmonic" and ok and not params["frequency"] > 0.0:
+            ctx.add(f"{p}.frequency", f"must be > 0 (Hz), got {params['frequency']!r}")
+            ok = False
+        if ok:
+            out.append(S.DriverSpec(name=name, joint=jn, motion=motion, params=params, coordinate=coordinate))
     return tuple(out)
 
 

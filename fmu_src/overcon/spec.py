@@ -275,6 +275,28 @@ class InputSpec:
         return INPUT_TYPES[self.type]
 
 
+DRIVER_MOTIONS = {"constant_speed": ("speed",), "ramp": ("from", "to", "t0", "t1"),
+                  "harmonic": ("amplitude", "frequency", "phase", "offset")}
+"""Driver motions (scene ``[[drivers]]``) and their parameters: the driven coordinate (from its
+value at q0; rad or m) as a function of time t (s): ``constant_speed`` speed (t - start_time);
+``ramp`` from ``from`` to ``to`` between t0 and t1 by a quintic with zero velocity and acceleration
+at both ends, held outside; ``harmonic`` offset + amplitude sin(2 pi frequency t + phase)
+(frequency in Hz, phase in rad; ``phase`` and ``offset`` default 0)."""
+
+
+@dataclass(frozen=True)
+class DriverSpec:
+    """One driver (``[[drivers]]``): ``joint`` a revolute (planar, spatial), translational,
+    prismatic or cylindrical joint; ``coordinate`` "angle" or "displacement" (the joint type's;
+    cylindrical: either, default angle); ``motion`` in :data:`DRIVER_MOTIONS` with its ``params``."""
+
+    name: str
+    joint: str
+    motion: str
+    params: Mapping[str, float]
+    coordinate: str = "angle"
+
+
 @dataclass(frozen=True)
 class SceneSpec:
     """A mechanism plus what to simulate. ``friction``: joint names with friction switched on;
@@ -306,3 +328,4 @@ class SceneSpec:
     source: str = ""
     inputs: tuple[InputSpec, ...] = ()  # scene [[inputs]]
     sensors: tuple[str, ...] = ()  # joints with sensor outputs ([outputs] joints)
+    drivers: tuple[DriverSpec, ...] = ()  # scene [[drivers]]

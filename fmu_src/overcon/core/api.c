@@ -38,8 +38,24 @@ static int in_range(const int *a, int n, int lo, int hi) { /* every a[i] in [lo,
 
 /* The equations of a joint type (overcon.joints.TYPES n_equations), 0 for an unknown type. */
 static int joint_equations(int type) {
-    static const int n[] = {0, 2, 2, 3, 5, 5, 4, 4, 6}; /* by J_* */
-    return type >= 0 && type <= J_FIXED ? n[type] : 0;
+    static const int n[] = {0, 2, 2, 3, 5, 5, 4, 4, 6, 1}; /* by J_* */
+    return type >= 0 && type <= J_DRIVER ? n[type] : 0;
+}
+
+/* A driver's constants (drivers.c): a driven joint of a type its coordinate has, on the same
+ * bodies, a known motion with finite parameters (a ramp's t1 after its t0). */
+static int driver_ok(const ovk_model *M, int j) {
+    const double *c = M->jconst + NJC * j;
+    for (int k = 0; k < 9; k++)
+        if (!isfinite(c[k])) return 0;
+    int jd = (int)c[0];
+    if (c[0] != (double)jd || jd < 0 || jd >= M->nj || !(c[1] == 0.0 || c[1] == 1.0) ||
+        !(c[2] == 1.0 || c[2] == 2.0 || c[2] == 3.0) || M->jlaw[j] != LAW_NONE)
+        return 0;
+    int t = M->jtype[jd], rot = c[1] == 0.0;
+    int ok = rot ? t == J_REVOLUTE || t == J_SREVOLUTE || t == J_CYLINDRICAL
+                 : t == J_TRANSLATIONAL || t == J_PRISMATIC || t == J_CYLINDRICAL;
+    return ok && M->jbi[j] == M->jbi[jd] && M->jbj[j] == M->jbj[jd] && (c[2] != 2.0 || c[6] > c[5]);
 }
 
 /* The model's counts, types and indices, checked before anything is sized from them: a model that
@@ -70,7 +86,8 @@ static int check_model(const ovk_model *M, ovk_data *d) {
     for (int j = 0; j < M->nj; j++) {
         int t = M->jtype[j], planar = t == J_REVOLUTE || t == J_TRANSLATIONAL;
         int spatial = t == J_SPHERICAL || (t >= J_SREVOLUTE && t <= J_FIXED);
-        if (!((M->dim == 2 && planar) || (M->dim == 3 && spatial)) || M->jneq[j] != joint_equations(t) ||
+        if (t == J_DRIVER && !driver_ok(M, j)) return ovk_fail(d, OVK_INVALID, "model: driver %d is not one the core takes", j);
+        if (!((M->dim == 2 && planar) || (M->dim == 3 && spatial) || t == J_DRIVER) || M->jneq[j] != joint_equations(t) ||
             M->jbi[j] < -1 || M->jbi[j] >= M->nb || M->jbj[j] < -1 || M->jbj[j] >= M->nb ||
             !in_range(M->jrows + OVK_MAXEQ * j, M->jneq[j], 0, M->m) || M->jlaw[j] < LAW_NONE || M->jlaw[j] > LAW_STRIBECK)
             return ovk_fail(d, OVK_INVALID, "model: joint %d (type %d, %d rows, bodies %d and %d, law %d) is not "
@@ -146,7 +163,7 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     size_t n_frames = (nb + 1) * (2 * dim + dim * dim + wd) + 4 * nb;
     size_t n_work = 4 * nx + nx * nc                          /* lam0x, x, x0, Wx */
                     + 4 * nx + nc * nx + nx * nx + nc + nx;   /* r, Dq, Mx, dx, xn, qn, rn (damped Newton) */
-    size_t need = n_frames + m * nh + 2 * m + nS + nR * (nc ? nc : 1) + 2 * nR + nh + nR * nc
+    size_t need = n_frames + m * nh + 3 * m + nS + nR * (nc ? nc : 1) + 2 * nR + nh + nR * nc
                   + 6 * OVK_MAXEQ * nj + n_work + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols)
                   + ovk_redundancy_doubles(M);
     d->mem = calloc(need ? need : 1, sizeof(double)); /* zeros: Phi_h outside its rows' blocks stays so (joints.c) */
@@ -172,6 +189,7 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->J = p; p += m * nh;
     d->phi = p; p += m;
     d->gam = p; p += m;
+    d->phit = p; p += m;
     d->S = p; p += nS;
     d->Sx = p; p += nR * (nc ? nc : 1);
     d->g = p; p += nR;
@@ -235,6 +253,7 @@ int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int
     const double *q = y, *h = y + M->nb * M->nq_b;
     int status;
     ovk_frames_build(M, q, h, &d->f);
+    d->f.t = t;
     ovk_constraint_rows(M, d, q);
     ovk_kkt_rhs(M, d, h);
     if ((status = ovk_loads(M, d, t))) return status;

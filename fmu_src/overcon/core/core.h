@@ -75,6 +75,7 @@ enum {
 };
 enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
+enum { J_DRIVER = 9 }; /* a driver (drivers.c): one rheonomic equation on a joint's coordinate, planar or spatial */
 enum { LAW_NONE = 0, LAW_REGULARISED = 1, LAW_STRIBECK = 2 };
 enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 
@@ -160,6 +161,7 @@ enum { OVK_FORM_ELIMINATED = 0, OVK_FORM_AL = 1 };
 
 /* Frames of the bodies, slot nb = the base. */
 typedef struct {
+    double t;              /* the time of the drivers' equations (drivers.c), set with the frames' users */
     double *r, *R, *v, *w; /* (nb + 1) slots: r, v dim; R dim*dim; w 1 (planar) or 3 */
     double *sb, *cb, *sg, *cg; /* Euler angles: sin/cos of beta and gamma per body (rates) */
 } ovk_frames;
@@ -218,6 +220,7 @@ typedef struct {
     int al_direct;     /* the last AL-form solve was kkt.c's direct one (its S factor stands; kkt_al.c) */
     int *al_rows;  /* every equation (m), then its two bodies (2 m): the row set of ovk_project */
     int *piv;      /* nx: the row interchanges of the friction solves' LU (friction.c, friction_robust.c) */
+    double *phit;  /* m: Phi_t of the drivers' equations (0 elsewhere), with Phi at d->f.t (joints.c) */
     double *u;     /* inputs: 2 nu + 1: the values at u_t, their slopes (per s), then u_t (inputs.c) */
 } ovk_data;
 
@@ -468,6 +471,12 @@ OVK_HIDDEN void ovk_spherical_friction_jac(const ovk_model *M, int j, const ovk_
                                            double *dQi, double *dQj);
 OVK_HIDDEN double ovk_spherical_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
 
+/* drivers.c */
+OVK_HIDDEN void ovk_driver_motion(const double *c, double t, double *out);
+OVK_HIDDEN void ovk_driver_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji, double *Jj,
+                                double *gam);
+OVK_HIDDEN double ovk_driver_phit(const ovk_model *M, int j, double t);
+
 /* joints_spatial.c */
 OVK_HIDDEN void ovk_axis_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji, double *Jj,
                               double *gam);
@@ -487,6 +496,10 @@ OVK_HIDDEN void ovk_input_forces(const ovk_model *M, const ovk_data *d, double t
 OVK_EXPORT int ovk_set_inputs(const ovk_model *M, ovk_data *d, const double *u, const double *du, double t_ref);
 OVK_EXPORT int ovk_sensors(const ovk_model *M, ovk_data *d, const double *y, const double *y0, int j, double *out);
 OVK_EXPORT int ovk_sim_set_inputs(ovk_sim *s, const double *u, const double *du);
+/* drivers.c: the time of the drivers' equations for the rows that follow (ovk_rows, ovk_rows_sparse),
+ * and Phi_t (m) of the last rows evaluated in d */
+OVK_EXPORT int ovk_set_time(ovk_data *d, double t);
+OVK_EXPORT int ovk_phi_t(const ovk_model *M, const ovk_data *d, double *out);
 OVK_HIDDEN void ovk_spring_points(const ovk_model *M, const ovk_frames *f, const double *lp, int bi, int bj,
                                   double *pi, double *pj);
 
@@ -609,6 +622,7 @@ OVK_EXPORT int ovk_pack_kept(const ovk_model *M, const int *retained, int nR, in
                              int *iwork);
 OVK_EXPORT int ovk_sim_uniqueness(const ovk_sim *s, int *rank, int *unique);
 OVK_EXPORT int ovk_sim_events(const ovk_sim *s);
+OVK_EXPORT int ovk_sim_effort_unique(const ovk_sim *s);
 OVK_EXPORT const char *ovk_sim_event(const ovk_sim *s, int k, double *t, int *kind);
 
 #endif

@@ -75,10 +75,20 @@ static int powers(ovk_sim *s, double t, const double *y, double *p) {
     ovk_compliant_energy(M, s->d, y, h, &elastic, &damper);
     p[0] = damper;
     p[1] = applied;
-    if (!M->nfj) return OVK_OK;
+    int drivers = 0;
+    for (int j = 0; j < M->nj; j++) drivers += M->jtype[j] == J_DRIVER;
+    if (!M->nfj && !drivers) return OVK_OK;
     int its = 0, status = ovk_sim_solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, s->yout, &its);
     if (status) return status;
     s->evaluations++;
+    for (int j = 0; drivers && j < M->nj; j++) { /* a driver's power: its effort -lam times the rate Phi_h h */
+        if (M->jtype[j] != J_DRIVER) continue;
+        int row = M->jrows[OVK_MAXEQ * j];
+        double rate = 0.0;
+        for (int k = 0; k < s->nh; k++) rate += s->d->J[(size_t)row * s->nh + k] * h[k];
+        p[1] += -s->ev_lam[row] * rate;
+    }
+    if (!M->nfj) return OVK_OK;
     double fp = 0.0;
     for (int k = 0; k < s->ncols; k++) fp += h[M->cols[k]] * s->ev_qf[k];
     p[0] = damper - fp;

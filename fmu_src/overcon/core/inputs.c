@@ -171,15 +171,15 @@ static void planar_sensor(const ovk_model *M, const ovk_frames *f, const double 
     out[3] = ddot[0] * u[0] + ddot[1] * u[1] + dd[0] * udot[0] + dd[1] * udot[1];
 }
 
-/* Joint j's sensors at y from their values at y0 into out[4]: angle (rad), rate (rad/s),
+/* Joint j's sensors at y from their values at y0 (NULL: raw) into out[4]: angle (rad), rate (rad/s),
  * displacement (m), speed (m/s); the spatial angle is in (-pi, pi] (atan2 of the lock vectors). */
 int ovk_sensors(const ovk_model *M, ovk_data *d, const double *y, const double *y0, int j, double *out) {
     if (!d) return OVK_NOMEM;
     if (d->status) return d->status;
     if (j < 0 || j >= M->nj) return ovk_fail(d, OVK_INVALID, "sensors: joint %d of %d", j, M->nj);
     int n = M->nb * M->nq_b;
-    double ref[4];
-    for (int pass = 0; pass < 2; pass++) {
+    double ref[4] = {0.0, 0.0, 0.0, 0.0};
+    for (int pass = y0 ? 0 : 1; pass < 2; pass++) { /* y0 NULL: the raw values (drivers' references) */
         const double *x = pass ? y : y0;
         double *o = pass ? out : ref;
         ovk_frames_build(M, x, x + n, &d->f);

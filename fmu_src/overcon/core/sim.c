@@ -348,6 +348,7 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
         status = rk->dense_status, memcpy(s->msg, rk->dense_msg, sizeof s->msg);
     if (status) return stopped(s, status, "integration stopped", rk->t);
     if (s->warm.count) hist_push(&s->step_warm, s->ncols, rk->t, s->warm.q[0]);
+    s->d->f.t = rk->t; /* the drivers' equations at the step's end */
     if ((status = ovk_rows_in(s->M, s->d, rk->y))) {
         snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d));
         return stopped(s, status, "integration stopped", rk->t);
@@ -469,7 +470,28 @@ int ovk_sim_uniqueness(const ovk_sim *s, int *rank, int *unique) {
         const double *lp = M->jlawp + (size_t)M->fj[k] * NLP;
         if (!(lp[0] == 0.0 && lp[3] == 0.0) && !s->along_unique[M->fj[k]]) motion = 0;
     }
+    int drivers = 0;
+    for (int j = 0; j < M->nj; j++) drivers += M->jtype[j] == J_DRIVER;
+    if (drivers && s->along_rank == s->nh) motion = 1; /* fully driven (DOF 0): the motion is prescribed */
     return motion;
+}
+
+/* Every driver's effort is unique at the last evaluation of the uniqueness along the motion
+ * (overcon.precheck.effort_verdicts): its own reaction unique and no friction acting on a joint
+ * whose reaction is not unique; 1 without drivers, -1 without a run. */
+int ovk_sim_effort_unique(const ovk_sim *s) {
+    if (!s || !s->along_unique) return -1;
+    const ovk_model *M = s->M;
+    for (int j = 0; j < M->nj; j++)
+        if (M->jtype[j] == J_DRIVER && !s->along_unique[j]) return 0;
+    for (int k = 0; k < M->nfj; k++) {
+        const double *lp = M->jlawp + (size_t)M->fj[k] * NLP;
+        if (!(lp[0] == 0.0 && lp[3] == 0.0) && !s->along_unique[M->fj[k]]) {
+            for (int j = 0; j < M->nj; j++)
+                if (M->jtype[j] == J_DRIVER) return 0;
+        }
+    }
+    return 1;
 }
 
 /* The run's kept equations become `retained` (M->nR of them, ascending): the packed arrays of the

@@ -64,7 +64,7 @@ typedef struct {
 
 enum { T_REAL = 0, T_INTEGER = 1, T_BOOLEAN = 2, T_STRING = 3 };
 enum { K_OUTPUT = 0, K_CONSTANT = 1, K_PARAM = 2, K_STABLE_STEP = 3, K_STATE = 4, K_DERIVATIVE = 5, K_ARRAY = 6, K_TIME = 7 };
-enum { K_ALONG = 8 }; /* arg 0 rank, 1 motion_unique, 2 + j joint j's reaction_unique (fmu_along_value) */
+enum { K_ALONG = 8 }; /* arg 0 rank, 1 motion_unique, 2 + j joint j's reaction_unique, 2 + nj effort_unique */
 enum { K_INPUT = 9 }; /* arg: the input's slot (ovk_model.nu) */
 /* K_STATE, K_DERIVATIVE: entry arg of y = [q, h] and of its derivative (Model Exchange's continuous
  * states); K_ARRAY (FMI 3.0): the consecutive reaction outputs of one joint from output arg on; K_TIME (FMI 3.0):

@@ -220,7 +220,7 @@ static int check_tables(const fmu_model *fm, char *err, size_t errsize) {
     for (int k = 0; k < fm->nvar; k++) {
         const fmu_var *v = &fm->var[k];
         int lim = v->key == K_OUTPUT || v->key == K_ARRAY ? fm->nout : v->key == K_PARAM ? fm->nparam
-                  : v->key == K_STATE || v->key == K_DERIVATIVE ? fm->ny : v->key == K_ALONG ? 2 + fm->M.nj
+                  : v->key == K_STATE || v->key == K_DERIVATIVE ? fm->ny : v->key == K_ALONG ? 3 + fm->M.nj
                   : v->key == K_INPUT ? fm->M.nu : 2;
         if (v->type < T_REAL || v->type > T_STRING || v->causality < 0 || v->causality > 4 || v->variability < 0 ||
             v->variability > 4 || v->key < K_OUTPUT || v->key > K_INPUT || v->arg < 0 ||

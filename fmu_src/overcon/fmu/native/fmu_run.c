@@ -264,7 +264,8 @@ static int step_outputs(fmu_inst *c, double t_new, const double *y, double *out)
 int fmu_along_value(fmu_inst *c, int arg, double *out) {
     if (!c->sim_valid && !fmu_ensure_sim(c, 0)) return 0;
     int nj = c->fm.M.nj, rank = 0, motion = ovk_sim_uniqueness(c->sim, &rank, c->along);
-    *out = arg == 0 ? rank : arg == 1 ? motion : arg - 2 < nj ? c->along[arg - 2] : 0;
+    *out = arg == 0 ? rank : arg == 1 ? motion : arg - 2 < nj ? c->along[arg - 2]
+           : ovk_sim_effort_unique(c->sim) == 1; /* 2 + nj: effort_unique */
     return 1;
 }
 

@@ -187,3 +187,37 @@ def test_sweep_varies_an_input_start_and_passes_a_table(door, tmp_path):
     with pytest.raises(InputError, match="motor"):
         sweep.prepare(tmp_path / "s3", inputs=[str(door)], params=["motor=0,20"], input_table=str(table),
                       lockstep_step=0, **quiet)
+
+
+def test_compare_a_group_with_inputs(tmp_path, capsys):
+    """``compare --input`` on two eliminations of the door with the motor: both runs get the table
+    (the motion differs from the run without it), the group is decided from the adaptive runs (the
+    FMUs refuse rk4, the lockstep method, with inputs: said, not failed)."""
+    from overcon.fmu.build import build_all
+    from overcon.tooling.cosim import EXAMPLE
+
+    src = (EXAMPLE / "door_motor.toml").read_text()
+    (tmp_path / "door.toml").write_text((EXAMPLE.parent / "door.toml").read_text())
+    other = src.replace('mechanism = "../door.toml"', 'mechanism = "door.toml"')
+    (tmp_path / "a.toml").write_text(other)
+    (tmp_path / "b.toml").write_text(other.replace('name = "coupled_door"', 'name = "coupled_door_b"')
+                                     .replace('eliminate = ["hinge2"]', "eliminate = [3, 4, 5, 9, 10]"))
+    code, res = build_all([tmp_path / "a.toml", tmp_path / "b.toml"], tmp_path / "fmus", allow_nonunique=True,
+                          refs=False, validate=False, kind="cs", echo=lambda s: None, echo_err=lambda s: None)
+    assert code == 0, [m for r in res for m in r.messages]
+    table = tmp_path / "in.csv"
+    table.write_text("time,motor\n0,30\n0.3,30\n")
+    args = ["compare", *(str(r.fmu) for r in res), "--stop-time", "0.3"]
+    code = main(args + ["--input", str(table), "--out", str(tmp_path / "c")])
+    out = capsys.readouterr().out
+    assert code == 0, out  # the friction motion differs between the eliminations, as the pre-check predicts
+    assert "refuse rk4" in out and "observed NOT UNIQUE, predicted not unique" in out
+    with_input = read_series(tmp_path / "c" / "coupled_door.csv")
+    assert main(args + ["--out", str(tmp_path / "c0")]) == 0
+    without = read_series(tmp_path / "c0" / "coupled_door.csv")
+    assert np.max(np.abs(with_input.values["door.x"] - without.values["door.x"])) > 1e-4
+
+
+def test_sweep_of_fmus_with_inputs_needs_adaptive_runs(door, tmp_path, capsys):
+    assert main(["sweep", str(door), "--param", "motor=0,5", "--out", str(tmp_path / "s")]) == 2
+    assert "--lockstep-step 0" in capsys.readouterr().err

@@ -55,7 +55,9 @@ class FmuInfo:
     eliminate: tuple[int, ...] | str | None = None
     motion_unique: bool | None = None  # pre-check prediction (None: not an overcon FMU)
     reaction_unique: dict = field(default_factory=dict)  # joint -> bool
-    lockstep: bool = False  # parameters solver.method and solver.step: can run on the lockstep grid
+    # parameters solver.method and solver.step: can run on the lockstep grid (rk4); an overcon FMU
+    # with inputs refuses rk4 (its fixed steps could step over the instant an input changes)
+    lockstep: bool = False
     parameters: dict = field(default_factory=dict)  # causality parameter: name -> FMI type (Real, Integer, ...)
     inputs: dict = field(default_factory=dict)  # causality input: name -> FMI type (an --input table sets the Real ones)
     fmi_version: str = "2.0"
@@ -194,7 +196,8 @@ def inspect_fmu(path) -> FmuInfo:
                    mechanism=facts.get("mechanism", ""), friction=facts.get("friction", ()),
                    eliminate=facts.get("eliminate"), motion_unique=motion_unique,
                    reaction_unique=reaction_unique,
-                   lockstep=params.get("solver.method") == "String" and params.get("solver.step") == "Real",
+                   lockstep=(params.get("solver.method") == "String" and params.get("solver.step") == "Real"
+                             and not (facts and any(t == "Real" for t in inputs.values()))),
                    parameters=params, inputs=inputs, fmi_version=str(md.fmiVersion),
                    can_interpolate_inputs=bool(md.coSimulation is not None and md.fmiVersion.startswith("2")
                                                and getattr(md.coSimulation, "canInterpolateInputs", False)))

@@ -131,6 +131,9 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
         use_lock = lockstep_step is not None and all(i.lockstep for i in items)
         if use_lock:
             lock_groups.add(g)
+        elif lockstep_step is not None and any(i.real_inputs and i.motion_unique is not None for i in items):
+            echo(f"{g}: FMUs with inputs refuse rk4, the method of the lockstep runs: verdict from the adaptive "
+                 "runs (not lockstep)")
         elif lockstep_step is not None:
             echo(f"{g}: not every FMU has the parameters solver.method and solver.step: verdict from the "
                  "adaptive runs (not lockstep)")

@@ -77,6 +77,10 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
     paths = _resolve_inputs(definition["inputs"], out_dir, echo)
     fmus = [_load_fmu(p) for p in paths]
     check_unique_models([f.info for f in fmus], out_dir)
+    with_inputs_ = [str(f.info.path) for f in fmus if f.info.real_inputs and f.info.motion_unique is not None]
+    if lstep is not None and with_inputs_:
+        raise InputError(f"{', '.join(with_inputs_)}: an FMU with inputs refuses rk4, the method of the lockstep runs; "
+                         "give --lockstep-step 0 (the FMUs' own solver settings)")
     types = _check_params(specs, fmus, lstep is not None)
     values = grid(specs, types, samples=definition["samples"], seed=definition["seed"])
     sets = list(zip(set_ids(values, definition["samples"] is not None), values))

@@ -159,3 +159,12 @@ def test_libcosim_settles_and_agrees_with_the_fmpy_master_loop(libcosim_run, loo
     for name in lib:
         scale = max(1.0, float(np.max(np.abs(loop[name]))))
         assert np.max(np.abs(lib[name] - loop[name])) <= 1e-12 * scale, name
+
+
+def test_plot_of_the_response(libcosim_run, tmp_path):
+    """The figure of docs/coupling.md (python -m overcon.tooling.cosim example --png FILE) from the
+    libcosim run."""
+    from overcon.tooling.cosim import plot
+
+    png = plot(*libcosim_run, tmp_path / "door.png", "test")
+    assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000

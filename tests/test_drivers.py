@@ -175,3 +175,30 @@ def test_the_driven_door_fmu_equals_the_run_in_process(tmp_path, fmi):
     for n in outs[:3]:
         assert np.array_equal(theirs[n], ours.column(n)), n
     assert all(theirs["effort_unique"])
+
+
+def _carriage(tmp_path: Path, drivers: str) -> Path:
+    shutil.copy(EX / "carriage.toml", tmp_path / "carriage.toml")
+    path = tmp_path / "carriage_driven.toml"
+    path.write_text('[scene]\nname = "carriage_driven"\nmechanism = "carriage.toml"\nfriction = []\n'
+                    f'eliminate = ["rod"]\nstop_time = 1.5\n\n{drivers}\n[outputs]\npositions = ["carriage.x"]\n'
+                    'reactions = []\njoints = ["guide"]\n\n[solver]\ntolerance = 1e-10\noutput_interval = 0.01\n')
+    return path
+
+
+def test_harmonic_driver_on_the_carriage_guide_and_its_effort(tmp_path, capsys):
+    """The carriage (5 kg, 40 N along its prismatic guide) driven harmonically along the guide,
+    x = A sin(2 pi t) with A 2 pi = its initial 0.5 m/s: the displacement follows to 1e-9 m and the
+    effort is m x'' - 40 N to 1e-8 relative; a driver on the rod's angle, which the guide already
+    locks, is refused (exit 2)."""
+    amp = 0.5 / (2 * np.pi)
+    path = _carriage(tmp_path, f'[[drivers]]\nname = "shaker"\njoint = "guide"\nmotion = "harmonic"\n'
+                               f'amplitude = {amp!r}\nfrequency = 1.0\n')
+    res = _run(path)
+    t = res.time
+    assert np.max(np.abs(res.column("guide.displacement") - amp * np.sin(2 * np.pi * t))) <= 1e-9
+    expect = 5.0 * (-amp * (2 * np.pi) ** 2 * np.sin(2 * np.pi * t)) - 40.0
+    assert np.max(np.abs(res.column("shaker.effort") - expect)) <= 1e-8 * np.max(np.abs(expect))
+    path = _carriage(tmp_path, '[[drivers]]\nname = "twist"\njoint = "rod"\nmotion = "constant_speed"\nspeed = 0.0\n')
+    assert main(["check", str(path)]) == 2
+    assert "driver twist" in capsys.readouterr().err

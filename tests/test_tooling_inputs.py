@@ -123,12 +123,25 @@ def door(tmp_path_factory):
     return build_door(tmp_path_factory.mktemp("door"))
 
 
-@pytest.mark.parametrize("interpolation", ["hold", "linear"])
-def test_run_input_equals_simulate_input(door, tmp_path, interpolation):
+@pytest.fixture(scope="module")
+def door3(tmp_path_factory):
+    from overcon.tooling.cosim import build_door
+
+    return build_door(tmp_path_factory.mktemp("door3"), fmi=3)
+
+
+@pytest.mark.parametrize("fmi, interpolation", [(2, "hold"), (2, "linear"), (3, "hold")])
+def test_run_input_equals_simulate_input(request, tmp_path, fmi, interpolation):
     """``overcon run FMU --input T`` (fmpy's input=, with set_input_derivatives for linear) gives
-    the positions of ``overcon simulate SCENE --input T`` in process, to 1e-10 m."""
+    the positions of ``overcon simulate SCENE --input T`` in process, to 1e-10 m, FMI 2.0 and 3.0
+    (FMI 3.0 takes no input derivatives from fmpy: refused, exit 2)."""
     from overcon.tooling.cosim import EXAMPLE
 
+    door = request.getfixturevalue("door" if fmi == 2 else "door3")
+    if fmi == 3:
+        (tmp_path / "t.csv").write_text(RAMP)
+        assert main(["run", str(door), "--input", str(tmp_path / "t.csv"), "--input-interpolation", "linear",
+                     "--out", str(tmp_path / "no")]) == 2
     table = tmp_path / "ramp.csv"
     table.write_text(RAMP)
     flags = ["--input", str(table), "--input-interpolation", interpolation]

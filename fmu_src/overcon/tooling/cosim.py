@@ -89,7 +89,12 @@ def run_osp(system: str | Path, stop: float, record) -> tuple[np.ndarray, dict]:
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimObserver import CosimObserver
 
-    ex = CosimExecution.from_osp_config_file(str(system))
+    if not Path(system).is_file():
+        raise InputError(f"{system}: no such system structure file")
+    try:
+        ex = CosimExecution.from_osp_config_file(str(system))
+    except AssertionError as exc:  # libcosimpy asserts with libcosim's reason
+        raise InputError(f"{system}: libcosim cannot set up the system: {exc}") from exc
     observer = CosimObserver.create_last_value()
     ex.add_observer(observer)
     where = {}
@@ -217,11 +222,19 @@ def _main(argv=None) -> int:
     e.add_argument("--png")
     args = p.parse_args(argv)
     if args.cmd == "run":
-        times, values = run_osp(args.system, args.stop, args.record)
-        write_series(args.csv, times, values)
+        code = 0
+        try:
+            times, values = run_osp(args.system, args.stop, args.record)
+            write_series(args.csv, times, values)
+        except InputError as exc:
+            print(f"overcon.tooling.cosim: {exc}", file=sys.stderr)
+            code = 2
+        except SimulationFailed as exc:
+            print(f"overcon.tooling.cosim: {exc}", file=sys.stderr)
+            code = 3
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(0)  # the pythonfmu library is never unloaded (module docstring)
+        os._exit(code)  # the pythonfmu library is never unloaded (module docstring)
     if args.out is None:
         with tempfile.TemporaryDirectory(prefix="overcon-coupling-") as tmp:
             return _example(Path(tmp), args.stop, args.png)

@@ -39,6 +39,7 @@ def admit(model: Model, *, check_initial: bool = True, eliminate_field: str = "s
     ``check_initial=False`` skips that check: only for evaluating kinematics at arbitrary
     configurations (tests); a Simulation checks again."""
     rows = check_initial_state(model) if check_initial else None  # Phi_h at q0, read once
+    check_drivers(model)
     if model.scene.redundancy == "min-norm":  # every equation kept; the solve is rank-revealing
         return replace(model, retained=np.arange(model.m), eliminated=(), elimination_mode="min-norm")
     fz = None
@@ -111,6 +112,14 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> tuple:
         return ", ".join(f"Phi{i} (joint {joint_of.get(i, '?')})" for i in numbers)
 
     Phi, (eq, col, val) = _rows_q0(model, where)
+    drivers = [c for c in model.joints if c.type == "driver"]
+    for c in drivers:  # a driver's motion starts at its coordinate's value at q0: zero
+        r = c.rows[0]
+        if not abs(Phi[r]) <= tol * max(1.0, float(np.max(np.abs(model.q0)))):
+            raise InconsistentInitialState(
+                f"driver {c.name}: the motion starts at {-Phi[r]:.6g} at the start time "
+                f"{model.scene.start_time:g} s, but a driver prescribes joint {model.joints[c.p['joint']].name}'s "
+                "coordinate from its value at q0, where it is 0 (start the motion at 0)")
     with np.errstate(all="ignore"):
         scale = max(1.0, float(np.max(np.abs(model.q0))))
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(Phi) <= tol * scale))]
@@ -130,11 +139,42 @@ def check_initial_state(model: Model, tol: float = 1e-9) -> tuple:
                              f"(joints[{j}].axis_i, joints[{j}].axis_j or the bodies' q0 are wrong)")
             raise InconsistentInitialState("; ".join(parts) + where)
         vel = np.bincount(eq, val * np.asarray(model.h0, float)[col], minlength=model.m)  # Phi_h h0
+        if drivers:  # + Phi_t of the rheonomic equations
+            from .kernel import rows_kernel
+            vel = vel + rows_kernel(model).phi_t(model.scene.start_time, np.concatenate([model.q0, model.h0]))
+            for c in drivers:
+                r = c.rows[0]
+                if not abs(vel[r]) <= tol * max(1.0, float(np.max(np.abs(model.h0)))):
+                    raise InconsistentInitialState(
+                        f"driver {c.name}: the initial velocities h0 give joint {model.joints[c.p['joint']].name} a "
+                        f"rate that differs from the motion's at the start time by {vel[r]:.6g} (h0 must move the "
+                        f"joint as the driver does){where}")
         hscale = max(1.0, float(np.max(np.abs(model.h0))))
         bad = [i + 1 for i in np.flatnonzero(~(np.abs(vel) <= tol * hscale))]
     if bad:
         raise InconsistentInitialState(f"initial velocities h0 violate the velocity constraints {eqs(bad)}{where}")
     return eq, col, val
+
+
+def check_drivers(model: Model) -> None:
+    """Refuse a driver whose equation depends on the others at q0 (its coordinate is already fixed
+    by the joints, or by another driver): ModelError naming the driver, its joint and the rank.
+    The drivers are taken in file order, each must raise the rank of the equations before it."""
+    drivers = [c for c in model.joints if c.type == "driver"]
+    if not drivers:
+        return
+    J = _jacobian_q0(model)
+    first = drivers[0].rows[0]
+    rank = analysis.numerical_rank(J[:, :first])
+    for c in drivers:
+        r = analysis.numerical_rank(J[:, : c.rows[0] + 1])
+        if r == rank:
+            what = "angle" if c.p["coordinate"] == 0 else "displacement"
+            joint = model.joints[c.p["joint"]].name
+            raise ModelError(f"driver {c.name}: its equation depends on the constraints before it (rank stays {rank} "
+                             f"with it): the {what} of joint {joint} is already fixed by the mechanism or another "
+                             "driver; a driver prescribes a free coordinate")
+        rank = r
 
 
 def _rows_q0(model: Model, where: str) -> tuple[np.ndarray, tuple]:
@@ -164,6 +204,8 @@ def _split_violations(model: Model, Phi: np.ndarray, bad: list[int]):
     {(joint index, meaning): its axis rows} in joint order)."""
     point, axes, bad = [], {}, set(bad)
     for c in model.joints:
+        if c.type == "driver":
+            continue  # checked first (check_initial_state)
         meanings = TYPES[c.type].row_meanings
         for k, r in enumerate(c.rows):
             if r + 1 not in bad:

@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-ABI = 10  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
+ABI = 11  # OVK_ABI in core/core.h: the layout of _CModel and the entry points' signatures
 
 STATUS = {0: "ok", 1: "singular position (S not positive definite)", 2: "friction Newton solve gave up",
           3: "Euler angles singular", 4: "non-finite number", 5: "spring points coincide", 6: "out of memory",
@@ -62,7 +62,8 @@ PROJECTION_SLACK = 10.0  # OVK_PROJ_SLACK of core/core.h: near a singular positi
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
-           ("spatial", "spatial_cylindrical"): 6, ("spatial", "spatial_universal"): 7, ("spatial", "spatial_fixed"): 8}
+           ("spatial", "spatial_cylindrical"): 6, ("spatial", "spatial_universal"): 7, ("spatial", "spatial_fixed"): 8,
+           ("planar", "driver"): 9, ("spatial", "driver"): 9}
 _ROTATIONS = ("euler_zxz", "quaternion")
 _AXIS_SIZES = {"spatial_revolute": ("radius", "length", "collar_radius"), "spatial_prismatic": ("length", "radius"),
                "spatial_cylindrical": ("length", "radius")}
@@ -121,7 +122,11 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_pack_kept", i, [vp, vp, i, vp, vp, vp, vp]),
                             ("ovk_sim_watch_extremes", i, [vp, vp, i, vp]),
                             ("ovk_band_svd", i, [vp, i, i, i, ctypes.c_double, vp, vp]),
-                            ("ovk_law_eval", i, [vp, i, ctypes.c_double, vp, vp])):
+                            ("ovk_law_eval", i, [vp, i, ctypes.c_double, vp, vp]),
+                            ("ovk_set_inputs", i, [vp, vp, vp, vp, ctypes.c_double]),
+                            ("ovk_sensors", i, [vp, vp, vp, vp, i, vp]),
+                            ("ovk_sim_set_inputs", i, [vp, vp, vp]),
+                            ("ovk_set_time", i, [vp, ctypes.c_double]), ("ovk_phi_t", i, [vp, vp, vp])):
         f = getattr(lib, name)
         f.restype, f.argtypes = res, args
     return lib
@@ -179,6 +184,16 @@ REDUNDANCY_COUNTS = ("redundancy", "nrig", "nax", "nwatch", "nfull")
 REDUNDANCY_ARRAYS = ("ckind", "ck", "cd", "rigpos", "rigrows", "rigbody", "axi", "axp", "watch", "full")
 """The redundancy block at the end of ``ovk_model`` (core/core.h), in its order."""
 REDUNDANCY_DOUBLES = {"ck", "cd", "axp"}
+INPUT_ARRAYS = ("ukind", "uidx", "up")
+"""The inputs block at the end of ``ovk_model`` (core/core.h, core/inputs.c), after ``nu``."""
+NUP = 8  # OVK_NUP: doubles per input (direction 3, point 3, frame, start)
+
+
+def input_block(model) -> dict:
+    """The inputs of ``model`` (:class:`overcon.model.CompiledInput`) as the core's arrays."""
+    return {"nu": len(model.inputs), "ukind": [u.kind for u in model.inputs],
+            "uidx": [(u.joint, u.bi, u.bj) for u in model.inputs],
+            "up": [(*u.direction, *u.point, float(u.frame), u.start) for u in model.inputs]}
 
 
 class _CModel(ctypes.Structure):
@@ -192,7 +207,8 @@ class _CModel(ctypes.Structure):
                                                   "rbody")]
                 + [(n, ctypes.c_int) for n in REDUNDANCY_COUNTS]
                 + [(n, ctypes.c_void_p) for n in REDUNDANCY_ARRAYS]
-                + [("formulation", ctypes.c_int)])
+                + [("formulation", ctypes.c_int)]
+                + [("nu", ctypes.c_int)] + [(n, ctypes.c_void_p) for n in INPUT_ARRAYS])
 
 
 _REDUNDANCY = {"eliminate": 0, "min-norm": 1, "compliant": 2}
@@ -240,7 +256,11 @@ def _redundancy_block(model, watch=None) -> dict:
 def _joint_constants(model, c) -> np.ndarray:
     out = np.zeros(NJC)
     p = c.p
-    if c.type == "translational":
+    if c.type == "driver":  # core/drivers.c: the layout ([8], the coordinate at q0, set by Kernel)
+        out[0], out[1], out[2] = p["joint"], p["coordinate"], p["motion"]
+        params = list(p["params"]) + ([p["start_time"]] if p["motion"] == 1 else [])
+        out[3:3 + len(params)] = params
+    elif c.type == "translational":
         out[0:2], out[2:4], out[4:6] = p["s_A"], p["s_B"], p["v"]
         out[6] = p["psi"]
         out[7:11] = np.asarray(p["B"], float).reshape(-1)
@@ -298,6 +318,7 @@ class Kernel:
         self._rows_fn, self._project_fn = lib.ovk_rows, lib.ovk_project
         self._lib_unique = lib.ovk_unique
         self._lib_robust = lib.ovk_evaluate_robust
+        self._lib = lib
         plan = model.plan
         I32 = np.int32
         keep = self._keep = []
@@ -336,7 +357,9 @@ class Kernel:
         m.jtype = arr([_JOINTS[(model.kind, c.type)] for c in joints], I32)
         m.jbi, m.jbj = arr([c.bi for c in joints], I32), arr([c.bj for c in joints], I32)
         m.jneq, m.jrows = arr([len(c.rows) for c in joints], I32), arr(rows, I32)
-        m.jconst = arr([_joint_constants(model, c) for c in joints], float)
+        jconst = np.array([_joint_constants(model, c) for c in joints], float).reshape(-1, NJC)
+        m.jconst = arr(jconst, float)
+        jconst = keep[-1]  # the packed copy the core reads (a driver's reference is written into it below)
         m.jlaw = arr([0 if c.law is None else _LAWS.get(c.law.name, 0) if rows_only else _LAWS[c.law.name]
                       for c in joints], I32)
         m.jlawp = arr([_law_constants(c.law) for c in joints], float)
@@ -349,9 +372,13 @@ class Kernel:
         xrows, fx, rbody = self._pack_kept(lib, m, model.retained)
         m.xrows, m.fx, m.rbody = arr(xrows, I32), arr(fx, I32), arr(rbody, I32)
         _pack_redundancy(m, _redundancy_block(model, watch), arr)
+        ub = input_block(model)
+        m.nu = ub["nu"]
+        m.ukind, m.uidx, m.up = arr(ub["ukind"], I32), arr(ub["uidx"], I32), arr(ub["up"], float)
         self._cmodel = m
         self._pm = ctypes.addressof(m)
         self._data = self._workspace(lib)
+        lib.ovk_set_time(self._data, float(model.scene.start_time))  # the drivers' equations at the start
         n_y = model.n + model.nh
         self._y = np.zeros(n_y)
         self._ydot = np.zeros(n_y)
@@ -370,6 +397,11 @@ class Kernel:
         self._fric = np.zeros(len(joints))
         self._lam_in = np.zeros(model.m)
         self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
+        y0 = np.concatenate([model.q0, model.h0])
+        for c in joints:  # a driver's reference: its coordinate's raw value at q0 (core/inputs.c ovk_sensors)
+            if c.type == "driver" and not (model.dim == 3 and c.p["coordinate"] == 0):
+                raw = self.sensors(y0, None, c.p["joint"])
+                jconst[c.index * NJC + 8] = raw[0] if c.p["coordinate"] == 0 else raw[2]
 
     @staticmethod
     def _pack_kept(lib, m, retained) -> tuple:
@@ -470,6 +502,36 @@ class Kernel:
         return self._reac, self._fric
 
 
+    def set_inputs(self, t: float, values, slopes=None) -> None:
+        """The inputs' values at t (model.inputs order; N, N.m) and slopes (per s; None: held) for
+        the evaluations that follow (core/inputs.c)."""
+        u, du = _input_arrays(self.model, values, slopes)
+        status = self._lib.ovk_set_inputs(self._pm, self._data, u.ctypes.data,
+                                          None if du is None else du.ctypes.data, float(t))
+        if status:
+            raise ValueError(f"inputs: {self._message()}")
+
+    def sensors(self, y: np.ndarray, y0: np.ndarray, j: int) -> np.ndarray:
+        """Joint j's [angle (rad), rate (rad/s), displacement (m), speed (m/s)] at y from their
+        values at y0 (None: the raw values) (core/inputs.c ovk_sensors)."""
+        out = np.zeros(4)
+        yy = np.ascontiguousarray(y, float)
+        y00 = None if y0 is None else np.ascontiguousarray(y0, float)
+        status = self._lib.ovk_sensors(self._pm, self._data, yy.ctypes.data, None if y00 is None else y00.ctypes.data,
+                                       int(j), out.ctypes.data)
+        if status:
+            raise RuntimeError(f"the compiled core's sensors failed ({STATUS.get(status, status)}): {self._message()}")
+        return out
+
+    def phi_t(self, t: float, y: np.ndarray) -> np.ndarray:
+        """Phi_t (m,) of the drivers' equations at (t, y) (0 for the other equations; core/drivers.c)."""
+        self._lib.ovk_set_time(self._data, float(t))
+        self.rows(y)
+        out = np.zeros(self.model.m)
+        self._lib.ovk_phi_t(self._pm, self._data, out.ctypes.data)
+        self._lib.ovk_set_time(self._data, float(self.model.scene.start_time))
+        return out
+
     def unique(self, y: np.ndarray) -> tuple[int, np.ndarray]:
         """(rank of the whole Jacobian, each joint's reaction unique (nj bools, model order)) at
         the state y by the pre-check's one-factorisation rule (core/unique.c; the same verdicts as
@@ -504,6 +566,16 @@ class Kernel:
         if status:
             raise ProjectionFailed(self._message())
         return out, drift.value
+
+
+def _input_arrays(model, values, slopes):
+    """(u, du or None) as contiguous arrays of the model's inputs, checked for their number."""
+    n = len(model.inputs)
+    u = np.ascontiguousarray(np.asarray(values, float).reshape(-1))
+    du = None if slopes is None else np.ascontiguousarray(np.asarray(slopes, float).reshape(-1))
+    if u.size != n or (du is not None and du.size != n):
+        raise ValueError(f"inputs: {n} values expected (the model's inputs), got {u.size}")
+    return (u if n else np.zeros(1)), (None if du is None else du if n else np.zeros(1))
 
 
 def rows_kernel(model):
@@ -780,6 +852,27 @@ class Run:
         rank, unique = ctypes.c_int(0), np.zeros(len(joints) or 1, np.intc)
         motion = self._lib.ovk_sim_uniqueness(self._sim, ctypes.addressof(rank), unique.ctypes.data)
         return rank.value, {c.name: bool(u) for c, u in zip(joints, unique)}, bool(motion)
+
+    def set_inputs(self, values, slopes=None) -> None:
+        """The inputs' values (model.inputs order) from the run's time on, held or with
+        ``slopes`` (per s) linear (core/sim.c ovk_sim_set_inputs); a non-finite value is a
+        ValueError, other failures a :class:`RunStopped`."""
+        u, du = _input_arrays(self.kernel.model, values, slopes)
+        status = self._lib.ovk_sim_set_inputs(self._sim, u.ctypes.data, None if du is None else du.ctypes.data)
+        if status and not self._lib.ovk_sim_status(self._sim):  # refused values: the run goes on
+            raise ValueError(self._message())
+        if status:
+            self._raise(status)
+
+    def sensors(self, y: np.ndarray) -> np.ndarray:
+        """(nj, 4) [angle, rate, displacement, speed] of the sensor joints at y, from q0 (rows of
+        the other joints zero)."""
+        model = self.kernel.model
+        out = np.zeros((len(model.joints), 4))
+        y0 = np.concatenate([model.q0, model.h0])
+        for j in sorted({j for _, j, _ in model.sensor_outputs}):
+            out[j] = self.kernel.sensors(y, y0, j)
+        return out
 
     def get_state(self) -> bytes:
         size = self._lib.ovk_sim_state_size(self._sim)

@@ -54,6 +54,8 @@ import numpy as np
 from .friction_laws import Law, make_law
 from .joints import TYPES, InitialFrames
 from .kinematics import cos_sin, euler_R_rows, quat_R_rows, rot2_rows
+from .scene import SENSOR_JOINTS
+from .spec import DRIVER_MOTIONS
 from .spec import BASE, ENERGY_OUTPUTS, VELOCITIES_PER_BODY, VELOCITY_OUTPUTS, MechanismSpec, SceneSpec, coordinates
 
 
@@ -81,6 +83,10 @@ class CompiledJoint:
     p: Mapping[str, object]
     law: Law | None  # friction switched on (None: frictionless)
     components: tuple[str, ...]
+
+    @property
+    def is_driver(self) -> bool:
+        return self.type == "driver"
 
     @property
     def module(self):
@@ -119,6 +125,29 @@ class CompiledLoad:
     free_length: float = 0.0
     s_i: np.ndarray | None = None
     s_j: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class CompiledInput:
+    """A scene input (:class:`overcon.spec.InputSpec`) packed for the core (core/inputs.c):
+    ``kind`` 1 joint_torque, 2 joint_force, 3 force, 4 torque; ``joint`` (-1 none), bodies ``bi``,
+    ``bj`` (-1 base); ``direction`` (unit, in ``frame``: 0 global, 1 body i's axes, 2 body j's),
+    ``point`` (body i coordinates), ``start`` (N or N.m)."""
+
+    name: str
+    type: str
+    kind: int
+    joint: int
+    bi: int
+    bj: int
+    direction: tuple[float, float, float]
+    point: tuple[float, float, float]
+    frame: int
+    start: float
+    unit: str
+
+
+INPUT_KINDS = {"joint_torque": 1, "joint_force": 2, "force": 3, "torque": 4}
 
 
 @dataclass(frozen=True)
@@ -165,6 +194,8 @@ class Model:
     # the pre-check's factorisation of the Jacobian at q0 (overcon.analysis.Factored), kept when
     # admission made it to choose the elimination (overcon.checks.admit); a replaced model has none
     factored_q0: object = field(init=False, repr=False, compare=False, default=None)
+    inputs: tuple[CompiledInput, ...] = ()  # scene [[inputs]]
+    sensor_outputs: tuple[tuple[str, int, int], ...] = ()  # (name, joint, 0 angle 1 rate 2 displacement 3 speed)
 
     def __post_init__(self):
         for name in ("mass", "inertia", "M", "Minv", "gravity", "q0", "h0", "retained", "compliant_rows",
@@ -196,7 +227,7 @@ class Model:
             c = self.joints[j]
             names += [f"{c.name}.{comp}" for comp in c.components]
         names += [f"{self.joints[j].name}.friction" for j in self.friction_outputs]
-        return names
+        return names + [name for name, _, _ in self.sensor_outputs]
 
 
 # ----------------------------------------------------------------------------- assembly plan
@@ -340,14 +371,61 @@ def compile_model(scene: SceneSpec) -> Model:
             components=jt.reaction_components + GLOBAL_COMPONENTS[kind]))
         row += ne
     joint_index = {c.name: c.index for c in joints}
+    sensors = tuple((f"{name}.{what}", joint_index[name], SENSOR_INDEX[what]) for name in scene.sensors
+                    for what in SENSOR_JOINTS[joints[joint_index[name]].type])
+    n_mech = len(joints)
+    for k, dv in enumerate(scene.drivers):  # one equation each, after the joints' (their efforts: outputs)
+        c = joints[joint_index[dv.joint]]
+        joints.append(CompiledJoint(
+            name=dv.name, type=DRIVER, index=n_mech + k, bi=c.bi, bj=c.bj, rows=(row,),
+            p=_read_only({"joint": c.index, "coordinate": 0 if dv.coordinate == "angle" else 1,
+                          "motion": DRIVER_MOTION_CODES[dv.motion],
+                          "params": tuple(float(dv.params[key]) for key in DRIVER_MOTIONS[dv.motion]),
+                          "start_time": float(scene.start_time)}),
+            law=None, components=("effort",)))
+        row += 1
     base = replace(
         bodies, joints=tuple(joints), m=row, retained=np.arange(row), **_compliance(scene, joints, row),
         friction_joints=tuple(c.index for c in joints if c.law is not None),
-        reaction_joints=tuple(joint_index[j] for j in scene.reactions),
+        reaction_joints=tuple(joint_index[j] for j in scene.reactions) + tuple(range(n_mech, len(joints))),
         friction_outputs=tuple(joint_index[j] for j in
                                (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
+        inputs=tuple(_compile_input(u, joints, joint_index, slot) for u in scene.inputs), sensor_outputs=sensors,
     )
     return base
+
+
+SENSOR_INDEX = {"angle": 0, "rate": 1, "displacement": 2, "speed": 3}
+DRIVER = "driver"
+"""``CompiledJoint.type`` of a driver (scene ``[[drivers]]``): one rheonomic equation on a joint's
+coordinate (core/drivers.c), its reaction the effort; not a mechanism joint type
+(:data:`overcon.joints.TYPES`)."""
+DRIVER_MOTION_CODES = {"constant_speed": 1, "ramp": 2, "harmonic": 3}
+"""The entries of the core's sensors of a joint (core/inputs.c ovk_sensors)."""
+
+
+def _compile_input(u, joints, joint_index: dict, slot: dict) -> CompiledInput:
+    """The input ``u`` (:class:`overcon.spec.InputSpec`) for the core: a joint input takes its
+    joint's axis (planar revolute: z; planar translational: the guide in body j's axes,
+    OMEGA^T v / |v|, at s_A; spatial: a_i in body i's axes at s_i), a body input its direction
+    and point."""
+    from .spec import INPUT_TYPES
+    pad = lambda v: tuple(float(x) for x in v) + (0.0,) * (3 - len(v))  # noqa: E731
+    if u.joint is not None:
+        c = joints[joint_index[u.joint]]
+        if c.type == "revolute":
+            d, pt, frame = (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 1
+        elif c.type == "translational":
+            v = np.asarray(c.p["v"], float)
+            d, pt, frame = pad(np.array([v[1], -v[0]]) / np.linalg.norm(v)), pad(c.p["s_A"]), 2
+        else:
+            d, pt, frame = pad(c.p["a_i"]), pad(c.p["s_i"]), 1
+        return CompiledInput(u.name, u.type, INPUT_KINDS[u.type], c.index, c.bi, c.bj, d, pt, frame,
+                             float(u.start), INPUT_TYPES[u.type])
+    d = pad(u.direction) if u.direction is not None else (1.0, 0.0, 0.0)
+    pt = pad(u.point) if u.point is not None else (0.0, 0.0, 0.0)
+    return CompiledInput(u.name, u.type, INPUT_KINDS[u.type], -1, slot[u.body], -1, d, pt,
+                         1 if u.frame == "body" else 0, float(u.start), INPUT_TYPES[u.type])
 
 
 def _compliance(scene: SceneSpec, joints, m: int) -> dict:

@@ -137,6 +137,8 @@ class PrecheckResult:
     problems: tuple[str, ...]
     warnings: tuple[str, ...]
     methods_run: tuple[str, ...] = ("rank", "svd", "qr")  # the tests that ran (each joint's ``methods`` keys)
+    drivers: tuple[str, ...] = ()  # scene [[drivers]]: their equations are in the numbers and the joints above
+    effort_unique: bool = True  # every driver's effort is unique (effort_verdicts)
     redundancy: str = "eliminate"  # the scene's method (spec.REDUNDANCY_METHODS); the verdicts are the rigid theory's
 
     def to_json(self) -> dict:
@@ -163,7 +165,7 @@ def precheck(model: Model, source: str = "", methods: str = "auto") -> PrecheckR
     :func:`analyse_model`)."""
     res = analyse_model(model, methods)
     summary = analysis.to_json(res)
-    types = {c.name: TYPES[c.type].name for c in model.joints}  # the files' type names
+    types = {c.name: "driver" if c.type == "driver" else TYPES[c.type].name for c in model.joints}  # the files'
     verdicts = {j["name"]: JointVerdict(type=types[j["name"]], **j) for j in summary.pop("joints")}
     # under redundancy "compliant" the numbers and verdicts are the rigid joints' (the compliant
     # joints' equations are forces there); a compliant joint's reaction is unique (no tests run)
@@ -188,17 +190,45 @@ def precheck(model: Model, source: str = "", methods: str = "auto") -> PrecheckR
     set_unique = True
     if acting:
         set_unique = bool(res.set_unique(acting).unique)
+    drivers, efforts = effort_verdicts(model, res, nonunique, set_unique)
+    for d, why in efforts.items():
+        problems.append(f"effort not unique: driver {d}: {why}")
     return PrecheckResult(
+        drivers=tuple(drivers), effort_unique=not efforts,
         **summary, joints=joints, file=source, scene=model.scene.name, kind=model.kind,
         methods_agree=not disagree, friction=tuple(friction), friction_on_nonunique=tuple(nonunique),
-        friction_set_unique=set_unique, motion_unique=not nonunique and set_unique,
+        friction_set_unique=set_unique,
+        motion_unique=(not nonunique and set_unique) or bool(drivers and summary["dof"] == 0),
         eliminated=tuple(model.eliminated), elimination_mode=model.elimination_mode,
         problems=tuple(problems), warnings=tuple(friction_warnings(model) + redundancy_warnings(model)),
         methods_run=analysis.METHOD_SETS[resolve_methods(model, methods)], redundancy=model.scene.redundancy)
 
 
+def effort_verdicts(model: Model, res, nonunique: list[str], set_unique: bool) -> tuple[list[str], dict[str, str]]:
+    """(the drivers, driver -> why its effort is not unique) (decided, issue 38: under a drive the
+    prescribed motion leaves the multipliers to carry the elimination's choice): a driver's effort,
+    the multiplier of its equation, depends on the elimination when its own column is not a direct
+    summand of span(J) (its reaction is not unique), or when friction acts on a joint whose reaction
+    is not unique (the friction force then depends on the elimination, and the effort balances it)."""
+    drivers = [c for c in model.joints if c.type == "driver"]
+    out = {}
+    for c in drivers:
+        joint = model.joints[c.p["joint"]].name
+        if not res.joints[c.name].unique:
+            out[c.name] = (f"its equation on joint {joint} is not a direct summand of span(J): the effort depends "
+                           "on the eliminated equations")
+        elif nonunique or not set_unique:
+            names = ", ".join(nonunique) or "the friction joints together"
+            out[c.name] = (f"on joint {joint}, friction on joint(s) {names}, whose reaction is not unique, makes "
+                           "the effort depend on which redundant equation is eliminated")
+    return [c.name for c in drivers], out
+
+
 def motion_verdict(result: PrecheckResult) -> str:
     """The verdict line of ``check`` (also the first warning of ``simulate`` when not unique)."""
+    if result.drivers and result.dof == 0:
+        return ("motion prescribed by the drivers (DOF 0: a kinematic analysis): unique; with friction on a "
+                "non-unique reaction the efforts depend on the elimination instead")
     if not result.friction:
         return "no friction: motion unique (reactions of non-unique joints depend on the elimination)"
     verdict = "UNIQUE" if result.motion_unique else "NOT UNIQUE (depends on the elimination)"
@@ -246,6 +276,9 @@ def format_table(result: PrecheckResult) -> str:
                      f"{m.get('svd', '-'):<6} {m.get('qr', '-'):<6} {fr}{flag}")
     lines.append("")
     lines.append(motion_verdict(result))
+    for d in result.drivers:
+        bad = [p for p in result.problems if p.startswith(f"effort not unique: driver {d}:")]
+        lines.append(f"driver {d}: effort {'NOT UNIQUE (depends on the elimination)' if bad else 'UNIQUE'}")
     if result.redundancy == "min-norm" and result.friction:
         lines.append("redundancy = 'min-norm': the runs use the minimum-norm multipliers, one motion chosen without "
                      "physical ground (the verdict above is the rigid theory's)")

@@ -1014,7 +1014,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     """The scene file's document checked section by section (its mechanism file too); None if
     either has problems (all in ``problems``)."""
     n_problems = len(problems)
-    _unknown_keys(ctx, doc, "", ("scene", "outputs", "solver"))
+    _unknown_keys(ctx, doc, "", ("scene", "outputs", "solver", "inputs", "drivers"))
     st = doc.get("scene")
     if _table(ctx, st, "scene") is None:
         return None
@@ -1040,7 +1040,17 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     redundancy, eliminate = _scene_redundancy(ctx, st, mech)
     start_time, stop_time = _scene_times(ctx, st)
     positions, reactions, friction_out, velocities, energy = _scene_outputs(ctx, doc, mech, joints, friction)
+    sensors = _scene_sensors(ctx, doc, mech)
+    inputs = _scene_inputs(ctx, doc, mech)
+    drivers = _scene_drivers(ctx, doc, mech, {u.name for u in inputs})
     solver_kw = _scene_solver(ctx, doc, problems, start_time, stop_time)
+    if drivers and (redundancy == "compliant" or solver_kw.get("singular") == "pass"):
+        ctx.add("drivers", "drivers run under the eliminated or min-norm solve with solver.singular = \"stop\" (the "
+                           "compliant and augmented Lagrangian solves do not carry a rheonomic equation yet)")
+    if inputs and solver_kw.get("method") == "rk4":
+        ctx.add("solver.method", "rk4 with [[inputs]]: its fixed steps would step over the instants where the inputs "
+                                 "change (co-simulation holds them over each communication step); use dopri5, dop853 "
+                                 "or radau")
     if len(problems) > n_problems or mech is None:
         return None
     if positions == "all":
@@ -1055,7 +1065,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
                      friction_outputs=friction_out, velocities=velocities, energy=energy,
                      start_time=start_time, stop_time=stop_time,
                      solver=SolverSpec(**solver_kw), group=group, description=description,
-                     source=ctx.file)
+                     source=ctx.file, inputs=inputs, sensors=sensors, drivers=drivers)
 
 
 def _scene_redundancy(ctx: _Ctx, st: dict, mech: MechanismSpec | None):
@@ -1154,7 +1164,7 @@ def _scene_outputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None, joints: dic
     velocities, energy = [], False
     ot = doc.get("outputs", _MISSING)
     if ot is not _MISSING and _table(ctx, ot, "outputs") is not None:
-        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions", "friction", "velocities", "energy"))
+        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions", "friction", "velocities", "energy", "joints"))
         # an [outputs] table is the scene's output set: friction outputs only if it lists them
         # (existing scenes keep their outputs, which their FMUs' regression baselines fix)
         friction_out = ot.get("friction", [])
@@ -1178,6 +1188,216 @@ def _scene_outputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None, joints: dic
     velocities = _check_outputs(ctx, velocities, "outputs.velocities", valid_bodies, "body name",
                                 lambda s: f"unknown body {_short(s)} (the base does not move)")
     return positions, reactions, friction_out, velocities, energy is True
+
+
+SENSOR_JOINTS = {"revolute": ("angle", "rate"), "spatial_revolute": ("angle", "rate"),
+                 "translational": ("displacement", "speed"), "spatial_prismatic": ("displacement", "speed"),
+                 "spatial_cylindrical": ("angle", "rate", "displacement", "speed")}
+"""Joint types with sensor outputs (``[outputs] joints``) and which (:data:`overcon.spec.JOINT_SENSORS`)."""
+
+INPUT_JOINTS = {"joint_torque": ("revolute", "spatial_revolute", "spatial_cylindrical"),
+                "joint_force": ("translational", "spatial_prismatic", "spatial_cylindrical")}
+"""The joint types an input of a joint type acts on (about or along the joint's axis)."""
+MAX_INPUTS = 1000
+RESERVED_NAMES = ("motion_unique", "rank", "redundancy", "time", "effort_unique")
+"""FMU variable names that are identifiers: no input may take them."""
+_INPUT_KEYS = ("name", "type", "joint", "body", "point", "direction", "frame", "start")
+
+
+def _scene_sensors(ctx: _Ctx, doc: dict, mech: MechanismSpec | None) -> tuple[str, ...]:
+    """``[outputs] joints``: "all" (every joint with sensors, :data:`SENSOR_JOINTS`) or distinct
+    joint names of such joints; default none."""
+    ot = doc.get("outputs")
+    if not isinstance(ot, dict) or "joints" not in ot:
+        return ()
+    types = {j.name: j.type for j in mech.joints} if mech is not None else None
+    value = ot["joints"]
+    if value == "all":
+        return tuple(n for n, t in types.items() if t in SENSOR_JOINTS) if types is not None else ()
+
+    def bad(name):
+        if types is None:
+            return None
+        if name not in types:
+            return f"unknown joint {_short(name)}"
+        if types[name] not in SENSOR_JOINTS:
+            return (f"joint '{name}' is a {JOINT_TYPES[types[name]].name} joint: sensors (angle, rate; displacement, "
+                    "speed) are those of revolute, translational, prismatic and cylindrical joints")
+        return None
+
+    if not isinstance(value, list):
+        ctx.add("outputs.joints", f"expected \"all\" or an array of joint names, got {_desc(value)}")
+        return ()
+    return _distinct_items(ctx, value, lambda k: f"outputs.joints[{k}]", _str, invalid=bad,
+                           duplicate=lambda s: f"{_short(s)} listed twice") or ()
+
+
+def _scene_inputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None) -> tuple:
+    """``[[inputs]]`` (:class:`overcon.spec.InputSpec`): names identifiers, unique among inputs and
+    not an output's name; ``joint_torque``/``joint_force`` name a joint of a type of
+    :data:`INPUT_JOINTS` (no body, point, direction, frame); ``force``/``torque`` a moving body, a
+    non-zero ``direction`` (normalised; planar torque: none, counter-clockwise), ``frame``
+    global (default) or body, and force a ``point`` (body coordinates, default the origin);
+    ``start`` a finite number (default 0)."""
+    items = _array_of_tables(ctx, doc, "inputs", False, MAX_INPUTS)
+    out, seen = [], {}
+    kind = mech.kind if mech is not None else None
+    joints = {j.name: j.type for j in mech.joints} if mech is not None else None
+    bodies = {b.name: None for b in mech.bodies} if mech is not None else None
+    for k, it in items:
+        p = f"inputs[{k}]"
+        _unknown_keys(ctx, it, p, _INPUT_KEYS)
+        name = _get(ctx, it, "name", p)
+        name = None if name is _MISSING else _register_name(ctx, _ident(ctx, name, f"{p}.name"), f"{p}.name", seen,
+                                                            p, "input")
+        if name in RESERVED_NAMES:
+            ctx.add(f"{p}.name", f"'{name}' is the name of another FMU variable (reserved: "
+                                 f"{', '.join(RESERVED_NAMES)})")
+            name = None
+        typ = _get(ctx, it, "type", p)
+        typ = None if typ is _MISSING else _choice(ctx, typ, f"{p}.type", tuple(S.INPUT_TYPES))
+        start = 0.0
+        if "start" in it:
+            start = _num(ctx, it["start"], f"{p}.start")
+        ok = name is not None and typ is not None and start is not None
+        fields = {}
+        if typ in INPUT_JOINTS:
+            for key in ("body", "point", "direction", "frame"):
+                if key in it:
+                    ctx.add(f"{p}.{key}", f"a {typ} input acts along or about its joint's axis: it takes no {key}")
+                    ok = False
+            v = _get(ctx, it, "joint", p)
+            jn = None if v is _MISSING else _str(ctx, v, f"{p}.joint")
+            if jn is not None and joints is not None:
+                if jn not in joints:
+                    ctx.add(f"{p}.joint", f"unknown joint {_short(jn)}")
+                    jn = None
+                elif joints[jn] not in INPUT_JOINTS[typ]:
+                    allowed = ", ".join(sorted({JOINT_TYPES[t].name for t in INPUT_JOINTS[typ]}))
+                    ctx.add(f"{p}.joint", f"joint '{jn}' is a {JOINT_TYPES[joints[jn]].name} joint: a {typ} input "
+                                          f"acts on {allowed} joints")
+                    jn = None
+            ok = ok and jn is not None
+            fields["joint"] = jn
+        elif typ is not None:
+            if "joint" in it:
+                ctx.add(f"{p}.joint", f"a {typ} input acts on a body: give body (not joint)")
+                ok = False
+            v = _get(ctx, it, "body", p)
+            body = None if v is _MISSING else _str(ctx, v, f"{p}.body")
+            if body is not None and bodies is not None and body not in bodies:
+                ctx.add(f"{p}.body", f"unknown body {_short(body)} (an input acts on a moving body, not the base)")
+                body = None
+            fields["body"] = body
+            ok = ok and body is not None
+            frame = "global"
+            if "frame" in it:
+                frame = _choice(ctx, it["frame"], f"{p}.frame", S.INPUT_FRAMES)
+                ok = ok and frame is not None
+            fields["frame"] = frame
+            if typ == "torque" and kind == "planar":
+                if "direction" in it:
+                    ctx.add(f"{p}.direction", "a planar torque acts about z (counter-clockwise positive): no direction")
+                    ok = False
+            else:
+                v = _get(ctx, it, "direction", p)
+                d = None if v is _MISSING else _shaped(ctx, v, f"{p}.direction", "dir", kind)
+                if d is not None:
+                    norm = math.sqrt(math.fsum(x * x for x in d))
+                    d = tuple(x / norm for x in d)
+                ok = ok and d is not None
+                fields["direction"] = d
+            if typ == "force":
+                pt = tuple(0.0 for _ in range(_DIM.get(kind, 0)))
+                if "point" in it:
+                    pt = _shaped(ctx, it["point"], f"{p}.point", "vec", kind)
+                fields["point"] = pt
+                ok = ok and pt is not None
+            elif "point" in it:
+                ctx.add(f"{p}.point", "a torque has no point of application")
+                ok = False
+        if ok:
+            out.append(S.InputSpec(name=name, type=typ, start=float(start), **fields))
+    return tuple(out)
+
+
+DRIVER_JOINTS = {"angle": ("revolute", "spatial_revolute", "spatial_cylindrical"),
+                 "displacement": ("translational", "spatial_prismatic", "spatial_cylindrical")}
+"""The joint types a driver's coordinate is prescribed on (rotation about, displacement along the axis)."""
+MAX_DRIVERS = 1000
+_DRIVER_KEYS = ("name", "joint", "motion", "coordinate", "speed", "from", "to", "t0", "t1", "amplitude", "frequency",
+                "phase", "offset")
+_DRIVER_DEFAULTS = {"phase": 0.0, "offset": 0.0}
+
+
+def _scene_drivers(ctx: _Ctx, doc: dict, mech: MechanismSpec | None, input_names: set) -> tuple:
+    """``[[drivers]]`` (:class:`overcon.spec.DriverSpec`): names identifiers, unique, not a joint's
+    or an input's name nor reserved; ``joint`` a joint of a type of :data:`DRIVER_JOINTS` (a
+    cylindrical joint: ``coordinate`` "angle" (default) or "displacement"), at most one driver per
+    joint and coordinate; ``motion`` in :data:`overcon.spec.DRIVER_MOTIONS` with exactly its
+    parameters, finite (a ramp's t1 > t0, a harmonic's frequency > 0). Whether the motion starts at
+    the coordinate's value at q0 (zero) with its rate is checked with q0 and h0
+    (:func:`overcon.checks.check_initial_state`)."""
+    items = _array_of_tables(ctx, doc, "drivers", False, MAX_DRIVERS)
+    out, seen, driven = [], {}, set()
+    joints = {j.name: j.type for j in mech.joints} if mech is not None else None
+    for k, it in items:
+        p = f"drivers[{k}]"
+        name = _get(ctx, it, "name", p)
+        name = None if name is _MISSING else _ident(ctx, name, f"{p}.name")
+        if name is not None and (name in RESERVED_NAMES or name in input_names or (joints and name in joints)):
+            ctx.add(f"{p}.name", f"'{name}' is already the name of a joint, an input or another FMU variable")
+            name = None
+        name = _register_name(ctx, name, f"{p}.name", seen, p, "driver")
+        motion = _get(ctx, it, "motion", p)
+        motion = None if motion is _MISSING else _choice(ctx, motion, f"{p}.motion", tuple(S.DRIVER_MOTIONS))
+        allowed = ("name", "joint", "motion", "coordinate") + (S.DRIVER_MOTIONS[motion] if motion else
+                                                                _DRIVER_KEYS[4:])
+        _unknown_keys(ctx, it, p, allowed)
+        ok = name is not None and motion is not None
+        v = _get(ctx, it, "joint", p)
+        jn = None if v is _MISSING else _str(ctx, v, f"{p}.joint")
+        coordinate = "angle"
+        if "coordinate" in it:
+            coordinate = _choice(ctx, it["coordinate"], f"{p}.coordinate", tuple(DRIVER_JOINTS))
+        if jn is not None and joints is not None:
+            if jn not in joints:
+                ctx.add(f"{p}.joint", f"unknown joint {_short(jn)}")
+                jn = None
+            else:
+                jt = joints[jn]
+                if "coordinate" not in it and jt not in DRIVER_JOINTS["angle"]:
+                    coordinate = "displacement"
+                if coordinate is not None and jt not in DRIVER_JOINTS[coordinate]:
+                    kinds = ", ".join(sorted({JOINT_TYPES[t].name for t in DRIVER_JOINTS[coordinate]}))
+                    ctx.add(f"{p}.joint", f"joint '{jn}' is a {JOINT_TYPES[jt].name} joint: a driver's {coordinate} "
+                                          f"is that of a {kinds} joint")
+                    jn = None
+                elif (jn, coordinate) in driven:
+                    ctx.add(f"{p}.joint", f"joint '{jn}' has a driver of its {coordinate} already")
+                    jn = None
+                else:
+                    driven.add((jn, coordinate))
+        ok = ok and jn is not None and coordinate is not None
+        params = {}
+        for key in (S.DRIVER_MOTIONS[motion] if motion else ()):
+            if key not in it and key in _DRIVER_DEFAULTS:
+                params[key] = _DRIVER_DEFAULTS[key]
+                continue
+            v = _get(ctx, it, key, p)
+            x = None if v is _MISSING else _num(ctx, v, f"{p}.{key}")
+            if x is None:
+                ok = False
+            params[key] = x
+        if motion == "ramp" and ok and not params["t1"] > params["t0"]:
+            ctx.add(f"{p}.t1", f"must be > t0 ({params['t0']!r}), got {params['t1']!r}")
+            ok = False
+        if motion == "harmonic" and ok and not params["frequency"] > 0.0:
+            ctx.add(f"{p}.frequency", f"must be > 0 (Hz), got {params['frequency']!r}")
+            ok = False
+        if ok:
+            out.append(S.DriverSpec(name=name, joint=jn, motion=motion, params=params, coordinate=coordinate))
+    return tuple(out)
 
 
 def _scene_solver(ctx: _Ctx, doc: dict, problems: list[Problem], start_time, stop_time) -> dict:

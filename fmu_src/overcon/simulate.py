@@ -200,9 +200,27 @@ class Simulation:
         """Output vector (model.output_names() order) at (t, y): :meth:`state_outputs`, then
         :meth:`derived_outputs` (reactions, friction forces)."""
         pos = self.state_outputs(y, t)
-        if not self._derived.size:
-            return pos
-        return np.concatenate((pos, self.derived_outputs(t, y)))
+        if self._derived.size:
+            pos = np.concatenate((pos, self.derived_outputs(t, y)))
+        if self.model.sensor_outputs:
+            pos = np.concatenate((pos, self.sensor_outputs(y)))
+        return pos
+
+    def sensor_outputs(self, y: np.ndarray) -> np.ndarray:
+        """The joint sensors ``<joint>.angle``, ``.rate``, ``.displacement``, ``.speed`` at y, from
+        their values at q0 (rad, rad/s, m, m/s; core/inputs.c), in output order."""
+        table = self._run.sensors(y)
+        return np.array([table[j, k] for _, j, k in self.model.sensor_outputs])
+
+    def set_inputs(self, values, slopes=None) -> None:
+        """The inputs' values (``model.inputs`` order; N, N.m) from the run's time on: held, or
+        linear with ``slopes`` (per s), until set again. The run never steps past the target of
+        :meth:`advance` while the model has inputs, so values set between two advances act from
+        the time reached (co-simulation's communication points)."""
+        try:
+            self._run.set_inputs(values, slopes)
+        except kernel_mod.RunStopped as exc:
+            raise _stopped(exc) from exc
 
     def state_outputs(self, y: np.ndarray, t: float | None = None) -> np.ndarray:
         """The outputs of the state (Model.state_output_names): positions, velocities (m/s,
@@ -306,10 +324,18 @@ def output_grid(start: float, stop: float, interval: float) -> np.ndarray:
 
 
 def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, output_interval: float | None = None,
-        **settings) -> Result:
+        inputs=None, input_interpolation: str = "hold", **settings) -> Result:
     """Simulate ``model`` with the solver options ``solver`` from the scene's start to ``stop_time``
     (default the scene's), outputs every ``output_interval`` (default ``solver.output_interval``);
-    ``settings`` go to :class:`Simulation`."""
+    ``inputs`` an input table (:class:`overcon.tooling.inputs.InputTable`, a column per input of
+    ``model.inputs``) set at every output point as a co-simulation host sets them at its
+    communication points, ``input_interpolation`` "hold" (the default: the value there, held over the
+    interval) or "linear" (with fmpy's first derivative there: :meth:`InputTable.step`); the outputs
+    at an output point see the values of the interval that ends there (the start's: its own), as an
+    FMU's after fmi2DoStep; ``settings`` go to :class:`Simulation`."""
+    if inputs is not None:
+        from .tooling.inputs import check_interpolation
+        check_interpolation(input_interpolation)
     scene = model.scene
     stop = scene.stop_time if stop_time is None else stop_time
     interval = solver.output_interval if output_interval is None else output_interval
@@ -321,15 +347,27 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
         raise ValueError(f"run(output_interval={interval!r}): {reason}")
     sim = Simulation(model, solver, **settings)
     grid = output_grid(scene.start_time, stop, interval)
+    names = [u.name for u in model.inputs]
     rows = []
     try:
-        for t in grid:
+        for k, t in enumerate(grid):
             y = sim.advance(t)
+            if inputs is not None and k == 0:  # the values at the start, before its outputs
+                _feed(sim, inputs, names, grid, k, input_interpolation)
+                y = sim.advance(t)
             rows.append(sim.outputs(t, y))
+            if inputs is not None and k + 1 < len(grid):  # the outputs at t saw the last interval's values
+                _feed(sim, inputs, names, grid, k, input_interpolation)
     except SimulationError as exc:
         exc.partial = _result(model, sim, grid[:len(rows)], rows)
         raise
     return _result(model, sim, grid, rows)
+
+
+def _feed(sim: Simulation, table, names, grid, k: int, interpolation: str) -> None:
+    """The inputs over the output interval from grid[k] (:meth:`InputTable.step`)."""
+    value, slope = table.step(grid[k], interpolation)
+    sim.set_inputs([value[n] for n in names], [slope[n] for n in names] if interpolation == "linear" else None)
 
 
 def _result(model: Model, sim: Simulation, time: np.ndarray, rows: list) -> Result:

@@ -244,6 +244,59 @@ the joints with a ``[joints.compliance]`` table are spring-dampers on their equa
 (:class:`ComplianceSpec`), the others rigid; their reactions, friction and motion are unique."""
 
 
+INPUT_TYPES = {"joint_torque": "N.m", "joint_force": "N", "force": "N", "torque": "N.m"}
+"""Input types (scene ``[[inputs]]``) and their units: a torque about a joint's axis (revolute,
+cylindrical), a force along a joint's axis (translational, prismatic, cylindrical), a force on a
+body at a point, a torque on a body."""
+INPUT_FRAMES = ("global", "body")
+
+JOINT_SENSORS = {"angle": "rad", "rate": "rad/s", "displacement": "m", "speed": "m/s"}
+"""Joint sensor outputs ``<joint>.<sensor>`` (``[outputs] joints``) and their units."""
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """One scene input (``[[inputs]]``): ``type`` in :data:`INPUT_TYPES`; ``joint`` for the joint
+    types, ``body`` for force and torque; ``point`` (body coordinates) and ``direction`` (unit
+    vector, in ``frame``: global or the body's axes) for force and torque; ``start`` the value
+    before the host sets one (N or N.m)."""
+
+    name: str
+    type: str
+    joint: str | None = None
+    body: str | None = None
+    point: tuple[float, ...] | None = None
+    direction: tuple[float, ...] | None = None
+    frame: str = "global"
+    start: float = 0.0
+
+    @property
+    def unit(self) -> str:
+        return INPUT_TYPES[self.type]
+
+
+DRIVER_MOTIONS = {"constant_speed": ("speed",), "ramp": ("from", "to", "t0", "t1"),
+                  "harmonic": ("amplitude", "frequency", "phase", "offset")}
+"""Driver motions (scene ``[[drivers]]``) and their parameters: the driven coordinate (from its
+value at q0; rad or m) as a function of time t (s): ``constant_speed`` speed (t - start_time);
+``ramp`` from ``from`` to ``to`` between t0 and t1 by a quintic with zero velocity and acceleration
+at both ends, held outside; ``harmonic`` offset + amplitude sin(2 pi frequency t + phase)
+(frequency in Hz, phase in rad; ``phase`` and ``offset`` default 0)."""
+
+
+@dataclass(frozen=True)
+class DriverSpec:
+    """One driver (``[[drivers]]``): ``joint`` a revolute (planar, spatial), translational,
+    prismatic or cylindrical joint; ``coordinate`` "angle" or "displacement" (the joint type's;
+    cylindrical: either, default angle); ``motion`` in :data:`DRIVER_MOTIONS` with its ``params``."""
+
+    name: str
+    joint: str
+    motion: str
+    params: Mapping[str, float]
+    coordinate: str = "angle"
+
+
 @dataclass(frozen=True)
 class SceneSpec:
     """A mechanism plus what to simulate. ``friction``: joint names with friction switched on;
@@ -273,3 +326,6 @@ class SceneSpec:
     group: str = ""
     description: str = ""
     source: str = ""
+    inputs: tuple[InputSpec, ...] = ()  # scene [[inputs]]
+    sensors: tuple[str, ...] = ()  # joints with sensor outputs ([outputs] joints)
+    drivers: tuple[DriverSpec, ...] = ()  # scene [[drivers]]

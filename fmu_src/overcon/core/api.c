@@ -38,8 +38,24 @@ static int in_range(const int *a, int n, int lo, int hi) { /* every a[i] in [lo,
 
 /* The equations of a joint type (overcon.joints.TYPES n_equations), 0 for an unknown type. */
 static int joint_equations(int type) {
-    static const int n[] = {0, 2, 2, 3, 5, 5, 4, 4, 6}; /* by J_* */
-    return type >= 0 && type <= J_FIXED ? n[type] : 0;
+    static const int n[] = {0, 2, 2, 3, 5, 5, 4, 4, 6, 1}; /* by J_* */
+    return type >= 0 && type <= J_DRIVER ? n[type] : 0;
+}
+
+/* A driver's constants (drivers.c): a driven joint of a type its coordinate has, on the same
+ * bodies, a known motion with finite parameters (a ramp's t1 after its t0). */
+static int driver_ok(const ovk_model *M, int j) {
+    const double *c = M->jconst + NJC * j;
+    for (int k = 0; k < 9; k++)
+        if (!isfinite(c[k])) return 0;
+    int jd = (int)c[0];
+    if (c[0] != (double)jd || jd < 0 || jd >= M->nj || !(c[1] == 0.0 || c[1] == 1.0) ||
+        !(c[2] == 1.0 || c[2] == 2.0 || c[2] == 3.0) || M->jlaw[j] != LAW_NONE)
+        return 0;
+    int t = M->jtype[jd], rot = c[1] == 0.0;
+    int ok = rot ? t == J_REVOLUTE || t == J_SREVOLUTE || t == J_CYLINDRICAL
+                 : t == J_TRANSLATIONAL || t == J_PRISMATIC || t == J_CYLINDRICAL;
+    return ok && M->jbi[j] == M->jbi[jd] && M->jbj[j] == M->jbj[jd] && (c[2] != 2.0 || c[6] > c[5]);
 }
 
 /* The model's counts, types and indices, checked before anything is sized from them: a model that
@@ -70,7 +86,8 @@ static int check_model(const ovk_model *M, ovk_data *d) {
     for (int j = 0; j < M->nj; j++) {
         int t = M->jtype[j], planar = t == J_REVOLUTE || t == J_TRANSLATIONAL;
         int spatial = t == J_SPHERICAL || (t >= J_SREVOLUTE && t <= J_FIXED);
-        if (!((M->dim == 2 && planar) || (M->dim == 3 && spatial)) || M->jneq[j] != joint_equations(t) ||
+        if (t == J_DRIVER && !driver_ok(M, j)) return ovk_fail(d, OVK_INVALID, "model: driver %d is not one the core takes", j);
+        if (!((M->dim == 2 && planar) || (M->dim == 3 && spatial) || t == J_DRIVER) || M->jneq[j] != joint_equations(t) ||
             M->jbi[j] < -1 || M->jbi[j] >= M->nb || M->jbj[j] < -1 || M->jbj[j] >= M->nb ||
             !in_range(M->jrows + OVK_MAXEQ * j, M->jneq[j], 0, M->m) || M->jlaw[j] < LAW_NONE || M->jlaw[j] > LAW_STRIBECK)
             return ovk_fail(d, OVK_INVALID, "model: joint %d (type %d, %d rows, bodies %d and %d, law %d) is not "
@@ -90,6 +107,17 @@ static int check_model(const ovk_model *M, ovk_data *d) {
         (M->nfg >= 0 && M->fgroup[M->nfg] != M->nfj) || !in_range(M->fx, OVK_MAXEQ * M->nfj, 0, M->nx + 1) ||
         !in_range(M->fci, 6 * M->nfj, 0, M->ncols + 1) || !in_range(M->fcj, 6 * M->nfj, 0, M->ncols + 1))
         return ovk_fail(d, OVK_INVALID, "model: an index of the elimination or the friction plan is out of range");
+    if (M->nu < 0 || M->nu > OVK_MAX_COUNT)
+        return ovk_fail(d, OVK_INVALID, "model: nu = %d is out of range [0, %d]", M->nu, OVK_MAX_COUNT);
+    for (int k = 0; k < M->nu; k++) {
+        int kind = M->ukind[k], j = M->uidx[3 * k], bi = M->uidx[3 * k + 1], bj = M->uidx[3 * k + 2];
+        int joint = kind == OVK_IN_JOINT_TORQUE || kind == OVK_IN_JOINT_FORCE;
+        double frame = M->up[OVK_NUP * k + 6];
+        if (!isfinite(M->up[OVK_NUP * k + 7]) || kind < OVK_IN_JOINT_TORQUE || kind > OVK_IN_TORQUE || bi < 0 || bi >= M->nb || bj < -1 || bj >= M->nb ||
+            (joint ? j < 0 || j >= M->nj : j != -1) || !(frame == 0.0 || frame == 1.0 || frame == 2.0))
+            return ovk_fail(d, OVK_INVALID, "model: input %d (kind %d, joint %d, bodies %d and %d, frame %g) is not "
+                            "one the core takes", k, kind, j, bi, bj, frame);
+    }
     for (int g = 0; g < M->nfg; g++)
         if (M->fgroup[g] > M->fgroup[g + 1])
             return ovk_fail(d, OVK_INVALID, "model: friction group %d starts after the next one", g);
@@ -135,7 +163,7 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     size_t n_frames = (nb + 1) * (2 * dim + dim * dim + wd) + 4 * nb;
     size_t n_work = 4 * nx + nx * nc                          /* lam0x, x, x0, Wx */
                     + 4 * nx + nc * nx + nx * nx + nc + nx;   /* r, Dq, Mx, dx, xn, qn, rn (damped Newton) */
-    size_t need = n_frames + m * nh + 2 * m + nS + nR * (nc ? nc : 1) + 2 * nR + nh + nR * nc
+    size_t need = n_frames + m * nh + 3 * m + nS + nR * (nc ? nc : 1) + 2 * nR + nh + nR * nc
                   + 6 * OVK_MAXEQ * nj + n_work + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols)
                   + ovk_redundancy_doubles(M);
     d->mem = calloc(need ? need : 1, sizeof(double)); /* zeros: Phi_h outside its rows' blocks stays so (joints.c) */
@@ -161,6 +189,7 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->J = p; p += m * nh;
     d->phi = p; p += m;
     d->gam = p; p += m;
+    d->phit = p; p += m;
     d->S = p; p += nS;
     d->Sx = p; p += nR * (nc ? nc : 1);
     d->g = p; p += nR;
@@ -179,11 +208,13 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->al_band = ovk_al_half_band(M); /* the AL band and vectors: formulation AL and ovk_project */
     d->al = calloc(ovk_al_doubles(M), sizeof(double));
     d->al_rows = calloc(3 * m + 1, sizeof(int));
-    if (!d->al || !d->al_rows)
+    d->u = calloc(2 * (size_t)M->nu + 1, sizeof(double)); /* the inputs' values: zero until set */
+    if (!d->al || !d->al_rows || !d->u)
         d->status = ovk_fail(d, OVK_NOMEM, "out of memory: the augmented Lagrangian workspace needs %zu bytes",
                              ovk_al_doubles(M) * sizeof(double) + (3 * m + 1) * sizeof(int));
     else
         ovk_al_make_rows(M, d);
+    for (int k = 0; d->u && k < M->nu; k++) d->u[k] = M->up[OVK_NUP * k + 7]; /* the start values */
     return d;
 }
 
@@ -195,6 +226,7 @@ void ovk_free_data(ovk_data *d) {
     free(d->al);
     free(d->al_rows);
     free(d->sb_mem);
+    free(d->u);
     free(d);
 }
 
@@ -206,10 +238,9 @@ static int finish(const ovk_model *M, ovk_data *d, const double *y, double *ydot
 /* y = [q (nb nq_b), h (nb nh_b)] -> ydot, lam (m; zeros at eliminated rows), qf (ncols; friction
  * forces, the next evaluation's warm start), *iterations (friction force evaluations), *damped
  * (the damped Newton ran). guess_mode: 0 none (x0 = lam0), 1 guess = qf of a nearby evaluation
- * (ncols), 2 guess = lam (m). t is unused (no load depends on time). */
+ * (ncols), 2 guess = lam (m). t: the time the inputs' values are taken at (inputs.c). */
 int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int guess_mode, const double *guess,
                  double *ydot, double *lam, double *qf, int *iterations, int *damped) {
-    (void)t;
     if (!d) return OVK_NOMEM;
     if (d->status) return d->status;
     d->msg[0] = '\0';
@@ -222,9 +253,10 @@ int ovk_evaluate(const ovk_model *M, ovk_data *d, double t, const double *y, int
     const double *q = y, *h = y + M->nb * M->nq_b;
     int status;
     ovk_frames_build(M, q, h, &d->f);
+    d->f.t = t;
     ovk_constraint_rows(M, d, q);
     ovk_kkt_rhs(M, d, h);
-    if ((status = ovk_loads(M, d))) return status;
+    if ((status = ovk_loads(M, d, t))) return status;
     status = M->redundancy == OVK_COMPLIANT       ? ovk_compliant_solve(M, d, h)
              : M->formulation == OVK_FORM_AL          ? ovk_kkt_al_solve(M, d)
                                                       : ovk_kkt_solve(M, d);

@@ -53,7 +53,7 @@
 
 #include <stddef.h>
 
-#define OVK_ABI 10 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+#define OVK_ABI 11 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
     OVK_OK = 0,
@@ -75,6 +75,7 @@ enum {
 };
 enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
+enum { J_DRIVER = 9 }; /* a driver (drivers.c): one rheonomic equation on a joint's coordinate, planar or spatial */
 enum { LAW_NONE = 0, LAW_REGULARISED = 1, LAW_STRIBECK = 2 };
 enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 
@@ -143,7 +144,16 @@ typedef struct {
     const int *watch;      /* nwatch: equations watched (SingularityMonitor.rows at the start) */
     const int *full;       /* nfull: equations of the whole Jacobian (the rigid ones) */
     int formulation;       /* OVK_FORM_*: the acceleration solve (solver.singular: "stop" eliminated, "pass" AL) */
+    /* inputs (inputs.c; scene [[inputs]]): named slots the host writes (ovk_set_inputs, ovk_sim_set_inputs),
+     * read where the loads are evaluated; 0 of them costs nothing */
+    int nu;
+    const int *ukind;      /* nu: OVK_IN_* */
+    const int *uidx;       /* nu * 3: joint (-1 none), body i, body j (-1 base) */
+    const double *up;      /* nu * OVK_NUP: direction[3] (unit), point[3] (body i axes), the direction's
+                            * frame (0 global, 1 body i's axes, 2 body j's), start value */
 } ovk_model;
+enum { OVK_IN_JOINT_TORQUE = 1, OVK_IN_JOINT_FORCE = 2, OVK_IN_FORCE = 3, OVK_IN_TORQUE = 4 };
+#define OVK_NUP 8 /* doubles per input (up) */
 enum { OVK_ELIMINATE = 0, OVK_MIN_NORM = 1, OVK_COMPLIANT = 2 };
 #define OVK_NAXI 10 /* ints per per-axis compliant joint (axi) */
 #define OVK_NAXP 21 /* doubles per per-axis compliant joint (axp) */
@@ -151,6 +161,7 @@ enum { OVK_FORM_ELIMINATED = 0, OVK_FORM_AL = 1 };
 
 /* Frames of the bodies, slot nb = the base. */
 typedef struct {
+    double t;              /* the time of the drivers' equations (drivers.c), set with the frames' users */
     double *r, *R, *v, *w; /* (nb + 1) slots: r, v dim; R dim*dim; w 1 (planar) or 3 */
     double *sb, *cb, *sg, *cg; /* Euler angles: sin/cos of beta and gamma per body (rates) */
 } ovk_frames;
@@ -209,6 +220,8 @@ typedef struct {
     int al_direct;     /* the last AL-form solve was kkt.c's direct one (its S factor stands; kkt_al.c) */
     int *al_rows;  /* every equation (m), then its two bodies (2 m): the row set of ovk_project */
     int *piv;      /* nx: the row interchanges of the friction solves' LU (friction.c, friction_robust.c) */
+    double *phit;  /* m: Phi_t of the drivers' equations (0 elsewhere), with Phi at d->f.t (joints.c) */
+    double *u;     /* inputs: 2 nu + 1: the values at u_t, their slopes (per s), then u_t (inputs.c) */
 } ovk_data;
 
 /* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, dop853, rk4);
@@ -234,6 +247,7 @@ typedef struct {
     double rtol, max_step, step, newton_tol;
     double t, h, t0, t_old, h_old, stable_step; /* radau: h is its h_abs */
     double h_abs_old, error_norm_old, lu_h; /* radau: the last accepted step's size and error; the LU's h */
+    double t_bound;  /* no step ends past it (inputs: the communication point; INFINITY otherwise); no state */
     double *y, *f, *y_old, *f_old; /* n each */
     double *K;       /* the stages of the last step: dopri5 7 n; dop853 16 n (12 stages, f_new, 3 dense
                       * stages); rk4 rows 0-3 scratch */
@@ -359,6 +373,7 @@ OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hi
 /* energy.c: the energy outputs' ledger */
 OVK_HIDDEN int ovk_sim_energy_start(ovk_sim *s, double t0, const double *y0);
 OVK_HIDDEN int ovk_sim_energy_step(ovk_sim *s);
+OVK_HIDDEN int ovk_sim_energy_inputs(ovk_sim *s);
 OVK_HIDDEN void ovk_compliant_energy(const ovk_model *M, ovk_data *d, const double *q, const double *h,
                                      double *elastic, double *damping);
 /* watch.c: the singularity watch after each step; the expiry behind a failed step */
@@ -456,6 +471,12 @@ OVK_HIDDEN void ovk_spherical_friction_jac(const ovk_model *M, int j, const ovk_
                                            double *dQi, double *dQj);
 OVK_HIDDEN double ovk_spherical_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
 
+/* drivers.c */
+OVK_HIDDEN void ovk_driver_motion(const double *c, double t, double *out);
+OVK_HIDDEN void ovk_driver_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji, double *Jj,
+                                double *gam);
+OVK_HIDDEN double ovk_driver_phit(const ovk_model *M, int j, double t);
+
 /* joints_spatial.c */
 OVK_HIDDEN void ovk_axis_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji, double *Jj,
                               double *gam);
@@ -469,7 +490,16 @@ OVK_HIDDEN void ovk_axis_friction_jac(const ovk_model *M, int j, const ovk_fctx 
 OVK_HIDDEN double ovk_axis_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
 
 /* loads.c */
-OVK_HIDDEN int ovk_loads(const ovk_model *M, ovk_data *d);
+OVK_HIDDEN int ovk_loads(const ovk_model *M, ovk_data *d, double t);
+/* inputs.c: the inputs' generalized forces at t added to Q (nh; frames of d built), the sensors */
+OVK_HIDDEN void ovk_input_forces(const ovk_model *M, const ovk_data *d, double t, double *Q);
+OVK_EXPORT int ovk_set_inputs(const ovk_model *M, ovk_data *d, const double *u, const double *du, double t_ref);
+OVK_EXPORT int ovk_sensors(const ovk_model *M, ovk_data *d, const double *y, const double *y0, int j, double *out);
+OVK_EXPORT int ovk_sim_set_inputs(ovk_sim *s, const double *u, const double *du);
+/* drivers.c: the time of the drivers' equations for the rows that follow (ovk_rows, ovk_rows_sparse),
+ * and Phi_t (m) of the last rows evaluated in d */
+OVK_EXPORT int ovk_set_time(ovk_data *d, double t);
+OVK_EXPORT int ovk_phi_t(const ovk_model *M, const ovk_data *d, double *out);
 OVK_HIDDEN void ovk_spring_points(const ovk_model *M, const ovk_frames *f, const double *lp, int bi, int bj,
                                   double *pi, double *pj);
 
@@ -592,6 +622,7 @@ OVK_EXPORT int ovk_pack_kept(const ovk_model *M, const int *retained, int nR, in
                              int *iwork);
 OVK_EXPORT int ovk_sim_uniqueness(const ovk_sim *s, int *rank, int *unique);
 OVK_EXPORT int ovk_sim_events(const ovk_sim *s);
+OVK_EXPORT int ovk_sim_effort_unique(const ovk_sim *s);
 OVK_EXPORT const char *ovk_sim_event(const ovk_sim *s, int k, double *t, int *kind);
 
 #endif

@@ -49,7 +49,7 @@ void ovk_compliant_energy(const ovk_model *M, ovk_data *d, const double *q, cons
 }
 
 /* [power dissipated by joint friction and the compliant joints' dampers (W, >= 0), power of the
- * constant forces and torques (W)] at (t, y) (Simulation._powers). */
+ * constant forces and torques and of the inputs at t (W)] at (t, y) (Simulation._powers). */
 static int powers(ovk_sim *s, double t, const double *y, double *p) {
     const ovk_model *M = s->M;
     int kh = M->nh_b, dim = M->dim, n = s->n;
@@ -69,15 +69,26 @@ static int powers(ovk_sim *s, double t, const double *y, double *p) {
             for (int i = 0; i < 3; i++) s->qload[bi * kh + 3 + i] += tb[i];
         }
     }
+    if (M->nu) ovk_input_forces(M, s->d, t, s->qload);
     double applied = 0.0, elastic, damper;
     for (int k = 0; k < s->nh; k++) applied += h[k] * s->qload[k];
     ovk_compliant_energy(M, s->d, y, h, &elastic, &damper);
     p[0] = damper;
     p[1] = applied;
-    if (!M->nfj) return OVK_OK;
+    int drivers = 0;
+    for (int j = 0; j < M->nj; j++) drivers += M->jtype[j] == J_DRIVER;
+    if (!M->nfj && !drivers) return OVK_OK;
     int its = 0, status = ovk_sim_solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, s->yout, &its);
     if (status) return status;
     s->evaluations++;
+    for (int j = 0; drivers && j < M->nj; j++) { /* a driver's power: its effort -lam times the rate Phi_h h */
+        if (M->jtype[j] != J_DRIVER) continue;
+        int row = M->jrows[OVK_MAXEQ * j];
+        double rate = 0.0;
+        for (int k = 0; k < s->nh; k++) rate += s->d->J[(size_t)row * s->nh + k] * h[k];
+        p[1] += -s->ev_lam[row] * rate;
+    }
+    if (!M->nfj) return OVK_OK;
     double fp = 0.0;
     for (int k = 0; k < s->ncols; k++) fp += h[M->cols[k]] * s->ev_qf[k];
     p[0] = damper - fp;
@@ -117,6 +128,13 @@ int ovk_sim_energy_step(ovk_sim *s) {
     memcpy(s->work_w[1], w, sizeof w);
     memcpy(s->work_p[1], pe, sizeof pe);
     return OVK_OK;
+}
+
+/* After the inputs changed at the last step's end: the powers there with their new values, the
+ * start of the next step's Simpson rule (the work so far stays). */
+int ovk_sim_energy_inputs(ovk_sim *s) {
+    if (!s->o.energy) return OVK_OK;
+    return powers(s, s->work_t[1], s->rk.y, s->work_p[1]);
 }
 
 /* The work [dissipated, applied] at t inside the last step (_WorkLedger.at). */

@@ -12,6 +12,7 @@ void ovk_joint_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi,
     case J_REVOLUTE: ovk_revolute_rows(M, f, j, phi, Ji, Jj, gam); break;
     case J_TRANSLATIONAL: ovk_translational_rows(M, f, j, phi, Ji, Jj, gam); break;
     case J_SPHERICAL: ovk_spherical_rows(M, f, j, phi, Ji, Jj, gam); break;
+    case J_DRIVER: ovk_driver_rows(M, f, j, phi, Ji, Jj, gam); break;
     default: ovk_axis_rows(M, f, j, phi, Ji, Jj, gam); break;
     }
 }
@@ -45,6 +46,7 @@ void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
             double pj = M->jbj[j] >= 0 ? q[M->jbj[j] * M->nq_b + 2] : 0.0;
             ph[1] = pi - pj - M->jconst[NJC * j + 6];
         }
+        if (M->jtype[j] == J_DRIVER) d->phit[M->jrows[OVK_MAXEQ * j]] = ovk_driver_phit(M, j, d->f.t);
         for (int e = 0; e < ne; e++) {
             int row = M->jrows[OVK_MAXEQ * j + e];
             d->phi[row] = ph[e];

@@ -30,6 +30,7 @@ void ovk_kkt_rhs(const ovk_model *M, ovk_data *d, const double *h) {
                 if (b < 0) continue;
                 for (int k = b * kh; k < (b + 1) * kh; k++) ph_h += d->J[(size_t)row * nh + k] * h[k];
             }
+            if (d->phit[row] != 0.0) ph_h += d->phit[row]; /* a driver: Phi' = Phi_h h + Phi_t */
             d->g[i] = d->g[i] - 2.0 * a * ph_h - a * a * d->phi[row];
         }
     }

@@ -25,9 +25,9 @@ void ovk_spring_points(const ovk_model *M, const ovk_frames *f, const double *lp
     }
 }
 
-/* OVK_SPRING when a spring of positive free length has coinciding points (its direction is
+/* The applied forces at time t (the inputs' values depend on it: inputs.c). OVK_SPRING when a spring of positive free length has coinciding points (its direction is
  * undefined); a spring of free length 0 pulls with -k d, defined there too. */
-int ovk_loads(const ovk_model *M, ovk_data *d) {
+int ovk_loads(const ovk_model *M, ovk_data *d, double t) {
     int nb = M->nb, dim = M->dim, kh = M->nh_b;
     const ovk_frames *f = &d->f;
     double *Q = d->Q;
@@ -90,5 +90,6 @@ int ovk_loads(const ovk_model *M, ovk_data *d) {
             }
         }
     }
+    if (M->nu) ovk_input_forces(M, d, t, Q);
     return OVK_OK;
 }

@@ -32,6 +32,12 @@ void ovk_reported(const ovk_model *M, ovk_data *d, const double *y, const double
     for (int j = 0; j < M->nj; j++) {
         int ne = M->jneq[j];
         double *out = reac + OVK_NREAC * j;
+        if (M->jtype[j] == J_DRIVER) { /* the effort: the motor's torque or force on body i, -lam (drivers.c) */
+            for (int k = 0; k < OVK_NREAC; k++) out[k] = 0.0;
+            out[0] = -lam[M->jrows[OVK_MAXEQ * j]];
+            fric[j] = 0.0;
+            continue;
+        }
         ovk_joint_rows(M, f, j, ph, blkI, blkJ, gm);
         for (int e = 0; e < ne; e++) lj[e] = lam[M->jrows[OVK_MAXEQ * j + e]];
         for (int k = 0; k < kh; k++) {

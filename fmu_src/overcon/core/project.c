@@ -40,6 +40,7 @@ int ovk_project(const ovk_model *M, ovk_data *d, double t, double *y, double tol
     double *mu = ovk_al_slot(M, d, OVK_AL_SLOT_PR2), *zero = ovk_al_slot(M, d, OVK_AL_SLOT_UNIT);
     double err = 0.0, prev = INFINITY;
     memset(zero, 0, sizeof(double) * (size_t)nh);
+    d->f.t = t; /* the drivers' equations at t */
     for (int it = 0;; it++) {
         ovk_frames_build(M, q, h, &d->f);
         ovk_constraint_rows(M, d, q);

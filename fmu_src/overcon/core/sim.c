@@ -172,6 +172,12 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->M = &s->Mrun;
     s->o = *o;
     if ((s->status = check_opts(s, o))) return s;
+    if (M->nu && o->rk.method == OVK_METHOD_RK4) {
+        s->status = OVK_INVALID;
+        snprintf(s->msg, sizeof s->msg, "cannot start: rk4's fixed steps would step over the instants where the "
+                 "inputs change: use dopri5, dop853 or radau with inputs");
+        return s;
+    }
     s->d = ovk_make_data(M);
     if (!s->d || ovk_data_status(s->d)) {
         s->status = s->d ? ovk_data_status(s->d) : OVK_NOMEM;
@@ -342,6 +348,7 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
         status = rk->dense_status, memcpy(s->msg, rk->dense_msg, sizeof s->msg);
     if (status) return stopped(s, status, "integration stopped", rk->t);
     if (s->warm.count) hist_push(&s->step_warm, s->ncols, rk->t, s->warm.q[0]);
+    s->d->f.t = rk->t; /* the drivers' equations at the step's end */
     if ((status = ovk_rows_in(s->M, s->d, rk->y))) {
         snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d));
         return stopped(s, status, "integration stopped", rk->t);
@@ -370,7 +377,9 @@ int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max
     double eps = 1e-12 * (fabs(t_target) > 1.0 ? fabs(t_target) : 1.0), started = ovk_now();
     long long n0 = rk->nsteps;
     int status = OVK_OK;
+    if (s->M->nu && t_target > rk->t) rk->t_bound = t_target; /* the inputs may change there */
     while (!status && rk->t < t_target - eps) status = step_checked(s, started, n0, max_steps, max_wall_time);
+    rk->t_bound = INFINITY;
     s->wall_time += ovk_now() - started;
     if (status) return status;
     if (rk->t - t_target < -eps || !isfinite(t_target))
@@ -461,7 +470,28 @@ int ovk_sim_uniqueness(const ovk_sim *s, int *rank, int *unique) {
         const double *lp = M->jlawp + (size_t)M->fj[k] * NLP;
         if (!(lp[0] == 0.0 && lp[3] == 0.0) && !s->along_unique[M->fj[k]]) motion = 0;
     }
+    int drivers = 0;
+    for (int j = 0; j < M->nj; j++) drivers += M->jtype[j] == J_DRIVER;
+    if (drivers && s->along_rank == s->nh) motion = 1; /* fully driven (DOF 0): the motion is prescribed */
     return motion;
+}
+
+/* Every driver's effort is unique at the last evaluation of the uniqueness along the motion
+ * (overcon.precheck.effort_verdicts): its own reaction unique and no friction acting on a joint
+ * whose reaction is not unique; 1 without drivers, -1 without a run. */
+int ovk_sim_effort_unique(const ovk_sim *s) {
+    if (!s || !s->along_unique) return -1;
+    const ovk_model *M = s->M;
+    for (int j = 0; j < M->nj; j++)
+        if (M->jtype[j] == J_DRIVER && !s->along_unique[j]) return 0;
+    for (int k = 0; k < M->nfj; k++) {
+        const double *lp = M->jlawp + (size_t)M->fj[k] * NLP;
+        if (!(lp[0] == 0.0 && lp[3] == 0.0) && !s->along_unique[M->fj[k]]) {
+            for (int j = 0; j < M->nj; j++)
+                if (M->jtype[j] == J_DRIVER) return 0;
+        }
+    }
+    return 1;
 }
 
 /* The run's kept equations become `retained` (M->nR of them, ascending): the packed arrays of the
@@ -482,10 +512,37 @@ int ovk_sim_use_kept(ovk_sim *s, const int *retained) {
         ovk_free_data(d);
         return status;
     }
+    memcpy(d->u, s->d->u, (2 * (size_t)R->nu + 1) * sizeof(double)); /* the inputs' values stay */
     ovk_free_data(s->d);
     s->d = d;
     *R = next;
     return OVK_OK;
+}
+
+/* The inputs' values u (nu) and slopes du (nu, per s; NULL: held) from the run's time on
+ * (inputs.c): an integrator step never ends past the target of ovk_sim_advance while the model
+ * has inputs, so the run stands at the communication point where they change. When they change,
+ * the right-hand side there (the first stage of the next step, the multipliers of the outputs)
+ * and the ledger's powers are evaluated again with them; equal values cost nothing. */
+int ovk_sim_set_inputs(ovk_sim *s, const double *u, const double *du) {
+    if (!s) return OVK_NOMEM;
+    if (s->status) return s->status;
+    const ovk_model *M = s->M;
+    int nu = M->nu, same = 1;
+    if (!nu) return OVK_OK;
+    double *cur = s->d->u, t = s->rk.t;
+    for (int k = 0; k < nu && same; k++) {
+        double now = cur[k] + cur[nu + k] * (t - cur[2 * nu]);
+        same = now == u[k] && cur[nu + k] == (du ? du[k] : 0.0);
+    }
+    if (same) return OVK_OK;
+    int status = ovk_set_inputs(M, s->d, u, du, t);
+    if (status) return snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d)), status;
+    status = sim_rhs(s, t, s->rk.y, s->rk.f);
+    s->rk.dense_ready = 0;
+    if (!status) status = ovk_sim_energy_inputs(s);
+    if (status) s->status = stopped(s, status, "inputs", t);
+    return status;
 }
 
 /* Goes on from (t, y) under the kept equations `kept` (m flags; as many as before) as

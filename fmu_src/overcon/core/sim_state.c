@@ -5,6 +5,7 @@
  * bytes (a state is restored on the machine and build that saved it, as FMI requires). A restore
  * is exact: the same bits continue the same trajectory. The wall time spent is not part of the
  * state (Simulation.get_state leaves it out too). */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -73,6 +74,10 @@ static void io_rk(codec *c, ovk_rk *rk) {
     }
 }
 
+/* The inputs (inputs.c): values, slopes and their time, as the host last set them (only in the
+ * state of a model with inputs: the others' states are as before). */
+static void io_inputs(codec *c, ovk_sim *s) { io(c, s->d->u, (2 * (size_t)s->M->nu + 1) * sizeof(double)); }
+
 /* The header and every field of the run, in order. */
 static void io_sim(codec *c, ovk_sim *s) {
     char magic[8] = STATE_MAGIC;
@@ -112,6 +117,7 @@ static void io_sim(codec *c, ovk_sim *s) {
     io(c, &s->along_rank, sizeof s->along_rank);
     io(c, s->along_unique, (size_t)s->M->nj * sizeof(int));
     io(c, &s->along_certified, sizeof s->along_certified);
+    if (s->M->nu) io_inputs(c, s);
     io(c, &s->nevents, sizeof s->nevents); /* last: a load sizes the list from it (ovk_sim_set_state) */
     for (int k = 0; k < s->nevents && !c->bad; k++) io(c, &s->events[k], sizeof s->events[k]);
 }
@@ -172,6 +178,11 @@ int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size) {
         int status = ovk_sim_use_kept(s, kept);
         if (status) return status;
     }
+    for (int k = 0; k < 2 * s->M->nu + 1; k++) /* the inputs restored: finite, as ovk_set_inputs takes them */
+        if (!isfinite(s->d->u[k])) {
+            memset(s->d->u, 0, (2 * (size_t)s->M->nu + 1) * sizeof(double));
+            return snprintf(s->msg, sizeof s->msg, "set state: input entry %d is not finite", k), OVK_INVALID;
+        }
     ovk_sim_watch_adopt(s);
     s->status = OVK_OK;
     s->msg[0] = '\0';

@@ -49,14 +49,14 @@ from ..params import rule_of
 from ..spec import REDUNDANCY_METHODS
 from .variables import redundancy_methods, redundancy_rule, with_redundancy
 
-FORMAT = 4  # 4: each packed model ends with its formulation (solver.singular)
+FORMAT = 5  # 5: each packed model ends with its inputs (nu, ukind, uidx, up)
 MAGIC = b"OVKFMU01"
 TYPES = {"Real": 0, "Integer": 1, "Boolean": 2, "String": 3, "Enumeration": 1}  # an Enumeration is an Integer in FMI 2.0's calls
-CAUSALITIES = {"output": 0, "parameter": 1, "local": 2, "independent": 3}
+CAUSALITIES = {"output": 0, "parameter": 1, "local": 2, "independent": 3, "input": 4}
 VARIABILITIES = {"continuous": 0, "constant": 1, "fixed": 2, "tunable": 3, "discrete": 4}
 KEYS = {"output": 0, "constant": 1, "param": 2, "stable_step": 3, "state": 4, "derivative": 5, "array": 6, "time": 7,
-        "along": 8}
-OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6, "energy": 7}
+        "along": 8, "input": 9}
+OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6, "energy": 7, "sensor": 8}
 TARGETS = {"mu": 1, "v_reg": 2, "mu_static": 3, "v_stribeck": 4, "solver.method": 10, "solver.tolerance": 11,
            "solver.step": 12, "solver.max_step": 13, "solver.baumgarte": 14, "solver.friction_tol": 15,
            "solver.friction_max_iter": 16, "solver.kernel": 17, "solver.max_internal_steps": 18,
@@ -102,6 +102,7 @@ def _outputs(w: _Out, model) -> None:
     rows += [(OUT_KINDS["reaction"], j, comp) for j in model.reaction_joints
              for comp in range(len(model.joints[j].components))]
     rows += [(OUT_KINDS["friction"], j, 0) for j in model.friction_outputs]
+    rows += [(OUT_KINDS["sensor"], j, what) for _, j, what in model.sensor_outputs]
     assert len(rows) == len(model.output_names())
     w.i(len(rows))
     for r in rows:
@@ -164,13 +165,18 @@ def _packed(w: _Out, k) -> None:
     w.d(cm.baumgarte, cm.tol)
     red = set(kernel_mod.REDUNDANCY_COUNTS + kernel_mod.REDUNDANCY_ARRAYS)
     for name, _ in cm._fields_:
-        if name in INT_FIELDS or name in ("baumgarte", "tol", "formulation") or name in red:
+        if name in INT_FIELDS or name in ("baumgarte", "tol", "formulation", "nu") or name in red \
+                or name in kernel_mod.INPUT_ARRAYS:
             continue
         (w.doubles if name in DOUBLE_FIELDS else w.ints)(by_address[getattr(cm, name)])
     w.i(*(getattr(cm, n) for n in kernel_mod.REDUNDANCY_COUNTS))
     for name in kernel_mod.REDUNDANCY_ARRAYS:
         (w.doubles if name in kernel_mod.REDUNDANCY_DOUBLES else w.ints)(by_address[getattr(cm, name)])
     w.i(cm.formulation)
+    w.i(cm.nu)  # the inputs (kernel.INPUT_ARRAYS)
+    w.ints(by_address[cm.ukind])
+    w.ints(by_address[cm.uidx])
+    w.doubles(by_address[cm.up])
 
 
 def model_file(model, solver, table, guid: str, messages=()) -> bytes:
@@ -200,7 +206,7 @@ def model_file(model, solver, table, guid: str, messages=()) -> bytes:
     w.i(len(table))
     for v in table:
         kind, arg = v.key
-        a = (arg if kind in ("output", "state", "derivative", "array") else int(bool(arg)) if kind == "constant"
+        a = (arg if kind in ("output", "state", "derivative", "array", "input") else int(bool(arg)) if kind == "constant"
              else index[arg] if kind == "param"
              else (ALONG_ARGS[arg] if arg in ALONG_ARGS else 2 + arg) if kind == "along" else 0)
         w.s(v.name)

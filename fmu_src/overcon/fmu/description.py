@@ -79,7 +79,7 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
             "modelIdentifier": scene.name,
             "needsExecutionTool": "true",  # a Python interpreter with numpy and scipy
             "canHandleVariableCommunicationStepSize": "true",
-            "canInterpolateInputs": "false",
+            "canInterpolateInputs": "true" if any(v.causality == "input" for v in table) else "false",
             "maxOutputDerivativeOrder": "0",
             "canRunAsynchronuously": "false",
             "canBeInstantiatedOnlyOncePerProcess": "false",
@@ -95,7 +95,8 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
             continue  # arrays are FMI 3.0's
         sv = ET.SubElement(mv, "ScalarVariable", {
             "name": v.name, "valueReference": str(vr), "description": v.description,
-            "causality": v.causality, "variability": v.variability, "initial": v.initial})
+            "causality": v.causality, "variability": v.variability,
+            **({"initial": v.initial} if v.initial else {})})  # an input has no initial
         typ = {}
         if v.unit is not None:
             typ["unit"] = v.unit

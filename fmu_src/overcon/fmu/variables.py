@@ -45,7 +45,18 @@ from dataclasses import dataclass
 
 from ..joints import TYPES
 from ..params import check_param, rule_of
-from ..spec import COORDINATE_UNITS, ENERGY_OUTPUTS, REDUNDANCY_METHODS, VELOCITY_OUTPUTS, coordinates
+from ..spec import (COORDINATE_UNITS, ENERGY_OUTPUTS, JOINT_SENSORS, REDUNDANCY_METHODS, VELOCITY_OUTPUTS,
+                    coordinates)
+
+SENSOR_NAMES = ("angle", "rate", "displacement", "speed")  # by the core's sensor index (overcon.model.SENSOR_INDEX)
+SENSOR_TEXT = {"angle": "rotation of body i relative to body j about the joint axis, from q0",
+               "rate": "rotation rate of body i relative to body j about the joint axis",
+               "displacement": "displacement of body i relative to body j along the joint axis, from q0",
+               "speed": "sliding speed of body i relative to body j along the joint axis"}
+INPUT_TEXT = {"joint_torque": "torque about the joint axis on body i (its reaction on body j)",
+              "joint_force": "force along the joint axis on body i (its reaction on body j)",
+              "force": "force on a body (signed magnitude along its direction)",
+              "torque": "torque on a body (signed magnitude about its direction)"}
 
 UNITS: dict[str, dict[str, int]] = {
     "1": {},
@@ -196,6 +207,15 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
     for j in model.reaction_joints:
         c = model.joints[j]
         bi = body_of.get(c.bi, "base")
+        if c.type == "driver":  # its effort (core/drivers.c)
+            driven = model.joints[c.p["joint"]]
+            rot = c.p["coordinate"] == 0
+            out.append(Var(f"{c.name}.effort", "Real", "output", "continuous", "calculated",
+                           f"driver {c.name}: the {'torque about' if rot else 'force along'} the axis of joint "
+                           f"{driven.name} that its motor exerts on body {bi} (its reaction on the other body) to "
+                           "impose the motion", unit="N.m" if rot else "N", key=("output", k)))
+            k += 1
+            continue
         units = dict(TYPES[c.type].reaction)
         for comp in c.components:
             frame = "global frame" if comp.endswith("0") else f"auxiliary frame of the {TYPES[c.type].name} joint"
@@ -211,8 +231,16 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
                        f"friction {TYPES[c.type].friction_text} of joint {c.name} on body {body_of.get(c.bi, 'base')} "
                        f"({c.law.name} law)", unit=unit, key=("output", k)))
         k += 1
+    for name, j, what in model.sensor_outputs:
+        sensor = SENSOR_NAMES[what]
+        out.append(Var(name, "Real", "output", "continuous", "calculated",
+                       f"joint {model.joints[j].name}: {SENSOR_TEXT[sensor]}", unit=JOINT_SENSORS[sensor],
+                       key=("output", k)))
+        k += 1
     friction = set(model.friction_joints)
     for j in model.reaction_joints:
+        if model.joints[j].type == "driver":
+            continue  # effort_unique (below)
         name = model.joints[j].name
         val = bool(reaction_unique[name])
         if j in friction:
@@ -249,6 +277,17 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
                    unit="s", key=("stable_step", None)))
     out.append(redundancy_var(model))
     out += _along_outputs(model, reaction_unique, rank)
+    drivers = [c for c in model.joints if c.type == "driver"]
+    if drivers:
+        acting = [model.joints[j].name for j in model.friction_joints
+                  if not (model.joints[j].law.mu == 0 and not model.joints[j].law.mu_static)]
+        start = all(reaction_unique.get(c.name, True) for c in drivers) and \
+            all(reaction_unique.get(n, True) for n in acting)
+        out.append(_along_var("effort_unique", "Boolean", "every driver's effort is unique: its equation a direct "
+                              "summand of span(J) and no friction on a joint whose reaction is not unique",
+                              bool(start), len(model.joints)))
+    out += [Var(u.name, "Real", "input", "continuous", "", f"input: {INPUT_TEXT[u.type]}", unit=u.unit,
+                start=float(u.start), key=("input", n)) for n, u in enumerate(model.inputs)]
     return out + _interface_variables(model, out, states, fmi3)
 
 
@@ -297,6 +336,8 @@ def _reaction_arrays(model, table_so_far: list[Var]) -> list[Var]:
     out = []
     for j in model.reaction_joints:
         c = model.joints[j]
+        if c.type == "driver":
+            continue  # a scalar effort
         units = {dict(TYPES[c.type].reaction).get(comp, "N") for comp in c.components}
         out.append(Var(f"{c.name}.reaction", "Real", "output", "continuous", "calculated",
                        f"reaction of joint {c.name}: the components {', '.join(c.components)} (the scalar outputs "

@@ -51,7 +51,7 @@ static fmi2Status set_values(fmi2Component comp, const char *fn, const fmi2Value
     if (!c || !fmu_allowed(c, fn, FMU_WRITABLE(c)) || !fmu_check_refs(c, fn, vr, nvr, values, type)) return fmi2Error;
     for (size_t i = 0; i < nvr; i++) {
         const fmu_var *v = &c->fm.var[vr[i]];
-        if (v->key != K_PARAM) {
+        if (v->key != K_PARAM && v->key != K_INPUT) {
             fmu_log(c, fmi2Error, "%s: value reference %u (%s) is %s (%s): it cannot be set", fn, vr[i], v->name,
                     fmu_causality_names[v->causality], fmu_variability_names[v->variability]);
             return fmi2Error;
@@ -62,6 +62,10 @@ static fmi2Status set_values(fmi2Component comp, const char *fn, const fmi2Value
         double x = type == T_REAL ? ((const fmi2Real *)values)[i] : type == T_STRING ? 0.0
                                                                    : (double)((const fmi2Integer *)values)[i];
         if (type == T_BOOLEAN) x = x != 0.0;
+        if (c->fm.var[vr[i]].key == K_INPUT) {
+            if (!fmu_set_input(c, fn, k, x, 0)) return fmi2Error;
+            continue;
+        }
         if (!fmu_set_param(c, fn, k, x, type == T_STRING ? ((const fmi2String *)values)[i] : NULL)) return fmi2Error;
     }
     return fmi2OK;
@@ -137,10 +141,26 @@ FMU_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2Va
     (void)vUnknown, (void)nUnknown, (void)vKnown, (void)nKnown, (void)dvKnown, (void)dvUnknown;
     return unsupported(c, "fmi2GetDirectionalDerivative");
 }
-FMU_EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+/* Co-simulation: the first derivatives of inputs, for the next communication step (the input is
+ * linear within it: canInterpolateInputs); order 1 only (maxInputDerivativeOrder is not raised). */
+FMU_EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
                                                   const fmi2Integer order[], const fmi2Real value[]) {
-    (void)vr, (void)nvr, (void)order, (void)value;
-    return unsupported(c, "fmi2SetRealInputDerivatives");
+    const char *fn = "fmi2SetRealInputDerivatives";
+    fmu_inst *c = comp;
+    if (!c || !fmu_allowed(c, fn, FMU_WRITABLE(c)) || !fmu_check_refs(c, fn, vr, nvr, value, T_REAL)) return fmi2Error;
+    if (c->me) return fmu_log(c, fmi2Error, "%s: a co-simulation call (this instance is for Model Exchange)", fn), fmi2Error;
+    if (nvr && !order) return fmu_log(c, fmi2Error, "%s: order is NULL but nvr = %zu", fn, nvr), fmi2Error;
+    for (size_t i = 0; i < nvr; i++) {
+        const fmu_var *v = &c->fm.var[vr[i]];
+        if (v->key != K_INPUT)
+            return fmu_log(c, fmi2Error, "%s: value reference %u (%s) is no input", fn, vr[i], v->name), fmi2Error;
+        if (order[i] != 1)
+            return fmu_log(c, fmi2Error, "%s: %s: derivative order %d (this FMU takes first derivatives: the input "
+                           "linear within the step)", fn, v->name, order[i]), fmi2Error;
+    }
+    for (size_t i = 0; i < nvr; i++)
+        if (!fmu_set_input(c, fn, c->fm.var[vr[i]].arg, value[i], 1)) return fmi2Error;
+    return fmi2OK;
 }
 FMU_EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                                    const fmi2Integer order[], fmi2Real value[]) {

@@ -65,7 +65,7 @@ static fmi3Status set_values(fmi3Instance instance, const char *fn, const fmi3Va
         return fmi3Error;
     for (size_t i = 0; i < nvr; i++) {
         const fmu_var *v = &c->fm.var[vr[i]];
-        if (v->key != K_PARAM) {
+        if (v->key != K_PARAM && v->key != K_INPUT) {
             fmu_log(c, fmi2Error, "%s: value reference %u (%s) is %s (%s): it cannot be set", fn, vr[i], v->name,
                     fmu_causality_names[v->causality], fmu_variability_names[v->variability]);
             return fmi3Error;
@@ -77,6 +77,10 @@ static fmi3Status set_values(fmi3Instance instance, const char *fn, const fmi3Va
                    : type == T_INTEGER ? (double)((const fmi3Int32 *)values)[i]
                    : type == T_BOOLEAN ? (double)((const fmi3Boolean *)values)[i]
                                        : 0.0;
+        if (c->fm.var[vr[i]].key == K_INPUT) {
+            if (!fmu_set_input(c, fn, k, x, 0)) return fmi3Error;
+            continue;
+        }
         if (!fmu_set_param(c, fn, k, x, type == T_STRING ? ((const fmi3String *)values)[i] : NULL)) return fmi3Error;
     }
     return fmi3OK;

@@ -64,12 +64,14 @@ typedef struct {
 
 enum { T_REAL = 0, T_INTEGER = 1, T_BOOLEAN = 2, T_STRING = 3 };
 enum { K_OUTPUT = 0, K_CONSTANT = 1, K_PARAM = 2, K_STABLE_STEP = 3, K_STATE = 4, K_DERIVATIVE = 5, K_ARRAY = 6, K_TIME = 7 };
-enum { K_ALONG = 8 }; /* arg 0 rank, 1 motion_unique, 2 + j joint j's reaction_unique (fmu_along_value) */
+enum { K_ALONG = 8 }; /* arg 0 rank, 1 motion_unique, 2 + j joint j's reaction_unique, 2 + nj effort_unique */
+enum { K_INPUT = 9 }; /* arg: the input's slot (ovk_model.nu) */
 /* K_STATE, K_DERIVATIVE: entry arg of y = [q, h] and of its derivative (Model Exchange's continuous
  * states); K_ARRAY (FMI 3.0): the consecutive reaction outputs of one joint from output arg on; K_TIME (FMI 3.0):
  * the independent variable time. */
 enum { V_CONTINUOUS = 0, V_CONSTANT = 1, V_FIXED = 2, V_TUNABLE = 3, V_DISCRETE = 4 };
-enum { O_POSITION = 1, O_VELOCITY = 2, O_REACTION = 5, O_FRICTION = 6, O_ENERGY = 7 }; /* energy: a = 0-3 */
+enum { O_POSITION = 1, O_VELOCITY = 2, O_REACTION = 5, O_FRICTION = 6, O_ENERGY = 7, O_SENSOR = 8 }; /* energy: a = 0-3;
+                                                                                      * sensor: joint a, entry b */
 enum { P_MU = 1, P_VREG = 2, P_MU_STATIC = 3, P_VSTRIBECK = 4, P_METHOD = 10, P_TOLERANCE = 11, P_STEP = 12,
        P_MAX_STEP = 13, P_BAUMGARTE = 14, P_FRICTION_TOL = 15, P_FRICTION_MAX_ITER = 16, P_KERNEL = 17,
        P_MAX_INTERNAL_STEPS = 18, P_MAX_WALL_TIME = 19, P_REDUNDANCY = 20 };
@@ -91,11 +93,11 @@ typedef struct {
     size_t size;
     const char *guid;
     ovk_model M;
-    void *arrays[35]; /* the 25 arrays of ovk_model, then the 10 of its redundancy block */
+    void *arrays[38]; /* the 25 arrays of ovk_model, the 10 of its redundancy block, the 3 of its inputs */
     int nalt;         /* redundancy: the models of the parameter's other methods */
     int alt_code[2];  /* their OVK_ELIMINATE, OVK_MIN_NORM or OVK_COMPLIANT */
     ovk_model alt[2];
-    void *alt_arrays[2][35];
+    void *alt_arrays[2][38];
     int n, nh, ny, quaternion;
     double start_time, stop_time, *y0;
     int me;               /* Model Exchange offered: the variables have the continuous states */
@@ -131,6 +133,7 @@ typedef struct fmu_saved {
     double *pval;       /* nparam */
     int *pset;          /* nparam: set by the host */
     double *outputs, *y; /* nout, ny */
+    double *uval;       /* 2 nu: the inputs as the host set them (fmu_inst.uval) */
     unsigned char *sim; /* the run's state bytes */
     size_t sim_size;
 } fmu_saved;
@@ -161,6 +164,9 @@ typedef struct {
     fmu_saved *states;
     char msg[FMU_MSG];
     int events_logged;  /* events of the run already logged (fmu_run.c) */
+    double *uval;       /* 2 nu + 1: the inputs' values and first derivatives as the host set them (the
+                         * derivatives for the next communication step only) */
+    int u_dirty;        /* uval changed since the run last took them (fmu_apply_inputs) */
 } fmu_inst;
 
 FMU_HIDDEN void fmu_log(fmu_inst *c, fmi2Status status, const char *fmt, ...)
@@ -198,12 +204,14 @@ FMU_HIDDEN fmi2Status fmu_setup(fmu_inst *c, const char *fn, int toleranceDefine
 FMU_HIDDEN fmi2Status fmu_exit_init(fmu_inst *c, const char *fn);
 FMU_HIDDEN fmi2Status fmu_do_step(fmu_inst *c, const char *fn, double t, double h);
 /* fmu_vars.c */
-FMU_HIDDEN extern const char *fmu_causality_names[4];
+FMU_HIDDEN extern const char *fmu_causality_names[5];
 FMU_HIDDEN extern const char *fmu_variability_names[5];
 FMU_HIDDEN int fmu_check_refs(fmu_inst *c, const char *fn, const fmi2ValueReference vr[], size_t nvr,
                               const void *values, int type);
 FMU_HIDDEN int fmu_value_of(fmu_inst *c, const char *fn, const fmu_var *v, double *out);
 FMU_HIDDEN int fmu_set_param(fmu_inst *c, const char *fn, int k, double x, const char *s);
+FMU_HIDDEN int fmu_set_input(fmu_inst *c, const char *fn, int k, double x, int order);
+FMU_HIDDEN int fmu_apply_inputs(fmu_inst *c);
 /* fmu_state.c */
 /* fmu_me.c: Model Exchange (and the derivative variables in co-simulation) */
 FMU_HIDDEN int fmu_me_eval(fmu_inst *c);

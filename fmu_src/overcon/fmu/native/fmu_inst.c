@@ -137,6 +137,11 @@ void fmu_init_fields(fmu_inst *c) {
     c->stable_step = 0.0;
     c->dx_valid = 0;
     memset(c->outputs, 0, (size_t)(fm->nout ? fm->nout : 1) * sizeof(double));
+    for (int k = 0; k < fm->M.nu; k++) { /* the inputs' start values, no derivatives */
+        c->uval[k] = fm->M.up[OVK_NUP * k + 7];
+        c->uval[fm->M.nu + k] = 0.0;
+    }
+    c->u_dirty = 1;
 }
 
 void fmu_free_inst(fmu_inst *c) {
@@ -147,7 +152,7 @@ void fmu_free_inst(fmu_inst *c) {
     }
     ovk_sim_free(c->sim);
     free(c->jlawp), free(c->pval), free(c->pset), free(c->outputs), free(c->y), free(c->reac), free(c->fric), free(c->dx);
-    free(c->strings), free(c->along);
+    free(c->strings), free(c->along), free(c->uval);
     fmu_model_free(&c->fm);
     free(c->name);
     free(c);
@@ -167,8 +172,9 @@ static int alloc_arrays(fmu_inst *c) {
     c->dx = calloc((size_t)fm->ny + 1, sizeof(double));
     c->strings = calloc((size_t)fm->nvar + 1, sizeof(char *));
     c->along = calloc(nj, sizeof(int));
+    c->uval = calloc(2 * (size_t)fm->M.nu + 1, sizeof(double));
     return c->jlawp && c->pval && c->pset && c->outputs && c->y && c->reac && c->fric && c->dx && c->strings &&
-           c->along;
+           c->along && c->uval;
 }
 
 /* The instance named tmp->name with tmp's logger, its model read from the resources folder

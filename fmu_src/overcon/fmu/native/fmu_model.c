@@ -11,7 +11,7 @@
 #include "fmu_common.h"
 
 #define MAX_ITEMS (1 << 24)
-#define FMU_FORMAT 4 /* overcon.fmu.cmodel.FORMAT */
+#define FMU_FORMAT 5 /* overcon.fmu.cmodel.FORMAT */
 
 typedef struct {
     const unsigned char *p, *end;
@@ -109,6 +109,16 @@ static void read_packed(reader *r, ovk_model *M, void **arrays) {
     }
     read_redundancy(r, M, arrays);
     M->formulation = rd_int(r); /* OVK_FORM_*: checked by the core (ovk_make_data) */
+    M->nu = rd_int(r); /* the inputs: their sizes here, their contents by the core (ovk_make_data) */
+    if (M->nu < 0 || M->nu > MAX_ITEMS) r->bad = 1;
+    const void **ufields[3] = {(const void **)&M->ukind, (const void **)&M->uidx, (const void **)&M->up};
+    const long long want_u[3] = {M->nu, 3LL * M->nu, (long long)OVK_NUP * M->nu};
+    for (int k = 0; k < 3 && !r->bad; k++) {
+        int count = 0;
+        arrays[35 + k] = rd_array(r, k == 2 ? sizeof(double) : sizeof(int), &count);
+        *ufields[k] = arrays[35 + k];
+        if (!r->bad && !(count == want_u[k] || (want_u[k] == 0 && count == 1))) r->bad = 1;
+    }
 }
 
 /* The packed models of the redundancy parameter's other methods (at most two). */
@@ -120,7 +130,8 @@ static void read_alternatives(reader *r, fmu_model *fm) {
         read_packed(r, &fm->alt[a], fm->alt_arrays[a]);
         const ovk_model *A = &fm->alt[a], *M = &fm->M;
         if (fm->alt_code[a] < OVK_ELIMINATE || fm->alt_code[a] > OVK_COMPLIANT || A->dim != M->dim || A->nb != M->nb ||
-            A->nq_b != M->nq_b || A->nh_b != M->nh_b || A->m != M->m || A->nj != M->nj || A->nl != M->nl)
+            A->nq_b != M->nq_b || A->nh_b != M->nh_b || A->m != M->m || A->nj != M->nj || A->nl != M->nl ||
+            A->nu != M->nu)
             r->bad = 1; /* another mechanism than the scene's */
     }
 }
@@ -202,15 +213,18 @@ static int check_tables(const fmu_model *fm, char *err, size_t errsize) {
                  (o->kind == O_VELOCITY && o->a >= 0 && o->a < fm->nh) ||
                  (o->kind == O_REACTION && o->a >= 0 && o->a < fm->M.nj && o->b >= 0 && o->b < OVK_NREAC) ||
                  (o->kind == O_FRICTION && o->a >= 0 && o->a < fm->M.nj) ||
-                 (o->kind == O_ENERGY && o->a >= 0 && o->a < 4);
+                 (o->kind == O_ENERGY && o->a >= 0 && o->a < 4) ||
+                 (o->kind == O_SENSOR && o->a >= 0 && o->a < fm->M.nj && o->b >= 0 && o->b < 4);
         if (!ok) return snprintf(err, errsize, "output %d: kind %d, %d, %d out of range", k, o->kind, o->a, o->b), 0;
     }
     for (int k = 0; k < fm->nvar; k++) {
         const fmu_var *v = &fm->var[k];
         int lim = v->key == K_OUTPUT || v->key == K_ARRAY ? fm->nout : v->key == K_PARAM ? fm->nparam
-                  : v->key == K_STATE || v->key == K_DERIVATIVE ? fm->ny : v->key == K_ALONG ? 2 + fm->M.nj : 2;
-        if (v->type < T_REAL || v->type > T_STRING || v->causality < 0 || v->causality > 3 || v->variability < 0 ||
-            v->variability > 4 || v->key < K_OUTPUT || v->key > K_ALONG || v->arg < 0 ||
+                  : v->key == K_STATE || v->key == K_DERIVATIVE ? fm->ny : v->key == K_ALONG ? 3 + fm->M.nj
+                  : v->key == K_INPUT ? fm->M.nu : 2;
+        if (v->type < T_REAL || v->type > T_STRING || v->causality < 0 || v->causality > 4 || v->variability < 0 ||
+            v->variability > 4 || v->key < K_OUTPUT || v->key > K_INPUT || v->arg < 0 ||
+            (v->key == K_INPUT && v->type != T_REAL) ||
             (v->key != K_STABLE_STEP && v->key != K_TIME && v->arg >= lim))
             return snprintf(err, errsize, "variable %d (%s): type %d, key %d, %d out of range", k, v->name, v->type,
                             v->key, v->arg), 0;
@@ -262,7 +276,7 @@ int fmu_model_read(const char *path, fmu_model *fm, char *err, size_t errsize) {
 }
 
 void fmu_model_free(fmu_model *fm) {
-    for (int k = 0; k < 35; k++) {
+    for (int k = 0; k < 38; k++) {
         free(fm->arrays[k]);
         for (int a = 0; a < 2; a++) free(fm->alt_arrays[a][k]);
     }

@@ -88,15 +88,25 @@ int fmu_derived_outputs(fmu_inst *c, double t, const double *y, const double *la
     const fmu_model *fm = &c->fm;
     int forces = 0, status = OVK_OK;
     double energy[4] = {0.0, 0.0, 0.0, 0.0};
-    for (int k = fm->nstate_out; k < fm->nout; k++) forces |= fm->out[k].kind != O_ENERGY;
+    for (int k = fm->nstate_out; k < fm->nout; k++) forces |= fm->out[k].kind == O_REACTION || fm->out[k].kind == O_FRICTION;
     if (fm->energy) status = ovk_sim_energy(c->sim, t, y, energy);
     if (!status && forces && !lam) status = ovk_sim_outputs(c->sim, t, y, c->reac, c->fric);
     if (!status && forces && lam && (status = ovk_outputs(&c->M, c->sim->d, y, lam, c->reac, c->fric)))
         snprintf(c->sim->msg, sizeof c->sim->msg, "%s", ovk_message(c->sim->d));
     if (status) return status;
+    double sensor[4] = {0.0, 0.0, 0.0, 0.0};
+    int sensed = -1;
     for (int k = fm->nstate_out; k < fm->nout; k++) {
         const fmu_out *o = &fm->out[k];
-        out[k] = o->kind == O_ENERGY     ? energy[o->a]
+        if (o->kind == O_SENSOR && o->a != sensed) { /* a joint's sensors, from q0 (core/inputs.c) */
+            if ((status = ovk_sensors(&c->M, c->sim->d, y, fm->y0, o->a, sensor))) {
+                snprintf(c->sim->msg, sizeof c->sim->msg, "%s", ovk_message(c->sim->d));
+                return status;
+            }
+            sensed = o->a;
+        }
+        out[k] = o->kind == O_SENSOR     ? sensor[o->b]
+                 : o->kind == O_ENERGY   ? energy[o->a]
                  : o->kind == O_REACTION ? c->reac[o->a * OVK_NREAC + o->b]
                                          : c->fric[o->a];
     }
@@ -159,6 +169,8 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
             return 0;
         }
         c->sim_valid = 1;
+        c->u_dirty = 1; /* the inputs as set so far (their start values otherwise) */
+        if (!fmu_apply_inputs(c)) return 0;
         c->events_logged = 0;
         c->dx_valid = 0;
         c->t = c->start_time;
@@ -183,6 +195,7 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
  * skipped them, and in every later step. 0 with the reason in c->msg on failure. */
 int fmu_read_derived(fmu_inst *c) {
     c->derived_read = 1;
+    if (!fmu_apply_inputs(c)) return 0;
     if (!c->derived_stale) return 1;
     int status = fmu_derived_outputs(c, c->t, c->y, NULL, c->outputs);
     if (status || !fmu_all_finite(c->outputs, c->fm.nout)) {
@@ -251,7 +264,8 @@ static int step_outputs(fmu_inst *c, double t_new, const double *y, double *out)
 int fmu_along_value(fmu_inst *c, int arg, double *out) {
     if (!c->sim_valid && !fmu_ensure_sim(c, 0)) return 0;
     int nj = c->fm.M.nj, rank = 0, motion = ovk_sim_uniqueness(c->sim, &rank, c->along);
-    *out = arg == 0 ? rank : arg == 1 ? motion : arg - 2 < nj ? c->along[arg - 2] : 0;
+    *out = arg == 0 ? rank : arg == 1 ? motion : arg - 2 < nj ? c->along[arg - 2]
+           : ovk_sim_effort_unique(c->sim) == 1; /* 2 + nj: effort_unique */
     return 1;
 }
 
@@ -387,7 +401,7 @@ fmi2Status fmu_do_step(fmu_inst *c, const char *fn, double currentCommunicationP
     double *y = malloc(((size_t)fm->ny + (size_t)fm->nout + 1) * sizeof(double));
     int ok = y != NULL;
     if (!ok) snprintf(c->msg, sizeof c->msg, "MemoryError: out of memory");
-    ok = ok && step(c, currentCommunicationPoint, communicationStepSize, y);
+    ok = ok && fmu_apply_inputs(c) && step(c, currentCommunicationPoint, communicationStepSize, y);
     double *out = y ? y + fm->ny : NULL;
     ok = ok && step_outputs(c, t_new, y, out);
     if (!ok) {
@@ -409,6 +423,10 @@ fmi2Status fmu_do_step(fmu_inst *c, const char *fn, double currentCommunicationP
     c->dx_valid = 0;
     c->have_outputs = c->has_y = 1;
     c->derived_stale = !c->derived_read && fm->nout > fm->nstate_out;
+    if (fm->M.nu) { /* the derivatives were for this step: the next one holds the values unless set again */
+        memset(c->uval + fm->M.nu, 0, (size_t)fm->M.nu * sizeof(double));
+        c->u_dirty = 1;
+    }
     free(y);
     return fmi2OK;
 }

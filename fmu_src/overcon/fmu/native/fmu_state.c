@@ -5,6 +5,7 @@
  * scalars, the arrays and the run's bytes, in native byte order (a state is restored on the
  * machine and build that saved it). A state of another FMU, or bytes that are not a state, are
  * refused with the reason. */
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -16,7 +17,7 @@
 
 static void free_saved(fmu_saved *s) {
     if (!s) return;
-    free(s->pval), free(s->pset), free(s->outputs), free(s->y), free(s->sim), free(s);
+    free(s->pval), free(s->pset), free(s->outputs), free(s->y), free(s->sim), free(s->uval), free(s);
 }
 
 static fmu_saved *new_saved(const fmu_inst *c, size_t sim_size) {
@@ -29,7 +30,8 @@ static fmu_saved *new_saved(const fmu_inst *c, size_t sim_size) {
     s->y = calloc((size_t)fm->ny + 1, sizeof(double));
     s->sim = calloc(sim_size ? sim_size : 1, 1);
     s->sim_size = sim_size;
-    if (!s->pval || !s->pset || !s->outputs || !s->y || !s->sim) {
+    s->uval = calloc(2 * (size_t)fm->M.nu + 1, sizeof(double)); /* the inputs as the host set them */
+    if (!s->pval || !s->pset || !s->outputs || !s->y || !s->sim || !s->uval) {
         free_saved(s);
         return NULL;
     }
@@ -55,6 +57,7 @@ static void snapshot(fmu_inst *c, fmu_saved *s) {
     memcpy(s->outputs, c->outputs, (size_t)fm->nout * sizeof(double));
     memcpy(s->y, c->y, (size_t)fm->ny * sizeof(double));
     if (s->has_sim) ovk_sim_get_state(c->sim, s->sim, s->sim_size);
+    memcpy(s->uval, c->uval, 2 * (size_t)fm->M.nu * sizeof(double)); /* inputs */
 }
 
 fmi2Status fmu_state_get(fmu_inst *c, const char *fn, fmi2FMUstate *state) {
@@ -82,6 +85,11 @@ fmi2Status fmu_state_get(fmu_inst *c, const char *fn, fmi2FMUstate *state) {
  * parameters and given the state's bytes. */
 static fmi2Status restore(fmu_inst *c, const char *fn, const fmu_saved *s) {
     const fmu_model *fm = &c->fm;
+    for (int k = 0; k < 2 * fm->M.nu; k++) /* inputs: finite, as fmu_set_input takes them */
+        if (!isfinite(s->uval[k])) return fmu_log(c, fmi2Error, "%s: input entry %d of the state is not finite", fn, k),
+                                          fmi2Error;
+    memcpy(c->uval, s->uval, 2 * (size_t)fm->M.nu * sizeof(double));
+    c->u_dirty = 1;
     memcpy(c->pval, s->pval, (size_t)fm->nparam * sizeof(double));
     memcpy(c->pset, s->pset, (size_t)fm->nparam * sizeof(int));
     c->start_time = s->start_time, c->tol_source = s->tol_source;
@@ -155,6 +163,7 @@ static void io_saved(codec *k, const fmu_inst *c, fmu_saved *s) {
     io(k, s->pset, (size_t)fm->nparam * sizeof(int));
     io(k, s->outputs, (size_t)fm->nout * sizeof(double));
     io(k, s->y, (size_t)fm->ny * sizeof(double));
+    if (fm->M.nu) io(k, s->uval, 2 * (size_t)fm->M.nu * sizeof(double)); /* inputs */
     io(k, &sim_size, sizeof sim_size);
     if (k->r && !k->bad) {
         s->mode = ints[0], s->tol_source = ints[1], s->have_outputs = ints[2], s->derived_stale = ints[3];

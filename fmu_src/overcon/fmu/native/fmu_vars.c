@@ -10,7 +10,7 @@
 #include "fmu_common.h"
 
 static const char *type_names[4] = {"Real", "Integer", "Boolean", "String"};
-const char *fmu_causality_names[4] = {"output", "parameter", "local", "independent"};
+const char *fmu_causality_names[5] = {"output", "parameter", "local", "independent", "input"};
 const char *fmu_variability_names[5] = {"continuous", "constant", "fixed", "tunable", "discrete"};
 
 /* The references checked: each exists and has type `type`; 0 with the refusal logged. */
@@ -53,11 +53,49 @@ int fmu_value_of(fmu_inst *c, const char *fn, const fmu_var *v, double *out) {
         *out = c->t;
     } else if (v->key == K_STABLE_STEP) {
         *out = c->stable_step;
+    } else if (v->key == K_INPUT) {
+        *out = c->uval[v->arg];
     } else if (v->key == K_ALONG) {
         if (!fmu_along_value(c, v->arg, out)) return fmu_log(c, fmi2Error, "%s: %s", fn, c->msg), 0;
     } else {
         *out = c->pval[v->arg];
     }
+    return 1;
+}
+
+/* Input k set to x (order 0) or its first derivative (order 1, co-simulation: over the next
+ * communication step); the run takes them when it next needs them (fmu_apply_inputs). 0 with the
+ * refusal logged: a value that is not finite. */
+int fmu_set_input(fmu_inst *c, const char *fn, int k, double x, int order) {
+    int nu = c->fm.M.nu;
+    if (!isfinite(x)) {
+        char shown[40];
+        fmu_repr(x, shown, sizeof shown);
+        for (int v = 0; v < c->fm.nvar; v++)
+            if (c->fm.var[v].key == K_INPUT && c->fm.var[v].arg == k)
+                return fmu_log(c, fmi2Error, "%s: input %s = %s refused: must be finite", fn, c->fm.var[v].name,
+                               shown), 0;
+        return fmu_log(c, fmi2Error, "%s: input %d = %s refused: must be finite", fn, k, shown), 0;
+    }
+    c->uval[order ? nu + k : k] = x;
+    c->u_dirty = 1;
+    if (c->have_outputs) c->derived_stale = c->fm.nout > c->fm.nstate_out; /* outputs that depend on them */
+    c->dx_valid = 0;
+    return 1;
+}
+
+/* The inputs as the host set them given to the run (Model Exchange: at the current time, held;
+ * co-simulation: from the current communication point, with the derivatives set for the step).
+ * 0 with the reason in c->msg. */
+int fmu_apply_inputs(fmu_inst *c) {
+    int nu = c->fm.M.nu;
+    if (!nu || !c->u_dirty || !c->sim) return 1;
+    int status = c->me ? ovk_set_inputs(&c->M, c->sim->d, c->uval, NULL, c->t)
+                       : ovk_sim_set_inputs(c->sim, c->uval, c->uval + nu);
+    if (status)
+        return snprintf(c->msg, sizeof c->msg, "SimulationError: %s", c->me ? ovk_message(c->sim->d)
+                                                                             : ovk_sim_message(c->sim)), 0;
+    c->u_dirty = 0;
     return 1;
 }
 

@@ -1,5 +1,7 @@
-"""Command line: ``overcon check | simulate | figures | build | run | compare | reproduce | sweep | converge``
-(argument parsing only; the work is done by the library).
+"""Command line: ``overcon check | simulate | figures | build | run | compare | reproduce | sweep |
+converge | regress | schema | draw | animate``. This module parses the arguments and reports; the
+work is done by the library. :func:`build_parser` is the one argument parser (the documentation's
+CLI reference is generated from it).
 
 Exit codes: 0 success (``check``: no friction on a non-unique reaction); 1 ``check`` found
 friction on a joint whose reaction is not unique (or the three tests disagree); 2 invalid input
@@ -44,9 +46,22 @@ def _scene_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--stop-time", type=float, metavar="T", help="stop time (s)")
 
 
+DESCRIPTION = ("Overconstrained rigid mechanisms with Coulomb joint friction: pre-check whether the simulated "
+               "motion is unique (Fraczek & Wojtyra 2011), simulate it, export it as an FMI FMU, and compare the "
+               "motions a simulator's choice of eliminated equations gives.")
+EPILOG = ("Start with: overcon check FILE. Exit codes: 0 ok; 1 a verdict to look at (friction on a non-unique "
+          "reaction, a mismatch, a regression); 2 bad input; 3 a simulation failed; 130 interrupted. "
+          "overcon COMMAND --help shows a command's flags; the documentation is in docs/ (README.md).")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="overcon", description=__doc__.split("\n\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    """The argument parser of the ``overcon`` command (every sub-command and flag)."""
+    from . import __version__
+
+    parser = _Parser(prog="overcon", description=DESCRIPTION, epilog=EPILOG)
+    parser.add_argument("--version", action="version", version=f"overcon {__version__}",
+                        help="print the version of overcon and exit")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
     c = sub.add_parser("check", help="reaction-uniqueness pre-check of a mechanism or scene")
     _scene_flags(c)
     c.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -164,6 +179,7 @@ def _tooling_parsers(sub) -> None:
                    help="FMI version of the paper scenes' FMUs: 2 (default) or 3 (FMI 3.0, the C runtime)")
     _sweep_parser(sub)
     _converge_parser(sub)
+    _regress_parser(sub)
 
 
 def _converge_parser(sub) -> None:
@@ -180,6 +196,60 @@ def _converge_parser(sub) -> None:
                    help="position accuracy (m) for the 'stiffness enough' answer (default 1e-6)")
     v.add_argument("--stop-time", type=_number, metavar="T", help="stop time (s; default: the scene's)")
     v.add_argument("--out", required=True, metavar="DIR", help="directory for converge.csv and converge.png")
+
+
+def _regress_parser(sub) -> None:
+    """``regress``: scene FMUs against committed baselines (overcon.tooling.regress)."""
+    from .tooling.regress import BASELINE_STEP, DEFAULT_BASELINES, DEFAULT_OUT, DEFAULT_TOLERANCES, TIERS
+
+    g = sub.add_parser("regress", help="regression check: build every scene of a directory as an FMU, run it and "
+                                       "compare every output with its committed baseline (exit 1 on a difference)",
+                       description="Build, validate (fmpy), run and compare every scene of DIR with its baseline "
+                                   "<baselines>/<scene>_ref.csv; --regenerate writes the baselines instead.",
+                       epilog="Exit codes: 0 every scene matches; 1 a regression (scene, output, difference and "
+                              "tolerance named); 2 bad input or a missing baseline (with the command that creates it).")
+    g.add_argument("dir", nargs="?", default="mechanisms", metavar="DIR",
+                   help="directory of the scene files, searched recursively (default: mechanisms)")
+    g.add_argument("--baselines", default=str(DEFAULT_BASELINES), metavar="DIR",
+                   help=f"directory of the baselines <scene>_ref.csv/.opt and provenance.json (default: {DEFAULT_BASELINES})")
+    g.add_argument("--tolerances", default=str(DEFAULT_TOLERANCES), metavar="FILE",
+                   help=f"tolerance table (default: {DEFAULT_TOLERANCES} if it exists, else the package's per-unit "
+                        "defaults)")
+    g.add_argument("--scenes", nargs="+", metavar="NAME", help="scene names or shell globs (default: every scene)")
+    g.add_argument("--out", default=str(DEFAULT_OUT), metavar="DIR",
+                   help=f"work directory: FMUs, result CSVs, report.md (default: {DEFAULT_OUT})")
+    g.add_argument("--junit", metavar="FILE", help="also write the result as JUnit XML, one test case per scene")
+    g.add_argument("--jobs", type=_jobs, metavar="N", help="FMUs run in parallel processes (default: CPU count)")
+    g.add_argument("--tier", choices=TIERS, help="force a tolerance tier (default: same_platform where the "
+                                                 "platform fingerprint equals the baseline's, else cross_platform)")
+    g.add_argument("--regenerate", action="store_true",
+                   help="write the baselines instead of checking them (deliberately, by hand; never in CI)")
+    g.add_argument("--stop-time", type=_positive, metavar="T",
+                   help="with --regenerate: stop time of the new baselines (default: the old one, else the FMU's)")
+    g.add_argument("--step", type=_positive, metavar="S",
+                   help=f"with --regenerate: output interval (default: the old one, else {BASELINE_STEP} s)")
+    g.add_argument("--fingerprint", action="store_true", help="print this platform's fingerprint (JSON) and exit")
+
+
+def cmd_regress(args) -> int:
+    from .tooling import regress as rg
+
+    if args.fingerprint:
+        fp = rg.platform_fingerprint()
+        print(json.dumps({"id": rg.fingerprint_id(fp), **fp}, indent=1))
+        return EXIT_OK
+    if args.regenerate:
+        if args.junit:
+            return _input_error("--junit: only for the check (--regenerate writes baselines, it checks nothing)")
+        return rg.regenerate(args.scenes, mechanisms=args.dir, baselines=args.baselines, out=args.out,
+                             jobs=args.jobs, stop_time=args.stop_time, step=args.step).code
+    if args.stop_time is not None or args.step is not None:
+        return _input_error("--stop-time/--step only with --regenerate (the check runs on each baseline's grid)")
+    out = rg.regress(args.scenes, mechanisms=args.dir, baselines=args.baselines, tolerances=args.tolerances,
+                     out=args.out, jobs=args.jobs, tier=args.tier)
+    if args.junit:
+        print(f"regress: JUnit XML {rg.write_junit(out, args.junit)}")
+    return out.code
 
 
 def cmd_converge(args) -> int:
@@ -213,7 +283,7 @@ def _sweep_parser(sub) -> None:
     w = sub.add_parser("sweep", help="run a grid (or random samples) of FMU parameters on Dask and measure how much "
                                      "the eliminations of each scene group disagree (sweep.csv, sweep.png)")
     w.add_argument("inputs", nargs="*", metavar="SCENE_OR_FMU",
-                   help="scene files (*.toml, built to FMUs first), FMU files or directories of FMUs")
+                   help="scene files (TOML, built to FMUs first), FMU files or directories of FMUs")
     w.add_argument("--param", action="append", default=[], metavar="NAME=V1,V2,...|NAME=lo:hi:n",
                    help="an FMU parameter and its values (repeatable; full-factorial grid), e.g. joint1.mu=0:0.02:5")
     w.add_argument("--samples", type=_jobs, metavar="N",
@@ -563,7 +633,8 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     handler = {"check": cmd_check, "simulate": cmd_simulate, "figures": cmd_figures,
                "build": cmd_build, "run": cmd_run, "compare": cmd_compare,
-               "reproduce": cmd_reproduce, "sweep": cmd_sweep, "converge": cmd_converge}[args.command]
+               "reproduce": cmd_reproduce, "sweep": cmd_sweep, "converge": cmd_converge,
+               "regress": cmd_regress}[args.command]
     try:
         code = handler(args)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit

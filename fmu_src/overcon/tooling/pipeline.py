@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import InputError
+from ..figures import PAPER_GROUPS
 from ..verdict import LOCKSTEP_MIN_STEP, LOCKSTEP_STEP, LockstepGrid, lockstep_start_values
 from .compare import (Comparison, compare_group, compare_reference, failed_group, group_fmus, invalid_group,
                       order_groups, read_along, validate_group)
@@ -413,6 +414,25 @@ def _beyond(comparisons: list[Comparison], mech: Path, out_dir: Path, *, jobs: i
     return lines, where
 
 
+def paper_scenes(mech: Path) -> tuple[list[Path], list[Path]]:
+    """The scene files of ``mech`` (not its subdirectories) whose ``group`` is one of the paper's
+    (:data:`overcon.figures.PAPER_GROUPS`), and the other scene files. Mechanism files and files
+    that do not parse are neither (the build reports the latter when it reads them)."""
+    import tomllib
+
+    paper, others = [], []
+    for f in sorted(mech.glob("*.toml")):
+        try:
+            doc = tomllib.loads(f.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            paper.append(f)  # the build names what is wrong with it
+            continue
+        sc = doc.get("scene")
+        if isinstance(sc, dict):
+            (paper if sc.get("group") in PAPER_GROUPS else others).append(f)
+    return paper, others
+
+
 def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, stop_time=None,
               lockstep_step: float | None = LOCKSTEP_STEP, fmi: int = 2) -> ReproduceOutcome:
     """Build an FMU per scene of ``mechanisms`` (pre-check printed, non-unique scenes built too),
@@ -428,10 +448,14 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
     mech = Path(mechanisms)
     if not mech.is_dir():
         raise InputError(f"{mech}: no such directory (--mechanisms: the directory of the scene files)")
-    echo(f"== build: one FMU per scene of {mech} (pre-check first) -> {out_dir / 'fmus'}")
+    paper, others = paper_scenes(mech)
+    if others:
+        echo(f"reproduce: {len(others)} scene(s) of {mech} not of the paper's groups left out "
+             f"({', '.join(p.name for p in others)}): run your own scenes with overcon compare or overcon regress")
+    echo(f"== build: one FMU per scene of the paper in {mech} (pre-check first) -> {out_dir / 'fmus'}")
     version = {"runtime": "c", "fmi": 3} if fmi == 3 else {}
-    code, built = build_all([mech], out_dir / "fmus", allow_nonunique=True, refs=False, jobs=jobs, echo=echo,
-                            **version)
+    code, built = build_all(paper, out_dir / "fmus", allow_nonunique=True, refs=False, jobs=jobs, echo=echo,
+                            **version) if paper else (0, [])
     if code == EXIT_INPUT:
         raise InputError(f"{mech}: some scenes could not be built (see above)")
     fmus = [r.fmu for r in built if r.status == "built"]

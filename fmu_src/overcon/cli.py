@@ -180,6 +180,7 @@ def _tooling_parsers(sub) -> None:
     _sweep_parser(sub)
     _converge_parser(sub)
     _regress_parser(sub)
+    _schema_parser(sub)
 
 
 def _converge_parser(sub) -> None:
@@ -250,6 +251,32 @@ def cmd_regress(args) -> int:
     if args.junit:
         print(f"regress: JUnit XML {rg.write_junit(out, args.junit)}")
     return out.code
+
+
+def _schema_parser(sub) -> None:
+    """``schema``: the JSON Schema of the file formats (overcon.schema)."""
+    m = sub.add_parser("schema", help="print the JSON Schema of mechanism or scene files (for editors: taplo, "
+                                      "Even Better TOML)",
+                       description="Print the JSON Schema (draft-07) of a file format, generated from the rules "
+                                   "the validator uses. any: either file, told apart by its [scene] table.")
+    m.add_argument("kind", choices=("mechanism", "scene", "any"), help="which file format")
+    m.add_argument("--out", metavar="FILE", help="write the schema to FILE instead of printing it")
+
+
+def cmd_schema(args) -> int:
+    from .schema import text
+
+    doc = text(args.kind)
+    if args.out is None:
+        sys.stdout.write(doc)
+        return EXIT_OK
+    try:
+        with open(args.out, "w", encoding="utf-8") as f:
+            f.write(doc)
+    except OSError as exc:
+        return _input_error(f"--out {args.out}: {exc.strerror or exc}")
+    print(f"wrote {args.out}")
+    return EXIT_OK
 
 
 def cmd_converge(args) -> int:
@@ -634,7 +661,7 @@ def main(argv=None) -> int:
     handler = {"check": cmd_check, "simulate": cmd_simulate, "figures": cmd_figures,
                "build": cmd_build, "run": cmd_run, "compare": cmd_compare,
                "reproduce": cmd_reproduce, "sweep": cmd_sweep, "converge": cmd_converge,
-               "regress": cmd_regress}[args.command]
+               "regress": cmd_regress, "schema": cmd_schema}[args.command]
     try:
         code = handler(args)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit

@@ -15,7 +15,7 @@ LAYERS = (
     # 0: the vocabulary: data records and helpers that import nothing above them
     ("spec", ("overcon", "overcon.spec", "overcon.params", "overcon.argtypes", "overcon.kinematics",
               "overcon.friction_laws", "overcon.joints", "overcon.figures", "overcon.verdict", "overcon.plots")),
-    ("scene", ("overcon.scene", "overcon.schema")),
+    ("scene", ("overcon.scene", "overcon.schema", "overcon.draw")),
     ("model", ("overcon.model",)),
     ("core", ("overcon.kernel",)),
     ("simulate/analysis", ("overcon.analysis", "overcon.checks", "overcon.precheck", "overcon.simulate",

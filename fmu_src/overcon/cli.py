@@ -181,6 +181,7 @@ def _tooling_parsers(sub) -> None:
     _converge_parser(sub)
     _regress_parser(sub)
     _schema_parser(sub)
+    _draw_parsers(sub)
 
 
 def _converge_parser(sub) -> None:
@@ -261,6 +262,56 @@ def _schema_parser(sub) -> None:
                                    "the validator uses. any: either file, told apart by its [scene] table.")
     m.add_argument("kind", choices=("mechanism", "scene", "any"), help="which file format")
     m.add_argument("--out", metavar="FILE", help="write the schema to FILE instead of printing it")
+
+
+def _draw_parsers(sub) -> None:
+    """``draw`` and ``animate``: pictures of a mechanism and of a run (overcon.draw)."""
+    d = sub.add_parser("draw", help="draw a mechanism (bodies, joints with their axes, guides, ground, names) at "
+                                    "q0 or at a time of a run, as PNG or SVG",
+                       description="Draw the mechanism of a mechanism or scene file: planar as one view, spatial "
+                                   "as three orthographic views and an isometric one.")
+    d.add_argument("file", metavar="SCENE_OR_MECHANISM", help="mechanism or scene TOML file")
+    d.add_argument("--out", required=True, metavar="FILE.png|svg", help="picture to write")
+    d.add_argument("--csv", metavar="RUN.csv", help="a run of the scene (overcon simulate or run): draw it at --at")
+    d.add_argument("--at", type=_number, metavar="T", help="time (s) in the run: its output point nearest T "
+                                                           "(default: the first)")
+    d.add_argument("--dpi", type=_jobs, default=120, metavar="N", help="PNG resolution (default 120)")
+    a = sub.add_parser("animate", help="animate a run of a scene (GIF, or MP4 with ffmpeg)",
+                       description="Draw every frame of a run (at most --frames output points, evenly spread) "
+                                   "and write them as an animation.")
+    a.add_argument("csv", metavar="RUN.csv", help="the run's CSV (overcon simulate or overcon run)")
+    a.add_argument("--scene", required=True, metavar="S", help="the scene (or mechanism) file of the run")
+    a.add_argument("--out", required=True, metavar="FILE.gif|mp4", help="animation to write")
+    a.add_argument("--fps", type=_jobs, default=20, metavar="N", help="frames per second (default 20)")
+    a.add_argument("--frames", type=_jobs, default=120, metavar="N", help="at most N frames (default 120)")
+    a.add_argument("--dpi", type=_jobs, default=80, metavar="N", help="resolution (default 80)")
+
+
+def cmd_draw(args) -> int:
+    from .draw import DrawError, draw
+
+    try:
+        out, what = draw(args.file, args.out, csv_path=args.csv, at=args.at, dpi=args.dpi)
+    except DrawError as exc:
+        return _input_error(exc)
+    if "not in the run" in what:
+        print(f"overcon: warning: {what.split('(', 1)[1].rstrip(')')}", file=sys.stderr)
+    print(f"wrote {out} ({what})")
+    return EXIT_OK
+
+
+def cmd_animate(args) -> int:
+    from .draw import DrawError, animate
+
+    try:
+        out, frames, held = animate(args.csv, args.scene, args.out, fps=args.fps, max_frames=args.frames,
+                                    dpi=args.dpi)
+    except DrawError as exc:
+        return _input_error(exc)
+    if held:
+        print(f"overcon: warning: {', '.join(held)} not in the run: drawn at q0", file=sys.stderr)
+    print(f"wrote {out} ({frames} frames at {args.fps} per second)")
+    return EXIT_OK
 
 
 def cmd_schema(args) -> int:
@@ -595,8 +646,10 @@ def cmd_reproduce(args) -> int:
     from .tooling.pipeline import reproduce
 
     def go():
+        from .draw import draw
+
         out = reproduce(args.out, mechanisms=args.mechanisms, jobs=args.jobs, stop_time=args.stop_time,
-                        lockstep_step=_lockstep(args), fmi=args.fmi)
+                        lockstep_step=_lockstep(args), fmi=args.fmi, draw=lambda m, png: draw(m, png, dpi=90))
         failed = [c for c in out.comparisons if c.failure is not None]
         n_bad = sum(not c.matches for c in out.comparisons) - len(failed)
         print(f"\n{len(out.comparisons)} groups compared, "
@@ -661,7 +714,7 @@ def main(argv=None) -> int:
     handler = {"check": cmd_check, "simulate": cmd_simulate, "figures": cmd_figures,
                "build": cmd_build, "run": cmd_run, "compare": cmd_compare,
                "reproduce": cmd_reproduce, "sweep": cmd_sweep, "converge": cmd_converge,
-               "regress": cmd_regress, "schema": cmd_schema}[args.command]
+               "regress": cmd_regress, "schema": cmd_schema, "draw": cmd_draw, "animate": cmd_animate}[args.command]
     try:
         code = handler(args)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit

@@ -433,13 +433,41 @@ def paper_scenes(mech: Path) -> tuple[list[Path], list[Path]]:
     return paper, others
 
 
+def _drawings(paper: list[Path], out_dir: Path, draw, echo) -> list[str]:
+    """Report lines showing each paper mechanism's drawing, made by ``draw(mechanism file, png)``
+    (overcon.draw.draw, handed in by the command line: the tooling reads no scene itself); the
+    mechanism files are those the paper scenes name (their [scene] mechanism key)."""
+    import tomllib
+
+    if draw is None:
+        return []
+    mechs: dict[Path, None] = {}
+    for f in paper:
+        try:
+            name = tomllib.loads(f.read_text(encoding="utf-8"))["scene"]["mechanism"]
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, KeyError, TypeError):
+            continue  # the build has reported this scene
+        if isinstance(name, str):
+            mechs[(f.parent / name).resolve()] = None
+    lines = ["## The mechanisms", ""] if mechs else []
+    for m in mechs:
+        png = out_dir / "mechanisms" / f"{m.stem}.png"
+        png.parent.mkdir(parents=True, exist_ok=True)
+        draw(m, png)
+        echo(f"drawing: {png}")
+        lines += [f"![{m.stem} at q0](mechanisms/{png.name})", ""]
+    return lines
+
+
 def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, stop_time=None,
-              lockstep_step: float | None = LOCKSTEP_STEP, fmi: int = 2) -> ReproduceOutcome:
+              lockstep_step: float | None = LOCKSTEP_STEP, fmi: int = 2, draw=None) -> ReproduceOutcome:
     """Build an FMU per scene of ``mechanisms`` (pre-check printed, non-unique scenes built too),
     run them with fmpy (``jobs`` processes), compare every group, write ``out_dir/report.md`` with
     the verdict table, the paper's figures and per-group details and plots. ``fmi`` 3: the FMUs
     are FMI 3.0 (C runtime, co-simulation and Model Exchange, run through co-simulation); the
-    compliant scenes beyond the paper stay FMI 2.0 (the C runtime does not cover compliant joints)."""
+    compliant scenes beyond the paper stay FMI 2.0 (the C runtime does not cover compliant joints).
+    Only the scenes of the paper's groups are taken (:func:`paper_scenes`); ``draw``, when given,
+    draws each paper mechanism into ``out_dir/mechanisms/`` for the report (:func:`_drawings`)."""
     from ..fmu.build import EXIT_INPUT, build_all
 
     t0 = time.perf_counter()
@@ -502,6 +530,7 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
         f"(build {t_build:.1f} s, simulations {t_run:.1f} s wall / {seconds['simulation_sum']:.1f} s summed, "
         f"plots {t_plot:.1f} s); {platform.python_implementation()} {platform.python_version()}.",
     ]
+    intro += [""] + _drawings(paper, out_dir, draw, echo)
     report = out_dir / "report.md"
     report.write_text(markdown(comparisons, out_dir, title="overcon reproduce: uniqueness of the simulated motion",
                                intro=intro, figures=figures, plots=plots, beyond=beyond), encoding="utf-8")

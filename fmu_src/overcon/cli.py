@@ -484,9 +484,14 @@ def cmd_simulate(args) -> int:
         return _input_error(f"{args.file}: the compiled core cannot run this scene: {why}")
     start = time.perf_counter()
     try:
-        with single_threaded_blas():
+        from .progress import bar
+
+        span = spec.stop_time - spec.start_time
+        with single_threaded_blas(), bar(span, "simulate", "s", bar_format="{l_bar}{bar}| t = {n:.3g}/{total:g} s") \
+                as shown:
             res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS,
-                      max_wall_time=args.max_wall_time or MAX_WALL_TIME)
+                      max_wall_time=args.max_wall_time or MAX_WALL_TIME,
+                      progress=lambda t: shown.update(t - spec.start_time - shown.n))
     except SimulationError as exc:
         return _failed_run(args, model, spec, exc, time.perf_counter() - start)
     wall = time.perf_counter() - start

@@ -306,9 +306,10 @@ def output_grid(start: float, stop: float, interval: float) -> np.ndarray:
 
 
 def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, output_interval: float | None = None,
-        **settings) -> Result:
+        progress=None, **settings) -> Result:
     """Simulate ``model`` with the solver options ``solver`` from the scene's start to ``stop_time``
     (default the scene's), outputs every ``output_interval`` (default ``solver.output_interval``);
+    ``progress(t)``, if given, is called at every output point (``overcon simulate``'s bar);
     ``settings`` go to :class:`Simulation`."""
     scene = model.scene
     stop = scene.stop_time if stop_time is None else stop_time
@@ -326,6 +327,8 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
         for t in grid:
             y = sim.advance(t)
             rows.append(sim.outputs(t, y))
+            if progress is not None:
+                progress(t)
     except SimulationError as exc:
         exc.partial = _result(model, sim, grid[:len(rows)], rows)
         raise

@@ -137,3 +137,19 @@ def test_reproduce_takes_the_papers_scenes_only(tmp_path):
     assert [p.name for p in others] == ["my_scene.toml"]
     real, foreign = paper_scenes(ROOT / "mechanisms")
     assert len(real) == 20 and foreign == []
+
+
+@pytest.mark.integration
+def test_public_api_builds_runs_and_compares(tmp_path):
+    import overcon
+
+    scenes = [ROOT / "mechanisms" / "planar_f45_wo4.toml", ROOT / "mechanisms" / "planar_f45_wo6.toml"]
+    fmus = overcon.build(scenes, tmp_path / "fmus")
+    assert [f.name for f in fmus] == ["planar_f45_wo4.fmu", "planar_f45_wo6.fmu"]
+    with pytest.raises(overcon.InputError, match="refused"):
+        overcon.build(ROOT / "mechanisms" / "planar_f1_wo4.toml", tmp_path / "nonunique")
+    runs = overcon.run(fmus[0], tmp_path / "results", stop_time=0.5, settings={"joint4.mu": 0.2})
+    assert runs[0].csv.is_file()
+    outcome = overcon.compare(fmus, tmp_path / "comparison", stop_time=0.5)
+    (c,) = outcome.comparisons
+    assert c.group == "planar_f45" and c.matches and (tmp_path / "comparison" / "report.md").is_file()

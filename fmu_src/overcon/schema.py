@@ -152,12 +152,19 @@ def _body(kind: str, dim: int, quaternion: bool) -> dict:
 
 
 def _mechanism_of(kind: str, quaternion: bool = False) -> dict:
+    """The parts of a ``kind`` mechanism that depend on its kind; joints and loads by reference to
+    :func:`_definitions` (one copy each, whatever the rotation)."""
     dim = sc._DIM[kind]
     return {"properties": {
         "mechanism": {"properties": {"gravity": _vec(dim)}},
         "bodies": {"items": _body(kind, dim, quaternion)},
-        "joints": {"items": _joint(kind, dim)},
-        "loads": {"items": _load(dim)}}}
+        "joints": {"items": {"$ref": f"#/definitions/{kind}_joint"}},
+        "loads": {"items": {"$ref": f"#/definitions/{kind}_load"}}}}
+
+
+def _definitions() -> dict:
+    return {f"{kind}_{what}": (_joint(kind, dim) if what == "joint" else _load(dim))
+            for kind, dim in sc._DIM.items() for what in ("joint", "load")}
 
 
 def mechanism_schema() -> dict:
@@ -178,7 +185,7 @@ def mechanism_schema() -> dict:
     assert tuple(sections) == sc.MECHANISM_SECTIONS
     return {"$schema": DRAFT, "title": "overcon mechanism file",
             "description": "Bodies, joints and loads of a mechanism (docs/scene-format.md).",
-            "type": "object", "additionalProperties": False, "required": ["mechanism", "bodies"],
+            "definitions": _definitions(), "type": "object", "additionalProperties": False, "required": ["mechanism", "bodies"],
             "properties": sections,
             "allOf": [
                 {"if": kind_is("planar"), "then": {"allOf": [
@@ -238,7 +245,8 @@ def any_schema() -> dict:
     mech, scene = mechanism_schema(), scene_schema()
     for s in (mech, scene):
         s.pop("$schema")
-    return {"$schema": DRAFT, "title": "overcon mechanism or scene file",
+    definitions = mech.pop("definitions")  # references resolve against the root
+    return {"$schema": DRAFT, "title": "overcon mechanism or scene file", "definitions": definitions,
             "if": {"required": ["scene"]}, "then": scene, "else": mech}
 
 

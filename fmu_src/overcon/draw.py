@@ -68,7 +68,9 @@ def pose(mech: S.MechanismSpec, coords: dict[str, tuple]) -> Pose:
     frames = {S.BASE: (np.zeros(dim), np.eye(dim))}
     for b in mech.bodies:
         q = np.asarray(coords[b.name], float)
-        if mech.kind == "planar":
+        if len(q) <= dim:  # a body with a position only (no orientation coordinates): not rotated
+            frames[b.name] = (q[:dim], np.eye(dim))
+        elif mech.kind == "planar":
             c, s = math.cos(q[2]), math.sin(q[2])
             frames[b.name] = (q[:2], np.array([[c, -s], [s, c]]))
         elif mech.rotation == "quaternion":
@@ -286,9 +288,9 @@ def run_coordinates(mech: S.MechanismSpec, cols: dict, where: str) -> tuple[dict
     it needs: the paper's sliders have no ``phi``) is drawn at its q0 value, and named: the caller
     says so in the picture and on stderr. A body none of whose coordinates is in the run is bad
     input (``positions = "all"`` in the scene's [outputs] has them all)."""
-    names = S.coordinates(mech.kind, mech.rotation)
     out, held = {}, []
     for b in mech.bodies:
+        names = S.coordinates(mech.kind, mech.rotation)[:len(b.q0)]  # a body may have fewer coordinates
         cols_b = []
         for k, c in enumerate(names):
             col = cols.get(f"{b.name}.{c}")

@@ -23,7 +23,7 @@ where said, CPU seconds (what other jobs on a loaded machine change least), medi
              min(n, m) > 2500 (minutes).
 The code measured is the ``overcon`` this Python imports: ``PYTHONPATH=OTHER/fmu_src`` measures
 another checkout (with its compiled core). The figures go to docs/benchmarks.md ("Pre-check at
-scale") and the README by hand.
+scale") and docs/reference/bounds.md by hand.
 """
 from __future__ import annotations
 

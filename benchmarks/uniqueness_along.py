@@ -1,6 +1,6 @@
 """Cost of the uniqueness along the motion (core/unique.c through overcon.kernel.Kernel.unique):
 one evaluation of the whole Jacobian's rank and every joint's verdict at q0, against one
-evaluation of Eq. 18, per mechanism. Prints the figures the README quotes.
+evaluation of Eq. 18, per mechanism. Prints the figures docs/howto/singular.md quotes.
 
     python benchmarks/uniqueness_along.py [--repeat N]
 """

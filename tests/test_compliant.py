@@ -290,7 +290,7 @@ def test_compliant_door_one_motion_whatever_the_elimination(capsys):
     """The door with friction in hinge1 and both hinges compliant (1e8 N/m): the scene's
     elimination no longer applies (both scenes of the group give the same motion), and the motion
     lies apart from both rigid eliminations' (which disagree among themselves); the distances
-    are printed (README "Compliant joints")."""
+    are printed (docs/howto/compliant.md)."""
     names, a = example_positions("compliant_door_h1_wo_hinge2")
     _, b = example_positions("compliant_door_h1_wo3_4_5_9_10")
     assert np.array_equal(a, b)

@@ -6,7 +6,7 @@
 - every joint type's Phi_h against central differences of the core's Phi along the coordinate
   rates of each unit velocity, and gamma against differences of Phi_h h along the motion;
 - the evaluation (Kernel.evaluate) against the equations it solves, M h' + Phi_h^T lam = Q + Q_f
-  and Phi_h h' = gamma - 2 a Phi_h h - a^2 Phi on the kept rows (README "Conventions"), with Q the
+  and Phi_h h' = gamma - 2 a Phi_h h - a^2 Phi on the kept rows (docs/reference/conventions.md), with Q the
   loads' Newton-Euler forces written here from their definitions;
 - the friction outputs at the returned multipliers against each joint type's friction law
   (docs/joint-friction.md, paper App. A) evaluated here from the joint's reaction outputs and

@@ -203,7 +203,7 @@ def test_debug_logging_honours_categories(unz):
 # ------------------------------------------------------------------------------- tolerance
 
 def test_setup_experiment_tolerance_rule(unz):
-    """The rule (slave docstring, README "Tolerance"): the parameter solver.tolerance if the host
+    """The rule (slave docstring, docs/reference/fmu.md, "Tolerance"): the parameter solver.tolerance if the host
     set it, else fmi2SetupExperiment's tolerance, else the scene's; a host tolerance outside the
     parameter's range is not used (fmi2Warning naming the range)."""
     fmu = str(unz.out / "planar_f45_wo4.fmu")

@@ -47,7 +47,7 @@ def _eval(lib, law, s):
 
 
 def _defined(law, s):
-    """mu(s)/s from the definitions (overcon.friction_laws, README "Friction law"): the signed
+    """mu(s)/s from the definitions (overcon.friction_laws, docs/explanation/decisions.md, "Friction law"): the signed
     coefficient mu(v) = clip(v / v_reg, -1, 1) (mu + (mu_static - mu) exp(-(v / v_stribeck)^2))
     (regularised: without the exponential term) divided by v = s > 0; at s = 0 its limit."""
     kind, mu, v_reg, mu_static, v_stribeck = law

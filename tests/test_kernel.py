@@ -128,7 +128,7 @@ def test_kernel_reports_non_finite_states_and_euler_singularities():
 
 def test_singular_position_stops_the_run(tmp_path):
     """The planar sliders driven into K = L = O (spring of free length 0): the run stops with the
-    singular position named, before the stop time (README "Decisions": within 1 s)."""
+    singular position named, before the stop time (docs/explanation/decisions.md: within 1 s)."""
     text = (MECH / "planar_sliders.toml").read_text().replace("free_length = 3.0", "free_length = 0.0")
     (tmp_path / "planar_sliders.toml").write_text(text)
     (tmp_path / "s.toml").write_text((MECH / "planar_none_wo4.toml").read_text())
@@ -215,7 +215,7 @@ def test_installed_library_is_the_package_core():
 def check_reactions(k, model, y, lam) -> None:
     """The reported reactions at (y, lam) against the core's Phi_h: each joint's global force
     (Fx0, Fy0(, Fz0), after its type's components) is the physical reaction on body i,
-    -(Phi_h)_X^T lam_X on body i's translational velocity columns (README "Conventions"; on body j
+    -(Phi_h)_X^T lam_X on body i's translational velocity columns (docs/reference/conventions.md; on body j
     the opposite when body i is the base), its auxiliary- or joint-frame force has the same
     magnitude (a rotation of it; where the type does not report the axial component, at most
     that), and a joint with friction switched off reports friction 0."""

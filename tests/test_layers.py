@@ -1,5 +1,5 @@
 """The package's imports flow one way: spec -> scene -> model -> core -> simulate/analysis -> fmu
--> tooling -> cli (README "Layers"). A static check over the source (every ``import``, also those
+-> tooling -> api -> cli (docs/explanation/architecture.md, "Code map"). A static check over the source (every ``import``, also those
 inside functions): no import cycle, no import of a higher layer, and the tooling imports nothing
 of the scene loader or the engine. The checker itself is tested on synthetic graphs."""
 from __future__ import annotations
@@ -15,16 +15,22 @@ LAYERS = (
     # 0: the vocabulary: data records and helpers that import nothing above them
     ("spec", ("overcon", "overcon.spec", "overcon.params", "overcon.argtypes", "overcon.kinematics",
               "overcon.friction_laws", "overcon.joints", "overcon.figures", "overcon.verdict", "overcon.plots")),
-    ("scene", ("overcon.scene",)),
+    ("scene", ("overcon.scene", "overcon.schema", "overcon.draw")),
     ("model", ("overcon.model",)),
     ("core", ("overcon.kernel",)),
     ("simulate/analysis", ("overcon.analysis", "overcon.checks", "overcon.precheck", "overcon.simulate",
                            "overcon.along", "overcon.paper", "overcon.converge")),
     ("fmu", ("overcon.fmu",)),
     ("tooling", ("overcon.tooling",)),
+    ("api", ("overcon.api",)),
     ("cli", ("overcon.cli",)),
 )
 """Layer order, lowest first; a module belongs to the layer of its longest listed prefix."""
+
+BY_NAME = {"overcon": "api"}
+"""Modules placed by their exact name, not as a prefix: the package's ``__init__`` is the public
+facade (it hands out overcon.api's names on first use), so it sits in the api layer, while a new
+module ``overcon.x`` without a listed prefix still falls to layer 0 as before."""
 
 TOOLING_MUST_NOT_IMPORT = ("overcon.scene", "overcon.model", "overcon.paper", "overcon.simulate", "overcon.kernel",
                            "overcon.checks", "overcon.precheck")
@@ -77,6 +83,8 @@ def import_graph(root: Path) -> dict[str, set[str]]:
 
 
 def layer_of(module: str, layers=LAYERS) -> int | None:
+    if layers is LAYERS and module in BY_NAME:
+        return [name for name, _ in layers].index(BY_NAME[module])
     best, level = -1, None
     for k, (_, prefixes) in enumerate(layers):
         for p in prefixes:

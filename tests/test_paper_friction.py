@@ -57,7 +57,7 @@ def test_adaptive_difference_is_reported_beside_the_verdict():
     unique, nonunique = group_run("planar_f45"), group_run("planar_f1")
     assert 0 < max(unique.adaptive_diff.values()) < 1e-5
     assert max(nonunique.adaptive_diff.values()) > 0.1
-    assert unique.labels == ["without eq. 4", "without eq. 6"]
+    assert unique.labels == ["without eq. 4 of joint2", "without eq. 6 of joint3"]  # the joint named
 
 
 OWN = scene_groups(Path(__file__).resolve().parent / "data" / "drawer")

@@ -25,7 +25,7 @@ from test_kernel import kernel_for, quaternion_spec, spec_of, states
 from test_kernel import quat_of_euler as euler_to_quat
 
 QUAT_NORM_RATE = 1.0
-"""The quaternion norm stabilisation rate k (1/s; README, core/core.h): d|e|^2/dt = k (1 - |e|^2) |e|^2."""
+"""The quaternion norm stabilisation rate k (1/s; core/core.h): d|e|^2/dt = k (1 - |e|^2) |e|^2."""
 
 
 def euler_R(angles) -> np.ndarray:

@@ -1,16 +1,17 @@
-"""Regression check (ci/regress.py): every scene FMU of mechanisms/ is built, validated, run with
-fmpy and compared with its committed baseline in ci/baselines/; and the check's own behaviour:
-a 1% mass change fails naming scene, output and difference, a scene without a baseline fails
-clearly, the tolerance table meets the acceptance floor (1e-6 m, 1e-4 N), regeneration round trip.
+"""Regression check (``overcon regress``, overcon.tooling.regress): every scene FMU of mechanisms/
+is built, validated, run with fmpy and compared with its committed baseline in ci/baselines/; and
+the check's own behaviour: a 1% mass change fails naming scene, output and difference, a scene
+without a baseline fails clearly, the tolerance table meets the acceptance floor (1e-6 m, 1e-4 N),
+regeneration round trip, JUnit XML with one test case per scene and a perturbed baseline failing.
 """
 from __future__ import annotations
 
-import importlib.util
 import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
+from xml.etree import ElementTree as ET
 
 import numpy as np
 import pytest
@@ -19,18 +20,12 @@ pytestmark = pytest.mark.integration  # every test here builds or runs FMUs, or 
 
 ROOT = Path(__file__).resolve().parent.parent
 MECH = ROOT / "mechanisms"
-SCRIPT = ROOT / "ci" / "regress.py"
+BASELINES = ROOT / "ci" / "baselines"
+TOLERANCES = ROOT / "ci" / "tolerances.toml"
+COMMAND = [sys.executable, "-m", "overcon.cli", "regress"]
 
+from overcon.tooling import regress  # noqa: E402
 
-def _load_script():
-    spec = importlib.util.spec_from_file_location("overcon_ci_regress", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
-
-
-regress = _load_script()
 SCENES, _PROBLEMS = regress.discover_scenes(MECH)
 PAPER = {f"planar_{f}_wo{k}" for f in ("none", "f45", "f1", "f145") for k in (4, 6)} | \
         {f"spatial_{f}_wo{k}" for f in ("none", "MN", "GH", "GHMN") for k in (5, 9, 18)}
@@ -64,22 +59,25 @@ def test_every_scene_has_a_baseline():
     default experiment (4 s planar, 10 s spatial) every 0.05 s."""
     assert not _PROBLEMS
     assert PAPER <= set(SCENES)
-    prov = regress.load_provenance(regress.DEFAULT_BASELINES)
+    prov = regress.load_provenance(BASELINES)
     for name in SCENES:
-        csv, opt = regress.baseline_files(regress.DEFAULT_BASELINES, name)
+        csv, opt = regress.baseline_files(BASELINES, name)
         assert csv.is_file() and opt.is_file(), f"{name}: no baseline"
         assert prov["scenes"][name]["platform"] in prov["platforms"]
         grid = regress.read_opt(opt)
         if name in PAPER:
             assert grid["StepSize"] == 0.05 and grid["StopTime"] == (4.0 if name.startswith("planar") else 10.0)
-    names = {f.name[: -len("_ref.csv")] for f in regress.DEFAULT_BASELINES.glob("*_ref.csv")}
+    names = {f.name[: -len("_ref.csv")] for f in BASELINES.glob("*_ref.csv")}
     assert names == set(SCENES)
 
 
 @pytest.mark.integration
 def test_every_scene_matches_its_baseline(tmp_path):
-    """The CI command itself: build, fmpy validate, run, compare all 20 scenes; exit 0."""
-    proc = subprocess.run([sys.executable, str(SCRIPT), "--out", str(tmp_path)], capture_output=True,
+    """The CI command itself, with the repository's defaults (mechanisms/, ci/baselines/,
+    ci/tolerances.toml from the working directory): build, fmpy validate, run, compare every
+    scene; exit 0; the JUnit XML has one passing test case per scene."""
+    junit = tmp_path / "out.xml"
+    proc = subprocess.run(COMMAND + ["--out", str(tmp_path), "--junit", str(junit)], capture_output=True,
                           text=True, cwd=ROOT, timeout=1200)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out[-6000:]
@@ -87,6 +85,44 @@ def test_every_scene_matches_its_baseline(tmp_path):
     assert ok == set(SCENES), out[-6000:]
     assert f"{len(SCENES)} scene(s) match their baselines, 0 regression(s), 0 bad input(s)" in proc.stdout
     assert (tmp_path / "report.md").is_file()
+    suite = ET.parse(junit).getroot().find("testsuite")
+    cases = suite.findall("testcase")
+    assert sorted(c.get("name") for c in cases) == sorted(SCENES)
+    assert all(len(c) == 0 for c in cases)  # no failure, no error
+    assert (suite.get("tests"), suite.get("failures"), suite.get("errors")) == (str(len(SCENES)), "0", "0")
+
+
+@pytest.mark.integration
+def test_a_perturbed_baseline_fails_in_the_junit_report(tmp_path):
+    """One baseline value moved by 1e-5 m: exit 1, and the JUnit XML has one failure naming the
+    scene and the output (the other scene passes)."""
+    names = ["planar_none_wo4", "planar_none_wo6"]
+    mdir = _mech_copy(tmp_path / "mech", names)
+    bl = tmp_path / "baselines"
+    bl.mkdir()
+    for n in names:
+        for ext in ("_ref.csv", "_ref.opt"):
+            shutil.copyfile(BASELINES / f"{n}{ext}", bl / f"{n}{ext}")
+    shutil.copyfile(BASELINES / "provenance.json", bl / "provenance.json")
+    csv = bl / "planar_none_wo6_ref.csv"
+    lines = csv.read_text().splitlines()
+    header = [h.strip('"') for h in lines[0].split(",")]
+    col = header.index("slider1.x")
+    row = lines[40].split(",")
+    row[col] = repr(float(row[col]) + 1e-5)
+    lines[40] = ",".join(row)
+    csv.write_text("\n".join(lines) + "\n")
+    junit = tmp_path / "junit.xml"
+    proc = subprocess.run(COMMAND + [str(mdir), "--baselines", str(bl), "--tolerances", str(TOLERANCES),
+                                     "--out", str(tmp_path / "out"), "--junit", str(junit)],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    cases = {c.get("name"): c for c in ET.parse(junit).getroot().iter("testcase")}
+    assert sorted(cases) == names
+    assert len(cases["planar_none_wo4"]) == 0
+    failure = cases["planar_none_wo6"].find("failure")
+    assert failure is not None and "planar_none_wo6" in failure.get("message")
+    assert "slider1.x" in failure.get("message") and "slider1.x" in failure.text
 
 
 @pytest.mark.integration
@@ -96,7 +132,8 @@ def test_mass_changed_by_1_percent_fails_naming_scene_output_and_difference(tmp_
     changed = mech.replace("mass = 3.0\n", "mass = 3.03\n", 1)  # slider1: 3 kg -> 3.03 kg
     mdir = _mech_copy(tmp_path / "mech", ["planar_none_wo4"], {"planar_sliders.toml": changed})
     lines: list[str] = []
-    out = regress.regress(["planar_none_wo4"], mechanisms=mdir, out=tmp_path / "out", echo=lines.append)
+    out = regress.regress(["planar_none_wo4"], mechanisms=mdir, baselines=BASELINES, tolerances=TOLERANCES,
+                          out=tmp_path / "out", echo=lines.append)
     text = "\n".join(lines)
     assert out.code == regress.EXIT_REGRESSION, text
     found = [FINDING.match(ln[len("REGRESSION "):]) for ln in lines if ln.startswith("REGRESSION ")]
@@ -115,19 +152,20 @@ def test_scene_without_baseline_fails_with_a_clear_message(tmp_path):
     mdir = _mech_copy(tmp_path / "mech", ["planar_none_wo4"])
     _new_scene(mdir, "my_slider_scene")
     lines: list[str] = []
-    out = regress.regress(["my_slider_scene"], mechanisms=mdir, out=tmp_path / "out", echo=lines.append)
+    out = regress.regress(["my_slider_scene"], mechanisms=mdir, baselines=BASELINES, tolerances=TOLERANCES,
+                          out=tmp_path / "out", echo=lines.append)
     text = "\n".join(lines)
     assert out.code == regress.EXIT_INPUT, text
     assert "my_slider_scene: no baseline" in text
     assert "my_slider_scene_ref.csv" in text
-    assert f"python ci/regress.py --regenerate --scenes my_slider_scene --mechanisms {mdir}" in text
+    assert f"overcon regress --regenerate --scenes my_slider_scene {mdir}" in text
     assert not (tmp_path / "out" / "fmus").exists()  # fails before building anything
 
 
 def test_command_line_exit_codes(tmp_path):
     mdir = _mech_copy(tmp_path / "mech", ["planar_none_wo4"])
     _new_scene(mdir, "my_slider_scene")
-    run = [sys.executable, str(SCRIPT), "--out", str(tmp_path / "out"), "--mechanisms", str(mdir)]
+    run = COMMAND + [str(mdir), "--out", str(tmp_path / "out")]
     p = subprocess.run(run + ["--scenes", "my_slider_scene"], capture_output=True, text=True, cwd=ROOT)
     assert p.returncode == 2 and "my_slider_scene: no baseline" in p.stdout
     p = subprocess.run(run + ["--scenes", "no_such_scene"], capture_output=True, text=True, cwd=ROOT)
@@ -187,7 +225,7 @@ def infos(tmp_path_factory):
 def test_tolerance_table_meets_the_floor(infos):
     """Same platform: every position/angle tolerance < 1e-6, every reaction tolerance < 1e-4
     (unique or not). Cross platform: the same, except outputs covered by a documented rule."""
-    table = regress.load_tolerances(regress.DEFAULT_TOLERANCES)
+    table = regress.load_tolerances(TOLERANCES)
     assert set(infos) == set(SCENES)
     n = 0
     for scene, info in infos.items():
@@ -208,10 +246,10 @@ def test_a_change_of_1e6_m_or_1e4_N_is_caught(infos):
     non-unique one is reported as such. Every scene, same-platform tier."""
     from overcon.tooling.run import Series, read_series
 
-    table = regress.load_tolerances(regress.DEFAULT_TOLERANCES)
+    table = regress.load_tolerances(TOLERANCES)
     all_unique = set()
     for scene, info in infos.items():
-        csv, _ = regress.baseline_files(regress.DEFAULT_BASELINES, scene)
+        csv, _ = regress.baseline_files(BASELINES, scene)
         ref = read_series(csv)
         same = regress.compare_scene(scene, info, ref, ref, csv, table, "same_platform")
         assert not same.findings and same.bit_identical

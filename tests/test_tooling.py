@@ -368,7 +368,7 @@ def test_unknown_group_exits_2(f45, tmp_path, capsys):
 
 def test_reactions_do_not_decide_and_prediction_must_agree(f45):
     infos = [inspect_fmu(f45["planar_f45_wo4"]), inspect_fmu(f45["planar_f45_wo6"])]
-    assert infos[0].label == "without eq. 4" and infos[0].group == "planar_f45" and infos[0].motion_unique
+    assert infos[0].label == "without eq. 4 of joint2" and infos[0].group == "planar_f45" and infos[0].motion_unique
     assert infos[0].reaction_unique["joint4"] and not infos[0].reaction_unique["joint1"]
     t = np.linspace(0, 1, 11)
 
@@ -411,6 +411,9 @@ def test_reproduce_planar_set(tmp_path, capsys):
     assert not (out / "fig7.png").exists()  # spatial figures: not in this set
     assert len(list((out / "groups").glob("*.png"))) == 4
     assert len(list((out / "fmus").glob("*.fmu"))) == 8
+    # the report shows the paper mechanism's drawing (overcon draw)
+    assert "## The mechanisms" in report and "](mechanisms/planar_sliders.png)" in report
+    assert (out / "mechanisms" / "planar_sliders.png").stat().st_size > 5_000
 
 
 def test_one_group_needs_one_prediction(f45, tmp_path, capsys):
@@ -461,14 +464,15 @@ def test_facts_record_gives_what_the_bundled_scene_says(f45):
     from overcon.checks import compile_checked
     from overcon.fmu import facts as facts_mod
     from overcon.precheck import precheck
-    from overcon.verdict import variant_label
+    from overcon.verdict import equation_joints, variant_label
 
     for name, fmu in f45.items():
         spec = scene_mod.load(MECH / f"{name}.toml")
         report = precheck(compile_checked(spec), name)
         info = inspect_fmu(fmu)
         assert (info.group, info.label, info.friction, info.eliminate, info.mechanism) == (
-            spec.group, variant_label(spec.eliminate), tuple(spec.friction), spec.eliminate, spec.mechanism.name)
+            spec.group, variant_label(spec.eliminate, equation_joints(compile_checked(spec).joints)),
+            tuple(spec.friction), spec.eliminate, spec.mechanism.name)
         assert info.motion_unique is report.motion_unique and info.reaction_unique == report.reaction_unique
         with zipfile.ZipFile(fmu) as zf:
             facts = facts_mod.decode(zf.read(facts_mod.PATH), str(fmu))

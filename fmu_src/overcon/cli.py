@@ -1,5 +1,7 @@
-"""Command line: ``overcon check | simulate | figures | build | run | compare | reproduce | sweep | converge``
-(argument parsing only; the work is done by the library).
+"""Command line: ``overcon check | simulate | figures | build | run | compare | reproduce | sweep |
+converge | regress | schema | draw | animate``. This module parses the arguments and reports; the
+work is done by the library. :func:`build_parser` is the one argument parser (the documentation's
+CLI reference is generated from it).
 
 Exit codes: 0 success (``check``: no friction on a non-unique reaction); 1 ``check`` found
 friction on a joint whose reaction is not unique (or the three tests disagree); 2 invalid input
@@ -44,9 +46,22 @@ def _scene_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--stop-time", type=float, metavar="T", help="stop time (s)")
 
 
+DESCRIPTION = ("Overconstrained rigid mechanisms with Coulomb joint friction: pre-check whether the simulated "
+               "motion is unique (Fraczek & Wojtyra 2011), simulate it, export it as an FMI FMU, and compare the "
+               "motions a simulator's choice of eliminated equations gives.")
+EPILOG = ("Start with: overcon check FILE. Exit codes: 0 ok; 1 a verdict to look at (friction on a non-unique "
+          "reaction, a mismatch, a regression); 2 bad input; 3 a simulation failed; 130 interrupted. "
+          "overcon COMMAND --help shows a command's flags; the documentation is in docs/ (README.md).")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="overcon", description=__doc__.split("\n\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    """The argument parser of the ``overcon`` command (every sub-command and flag)."""
+    from . import __version__
+
+    parser = _Parser(prog="overcon", description=DESCRIPTION, epilog=EPILOG)
+    parser.add_argument("--version", action="version", version=f"overcon {__version__}",
+                        help="print the version of overcon and exit")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
     c = sub.add_parser("check", help="reaction-uniqueness pre-check of a mechanism or scene")
     _scene_flags(c)
     c.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -172,6 +187,9 @@ def _tooling_parsers(sub) -> None:
                    help="FMI version of the paper scenes' FMUs: 2 (default) or 3 (FMI 3.0, the C runtime)")
     _sweep_parser(sub)
     _converge_parser(sub)
+    _regress_parser(sub)
+    _schema_parser(sub)
+    _draw_parsers(sub)
 
 
 def _converge_parser(sub) -> None:
@@ -188,6 +206,136 @@ def _converge_parser(sub) -> None:
                    help="position accuracy (m) for the 'stiffness enough' answer (default 1e-6)")
     v.add_argument("--stop-time", type=_number, metavar="T", help="stop time (s; default: the scene's)")
     v.add_argument("--out", required=True, metavar="DIR", help="directory for converge.csv and converge.png")
+
+
+def _regress_parser(sub) -> None:
+    """``regress``: scene FMUs against committed baselines (overcon.tooling.regress)."""
+    from .tooling.regress import BASELINE_STEP, DEFAULT_BASELINES, DEFAULT_OUT, DEFAULT_TOLERANCES, TIERS
+
+    g = sub.add_parser("regress", help="regression check: build every scene of a directory as an FMU, run it and "
+                                       "compare every output with its committed baseline (exit 1 on a difference)",
+                       description="Build, validate (fmpy), run and compare every scene of DIR with its baseline "
+                                   "<baselines>/<scene>_ref.csv; --regenerate writes the baselines instead.",
+                       epilog="Exit codes: 0 every scene matches; 1 a regression (scene, output, difference and "
+                              "tolerance named); 2 bad input or a missing baseline (with the command that creates it).")
+    g.add_argument("dir", nargs="?", default="mechanisms", metavar="DIR",
+                   help="directory of the scene files, searched recursively (default: mechanisms)")
+    g.add_argument("--baselines", default=str(DEFAULT_BASELINES), metavar="DIR",
+                   help=f"directory of the baselines <scene>_ref.csv/.opt and provenance.json (default: {DEFAULT_BASELINES})")
+    g.add_argument("--tolerances", default=str(DEFAULT_TOLERANCES), metavar="FILE",
+                   help=f"tolerance table (default: {DEFAULT_TOLERANCES} if it exists, else the package's per-unit "
+                        "defaults)")
+    g.add_argument("--scenes", nargs="+", metavar="NAME", help="scene names or shell globs (default: every scene)")
+    g.add_argument("--out", default=str(DEFAULT_OUT), metavar="DIR",
+                   help=f"work directory: FMUs, result CSVs, report.md (default: {DEFAULT_OUT})")
+    g.add_argument("--junit", metavar="FILE", help="also write the result as JUnit XML, one test case per scene")
+    g.add_argument("--jobs", type=_jobs, metavar="N", help="FMUs run in parallel processes (default: CPU count)")
+    g.add_argument("--tier", choices=TIERS, help="force a tolerance tier (default: same_platform where the "
+                                                 "platform fingerprint equals the baseline's, else cross_platform)")
+    g.add_argument("--regenerate", action="store_true",
+                   help="write the baselines instead of checking them (deliberately, by hand; never in CI)")
+    g.add_argument("--stop-time", type=_positive, metavar="T",
+                   help="with --regenerate: stop time of the new baselines (default: the old one, else the FMU's)")
+    g.add_argument("--step", type=_positive, metavar="S",
+                   help=f"with --regenerate: output interval (default: the old one, else {BASELINE_STEP} s)")
+    g.add_argument("--fingerprint", action="store_true", help="print this platform's fingerprint (JSON) and exit")
+
+
+def cmd_regress(args) -> int:
+    from .tooling import regress as rg
+
+    if args.fingerprint:
+        fp = rg.platform_fingerprint()
+        print(json.dumps({"id": rg.fingerprint_id(fp), **fp}, indent=1))
+        return EXIT_OK
+    if args.regenerate:
+        if args.junit:
+            return _input_error("--junit: only for the check (--regenerate writes baselines, it checks nothing)")
+        return rg.regenerate(args.scenes, mechanisms=args.dir, baselines=args.baselines, out=args.out,
+                             jobs=args.jobs, stop_time=args.stop_time, step=args.step).code
+    if args.stop_time is not None or args.step is not None:
+        return _input_error("--stop-time/--step only with --regenerate (the check runs on each baseline's grid)")
+    out = rg.regress(args.scenes, mechanisms=args.dir, baselines=args.baselines, tolerances=args.tolerances,
+                     out=args.out, jobs=args.jobs, tier=args.tier)
+    if args.junit:
+        print(f"regress: JUnit XML {rg.write_junit(out, args.junit)}")
+    return out.code
+
+
+def _schema_parser(sub) -> None:
+    """``schema``: the JSON Schema of the file formats (overcon.schema)."""
+    m = sub.add_parser("schema", help="print the JSON Schema of mechanism or scene files (for editors: taplo, "
+                                      "Even Better TOML)",
+                       description="Print the JSON Schema (draft-07) of a file format, generated from the rules "
+                                   "the validator uses. any: either file, told apart by its [scene] table.")
+    m.add_argument("kind", choices=("mechanism", "scene", "any"), help="which file format")
+    m.add_argument("--out", metavar="FILE", help="write the schema to FILE instead of printing it")
+
+
+def _draw_parsers(sub) -> None:
+    """``draw`` and ``animate``: pictures of a mechanism and of a run (overcon.draw)."""
+    d = sub.add_parser("draw", help="draw a mechanism (bodies, joints with their axes, guides, ground, names) at "
+                                    "q0 or at a time of a run, as PNG or SVG",
+                       description="Draw the mechanism of a mechanism or scene file: planar as one view, spatial "
+                                   "as three orthographic views and an isometric one.")
+    d.add_argument("file", metavar="SCENE_OR_MECHANISM", help="mechanism or scene TOML file")
+    d.add_argument("--out", required=True, metavar="FILE.png|svg", help="picture to write")
+    d.add_argument("--csv", metavar="RUN.csv", help="a run of the scene (overcon simulate or run): draw it at --at")
+    d.add_argument("--at", type=_number, metavar="T", help="time (s) in the run: its output point nearest T "
+                                                           "(default: the first)")
+    d.add_argument("--dpi", type=_jobs, default=120, metavar="N", help="PNG resolution (default 120)")
+    a = sub.add_parser("animate", help="animate a run of a scene (GIF, or MP4 with ffmpeg)",
+                       description="Draw every frame of a run (at most --frames output points, evenly spread) "
+                                   "and write them as an animation.")
+    a.add_argument("csv", metavar="RUN.csv", help="the run's CSV (overcon simulate or overcon run)")
+    a.add_argument("--scene", required=True, metavar="S", help="the scene (or mechanism) file of the run")
+    a.add_argument("--out", required=True, metavar="FILE.gif|mp4", help="animation to write")
+    a.add_argument("--fps", type=_jobs, default=20, metavar="N", help="frames per second (default 20)")
+    a.add_argument("--frames", type=_jobs, default=120, metavar="N", help="at most N frames (default 120)")
+    a.add_argument("--dpi", type=_jobs, default=80, metavar="N", help="resolution (default 80)")
+
+
+def cmd_draw(args) -> int:
+    from .draw import DrawError, draw
+
+    try:
+        out, what = draw(args.file, args.out, csv_path=args.csv, at=args.at, dpi=args.dpi)
+    except DrawError as exc:
+        return _input_error(exc)
+    if "not in the run" in what:
+        print(f"overcon: warning: {what.split('(', 1)[1].rstrip(')')}", file=sys.stderr)
+    print(f"wrote {out} ({what})")
+    return EXIT_OK
+
+
+def cmd_animate(args) -> int:
+    from .draw import DrawError, animate
+
+    try:
+        out, frames, held = animate(args.csv, args.scene, args.out, fps=args.fps, max_frames=args.frames,
+                                    dpi=args.dpi)
+    except DrawError as exc:
+        return _input_error(exc)
+    if held:
+        print(f"overcon: warning: {', '.join(held)} not in the run: drawn at q0", file=sys.stderr)
+    print(f"wrote {out} ({frames} frames at {args.fps} per second)")
+    return EXIT_OK
+
+
+def cmd_schema(args) -> int:
+    from .schema import text
+
+    doc = text(args.kind)
+    if args.out is None:
+        sys.stdout.write(doc)
+        return EXIT_OK
+    try:
+        with open(args.out, "w", encoding="utf-8") as f:
+            f.write(doc)
+    except OSError as exc:
+        return _input_error(f"--out {args.out}: {exc.strerror or exc}")
+    print(f"wrote {args.out}")
+    return EXIT_OK
 
 
 def cmd_converge(args) -> int:
@@ -221,7 +369,7 @@ def _sweep_parser(sub) -> None:
     w = sub.add_parser("sweep", help="run a grid (or random samples) of FMU parameters on Dask and measure how much "
                                      "the eliminations of each scene group disagree (sweep.csv, sweep.png)")
     w.add_argument("inputs", nargs="*", metavar="SCENE_OR_FMU",
-                   help="scene files (*.toml, built to FMUs first), FMU files or directories of FMUs")
+                   help="scene files (TOML, built to FMUs first), FMU files or directories of FMUs")
     w.add_argument("--param", action="append", default=[], metavar="NAME=V1,V2,...|NAME=lo:hi:n",
                    help="an FMU parameter and its values (repeatable; full-factorial grid), e.g. joint1.mu=0:0.02:5")
     w.add_argument("--samples", type=_jobs, metavar="N",
@@ -366,10 +514,15 @@ def cmd_simulate(args) -> int:
             return _input_error(f"--input {exc}")
     start = time.perf_counter()
     try:
-        with single_threaded_blas():
+        from .progress import bar
+
+        span = spec.stop_time - spec.start_time
+        with single_threaded_blas(), bar(span, "simulate", "s", bar_format="{l_bar}{bar}| t = {n:.3g}/{total:g} s") \
+                as shown:
             res = run(model, spec.solver, max_steps=args.max_steps or MAX_STEPS,
                       max_wall_time=args.max_wall_time or MAX_WALL_TIME, inputs=table,
-                      input_interpolation=args.input_interpolation)
+                      input_interpolation=args.input_interpolation,
+                      progress=lambda t: shown.update(t - spec.start_time - shown.n))
     except SimulationError as exc:
         return _failed_run(args, model, spec, exc, time.perf_counter() - start)
     wall = time.perf_counter() - start
@@ -532,8 +685,10 @@ def cmd_reproduce(args) -> int:
     from .tooling.pipeline import reproduce
 
     def go():
+        from .draw import draw
+
         out = reproduce(args.out, mechanisms=args.mechanisms, jobs=args.jobs, stop_time=args.stop_time,
-                        lockstep_step=_lockstep(args), fmi=args.fmi)
+                        lockstep_step=_lockstep(args), fmi=args.fmi, draw=lambda m, png: draw(m, png, dpi=90))
         failed = [c for c in out.comparisons if c.failure is not None]
         n_bad = sum(not c.matches for c in out.comparisons) - len(failed)
         print(f"\n{len(out.comparisons)} groups compared, "
@@ -599,7 +754,8 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     handler = {"check": cmd_check, "simulate": cmd_simulate, "figures": cmd_figures,
                "build": cmd_build, "run": cmd_run, "compare": cmd_compare,
-               "reproduce": cmd_reproduce, "sweep": cmd_sweep, "converge": cmd_converge}[args.command]
+               "reproduce": cmd_reproduce, "sweep": cmd_sweep, "converge": cmd_converge,
+               "regress": cmd_regress, "schema": cmd_schema, "draw": cmd_draw, "animate": cmd_animate}[args.command]
     try:
         code = handler(args)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit

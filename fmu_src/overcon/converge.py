@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .progress import bar
+
 from . import scene as scene_mod
 from .checks import compile_checked
 from .simulate import SimulationError, run
@@ -250,13 +252,17 @@ def converge(path: Path, stiffness: np.ndarray, *, accuracy: float = 1e-6, stop_
                                  f"{spec.start_time:g} s")
     reference_stiffness(spec)  # refuses a scene without compliant joints
     runs = []
-    for k in stiffness:
-        runs.append(run_one(f"k = {k:.3g} N/m", scaled_scene(spec, float(k)), stop_time))
-        echo(f"  k = {k:10.4g} N/m: {runs[-1].steps} steps, {runs[-1].wall:.2f} s")
-    rigid = []
-    for label, s in rigid_scenes(spec, path):
-        rigid.append(run_one(label, s, stop_time))
-        echo(f"  rigid, {label}: {rigid[-1].steps} steps, {rigid[-1].wall:.2f} s")
+    rigid_list = list(rigid_scenes(spec, path))
+    with bar(len(stiffness) + len(rigid_list), "converge", "run") as shown:
+        for k in stiffness:
+            runs.append(run_one(f"k = {k:.3g} N/m", scaled_scene(spec, float(k)), stop_time))
+            echo(f"  k = {k:10.4g} N/m: {runs[-1].steps} steps, {runs[-1].wall:.2f} s")
+            shown.update()
+        rigid = []
+        for label, s in rigid_list:
+            rigid.append(run_one(label, s, stop_time))
+            echo(f"  rigid, {label}: {rigid[-1].steps} steps, {rigid[-1].wall:.2f} s")
+            shown.update()
     return Study(np.asarray(stiffness, float), runs, rigid, accuracy)
 
 

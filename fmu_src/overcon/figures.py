@@ -15,6 +15,13 @@ class Figure:
     title: str
 
 
+PAPER_GROUPS = ("planar_none", "planar_f45", "planar_f1", "planar_f145",
+                "spatial_none", "spatial_MN", "spatial_GH", "spatial_GHMN")
+"""The paper's eight scene groups (friction set x mechanism): what ``overcon reproduce`` runs. A
+scene of another group in the mechanisms directory is left out and named (decided: the paper's
+report must not change because a user put a scene beside the paper's; user scenes are run by
+``compare`` and ``regress``)."""
+
 ADAPTIVE_RUNS = "adaptive runs (each scene's own solver settings)"
 """Which runs the in-process figures show (``overcon figures``)."""
 

@@ -1,7 +1,7 @@
 """Friction coefficient as a function of relative velocity, mu(v) (paper Fig. 1).
 
 - A ``coulomb``: mu sign(v). Discontinuous at v = 0: for analysis only, refused for integration.
-- B ``regularised`` (the paper's choice; a project decision, see README): mu clip(v / v_reg, -1, 1).
+- B ``regularised`` (the paper's choice; a project decision, see docs/explanation/decisions.md): mu clip(v / v_reg, -1, 1).
 - C ``stribeck``: B with a Stribeck peak, mu(v) = clip(v/v_reg, -1, 1) (mu + (mu_static - mu)
   exp(-(v / v_stribeck)^2)).
 

@@ -21,7 +21,8 @@ from .checks import compile_checked
 from .precheck import precheck
 from .simulate import Result, SimulationError, run_scene
 from .spec import SceneSpec
-from .verdict import LOCKSTEP_METHOD, LOCKSTEP_STEP, LockstepGrid, lockstep_tolerance, variant_label
+from .verdict import (LOCKSTEP_METHOD, LOCKSTEP_STEP, LockstepGrid, equation_joints, lockstep_tolerance,
+                      variant_label)
 
 
 def scene_files(directory: Path) -> list[Path]:
@@ -103,8 +104,9 @@ def run_group(items: list[tuple[Path, SceneSpec]], *, tolerance: float | None = 
         if stop_time is not None:
             spec = dataclasses.replace(spec, stop_time=stop_time)
         specs.append(spec)
-        predicted.append(precheck(compile_checked(scene.as_scene(spec)), str(path)).motion_unique)
-        labels.append(variant_label(spec.eliminate))
+        model = compile_checked(scene.as_scene(spec))
+        predicted.append(precheck(model, str(path)).motion_unique)
+        labels.append(variant_label(spec.eliminate, equation_joints(model.joints)))
         if adaptive:
             results.append(run_scene(scene.as_scene(spec, tolerance=tolerance)))
     lock, lockstep_step = _lockstep_runs(specs, lockstep_step, outputs)

@@ -14,7 +14,7 @@ Envelopes (why each bound; the costs behind them: docs/benchmarks.md, "Input lim
 at 1e-14 still run the paper scenes (0.1 s of planar_f45_wo4: 25 and 47 steps); below it the error
 test asks for less than the double-precision round-off of the stages, the step collapses and the
 run crawls (at 1e-300 it would never finish). Above 1e-2 the global error (20-100 x tolerance x scale,
-README "uniqueness tolerance") exceeds 1 m on the paper mechanisms: no usable result.
+docs/explanation/decisions.md, "Uniqueness tolerances") exceeds 1 m on the paper mechanisms: no usable result.
 
 ``solver.step`` (rk4) and ``solver.max_step`` (adaptive) in [1e-8, 1] s: 1e-8 s keeps t + h
 distinguishable from t for |t| up to ~1e7 s (ulp(1e7) = 1.9e-9 s); 1 s is longer than any time

@@ -29,6 +29,11 @@ def difference_pairs(labels: list[str], reference: Mapping[str, str] | None = No
     return [(lab, reference[lab]) for lab in labels if lab in reference and reference[lab] != lab]
 
 
+OUTSIDE = dict(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+"""Legends beside the axes, never over a curve (decided: Fig. 7's legend covered the curve near
+t = 9.5-10 s wherever matplotlib's "best" placed it)."""
+
+
 def plot_series(path: Path, time: np.ndarray, series: Mapping[str, np.ndarray], *, title: str,
                 ylabel: str, differences: bool = True, reference: Mapping[str, str] | None = None,
                 runs: str = "") -> Path:
@@ -42,7 +47,7 @@ def plot_series(path: Path, time: np.ndarray, series: Mapping[str, np.ndarray], 
 
     labels = list(series)
     pairs = difference_pairs(labels, reference) if differences and len(labels) > 1 else []
-    fig, axes = plt.subplots(2 if pairs else 1, 1, figsize=(7.0, 6.0 if pairs else 4.0), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(2 if pairs else 1, 1, figsize=(9.5, 6.0 if pairs else 4.0), sharex=True, squeeze=False)
     look = {lab: dict(ls=STYLES[k % len(STYLES)], color=f"C{k % 10}") for k, lab in enumerate(labels)}
     ax = axes[0, 0]
     for lab in labels:
@@ -50,7 +55,7 @@ def plot_series(path: Path, time: np.ndarray, series: Mapping[str, np.ndarray], 
     ax.set_ylabel(ylabel)
     ax.set_title(f"{title}\n{runs}" if runs else title, fontsize=9)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(**OUTSIDE)
     if pairs:
         unit = _unit(ylabel)
         dax = axes[1, 0]
@@ -61,7 +66,7 @@ def plot_series(path: Path, time: np.ndarray, series: Mapping[str, np.ndarray], 
                      **look[lab])
         dax.set_ylabel(f"difference ({unit})" if unit else "difference")
         dax.grid(alpha=0.3)
-        dax.legend(fontsize=7)
+        dax.legend(**OUTSIDE)
     axes[-1, 0].set_xlabel("time (s)")
     fig.tight_layout()
     path = Path(path)

@@ -101,6 +101,15 @@ from .spec import (
 __all__ = ["Problem", "SceneError", "load", "as_scene", "parse_joint_list", "parse_eliminate"]
 
 CLI_SOURCE = "<command line>"
+
+# The keys each table may have: read by the checks below and by overcon.schema, which generates the
+# JSON Schema of the file formats from these tables, overcon.joints.TYPES, spec.LOAD_FIELDS and
+# overcon.params (one source for the validator and the editors' schema).
+MECHANISM_SECTIONS = ("mechanism", "bodies", "joints", "loads")
+MECHANISM_KEYS = ("name", "kind", "gravity", "description", "rotation")
+BODY_KEYS = ("name", "mass", "inertia", "q0", "h0")
+SCENE_SECTIONS = ("scene", "outputs", "solver", "inputs", "drivers")
+OUTPUT_KEYS = ("positions", "reactions", "friction", "velocities", "energy", "joints")
 FILE_FIELD = "(file)"
 
 _DIM = {"planar": 2, "spatial": 3}
@@ -537,7 +546,7 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
     """The mechanism file's document checked section by section; None if it has problems (all
     in ``ctx``, those of a named body, joint or load carrying its name)."""
     n_problems = len(ctx.problems)
-    _unknown_keys(ctx, doc, "", ("mechanism", "bodies", "joints", "loads"))
+    _unknown_keys(ctx, doc, "", MECHANISM_SECTIONS)
     head = _check_header(doc, ctx)
     body_names: dict[str, str] = {}  # name -> field where first defined
     bodies = _check_bodies(doc, ctx, head, body_names)
@@ -575,7 +584,7 @@ def _check_header(doc: dict, ctx: _Ctx) -> _MechHeader:
     mt = _get(ctx, doc, "mechanism", "")
     if mt is _MISSING or _table(ctx, mt, "mechanism") is None:
         return head
-    _unknown_keys(ctx, mt, "mechanism", ("name", "kind", "gravity", "description", "rotation"))
+    _unknown_keys(ctx, mt, "mechanism", MECHANISM_KEYS)
     v = _get(ctx, mt, "name", "mechanism")
     if v is not _MISSING:
         head.name = _ident(ctx, v, "mechanism.name")
@@ -610,7 +619,7 @@ def _check_body(bt: dict, p: str, ctx: _Ctx, head: _MechHeader, body_names: dict
     kind, rotation = head.kind, head.rotation
     ncoord = len(S.coordinates(kind, rotation)) if kind and rotation else None
     nvel = S.VELOCITIES_PER_BODY.get(kind)
-    _unknown_keys(ctx, bt, p, ("name", "mass", "inertia", "q0", "h0"))
+    _unknown_keys(ctx, bt, p, BODY_KEYS)
     bname = mass = inertia = q0 = None
     h0 = tuple(0.0 for _ in range(nvel)) if nvel else None
     v = _get(ctx, bt, "name", p)
@@ -1014,7 +1023,7 @@ def _check_scene(doc: dict, ctx: _Ctx, problems: list[Problem]) -> SceneSpec | N
     """The scene file's document checked section by section (its mechanism file too); None if
     either has problems (all in ``problems``)."""
     n_problems = len(problems)
-    _unknown_keys(ctx, doc, "", ("scene", "outputs", "solver", "inputs", "drivers"))
+    _unknown_keys(ctx, doc, "", SCENE_SECTIONS)
     st = doc.get("scene")
     if _table(ctx, st, "scene") is None:
         return None
@@ -1164,7 +1173,7 @@ def _scene_outputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None, joints: dic
     velocities, energy = [], False
     ot = doc.get("outputs", _MISSING)
     if ot is not _MISSING and _table(ctx, ot, "outputs") is not None:
-        _unknown_keys(ctx, ot, "outputs", ("positions", "reactions", "friction", "velocities", "energy", "joints"))
+        _unknown_keys(ctx, ot, "outputs", OUTPUT_KEYS)
         # an [outputs] table is the scene's output set: friction outputs only if it lists them
         # (existing scenes keep their outputs, which their FMUs' regression baselines fix)
         friction_out = ot.get("friction", [])

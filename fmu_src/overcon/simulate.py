@@ -324,7 +324,7 @@ def output_grid(start: float, stop: float, interval: float) -> np.ndarray:
 
 
 def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, output_interval: float | None = None,
-        inputs=None, input_interpolation: str = "hold", **settings) -> Result:
+        inputs=None, input_interpolation: str = "hold", progress=None, **settings) -> Result:
     """Simulate ``model`` with the solver options ``solver`` from the scene's start to ``stop_time``
     (default the scene's), outputs every ``output_interval`` (default ``solver.output_interval``);
     ``inputs`` an input table (:class:`overcon.tooling.inputs.InputTable`, a column per input of
@@ -332,7 +332,8 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
     communication points, ``input_interpolation`` "hold" (the default: the value there, held over the
     interval) or "linear" (with fmpy's first derivative there: :meth:`InputTable.step`); the outputs
     at an output point see the values of the interval that ends there (the start's: its own), as an
-    FMU's after fmi2DoStep; ``settings`` go to :class:`Simulation`."""
+    FMU's after fmi2DoStep; ``progress(t)``, if given, is called at every output point (``overcon
+    simulate``'s bar); ``settings`` go to :class:`Simulation`."""
     if inputs is not None:
         from .tooling.inputs import check_interpolation
         check_interpolation(input_interpolation)
@@ -358,6 +359,8 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
             rows.append(sim.outputs(t, y))
             if inputs is not None and k + 1 < len(grid):  # the outputs at t saw the last interval's values
                 _feed(sim, inputs, names, grid, k, input_interpolation)
+            if progress is not None:
+                progress(t)
     except SimulationError as exc:
         exc.partial = _result(model, sim, grid[:len(rows)], rows)
         raise

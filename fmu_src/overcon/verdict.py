@@ -92,12 +92,35 @@ def uniqueness_tolerance(solver_tolerance: float, scale: float) -> float:
     return UNIQUE_FACTOR * solver_tolerance * max(1.0, scale)
 
 
-def variant_label(eliminate) -> str:
-    """Legend label as in the paper: "without eq. 4" (``eliminate``: 1-based equation numbers,
-    ``"auto"``, or empty)."""
+def equation_joints(joints) -> list[str]:
+    """The joint name of every constraint equation, in equation order, from a compiled model's
+    joints (``Model.joints``: each with ``name`` and its 0-based ``rows``)."""
+    owner: dict[int, str] = {}
+    for c in joints:
+        for r in c.rows:
+            owner[int(r)] = c.name
+    return [owner.get(k, "") for k in range(max(owner, default=-1) + 1)]
+
+
+def variant_label(eliminate, equation_joints=()) -> str:
+    """Legend label as in the paper, with the joint whose equations are eliminated: "without eq. 4
+    of joint2", "without eq. 3, 4, 5 of A, eq. 9, 10 of B" (``eliminate``: 1-based equation numbers,
+    ``"auto"``, or empty; ``equation_joints``: the joint of every equation, in order; without it,
+    or for a number outside it, the numbers alone: "without eq. 4")."""
     if eliminate == "auto":
         return "auto elimination"
-    return "without eq. " + ", ".join(str(k) for k in eliminate) if eliminate else "no elimination"
+    if not eliminate:
+        return "no elimination"
+    if not all(1 <= k <= len(equation_joints) for k in eliminate):
+        return "without eq. " + ", ".join(str(k) for k in eliminate)
+    parts: list[tuple[str, list[int]]] = []
+    for k in eliminate:
+        joint = equation_joints[k - 1]
+        if parts and parts[-1][0] == joint:
+            parts[-1][1].append(k)
+        else:
+            parts.append((joint, [k]))
+    return "without " + ", ".join(f"eq. {', '.join(map(str, ks))} of {joint}" for joint, ks in parts)
 
 
 def next_lockstep_step(step: float, stable_steps: list[float | None]) -> float | None:

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Figures quoted in the README (FMUs): wall time of one fmi2DoStep(0, 1e6) under the default work
+"""Figures quoted in docs/reference/fmu.md: wall time of one fmi2DoStep(0, 1e6) under the default work
 budget, of the C host (fmu_host.c) per process from an empty environment, and the FMI overhead per
 communication point through fmpy (20000 points of 1e-5 s, minus the same run in process: kernel.Run's
 advance and its outputs' table per point, two ctypes calls as fmpy makes two FMI calls).

@@ -11,6 +11,8 @@ Format :data:`FORMAT` (``"format": 1``), keys:
 ``friction``         joints with friction switched on, in scene order
 ``eliminate``        the scene's ``eliminate``: 1-based equation numbers, or ``"auto"``
 ``eliminated``       the equations the build's model eliminated (1-based)
+``equation_joints``  the joint of every constraint equation, in equation order (legend labels
+                     name the eliminated joint); optional, absent in older records
 ``motion_unique``    the pre-check's prediction for the motion
 ``reaction_unique``  joint name -> the pre-check's prediction for its reaction
 ``solver``           the scene's solver defaults (the ``solver.*`` parameters' start values),
@@ -24,6 +26,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+
+from ..verdict import equation_joints
 
 PATH = "resources/overcon_facts.json"
 FORMAT = 1
@@ -47,6 +51,7 @@ def record(spec, model, report) -> dict:
         "friction": list(spec.friction),
         "eliminate": spec.eliminate if spec.eliminate == "auto" else list(spec.eliminate),
         "eliminated": list(model.eliminated),
+        "equation_joints": equation_joints(model.joints),
         "motion_unique": bool(report.motion_unique),
         "reaction_unique": dict(report.reaction_unique),
         "solver": solver,
@@ -91,4 +96,8 @@ def decode(data: bytes, where: str) -> dict:
     out["reaction_unique"] = dict(_key(facts, "reaction_unique", dict, where))
     out["solver"] = dict(_key(facts, "solver", dict, where))
     out["outputs"] = tuple(_key(facts, "outputs", list, where))
+    joints = facts.get("equation_joints", [])
+    if not (isinstance(joints, list) and all(isinstance(j, str) for j in joints)):
+        raise FactsError(f"{where}: {PATH}: key 'equation_joints' is not a list of joint names")
+    out["equation_joints"] = tuple(joints)
     return out

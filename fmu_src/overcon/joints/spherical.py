@@ -7,7 +7,7 @@ parallel to body i (A.10). Physical reaction p' = [Fx, Fy, Fz] in body i axes (t
 is zero).
 
 Friction (A.11-A.18): contact point s'_C = -rho F'/|F'| with F' taken from the left-hand-side
-generalized reaction (f_X)_i = (J_X)_i lam_X (a project decision, see README: the paper's figures
+generalized reaction (f_X)_i = (J_X)_i lam_X (a project decision, see docs/explanation/decisions.md: the paper's figures
 cannot tell this side from the opposite one), sliding velocity v' = omega'_ij x s'_C with
 omega'_ij = R_i^T R_j omega_j - omega_i, friction force F'_fr = mu(|v'|)|F'| v'/|v'| applied to
 body i at C, and the opposite force on body j.

@@ -118,7 +118,7 @@ def _overcon_facts(path: Path, zf: zipfile.ZipFile) -> dict:
         facts = facts_mod.decode(zf.read(facts_mod.PATH), str(path))
     except facts_mod.FactsError as exc:
         raise InputError(str(exc)) from exc
-    return dict(facts, label=variant_label(facts["eliminate"]))
+    return dict(facts, label=variant_label(facts["eliminate"], facts["equation_joints"]))
 
 
 _FMI2_TYPE = {"Float64": "Real", "Float32": "Real", "Int8": "Integer", "UInt8": "Integer", "Int16": "Integer",

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import InputError
+from ..figures import PAPER_GROUPS
 from ..verdict import LOCKSTEP_MIN_STEP, LOCKSTEP_STEP, LockstepGrid, lockstep_start_values
 from .compare import (Comparison, compare_group, compare_reference, failed_group, group_fmus, invalid_group,
                       order_groups, read_along, validate_group)
@@ -428,13 +429,60 @@ def _beyond(comparisons: list[Comparison], mech: Path, out_dir: Path, *, jobs: i
     return lines, where
 
 
+def paper_scenes(mech: Path) -> tuple[list[Path], list[Path]]:
+    """The scene files of ``mech`` (not its subdirectories) whose ``group`` is one of the paper's
+    (:data:`overcon.figures.PAPER_GROUPS`), and the other scene files. Mechanism files and files
+    that do not parse are neither (the build reports the latter when it reads them)."""
+    import tomllib
+
+    paper, others = [], []
+    for f in sorted(mech.glob("*.toml")):
+        try:
+            doc = tomllib.loads(f.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            paper.append(f)  # the build names what is wrong with it
+            continue
+        sc = doc.get("scene")
+        if isinstance(sc, dict):
+            (paper if sc.get("group") in PAPER_GROUPS else others).append(f)
+    return paper, others
+
+
+def _drawings(paper: list[Path], out_dir: Path, draw, echo) -> list[str]:
+    """Report lines showing each paper mechanism's drawing, made by ``draw(mechanism file, png)``
+    (overcon.draw.draw, handed in by the command line: the tooling reads no scene itself); the
+    mechanism files are those the paper scenes name (their [scene] mechanism key)."""
+    import tomllib
+
+    if draw is None:
+        return []
+    mechs: dict[Path, None] = {}
+    for f in paper:
+        try:
+            name = tomllib.loads(f.read_text(encoding="utf-8"))["scene"]["mechanism"]
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, KeyError, TypeError):
+            continue  # the build has reported this scene
+        if isinstance(name, str):
+            mechs[(f.parent / name).resolve()] = None
+    lines = ["## The mechanisms", ""] if mechs else []
+    for m in mechs:
+        png = out_dir / "mechanisms" / f"{m.stem}.png"
+        png.parent.mkdir(parents=True, exist_ok=True)
+        draw(m, png)
+        echo(f"drawing: {png}")
+        lines += [f"![{m.stem} at q0](mechanisms/{png.name})", ""]
+    return lines
+
+
 def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, stop_time=None,
-              lockstep_step: float | None = LOCKSTEP_STEP, fmi: int = 2) -> ReproduceOutcome:
+              lockstep_step: float | None = LOCKSTEP_STEP, fmi: int = 2, draw=None) -> ReproduceOutcome:
     """Build an FMU per scene of ``mechanisms`` (pre-check printed, non-unique scenes built too),
     run them with fmpy (``jobs`` processes), compare every group, write ``out_dir/report.md`` with
     the verdict table, the paper's figures and per-group details and plots. ``fmi`` 3: the FMUs
     are FMI 3.0 (C runtime, co-simulation and Model Exchange, run through co-simulation); the
-    compliant scenes beyond the paper stay FMI 2.0 (the C runtime does not cover compliant joints)."""
+    compliant scenes beyond the paper stay FMI 2.0 (the C runtime does not cover compliant joints).
+    Only the scenes of the paper's groups are taken (:func:`paper_scenes`); ``draw``, when given,
+    draws each paper mechanism into ``out_dir/mechanisms/`` for the report (:func:`_drawings`)."""
     from ..fmu.build import EXIT_INPUT, build_all
 
     t0 = time.perf_counter()
@@ -443,10 +491,14 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
     mech = Path(mechanisms)
     if not mech.is_dir():
         raise InputError(f"{mech}: no such directory (--mechanisms: the directory of the scene files)")
-    echo(f"== build: one FMU per scene of {mech} (pre-check first) -> {out_dir / 'fmus'}")
+    paper, others = paper_scenes(mech)
+    if others:
+        echo(f"reproduce: {len(others)} scene(s) of {mech} not of the paper's groups left out "
+             f"({', '.join(p.name for p in others)}): run your own scenes with overcon compare or overcon regress")
+    echo(f"== build: one FMU per scene of the paper in {mech} (pre-check first) -> {out_dir / 'fmus'}")
     version = {"runtime": "c", "fmi": 3} if fmi == 3 else {}
-    code, built = build_all([mech], out_dir / "fmus", allow_nonunique=True, refs=False, jobs=jobs, echo=echo,
-                            **version)
+    code, built = build_all(paper, out_dir / "fmus", allow_nonunique=True, refs=False, jobs=jobs, echo=echo,
+                            **version) if paper else (0, [])
     if code == EXIT_INPUT:
         raise InputError(f"{mech}: some scenes could not be built (see above)")
     fmus = [r.fmu for r in built if r.status == "built"]
@@ -493,6 +545,7 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
         f"(build {t_build:.1f} s, simulations {t_run:.1f} s wall / {seconds['simulation_sum']:.1f} s summed, "
         f"plots {t_plot:.1f} s); {platform.python_implementation()} {platform.python_version()}.",
     ]
+    intro += [""] + _drawings(paper, out_dir, draw, echo)
     report = out_dir / "report.md"
     report.write_text(markdown(comparisons, out_dir, title="overcon reproduce: uniqueness of the simulated motion",
                                intro=intro, figures=figures, plots=plots, beyond=beyond), encoding="utf-8")

@@ -372,6 +372,10 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
 
     t0 = time.perf_counter()
     last = [None]  # time of the last progress line (first: the first step, after instantiation)
+    # progress lines on a terminal only: a CI log or a pipe gets the result lines alone (overcon.progress)
+    from ..progress import _terminal
+
+    progress = progress and _terminal()
 
     def step_finished(t, rec):
         recorder[0] = rec
@@ -520,8 +524,11 @@ def run_jobs(jobs: list[Job], *, workers: int = 2, progress: bool = True, timeou
              f"wall {r.sim_seconds:.2f} s simulation, {r.wall_seconds:.2f} s process")
 
     if jobs:
-        with ThreadPoolExecutor(max(1, min(workers, len(jobs)))) as pool:
-            list(pool.map(one, jobs))
+        from ..progress import bar
+
+        with bar(len(jobs), "FMU runs", "run") as shown, ThreadPoolExecutor(max(1, min(workers, len(jobs)))) as pool:
+            for _ in pool.map(one, jobs):
+                shown.update()
     return results, failures
 
 

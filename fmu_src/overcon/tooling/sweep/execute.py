@@ -280,12 +280,17 @@ def _dashboard(client) -> str | None:
 
 
 def _progress_thread(futures, client):
-    from distributed.diagnostics.progressbar import TextProgressBar
+    """A tqdm bar over the runs on a terminal (overcon.progress: nothing in CI logs or pipes),
+    advanced as tasks finish; the rows do not depend on it."""
+    from distributed import as_completed
+
+    from ...progress import bar as progress_bar
 
     def bar():
         try:
-            # complete=False: the runs only, not the FMU bytes scattered before them
-            TextProgressBar(futures, scheduler=client.scheduler.address, complete=False)
+            with progress_bar(len(futures), "sweep", "run") as shown:
+                for _ in as_completed(futures):
+                    shown.update()
         except Exception:  # noqa: BLE001 -- the bar is cosmetic; the rows do not depend on it
             pass
 

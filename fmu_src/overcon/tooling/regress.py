@@ -1,12 +1,17 @@
-#!/usr/bin/env python3
-"""Regression check of the scene FMUs against committed baselines.
+"""``overcon regress``: the regression check of scene FMUs against committed baselines.
 
-    python ci/regress.py [--scenes NAME|GLOB ...] [--out DIR] [--jobs N]      # the check (CI)
-    python ci/regress.py --regenerate [--scenes ...] [--stop-time T] [--step S]  # by hand only
+    overcon regress [DIR] [--baselines DIR] [--scenes NAME|GLOB ...] [--junit FILE]   # the check (CI)
+    overcon regress [DIR] --regenerate [--scenes ...] [--stop-time T] [--step S]      # by hand only
 
-The check, for every scene file of ``mechanisms/`` and its subdirectories (files with a ``[scene]`` table):
+``DIR`` (default ``mechanisms``) is any directory of scene files; ``--baselines`` (default
+``ci/baselines``) the directory of their baselines; ``--tolerances`` (default
+``ci/tolerances.toml`` when it exists, else the package's :data:`PACKAGED_TOLERANCES`) the
+tolerance table. Relative defaults are taken from the working directory, so in this repository
+and in a user's own project laid out the same way the command needs no option.
 
-1. finds its baseline ``ci/baselines/<scene>_ref.csv`` + ``<scene>_ref.opt`` (FMI cross-check
+The check, for every scene file of ``DIR`` and its subdirectories (files with a ``[scene]`` table):
+
+1. finds its baseline ``<baselines>/<scene>_ref.csv`` + ``<scene>_ref.opt`` (FMI cross-check
    files: time and every Real output; StartTime, StopTime, StepSize, RelTol). A scene without one
    fails (exit 2) with the command that creates it; a baseline without a scene fails too;
 2. builds the scene's FMU (``overcon.fmu.build.build_all``, non-unique scenes included) and
@@ -16,21 +21,23 @@ The check, for every scene file of ``mechanisms/`` and its subdirectories (files
    tolerance 1e-9, stop 4 s planar / 10 s spatial), outputs every ``StepSize`` = 0.05 s;
 4. compares it with ``overcon.tooling.compare.compare_reference`` (the reference mode of
    ``overcon compare --ref``), then replaces the library's one-size tolerance by the per-output
-   tolerance of ``ci/tolerances.toml`` (the ONE place tolerances are stated) and marks every
+   tolerance of the tolerance table (the ONE place tolerances are stated) and marks every
    reaction output with its joint's ``reaction_unique`` constant: non-unique reactions are
    compared like the others (deterministic for a fixed elimination) but reported as non-unique.
 
 The tolerance *tier* is chosen per scene: ``same_platform`` when this machine's numerical
 fingerprint (Python, numpy, scipy, their BLAS, CPU model and flags, libc, kernel-selecting
 environment variables; :func:`platform_fingerprint`) equals the one recorded with the baseline in
-``ci/baselines/provenance.json``: there the results are bit-identical and the tolerances are far
+``<baselines>/provenance.json``: there the results are bit-identical and the tolerances are far
 below the acceptance floor; ``cross_platform`` otherwise (round-off of another BLAS, amplified by
 the friction solve; measured, see the file).
 
 Exit codes: 0 every scene matches; 1 a regression (each line names the scene, the output, the
 difference, where it is largest, and the tolerance with its source); 2 bad input (no baseline,
 a baseline without a scene, an invalid scene or tolerance file, a baseline file that is not on its
-.opt grid). Worst wins: 2 > 1. The report (``<out>/report.md``) has every output's table.
+.opt grid). Worst wins: 2 > 1. The report (``<out>/report.md``) has every output's table;
+``--junit FILE`` also writes JUnit XML (:func:`write_junit`): one test case per scene, a
+``failure`` naming the scene and its outputs over tolerance, an ``error`` for bad input.
 
 ``--regenerate`` builds, validates and runs the selected scenes (all by default) and writes their
 baselines (the old grid is kept unless ``--stop-time``/``--step`` are given; a new scene gets its
@@ -49,7 +56,6 @@ the check costs the same as the full default experiment (its wall time: docs/ben
 """
 from __future__ import annotations
 
-import argparse
 import datetime
 import fnmatch
 import hashlib
@@ -58,7 +64,6 @@ import math
 import os
 import platform
 import shutil
-import sys
 import time
 import tomllib
 from concurrent.futures import ThreadPoolExecutor
@@ -67,11 +72,14 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_MECHANISMS = ROOT / "mechanisms"
-DEFAULT_BASELINES = ROOT / "ci" / "baselines"
-DEFAULT_TOLERANCES = ROOT / "ci" / "tolerances.toml"
-DEFAULT_OUT = ROOT / "dist" / "regress"
+DEFAULT_MECHANISMS = Path("mechanisms")
+DEFAULT_BASELINES = Path("ci") / "baselines"
+DEFAULT_TOLERANCES = Path("ci") / "tolerances.toml"
+DEFAULT_OUT = Path("dist") / "regress"
+PACKAGED_TOLERANCES = Path(__file__).resolve().parent / "regress_tolerances.toml"
+"""The tolerance table used when ``--tolerances`` is not given and ``ci/tolerances.toml`` does not
+exist (a user's own project): the per-unit values of this repository's table, without its
+scene-specific rules (which name this repository's scenes)."""
 BASELINE_STEP = 0.05  # s: output interval of new baselines (see the module docstring)
 PROVENANCE = "provenance.json"
 TIERS = ("same_platform", "cross_platform")
@@ -102,15 +110,13 @@ def _rel(p: Path) -> str:
 # scenes and baselines
 
 def discover_scenes(mechanisms: Path) -> tuple[dict[str, Path], list[str]]:
-    """Scene name -> file for the *.toml files of ``mechanisms`` and its subdirectories (the
-    paper's scenes, and the examples in ``mechanisms/examples/``) that have a [scene] table (the
-    name is the scene's ``name``, which names its FMU), and problems (unreadable or invalid scene
-    files, duplicate names)."""
-    from overcon import scene as scene_mod
-
+    """Scene name -> file for the *.toml files of ``mechanisms`` and its subdirectories that have
+    a [scene] table (the name is the scene's ``name``, which names its FMU), and problems
+    (unreadable TOML, a scene without a usable name, duplicate names). The scene is validated
+    when its FMU is built (a scene the loader refuses is bad input of that scene)."""
     mechanisms = Path(mechanisms)
     if not mechanisms.is_dir():
-        raise BadInput(f"{mechanisms}: no such directory (--mechanisms: the directory of the scene files)")
+        raise BadInput(f"{mechanisms}: no such directory (the directory of the scene files)")
     scenes: dict[str, Path] = {}
     problems: list[str] = []
     for f in sorted(mechanisms.rglob("*.toml")):
@@ -121,10 +127,9 @@ def discover_scenes(mechanisms: Path) -> tuple[dict[str, Path], list[str]]:
             continue
         if not isinstance(doc.get("scene"), dict):
             continue  # a mechanism file
-        try:
-            name = scene_mod.load(f).name
-        except scene_mod.SceneError as exc:
-            problems.append(f"{f}: invalid scene file:\n  " + str(exc).replace("\n", "\n  "))
+        name = doc["scene"].get("name")
+        if not isinstance(name, str) or not name.isidentifier():
+            problems.append(f"{f}: invalid scene file: scene.name must be an identifier, got {name!r}")
             continue
         if name in scenes:
             problems.append(f"{f}: scene name {name} also used by {scenes[name]} (names must be unique: "
@@ -177,9 +182,10 @@ def write_opt(path: Path, start: float, stop: float, step: float, rel_tol: float
 
 
 def regenerate_command(names: list[str], mechanisms: Path, baselines: Path) -> str:
-    cmd = "python ci/regress.py --regenerate --scenes " + " ".join(names)
+    """The command that writes these scenes' baselines (printed where one is missing or differs)."""
+    cmd = "overcon regress --regenerate --scenes " + " ".join(names)
     if Path(mechanisms).resolve() != DEFAULT_MECHANISMS.resolve():
-        cmd += f" --mechanisms {mechanisms}"
+        cmd += f" {mechanisms}"
     if Path(baselines).resolve() != DEFAULT_BASELINES.resolve():
         cmd += f" --baselines {baselines}"
     return cmd
@@ -201,8 +207,8 @@ def load_provenance(baselines: Path) -> dict:
 def save_provenance(baselines: Path, doc: dict) -> None:
     used = {s.get("platform") for s in doc["scenes"].values()}
     doc["platforms"] = {k: v for k, v in doc["platforms"].items() if k in used}
-    doc["note"] = ("written by python ci/regress.py --regenerate: per scene, the platform fingerprint "
-                   "(see ci/regress.py platform_fingerprint) and the FMU the baseline came from")
+    doc["note"] = ("written by overcon regress --regenerate: per scene, the platform fingerprint "
+                   "(overcon.tooling.regress.platform_fingerprint) and the FMU the baseline came from")
     (Path(baselines) / PROVENANCE).write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n",
                                               encoding="utf-8")
 
@@ -310,6 +316,15 @@ def _str_list(v, where: str, path: Path) -> tuple[str, ...]:
     if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
         raise BadInput(f"{path}: {where} must be a string or a non-empty list of strings, got {v!r}")
     return tuple(v)
+
+
+def tolerance_file(path) -> Path:
+    """The tolerance table to read: ``path``; the default ``ci/tolerances.toml`` when it does not
+    exist falls back to :data:`PACKAGED_TOLERANCES` (a file given explicitly must exist)."""
+    path = Path(path)
+    if path == DEFAULT_TOLERANCES and not path.is_file():
+        return PACKAGED_TOLERANCES
+    return path
 
 
 def load_tolerances(path: Path) -> ToleranceTable:
@@ -425,7 +440,7 @@ class Outcome:
 
 def _build(names: list[str], scenes: dict[str, Path], fmu_dir: Path) -> tuple[dict[str, Path], dict[str, list[str]]]:
     """FMU per scene (pre-check verdicts go to the build log only); problems per scene."""
-    from overcon.fmu.build import build_all
+    from ..fmu.build import build_all
 
     log: list[str] = []
     fmu_dir.mkdir(parents=True, exist_ok=True)
@@ -455,8 +470,8 @@ def _run(jobs_list, out_dir: Path, jobs: int) -> dict:
     """jobs_list: [(FmuInfo, Experiment)], longest first. Returns model -> (csv, seconds inside
     simulate_fmu) or the error text.
     One ``run_fmus`` call per FMU so that a failure stays with its scene."""
-    from overcon.tooling import InputError, SimulationFailed
-    from overcon.tooling.run import run_fmus
+    from . import InputError, SimulationFailed
+    from .run import run_fmus
 
     out_dir.mkdir(parents=True, exist_ok=True)
 
@@ -476,7 +491,7 @@ def _run(jobs_list, out_dir: Path, jobs: int) -> dict:
 
 
 def _experiment(start: float, stop: float, step: float):
-    from overcon.tooling.run import Experiment
+    from .run import Experiment
 
     return Experiment(float(start), float(stop), float(step))
 
@@ -498,7 +513,7 @@ def _check_baseline_grid(ref, opt: dict, csv_path: Path) -> None:
 def compare_scene(scene: str, info, result, ref, ref_path: Path, table: ToleranceTable, tier: str) -> SceneCheck:
     """``compare_reference`` (library reference mode: every common output decides), then the
     per-output tolerances of ``table`` for ``tier`` and the reaction-uniqueness marks."""
-    from overcon.tooling.compare import compare_reference
+    from .compare import compare_reference
 
     c = compare_reference(info, result, ref, ref_path, tolerance=1.0)  # tolerances replaced below
     ref_s, res_s = c.series
@@ -541,7 +556,7 @@ def _ok_line(check: SceneCheck) -> str:
 
 
 def _report(outcome: Outcome, out: Path, title: str) -> Path:
-    from overcon.tooling.report import console_table
+    from .report import console_table
 
     lines = [f"# {title}", ""]
     if outcome.problems:
@@ -603,7 +618,7 @@ def regress(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS, b
     t0 = time.perf_counter()
     r = _Regress(Path(mechanisms), Path(baselines), Path(out), jobs or os.cpu_count() or 2, tier, echo,
                  Outcome(EXIT_OK, {}))
-    names = _regress_inputs(r, scenes, Path(tolerances))
+    names = _regress_inputs(r, scenes, tolerance_file(tolerances))
     if names is None:
         return r.outcome
     ready = _baselines_present(r, names, full_set=not scenes)
@@ -672,9 +687,9 @@ def _prepare_scene(r: _Regress, n: str, fmus: dict, build_problems: dict):
     """One built scene: its FMU validated, its baseline read and checked against the FMU's outputs
     and tolerance, its tier chosen. Returns (scene, FmuInfo, baseline, baseline csv, experiment)
     to run, or None (the problem is in its check)."""
-    from overcon.tooling import InputError
-    from overcon.tooling.fmus import inspect_fmu
-    from overcon.tooling.run import read_series
+    from . import InputError
+    from .fmus import inspect_fmu
+    from .run import read_series
 
     check = r.outcome.checks.setdefault(n, SceneCheck(n, "ok"))
     if n in build_problems:
@@ -714,8 +729,8 @@ def _prepare_scene(r: _Regress, n: str, fmus: dict, build_problems: dict):
 
 def _compare_run(r: _Regress, item, got) -> None:
     """One scene's run (its CSV and seconds, or the failure text) compared with its baseline."""
-    from overcon.tooling import InputError
-    from overcon.tooling.run import read_series
+    from . import InputError
+    from .run import read_series
 
     n, info, ref, csv, ex = item
     check = r.outcome.checks[n]
@@ -786,10 +801,6 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
                out=DEFAULT_OUT, jobs: int | None = None, stop_time: float | None = None,
                step: float | None = None, echo=_echo) -> Outcome:
     """Write the baselines of the selected scenes (all when None); see the module docstring."""
-    from overcon.tooling import InputError
-    from overcon.tooling.fmus import inspect_fmu
-    from overcon.tooling.run import read_series
-
     t0 = time.perf_counter()
     mechanisms, baselines, out = Path(mechanisms), Path(baselines), Path(out)
     jobs = jobs or os.cpu_count() or 2
@@ -811,38 +822,60 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
         outcome.code = EXIT_INPUT
         return outcome
     fmus, build_problems = _build(names, all_scenes, out / "fmus")
-    todo = []
-    for n in names:
-        check = outcome.checks[n] = SceneCheck(n, "ok")
-        if n in build_problems:
-            check.status, check.messages = "input", build_problems[n]
-            continue
-        problems_v = _validate(fmus[n])
-        if problems_v:
-            check.status = "regression"
-            check.messages.append(f"{n}: fmpy validate found problems, baseline NOT written: " + "; ".join(problems_v))
-            continue
-        csv, opt_path = baseline_files(baselines, n)
-        try:
-            info = inspect_fmu(fmus[n])
-            old = read_opt(opt_path) if opt_path.is_file() else {}
-        except (BadInput, InputError) as exc:
-            check.status = "input"
-            check.messages.append(f"{n}: {exc}")
-            continue
-        start = info.start
-        stop = stop_time if stop_time is not None else old.get("StopTime", info.stop)
-        h = step if step is not None else old.get("StepSize", BASELINE_STEP)
-        if stop <= start:
-            check.status = "input"
-            check.messages.append(f"{n}: stop time {stop:g} s is not after the start time {start:g} s")
-            continue
-        todo.append((n, info, _experiment(start, stop, h)))
+    todo = [x for x in (_regenerate_plan(outcome, n, fmus, build_problems, baselines, stop_time, step)
+                        for n in names) if x is not None]
     for c in outcome.checks.values():
         for m in c.messages:
             echo(("BAD INPUT " if c.status == "input" else "FAILED ") + m)
     todo.sort(key=lambda x: (-(x[2].stop - x[2].start), -len(x[1].friction)))
     csvs = _run([(x[1], x[2]) for x in todo], out / "results", jobs) if todo else {}
+    fid = _write_baselines(outcome, todo, csvs, baselines, provenance, echo)
+    save_provenance(baselines, provenance)
+    statuses = [c.status for c in outcome.checks.values()]
+    outcome.code = EXIT_INPUT if "input" in statuses else EXIT_REGRESSION if "regression" in statuses else EXIT_OK
+    outcome.seconds = {"total": time.perf_counter() - t0}
+    echo(f"regenerate: {statuses.count('ok')} baseline(s) written to {_rel(baselines)} in "
+         f"{outcome.seconds['total']:.1f} s (platform {fid}); review the changes above and `git diff "
+         f"--stat {_rel(baselines)}` before committing")
+    return outcome
+
+
+def _regenerate_plan(outcome: Outcome, n: str, fmus: dict, build_problems: dict, baselines: Path,
+                     stop_time: float | None, step: float | None):
+    """(scene, FmuInfo, Experiment) to run for a new baseline, or None (the reason in its check)."""
+    from . import InputError
+    from .fmus import inspect_fmu
+
+    check = outcome.checks[n] = SceneCheck(n, "ok")
+    if n in build_problems:
+        check.status, check.messages = "input", build_problems[n]
+        return None
+    problems_v = _validate(fmus[n])
+    if problems_v:
+        check.status = "regression"
+        check.messages.append(f"{n}: fmpy validate found problems, baseline NOT written: " + "; ".join(problems_v))
+        return None
+    csv, opt_path = baseline_files(baselines, n)
+    try:
+        info = inspect_fmu(fmus[n])
+        old = read_opt(opt_path) if opt_path.is_file() else {}
+    except (BadInput, InputError) as exc:
+        check.status = "input"
+        check.messages.append(f"{n}: {exc}")
+        return None
+    start = info.start
+    stop = stop_time if stop_time is not None else old.get("StopTime", info.stop)
+    h = step if step is not None else old.get("StepSize", BASELINE_STEP)
+    if stop <= start:
+        check.status = "input"
+        check.messages.append(f"{n}: stop time {stop:g} s is not after the start time {start:g} s")
+        return None
+    return n, info, _experiment(start, stop, h)
+
+
+def _write_baselines(outcome: Outcome, todo, csvs, baselines: Path, provenance: dict, echo) -> str:
+    """Copy each finished run to its baseline (with its .opt and provenance); returns the
+    platform's fingerprint id."""
     fp = platform_fingerprint()
     fid = fingerprint_id(fp)
     baselines.mkdir(parents=True, exist_ok=True)
@@ -857,30 +890,7 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
             continue
         got = got[0]
         csv, opt_path = baseline_files(baselines, n)
-        change = "new baseline"
-        if csv.is_file():
-            try:
-                old, new = read_series(csv), read_series(got)
-                if len(old.time) == len(new.time) and np.allclose(old.time, new.time, rtol=0, atol=1e-9 * ex.step):
-                    common = [x for x in new.names if x in old.values]
-                    diffs = {x: float(np.max(np.abs(new.values[x] - old.values[x]))) for x in common}
-                    units = {o.name: o.unit for o in info.outputs}
-                    if not diffs or max(diffs.values()) == 0.0:
-                        change = "unchanged (bit-identical)"
-                    else:
-                        w = max(diffs, key=diffs.get)
-                        change = f"changed: largest {diffs[w]:.3g} {units.get(w) or ''} in {w}"
-                        for u in ("m", "rad", "N", "N.m"):
-                            du = [d for x, d in diffs.items() if units.get(x) == u]
-                            if du:
-                                change += f"; max {max(du):.3g} {u}"
-                    added = [x for x in new.names if x not in old.values]
-                    if added:
-                        change += f"; new outputs {', '.join(added)}"
-                else:
-                    change = "replaced (different grid)"
-            except InputError:
-                change = "replaced (the old file was unreadable)"
+        change = _baseline_change(csv, got, ex, info) if csv.is_file() else "new baseline"
         shutil.copyfile(got, csv)
         write_opt(opt_path, ex.start, ex.stop, ex.step, info.tolerance)
         provenance["platforms"][fid] = fp
@@ -889,14 +899,36 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
         check.messages.append(f"{n}: wrote {_rel(csv)} ({csv.stat().st_size // 1024} KiB, t = {ex.start:g}..{ex.stop:g} s "
                               f"every {ex.step:g} s): {change}")
         echo(check.messages[-1])
-    save_provenance(baselines, provenance)
-    statuses = [c.status for c in outcome.checks.values()]
-    outcome.code = EXIT_INPUT if "input" in statuses else EXIT_REGRESSION if "regression" in statuses else EXIT_OK
-    outcome.seconds = {"total": time.perf_counter() - t0}
-    echo(f"regenerate: {statuses.count('ok')} baseline(s) written to {_rel(baselines)} in "
-         f"{outcome.seconds['total']:.1f} s (platform {fid}); review the changes above and `git diff "
-         f"--stat {_rel(baselines)}` before committing")
-    return outcome
+    return fid
+
+
+def _baseline_change(csv: Path, got: Path, ex, info) -> str:
+    """How far the new run moved from the old baseline, in words."""
+    from . import InputError
+    from .run import read_series
+
+    try:
+        old, new = read_series(csv), read_series(got)
+    except InputError:
+        return "replaced (the old file was unreadable)"
+    if not (len(old.time) == len(new.time) and np.allclose(old.time, new.time, rtol=0, atol=1e-9 * ex.step)):
+        return "replaced (different grid)"
+    common = [x for x in new.names if x in old.values]
+    diffs = {x: float(np.max(np.abs(new.values[x] - old.values[x]))) for x in common}
+    units = {o.name: o.unit for o in info.outputs}
+    if not diffs or max(diffs.values()) == 0.0:
+        change = "unchanged (bit-identical)"
+    else:
+        w = max(diffs, key=diffs.get)
+        change = f"changed: largest {diffs[w]:.3g} {units.get(w) or ''} in {w}"
+        for u in ("m", "rad", "N", "N.m"):
+            du = [d for x, d in diffs.items() if units.get(x) == u]
+            if du:
+                change += f"; max {max(du):.3g} {u}"
+    added = [x for x in new.names if x not in old.values]
+    if added:
+        change += f"; new outputs {', '.join(added)}"
+    return change
 
 
 def _guid(fmu: Path) -> str:
@@ -909,53 +941,44 @@ def _guid(fmu: Path) -> str:
         return ""
 
 
+
+
 # ---------------------------------------------------------------------------------------------
-# command line
+# JUnit XML (what GitHub, GitLab and Jenkins display)
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="ci/regress.py", description=__doc__.split("\n\n")[0],
-                                epilog="Exit codes: 0 all match; 1 a regression; 2 bad input or a missing baseline.")
-    p.add_argument("--scenes", nargs="+", metavar="NAME", help="scene names or shell globs (default: every scene)")
-    p.add_argument("--mechanisms", default=str(DEFAULT_MECHANISMS), metavar="DIR",
-                   help="directory of the scene files (default: mechanisms/)")
-    p.add_argument("--baselines", default=str(DEFAULT_BASELINES), metavar="DIR",
-                   help="directory of the baselines (default: ci/baselines/)")
-    p.add_argument("--tolerances", default=str(DEFAULT_TOLERANCES), metavar="FILE",
-                   help="tolerance table (default: ci/tolerances.toml)")
-    p.add_argument("--out", default=str(DEFAULT_OUT), metavar="DIR",
-                   help="work directory: FMUs, result CSVs, report.md (default: dist/regress)")
-    p.add_argument("--jobs", type=int, metavar="N", help="FMUs run in parallel processes (default: CPU count)")
-    p.add_argument("--tier", choices=TIERS, help="force a tolerance tier (default: same_platform when the "
-                                                 "platform fingerprint equals the baseline's)")
-    p.add_argument("--regenerate", action="store_true",
-                   help="write the baselines instead of checking them (deliberately, by hand; never in CI)")
-    p.add_argument("--stop-time", type=float, metavar="T", help="--regenerate: stop time of the new baselines "
-                                                                "(default: the old one, else the FMU's)")
-    p.add_argument("--step", type=float, metavar="S", help=f"--regenerate: output interval (default: the old one, "
-                                                           f"else {BASELINE_STEP} s)")
-    p.add_argument("--fingerprint", action="store_true", help="print this platform's fingerprint and exit")
-    return p
+def write_junit(outcome: Outcome, path, *, suite: str = "overcon regress") -> Path:
+    """Write ``outcome`` as JUnit XML: one ``testcase`` per scene (classname ``overcon.regress``,
+    its run's seconds), with a ``failure`` for a regression (message: the scene and its outputs
+    over tolerance; text: every finding) and an ``error`` for bad input; bad input not tied to a
+    scene (an orphan baseline, an unreadable file) is one more test case, ``(input)``, in error."""
+    from xml.etree import ElementTree as ET
 
-
-def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
-    if args.jobs is not None and args.jobs < 1:
-        print(f"ci/regress.py: --jobs {args.jobs}: must be >= 1", file=sys.stderr)
-        return EXIT_INPUT
-    if args.fingerprint:
-        fp = platform_fingerprint()
-        print(json.dumps({"id": fingerprint_id(fp), **fp}, indent=1))
-        return EXIT_OK
-    if args.regenerate:
-        return regenerate(args.scenes, mechanisms=args.mechanisms, baselines=args.baselines, out=args.out,
-                          jobs=args.jobs, stop_time=args.stop_time, step=args.step).code
-    if args.stop_time is not None or args.step is not None:
-        print("ci/regress.py: --stop-time/--step only with --regenerate (the check runs on each baseline's grid)",
-              file=sys.stderr)
-        return EXIT_INPUT
-    return regress(args.scenes, mechanisms=args.mechanisms, baselines=args.baselines, tolerances=args.tolerances,
-                   out=args.out, jobs=args.jobs, tier=args.tier).code
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    cases = []
+    for c in outcome.checks.values():
+        case = ET.Element("testcase", classname="overcon.regress", name=c.scene, time=f"{c.seconds:.3f}")
+        if c.status == "regression":
+            outputs = ", ".join(f.output for f in c.findings) or "see the text"
+            el = ET.SubElement(case, "failure", type="regression",
+                               message=f"{c.scene}: differs from its baseline in {outputs}")
+            el.text = "\n".join(c.messages)
+        elif c.status == "input":
+            el = ET.SubElement(case, "error", type="bad input", message=(c.messages or ["bad input"])[0][:500])
+            el.text = "\n".join(c.messages)
+        cases.append(case)
+    if outcome.problems:
+        case = ET.Element("testcase", classname="overcon.regress", name="(input)", time="0")
+        el = ET.SubElement(case, "error", type="bad input", message=outcome.problems[0][:500])
+        el.text = "\n".join(outcome.problems)
+        cases.append(case)
+    failures = sum(1 for c in cases if c.find("failure") is not None)
+    errors = sum(1 for c in cases if c.find("error") is not None)
+    total = f"{outcome.seconds.get('total', 0.0):.3f}"
+    attrs = dict(name=suite, tests=str(len(cases)), failures=str(failures), errors=str(errors), time=total)
+    root = ET.Element("testsuites", **attrs)
+    ts = ET.SubElement(root, "testsuite", **attrs)
+    ts.extend(cases)
+    ET.indent(root)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    return path

@@ -168,6 +168,13 @@ static void read_rest(reader *r, fmu_model *fm) {
     fm->stop_time = rd_double(r);
     int ny = 0;
     fm->y0 = rd_array(r, sizeof(double), &ny);
+    /* the sizes checked before they are added (and against the packed model: n + nh states) */
+    long long nq = (long long)fm->M.nb * fm->M.nq_b, nv = (long long)fm->M.nb * fm->M.nh_b;
+    if (fm->n < 0 || fm->nh < 0 || fm->n > MAX_ITEMS || fm->nh > MAX_ITEMS || fm->n != nq || fm->nh != nv ||
+        (fm->quaternion != 0 && (fm->quaternion != 1 || fm->M.nq_b != 7))) {
+        r->bad = 1;
+        fm->n = fm->nh = 0;
+    }
     fm->ny = fm->n + fm->nh;
     if (ny != fm->ny) r->bad = 1;
     if (counted(r, &fm->nout) && (fm->out = calloc((size_t)fm->nout + 1, sizeof *fm->out)) == NULL) r->bad = 2;

@@ -287,7 +287,8 @@ static int fields_refused(const fmu_inst *c, const fmu_saved *s, char *why, size
         for (size_t i = 0; i < field_count(fm, f); i++) {
             double x = field_value(data, f, i);
             char shown[40], rule[900] = "";
-            fmu_repr(x, shown, sizeof shown);
+            if (f->type == FT_INT) snprintf(shown, sizeof shown, "%d", ((const int *)data)[i]);
+            else fmu_repr(x, shown, sizeof shown);
             if (f->check == CK_PARAM) {
                 if (fmu_param_refuses(&fm->par[i], x, shown, rule, sizeof rule))
                     return snprintf(why, size, "parameter %s = %s: %s", fm->par[i].name, shown, rule), 1;

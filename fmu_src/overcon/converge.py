@@ -17,6 +17,8 @@ of run i is estimated as its difference to the stiffest run plus the stiffest ru
 extrapolated from the last difference with the order p as a geometric tail."""
 from __future__ import annotations
 
+from .outfiles import savefig_atomic
+
 import csv
 import dataclasses
 import math
@@ -300,7 +302,7 @@ def write_plot(study: Study, path: Path, title: str) -> Path:
     ax.set_title(title)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    savefig_atomic(fig, path, dpi=110)
     plt.close(fig)
     return path
 

@@ -1,6 +1,8 @@
 """A sweep's definition: ``DIR/sweep.json``, the FMUs it resolves to, new or resumed."""
 from __future__ import annotations
 
+from ...outfiles import write_text_atomic
+
 import json
 import math
 from pathlib import Path
@@ -78,5 +80,5 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
     columns = _columns([s.name for s in specs], fmus)
     if not resume:
         out_dir.mkdir(parents=True, exist_ok=True)
-        jpath.write_text(json.dumps(definition, indent=1) + "\n", encoding="utf-8")
+        write_text_atomic(jpath, json.dumps(definition, indent=1) + "\n")
     return Sweep(out_dir, definition, fmus, groups, sets, exps, columns, lstep)

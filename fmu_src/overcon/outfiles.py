@@ -104,19 +104,28 @@ def check_outputs(outputs: dict[str, object], inputs: dict[str, object]) -> str 
 
 
 def check_out_dir(option: str, path, inputs: dict[str, object] | None = None) -> str | None:
-    """Why the output directory ``path`` cannot be written (made if missing, then probed with a
-    file of its own), or None. Checked before any simulation."""
+    """Why the output directory ``path`` cannot be written, or None; checked before any simulation
+    and without making it: an existing directory is probed with a file of its own, a missing one
+    needs its nearest existing ancestor to be a writable directory."""
     d = Path(path)
     if d.exists() and not d.is_dir():
         return f"{option} {d}: not a directory"
     for name, q in (inputs or {}).items():
         if q is not None and Path(q).exists() and _same(d, Path(q)):
             return f"{option} {d}: is the input {name}"
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-        probe = d / f".overcon-write-probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        return f"{option} {d}: cannot write there ({exc.strerror or exc})"
+    if d.is_dir():
+        try:
+            probe = d / f".overcon-write-probe-{os.getpid()}"
+            probe.write_bytes(b"")
+            probe.unlink()
+        except OSError as exc:
+            return f"{option} {d}: cannot write there ({exc.strerror or exc})"
+        return None
+    up = d.absolute().parent
+    while not up.exists():
+        up = up.parent
+    if not up.is_dir():
+        return f"{option} {d}: cannot write there ({up} is not a directory)"
+    if not os.access(up, os.W_OK | os.X_OK):
+        return f"{option} {d}: cannot write there ({up} is not writable)"
     return None

@@ -1412,7 +1412,7 @@ def _read(path: Path, ctx: _Ctx) -> dict | None:
         return None
     why = toml_prescan(text)
     if why is not None:
-        ctx.add(FILE_FIELD, f"refused before parsing: {why}")
+        ctx.add(FILE_FIELD, f"invalid TOML (refused before parsing): {why}")
         return None
     try:
         return tomllib.loads(text)

@@ -52,7 +52,10 @@ static const char *rd_string(reader *r) {
 static void *rd_array(reader *r, size_t item, int *count) {
     int n = rd_int(r);
     if (count) *count = 0;
-    if (r->bad || n < 0 || n > MAX_ITEMS) { r->bad = 1; return NULL; }
+    if (r->bad || n < 0 || n > MAX_ITEMS || (size_t)(r->end - r->p) < (size_t)n * item) { /* before it allocates */
+        r->bad = 1;
+        return NULL;
+    }
     void *a = calloc((size_t)(n ? n : 1), item);
     if (!a) { r->bad = 2; return NULL; }
     rd(r, a, (size_t)n * item);

@@ -120,8 +120,9 @@ mkdir -p "$tmp/fuzz"
 "$PY" tests/c_host/fuzz_targets.py "$tmp/fuzz" > "$tmp/fuzz/targets.txt"
 "$PY" tests/state_craft.py "$tmp/fuzz/targets.txt" "$tmp/fuzz/crafted" > "$tmp/fuzz/crafted.txt" # before the rebuild
 $CC -O2 -Wall -Wextra -Werror "${FUZZ_SAN[@]}" -o "$tmp/fuzz_fmu" tests/c_host/fuzz_fmu.c -ldl -lm
-while read -r id dir _; do
-    $CC "${FLAGS[@]}" "${FUZZ_SAN[@]}" -shared -fPIC -o "$dir/binaries/linux64/$id.so" "$FMI"/fmu_*.c "$FMI"/fmi2_*.c "$CORE"/*.c -lm
+$CC "${FLAGS[@]}" "${FUZZ_SAN[@]}" -shared -fPIC -o "$tmp/fuzz/fmi2_san.so" "$FMI"/fmu_*.c "$FMI"/fmi2_*.c "$CORE"/*.c -lm
+while read -r id dir _; do  # one sanitized build of the FMI 2.0 layer: every target's binary
+    cp "$tmp/fuzz/fmi2_san.so" "$dir/binaries/linux64/$id.so"
 done < "$tmp/fuzz/targets.txt"
 export ASAN_OPTIONS=detect_leaks=1:halt_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 while read -r id file; do

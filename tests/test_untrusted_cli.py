@@ -268,3 +268,16 @@ def test_set_redundancy_by_item_name(fmu, tmp_path, capsys):
     assert code == 2 and "--set redundancy=bogus: not one of redundancy's items (eliminate (1), min-norm (2), " \
         "compliant (3))" in err, err
     assert "no such parameter" not in err
+
+
+@pytest.mark.parametrize("definition, message", [
+    ('{"inputs": [], "params": ["a=1"], "samples": 1e999, "seed": null, "stop_time": null, "lockstep_step": null}',
+     "number 1e999 is not finite"),
+    ('{"inputs": "x", "params": [], "samples": null, "seed": null, "stop_time": null, "lockstep_step": null}',
+     "key 'inputs' has the wrong type (str), expected array"),
+    ('{"inputs": [], "params": []}', "key 'samples' missing"),
+])
+def test_crafted_sweep_definition_exits_2_naming_the_key(tmp_path, capsys, definition, message):
+    (tmp_path / "sweep.json").write_text(definition)
+    code, err = run_cli(["sweep", "--resume", tmp_path], capsys)
+    assert code == 2 and f"{tmp_path / 'sweep.json'}" in err and message in err, err

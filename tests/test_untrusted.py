@@ -240,3 +240,41 @@ def test_ten_thousand_mutated_states_per_integrator(fuzzer, targets):
     """The acceptance's 10,000 mutations of each integrator's state and the door's (about 50 s in all
     on the shipped binaries)."""
     _fuzz(fuzzer, targets, "states", 10000, 600, seed=2)
+
+
+def test_fmi3_refuses_a_crafted_kept_list_and_an_fmi2_state(targets, tmp_path):
+    """The kept-list crash hit fmi3SetFMUState too: the same bytes checks in FMI 3.0; and an FMI 2.0
+    state is not an FMI 3.0 instance's."""
+    from fmpy.fmi3 import FMU3Slave
+    from overcon.fmu import build as fmu_build
+    unz, scenes, _ = targets
+    code, results = fmu_build.build_all([str(scenes["f45_dopri5"])], tmp_path, refs=False, validate=False,
+                                        allow_nonunique=True, runtime="c", fmi=3, echo=lambda s: None,
+                                        echo_err=lambda s: None)
+    assert code == 0
+    d = Path(fmpy.extract(str(results[0].fmu), str(tmp_path / "u3")))
+    md = fmpy.read_model_description(str(d))
+    messages = []
+    s = FMU3Slave(guid=md.guid, unzipDirectory=str(d), modelIdentifier=md.coSimulation.modelIdentifier,
+                  instanceName="f3")
+    s.instantiate(logMessage=lambda env, status, category, message: messages.append(message.decode()))
+    s.enterInitializationMode(startTime=0.0)
+    s.exitInitializationMode()
+    for k in range(10):
+        s.doStep(0.01 * k, 0.01)
+    data = bytes(s.serializeFMUState(s.getFMUState()))
+    nparam = sum(v.causality == "parameter" for v in md.modelVariables)
+    at = state_craft.layout(data, md.guid, nparam, *state_craft.model_counts(scenes["f45_dopri5"]))
+    state = s.deserializeFMUState(state_craft.patched(data, at, md.guid, "sim.kept[0]", 1_000_000))
+    with pytest.raises(FMICallException):
+        s.setFMUState(state)
+    assert any("fmi3SetFMUState: the state is refused" in m and "kept equation 0 = 1000000" in m for m in messages)
+    s.doStep(0.1, 0.01)  # still usable
+    fmi2 = Co(unz["f45_dopri5"])
+    two = bytes(fmi2.fmu.serializeFMUstate(fmi2.fmu.getFMUstate()))
+    fmi2.free()
+    with pytest.raises(FMICallException):
+        s.deserializeFMUState(two)  # another GUID as well as another version: refused at the GUID
+    assert any("fmi3DeserializeFMUState: the bytes are refused" in m for m in messages), messages
+    s.terminate()
+    s.freeInstance()

@@ -281,3 +281,23 @@ def test_crafted_sweep_definition_exits_2_naming_the_key(tmp_path, capsys, defin
     (tmp_path / "sweep.json").write_text(definition)
     code, err = run_cli(["sweep", "--resume", tmp_path], capsys)
     assert code == 2 and f"{tmp_path / 'sweep.json'}" in err and message in err, err
+
+
+def test_ctrl_c_during_a_run_removes_its_temp_dir(fmu, tmp_path, monkeypatch):
+    import overcon.tooling.run as run_mod
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    seen = []
+
+    def interrupted(argv, **kw):
+        seen.append(json.loads(argv[-1])["unzip_dir"])
+        assert Path(seen[-1]).is_dir()
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run_mod.subprocess, "run", interrupted)
+    info = inspect_fmu(fmu)
+    with pytest.raises(KeyboardInterrupt):
+        run_mod.run_one(info, experiment(info, stop_time=0.05), tmp_path / "x.csv", False, None)
+    assert seen and list(tmp.iterdir()) == []

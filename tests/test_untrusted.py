@@ -1,4 +1,4 @@
-"""Untrusted input to the FMUs (issue 36, docs/untrusted-input.md): serialized FMU states that
+"""Untrusted input to the FMUs (docs/untrusted-input.md): serialized FMU states that
 crashed, hung or were accepted before the state validator, replayed on the shipped C-runtime
 binaries through fmpy's low-level API; the smaller FMI items (a NULL GUID, %00 in the resource
 URI, a step below the time's resolution); and the seeded fuzzer (tests/c_host/fuzz_fmu.c) on

@@ -1,4 +1,4 @@
-"""Untrusted input to the command line (issue 36, docs/untrusted-input.md): FMU archives (a
+"""Untrusted input to the command line (docs/untrusted-input.md): FMU archives (a
 modelIdentifier that is a path, a zip bomb, temp directories after failing runs, crafted facts
 records), scene files that would make tomllib quadratic, and output paths that must never destroy
 inputs or look complete when they are not."""

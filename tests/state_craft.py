@@ -41,6 +41,7 @@ def layout(data: bytes, guid: str, nparam: int, nR: int, nj: int) -> dict[str, t
     for k in range(nparam):
         at[f"pval[{k}]"] = (payload + 52 + 8 * k, "d")
         at[f"pset[{k}]"] = (payload + 52 + 8 * nparam + 4 * k, "i")
+    at["outputs[0]"] = (payload + 52 + 12 * nparam, "d")
     at["y[0]"] = (payload + 52 + 12 * nparam + 8 * nout, "d")
     rk = sim + 28
     at["sim.has_K"], at["sim.k"], at["sim.t"], at["sim.h"] = (rk, "i"), (rk + 32, "q"), (rk + 80, "d"), (rk + 88, "d")

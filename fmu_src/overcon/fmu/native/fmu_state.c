@@ -33,7 +33,7 @@
  * fmu_inst of the same name, and one line here). ---- */
 enum { FT_INT, FT_DOUBLE };                               /* element type */
 enum { FN_ONE, FN_PARAM, FN_OUT, FN_Y };                  /* element count: 1, nparam, nout, ny */
-enum { CK_FLAG, CK_MODE, CK_TOL_SOURCE, CK_FINITE, CK_STABLE_STEP, CK_PARAM }; /* the rule of every element */
+enum { CK_ANY, CK_FLAG, CK_MODE, CK_TOL_SOURCE, CK_FINITE, CK_STABLE_STEP, CK_PARAM }; /* the rule of every element */
 typedef struct {
     const char *name;
     size_t saved, inst; /* offsetof in fmu_saved and fmu_inst ((size_t)-1: none) */
@@ -56,8 +56,8 @@ static const state_field STATE_FIELDS[] = {
     SCALAR(stable_step, FT_DOUBLE, CK_STABLE_STEP, 0),
     ARRAY(pval, FT_DOUBLE, FN_PARAM, CK_PARAM, 1),
     ARRAY(pset, FT_INT, FN_PARAM, CK_FLAG, 1),
-    ARRAY(outputs, FT_DOUBLE, FN_OUT, CK_FINITE, 0),
-    ARRAY(y, FT_DOUBLE, FN_Y, CK_FINITE, 0),
+    ARRAY(outputs, FT_DOUBLE, FN_OUT, CK_ANY, 0), /* finite when have_outputs (fields_refused) */
+    ARRAY(y, FT_DOUBLE, FN_Y, CK_ANY, 0),         /* finite when has_y */
 };
 #define NFIELDS (sizeof STATE_FIELDS / sizeof STATE_FIELDS[0])
 
@@ -311,6 +311,9 @@ static int fields_refused(const fmu_inst *c, const fmu_saved *s, char *why, size
     if ((s->have_outputs || s->derived_stale) && !s->has_sim)
         return snprintf(why, size, "outputs of a run (have_outputs %d, derived_stale %d) without the run's bytes",
                         s->have_outputs, s->derived_stale), 1;
+    if (s->have_outputs && !fmu_all_finite(s->outputs, fm->nout))
+        return snprintf(why, size, "have_outputs = 1 with a non-finite output"), 1;
+    if (s->has_y && !fmu_all_finite(s->y, fm->ny)) return snprintf(why, size, "has_y = 1 with a non-finite state"), 1;
     if (!s->has_sim && s->sim_size)
         return snprintf(why, size, "%zu bytes of a run but has_sim = 0", s->sim_size), 1;
     return 0;

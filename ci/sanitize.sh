@@ -107,7 +107,7 @@ for id in planar_f45_wo4 door_h1_wo_hinge2; do
         "$tmp/fmu_host3" -q -M -w "$tmp/3_$id" "$id" "$token" 0 0.2 0.001 1e-9 $vrs > "$tmp/3_${id}_me.csv"
     echo "sanitize: FMI 3.0 FMU $id: $(($(wc -l < "$tmp/3_$id.csv") - 1)) rows co-simulation, FMU state restored bit for bit; $(($(wc -l < "$tmp/3_${id}_me.csv") - 1)) rows Model Exchange"
 done
-# The fuzzing stage (issue 36, docs/untrusted-input.md): tests/c_host/fuzz_fmu.c, a seeded hand-written
+# The fuzzing stage (docs/untrusted-input.md): tests/c_host/fuzz_fmu.c, a seeded hand-written
 # mutator, against the FMI 2.0 layer built with ASan/UBSan (and float-cast-overflow: a double converted to
 # an int out of range) on one FMU per integrator (dopri5, dop853, rk4, radau) and the quaternion door: first
 # the regression states of tests/data/untrusted/states.json (crafted by tests/state_craft.py), then mutated

@@ -19,7 +19,9 @@
 # by the plain C host (tests/c_host/fmu_host.c, sanitized too) over 0-1 s with
 # an FMU state saved half-way through its bytes and restored (-S: the same bits at the end).
 # Then the FMI 3.0 layer (fmi3_*.c) the same way through tests/c_host/fmu_host3.c, co-simulation (-S) and
-# Model Exchange (-M). Every run also calls ovk_sim_watch_extremes (warm and cold) and checks the state is untouched. Also compiles the core with clang -Werror when clang is installed. About 40 s.
+# Model Exchange (-M). Every run also calls ovk_sim_watch_extremes (warm and cold) and checks the state is untouched.
+# Then the fuzzing stage (below: FMU states, model files, FMI calls; FUZZ_SECONDS). Also compiles the core with
+# clang -Werror when clang is installed. About 40 s plus the fuzzing stage's 90 s.
 # Usage: bash ci/sanitize.sh   (PYTHON: the installed overcon's interpreter, default .venv/bin/python;
 #                               CC: the compiler, default cc)
 set -euo pipefail
@@ -105,6 +107,38 @@ for id in planar_f45_wo4 door_h1_wo_hinge2; do
         "$tmp/fmu_host3" -q -M -w "$tmp/3_$id" "$id" "$token" 0 0.2 0.001 1e-9 $vrs > "$tmp/3_${id}_me.csv"
     echo "sanitize: FMI 3.0 FMU $id: $(($(wc -l < "$tmp/3_$id.csv") - 1)) rows co-simulation, FMU state restored bit for bit; $(($(wc -l < "$tmp/3_${id}_me.csv") - 1)) rows Model Exchange"
 done
+# The fuzzing stage (docs/untrusted-input.md): tests/c_host/fuzz_fmu.c, a seeded hand-written
+# mutator, against the FMI 2.0 layer built with ASan/UBSan (and float-cast-overflow: a double converted to
+# an int out of range) on one FMU per integrator (dopri5, dop853, rk4, radau) and the quaternion door: first
+# the regression states of tests/data/untrusted/states.json (crafted by tests/state_craft.py), then mutated
+# states, model files and FMI call sequences, each bounded by a case count and by FUZZ_SECONDS of wall time
+# per target and mode (default 6: about 90 s in all). Any sanitizer report, hang past a doStep's budget,
+# accepted state outside its parameters' rules or refused state that changed the instance fails the stage.
+FUZZ_SECONDS=${FUZZ_SECONDS:-6}
+FUZZ_SAN=("${SAN[@]}" -fsanitize=float-cast-overflow)
+mkdir -p "$tmp/fuzz"
+"$PY" tests/c_host/fuzz_targets.py "$tmp/fuzz" > "$tmp/fuzz/targets.txt"
+"$PY" tests/state_craft.py "$tmp/fuzz/targets.txt" "$tmp/fuzz/crafted" > "$tmp/fuzz/crafted.txt" # before the rebuild
+$CC -O2 -Wall -Wextra -Werror "${FUZZ_SAN[@]}" -o "$tmp/fuzz_fmu" tests/c_host/fuzz_fmu.c -ldl -lm
+$CC "${FLAGS[@]}" "${FUZZ_SAN[@]}" -shared -fPIC -o "$tmp/fuzz/fmi2_san.so" "$FMI"/fmu_*.c "$FMI"/fmi2_*.c "$CORE"/*.c -lm
+while read -r id dir _; do  # one sanitized build of the FMI 2.0 layer: every target's binary
+    cp "$tmp/fuzz/fmi2_san.so" "$dir/binaries/linux64/$id.so"
+done < "$tmp/fuzz/targets.txt"
+export ASAN_OPTIONS=detect_leaks=1:halt_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+while read -r id file; do
+    line=$(grep "^$id " "$tmp/fuzz/targets.txt")
+    read -r _ dir guid args <<< "$line"
+    # shellcheck disable=SC2086
+    "$tmp/fuzz_fmu" replay "$dir" "$id" "$guid" 0 1 60 $args -r "$file" > /dev/null
+done < "$tmp/fuzz/crafted.txt"
+echo "sanitize: $(wc -l < "$tmp/fuzz/crafted.txt") regression states (tests/data/untrusted/states.json) replayed"
+while read -r id dir guid args; do
+    for mode in states model calls; do
+        # shellcheck disable=SC2086
+        "$tmp/fuzz_fmu" $mode "$dir" "$id" "$guid" 20261127 100000 "$FUZZ_SECONDS" $args -o "$tmp/fuzz/out_${mode}_$id"
+    done
+done < "$tmp/fuzz/targets.txt"
+unset ASAN_OPTIONS UBSAN_OPTIONS
 if command -v clang >/dev/null 2>&1; then
     clang "${FLAGS[@]}" -shared -fPIC -o "$tmp/libovercore_clang.so" "$CORE"/*.c -lm
     echo "sanitize: the core compiles with clang -Wall -Wextra -Werror"

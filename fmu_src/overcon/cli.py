@@ -141,6 +141,24 @@ def _positive(text: str) -> float:
     return val
 
 
+def _archive_flags(p) -> None:
+    """The limits of an FMU archive (overcon.tooling.fmus.archive_limits; docs/untrusted-input.md)."""
+    from .tooling.fmus import MAX_UNZIPPED_FILES, MAX_UNZIPPED_MB
+    p.add_argument("--max-unzipped-mb", type=_positive, metavar="MB",
+                   help=f"refuse an FMU whose files unzip to more than MB MiB (default {MAX_UNZIPPED_MB})")
+    p.add_argument("--max-unzipped-files", type=_jobs, metavar="N",
+                   help=f"refuse an FMU archive of more than N files (default {MAX_UNZIPPED_FILES})")
+
+
+def _use_archive_flags(args) -> None:
+    """The flags' limits, for this process and (through the environment) its worker processes."""
+    from .tooling.fmus import LIMIT_ENV
+    if getattr(args, "max_unzipped_mb", None):
+        os.environ[LIMIT_ENV[0]] = repr(float(args.max_unzipped_mb))
+    if getattr(args, "max_unzipped_files", None):
+        os.environ[LIMIT_ENV[1]] = str(int(args.max_unzipped_files))
+
+
 def _tooling_parsers(sub) -> None:
     """``run``, ``compare``, ``reproduce``: fmpy drives the FMUs (overcon.tooling)."""
     r = sub.add_parser("run", help="simulate FMUs with fmpy, one CSV per FMU")
@@ -152,6 +170,7 @@ def _tooling_parsers(sub) -> None:
     r.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
     r.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
     _input_flags(r)
+    _archive_flags(r)
     c = sub.add_parser("compare", help="run FMUs of a scene group (or one FMU and a reference CSV) and compare "
                                        "them: uniqueness verdict next to the pre-check's prediction")
     c.add_argument("fmus", nargs="+", metavar="FMU", help="FMU files or directories of them; grouped by their "
@@ -175,6 +194,7 @@ def _tooling_parsers(sub) -> None:
     c.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H", help=LOCKSTEP_HELP)
     c.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
     _input_flags(c)
+    _archive_flags(c)
     p = sub.add_parser("reproduce", help="the main job: build the paper's FMUs, pre-check, run with fmpy, compare "
                                          "every group, write report.md with the verdicts and Figs. 3-5, 7-9")
     p.add_argument("--out", default="reproduce", metavar="DIR", help="output directory (default: reproduce)")
@@ -485,15 +505,17 @@ def cmd_simulate(args) -> int:
 
     from .precheck import precheck, run_warnings
 
-    out = Path(args.out)
-    if out.is_dir() or not out.parent.is_dir():
-        return _input_error(f"--out {args.out}: " + ("is a directory (give a CSV file name)" if out.is_dir()
-                                                     else f"the directory {out.parent} does not exist"))
-    events = Path(args.events) if args.events else None
-    if events is not None and (events.is_dir() or not events.parent.is_dir()):
-        return _input_error(f"--events {args.events}: " + ("is a directory (give a CSV file name)" if events.is_dir()
-                                                           else f"the directory {events.parent} does not exist"))
+    from .outfiles import check_outputs
+
+    outputs = {"--out": args.out, "--events": args.events}
+    why = check_outputs(outputs, {"scene file": args.file})
+    if why:
+        return _input_error(why)
     spec, model = _load(args)
+    mechanism = getattr(spec.mechanism, "source", None)
+    why = check_outputs(outputs, {"scene file": args.file, "mechanism file": mechanism})
+    if why:
+        return _input_error(why)
     for w in run_warnings(precheck(model, args.file)):
         print(f"overcon: warning: {w}", file=sys.stderr)
     from .kernel import refusal
@@ -526,8 +548,11 @@ def cmd_simulate(args) -> int:
     except SimulationError as exc:
         return _failed_run(args, model, spec, exc, time.perf_counter() - start)
     wall = time.perf_counter() - start
-    write_csv(res, args.out)
-    _write_events(args, res)
+    try:
+        write_csv(res, args.out)
+        _write_events(args, res)
+    except OSError as exc:
+        return _input_error(f"--out {args.out}: cannot write: {exc.strerror or exc}")
     print(_run_stats(args.out, model, res, wall))
     if res.stiff_steps:
         print(f"note: {res.stiff_steps} steps were limited by stability (stiff: friction sticking inside the "
@@ -622,8 +647,15 @@ def cmd_run(args) -> int:
     from .tooling.pipeline import run_paths
     from .tooling.run import parse_settings
 
+    from .outfiles import check_out_dir
+    from .tooling import InputError
+
     def go():
         start = time.perf_counter()
+        _use_archive_flags(args)
+        why = check_out_dir("--out", args.out, {f"FMU {f}": f for f in args.fmus})
+        if why:
+            raise InputError(why)
         res = run_paths(args.fmus, args.out, stop_time=args.stop_time, step=args.step, jobs=args.jobs,
                         settings=parse_settings(args.set), input_table=args.input_table,
                         interpolation=args.input_interpolation)
@@ -637,10 +669,17 @@ def cmd_compare(args) -> int:
     from .tooling.pipeline import compare_paths, compare_with_reference
     from .tooling.run import parse_settings
 
+    from .outfiles import check_out_dir
+    from .tooling import InputError
+
     plots = args.plot if args.plot in ("worst", "all") else [n for n in args.plot.split(",") if n]
 
     def go():
         start = time.perf_counter()
+        _use_archive_flags(args)
+        why = check_out_dir("--out", args.out, {**{f"FMU {f}": f for f in args.fmus}, "--ref": args.ref})
+        if why:
+            raise InputError(why)
         if args.ref is not None:
             if len(args.fmus) != 1 or args.group:
                 print("overcon: --ref compares exactly one FMU file against the CSV (no --group)", file=sys.stderr)

@@ -17,6 +17,8 @@ of run i is estimated as its difference to the stiffest run plus the stiffest ru
 extrapolated from the last difference with the order p as a geometric tail."""
 from __future__ import annotations
 
+from .outfiles import atomic, savefig_atomic
+
 import csv
 import dataclasses
 import math
@@ -270,7 +272,7 @@ def write_table(study: Study, path: Path) -> Path:
     """CSV, one row per stiffness: k (N/m), the position and reaction differences (to the next
     and to the stiffest run), the estimated error (m), the distance to each rigid elimination (m),
     the run's steps and wall time (s)."""
-    with open(path, "w", newline="") as fh:
+    with atomic(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["stiffness_N_per_m", "positions_to_next_m", "positions_to_stiffest_m", "reactions_to_next",
                     "reactions_to_stiffest", "estimated_error_m",
@@ -306,7 +308,7 @@ def write_plot(study: Study, path: Path, title: str) -> Path:
     ax.set_title(title)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    savefig_atomic(fig, path, dpi=110)
     plt.close(fig)
     return path
 

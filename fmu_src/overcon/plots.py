@@ -8,6 +8,8 @@ equal differences, or two near zero) is still read off the legend; ``runs`` name
 the plot shows (a second title line)."""
 from __future__ import annotations
 
+from .outfiles import savefig_atomic
+
 from pathlib import Path
 from typing import Mapping
 
@@ -71,6 +73,6 @@ def plot_series(path: Path, time: np.ndarray, series: Mapping[str, np.ndarray], 
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    savefig_atomic(fig, path, dpi=110)
     plt.close(fig)
     return path

@@ -58,7 +58,9 @@ What is validated
   :func:`overcon.params.check_relations` (output points, fewest internal steps), reported against
   the solver field, or ``scene.stop_time`` when the file does not give that field.
 * Files (bounded work): only regular files are read (a FIFO would block, ``/dev/zero`` never
-  ends: both are refused without opening them), at most :data:`MAX_FILE_BYTES` (1 MiB); at most
+  ends: both are refused without opening them), at most :data:`MAX_FILE_BYTES` (1 MiB), and within
+  the key depth, key length, key count and nesting of :func:`toml_prescan` (:data:`MAX_KEY_DEPTH` ...)
+  before ``tomllib`` parses it; at most
   :data:`MAX_BODIES` bodies, :data:`MAX_JOINTS` joints, :data:`MAX_LOADS` loads (why: there).
 
 If the scene's mechanism file has problems, the scene's references to bodies, joints and equation
@@ -1490,6 +1492,103 @@ all``) costs two SVDs per joint and is the default only up to
 :data:`overcon.precheck.AUTO_ALL_JOINTS` joints. The paper's mechanisms have 4 and 7 bodies.
 Loads cost one short loop each per evaluation."""
 
+MAX_KEY_DEPTH = 32
+MAX_KEY_LENGTH = 1024
+MAX_KEYS = 100_000
+MAX_NESTING = 32
+"""Bounds of a TOML file checked by :func:`toml_prescan` before ``tomllib`` parses it, because the
+size cap alone does not bound the parser: ``tomllib`` spends time and memory quadratic in a key's
+depth (a dotted key ``gravity.a.a.a...`` of 20,000 parts, a 44 KB file, took 36 s and 2.4 GB).
+Depth: the parts of a key path, its table header's included (the paper's files use at most 3);
+length: the characters of one key path (names are at most 40 characters by the rules above);
+keys: every key and table header of the file (a mechanism at the body and joint limits has about
+10,000); nesting: arrays and inline tables inside each other."""
+
+
+def toml_prescan(text: str) -> str | None:
+    """Why ``text`` is refused before parsing (one linear pass: strings and comments skipped, key
+    paths and nesting counted), or None. Not a TOML parser: a file it lets through may still be
+    invalid TOML (tomllib says so); it only bounds what the parser may spend."""
+    i, n, keys = 0, len(text), 0
+    stack: list[str] = []  # open [ and { of values
+    header_parts = 0  # parts of the current table header
+    line = 1
+
+    def skip_string(i: int) -> int:
+        q = text[i]
+        if text.startswith(q * 3, i):
+            end = text.find(q * 3, i + 3)
+            return n if end < 0 else end + 3
+        j = i + 1
+        while j < n and text[j] != q and text[j] != "\n":
+            j += 2 if q == '"' and text[j] == "\\" else 1
+        return j + 1
+
+    def key_path(i: int, stop: str) -> tuple[int, int, int]:
+        """(index after the key, its parts, its length) of a key ending before one of stop."""
+        parts, start = 1, i
+        while i < n and text[i] not in stop and text[i] != "\n":
+            if text[i] in "\"'":
+                i = skip_string(i)
+                continue
+            if text[i] == ".":
+                parts += 1
+            i += 1
+        return i, parts, i - start
+
+    expect_key = True
+    while i < n:
+        ch = text[i]
+        if ch == "\n":
+            line += 1
+            i += 1
+            if not stack:
+                expect_key = True
+            continue
+        if ch in " \t\r":
+            i += 1
+            continue
+        if ch == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        if expect_key and not stack and ch == "[":  # a table header
+            j, parts, length = key_path(i + (2 if text.startswith("[[", i) else 1), "]")
+            header_parts = parts
+            keys += 1
+            if parts > MAX_KEY_DEPTH or length > MAX_KEY_LENGTH:
+                return (f"line {line}: a table header of {parts} parts and {length} characters (at most "
+                        f"{MAX_KEY_DEPTH} parts and {MAX_KEY_LENGTH} characters)")
+            i, expect_key = j + 1, False
+            continue
+        if expect_key:
+            j, parts, length = key_path(i, "=}")
+            keys += 1
+            depth = parts + header_parts + sum(1 for c in stack if c == "{")
+            if depth > MAX_KEY_DEPTH or length > MAX_KEY_LENGTH:
+                return (f"line {line}: a key of {depth} parts (with its table's) and {length} characters (at most "
+                        f"{MAX_KEY_DEPTH} parts and {MAX_KEY_LENGTH} characters)")
+            if keys > MAX_KEYS:
+                return f"more than {MAX_KEYS} keys"
+            i, expect_key = j + 1, False
+            continue
+        if ch in "\"'":
+            i = skip_string(i)
+            continue
+        if ch in "[{":
+            stack.append(ch)
+            if len(stack) > MAX_NESTING:
+                return f"line {line}: arrays and inline tables nested deeper than {MAX_NESTING}"
+            expect_key = ch == "{"
+        elif ch in "]}":
+            if stack:
+                stack.pop()
+        elif ch == "," and stack and stack[-1] == "{":
+            expect_key = True
+        i += 1
+    return None
+
+
 _FILE_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
                (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
                (stat.S_ISSOCK, "a socket"))
@@ -1539,6 +1638,10 @@ def _read(path: Path, ctx: _Ctx) -> dict | None:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         ctx.add(FILE_FIELD, f"not UTF-8 text (byte {exc.start})")
+        return None
+    why = toml_prescan(text)
+    if why is not None:
+        ctx.add(FILE_FIELD, f"invalid TOML (refused before parsing): {why}")
         return None
     try:
         return tomllib.loads(text)
@@ -1762,7 +1865,10 @@ def is_scene_file(path) -> bool | None:
     if data is None:
         return None
     try:
-        doc = tomllib.loads(data.decode("utf-8"))
+        text = data.decode("utf-8")
+        if toml_prescan(text) is not None:
+            return None
+        doc = tomllib.loads(text)
     except (UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError, ValueError,
             OverflowError, MemoryError):
         return None

@@ -389,8 +389,9 @@ def run_scene(scene: SceneSpec, **kw) -> Result:
 
 def write_events(events, path) -> None:
     """The events of a run (:data:`EVENT_KINDS`) as CSV: ``time`` (s), ``kind``, ``detail``; the
-    header alone when there were none."""
-    with open(path, "w", newline="") as fh:
+    header alone when there were none. Written whole or not at all (overcon.outfiles)."""
+    from .outfiles import atomic
+    with atomic(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["time", "kind", "detail"])
         for t, kind, detail in events:
@@ -398,7 +399,9 @@ def write_events(events, path) -> None:
 
 
 def write_csv(result: Result, path) -> None:
-    with open(path, "w", newline="") as fh:
+    """The result as CSV (time, then the outputs), written whole or not at all (overcon.outfiles)."""
+    from .outfiles import atomic
+    with atomic(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["time", *result.names])
         for t, row in zip(result.time, result.values):

@@ -118,6 +118,24 @@ static int check_model(const ovk_model *M, ovk_data *d) {
             return ovk_fail(d, OVK_INVALID, "model: input %d (kind %d, joint %d, bodies %d and %d, frame %g) is not "
                             "one the core takes", k, kind, j, bi, bj, frame);
     }
+    for (int p = 1; p < M->nR; p++)
+        if (M->retained[p] <= M->retained[p - 1])
+            return ovk_fail(d, OVK_INVALID, "model: the retained rows are not ascending (position %d: %d after %d)", p,
+                            M->retained[p], M->retained[p - 1]);
+    /* the joints' rows are the m equations, each once (unique.c and watch.c fill per-row tables from them) */
+    unsigned char *seen = calloc((size_t)M->m + 1, 1);
+    if (!seen) return ovk_fail(d, OVK_NOMEM, "out of memory: %d row flags", M->m);
+    int covered = 0, twice = -1;
+    for (int j = 0; j < M->nj; j++)
+        for (int e = 0; e < M->jneq[j]; e++) {
+            int r = M->jrows[(size_t)j * OVK_MAXEQ + e];
+            if (seen[r]++) twice = r;
+            else covered++;
+        }
+    free(seen);
+    if (twice >= 0 || covered != M->m)
+        return ovk_fail(d, OVK_INVALID, "model: the joints' rows are not the %d equations once each (%d covered%s)",
+                        M->m, covered, twice >= 0 ? ", one twice" : "");
     for (int g = 0; g < M->nfg; g++)
         if (M->fgroup[g] > M->fgroup[g + 1])
             return ovk_fail(d, OVK_INVALID, "model: friction group %d starts after the next one", g);

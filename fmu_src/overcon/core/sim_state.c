@@ -140,9 +140,88 @@ int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size) {
     return OVK_OK;
 }
 
+/* 1 if x is 0 or 1. */
+static int flag(long long x) { return x == 0 || x == 1; }
+
+/* The fields a load put into the run, checked before anything computes with them: every index
+ * against its bound (radau's pivots, the kept equations, the events' kinds and texts), every
+ * counter non-negative, every flag 0 or 1, the integrator's times and step finite (its step > 0)
+ * and its state vector finite. kept: the loaded kept equations (nR). 0, or 1 with the reason in
+ * why. The numbers that only enter arithmetic (stages, multipliers, warm starts) are not bounded:
+ * a wrong one ends in a refused step, never outside an array. */
+static int loaded_bad(const ovk_sim *s, const int *kept, char *why, size_t size) {
+    const ovk_rk *rk = &s->rk;
+    const int *flags[] = {&rk->has_K, &rk->dense_ready, &rk->current_jac, &rk->has_lu, &rk->has_old, &s->has_lam,
+                          &s->has_last};
+    static const char *flag_names[] = {"has_K", "dense_ready", "current_jac", "has_lu", "has_old", "has_lam",
+                                       "has_last"};
+    for (size_t k = 0; k < sizeof flags / sizeof flags[0]; k++)
+        if (!flag(*flags[k])) return snprintf(why, size, "flag %s = %d (0 or 1)", flag_names[k], *flags[k]), 1;
+    const long long counts[] = {rk->n_stiff, rk->n_nonstiff, rk->n_limited, rk->k, rk->nfev, rk->nsteps,
+                                rk->stiff_steps, rk->njev, rk->nlu, s->friction_iterations, s->evaluations,
+                                s->along_certified};
+    for (size_t k = 0; k < sizeof counts / sizeof counts[0]; k++)
+        if (counts[k] < 0) return snprintf(why, size, "counter %zu = %lld (>= 0)", k, counts[k]), 1;
+    const double times[] = {rk->t, rk->t0, rk->t_old, rk->h_old, rk->h_abs_old, rk->error_norm_old, rk->lu_h,
+                            s->last_t, s->t_prev};
+    for (size_t k = 0; k < sizeof times / sizeof times[0]; k++)
+        if (!isfinite(times[k])) return snprintf(why, size, "integrator number %zu = %g (finite)", k, times[k]), 1;
+    if (!(isfinite(rk->h) && rk->h > 0.0)) return snprintf(why, size, "step h = %g (finite, > 0)", rk->h), 1;
+    if (isnan(rk->stable_step) || rk->stable_step < 0.0)
+        return snprintf(why, size, "stable step = %g (>= 0)", rk->stable_step), 1;
+    for (int i = 0; i < rk->n; i++)
+        if (!isfinite(rk->y[i])) return snprintf(why, size, "y[%d] = %g (finite)", i, rk->y[i]), 1;
+    if (rk->method == OVK_METHOD_RADAU)
+        for (int i = 0; i < 2 * rk->n; i++) /* piv then pivc, n each (one block) */
+            if (rk->piv[i] < 0 || rk->piv[i] >= rk->n)
+                return snprintf(why, size, "radau pivot %s[%d] = %d (0 to %d)", i < rk->n ? "piv" : "pivc",
+                                i % rk->n, rk->piv[i], rk->n - 1), 1;
+    const ovk_hist *hist[2] = {&s->warm, &s->step_warm};
+    for (int k = 0; k < 2; k++) {
+        if (hist[k]->count < 0 || hist[k]->count > 2)
+            return snprintf(why, size, "warm start count = %d (0 to 2)", hist[k]->count), 1;
+        for (int i = 0; i < hist[k]->count; i++)
+            if (!isfinite(hist[k]->t[i])) return snprintf(why, size, "warm start time = %g (finite)", hist[k]->t[i]), 1;
+    }
+    for (int p = 0; p < s->Mrun.nR; p++)
+        if (kept[p] < 0 || kept[p] >= s->m || (p && kept[p] <= kept[p - 1]))
+            return snprintf(why, size, "kept equation %d = %d (ascending, 0 to %d)", p, kept[p], s->m - 1), 1;
+    if (s->along_rank < 0 || s->along_rank > s->m)
+        return snprintf(why, size, "rank along the motion = %d (0 to %d)", s->along_rank, s->m), 1;
+    for (int k = 0; k < 2 * s->M->nu + 1; k++) /* the inputs: finite, as ovk_set_inputs takes them */
+        if (!isfinite(s->d->u[k])) return snprintf(why, size, "input entry %d = %g (finite)", k, s->d->u[k]), 1;
+    for (int j = 0; j < s->M->nj; j++)
+        if (!flag(s->along_unique[j])) return snprintf(why, size, "reaction_unique[%d] = %d (0 or 1)", j, s->along_unique[j]), 1;
+    if (s->eig && (!flag(s->eig->have) || s->watch_capped < 0))
+        return snprintf(why, size, "watch: have = %d, capped = %lld", s->eig->have, s->watch_capped), 1;
+    for (int k = 0; k < s->nevents; k++) {
+        const ovk_event *e = &s->events[k];
+        if (!isfinite(e->t) || e->kind < OVK_EV_SINGULAR || e->kind > OVK_EV_STOPPED ||
+            !memchr(e->detail, '\0', sizeof e->detail))
+            return snprintf(why, size, "event %d: time %g, kind %d (0 to 4), text %s", k, e->t, e->kind,
+                            memchr(e->detail, '\0', sizeof e->detail) ? "ended" : "not ended"), 1;
+    }
+    return 0;
+}
+
 /* Restores a state saved by ovk_sim_get_state of a run of the same model and method; the run's
  * status is cleared (a stopped run continues from the restored state). A state of another
- * size, format or run is refused and the run is left as it was. */
+ * size, format or run is refused and the run is left as it was. The bytes are read into the run's
+ * fields and every field is checked (loaded_bad) before anything computes with them; a state that
+ * fails is refused with the reason, and the run's own state, kept aside before the load, is put
+ * back (the run continues as if the call had not happened). */
+static int load(ovk_sim *s, const unsigned char *buf, size_t size, char *why, size_t whysize) {
+    codec c = {NULL, buf, 0, size, 0};
+    io_sim(&c, s); /* nevents is read before the events: the loop reads the saved ones */
+    const int *kept = s->kept + 5 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj;
+    if (loaded_bad(s, kept, why, whysize)) return OVK_INVALID;
+    if (memcmp(kept, s->Mrun.retained, (size_t)s->Mrun.nR * sizeof(int))) { /* another kept set: its arrays */
+        int status = ovk_sim_use_kept(s, kept);
+        if (status) return snprintf(why, whysize, "%s", s->msg), status;
+    }
+    return OVK_OK;
+}
+
 int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size) {
     if (!s) return OVK_NOMEM;
     /* the size of a state of this run with the saved number of events (the last int before them) */
@@ -171,18 +250,20 @@ int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size) {
         return snprintf(s->msg, sizeof s->msg, "set state: not a state of this run (format %d, method %d, %d "
                         "states, %d friction columns, %d rows)", head[0], head[1], head[2], head[3], head[4]),
                OVK_INVALID;
-    codec c = {NULL, buf, 0, size, 0};
-    io_sim(&c, s); /* nevents is read before the events: the loop reads the saved ones */
-    const int *kept = s->kept + 5 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj;
-    if (memcmp(kept, s->Mrun.retained, (size_t)s->Mrun.nR * sizeof(int))) { /* another kept set: its arrays */
-        int status = ovk_sim_use_kept(s, kept);
-        if (status) return status;
+    size_t own_size = ovk_sim_state_size(s);
+    unsigned char *own = malloc(own_size ? own_size : 1);
+    if (!own) return snprintf(s->msg, sizeof s->msg, "set state: out of memory (%zu bytes)", own_size), OVK_NOMEM;
+    int status = ovk_sim_get_state(s, own, own_size);
+    char why[OVK_MSG] = "";
+    if (!status && (status = load(s, buf, size, why, sizeof why))) {
+        char ignored[OVK_MSG];
+        int back = load(s, own, own_size, ignored, sizeof ignored); /* the run's own state: checked before */
+        snprintf(s->msg, sizeof s->msg, "set state: refused: %.900s%s", why,
+                 back ? " (and the previous state could not be put back)" : "");
+        if (back) s->status = back;
     }
-    for (int k = 0; k < 2 * s->M->nu + 1; k++) /* the inputs restored: finite, as ovk_set_inputs takes them */
-        if (!isfinite(s->d->u[k])) {
-            memset(s->d->u, 0, (2 * (size_t)s->M->nu + 1) * sizeof(double));
-            return snprintf(s->msg, sizeof s->msg, "set state: input entry %d is not finite", k), OVK_INVALID;
-        }
+    free(own);
+    if (status) return status;
     ovk_sim_watch_adopt(s);
     s->status = OVK_OK;
     s->msg[0] = '\0';

@@ -355,15 +355,19 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
         out_dir.mkdir(parents=True, exist_ok=True)
         fmu = out_dir / f"{spec.name}.fmu"
         tmp = fmu.with_suffix(".fmu.part")
-        with zipfile.ZipFile(tmp, "w") as zf:
-            _zip_write(zf, "modelDescription.xml", xml)
-            _zip_write(zf, f"binaries/{plat}/{spec.name}.{ext}", binary, 0o755)
-            _zip_write(zf, "resources/overcon_model.bin", model_bin)
-            _zip_write(zf, "resources/overcon_fmu.json", json.dumps(manifest, indent=1).encode())
-            _zip_write(zf, facts.PATH, facts.encode(facts.record(spec, model, report)))
-            _zip_write(zf, f"resources/{scene_zip}", scene_bytes)
-            _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
-        _finish(path, tmp, fmu, validate)
+        try:  # the .part removed on any way out but the rename (Ctrl-C included: overcon.outfiles)
+            with zipfile.ZipFile(tmp, "w") as zf:
+                _zip_write(zf, "modelDescription.xml", xml)
+                _zip_write(zf, f"binaries/{plat}/{spec.name}.{ext}", binary, 0o755)
+                _zip_write(zf, "resources/overcon_model.bin", model_bin)
+                _zip_write(zf, "resources/overcon_fmu.json", json.dumps(manifest, indent=1).encode())
+                _zip_write(zf, facts.PATH, facts.encode(facts.record(spec, model, report)))
+                _zip_write(zf, f"resources/{scene_zip}", scene_bytes)
+                _zip_write(zf, f"resources/{mech_zip}", mech_bytes)
+            _finish(path, tmp, fmu, validate)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
     except BuildError as exc:
         raise _NotBuilt("failed", f"{path}: build failed: {exc}") from exc
     except (OSError, ValueError, KeyError, RuntimeError) as exc:
@@ -427,9 +431,11 @@ def write_reference(fmu: Path) -> tuple[Path, Path]:
         at = "" if reached is None else f" at t = {reached!r} s"
         raise ReferenceRunFailed(f"the reference run of {stem} (default experiment {start!r} to {stop!r} s) "
                                  f"stopped{at}: {reason}")
-    write_csv(str(csv_path), result)
-    opt_path.write_text(f"StartTime, {start!r}\nStopTime, {stop!r}\n"
-                        f"StepSize, {step!r}\nRelTol, {float(ex.tolerance)!r}\n")
+    from ..outfiles import atomic_path, write_text_atomic  # noqa: PLC0415
+    with atomic_path(csv_path) as part:
+        write_csv(str(part), result)
+    write_text_atomic(opt_path, f"StartTime, {start!r}\nStopTime, {stop!r}\n"
+                      f"StepSize, {step!r}\nRelTol, {float(ex.tolerance)!r}\n")
     return csv_path, opt_path
 
 

@@ -20,13 +20,17 @@ Format :data:`FORMAT` (``"format": 1``), keys:
 ``outputs``          the Real outputs, in modelDescription order
 
 A reader refuses a record of another format number (written by a newer or older overcon) with a
-message naming the file and both numbers; keys may be added within one format number.
+message naming the file and both numbers; keys may be added within one format number. A record is
+untrusted input (an FMU from someone else): it is read through :func:`overcon.formats.load_json`
+(size, nesting and non-finite numbers bounded before parsing) and validated against
+:data:`SCHEMA` (a JSON Schema of format 1) before any key is used.
 """
 from __future__ import annotations
 
 import dataclasses
 import json
 
+from ..formats import SchemaError, load_json, validate
 from ..verdict import equation_joints
 
 PATH = "resources/overcon_facts.json"
@@ -36,6 +40,36 @@ MANIFEST = "resources/overcon_fmu.json"  # present in every overcon FMU, with or
 
 class FactsError(ValueError):
     """A facts record that cannot be used; the message names the FMU file and the key at fault."""
+
+
+_NAME = {"type": "string", "maxLength": 1024}
+SCHEMA = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "$id": "https://overcon.invalid/schemas/overcon_facts-1.json",
+    "title": "overcon FMU facts record (resources/overcon_facts.json), format 1",
+    "type": "object",
+    "maxProperties": 64,
+    "required": ["format", "model", "mechanism", "group", "friction", "eliminate", "motion_unique",
+                 "reaction_unique", "solver", "outputs"],
+    "properties": {
+        "format": {"const": FORMAT},
+        "model": _NAME,
+        "mechanism": _NAME,
+        "group": _NAME,
+        "friction": {"type": "array", "maxItems": 100_000, "items": _NAME},
+        "eliminate": {"anyOf": [{"const": "auto"},
+                                {"type": "array", "maxItems": 1_000_000,
+                                 "items": {"type": "integer", "minimum": 1, "maximum": 2 ** 31 - 1}}]},
+        "eliminated": {"type": "array", "maxItems": 1_000_000,
+                       "items": {"type": "integer", "minimum": 1, "maximum": 2 ** 31 - 1}},
+        "motion_unique": {"type": "boolean"},
+        "reaction_unique": {"type": "object", "maxProperties": 100_000, "additionalProperties": {"type": "boolean"}},
+        "solver": {"type": "object", "maxProperties": 64,
+                   "additionalProperties": {"type": ["string", "number", "boolean", "null"], "maxLength": 1024}},
+        "outputs": {"type": "array", "maxItems": 1_000_000, "items": _NAME},
+        "equation_joints": {"type": "array", "maxItems": 1_000_000, "items": _NAME},
+    },
+}
 
 
 def record(spec, model, report) -> dict:
@@ -63,41 +97,34 @@ def encode(facts: dict) -> bytes:
     return json.dumps(facts, indent=1, sort_keys=True).encode()
 
 
-def _key(facts: dict, key: str, kind, where: str):
-    if key not in facts:
-        raise FactsError(f"{where}: {PATH}: key {key!r} missing")
-    value = facts[key]
-    if not isinstance(value, kind):
-        raise FactsError(f"{where}: {PATH}: key {key!r} has the wrong type ({type(value).__name__})")
-    return value
-
-
 def decode(data: bytes, where: str) -> dict:
     """The facts of ``data`` (the bytes of :data:`PATH` in the FMU ``where``), checked: the format
     number, and the type of every key the tooling uses. ``eliminate`` comes back as a tuple of
     ints or ``"auto"``, ``friction`` as a tuple. Raises :class:`FactsError`."""
     try:
-        facts = json.loads(data)
-    except ValueError as exc:
-        raise FactsError(f"{where}: {PATH} is not JSON: {exc}") from exc
+        facts = load_json(data, f"{where}: {PATH}")
+    except SchemaError as exc:
+        raise FactsError(str(exc)) from exc
     if not isinstance(facts, dict):
         raise FactsError(f"{where}: {PATH} is not a JSON object")
     fmt = facts.get("format")
     if fmt != FORMAT:
         raise FactsError(f"{where}: {PATH} has format {fmt!r}; this overcon reads format {FORMAT} "
                          "(rebuild the FMU with this overcon: overcon build)")
-    out = {k: _key(facts, k, str, where) for k in ("model", "mechanism", "group")}
-    out["friction"] = tuple(_key(facts, "friction", list, where))
-    elim = _key(facts, "eliminate", (list, str), where)
+    elim = facts.get("eliminate")
     if isinstance(elim, str) and elim != "auto":
         raise FactsError(f"{where}: {PATH}: key 'eliminate' is {elim!r}, not a list or \"auto\"")
-    out["eliminate"] = elim if isinstance(elim, str) else tuple(int(k) for k in elim)
-    out["motion_unique"] = _key(facts, "motion_unique", bool, where)
-    out["reaction_unique"] = dict(_key(facts, "reaction_unique", dict, where))
-    out["solver"] = dict(_key(facts, "solver", dict, where))
-    out["outputs"] = tuple(_key(facts, "outputs", list, where))
-    joints = facts.get("equation_joints", [])
-    if not (isinstance(joints, list) and all(isinstance(j, str) for j in joints)):
-        raise FactsError(f"{where}: {PATH}: key 'equation_joints' is not a list of joint names")
-    out["equation_joints"] = tuple(joints)
+    try:
+        validate(facts, SCHEMA, f"{where}: {PATH}")
+    except SchemaError as exc:
+        raise FactsError(str(exc)) from exc
+    out = {k: facts[k] for k in ("model", "mechanism", "group")}
+    out["friction"] = tuple(facts["friction"])
+    elim = facts["eliminate"]
+    out["eliminate"] = elim if isinstance(elim, str) else tuple(elim)
+    out["motion_unique"] = facts["motion_unique"]
+    out["reaction_unique"] = dict(facts["reaction_unique"])
+    out["solver"] = dict(facts["solver"])
+    out["outputs"] = tuple(facts["outputs"])
+    out["equation_joints"] = tuple(facts.get("equation_joints", ()))
     return out

@@ -44,6 +44,7 @@ Rules (also stated in every report, :func:`rules_text`):
 from __future__ import annotations
 
 import csv
+import math
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -134,8 +135,10 @@ def read_along(path, *, failed: bool = False) -> Along | None:
     for k, row in enumerate(rows[1:]):
         try:
             t, rank, flags = float(row[0]), int(row[col["rank"]]), {n: int(row[col[n]]) for n in head[1:]}
-        except (ValueError, IndexError) as exc:
+        except (ValueError, IndexError, KeyError) as exc:
             raise InputError(f"{path}: row {k + 2} is not a time and integers: {row}") from exc
+        if not math.isfinite(t) or len(row) != len(head):
+            raise InputError(f"{path}: row {k + 2}: a finite time and {len(head)} columns expected: {row[:4]}")
         iv = Interval(t, t, rank, tuple(j for j in joints if flags[j + ".reaction_unique"] == 0),
                       bool(flags.get("motion_unique", 1)), failed and k == len(rows) - 2)
         last = out[-1] if out else None

@@ -8,9 +8,19 @@ friction set, eliminated equations, mechanism and predictions, and the paper-sty
 (:func:`overcon.verdict.variant_label`). FMUs of other tools (no ``resources/overcon_fmu.json``)
 form one group, :data:`OTHER_GROUP`, are labelled with their model name and carry no prediction;
 an overcon FMU without a readable facts record of this format is refused, naming the file.
+
+An FMU is untrusted input (docs/untrusted-input.md): before anything is read from it, the archive's
+file count and total uncompressed size are checked against :func:`archive_limits` (defaults
+:data:`MAX_UNZIPPED_MB` MiB and :data:`MAX_UNZIPPED_FILES` files; ``--max-unzipped-mb`` and
+``--max-unzipped-files`` of run and compare raise them), its entry names must stay inside the
+archive, and its ``modelIdentifier`` must be an identifier (the FMI standard requires a C
+identifier; file names are made from it): else :class:`InputError` (exit 2). :func:`extract`
+unzips it under those checks.
 """
 from __future__ import annotations
 
+import os
+import re
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +33,48 @@ QUATERNION_SUFFIXES = (".e0", ".e1", ".e2", ".e3")
 spatial bodies with ``rotation = "quaternion"``: positions too (they decide a verdict)."""
 OTHER_GROUP = "fmus"  # the group of FMUs without an overcon scene (other tools): compared together
 REACTION_UNITS = ("N", "N.m")
+MAX_UNZIPPED_MB = 2048  # an overcon FMU is a few MB; a foreign one with large resources fits too
+MAX_UNZIPPED_FILES = 10_000
+LIMIT_ENV = ("OVERCON_MAX_UNZIPPED_MB", "OVERCON_MAX_UNZIPPED_FILES")  # set by the flags, read by the workers too
+IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+
+
+def archive_limits() -> tuple[int, int]:
+    """(bytes, files) an FMU archive may unzip to: the defaults, or the flags' values (passed on
+    to the worker processes in the environment, :data:`LIMIT_ENV`)."""
+    mb = float(os.environ.get(LIMIT_ENV[0]) or MAX_UNZIPPED_MB)
+    files = int(os.environ.get(LIMIT_ENV[1]) or MAX_UNZIPPED_FILES)
+    return int(mb * 1024 * 1024), files
+
+
+def check_archive(path: Path, zf: zipfile.ZipFile) -> None:
+    """:class:`InputError` for an archive over the limits or with an entry outside itself."""
+    max_bytes, max_files = archive_limits()
+    infos = zf.infolist()
+    if len(infos) > max_files:
+        raise InputError(f"{path}: {len(infos)} files in the archive, more than the limit of {max_files} "
+                         "(--max-unzipped-files raises it)")
+    total = sum(i.file_size for i in infos)
+    if total > max_bytes:
+        raise InputError(f"{path}: unzips to {total / 2 ** 20:.1f} MiB, more than the limit of "
+                         f"{max_bytes / 2 ** 20:g} MiB (--max-unzipped-mb raises it)")
+    for i in infos:
+        parts = i.filename.replace("\\", "/").split("/")
+        if i.filename.startswith(("/", "\\")) or ".." in parts or ":" in parts[0]:
+            raise InputError(f"{path}: archive entry {i.filename!r} points outside the FMU")
+
+
+def extract(path, dest) -> Path:
+    """The FMU ``path`` unzipped into the directory ``dest`` (made by the caller, who removes it),
+    after :func:`check_archive`; zipfile stops every entry at its declared size."""
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as zf:
+            check_archive(path, zf)
+            zf.extractall(dest)
+    except zipfile.BadZipFile as exc:
+        raise InputError(f"{path}: corrupt FMU archive: {exc}") from exc
+    return Path(dest)
 
 
 @dataclass(frozen=True)
@@ -60,6 +112,7 @@ class FmuInfo:
     lockstep: bool = False
     parameters: dict = field(default_factory=dict)  # causality parameter: name -> FMI type (Real, Integer, ...)
     inputs: dict = field(default_factory=dict)  # causality input: name -> FMI type (an --input table sets the Real ones)
+    enumerations: dict = field(default_factory=dict)  # Enumeration parameters: name -> {item name: value}
     fmi_version: str = "2.0"
     can_interpolate_inputs: bool = False  # FMI 2.0 co-simulation's canInterpolateInputs (input derivatives)
 
@@ -152,16 +205,24 @@ def inspect_fmu(path) -> FmuInfo:
     if not zipfile.is_zipfile(path):
         raise InputError(f"{path}: not an FMU (not a zip archive; corrupt or truncated file?)")
     try:
+        with zipfile.ZipFile(path) as zf:
+            check_archive(path, zf)
+    except zipfile.BadZipFile as exc:
+        raise InputError(f"{path}: corrupt FMU archive: {exc}") from exc
+    try:
         md = read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises plain Exceptions, lxml errors, KeyError, BadZipFile
         raise InputError(f"{path}: cannot read modelDescription.xml: {type(exc).__name__}: {exc}") from exc
     if md.coSimulation is None and md.modelExchange is None:
         raise InputError(f"{path}: neither co-simulation nor Model Exchange (only those FMUs are run)")
-    outputs, constants, params, inputs = [], {}, {}, {}
+    outputs, constants, params, inputs, enums = [], {}, {}, {}, {}
     for v in md.modelVariables:
         typ = type_name(v)
         if v.causality == "parameter":
             params[v.name] = typ
+            if typ == "Enumeration" and v.declaredType is not None:
+                enums[v.name] = {i.name: int(i.value) for i in v.declaredType.items
+                                 if str(i.value).lstrip("-").isdigit()}
         if v.causality == "input" and not getattr(v, "dimensions", None):
             inputs[v.name] = typ
         if v.causality != "output" or getattr(v, "dimensions", None):
@@ -188,6 +249,10 @@ def inspect_fmu(path) -> FmuInfo:
     except zipfile.BadZipFile as exc:
         raise InputError(f"{path}: corrupt FMU archive: {exc}") from exc
     model = (md.coSimulation or md.modelExchange).modelIdentifier
+    if not isinstance(model, str) or not IDENTIFIER.match(model):
+        raise InputError(f"{path}: modelIdentifier {model!r} is not an identifier (letters, digits and _, not "
+                         "starting with a digit, as the FMI standard requires): refused, the output file names "
+                         "are made from it")
     reaction_unique = {name[: -len(".reaction_unique")]: val for name, val in constants.items()
                        if name.endswith(".reaction_unique")} or facts.get("reaction_unique", {})
     motion_unique = constants.get("motion_unique", facts.get("motion_unique"))
@@ -200,7 +265,8 @@ def inspect_fmu(path) -> FmuInfo:
                              and not (facts and any(t == "Real" for t in inputs.values()))),
                    parameters=params, inputs=inputs, fmi_version=str(md.fmiVersion),
                    can_interpolate_inputs=bool(md.coSimulation is not None and md.fmiVersion.startswith("2")
-                                               and getattr(md.coSimulation, "canInterpolateInputs", False)))
+                                               and getattr(md.coSimulation, "canInterpolateInputs", False)),
+                   enumerations=enums)
 
 
 def inspect_all(paths) -> list[FmuInfo]:

@@ -18,6 +18,7 @@ import numpy as np
 
 from . import InputError
 from ..figures import PAPER_GROUPS
+from ..outfiles import write_text_atomic
 from ..verdict import LOCKSTEP_MIN_STEP, LOCKSTEP_STEP, LockstepGrid, lockstep_start_values
 from .compare import (Comparison, compare_group, compare_reference, failed_group, group_fmus, invalid_group,
                       order_groups, read_along, validate_group)
@@ -276,7 +277,7 @@ def compare_paths(paths, out_dir, *, group: str | None = None, one_group: bool =
     comparisons += invalid
     plot_files = {c.group: plot_comparison(c, out_dir, plots) for c in comparisons}
     report = out_dir / "report.md"
-    report.write_text(markdown(comparisons, out_dir, title=title, plots=plot_files), encoding="utf-8")
+    write_text_atomic(report, markdown(comparisons, out_dir, title=title, plots=plot_files), encoding="utf-8")
     for c in comparisons:
         echo("")
         echo(console_table(c))
@@ -314,6 +315,12 @@ def compare_with_reference(fmu, ref_csv, out_dir, *, tolerance: float | None = N
     ref_csv = Path(ref_csv)
     ref = read_series(ref_csv)
     info = inspect_fmu(fmu)
+    from ..outfiles import check_outputs
+    written = {"the result CSV": out_dir / f"{info.model}.csv", "the along CSV": along_path(out_dir / f"{info.model}.csv"),
+               "the report": out_dir / "report.md"}
+    why = check_outputs(written, {"--ref": ref_csv})
+    if why:
+        raise InputError(why)
     common = [n for n in ref.names if n in info.output_names]
     if not common:
         raise InputError(f"no common outputs: {ref_csv} has {', '.join(ref.names[:4])}, {info.path} has "
@@ -334,7 +341,7 @@ def compare_with_reference(fmu, ref_csv, out_dir, *, tolerance: float | None = N
     c.wall_seconds = [results[0].sim_seconds]
     plot_files = {c.group: plot_comparison(c, out_dir, plots)}
     report = out_dir / "report.md"
-    report.write_text(markdown([c], out_dir, title="overcon compare (reference)", plots=plot_files), encoding="utf-8")
+    write_text_atomic(report, markdown([c], out_dir, title="overcon compare (reference)", plots=plot_files), encoding="utf-8")
     echo("")
     echo(console_table(c))
     echo(verdict_line(c))
@@ -547,6 +554,6 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
     ]
     intro += [""] + _drawings(paper, out_dir, draw, echo)
     report = out_dir / "report.md"
-    report.write_text(markdown(comparisons, out_dir, title="overcon reproduce: uniqueness of the simulated motion",
+    write_text_atomic(report, markdown(comparisons, out_dir, title="overcon reproduce: uniqueness of the simulated motion",
                                intro=intro, figures=figures, plots=plots, beyond=beyond), encoding="utf-8")
     return ReproduceOutcome(comparisons, report, [p for _, p in figures], seconds, where)

@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..outfiles import atomic, atomic_path
 from ..params import MAX_OUTPUT_POINTS, check_param
 from . import InputError, SimulationFailed
 from .fmus import FmuInfo, interface, type_name
@@ -157,6 +158,14 @@ def start_values_for(info: FmuInfo, settings: dict[str, str]) -> dict:
     out = {}
     for name, text in settings.items():
         typ = info.parameters.get(name) or info.inputs.get(name)  # an input's start value: set like a parameter
+        if typ == "Enumeration":  # an item's name or its value
+            items = info.enumerations.get(name, {})
+            value = items.get(text, int(text) if text.lstrip("-").isdigit() else None)
+            if value not in items.values():
+                raise InputError(f"{info.path}: --set {name}={text}: not one of {name}'s items "
+                                 f"({', '.join(f'{k} ({v})' for k, v in items.items()) or 'none listed'})")
+            out[name] = value
+            continue
         if typ not in _CONVERT:
             known = ", ".join(sorted(info.parameters)[:12]) or "none"
             raise InputError(f"{info.path}: --set {name}: no such parameter or input (parameters: {known}"
@@ -210,36 +219,48 @@ STABLE_STEP = "solver.stable_step"
 
 
 @contextlib.contextmanager
-def _instance(fmu, logger):
+def _instance(fmu, logger, unzip_dir=None):
     """(path for simulate_fmu, model description, FMU instance or None, a function returning
-    ``solver.stable_step`` or None). An FMU with that variable is extracted and instantiated here,
-    so that after a failed run the variable can still be read from the instance (as data, not
-    from the log's prose); any other FMU is left to simulate_fmu."""
+    ``solver.stable_step`` or None). An FMU file is unzipped here, under the archive limits
+    (:func:`overcon.tooling.fmus.extract`), into ``unzip_dir`` (made and removed by the caller) or a
+    temporary directory removed on every way out (success, failure, Ctrl-C). An FMU with that
+    variable is instantiated here, so that after a failed run the variable can still be read from
+    the instance (as data, not from the log's prose); any other FMU is left to simulate_fmu."""
     import fmpy
 
-    md = fmpy.read_model_description(str(fmu))
-    vr = next((v.valueReference for v in md.modelVariables if v.name == STABLE_STEP), None)
-    if vr is None:
-        yield str(fmu), None, None, lambda: None
-        return
-    tmp = None if Path(fmu).is_dir() else tempfile.mkdtemp(prefix="overcon-run-")
-    where = str(fmu) if tmp is None else fmpy.extract(str(fmu), tmp)
-    instance = fmpy.instantiate_fmu(where, md, interface(md), debug_logging=True, logger=logger)
-    get = instance.getFloat64 if md.fmiVersion.startswith("3") else instance.getReal
+    from .fmus import extract
 
-    def stable_step():
-        try:
-            value = float(get([vr])[0])
-        except Exception:  # noqa: BLE001 -- the instance may be unusable after the failure
-            return None
-        return value if value > 0.0 else None
-
+    tmp = None
+    instance = None
     try:
+        if Path(fmu).is_dir():
+            where = str(fmu)
+        else:
+            if unzip_dir is None:
+                unzip_dir = tmp = tempfile.mkdtemp(prefix="overcon-run-")
+            where = str(extract(fmu, unzip_dir))
+        md = fmpy.read_model_description(where)
+        vr = next((v.valueReference for v in md.modelVariables if v.name == STABLE_STEP), None)
+        if vr is None:
+            yield where, None, None, lambda: None
+            return
+        instance = fmpy.instantiate_fmu(where, md, interface(md), debug_logging=True, logger=logger)
+        get = instance.getFloat64 if md.fmiVersion.startswith("3") else instance.getReal
+
+        def stable_step():
+            try:
+                value = float(get([vr])[0])
+            except Exception:  # noqa: BLE001 -- the instance may be unusable after the failure
+                return None
+            return value if value > 0.0 else None
+
         yield where, md, instance, stable_step
     finally:
-        instance.freeInstance()
+        if instance is not None:
+            instance.freeInstance()
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+
 
 def along_outputs(md) -> list[str]:
     """The discrete uniqueness outputs of the model description ``md`` (fmpy's): ``rank``,
@@ -267,12 +288,10 @@ def _write_along(path: Path, result, names: list[str], held: dict | None = None,
     if held is not None:
         t = rows[-1][0] + step if rows else float("nan")
         rows.append([t] + [int(held[n]) for n in names])
-    part = path.with_name(path.name + ".part")
-    with open(part, "w", encoding="utf-8") as f:
+    with atomic(path, "w", encoding="utf-8") as f:
         f.write(",".join(f'"{n}"' for n in ["time", *names]) + "\n")
         for r in rows:
             f.write(",".join([repr(r[0]), *map(str, r[1:])]) + "\n")
-    os.replace(part, path)
 
 
 def _held(instance, md, names: list[str]) -> dict | None:
@@ -348,7 +367,8 @@ def _input_derivatives_buffers():
 
 def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, step: float,
              outputs: list[str], progress: bool = True, label: str = "", start_values: dict | None = None,
-             along: bool = False, input_table: InputTable | None = None, interpolation: str = "hold") -> dict:
+             along: bool = False, input_table: InputTable | None = None, interpolation: str = "hold",
+             unzip_dir: str | None = None) -> dict:
     """One ``fmpy.simulate_fmu`` run; writes ``csv`` (and with ``along`` the along file, module
     docstring). ``input_table`` goes to fmpy's ``input=`` (its structured array), with
     ``set_input_derivatives`` when ``interpolation`` is "linear" (:mod:`overcon.tooling.inputs`).
@@ -360,6 +380,12 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
     label = label or Path(fmu).stem
     along_file = along_path(csv)
     along_file.unlink(missing_ok=True)  # never a stale one from an earlier run
+    if not Path(fmu).is_dir():
+        import zipfile
+
+        from .fmus import check_archive
+        with zipfile.ZipFile(fmu) as zf:  # the limits before fmpy reads anything of it
+            check_archive(Path(fmu), zf)
     discrete = along_outputs(fmpy.read_model_description(str(fmu), validate=False)) if along else []
     recorder = [None]  # fmpy's recorder, for the points before a failure
     messages: list[str] = []
@@ -394,7 +420,7 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
         kw.update(input=input_table.structured(), set_input_derivatives=check_interpolation(interpolation) == "linear")
     stable = None
     try:
-        with _instance(fmu, logger) as (where, md, instance, stable_step), _input_derivatives_buffers():
+        with _instance(fmu, logger, unzip_dir) as (where, md, instance, stable_step), _input_derivatives_buffers():
             try:
                 result = fmpy.simulate_fmu(where, model_description=md, fmu_instance=instance, **kw) \
                     if instance is not None else fmpy.simulate_fmu(where, logger=logger, debug_logging=True, **kw)
@@ -420,9 +446,8 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
                                f"time {stop:g} s: {why}")
     csv = Path(csv)
     csv.parent.mkdir(parents=True, exist_ok=True)
-    part = csv.with_name(csv.name + ".part")
-    write_csv(str(part), result, columns=list(outputs))
-    os.replace(part, csv)
+    with atomic_path(csv) as part:
+        write_csv(str(part), result, columns=list(outputs))
     if discrete:
         _write_along(along_file, result, discrete)
     return {"rows": len(result), "sim_seconds": sim_seconds, "last_time": last_time}
@@ -436,7 +461,8 @@ def _worker(argv: list[str]) -> None:
         out = simulate(job["fmu"], job["csv"], start=job["start"], stop=job["stop"], step=job["step"],
                        outputs=job["outputs"], progress=job["progress"], label=job["label"],
                        start_values=job.get("start_values"), along=job.get("along", False),
-                       input_table=table, interpolation=job.get("interpolation", "hold"))
+                       input_table=table, interpolation=job.get("interpolation", "hold"),
+                       unzip_dir=job.get("unzip_dir"))
         out["error"] = ""
     except SimulationFailed as exc:
         out = {"error": str(exc), "stable_step": exc.stable_step}
@@ -470,16 +496,20 @@ def run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: f
            "outputs": info.output_names, "progress": progress, "label": label or info.model,
            "start_values": dict(ex.start_values), "along": along, "interpolation": ex.interpolation}
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="overcon-input-") as tmp:
-        if ex.input_table is not None:  # to the worker as a file (a table may exceed an argument's size)
-            job["input"] = str(write_input_table(ex.input_table, Path(tmp) / "input.csv"))
-            job["input_names"] = ex.input_table.names
-        try:
-            proc = subprocess.run([sys.executable, "-m", "overcon.tooling.run", json.dumps(job)],
-                                  stdout=subprocess.PIPE, stderr=None, text=True, timeout=timeout,
-                                  env=_worker_env())
-        except subprocess.TimeoutExpired as exc:
-            raise SimulationFailed(f"{info.path}: no result within {timeout:g} s (killed)") from exc
+    unzip_dir = job["unzip_dir"] = tempfile.mkdtemp(prefix="overcon-run-")  # removed here whatever the worker did
+    try:
+        with tempfile.TemporaryDirectory(prefix="overcon-input-") as tmp:
+            if ex.input_table is not None:  # to the worker as a file (a table may exceed an argument's size)
+                job["input"] = str(write_input_table(ex.input_table, Path(tmp) / "input.csv"))
+                job["input_names"] = ex.input_table.names
+            try:
+                proc = subprocess.run([sys.executable, "-m", "overcon.tooling.run", json.dumps(job)],
+                                      stdout=subprocess.PIPE, stderr=None, text=True, timeout=timeout,
+                                      env=_worker_env())
+            except subprocess.TimeoutExpired as exc:
+                raise SimulationFailed(f"{info.path}: no result within {timeout:g} s (killed)") from exc
+    finally:
+        shutil.rmtree(unzip_dir, ignore_errors=True)
     wall = time.perf_counter() - t0
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith(RESULT_TAG)]
     if not lines:
@@ -565,34 +595,25 @@ def run_fmus(infos: list[FmuInfo], out_dir, *, stop_time: float | None = None, s
 
 def read_series(path) -> Series:
     """Read a result CSV (FMI cross-check rules: header with ``time`` first, comma separated, one
-    row per time) with ``fmpy.util.read_csv``. :class:`InputError` naming the file when it is
-    missing or unreadable, has no ``time`` column first, a non-numeric or non-finite value, fewer
-    than 2 rows, or times that do not increase."""
-    from fmpy.util import read_csv
+    row per time), validated as :data:`overcon.formats.CSV_FORMAT` (:func:`overcon.formats.read_csv_table`):
+    :class:`InputError` naming the file (and the row and column) when it is missing or unreadable,
+    has no ``time`` column first, a row with another number of columns than the header, a
+    non-numeric or non-finite value, fewer than 2 rows, or times that do not increase."""
+    from ..formats import SchemaError, read_csv_table
 
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such CSV file")
     try:
-        data = read_csv(str(path))
-    except Exception as exc:  # noqa: BLE001 -- fmpy raises IndexError/ValueError/UnicodeError...
-        raise InputError(f"{path}: unreadable CSV (FMI cross-check format expected: header "
-                         f"\"time\",\"name\",..., then numbers): {type(exc).__name__}: {exc}") from exc
-    names = list(data.dtype.names or ())
-    if not names or names[0] != "time":
-        raise InputError(f"{path}: the first column must be \"time\", got {names[:1]}")
-    if len(data) < 2:
+        names, rows = read_csv_table(path)
+    except SchemaError as exc:
+        raise InputError(str(exc)) from exc
+    except OSError as exc:
+        raise InputError(f"{path}: unreadable: {exc.strerror or exc}") from exc
+    if len(rows) < 2:
         raise InputError(f"{path}: fewer than 2 rows")
-    t = np.asarray(data["time"], dtype=float)
-    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-        raise InputError(f"{path}: the time column must be finite and strictly increasing")
-    values = {}
-    for n in names[1:]:
-        col = np.asarray(data[n], dtype=float)
-        if col.ndim != 1:
-            continue  # array columns (not written by overcon) are not compared
-        values[n] = col
-    return Series(t, values)
+    data = np.array(rows, dtype=float)
+    return Series(data[:, 0].copy(), {n: data[:, k].copy() for k, n in enumerate(names) if k > 0})
 
 
 if __name__ == "__main__":

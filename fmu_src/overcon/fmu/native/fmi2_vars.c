@@ -24,7 +24,7 @@ static fmi2Status get_values(fmi2Component comp, const char *fn, const fmi2Value
         else if (type == T_BOOLEAN) ((fmi2Boolean *)values)[i] = x != 0.0;
         else {
             const fmu_param *p = v->key == K_PARAM ? &c->fm.par[v->arg] : NULL;
-            int k = (int)x;
+            int k = p && x >= 0 && x < p->nchoices ? (int)x : -1; /* an index checked before it converts */
             ((fmi2String *)values)[i] = p && k >= 0 && k < p->nchoices ? p->choices[k] : "";
         }
     }

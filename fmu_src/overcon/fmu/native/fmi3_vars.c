@@ -50,7 +50,7 @@ static fmi3Status get_values(fmi3Instance instance, const char *fn, const fmi3Va
             else if (type == T_BOOLEAN) ((fmi3Boolean *)values)[j] = x != 0.0;
             else {
                 const fmu_param *p = v->key == K_PARAM ? &c->fm.par[v->arg] : NULL;
-                int k = (int)x;
+                int k = p && x >= 0 && x < p->nchoices ? (int)x : -1; /* an index checked before it converts */
                 ((fmi3String *)values)[j] = p && k >= 0 && k < p->nchoices ? p->choices[k] : "";
             }
         }

@@ -125,7 +125,8 @@ enum { M_INSTANTIATED = 1, M_INITIALIZATION = 2, M_STEPPING = 4, M_ERROR = 8, M_
 enum { CAT_EVENTS, CAT_WARNING, CAT_ERROR, CAT_FATAL, N_CATEGORIES };
 #define FMU_MSG 1024
 
-/* Everything an FMU state holds: the mode, parameters, time, outputs and the run's bytes. */
+/* Everything an FMU state holds: the mode, parameters, time, outputs and the run's bytes (their
+ * layout, checks and copies: the table STATE_FIELDS of fmu_state.c, one line per field). */
 typedef struct fmu_saved {
     struct fmu_saved *next;
     int mode, tol_source, have_outputs, derived_stale, has_y, has_sim, has_failed;
@@ -212,7 +213,9 @@ FMU_HIDDEN int fmu_value_of(fmu_inst *c, const char *fn, const fmu_var *v, doubl
 FMU_HIDDEN int fmu_set_param(fmu_inst *c, const char *fn, int k, double x, const char *s);
 FMU_HIDDEN int fmu_set_input(fmu_inst *c, const char *fn, int k, double x, int order);
 FMU_HIDDEN int fmu_apply_inputs(fmu_inst *c);
+FMU_HIDDEN int fmu_param_refuses(const fmu_param *p, double x, const char *shown, char *why, size_t size);
 /* fmu_state.c */
+FMU_HIDDEN void fmu_saved_free(fmu_saved *s);
 /* fmu_me.c: Model Exchange (and the derivative variables in co-simulation) */
 FMU_HIDDEN int fmu_me_eval(fmu_inst *c);
 FMU_HIDDEN fmi2Status fmu_me_set_time(fmu_inst *c, const char *fn, double t);

@@ -96,7 +96,8 @@ static int hexval(char ch) {
                                              : ch >= 'A' && ch <= 'F' ? ch - 'A' + 10 : -1;
 }
 
-/* The resources folder of a file: URI (or a plain absolute path), percent escapes decoded. */
+/* The resources folder of a file: URI (or a plain absolute path), percent escapes decoded; 0 for
+ * one that is not, or whose escapes hold %00 (a NUL would silently cut the path there). */
 int fmu_resource_dir(const char *uri, char *out, size_t size) {
     const char *p = uri;
     if (!strncmp(p, "file://localhost/", 17)) p += 16;
@@ -107,6 +108,7 @@ int fmu_resource_dir(const char *uri, char *out, size_t size) {
     size_t j = 0;
     for (; *p && j + 1 < size; p++) {
         if (*p == '%' && hexval(p[1]) >= 0 && hexval(p[2]) >= 0) {
+            if (hexval(p[1]) == 0 && hexval(p[2]) == 0) return 0; /* %00 would cut the path short */
             out[j++] = (char)(hexval(p[1]) * 16 + hexval(p[2]));
             p += 2;
         } else {
@@ -148,7 +150,7 @@ void fmu_free_inst(fmu_inst *c) {
     while (c->states) {
         fmu_saved *s = c->states;
         c->states = s->next;
-        free(s->pval), free(s->pset), free(s->outputs), free(s->y), free(s->sim), free(s);
+        fmu_saved_free(s);
     }
     ovk_sim_free(c->sim);
     free(c->jlawp), free(c->pval), free(c->pset), free(c->outputs), free(c->y), free(c->reac), free(c->fric), free(c->dx);
@@ -199,7 +201,12 @@ fmu_inst *fmu_instantiate(const fmu_inst *tmp, const char *fn, const char *resou
         fmu_free_inst(c);
         return NULL;
     }
-    if (guid && strcmp(guid, c->fm.guid)) {
+    if (!guid) {
+        fmu_log(c, fmi2Error, "%s: the GUID (instantiationToken) is NULL; this FMU's is %s", fn, c->fm.guid);
+        fmu_free_inst(c);
+        return NULL;
+    }
+    if (strcmp(guid, c->fm.guid)) {
         fmu_log(c, fmi2Error, "%s: GUID %s does not match this FMU's %s (modelDescription.xml of another "
                 "build?)", fn, guid, c->fm.guid);
         fmu_free_inst(c);

@@ -52,7 +52,10 @@ static const char *rd_string(reader *r) {
 static void *rd_array(reader *r, size_t item, int *count) {
     int n = rd_int(r);
     if (count) *count = 0;
-    if (r->bad || n < 0 || n > MAX_ITEMS) { r->bad = 1; return NULL; }
+    if (r->bad || n < 0 || n > MAX_ITEMS || (size_t)(r->end - r->p) < (size_t)n * item) { /* before it allocates */
+        r->bad = 1;
+        return NULL;
+    }
     void *a = calloc((size_t)(n ? n : 1), item);
     if (!a) { r->bad = 2; return NULL; }
     rd(r, a, (size_t)n * item);
@@ -179,6 +182,13 @@ static void read_rest(reader *r, fmu_model *fm) {
     fm->stop_time = rd_double(r);
     int ny = 0;
     fm->y0 = rd_array(r, sizeof(double), &ny);
+    /* the sizes checked before they are added (and against the packed model: n + nh states) */
+    long long nq = (long long)fm->M.nb * fm->M.nq_b, nv = (long long)fm->M.nb * fm->M.nh_b;
+    if (fm->n < 0 || fm->nh < 0 || fm->n > MAX_ITEMS || fm->nh > MAX_ITEMS || fm->n != nq || fm->nh != nv ||
+        (fm->quaternion != 0 && (fm->quaternion != 1 || fm->M.nq_b != 7))) {
+        r->bad = 1;
+        fm->n = fm->nh = 0;
+    }
     fm->ny = fm->n + fm->nh;
     if (ny != fm->ny) r->bad = 1;
     if (counted(r, &fm->nout) && (fm->out = calloc((size_t)fm->nout + 1, sizeof *fm->out)) == NULL) r->bad = 2;

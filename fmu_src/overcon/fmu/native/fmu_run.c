@@ -28,8 +28,8 @@ const char *fmu_choice(const fmu_inst *c, int target) {
     int k = fmu_param_index(&c->fm, target, -1);
     if (k < 0) return "";
     const fmu_param *p = &c->fm.par[k];
-    int i = (int)c->pval[k];
-    return i >= 0 && i < p->nchoices ? p->choices[i] : "";
+    double x = c->pval[k]; /* checked before it converts: a value of a state is checked too (fmu_state.c) */
+    return x >= 0 && x < p->nchoices ? p->choices[(int)x] : "";
 }
 
 /* The packed model with the parameters' values: the friction laws (jlawp), the Baumgarte
@@ -38,7 +38,8 @@ const char *fmu_choice(const fmu_inst *c, int target) {
 int fmu_apply_params(fmu_inst *c) {
     const fmu_model *fm = &c->fm;
     int red = fmu_param_index(fm, P_REDUNDANCY, -1); /* redundancy: the model of the method the parameter names */
-    c->M = *fmu_model_for(fm, red < 0 ? -1 : (int)c->pval[red] - 1);
+    double code = red < 0 ? 0.0 : c->pval[red]; /* the choice's index, range-checked before it converts */
+    c->M = *fmu_model_for(fm, code >= 0 && code < FMU_MAX_CHOICES ? (int)code - 1 : -1);
     memcpy(c->jlawp, fm->M.jlawp, (size_t)fm->M.nj * NLP * sizeof(double));
     for (int k = 0; k < fm->nparam; k++) {
         const fmu_param *p = &fm->par[k];
@@ -60,7 +61,8 @@ int fmu_apply_params(fmu_inst *c) {
     c->M.jlawp = c->jlawp;
     c->M.baumgarte = fmu_param_value(c, P_BAUMGARTE);
     c->M.tol = fmu_param_value(c, P_FRICTION_TOL);
-    c->M.max_iter = (int)fmu_param_value(c, P_FRICTION_MAX_ITER);
+    double iter = fmu_param_value(c, P_FRICTION_MAX_ITER); /* the rule's 1 to 1000, checked before it converts */
+    c->M.max_iter = iter >= 1 && iter <= 1e6 ? (int)iter : fm->M.max_iter;
     return 1;
 }
 
@@ -197,6 +199,7 @@ int fmu_read_derived(fmu_inst *c) {
     c->derived_read = 1;
     if (!fmu_apply_inputs(c)) return 0;
     if (!c->derived_stale) return 1;
+    if (!c->sim) return snprintf(c->msg, sizeof c->msg, "reactions and friction forces: no run to compute them"), 0;
     int status = fmu_derived_outputs(c, c->t, c->y, NULL, c->outputs);
     if (status || !fmu_all_finite(c->outputs, c->fm.nout)) {
         char t[40];
@@ -318,8 +321,15 @@ static int step(fmu_inst *c, double t, double h, double *y) {
         return snprintf(c->msg, sizeof c->msg, "communication point %s s is not the end of the previous step (%s s)",
                         a, b), 0;
     }
+    if (h > 0 && t + h == t) { /* the step would return OK without advancing */
+        fmu_repr(t, a, sizeof a);
+        fmu_repr(h, b, sizeof b);
+        return snprintf(c->msg, sizeof c->msg, "the communication step %s s is below the resolution of the time %s s "
+                        "(t + h rounds to t)", b, a), 0;
+    }
     if (!c->sim_valid && !fmu_ensure_sim(c, 1)) return 0;
-    long long max_steps = (long long)fmu_param_value(c, P_MAX_INTERNAL_STEPS);
+    double steps = fmu_param_value(c, P_MAX_INTERNAL_STEPS); /* the rule's 1 to 1e8: range-checked before it converts */
+    long long max_steps = steps >= 0 && steps <= 1e15 ? (long long)steps : 0;
     double max_wall = fmu_param_value(c, P_MAX_WALL_TIME);
     if (c->events_logged > ovk_sim_events(c->sim)) c->events_logged = ovk_sim_events(c->sim); /* a restored state */
     int status = ovk_sim_advance(c->sim, t + h, max_steps, max_wall, y);

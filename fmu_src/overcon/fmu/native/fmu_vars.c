@@ -99,9 +99,24 @@ int fmu_apply_inputs(fmu_inst *c) {
     return 1;
 }
 
-/* The reason a number is refused by the rule of p (overcon.params.Rule.check), or 0. */
-static int rule_refuses(const fmu_param *p, double x, const char *shown, char *why, size_t size) {
+/* The one rule check of a parameter's value (overcon.params.Rule.check), shared by the setters
+ * (fmu_set_param) and the FMU state's validator (fmu_state.c): a number not finite or outside its
+ * range, an Integer that is not integral, a choice whose index (strings are held as the index of
+ * the choice) is none of the choices. The reason into why (shown: the value as the caller words
+ * it), 1; or 0 when the rule accepts x. The cross rule mu_static >= mu is checked by the setter of
+ * mu_static and, for any source of values, when the run is made (fmu_apply_params). */
+int fmu_param_refuses(const fmu_param *p, double x, const char *shown, char *why, size_t size) {
+    if (p->rule == RULE_CHOICE) {
+        if (x >= 0 && x < p->nchoices && x == floor(x)) return 0;
+        size_t len = (size_t)snprintf(why, size, "must be one of ");
+        for (int i = 0; i < p->nchoices && len < size; i++)
+            len += (size_t)snprintf(why + len, size - len, "%s%s", i ? ", " : "", p->choices[i]);
+        if (len < size) snprintf(why + len, size - len, ", got %s", shown);
+        return 1;
+    }
     if (!isfinite(x)) return snprintf(why, size, "must be finite, got %s", shown), 1;
+    if ((p->type == T_INTEGER || p->rule == RULE_INT) && (x != floor(x) || x < -2147483648.0 || x > 2147483647.0))
+        return snprintf(why, size, "must be an integer, got %s", shown), 1;
     int low = p->has_lo && (p->low_open ? x <= p->lo : x < p->lo), high = p->has_hi && x > p->hi;
     if (!low && !high) return 0;
     snprintf(why, size, "must be %s, got %s%s%s%s", p->range_text, shown, p->why[0] ? " (" : "", p->why,
@@ -115,31 +130,27 @@ int fmu_set_param(fmu_inst *c, const char *fn, int k, double x, const char *s) {
     const fmu_param *p = &c->fm.par[k];
     char shown[600], why[900] = "";
     if (p->rule == RULE_CHOICE) snprintf(shown, sizeof shown, "'%s'", s ? s : "None");
-    else if (p->type == T_INTEGER) snprintf(shown, sizeof shown, "%d", (int)x);
+    else if (p->type == T_INTEGER && x >= -2147483648.0 && x <= 2147483647.0) snprintf(shown, sizeof shown, "%d", (int)x);
     else fmu_repr(x, shown, sizeof shown);
     if ((c->mode & (M_STEPPING | M_EVENT | M_CONTINUOUS)) && !p->tunable)
         snprintf(why, sizeof why, "variability fixed: it cannot change after initialization (%sReset first)",
                  c->fmi3 ? "fmi3" : "fmi2");
     else if (p->rule == RULE_CHOICE && !s)
         snprintf(why, sizeof why, "a value is required");
-    else if (p->rule == RULE_CHOICE) {
-        int found = -1;
-        for (int i = 0; i < p->nchoices; i++)
-            if (!strcmp(s, p->choices[i])) found = i;
-        if (found < 0) {
-            size_t len = (size_t)snprintf(why, sizeof why, "must be one of ");
-            for (int i = 0; i < p->nchoices && len < sizeof why; i++)
-                len += (size_t)snprintf(why + len, sizeof why - len, "%s%s", i ? ", " : "", p->choices[i]);
-            if (len < sizeof why) snprintf(why + len, sizeof why - len, ", got %s", shown);
+    else {
+        if (p->rule == RULE_CHOICE) {
+            int found = -1;
+            for (int i = 0; i < p->nchoices; i++)
+                if (!strcmp(s, p->choices[i])) found = i;
+            x = found;
         }
-        x = found;
-    } else if (!rule_refuses(p, x, shown, why, sizeof why) && p->target == P_MU_STATIC) {
-        for (int i = 0; i < c->fm.nparam; i++)
-            if (c->fm.par[i].target == P_MU && c->fm.par[i].joint == p->joint && x < c->pval[i]) {
-                char mu[40];
-                fmu_repr(c->pval[i], mu, sizeof mu);
-                snprintf(why, sizeof why, "must be >= %s (%s), got %s", c->fm.par[i].name, mu, shown);
-            }
+        if (!fmu_param_refuses(p, x, shown, why, sizeof why) && p->target == P_MU_STATIC)
+            for (int i = 0; i < c->fm.nparam; i++)
+                if (c->fm.par[i].target == P_MU && c->fm.par[i].joint == p->joint && x < c->pval[i]) {
+                    char mu[40];
+                    fmu_repr(c->pval[i], mu, sizeof mu);
+                    snprintf(why, sizeof why, "must be >= %s (%s), got %s", c->fm.par[i].name, mu, shown);
+                }
     }
     if (why[0]) return fmu_log(c, fmi2Error, "%s: parameter %s = %s refused: %s", fn, p->name, shown, why), 0;
     c->pval[k] = x;

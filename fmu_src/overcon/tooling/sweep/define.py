@@ -5,6 +5,7 @@ import json
 import math
 from pathlib import Path
 
+from ...outfiles import write_text_atomic
 from ...verdict import LOCKSTEP_STEP
 from .. import InputError
 from ..compare import group_fmus, validate_group
@@ -12,6 +13,27 @@ from ..run import check_unique_models, with_inputs
 from .grid import grid, parse_param, set_ids
 from .inputs import _check_params, _load_fmu, _resolve_inputs
 from .rows import CSV_NAME, JSON_NAME, Sweep, _columns
+
+
+_NUMBER_OR_NULL = {"type": ["number", "null"]}
+DEFINITION_SCHEMA = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "$id": "https://overcon.invalid/schemas/sweep-definition-1.json",
+    "title": "overcon sweep definition (sweep.json), as written by overcon sweep",
+    "type": "object",
+    "maxProperties": 32,
+    "required": ["inputs", "params", "samples", "seed", "stop_time", "lockstep_step"],
+    "properties": {
+        "inputs": {"type": "array", "maxItems": 10_000, "items": {"type": "string", "maxLength": 4096}},
+        "params": {"type": "array", "maxItems": 1_000, "items": {"type": "string", "maxLength": 4096}},
+        "samples": {"type": ["integer", "null"], "minimum": 1, "maximum": 10_000_000},
+        "seed": {"type": ["integer", "null"]},
+        "stop_time": _NUMBER_OR_NULL,
+        "lockstep_step": _NUMBER_OR_NULL,
+        "guids": {"type": "object", "maxProperties": 10_000, "additionalProperties": {"type": ["string", "null"], "maxLength": 256}},
+    },
+}
+"""The schema of sweep.json (read back by ``overcon sweep --resume``; docs/untrusted-input.md)."""
 
 def _lockstep_step(h) -> float | None:
     if h is None or h == 0:
@@ -50,10 +72,12 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
                              "--param, --samples, --seed, --stop-time or --input with it")
         if not jpath.is_file():
             raise InputError(f"{jpath}: no such file: {out_dir} holds no sweep to resume")
+        from ...formats import SchemaError, load_json, validate
         try:
-            definition = json.loads(jpath.read_text(encoding="utf-8"))
-        except ValueError as exc:
-            raise InputError(f"{jpath}: unreadable sweep definition: {exc}") from exc
+            definition = load_json(jpath.read_bytes(), str(jpath))
+            validate(definition, DEFINITION_SCHEMA, str(jpath))
+        except SchemaError as exc:
+            raise InputError(f"unreadable sweep definition: {exc}") from exc
     else:
         if (out_dir / CSV_NAME).exists() or jpath.exists():
             raise InputError(f"{out_dir}: already holds a sweep ({CSV_NAME}/{JSON_NAME}); continue it with "
@@ -113,5 +137,5 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
     columns = _columns([s.name for s in specs], fmus)
     if not resume:
         out_dir.mkdir(parents=True, exist_ok=True)
-        jpath.write_text(json.dumps(definition, indent=1) + "\n", encoding="utf-8")
+        write_text_atomic(jpath, json.dumps(definition, indent=1) + "\n")
     return Sweep(out_dir, definition, fmus, groups, sets, exps, columns, lstep)

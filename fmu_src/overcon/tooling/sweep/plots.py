@@ -1,6 +1,8 @@
 """``sweep.png`` and, with pyarrow, ``sweep.parquet``."""
 from __future__ import annotations
 
+from ...outfiles import savefig_atomic
+
 from pathlib import Path
 
 from ...verdict import LOCKSTEP_FACTOR
@@ -72,6 +74,6 @@ def plot(sw: Sweep, rows: list[dict]) -> Path:
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     out = sw.out_dir / PNG_NAME
-    fig.savefig(out, dpi=110)
+    savefig_atomic(fig, out, dpi=110)
     plt.close(fig)
     return out

@@ -227,6 +227,7 @@ typedef struct {
 typedef struct {
     int method, n, detect_stiffness;
     int has_K, dense_ready; /* a step was taken (K, radau's Z valid); Q is current for that step */
+    int dense_kept;      /* ovk_rk_restart kept the dense output of the step before it (has_K is 0) */
     int n_stiff, n_nonstiff, n_limited;
     int current_jac, has_lu, has_old; /* radau: J at the step's start; LU of lu_h; h_abs_old, error_norm_old */
     int nK, nQ;          /* rows of K and Q that are state (0: scratch only) */
@@ -252,6 +253,10 @@ OVK_HIDDEN int ovk_rk_start(ovk_rk *rk, const ovk_rk_opts *o, int n, double *mem
                             ovk_rhs_fn fun, void *ctx, char *msg);
 OVK_HIDDEN int ovk_rk_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg);
 OVK_HIDDEN int ovk_rk_dense(ovk_rk *rk, double t, double *out);
+/* The last step's dense output coefficients made while its right-hand side is in force, then the
+ * restart at its end that keeps them (integrate_rk.c) */
+OVK_HIDDEN int ovk_rk_dense_prepare(ovk_rk *rk);
+OVK_HIDDEN int ovk_rk_restart(ovk_rk *rk, const ovk_rk_opts *o, ovk_rhs_fn fun, void *ctx, char *msg);
 OVK_HIDDEN size_t ovk_radau_doubles(int n);
 OVK_HIDDEN void ovk_radau_layout(ovk_rk *rk, double *p);
 OVK_HIDDEN int ovk_radau_start(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg);

@@ -136,7 +136,7 @@ class Simulation:
         except kernel_mod.RunStopped as exc:
             raise _stopped(exc) from exc
         self.kernel_note = f"right-hand side: compiled kernel ({kernel_mod.library_path()})"
-        self._derived = _DerivedPlan(model)
+        self._plans = _Plans(model)
 
     # -- counters of the core's run ----------------------------------------------------------
     @property
@@ -196,37 +196,23 @@ class Simulation:
             raise _stopped(exc) from exc
 
     # -- outputs ---------------------------------------------------------------------------
+    # Every output comes from the core's output plan (overcon.kernel.output_plan, core/sim_out.c),
+    # the one computation :func:`run`'s grid and the FMUs use too.
     def outputs(self, t: float, y: np.ndarray) -> np.ndarray:
         """Output vector (model.output_names() order) at (t, y): :meth:`state_outputs`, then
         :meth:`derived_outputs` (reactions, friction forces)."""
-        pos = self.state_outputs(y, t)
-        if not self._derived.size:
-            return pos
-        return np.concatenate((pos, self.derived_outputs(t, y)))
+        return self._row(t, y, None)
 
     def state_outputs(self, y: np.ndarray, t: float | None = None) -> np.ndarray:
         """The outputs of the state (Model.state_output_names): positions, velocities (m/s,
         rad/s: entries of h), energies (J: kinetic, potential, and the dissipated and applied
         work at t, by default the time of the last :meth:`advance`; core/energy.c)."""
-        pos = self.position_outputs(y)
-        model = self.model
-        if not model.velocity_outputs and not model.energy_outputs:
-            return pos
-        parts = [pos, y[self.n:][self._derived.velocity_index]]
-        if model.energy_outputs:
-            try:
-                parts.append(self._run.energies(self._target if t is None else t, y))
-            except kernel_mod.RunStopped as exc:
-                raise _stopped(exc) from exc
-        return np.concatenate(parts)
+        return self._row(self._target if t is None else t, y, self._plans.state)
 
     def position_outputs(self, y: np.ndarray) -> np.ndarray:
         """The position outputs (m, rad; quaternions as e / |e|, the orientation the dynamics use)
         at the state y."""
-        q = y[: self.n]
-        if self.model.rotation == "quaternion":
-            q = normalized_coordinates(self.model, q)
-        return q[self._derived.position_index]
+        return self._row(self._target, y, self._plans.position)
 
     def derived_outputs(self, t: float, y: np.ndarray) -> np.ndarray:
         """Reactions and friction forces at (t, y) (model.output_names() order after the
@@ -235,12 +221,27 @@ class Simulation:
         evaluation of Eq. 18 warm-started from the friction forces at the ends of the last two
         steps, interpolated linearly to t (so the values depend on the integrator's state only,
         never on the output grid), without changing the integration's warm start (core/sim.c)."""
-        if not self._derived.size:
-            return np.zeros(0)
+        return self._row(t, y, self._plans.derived)
+
+    def _row(self, t: float, y: np.ndarray, plan) -> np.ndarray:
         try:
-            return self._derived.values_from_kernel(*self._run.outputs(t, y))
+            return self._run.output_row(t, y, plan)
         except kernel_mod.RunStopped as exc:
             raise _stopped(exc) from exc
+
+    def grid(self, times: np.ndarray, plan: np.ndarray | None = None) -> tuple[np.ndarray, int, "SimulationError | None"]:
+        """The run advanced through ``times`` (ascending, from the run's time on), the outputs
+        (model.output_names() order; or those of the core's ``plan``, rows (kind, a, b) of
+        :func:`overcon.kernel.output_plan`) at each computed inside the core (core/sim_out.c)
+        into one preallocated array: (values (len(times), outputs), rows computed, the stop as a
+        :class:`SimulationError` or None). Rows after a stop are NaN."""
+        times = np.asarray(times, float)
+        if times.size:
+            self._target = float(times[-1])
+        values, rows, stop = self._run.grid(times, plan)
+        if rows < times.size and rows:
+            self._target = float(times[rows - 1])
+        return values, rows, None if stop is None else _stopped(stop)
 
     # -- state -----------------------------------------------------------------------------
     def get_state(self) -> bytes:
@@ -254,27 +255,19 @@ class Simulation:
             raise ValueError(f"Simulation.set_state: {exc}") from exc
 
 
-class _DerivedPlan:
-    """Where a model's outputs come from: ``position_index`` and ``velocity_index`` into q and h,
-    and the (joint, component) of every reaction output and the joints of the friction outputs in
-    the core's per-joint table (:meth:`overcon.kernel.Kernel.outputs`), in output order."""
+class _Plans:
+    """The core's output plans of the parts of a model's outputs (rows of
+    :func:`overcon.kernel.output_plan`): the state's (positions, velocities, energies), the
+    positions', and the derived ones (reactions, friction forces)."""
 
     def __init__(self, model: Model):
-        self.position_index = np.array([i for _, i in model.position_outputs], np.intp)
-        self.velocity_index = np.array([i for _, i in model.velocity_outputs], np.intp)
-        pairs = [(j, comp) for j in model.reaction_joints for comp in range(len(model.joints[j].components))]
-        self.n_reactions = len(pairs)
-        self.kernel_reactions = np.array(pairs, np.intp).reshape(-1, 2).T  # (joints, components)
-        self.kernel_friction = np.array(model.friction_outputs, np.intp)
-        self.size = self.n_reactions + len(self.kernel_friction)
-
-    def values_from_kernel(self, reac: np.ndarray, fric: np.ndarray) -> np.ndarray:
-        """The derived outputs from the core's table (reactions (nj, 9), friction outputs (nj,))."""
-        out = np.empty(self.size)
-        j, c = self.kernel_reactions
-        out[: self.n_reactions] = reac[j, c]
-        out[self.n_reactions:] = fric[self.kernel_friction]
-        return out
+        plan = kernel_mod.output_plan(model)
+        kinds = plan[:, 0]
+        K = kernel_mod.OUT_KINDS
+        pick = lambda *names: np.ascontiguousarray(plan[np.isin(kinds, [K[n] for n in names])])  # noqa: E731
+        self.state = pick("position", "velocity", "energy")
+        self.position = pick("position")
+        self.derived = pick("reaction", "friction")
 
 
 @dataclass
@@ -321,21 +314,16 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
         raise ValueError(f"run(output_interval={interval!r}): {reason}")
     sim = Simulation(model, solver, **settings)
     grid = output_grid(scene.start_time, stop, interval)
-    rows = []
-    try:
-        for t in grid:
-            y = sim.advance(t)
-            rows.append(sim.outputs(t, y))
-    except SimulationError as exc:
-        exc.partial = _result(model, sim, grid[:len(rows)], rows)
-        raise
-    return _result(model, sim, grid, rows)
+    values, rows, stop_exc = sim.grid(grid)
+    if stop_exc is not None:
+        stop_exc.partial = _result(model, sim, grid[:rows], values[:rows])
+        raise stop_exc
+    return _result(model, sim, grid, values)
 
 
-def _result(model: Model, sim: Simulation, time: np.ndarray, rows: list) -> Result:
-    """The :class:`Result` of the output points ``time`` and their ``rows`` so far, with the
-    run's counters."""
-    values = np.array(rows) if rows else np.zeros((0, len(model.output_names())))
+def _result(model: Model, sim: Simulation, time: np.ndarray, values: np.ndarray) -> Result:
+    """The :class:`Result` of the output points ``time`` and their rows ``values`` so far, with
+    the run's counters."""
     return Result(model.output_names(), np.asarray(time), values, sim.max_drift, sim.evaluations,
                   sim.friction_iterations, sim.steps, sim.stiff_steps, sim.kernel_note, tuple(sim.events))
 

@@ -53,7 +53,7 @@
 
 #include <stddef.h>
 
-#define OVK_ABI 10 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
+#define OVK_ABI 11 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
     OVK_OK = 0,
@@ -357,6 +357,9 @@ typedef struct {
     long long watch_capped;        /* estimates of r that reached the iteration bound (watch_eig.c) */
     double along_time;             /* s spent in the uniqueness along the motion (ovk_sim_along), not state */
     long long along_certified;     /* its evaluations the watch's bounds decided (unique.c) */
+    /* the output rows (sim_out.c): scratch made at the first row, not state */
+    double *out_mem;               /* the one allocation behind out_y (ny), out_reac (nj OVK_NREAC), out_fric (nj) */
+    double *out_y, *out_reac, *out_fric;
 } ovk_sim;
 #define OVK_SIM_NINFO 18
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
@@ -585,6 +588,18 @@ OVK_EXPORT void ovk_sim_state_vector(const ovk_sim *s, double *y);
 OVK_EXPORT void ovk_sim_info(const ovk_sim *s, double *info);
 OVK_EXPORT int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double *fric);
 OVK_EXPORT int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out);
+/* sim_out.c: the output rows of a run. An output: kind (OVK_OUT_*), a, b: a position's index into q,
+ * a velocity's into h, a state entry's into y = [q, h] (as it is: quaternions not normalised), an energy's 0-3 (kinetic, potential, dissipated, applied), a reaction's joint
+ * and entry (< OVK_NREAC), a friction output's joint (overcon.kernel.output_plan, the FMUs' plan). */
+enum { OVK_OUT_POSITION = 1, OVK_OUT_VELOCITY = 2, OVK_OUT_STATE = 3, OVK_OUT_REACTION = 5, OVK_OUT_FRICTION = 6, OVK_OUT_ENERGY = 7 };
+typedef struct { int kind, a, b; } ovk_out;
+OVK_EXPORT int ovk_plan_check(const ovk_model *M, const ovk_out *plan, int nout, char *msg);
+OVK_EXPORT void ovk_state_outputs(const ovk_model *M, const ovk_out *plan, int nout, const double *y, double *out);
+OVK_EXPORT int ovk_sim_derived_outputs(ovk_sim *s, const ovk_out *plan, int nout, double t, const double *y,
+                                       const double *lam, double *reac, double *fric, double *out);
+OVK_EXPORT int ovk_sim_output_row(ovk_sim *s, const ovk_out *plan, int nout, double t, const double *y, double *out);
+OVK_EXPORT int ovk_sim_grid(ovk_sim *s, const ovk_out *plan, int nout, const double *times, long long nt,
+                            double *values, long long *rows);
 OVK_EXPORT size_t ovk_sim_state_size(const ovk_sim *s);
 OVK_EXPORT int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size);
 OVK_EXPORT int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size);

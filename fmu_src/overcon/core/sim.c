@@ -243,6 +243,7 @@ void ovk_sim_free(ovk_sim *s) {
     free(s->events);
     free(s->kept);
     free(s->y0);
+    free(s->out_mem);
     ovk_eig_free(s->eig);
     free(s);
 }

@@ -164,8 +164,8 @@ def exudyn_door(step: float):
     ss.timeIntegration.newton.relativeTolerance = 1e-12
     ss.timeIntegration.newton.absoluteTolerance = 1e-12
     ss.solution.file.write = False
-    ss.displayStatistics = False
-    ss.displayComputationTime = False
+    ss.show.statistics = False
+    ss.show.computationTime = False
     ss.linearSolver.solverType = exu.LinearSolverType.EigenDense
     ss.linearSolver.ignoreSingularJacobian = True
     ss.solution.sensors.writePeriod = DOOR_DT

@@ -69,3 +69,65 @@ def test_rows_inside_the_reselected_step_in_the_fmu(tmp_path):
     names, want = _positions(ref)
     worst = np.max(np.abs(np.column_stack([got[n] for n in names]) - want), axis=1)
     assert np.max(worst) <= 1e-8, (ref.time[np.argmax(worst)], np.max(worst))
+
+
+# ------------------------------------------------------------------------ the grid in the core
+MECH = ROOT / "mechanisms"
+
+
+def _spec(name: str, **kw):
+    return scene_mod.as_scene(scene_mod.load(MECH / f"{name}.toml"), **kw)
+
+
+@pytest.mark.parametrize("name", ["planar_f45_wo4", "spatial_MN_wo5", "examples/door_h1_wo_hinge2"])
+def test_grid_rows_equal_the_point_by_point_outputs(name):
+    """The whole grid computed inside the core (run, ovk_sim_grid) gives, bit for bit, the rows of
+    advance() and outputs() point by point (ovk_sim_advance, ovk_sim_output_row): positions
+    (quaternions normalised), reactions, friction forces, energies."""
+    from overcon.simulate import Simulation, output_grid
+    spec = _spec(name, stop_time=0.3)
+    model = compile_checked(spec)
+    res = run(model, spec.solver)
+    sim = Simulation(model, spec.solver)
+    grid = output_grid(spec.start_time, 0.3, spec.solver.output_interval)
+    rows = np.array([sim.outputs(t, sim.advance(t)) for t in grid])
+    assert res.values.shape == (len(grid), len(model.output_names()))
+    assert np.array_equal(res.values, rows)
+    assert sim.steps == res.steps and sim.evaluations == res.evaluations
+
+
+def test_a_stopped_grid_keeps_its_rows(tmp_path):
+    """A run stopped by its work budget: the SimulationError's partial result holds the rows
+    computed before the stop, equal to an unstopped run's first rows."""
+    from overcon.simulate import BudgetExceeded
+    spec = _spec("planar_f45_wo4", stop_time=1.0)
+    model = compile_checked(spec)
+    full = run(model, spec.solver)
+    with pytest.raises(BudgetExceeded) as exc:
+        run(model, spec.solver, max_steps=full.steps // 2)
+    part = exc.value.partial
+    assert 0 < len(part.time) < len(full.time)
+    assert np.array_equal(part.values, full.values[: len(part.time)])
+    assert not np.isnan(part.values).any()
+
+
+def test_grid_refuses_a_bad_plan_and_bad_times():
+    """Numbers from outside are checked before they index: an output of another kind or out of
+    range and times that go back are refused with a message naming them; the run is untouched."""
+    from overcon import kernel
+    from overcon.simulate import Simulation, SimulationError
+    spec = _spec("planar_f45_wo4", stop_time=0.1)
+    model = compile_checked(spec)
+    sim = Simulation(model, spec.solver)
+    for plan, match in (([(4, 0, 0)], r"output plan: output 0 \(kind 4"),
+                        ([(kernel.OUT_KINDS["position"], model.n, 0)], r"output plan: output 0"),
+                        ([(kernel.OUT_KINDS["reaction"], 0, 9)], r"output plan: output 0")):
+        with pytest.raises(kernel.RunStopped, match=match):
+            sim._run.output_row(0.0, np.concatenate([model.q0, model.h0]), np.array(plan))
+        _, rows, stop = sim.grid(np.array([0.01]), np.array(plan))
+        assert rows == 0 and isinstance(stop, SimulationError) and "output plan" in str(stop)
+    _, rows, stop = sim.grid(np.array([0.02, 0.01]))
+    assert rows == 0 and "not after the one before" in str(stop)
+    assert sim.t == 0.0 and sim.steps == 0
+    values, rows, stop = sim.grid(np.array([0.01, 0.02]))
+    assert stop is None and rows == 2 and values.shape == (2, len(model.output_names()))

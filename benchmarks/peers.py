@@ -1,7 +1,8 @@
 """overcon against peer multibody codes at matched accuracy: the frictionless door and the N-four-bar.
 
     pip install -e ".[bench]"          # MuJoCo, Exudyn, OpenSim (optional: a missing peer is skipped)
-    python benchmarks/peers.py [--rounds 3] [--cases door,nfourbar] [--n 2 10] [--plot docs/peers.png]
+    python benchmarks/peers.py [--rounds 3] [--nfourbar-rounds 1] [--cases door,nfourbar] [--n 2 10]
+                               [--plot docs/peers.png]
 
 Two cases, each run by every code over a sweep of its accuracy setting (overcon: the tolerance;
 MuJoCo, Exudyn: the time step; OpenSim: its integrator accuracy), interleaved: every round runs
@@ -21,7 +22,9 @@ step; Exudyn: build and SolveDynamic; OpenSim: build, initSystem and integrate),
 - **nfourbar**: the N-four-bar (benchmark A02; benchmarks/nfourbar.py: the scene generator, the
   exact branch), 20 s, B0's x every 10 ms. Error: the largest difference of B0's x from the exact
   branch. overcon with ``[solver] singular = "pass"``; MuJoCo as a tree of hinges (crank0,
-  coupler0, crank1, ...) closed by N ball connections of the other cranks to the ground. A run
+  coupler0, crank1, ...) closed by N ball connections of the other cranks to the ground; Exudyn
+  with planar bodies and its 2D revolute joints, generalized-alpha at spectral radius 0.9 (OpenSim
+  is not run on it: its model is not written here). A run
   whose error exceeds 0.1 m has left the branch (at a flat position): reported as ``wrong
   branch``, never as a time; a run that raises is ``failed`` with its message.
 
@@ -251,10 +254,11 @@ def overcon_nfourbar(n: int, tolerance: float, tmp: Path, method: str = "dop853"
     return built - start, time.perf_counter() - built, x
 
 
-def mujoco_nfourbar(n: int, step: float, integrator: str):
+def mujoco_nfourbar(n: int, step: float, integrator: str, solref: str | None = None):
     """MuJoCo's N-four-bar: a tree of hinges about z (crank0 on the ground, coupler0 on its top,
     crank1 on coupler0's end, ...) closed by a ball connection of each crank i >= 1 to the ground
-    point (i, 0); every rod 1 kg, 1/12 kg m^2 about z; B0 a site on crank0's top."""
+    point (i, 0) (its soft constraint: MuJoCo's default solref, or ``solref`` for stiffer ones);
+    every rod 1 kg, 1/12 kg m^2 about z; B0 a site on crank0's top."""
     import mujoco
     start = time.perf_counter()
     rod = 'mass="1" diaginertia="0.0833333333333333 0.001 0.0833333333333333"'
@@ -267,7 +271,8 @@ def mujoco_nfourbar(n: int, step: float, integrator: str):
                 f'<body name="crank{i + 1}" pos="0.5 -0.5 0">', f'<inertial pos="0 0 0" {rod}/>', hinge.format("0 0.5 0")]
         close += 2
     xml += ["</body>"] * close
-    eq = "".join(f'<connect body1="crank{i}" body2="world" anchor="0 -0.5 0"/>' for i in range(1, n + 1))
+    ref = f' solref="{solref}"' if solref else ""
+    eq = "".join(f'<connect body1="crank{i}" body2="world" anchor="0 -0.5 0"{ref}/>' for i in range(1, n + 1))
     text = (f'<mujoco><option timestep="{step!r}" integrator="{integrator}" gravity="0 -9.81 0"/>'
             f'<worldbody>{"".join(xml)}</worldbody><equality>{eq}</equality></mujoco>')
     model = mujoco.MjModel.from_xml_string(text)
@@ -278,12 +283,68 @@ def mujoco_nfourbar(n: int, step: float, integrator: str):
     return built - start, time.perf_counter() - built, x
 
 
-def nfourbar_runs(n: int, tmp: Path) -> list[tuple[str, str, object]]:
+def exudyn_nfourbar(n: int, step: float, rho: float = 0.9):
+    """Exudyn's N-four-bar: planar rigid bodies (NodeRigidBody2D) and its 2D revolute joints,
+    generalized-alpha with spectral radius ``rho`` (some numerical damping: without it its Newton
+    stops at the flat positions) at the fixed step ``step``; B0 a sensor on crank0's top."""
+    import exudyn as exu
+    from exudyn.utilities import (LoadMassProportional, MarkerBodyMass, MarkerBodyPosition, NodeRigidBody2D,
+                                  ObjectGround, ObjectJointRevolute2D, ObjectRigidBody2D, SensorBody)
+    start = time.perf_counter()
+    SC = exu.SystemContainer()
+    mbs = SC.AddSystem()
+    ground = mbs.AddObject(ObjectGround())
+
+    def rod(x, y, phi, v):
+        node = mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[x, y, phi], initialVelocities=v))
+        body = mbs.AddObject(ObjectRigidBody2D(mass=1.0, inertia=1.0 / 12.0, nodeNumber=node))
+        mbs.AddLoad(LoadMassProportional(markerNumber=mbs.AddMarker(MarkerBodyMass(bodyNumber=body)),
+                                         loadVector=[0.0, -9.81, 0.0]))
+        return body
+
+    def pin(a, pa, b, pb):
+        ma = mbs.AddMarker(MarkerBodyPosition(bodyNumber=a, localPosition=[pa[0], pa[1], 0.0]))
+        mb = mbs.AddMarker(MarkerBodyPosition(bodyNumber=b, localPosition=[pb[0], pb[1], 0.0]))
+        mbs.AddObject(ObjectJointRevolute2D(markerNumbers=[ma, mb]))
+
+    cranks = [rod(i, 0.5, math.pi / 2, [0.5, 0.0, -1.0]) for i in range(n + 1)]
+    couplers = [rod(i + 0.5, 1.0, 0.0, [1.0, 0.0, 0.0]) for i in range(n)]
+    for i, c in enumerate(cranks):
+        pin(c, (-0.5, 0.0), ground, (float(i), 0.0))
+    for i, c in enumerate(couplers):
+        pin(cranks[i], (0.5, 0.0), c, (-0.5, 0.0))
+        pin(c, (0.5, 0.0), cranks[i + 1], (0.5, 0.0))
+    sensor = mbs.AddSensor(SensorBody(bodyNumber=cranks[0], localPosition=[0.5, 0.0, 0.0], storeInternal=True,
+                                      outputVariableType=exu.OutputVariableType.Position))
+    mbs.Assemble()
+    ss = exu.SimulationSettings()
+    ss.timeIntegration.numberOfSteps = int(round(NFB_STOP / step))
+    ss.timeIntegration.endTime = NFB_STOP
+    ss.timeIntegration.verboseMode = 0
+    ss.timeIntegration.generalizedAlpha.spectralRadius = rho
+    ss.timeIntegration.adaptiveStep = False
+    ss.solution.file.write = False
+    ss.show.statistics = False
+    ss.show.computationTime = False
+    ss.linearSolver.ignoreSingularJacobian = True
+    ss.solution.sensors.writePeriod = NFB_DT
+    built = time.perf_counter()
+    ok = exu.SolveDynamic(mbs, ss)
+    if not ok:
+        raise RuntimeError("SolveDynamic did not converge")
+    data = mbs.GetSensorStoredData(sensor)
+    return built - start, time.perf_counter() - built, data[:, 1]
+
+
+def nfourbar_runs(n: int, tmp: Path, stiff: bool = False) -> list[tuple[str, str, object]]:
     runs = [("overcon dop853", f"tol {tol:g}", lambda tol=tol: overcon_nfourbar(n, tol, tmp))
             for tol in (1e-3, 1e-5, 1e-7, 1e-9)]
     runs += [("mujoco RK4", f"dt {dt:g}", lambda dt=dt: mujoco_nfourbar(n, dt, "RK4")) for dt in (1e-3, 1e-4)]
     runs += [("mujoco implicitfast", f"dt {dt:g}", lambda dt=dt: mujoco_nfourbar(n, dt, "implicitfast"))
              for dt in (1e-3, 1e-4)]
+    runs += [("exudyn rho 0.9", f"dt {dt:g}", lambda dt=dt: exudyn_nfourbar(n, dt)) for dt in (1e-3, 5e-4)]
+    if stiff:  # MuJoCo's closures 40 times stiffer than its default (solref 0.02): a minute a run
+        runs += [("mujoco RK4 solref 0.0005", "dt 5e-05", lambda: mujoco_nfourbar(n, 5e-5, "RK4", "0.0005 1"))]
     return runs
 
 
@@ -373,10 +434,14 @@ def plot(panels: list[tuple[str, list[Outcome]]], path: Path) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=3, help="rounds of the door (default 3)")
+    ap.add_argument("--nfourbar-rounds", type=int, default=1, help="rounds of the N-four-bar (default 1: its peers "
+                    "take seconds to minutes a run)")
     ap.add_argument("--cases", default="door,nfourbar")
     ap.add_argument("--n", type=int, nargs="+", default=[2, 10])
     ap.add_argument("--plot", help="write the speed/accuracy plot (PNG) here")
+    ap.add_argument("--mujoco-stiff", action="store_true",
+                    help="also MuJoCo's N-four-bar with closures of solref 0.0005 at dt 5e-5 (a minute a run)")
     args = ap.parse_args(argv)
     cases = set(args.cases.split(","))
     panels = []
@@ -390,8 +455,8 @@ def main(argv=None) -> int:
         for n in args.n if "nfourbar" in cases else ():
             times = np.round(np.arange(int(round(NFB_STOP / NFB_DT)) + 1) * NFB_DT, 10)
             ref = _nfourbar_module().reference_x(n, times)
-            out = sweep(nfourbar_runs(n, Path(tmp)), ref, lambda x, r: float(np.max(np.abs(np.asarray(x).reshape(-1) - r))),
-                        args.rounds, branch=WRONG_BRANCH)
+            out = sweep(nfourbar_runs(n, Path(tmp), args.mujoco_stiff), ref, lambda x, r: float(np.max(np.abs(np.asarray(x).reshape(-1) - r))),
+                        args.nfourbar_rounds, branch=WRONG_BRANCH)
             print("\n".join(table(f"N-four-bar N = {n}, {NFB_STOP:g} s", out, (1e-3, 1e-5))), flush=True)
             panels.append((f"N-four-bar N = {n} (20 s)", out))
     if args.plot and panels:

@@ -23,8 +23,8 @@ step; Exudyn: build and SolveDynamic; OpenSim: build, initSystem and integrate),
   exact branch), 20 s, B0's x every 10 ms. Error: the largest difference of B0's x from the exact
   branch. overcon with ``[solver] singular = "pass"``; MuJoCo as a tree of hinges (crank0,
   coupler0, crank1, ...) closed by N ball connections of the other cranks to the ground; Exudyn
-  with planar bodies and its 2D revolute joints, generalized-alpha at spectral radius 0.9 (OpenSim
-  is not run on it: its model is not written here). A run
+  with planar bodies and its 2D revolute joints, generalized-alpha at spectral radius 0.9; OpenSim
+  as a tree of pin joints closed by N point constraints of the cranks' feet. A run
   whose error exceeds 0.1 m has left the branch (at a flat position): reported as ``wrong
   branch``, never as a time; a run that raises is ``failed`` with its message.
 
@@ -336,6 +336,52 @@ def exudyn_nfourbar(n: int, step: float, rho: float = 0.9):
     return built - start, time.perf_counter() - built, data[:, 1]
 
 
+def opensim_nfourbar(n: int, accuracy: float):
+    """OpenSim's N-four-bar: a tree of pin joints (about z; crank0 on the ground, coupler0 on its top,
+    crank1 on coupler0's end, ...) closed by a point constraint of each crank i >= 1's foot to the
+    ground point (i, 0); rods along their body x, 1 kg, 1/12 kg m^2 about z; the default integrator
+    at ``accuracy``."""
+    import opensim as osim
+    osim.Logger.setLevelString("Off")
+    start = time.perf_counter()
+    model = osim.Model()
+    model.setGravity(osim.Vec3(0.0, -9.81, 0.0))
+    joints, parent, at = [], model.getGround(), osim.Vec3(0.0)
+    cranks = []
+    for k in range(2 * n + 1):  # crank0, coupler0, crank1, ...: each hinged to the one before
+        crank = k % 2 == 0
+        body = osim.Body(f"{'crank' if crank else 'coupler'}{k // 2}", 1.0, osim.Vec3(0.0),
+                         osim.Inertia(1e-3, 1.0 / 12.0, 1.0 / 12.0))
+        model.addBody(body)
+        # a crank hangs from its foot (the ground) or its top (a coupler's end); a coupler from its left end
+        child = osim.Vec3(-0.5 if (crank and k == 0) or not crank else 0.5, 0.0, 0.0)
+        joint = osim.PinJoint(f"J{k}", parent, at, osim.Vec3(0.0), body, child, osim.Vec3(0.0))
+        model.addJoint(joint)
+        joints.append(joint)
+        if crank:
+            cranks.append(body)
+        parent, at = body, osim.Vec3(0.5, 0.0, 0.0)
+    for i, crank in enumerate(cranks[1:], start=1):
+        model.addConstraint(osim.PointConstraint(model.getGround(), osim.Vec3(float(i), 0.0, 0.0), crank,
+                                                 osim.Vec3(-0.5, 0.0, 0.0)))
+    for k, joint in enumerate(joints):  # absolute angles: cranks pi/2, couplers 0; cranks at -1 rad/s
+        c = joint.upd_coordinates(0)
+        c.setDefaultValue(math.pi / 2 if k == 0 else (-math.pi / 2 if k % 2 else math.pi / 2))
+        c.setDefaultSpeedValue(-1.0 if k % 2 == 0 else 1.0)
+    state = model.initSystem()
+    manager = osim.Manager(model)
+    manager.setIntegratorAccuracy(accuracy)
+    state.setTime(0.0)
+    manager.initialize(state)
+    built = time.perf_counter()
+    top, x = osim.Vec3(0.5, 0.0, 0.0), []
+    for k in range(int(round(NFB_STOP / NFB_DT)) + 1):
+        state = manager.integrate(k * NFB_DT) if k else state
+        model.realizePosition(state)
+        x.append(cranks[0].findStationLocationInGround(state, top).get(0))
+    return built - start, time.perf_counter() - built, np.array(x)
+
+
 def nfourbar_runs(n: int, tmp: Path, stiff: bool = False) -> list[tuple[str, str, object]]:
     runs = [("overcon dop853", f"tol {tol:g}", lambda tol=tol: overcon_nfourbar(n, tol, tmp))
             for tol in (1e-3, 1e-5, 1e-7, 1e-9)]
@@ -343,6 +389,7 @@ def nfourbar_runs(n: int, tmp: Path, stiff: bool = False) -> list[tuple[str, str
     runs += [("mujoco implicitfast", f"dt {dt:g}", lambda dt=dt: mujoco_nfourbar(n, dt, "implicitfast"))
              for dt in (1e-3, 1e-4)]
     runs += [("exudyn rho 0.9", f"dt {dt:g}", lambda dt=dt: exudyn_nfourbar(n, dt)) for dt in (1e-3, 5e-4)]
+    runs += [("opensim", f"acc {acc:g}", lambda acc=acc: opensim_nfourbar(n, acc)) for acc in (1e-3, 1e-5, 1e-7)]
     if stiff:  # MuJoCo's closures 40 times stiffer than its default (solref 0.02): a minute a run
         runs += [("mujoco RK4 solref 0.0005", "dt 5e-05", lambda: mujoco_nfourbar(n, 5e-5, "RK4", "0.0005 1"))]
     return runs

@@ -183,6 +183,7 @@ def opensim_door(accuracy: float):
     that their z is the line), the default integrator at ``accuracy``."""
     import opensim as osim
     osim.Logger.setLevelString("Off")  # its manager's report at every integrate() call
+    osim.Logger.removeFileSink()  # no opensim.log in the working directory
     start = time.perf_counter()
     model = osim.Model()
     model.setGravity(osim.Vec3(*GRAVITY))
@@ -343,6 +344,7 @@ def opensim_nfourbar(n: int, accuracy: float):
     at ``accuracy``."""
     import opensim as osim
     osim.Logger.setLevelString("Off")
+    osim.Logger.removeFileSink()
     start = time.perf_counter()
     model = osim.Model()
     model.setGravity(osim.Vec3(0.0, -9.81, 0.0))

@@ -412,6 +412,12 @@ class Outcome:
         return self.build + self.run
 
 
+def _short(text: str, size: int = 150) -> str:
+    """A peer's message on one line, its start and its end when it is long (the cause is often last)."""
+    text = " ".join(line.strip() for line in text.splitlines() if line.strip()).replace("|", "/")
+    return text if len(text) <= size else f"{text[:60]} ... {text[-(size - 65):]}"
+
+
 def sweep(runs, reference: np.ndarray, error, rounds: int, branch: float | None = None) -> list[Outcome]:
     """Every run once per round, interleaved; a run's times are its best round's."""
     out = [Outcome(code, setting) for code, setting, _ in runs]
@@ -426,7 +432,7 @@ def sweep(runs, reference: np.ndarray, error, rounds: int, branch: float | None 
                 o.failure = f"not installed ({exc.name})"
                 continue
             except Exception as exc:  # a peer's own failure (no convergence, a refused model): reported as such
-                o.failure = f"failed: {type(exc).__name__}: {str(exc).splitlines()[0][:80] if str(exc) else ''}"
+                o.failure = f"failed: {type(exc).__name__}: {_short(str(exc))}"
                 continue
             if not math.isfinite(err):
                 o.failure = "failed: non-finite result"

@@ -5,7 +5,8 @@ their integrators, watch and ledgers (:class:`Run`, core/sim.c), which ``overcon
 the FMUs run.
 
 Why ctypes (decided here): the core's interface is a handful of C functions over flat arrays,
-called once per run step or per output point, not per arithmetic operation; ctypes needs no
+called once per run (a whole output grid: :meth:`Run.grid`) or per point asked for, not per
+arithmetic operation; ctypes needs no
 compiler beyond the core's own build and no CPython ABI, so one ``libovercore`` serves every
 Python version, and the FMU binaries load the same sources without Python.
 

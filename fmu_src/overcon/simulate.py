@@ -11,7 +11,12 @@ A :class:`Simulation` owns the core's run (integrator, warm starts, the singular
 uniqueness along the motion, the work ledger, counters, events); the :class:`Model` never
 changes. ``get_state``/``set_state`` round-trip it exactly (the core's serialised state, bytes);
 outputs are read by dense output at any time inside the last step and never disturb the
-integration.
+integration. :func:`run` (``overcon simulate``) has its whole output grid computed inside the
+core (:meth:`Simulation.grid`, core/sim_out.c): every row of the model's output plan written into
+one array allocated beforehand, no Python per output point; :meth:`Simulation.outputs` is the
+same computation for one point. A point inside a step at whose end the kept equations are chosen
+again comes from that step's dense output (the accepted trajectory, core/integrate_rk.c
+ovk_rk_restart).
 
 Solver options (decided here): a Simulation is given the Model and, separately, the solver
 options (:class:`overcon.spec.SolverSpec`, frozen; a scene's ``scene.solver``). The Model carries

@@ -26,6 +26,7 @@
  *   integrate_radau.c   its implicit Radau IIA of order 5 (radau), collocation dense output
  *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
  *                       work budgets, derived outputs at any point of the last step
+ *   sim_out.c           the output rows of a run: the model's output plan at a point, a whole grid
  *   svd.c               one-sided Jacobi SVD: singular values (the watch's rare whole-Jacobian checks)
  *   watch_eig.c         the watch's r: the kept rows' extreme singular values tracked from check to
  *                       check (inverse iterations on the banded G = W W^T)

@@ -131,3 +131,5 @@ def test_grid_refuses_a_bad_plan_and_bad_times():
     assert sim.t == 0.0 and sim.steps == 0
     values, rows, stop = sim.grid(np.array([0.01, 0.02]))
     assert stop is None and rows == 2 and values.shape == (2, len(model.output_names()))
+    _, rows, stop = sim.grid(np.array([-1.0]))
+    assert rows == 0 and "before the run's last step" in str(stop)

@@ -113,7 +113,7 @@ int ovk_sim_output_row(ovk_sim *s, const ovk_out *plan, int nout, double t, cons
     return ovk_sim_derived_outputs(s, plan, nout, t, y, NULL, s->out_reac, s->out_fric, out);
 }
 
-/* The run advanced through the times t[0..nt) (ascending, from the run's time on) and the row of
+/* The run advanced through the times t[0..nt) (ascending, from the last step's start on) and the row of
  * the plan at each written into values (nt x nout, row-major; the caller's array of that size):
  * as ovk_sim_advance to each time and ovk_sim_output_row there, the run's budgets of its life
  * checked on the way. *rows: the rows written; a stop leaves the rows before it in values and its
@@ -132,6 +132,9 @@ int ovk_sim_grid(ovk_sim *s, const ovk_out *plan, int nout, const double *times,
         if (!isfinite(times[k]) || (k && !(times[k] > times[k - 1])))
             return snprintf(s->msg, sizeof s->msg, "output grid: time %lld (%.17g s) is not finite or not after the "
                             "one before", k, times[k]), OVK_INVALID;
+    if (nt && times[0] < s->rk.t_old) /* the dense output answers inside the last step only */
+        return snprintf(s->msg, sizeof s->msg, "output grid: time 0 (%.17g s) is before the run's last step (from "
+                        "%.17g s)", times[0], s->rk.t_old), OVK_INVALID;
     if ((status = out_scratch(s))) return status;
     double *y = s->out_y;
     for (long long k = 0; k < nt; k++) {

@@ -27,7 +27,10 @@ def fresh_outputs(sim, model, spec, t, y):
     Eq. 18 at (t, y) (a Kernel of its own: no warm start), and the largest |lam|."""
     k = kernel.Kernel(kernel.library()[0], model, spec.solver)
     _, lam, _, _ = k.evaluate(t, y)
-    derived = sim._derived.values_from_kernel(*k.outputs(y, lam))
+    reac, fric = k.outputs(y, lam)
+    plan = kernel.output_plan(model)
+    derived = [reac[a, b] if kind == kernel.OUT_KINDS["reaction"] else fric[a] for kind, a, b in plan.tolist()
+               if kind in (kernel.OUT_KINDS["reaction"], kernel.OUT_KINDS["friction"])]
     return np.concatenate((sim.position_outputs(y), derived)), float(np.max(np.abs(lam)))
 
 

@@ -17,9 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .analysis import analyse, numerical_rank
+from . import kernel as kernel_mod
 from .kernel import rows_kernel
 from .precheck import compliant_joints, frictionless
-from .simulate import Simulation, SimulationError, output_grid
+from .simulate import Simulation, output_grid
 
 
 @dataclass(frozen=True)
@@ -92,14 +93,11 @@ def along(model, solver, stop_time: float) -> AlongReport:
         raise ValueError(f"--along {stop_time:g}: must be after the scene's start time {start:g} s")
     names = _friction_names(model)
     sim, rows = Simulation(model, solver), rows_kernel(model)
-    samples, stopped = [], None
-    try:
-        for t in output_grid(start, stop_time, solver.output_interval):
-            y = sim.advance(t)
-            samples.append((float(t), *sample(model, y[: model.n], names, rows)))
-    except SimulationError as exc:
-        stopped = str(exc)
-    return AlongReport(stop_time, solver.output_interval, _segments(samples), stopped)
+    grid = output_grid(start, stop_time, solver.output_interval)
+    coordinates = np.array([(kernel_mod.STATE_KIND, i, 0) for i in range(model.n)], np.intc).reshape(-1, 3)
+    q, done, stop = sim.grid(grid, coordinates)  # the run's whole grid inside the core
+    samples = [(float(t), *sample(model, q[k], names, rows)) for k, t in enumerate(grid[:done])]
+    return AlongReport(stop_time, solver.output_interval, _segments(samples), None if stop is None else str(stop))
 
 
 def format_along(report: AlongReport) -> str:

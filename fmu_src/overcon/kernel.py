@@ -5,7 +5,8 @@ their integrators, watch and ledgers (:class:`Run`, core/sim.c), which ``overcon
 the FMUs run.
 
 Why ctypes (decided here): the core's interface is a handful of C functions over flat arrays,
-called once per run step or per output point, not per arithmetic operation; ctypes needs no
+called once per run (a whole output grid: :meth:`Run.grid`) or per point asked for, not per
+arithmetic operation; ctypes needs no
 compiler beyond the core's own build and no CPython ABI, so one ``libovercore`` serves every
 Python version, and the FMU binaries load the same sources without Python.
 
@@ -113,6 +114,8 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_sim_state_vector", None, [vp, vp]), ("ovk_sim_info", None, [vp, vp]),
                             ("ovk_sim_outputs", i, [vp, ctypes.c_double, vp, vp, vp]),
                             ("ovk_sim_energy", i, [vp, ctypes.c_double, vp, vp]),
+                            ("ovk_sim_output_row", i, [vp, vp, i, ctypes.c_double, vp, vp]),
+                            ("ovk_sim_grid", i, [vp, vp, i, vp, ctypes.c_longlong, vp, vp]),
                             ("ovk_sim_state_size", ctypes.c_size_t, [vp]),
                             ("ovk_sim_get_state", i, [vp, vp, ctypes.c_size_t]),
                             ("ovk_sim_set_state", i, [vp, vp, ctypes.c_size_t]),
@@ -697,6 +700,30 @@ WALL_TIMES = ("wall_time", "watch_time", "along_time")
 """The entries of :data:`INFO` that are wall times: no state, they differ between equal runs."""
 
 
+OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6, "energy": 7, "sensor": 8}
+"""The kinds of a model output in the core's plan (``OVK_OUT_*`` of core/core.h, core/sim_out.c)."""
+STATE_KIND = 3
+"""The core's plan kind of an entry of the state y = [q, h] as it is (quaternions not normalised):
+not a model output, for callers that need the state along a grid (``check --along``)."""
+
+
+def output_plan(model) -> np.ndarray:
+    """The core's output plan of ``model`` (rows (kind, a, b) in ``model.output_names()`` order,
+    int32): a position's index into q, a velocity's into h, an energy's 0-3 (kinetic, potential,
+    dissipated, applied: spec.ENERGY_OUTPUTS), a reaction's joint and component, a friction
+    output's joint, a sensor's joint and entry (angle, rate, displacement, speed). ``overcon simulate`` and the FMUs' model file (:mod:`overcon.fmu.cmodel`) use it."""
+    rows = [(OUT_KINDS["position"], i, 0) for _, i in model.position_outputs]
+    rows += [(OUT_KINDS["velocity"], i, 0) for _, i in model.velocity_outputs]
+    rows += [(OUT_KINDS["energy"], k, 0) for k in range(4)] if model.energy_outputs else []
+    rows += [(OUT_KINDS["reaction"], j, comp) for j in model.reaction_joints
+             for comp in range(len(model.joints[j].components))]
+    rows += [(OUT_KINDS["friction"], j, 0) for j in model.friction_outputs]
+    rows += [(OUT_KINDS["sensor"], j, what) for _, j, what in model.sensor_outputs]  # a joint's entry 0-3
+    if len(rows) != len(model.output_names()):
+        raise ValueError(f"output plan: {len(rows)} outputs for the model's {len(model.output_names())} names")
+    return np.ascontiguousarray(np.array(rows, np.intc).reshape(-1, 3))
+
+
 class _CRkOpts(ctypes.Structure):
     """``ovk_rk_opts`` of core/core.h."""
     _fields_ = [("method", ctypes.c_int), ("detect_stiffness", ctypes.c_int), ("tolerance", ctypes.c_double),
@@ -754,6 +781,7 @@ class Run:
         self._finalize = weakref.finalize(self, lib.ovk_sim_free, sim)
         self._y = np.zeros(self.ny)
         self._info = np.zeros(len(INFO))
+        self._plan = output_plan(model)
         status = lib.ovk_sim_status(sim)
         if status:
             raise RunStopped(status, self._message())
@@ -823,6 +851,38 @@ class Run:
         if status:
             self._raise(status)
         return reac, fric
+
+    def output_row(self, t: float, y: np.ndarray, plan: np.ndarray | None = None) -> np.ndarray:
+        """The outputs of ``plan`` (default the model's :func:`output_plan`, ``model.output_names()``
+        order) at (t, y) of the last step (core/sim_out.c), a new array; the run's state is left
+        as it was."""
+        plan = self._plan if plan is None else np.ascontiguousarray(plan, np.intc).reshape(-1, 3)
+        yy = np.ascontiguousarray(y, float)
+        if yy.shape != (self.ny,):
+            raise ValueError(f"output_row: a state of {self.ny} entries, got shape {yy.shape}")
+        out = np.zeros(len(plan))
+        status = self._lib.ovk_sim_output_row(self._sim, plan.ctypes.data, len(plan), t, yy.ctypes.data,
+                                              out.ctypes.data)
+        if status:
+            self._raise(status)
+        return out
+
+    def grid(self, times: np.ndarray, plan: np.ndarray | None = None) -> tuple[np.ndarray, int, RunStopped | None]:
+        """The run advanced through ``times`` (ascending, finite, from the run's time on) with the
+        row of ``plan`` (default the model's :func:`output_plan`) at each, all inside the core
+        (core/sim_out.c, ovk_sim_grid) into one preallocated array: (values (len(times),
+        len(plan)), rows written, the stop or None). A stop leaves the rows before it; rows after
+        it are NaN."""
+        plan = self._plan if plan is None else np.ascontiguousarray(plan, np.intc).reshape(-1, 3)
+        times = np.ascontiguousarray(times, float).reshape(-1)
+        values = np.full((len(times), len(plan)), np.nan)
+        rows = ctypes.c_longlong(0)
+        status = self._lib.ovk_sim_grid(self._sim, plan.ctypes.data, len(plan), times.ctypes.data, len(times),
+                                        values.ctypes.data, ctypes.addressof(rows))
+        stop = None
+        if status:
+            stop = RunStopped(status, self._message(), self.info["stable_step"] if status == 10 else None)
+        return values, int(rows.value), stop
 
     def energies(self, t: float, y: np.ndarray) -> np.ndarray:
         """[kinetic, potential, dissipated, applied] (J) at (t, y) of the last step, as the energy

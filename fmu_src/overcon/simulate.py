@@ -11,7 +11,12 @@ A :class:`Simulation` owns the core's run (integrator, warm starts, the singular
 uniqueness along the motion, the work ledger, counters, events); the :class:`Model` never
 changes. ``get_state``/``set_state`` round-trip it exactly (the core's serialised state, bytes);
 outputs are read by dense output at any time inside the last step and never disturb the
-integration.
+integration. :func:`run` (``overcon simulate``) has its whole output grid computed inside the
+core (:meth:`Simulation.grid`, core/sim_out.c): every row of the model's output plan written into
+one array allocated beforehand, no Python per output point; :meth:`Simulation.outputs` is the
+same computation for one point. A point inside a step at whose end the kept equations are chosen
+again comes from that step's dense output (the accepted trajectory, core/integrate_rk.c
+ovk_rk_restart).
 
 Solver options (decided here): a Simulation is given the Model and, separately, the solver
 options (:class:`overcon.spec.SolverSpec`, frozen; a scene's ``scene.solver``). The Model carries
@@ -136,7 +141,7 @@ class Simulation:
         except kernel_mod.RunStopped as exc:
             raise _stopped(exc) from exc
         self.kernel_note = f"right-hand side: compiled kernel ({kernel_mod.library_path()})"
-        self._derived = _DerivedPlan(model)
+        self._plans = _Plans(model)
 
     # -- counters of the core's run ----------------------------------------------------------
     @property
@@ -196,21 +201,12 @@ class Simulation:
             raise _stopped(exc) from exc
 
     # -- outputs ---------------------------------------------------------------------------
+    # Every output comes from the core's output plan (overcon.kernel.output_plan, core/sim_out.c),
+    # the one computation :func:`run`'s grid and the FMUs use too.
     def outputs(self, t: float, y: np.ndarray) -> np.ndarray:
         """Output vector (model.output_names() order) at (t, y): :meth:`state_outputs`, then
         :meth:`derived_outputs` (reactions, friction forces)."""
-        pos = self.state_outputs(y, t)
-        if self._derived.size:
-            pos = np.concatenate((pos, self.derived_outputs(t, y)))
-        if self.model.sensor_outputs:
-            pos = np.concatenate((pos, self.sensor_outputs(y)))
-        return pos
-
-    def sensor_outputs(self, y: np.ndarray) -> np.ndarray:
-        """The joint sensors ``<joint>.angle``, ``.rate``, ``.displacement``, ``.speed`` at y, from
-        their values at q0 (rad, rad/s, m, m/s; core/inputs.c), in output order."""
-        table = self._run.sensors(y)
-        return np.array([table[j, k] for _, j, k in self.model.sensor_outputs])
+        return self._row(t, y, None)
 
     def set_inputs(self, values, slopes=None) -> None:
         """The inputs' values (``model.inputs`` order; N, N.m) from the run's time on: held, or
@@ -226,25 +222,12 @@ class Simulation:
         """The outputs of the state (Model.state_output_names): positions, velocities (m/s,
         rad/s: entries of h), energies (J: kinetic, potential, and the dissipated and applied
         work at t, by default the time of the last :meth:`advance`; core/energy.c)."""
-        pos = self.position_outputs(y)
-        model = self.model
-        if not model.velocity_outputs and not model.energy_outputs:
-            return pos
-        parts = [pos, y[self.n:][self._derived.velocity_index]]
-        if model.energy_outputs:
-            try:
-                parts.append(self._run.energies(self._target if t is None else t, y))
-            except kernel_mod.RunStopped as exc:
-                raise _stopped(exc) from exc
-        return np.concatenate(parts)
+        return self._row(self._target if t is None else t, y, self._plans.state)
 
     def position_outputs(self, y: np.ndarray) -> np.ndarray:
         """The position outputs (m, rad; quaternions as e / |e|, the orientation the dynamics use)
         at the state y."""
-        q = y[: self.n]
-        if self.model.rotation == "quaternion":
-            q = normalized_coordinates(self.model, q)
-        return q[self._derived.position_index]
+        return self._row(self._target, y, self._plans.position)
 
     def derived_outputs(self, t: float, y: np.ndarray) -> np.ndarray:
         """Reactions and friction forces at (t, y) (model.output_names() order after the
@@ -253,12 +236,27 @@ class Simulation:
         evaluation of Eq. 18 warm-started from the friction forces at the ends of the last two
         steps, interpolated linearly to t (so the values depend on the integrator's state only,
         never on the output grid), without changing the integration's warm start (core/sim.c)."""
-        if not self._derived.size:
-            return np.zeros(0)
+        return self._row(t, y, self._plans.derived)
+
+    def _row(self, t: float, y: np.ndarray, plan) -> np.ndarray:
         try:
-            return self._derived.values_from_kernel(*self._run.outputs(t, y))
+            return self._run.output_row(t, y, plan)
         except kernel_mod.RunStopped as exc:
             raise _stopped(exc) from exc
+
+    def grid(self, times: np.ndarray, plan: np.ndarray | None = None) -> tuple[np.ndarray, int, "SimulationError | None"]:
+        """The run advanced through ``times`` (ascending, from the run's time on), the outputs
+        (model.output_names() order; or those of the core's ``plan``, rows (kind, a, b) of
+        :func:`overcon.kernel.output_plan`) at each computed inside the core (core/sim_out.c)
+        into one preallocated array: (values (len(times), outputs), rows computed, the stop as a
+        :class:`SimulationError` or None). Rows after a stop are NaN."""
+        times = np.asarray(times, float)
+        if times.size:
+            self._target = float(times[-1])
+        values, rows, stop = self._run.grid(times, plan)
+        if rows < times.size and rows:
+            self._target = float(times[rows - 1])
+        return values, rows, None if stop is None else _stopped(stop)
 
     # -- state -----------------------------------------------------------------------------
     def get_state(self) -> bytes:
@@ -272,27 +270,19 @@ class Simulation:
             raise ValueError(f"Simulation.set_state: {exc}") from exc
 
 
-class _DerivedPlan:
-    """Where a model's outputs come from: ``position_index`` and ``velocity_index`` into q and h,
-    and the (joint, component) of every reaction output and the joints of the friction outputs in
-    the core's per-joint table (:meth:`overcon.kernel.Kernel.outputs`), in output order."""
+class _Plans:
+    """The core's output plans of the parts of a model's outputs (rows of
+    :func:`overcon.kernel.output_plan`): the state's (positions, velocities, energies), the
+    positions', and the derived ones (reactions, friction forces, joint sensors)."""
 
     def __init__(self, model: Model):
-        self.position_index = np.array([i for _, i in model.position_outputs], np.intp)
-        self.velocity_index = np.array([i for _, i in model.velocity_outputs], np.intp)
-        pairs = [(j, comp) for j in model.reaction_joints for comp in range(len(model.joints[j].components))]
-        self.n_reactions = len(pairs)
-        self.kernel_reactions = np.array(pairs, np.intp).reshape(-1, 2).T  # (joints, components)
-        self.kernel_friction = np.array(model.friction_outputs, np.intp)
-        self.size = self.n_reactions + len(self.kernel_friction)
-
-    def values_from_kernel(self, reac: np.ndarray, fric: np.ndarray) -> np.ndarray:
-        """The derived outputs from the core's table (reactions (nj, 9), friction outputs (nj,))."""
-        out = np.empty(self.size)
-        j, c = self.kernel_reactions
-        out[: self.n_reactions] = reac[j, c]
-        out[self.n_reactions:] = fric[self.kernel_friction]
-        return out
+        plan = kernel_mod.output_plan(model)
+        kinds = plan[:, 0]
+        K = kernel_mod.OUT_KINDS
+        pick = lambda *names: np.ascontiguousarray(plan[np.isin(kinds, [K[n] for n in names])])  # noqa: E731
+        self.state = pick("position", "velocity", "energy")
+        self.position = pick("position")
+        self.derived = pick("reaction", "friction", "sensor")
 
 
 @dataclass
@@ -348,23 +338,51 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
         raise ValueError(f"run(output_interval={interval!r}): {reason}")
     sim = Simulation(model, solver, **settings)
     grid = output_grid(scene.start_time, stop, interval)
-    names = [u.name for u in model.inputs]
-    rows = []
-    try:
+    if inputs is None:
+        values, rows, stop_exc = _grid_in_chunks(sim, grid, progress)
+    else:  # point by point: the inputs are set between two output points, as a host sets them
+        names = [u.name for u in model.inputs]
+        values = np.full((len(grid), len(model.output_names())), np.nan)
+        rows, stop_exc = 0, None
         for k, t in enumerate(grid):
-            y = sim.advance(t)
-            if inputs is not None and k == 0:  # the values at the start, before its outputs
+            if k == 0:  # the values at the start, before its outputs
                 _feed(sim, inputs, names, grid, k, input_interpolation)
-                y = sim.advance(t)
-            rows.append(sim.outputs(t, y))
-            if inputs is not None and k + 1 < len(grid):  # the outputs at t saw the last interval's values
+            row, got, stop_exc = sim.grid(grid[k:k + 1])
+            values[k:k + got] = row[:got]
+            rows += got
+            if stop_exc is not None:
+                break
+            if k + 1 < len(grid):  # the outputs at t saw the last interval's values
                 _feed(sim, inputs, names, grid, k, input_interpolation)
             if progress is not None:
                 progress(t)
-    except SimulationError as exc:
-        exc.partial = _result(model, sim, grid[:len(rows)], rows)
-        raise
-    return _result(model, sim, grid, rows)
+    if stop_exc is not None:
+        stop_exc.partial = _result(model, sim, grid[:rows], values[:rows])
+        raise stop_exc
+    return _result(model, sim, grid, values)
+
+
+PROGRESS_CHUNKS = 200
+"""A run with a progress callback computes its grid in at most this many calls of the core."""
+
+
+def _grid_in_chunks(sim: "Simulation", grid: np.ndarray, progress) -> tuple:
+    """:meth:`Simulation.grid` over the whole grid (one call), or in chunks with ``progress(t)``
+    called after each (``overcon simulate``'s bar): the same rows either way."""
+    if progress is None:
+        return sim.grid(grid)
+    values = np.full((len(grid), len(sim.model.output_names())), np.nan)
+    rows = 0
+    for part in np.array_split(np.arange(len(grid)), min(PROGRESS_CHUNKS, len(grid))):
+        if not part.size:
+            continue
+        chunk, got, stop_exc = sim.grid(grid[part[0]:part[-1] + 1])
+        values[part[0]:part[0] + got] = chunk[:got]
+        rows += got
+        if stop_exc is not None:
+            return values, rows, stop_exc
+        progress(float(grid[part[-1]]))
+    return values, rows, None
 
 
 def _feed(sim: Simulation, table, names, grid, k: int, interpolation: str) -> None:
@@ -373,10 +391,9 @@ def _feed(sim: Simulation, table, names, grid, k: int, interpolation: str) -> No
     sim.set_inputs([value[n] for n in names], [slope[n] for n in names] if interpolation == "linear" else None)
 
 
-def _result(model: Model, sim: Simulation, time: np.ndarray, rows: list) -> Result:
-    """The :class:`Result` of the output points ``time`` and their ``rows`` so far, with the
-    run's counters."""
-    values = np.array(rows) if rows else np.zeros((0, len(model.output_names())))
+def _result(model: Model, sim: Simulation, time: np.ndarray, values: np.ndarray) -> Result:
+    """The :class:`Result` of the output points ``time`` and their rows ``values`` so far, with
+    the run's counters."""
     return Result(model.output_names(), np.asarray(time), values, sim.max_drift, sim.evaluations,
                   sim.friction_iterations, sim.steps, sim.stiff_steps, sim.kernel_note, tuple(sim.events))
 

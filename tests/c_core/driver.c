@@ -319,6 +319,58 @@ static void watch_extremes(ovk_sim *s, const double *y, tally *t) {
     free(after);
 }
 
+#define OVK_MAX_JOINTS_CHECKED 64 /* the grid's check reads the first reaction entry of at most these joints */
+
+/* The same run through ovk_sim_grid (core/sim_out.c) over 4 points to the end, with a plan of every
+ * entry of y, the energies (with the ledger), every joint's first reaction entry and friction
+ * output: the last row must give the installed core's y, reactions, friction outputs and energies
+ * bits; then the refusals of a plan out of range, times not ascending, and an empty grid. */
+static void run_grid(const model_t *m, const ovk_sim_opts *o, const double *y0, int n_y, double t_end, int want_status,
+                     const double *want_y, const double *want_reac, int n_r, const double *want_fric, int n_f,
+                     const double *want_en, int n_en, tally *t) {
+    int nj = m->M.nj, nout = n_y + (o->energy ? 4 : 0) + 2 * nj, k = 0;
+    ovk_out *plan = calloc((size_t)nout + 1, sizeof *plan);
+    double times[4] = {0.25 * t_end, 0.5 * t_end, 0.75 * t_end, t_end}, *values = calloc(4 * (size_t)nout + 1, sizeof(double));
+    ovk_sim *s = ovk_sim_new(&m->M, o, 0.0, y0);
+    if (!plan || !values || !s) {
+        fail(t, "grid: out of memory");
+        free(plan), free(values), ovk_sim_free(s);
+        return;
+    }
+    for (int i = 0; i < n_y; i++) plan[k++] = (ovk_out){OVK_OUT_STATE, i, 0};
+    for (int i = 0; o->energy && i < 4; i++) plan[k++] = (ovk_out){OVK_OUT_ENERGY, i, 0};
+    for (int j = 0; j < nj; j++) plan[k++] = (ovk_out){OVK_OUT_REACTION, j, 0};
+    for (int j = 0; j < nj; j++) plan[k++] = (ovk_out){OVK_OUT_FRICTION, j, 0};
+    long long rows = -1;
+    int status = ovk_sim_status(s);
+    if (!status) status = ovk_sim_grid(s, plan, nout, times, 4, values, &rows);
+    if (status != want_status) fail(t, ovk_sim_message(s));
+    if (!status) {
+        const double *last = values + 3 * (size_t)nout;
+        double reac0[OVK_MAX_JOINTS_CHECKED], en[4];
+        int nr = nj < OVK_MAX_JOINTS_CHECKED ? nj : OVK_MAX_JOINTS_CHECKED;
+        if (rows != 4) fail(t, "grid: not every row written");
+        compare(t, "grid", "y", last, want_y, n_y);
+        for (int j = 0; j < nr && j * OVK_NREAC < n_r; j++) reac0[j] = want_reac[j * OVK_NREAC];
+        compare(t, "grid", "reactions", last + n_y + (o->energy ? 4 : 0), reac0, n_r ? nr : 0);
+        compare(t, "grid", "friction", last + n_y + (o->energy ? 4 : 0) + nj, want_fric, n_f < nj ? n_f : nj);
+        for (int i = 0; i < 4 && o->energy; i++) en[i] = last[n_y + i];
+        if (o->energy) compare(t, "grid", "energies", en, want_en, n_en < 4 ? n_en : 4);
+        ovk_out bad = {4, 0, 0};
+        double back[2] = {t_end, 0.5 * t_end};
+        if (ovk_sim_grid(s, &bad, 1, times, 1, values, &rows) != OVK_INVALID || rows != 0)
+            fail(t, "grid: a plan of kind 4 was not refused");
+        if (ovk_sim_grid(s, plan, nout, back, 2, values, &rows) != OVK_INVALID) fail(t, "grid: times going back");
+        if (ovk_sim_grid(s, plan, nout, times, 0, NULL, &rows) || rows != 0) fail(t, "grid: an empty grid");
+    } else if (rows < 0 || rows > 3) {
+        fail(t, "grid: a stopped run's rows");
+    }
+    t->calls++;
+    free(plan);
+    free(values);
+    ovk_sim_free(s);
+}
+
 /* An 'R' record: the run in C twice, each saving its state half-way, finishing, restoring the
  * state and finishing again; every finish must give the installed core's bits. */
 static int run_sim(reader *r, model_t *m, tally *t) {
@@ -363,6 +415,7 @@ static int run_sim(reader *r, model_t *m, tally *t) {
         ovk_sim_free(s);
         t->calls++;
     }
+    if (!r->bad) run_grid(m, &o, y0, n_y, v[3], want_status, want_y, want_reac, n_r, want_fric, n_f, want_en, n_en, t);
     free(y0); free(want_y); free(want_info); free(want_reac); free(want_fric); free(want_en);
     free(y); free(reac); free(fric);
     return !r->bad;

@@ -26,6 +26,7 @@
  *   integrate_radau.c   its implicit Radau IIA of order 5 (radau), collocation dense output
  *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
  *                       work budgets, derived outputs at any point of the last step
+ *   sim_out.c           the output rows of a run: the model's output plan at a point, a whole grid
  *   svd.c               one-sided Jacobi SVD: singular values (the watch's rare whole-Jacobian checks)
  *   watch_eig.c         the watch's r: the kept rows' extreme singular values tracked from check to
  *                       check (inverse iterations on the banded G = W W^T)
@@ -240,6 +241,7 @@ typedef struct {
 typedef struct {
     int method, n, detect_stiffness;
     int has_K, dense_ready; /* a step was taken (K, radau's Z valid); Q is current for that step */
+    int dense_kept;      /* ovk_rk_restart kept the dense output of the step before it (has_K is 0) */
     int n_stiff, n_nonstiff, n_limited;
     int current_jac, has_lu, has_old; /* radau: J at the step's start; LU of lu_h; h_abs_old, error_norm_old */
     int nK, nQ;          /* rows of K and Q that are state (0: scratch only) */
@@ -266,6 +268,10 @@ OVK_HIDDEN int ovk_rk_start(ovk_rk *rk, const ovk_rk_opts *o, int n, double *mem
                             ovk_rhs_fn fun, void *ctx, char *msg);
 OVK_HIDDEN int ovk_rk_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg);
 OVK_HIDDEN int ovk_rk_dense(ovk_rk *rk, double t, double *out);
+/* The last step's dense output coefficients made while its right-hand side is in force, then the
+ * restart at its end that keeps them (integrate_rk.c) */
+OVK_HIDDEN int ovk_rk_dense_prepare(ovk_rk *rk);
+OVK_HIDDEN int ovk_rk_restart(ovk_rk *rk, const ovk_rk_opts *o, ovk_rhs_fn fun, void *ctx, char *msg);
 OVK_HIDDEN size_t ovk_radau_doubles(int n);
 OVK_HIDDEN void ovk_radau_layout(ovk_rk *rk, double *p);
 OVK_HIDDEN int ovk_radau_start(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg);
@@ -366,6 +372,9 @@ typedef struct {
     long long watch_capped;        /* estimates of r that reached the iteration bound (watch_eig.c) */
     double along_time;             /* s spent in the uniqueness along the motion (ovk_sim_along), not state */
     long long along_certified;     /* its evaluations the watch's bounds decided (unique.c) */
+    /* the output rows (sim_out.c): scratch made at the first row, not state */
+    double *out_mem;               /* the one allocation behind out_y (ny), out_reac (nj OVK_NREAC), out_fric (nj) */
+    double *out_y, *out_reac, *out_fric;
 } ovk_sim;
 #define OVK_SIM_NINFO 18
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
@@ -610,6 +619,19 @@ OVK_EXPORT void ovk_sim_state_vector(const ovk_sim *s, double *y);
 OVK_EXPORT void ovk_sim_info(const ovk_sim *s, double *info);
 OVK_EXPORT int ovk_sim_outputs(ovk_sim *s, double t, const double *y, double *reac, double *fric);
 OVK_EXPORT int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out);
+/* sim_out.c: the output rows of a run. An output: kind (OVK_OUT_*), a, b: a position's index into q,
+ * a velocity's into h, a state entry's into y = [q, h] (as it is: quaternions not normalised), an energy's 0-3 (kinetic, potential, dissipated, applied), a reaction's joint
+ * and entry (< OVK_NREAC), a friction output's joint (overcon.kernel.output_plan, the FMUs' plan). */
+enum { OVK_OUT_POSITION = 1, OVK_OUT_VELOCITY = 2, OVK_OUT_STATE = 3, OVK_OUT_REACTION = 5, OVK_OUT_FRICTION = 6, OVK_OUT_ENERGY = 7,
+       OVK_OUT_SENSOR = 8 };
+typedef struct { int kind, a, b; } ovk_out;
+OVK_EXPORT int ovk_plan_check(const ovk_model *M, const ovk_out *plan, int nout, char *msg);
+OVK_EXPORT void ovk_state_outputs(const ovk_model *M, const ovk_out *plan, int nout, const double *y, double *out);
+OVK_EXPORT int ovk_sim_derived_outputs(ovk_sim *s, const ovk_out *plan, int nout, double t, const double *y,
+                                       const double *lam, double *reac, double *fric, double *out);
+OVK_EXPORT int ovk_sim_output_row(ovk_sim *s, const ovk_out *plan, int nout, double t, const double *y, double *out);
+OVK_EXPORT int ovk_sim_grid(ovk_sim *s, const ovk_out *plan, int nout, const double *times, long long nt,
+                            double *values, long long *rows);
 OVK_EXPORT size_t ovk_sim_state_size(const ovk_sim *s);
 OVK_EXPORT int ovk_sim_get_state(ovk_sim *s, unsigned char *buf, size_t size);
 OVK_EXPORT int ovk_sim_set_state(ovk_sim *s, const unsigned char *buf, size_t size);

@@ -160,7 +160,7 @@ static void dense_poly(const ovk_rk *rk, double t, double *out) {
 }
 
 void ovk_radau_dense(const ovk_rk *rk, double t, double *out) {
-    if (t == rk->t || !rk->has_K) {
+    if (t == rk->t || (!rk->has_K && !rk->dense_kept)) {
         memcpy(out, rk->y, (size_t)rk->n * sizeof(double));
         return;
     }
@@ -378,6 +378,7 @@ int ovk_radau_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg) {
     memcpy(rk->y_old, y, (size_t)n * sizeof(double));
     memcpy(rk->Zs, Z, 3 * (size_t)n * sizeof(double));
     rk->has_K = 1;
+    rk->dense_kept = 0;
     rk->t = t_new;
     memcpy(rk->y, rk->ynew, (size_t)n * sizeof(double));
     memcpy(rk->f, rk->F, (size_t)n * sizeof(double));

@@ -135,11 +135,14 @@ size_t ovk_rk_doubles(int method, int n) {
     return method == OVK_METHOD_RADAU ? common + ovk_radau_doubles(n) : common;
 }
 
-/* Lays the arrays out in mem (ovk_rk_doubles(o->method, n) doubles) and evaluates f(t0, y0)
- * (radau: and its Jacobian there). */
-int ovk_rk_start(ovk_rk *rk, const ovk_rk_opts *o, int n, double *mem, double t0, const double *y0, ovk_rhs_fn fun,
-                 void *ctx, char *msg) {
+/* The integrator's scalars set anew for the options o and its arrays laid out in mem
+ * (ovk_rk_doubles(o->method, n) doubles; their contents are left as they are); dense_fun and
+ * dense_ctx stay. */
+static void reset(ovk_rk *rk, const ovk_rk_opts *o, int n, double *mem) {
+    ovk_rhs_fn dense_fun = rk->dense_fun; /* the dense stages' right-hand side stays */
+    void *dense_ctx = rk->dense_ctx;
     memset(rk, 0, sizeof *rk);
+    rk->dense_fun = dense_fun, rk->dense_ctx = dense_ctx;
     rk->method = o->method;
     rk->n = n;
     rk->rtol = o->tolerance;
@@ -158,18 +161,57 @@ int ovk_rk_start(ovk_rk *rk, const ovk_rk_opts *o, int n, double *mem, double t0
     rk->K = p; p += (size_t)rk->nK * n;
     rk->Q = p; p += (size_t)rk->nQ * n;
     if (rk->method == OVK_METHOD_RADAU) ovk_radau_layout(rk, p);
-    rk->t = rk->t0 = rk->t_old = t0;
     rk->t_bound = INFINITY;
-    for (int i = 0; i < n; i++) rk->y[i] = y0[i];
-    int status = fun(ctx, t0, rk->y, rk->f);
+}
+
+/* f(t, y) into rk->f, the first step size, and radau's Jacobian there. */
+static int first_evaluation(ovk_rk *rk, const ovk_rk_opts *o, ovk_rhs_fn fun, void *ctx) {
+    int status = fun(ctx, rk->t, rk->y, rk->f);
     if (status) return status;
     rk->nfev = 1;
     rk->h = o->first_step > 0.0 ? o->first_step : 1e-4;
     if (rk->max_step < rk->h) rk->h = rk->max_step;
+    return OVK_OK;
+}
+
+/* Lays the arrays out in mem (ovk_rk_doubles(o->method, n) doubles) and evaluates f(t0, y0)
+ * (radau: and its Jacobian there). */
+int ovk_rk_start(ovk_rk *rk, const ovk_rk_opts *o, int n, double *mem, double t0, const double *y0, ovk_rhs_fn fun,
+                 void *ctx, char *msg) {
+    reset(rk, o, n, mem);
+    rk->t = rk->t0 = rk->t_old = t0;
+    for (int i = 0; i < n; i++) rk->y[i] = y0[i];
+    int status = first_evaluation(rk, o, fun, ctx);
+    if (status) return status;
     for (int i = 0; i < n; i++) {
         rk->y_old[i] = rk->y[i];
         rk->f_old[i] = rk->f[i];
     }
+    if (rk->method == OVK_METHOD_RADAU) return ovk_radau_start(rk, fun, ctx, msg);
+    return OVK_OK;
+}
+
+/* Goes on from the end (t, y) of the last accepted step as ovk_rk_start there would (a new step
+ * control and f(t, y) of fun, which may differ from the step's right-hand side), but keeps that
+ * step's dense output: ovk_rk_dense still answers on [t_old, t] from the step that was accepted
+ * (a run whose kept equations are chosen again at a step's end, sim.c). ovk_rk_dense_prepare
+ * must have run while the step's right-hand side was still in force. The counters start anew. */
+int ovk_rk_restart(ovk_rk *rk, const ovk_rk_opts *o, ovk_rhs_fn fun, void *ctx, char *msg) {
+    double t = rk->t, t_old = rk->t_old, h_old = rk->h_old, t_bound = rk->t_bound; /* a bound of the advance in course */
+    int kept = t_old < t && (rk->method == OVK_METHOD_RK4 || rk->has_K || rk->dense_kept) &&
+               (rk->method == OVK_METHOD_RK4 || rk->method == OVK_METHOD_RADAU || rk->dense_ready);
+    reset(rk, o, rk->n, rk->y);
+    rk->t_bound = t_bound;
+    rk->t = rk->t0 = t;
+    rk->t_old = kept ? t_old : t, rk->h_old = kept ? h_old : 0.0;
+    rk->dense_kept = kept, rk->dense_ready = kept;
+    int status = first_evaluation(rk, o, fun, ctx);
+    if (status) return status;
+    if (!kept)
+        for (int i = 0; i < rk->n; i++) {
+            rk->y_old[i] = rk->y[i];
+            rk->f_old[i] = rk->f[i];
+        }
     if (rk->method == OVK_METHOD_RADAU) return ovk_radau_start(rk, fun, ctx, msg);
     return OVK_OK;
 }
@@ -302,7 +344,7 @@ static int erk_step(ovk_rk *rk, const erk_tableau *tb, ovk_rhs_fn fun, void *ctx
             rk->t_old = t;
             rk->h_old = h;
             rk->has_K = 1;
-            rk->dense_ready = 0;
+            rk->dense_ready = rk->dense_kept = 0;
             rk->dense_status = OVK_OK;
             rk->t = bounded ? rk->t_bound : t + h;
             rk->h = h * factor;
@@ -363,6 +405,7 @@ static int rk4_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg) {
     memcpy(rk->y, rk->ynew, (size_t)n * sizeof(double));
     memcpy(rk->f, f_new, (size_t)n * sizeof(double));
     rk->t_old = t;
+    rk->dense_kept = 0;
     rk->k++;
     rk->t = t_new;
     rk->nsteps++;
@@ -407,6 +450,33 @@ static int dop853_dense_setup(ovk_rk *rk) {
     return OVK_OK;
 }
 
+/* The dense output coefficients of the last step made ready: dop853's Q (its three dense stages;
+ * a failure kept in rk->dense_status until the next step), dopri5's Q = K^T P. */
+static int coefficients(ovk_rk *rk) {
+    int n = rk->n;
+    if (rk->dense_ready) return OVK_OK;
+    if (rk->method == OVK_METHOD_DOP853) {
+        if (!rk->dense_status) {
+            rk->dense_status = dop853_dense_setup(rk);
+            rk->dense_ready = !rk->dense_status;
+        }
+        return rk->dense_status;
+    }
+    for (int i = 0; i < n; i++)
+        for (int c = 0; c < 4; c++) {
+            double acc = 0.0;
+            for (int j = 0; j < 7; j++) acc += rk->K[(size_t)j * n + i] * DP_P[j][c];
+            rk->Q[(size_t)i * 4 + c] = acc;
+        }
+    rk->dense_ready = 1;
+    return OVK_OK;
+}
+
+int ovk_rk_dense_prepare(ovk_rk *rk) {
+    if (!rk->has_K || rk->method == OVK_METHOD_RK4 || rk->method == OVK_METHOD_RADAU) return OVK_OK;
+    return coefficients(rk);
+}
+
 /* The solution at t_old <= t <= t (integrators' dense()), into out (n). OVK_OK, or the status of
  * dop853's dense stages (out is then NaN and rk->dense_status keeps the status until the next step). */
 int ovk_rk_dense(ovk_rk *rk, double t, double *out) {
@@ -419,28 +489,26 @@ int ovk_rk_dense(ovk_rk *rk, double t, double *out) {
         ovk_radau_dense(rk, t, out);
         return OVK_OK;
     }
-    if (rk->method == OVK_METHOD_RK4) {
+    if (rk->method == OVK_METHOD_RK4) { /* f at the step's end: row 0 of K (rk->f once a restart evaluated anew) */
         double h = rk->t - rk->t_old, x = (t - rk->t_old) / h;
         double h00 = 2 * pow(x, 3) - 3 * pow(x, 2) + 1, h10 = pow(x, 3) - 2 * pow(x, 2) + x;
         double h01 = -2 * pow(x, 3) + 3 * pow(x, 2), h11 = pow(x, 3) - pow(x, 2);
         double a = h10 * h, b = h11 * h;
-        for (int i = 0; i < n; i++) out[i] = h00 * rk->y_old[i] + a * rk->f_old[i] + h01 * rk->y[i] + b * rk->f[i];
+        const double *f_end = rk->K;
+        for (int i = 0; i < n; i++) out[i] = h00 * rk->y_old[i] + a * rk->f_old[i] + h01 * rk->y[i] + b * f_end[i];
         return OVK_OK;
     }
-    if (!rk->has_K) { /* no step yet: t is t0 */
+    if (!rk->has_K && !rk->dense_kept) { /* no step yet: t is t0 */
         memcpy(out, rk->y, (size_t)n * sizeof(double));
         return OVK_OK;
     }
     double x = (t - rk->t_old) / rk->h_old;
+    int status = coefficients(rk);
+    if (status) {
+        for (int i = 0; i < n; i++) out[i] = NAN;
+        return status;
+    }
     if (rk->method == OVK_METHOD_DOP853) {
-        if (!rk->dense_ready && !rk->dense_status) {
-            rk->dense_status = dop853_dense_setup(rk);
-            rk->dense_ready = !rk->dense_status;
-        }
-        if (rk->dense_status) {
-            for (int i = 0; i < n; i++) out[i] = NAN;
-            return rk->dense_status;
-        }
         /* y_old + the nested polynomial of Dop853._dense_eval: row r of F weighted by the product of
          * the factors x, 1 - x, x, ... of rows 6 down to r */
         double w[7], p = 1.0;
@@ -454,15 +522,6 @@ int ovk_rk_dense(ovk_rk *rk, double t, double *out) {
             out[i] = acc + rk->y_old[i];
         }
         return OVK_OK;
-    }
-    if (!rk->dense_ready) { /* Q = K^T P */
-        for (int i = 0; i < n; i++)
-            for (int c = 0; c < 4; c++) {
-                double acc = 0.0;
-                for (int j = 0; j < 7; j++) acc += rk->K[(size_t)j * n + i] * DP_P[j][c];
-                rk->Q[(size_t)i * 4 + c] = acc;
-            }
-        rk->dense_ready = 1;
     }
     double p[4];
     p[0] = x;

@@ -249,6 +249,7 @@ void ovk_sim_free(ovk_sim *s) {
     free(s->events);
     free(s->kept);
     free(s->y0);
+    free(s->out_mem);
     ovk_eig_free(s->eig);
     free(s);
 }
@@ -547,7 +548,10 @@ int ovk_sim_set_inputs(ovk_sim *s, const double *u, const double *du) {
 
 /* Goes on from (t, y) under the kept equations `kept` (m flags; as many as before) as
  * Simulation._restart: a new integrator with the same settings and step counters, no warm
- * starts, the watch started anew there. The status (its message in s->msg). */
+ * starts, the watch started anew there. From the end of the last accepted step (the elimination
+ * chosen again there, ovk_sim_degraded) the integrator keeps that step's dense output, made under
+ * the kept equations of the step, so output points inside the step come from the trajectory that
+ * was accepted. The status (its message in s->msg). */
 int ovk_sim_restart(ovk_sim *s, const int *kept, double t, const double *y) {
     int nR = 0, *retained = s->kept + 5 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj; /* scratch: m ints */
     for (int r = 0; r < s->m; r++)
@@ -555,13 +559,16 @@ int ovk_sim_restart(ovk_sim *s, const int *kept, double t, const double *y) {
     if (nR != s->Mrun.nR)
         return snprintf(s->msg, sizeof s->msg, "t = %.9g s: %d equations chosen to keep, the run keeps %d", t, nR,
                         s->Mrun.nR), OVK_INVALID;
-    int status = ovk_sim_use_kept(s, retained);
-    if (status) return status;
+    int at_end = t == s->rk.t && !memcmp(y, s->rk.y, (size_t)s->ny * sizeof(double)), status = OVK_OK;
+    if (at_end && (status = ovk_rk_dense_prepare(&s->rk))) /* under the step's kept equations */
+        return memcpy(s->msg, s->rk.dense_msg, sizeof s->msg), status;
+    if ((status = ovk_sim_use_kept(s, retained))) return status;
     memmove(s->ystar, y, (size_t)s->ny * sizeof(double)); /* y may lie in the integrator's arrays */
     long long nsteps = s->rk.nsteps, nfev = s->rk.nfev;
     s->has_lam = s->has_last = 0;
     s->warm.count = s->step_warm.count = 0;
-    status = ovk_rk_start(&s->rk, &s->o.rk, s->ny, s->rk.y, t, s->ystar, sim_rhs, s, s->msg);
+    status = at_end ? ovk_rk_restart(&s->rk, &s->o.rk, sim_rhs, s, s->msg)
+                    : ovk_rk_start(&s->rk, &s->o.rk, s->ny, s->rk.y, t, s->ystar, sim_rhs, s, s->msg);
     s->rk.nsteps = nsteps, s->rk.nfev = nfev;
     s->min_ratio = INFINITY; /* a new watch (SingularityMonitor) */
     s->t_prev = t;

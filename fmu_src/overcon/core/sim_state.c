@@ -13,7 +13,7 @@
 #include "core.h"
 
 #define STATE_MAGIC "OVKSIM"
-#define STATE_VERSION 5
+#define STATE_VERSION 6
 
 typedef struct {
     unsigned char *w;       /* saving: the next byte to write */
@@ -42,8 +42,8 @@ static void io_hist(codec *c, ovk_hist *h, int nc) {
  * has one size. dense_status is no state: a restored run computes the dense output again. */
 static void io_rk(codec *c, ovk_rk *rk) {
     size_t n = (size_t)rk->n * sizeof(double);
-    int ints[8] = {rk->has_K, rk->dense_ready, rk->n_stiff, rk->n_nonstiff, rk->n_limited, rk->current_jac,
-                   rk->has_lu, rk->has_old};
+    int ints[9] = {rk->has_K, rk->dense_ready, rk->n_stiff, rk->n_nonstiff, rk->n_limited, rk->current_jac,
+                   rk->has_lu, rk->has_old, rk->dense_kept};
     long long counts[6] = {rk->k, rk->nfev, rk->nsteps, rk->stiff_steps, rk->njev, rk->nlu};
     double reals[9] = {rk->t, rk->h, rk->t0, rk->t_old, rk->h_old, rk->stable_step, rk->h_abs_old,
                        rk->error_norm_old, rk->lu_h};
@@ -53,6 +53,7 @@ static void io_rk(codec *c, ovk_rk *rk) {
     if (c->r && !c->bad) {
         rk->has_K = ints[0], rk->dense_ready = ints[1], rk->n_stiff = ints[2], rk->n_nonstiff = ints[3];
         rk->n_limited = ints[4], rk->current_jac = ints[5], rk->has_lu = ints[6], rk->has_old = ints[7];
+        rk->dense_kept = ints[8];
         rk->k = counts[0], rk->nfev = counts[1], rk->nsteps = counts[2], rk->stiff_steps = counts[3];
         rk->njev = counts[4], rk->nlu = counts[5];
         rk->t = reals[0], rk->h = reals[1], rk->t0 = reals[2], rk->t_old = reals[3], rk->h_old = reals[4];

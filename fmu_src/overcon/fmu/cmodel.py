@@ -56,7 +56,7 @@ CAUSALITIES = {"output": 0, "parameter": 1, "local": 2, "independent": 3, "input
 VARIABILITIES = {"continuous": 0, "constant": 1, "fixed": 2, "tunable": 3, "discrete": 4}
 KEYS = {"output": 0, "constant": 1, "param": 2, "stable_step": 3, "state": 4, "derivative": 5, "array": 6, "time": 7,
         "along": 8, "input": 9}
-OUT_KINDS = {"position": 1, "velocity": 2, "reaction": 5, "friction": 6, "energy": 7, "sensor": 8}
+OUT_KINDS = kernel_mod.OUT_KINDS
 TARGETS = {"mu": 1, "v_reg": 2, "mu_static": 3, "v_stribeck": 4, "solver.method": 10, "solver.tolerance": 11,
            "solver.step": 12, "solver.max_step": 13, "solver.baumgarte": 14, "solver.friction_tol": 15,
            "solver.friction_max_iter": 16, "solver.kernel": 17, "solver.max_internal_steps": 18,
@@ -95,17 +95,10 @@ class _Out:
 
 
 def _outputs(w: _Out, model) -> None:
-    """The output plan in output order (``model.output_names()``)."""
-    rows = [(OUT_KINDS["position"], i, 0) for _, i in model.position_outputs]
-    rows += [(OUT_KINDS["velocity"], i, 0) for _, i in model.velocity_outputs]
-    rows += [(OUT_KINDS["energy"], k, 0) for k in range(4)] if model.energy_outputs else []  # spec.ENERGY_OUTPUTS order
-    rows += [(OUT_KINDS["reaction"], j, comp) for j in model.reaction_joints
-             for comp in range(len(model.joints[j].components))]
-    rows += [(OUT_KINDS["friction"], j, 0) for j in model.friction_outputs]
-    rows += [(OUT_KINDS["sensor"], j, what) for _, j, what in model.sensor_outputs]
-    assert len(rows) == len(model.output_names())
+    """The output plan in output order (``model.output_names()``; :func:`overcon.kernel.output_plan`)."""
+    rows = kernel_mod.output_plan(model)
     w.i(len(rows))
-    for r in rows:
+    for r in rows.tolist():
         w.i(*r)
 
 

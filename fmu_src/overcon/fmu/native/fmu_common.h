@@ -70,8 +70,8 @@ enum { K_INPUT = 9 }; /* arg: the input's slot (ovk_model.nu) */
  * states); K_ARRAY (FMI 3.0): the consecutive reaction outputs of one joint from output arg on; K_TIME (FMI 3.0):
  * the independent variable time. */
 enum { V_CONTINUOUS = 0, V_CONSTANT = 1, V_FIXED = 2, V_TUNABLE = 3, V_DISCRETE = 4 };
-enum { O_POSITION = 1, O_VELOCITY = 2, O_REACTION = 5, O_FRICTION = 6, O_ENERGY = 7, O_SENSOR = 8 }; /* energy: a = 0-3;
-                                                                                      * sensor: joint a, entry b */
+enum { O_POSITION = OVK_OUT_POSITION, O_VELOCITY = OVK_OUT_VELOCITY, O_REACTION = OVK_OUT_REACTION,
+       O_FRICTION = OVK_OUT_FRICTION, O_ENERGY = OVK_OUT_ENERGY, O_SENSOR = OVK_OUT_SENSOR }; /* the core's output plan (sim_out.c) */
 enum { P_MU = 1, P_VREG = 2, P_MU_STATIC = 3, P_VSTRIBECK = 4, P_METHOD = 10, P_TOLERANCE = 11, P_STEP = 12,
        P_MAX_STEP = 13, P_BAUMGARTE = 14, P_FRICTION_TOL = 15, P_FRICTION_MAX_ITER = 16, P_KERNEL = 17,
        P_MAX_INTERNAL_STEPS = 18, P_MAX_WALL_TIME = 19, P_REDUNDANCY = 20 };
@@ -85,7 +85,7 @@ typedef struct {
     double lo, hi, ddefault;
     const char *choices[FMU_MAX_CHOICES];
 } fmu_param;
-typedef struct { int kind, a, b; } fmu_out;
+typedef ovk_out fmu_out;
 
 /* The model file, read once per instance; strings point into the file's bytes (kept). */
 typedef struct {

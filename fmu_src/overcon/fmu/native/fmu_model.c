@@ -217,16 +217,11 @@ static void read_rest(reader *r, fmu_model *fm) {
 
 /* Indices of the tables checked against their sizes (outputs, keys, joints). */
 static int check_tables(const fmu_model *fm, char *err, size_t errsize) {
-    for (int k = 0; k < fm->nout; k++) {
-        const fmu_out *o = &fm->out[k];
-        int ok = (o->kind == O_POSITION && o->a >= 0 && o->a < fm->n) ||
-                 (o->kind == O_VELOCITY && o->a >= 0 && o->a < fm->nh) ||
-                 (o->kind == O_REACTION && o->a >= 0 && o->a < fm->M.nj && o->b >= 0 && o->b < OVK_NREAC) ||
-                 (o->kind == O_FRICTION && o->a >= 0 && o->a < fm->M.nj) ||
-                 (o->kind == O_ENERGY && o->a >= 0 && o->a < 4) ||
-                 (o->kind == O_SENSOR && o->a >= 0 && o->a < fm->M.nj && o->b >= 0 && o->b < 4);
-        if (!ok) return snprintf(err, errsize, "output %d: kind %d, %d, %d out of range", k, o->kind, o->a, o->b), 0;
-    }
+    char why[OVK_MSG];
+    if (fm->n != fm->M.nb * fm->M.nq_b || fm->nh != fm->M.nb * fm->M.nh_b)
+        return snprintf(err, errsize, "%d coordinates and %d velocities for the model's %d and %d", fm->n, fm->nh,
+                        fm->M.nb * fm->M.nq_b, fm->M.nb * fm->M.nh_b), 0;
+    if (ovk_plan_check(&fm->M, fm->out, fm->nout, why)) return snprintf(err, errsize, "%s", why), 0;
     for (int k = 0; k < fm->nvar; k++) {
         const fmu_var *v = &fm->var[k];
         int lim = v->key == K_OUTPUT || v->key == K_ARRAY ? fm->nout : v->key == K_PARAM ? fm->nparam

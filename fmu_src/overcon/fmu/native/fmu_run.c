@@ -66,53 +66,20 @@ int fmu_apply_params(fmu_inst *c) {
     return 1;
 }
 
-/* The outputs of the state alone (positions, quaternions as e / |e|, velocities) into out. */
+/* The outputs of the state alone (positions, quaternions as e / |e|, velocities) into out
+ * (core/sim_out.c). */
 void fmu_state_outputs(const fmu_inst *c, const double *y, double *out) {
-    const fmu_model *fm = &c->fm;
-    for (int k = 0; k < fm->nstate_out; k++) {
-        const fmu_out *o = &fm->out[k];
-        if (o->kind == O_VELOCITY) {
-            out[k] = y[fm->n + o->a];
-        } else if (fm->quaternion && o->a % 7 >= 3) {
-            const double *e = y + (o->a / 7) * 7 + 3;
-            out[k] = y[o->a] / sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3]);
-        } else {
-            out[k] = y[o->a];
-        }
-    }
+    ovk_state_outputs(&c->M, c->fm.out, c->fm.nstate_out, y, out);
 }
 
-/* The energies, reactions and friction forces at (t, y) into out (ovk_sim_energy, ovk_sim_outputs:
- * each only when an output needs it); with lam (Model Exchange) the reactions and friction forces of
- * those multipliers, the evaluation at (t, y) that gave the derivatives (ovk_outputs). A status on
- * failure, its message in the run's. */
+/* The energies, reactions and friction forces at (t, y) into out (core/sim_out.c: each only when an
+ * output needs it); with lam (Model Exchange) the reactions and friction forces of those
+ * multipliers, the evaluation at (t, y) that gave the derivatives. A status on failure, its message
+ * in the run's. */
 int fmu_derived_outputs(fmu_inst *c, double t, const double *y, const double *lam, double *out) {
     const fmu_model *fm = &c->fm;
-    int forces = 0, status = OVK_OK;
-    double energy[4] = {0.0, 0.0, 0.0, 0.0};
-    for (int k = fm->nstate_out; k < fm->nout; k++) forces |= fm->out[k].kind == O_REACTION || fm->out[k].kind == O_FRICTION;
-    if (fm->energy) status = ovk_sim_energy(c->sim, t, y, energy);
-    if (!status && forces && !lam) status = ovk_sim_outputs(c->sim, t, y, c->reac, c->fric);
-    if (!status && forces && lam && (status = ovk_outputs(&c->M, c->sim->d, y, lam, c->reac, c->fric)))
-        snprintf(c->sim->msg, sizeof c->sim->msg, "%s", ovk_message(c->sim->d));
-    if (status) return status;
-    double sensor[4] = {0.0, 0.0, 0.0, 0.0};
-    int sensed = -1;
-    for (int k = fm->nstate_out; k < fm->nout; k++) {
-        const fmu_out *o = &fm->out[k];
-        if (o->kind == O_SENSOR && o->a != sensed) { /* a joint's sensors, from q0 (core/inputs.c) */
-            if ((status = ovk_sensors(&c->M, c->sim->d, y, fm->y0, o->a, sensor))) {
-                snprintf(c->sim->msg, sizeof c->sim->msg, "%s", ovk_message(c->sim->d));
-                return status;
-            }
-            sensed = o->a;
-        }
-        out[k] = o->kind == O_SENSOR     ? sensor[o->b]
-                 : o->kind == O_ENERGY   ? energy[o->a]
-                 : o->kind == O_REACTION ? c->reac[o->a * OVK_NREAC + o->b]
-                                         : c->fric[o->a];
-    }
-    return OVK_OK;
+    return ovk_sim_derived_outputs(c->sim, fm->out + fm->nstate_out, fm->nout - fm->nstate_out, t, y, lam, c->reac,
+                                   c->fric, out + fm->nstate_out);
 }
 
 int fmu_all_finite(const double *a, int n) {

@@ -44,10 +44,12 @@ def layout(data: bytes, guid: str, nparam: int, nR: int, nj: int) -> dict[str, t
     at["outputs[0]"] = (payload + 52 + 12 * nparam, "d")
     at["y[0]"] = (payload + 52 + 12 * nparam + 8 * nout, "d")
     rk = sim + 28
-    at["sim.has_K"], at["sim.k"], at["sim.t"], at["sim.h"] = (rk, "i"), (rk + 32, "q"), (rk + 80, "d"), (rk + 88, "d")
+    # io_rk: 9 ints (has_K ... dense_kept), 6 counters, 9 reals, then the arrays
+    at["sim.has_K"], at["sim.k"], at["sim.t"], at["sim.h"] = (rk, "i"), (rk + 36, "q"), (rk + 84, "d"), (rk + 92, "d")
+    at["sim.dense_kept"] = (rk + 32, "i")
     if method == 3:  # OVK_METHOD_RADAU: piv and pivc after y, f, y_old, f_old, J, LU, LUc
-        at["sim.piv[0]"] = (rk + 152 + 8 * (4 * ny + 4 * ny * ny), "i")
-        at["sim.pivc[0]"] = (rk + 152 + 8 * (4 * ny + 4 * ny * ny) + 4 * ny, "i")
+        at["sim.piv[0]"] = (rk + 156 + 8 * (4 * ny + 4 * ny * ny), "i")
+        at["sim.pivc[0]"] = (rk + 156 + 8 * (4 * ny + 4 * ny * ny) + 4 * ny, "i")
     end = len(data)
     assert struct.unpack_from("i", data, end - 4)[0] == 0, "a state with events: the kept list is not at the end"
     kept = end - 4 - 8 - 4 * nj - 4 - 4 * nR

@@ -153,9 +153,9 @@ static int flag(long long x) { return x == 0 || x == 1; }
 static int loaded_bad(const ovk_sim *s, const int *kept, char *why, size_t size) {
     const ovk_rk *rk = &s->rk;
     const int *flags[] = {&rk->has_K, &rk->dense_ready, &rk->current_jac, &rk->has_lu, &rk->has_old, &s->has_lam,
-                          &s->has_last};
+                          &s->has_last, &rk->dense_kept};
     static const char *flag_names[] = {"has_K", "dense_ready", "current_jac", "has_lu", "has_old", "has_lam",
-                                       "has_last"};
+                                       "has_last", "dense_kept"};
     for (size_t k = 0; k < sizeof flags / sizeof flags[0]; k++)
         if (!flag(*flags[k])) return snprintf(why, size, "flag %s = %d (0 or 1)", flag_names[k], *flags[k]), 1;
     const long long counts[] = {rk->n_stiff, rk->n_nonstiff, rk->n_limited, rk->k, rk->nfev, rk->nsteps,

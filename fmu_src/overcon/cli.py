@@ -136,6 +136,7 @@ def _tooling_parsers(sub) -> None:
     r.add_argument("--out", default="results", metavar="DIR", help="directory for <model>.csv (default: results)")
     r.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
     r.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
+    _input_flags(r)
     c = sub.add_parser("compare", help="run FMUs of a scene group (or one FMU and a reference CSV) and compare "
                                        "them: uniqueness verdict next to the pre-check's prediction")
     c.add_argument("fmus", nargs="+", metavar="FMU", help="FMU files or directories of them; grouped by their "
@@ -158,6 +159,7 @@ def _tooling_parsers(sub) -> None:
     c.add_argument("--jobs", type=_jobs, default=2, metavar="N", help="FMUs run in parallel processes (default 2)")
     c.add_argument("--lockstep-step", type=float, default=LOCKSTEP_STEP, metavar="H", help=LOCKSTEP_HELP)
     c.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
+    _input_flags(c)
     p = sub.add_parser("reproduce", help="the main job: build the paper's FMUs, pre-check, run with fmpy, compare "
                                          "every group, write report.md with the verdicts and Figs. 3-5, 7-9")
     p.add_argument("--out", default="reproduce", metavar="DIR", help="output directory (default: reproduce)")
@@ -235,9 +237,23 @@ def _sweep_parser(sub) -> None:
                         "own solver settings (then solver.tolerance can be swept; no verdict)")
     w.add_argument("--out", metavar="DIR", help="directory for sweep.csv, sweep.json, sweep.png (and fmus/)")
     w.add_argument("--resume", metavar="DIR", help="continue the sweep in DIR (runs only the missing rows)")
+    _input_flags(w)
 
 
-SET_HELP = ("set an FMU parameter in every run (repeatable), e.g. --set solver.method=radau --set joint4.mu=0.2; "
+def _input_flags(p: argparse.ArgumentParser) -> None:
+    """``--input`` and ``--input-interpolation`` of run, compare and sweep (overcon.tooling.inputs)."""
+    p.add_argument("--input", dest="input_table", metavar="INPUTS.csv",
+                   help="values of the FMUs' inputs over time: a CSV with a time column (s) and one column per "
+                        "input (every Real input of the FMU, no other); linear between rows, the first/last row's "
+                        "value before/after them; given to fmpy's input= (docs/coupling.md)")
+    p.add_argument("--input-interpolation", choices=("hold", "linear"), default="hold",
+                   help="hold (default): each input held over each communication step at its value at the step's "
+                        "start (FMI co-simulation); linear: the host also sets the input's derivative "
+                        "(fmi2SetRealInputDerivatives: FMI 2.0 FMUs with canInterpolateInputs)")
+
+
+SET_HELP = ("set an FMU parameter in every run (repeatable), e.g. --set solver.method=radau --set joint4.mu=0.2, "
+            "or an input's start value (--set motor=2.5: the input keeps it when no --input table sets it); "
             "the lockstep runs keep their own solver.method and solver.step")
 LOCKSTEP_HELP = ("fixed step (s) of the lockstep runs that decide the verdict: every elimination of a group is also "
                  "run with rk4 on this grid (default 0.005; 0: no lockstep runs, verdict from the adaptive runs)")
@@ -456,7 +472,8 @@ def cmd_run(args) -> int:
     def go():
         start = time.perf_counter()
         res = run_paths(args.fmus, args.out, stop_time=args.stop_time, step=args.step, jobs=args.jobs,
-                        settings=parse_settings(args.set))
+                        settings=parse_settings(args.set), input_table=args.input_table,
+                        interpolation=args.input_interpolation)
         print(f"{len(res)} FMU(s) run in {time.perf_counter() - start:.1f} s; CSVs in {args.out}/")
         return EXIT_OK
 
@@ -480,12 +497,14 @@ def cmd_compare(args) -> int:
                       file=sys.stderr)
                 return EXIT_INPUT
             out = compare_with_reference(args.fmus[0], args.ref, args.out, tolerance=args.tolerance,
-                                         stop_time=args.stop_time, step=args.step, plots=plots)
+                                         stop_time=args.stop_time, step=args.step, plots=plots,
+                                         input_table=args.input_table, interpolation=args.input_interpolation)
         else:
             out = compare_paths(args.fmus, args.out, group=args.group, one_group=args.one_group,
                                 tolerance=args.tolerance, lockstep_step=_lockstep(args),
                                 stop_time=args.stop_time, step=args.step, jobs=args.jobs, plots=plots,
-                                settings=parse_settings(args.set))
+                                settings=parse_settings(args.set), input_table=args.input_table,
+                                interpolation=args.input_interpolation)
         print(f"report: {out.report} ({time.perf_counter() - start:.1f} s)")
         return _verdict_exit(out.comparisons)
 
@@ -544,10 +563,12 @@ def cmd_sweep(args) -> int:
                       file=sys.stderr)
                 return EXIT_INPUT
             sw = sweep.prepare(args.resume, resume=True, inputs=args.inputs, params=args.param,
-                               samples=args.samples, seed=args.seed, stop_time=args.stop_time)
+                               samples=args.samples, seed=args.seed, stop_time=args.stop_time,
+                               input_table=args.input_table, interpolation=args.input_interpolation)
         else:
             sw = sweep.prepare(args.out, inputs=args.inputs, params=args.param, samples=args.samples,
-                               seed=args.seed, stop_time=args.stop_time, lockstep_step=args.lockstep_step)
+                               seed=args.seed, stop_time=args.stop_time, lockstep_step=args.lockstep_step,
+                               input_table=args.input_table, interpolation=args.input_interpolation)
         out = sweep.run(sw, scheduler=args.scheduler, workers=args.workers or 2)
         print(f"{out.rows} row(s) in {out.csv} ({out.written} new, {out.failed} not ok) in {out.seconds:.1f} s"
               + (f"; plot {out.png}" if out.png else "") + (f"; {out.parquet}" if out.parquet else ""))

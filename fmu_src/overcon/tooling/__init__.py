@@ -7,7 +7,8 @@ group, label and predict.
 Modules: :mod:`.fmus` (inspect an FMU: experiment, outputs, scene, predictions),
 :mod:`.run` (simulate FMUs in worker processes, CSV in and out), :mod:`.compare` (differences,
 tolerances, verdicts), :mod:`.report` (Markdown and PNG), :mod:`.reproduce` (the main job),
-:mod:`.sweep` (parameter sweeps on Dask).
+:mod:`.sweep` (parameter sweeps on Dask), :mod:`.inputs` (the ``--input`` tables of FMU inputs),
+:mod:`.cosim` (an overcon FMU in a system: the coupling example in libcosim).
 
 Errors: :class:`InputError` (bad input: exit 2), :class:`SimulationFailed` (exit 3).
 """

@@ -55,8 +55,18 @@ class FmuInfo:
     eliminate: tuple[int, ...] | str | None = None
     motion_unique: bool | None = None  # pre-check prediction (None: not an overcon FMU)
     reaction_unique: dict = field(default_factory=dict)  # joint -> bool
-    lockstep: bool = False  # parameters solver.method and solver.step: can run on the lockstep grid
+    # parameters solver.method and solver.step: can run on the lockstep grid (rk4); an overcon FMU
+    # with inputs refuses rk4 (its fixed steps could step over the instant an input changes)
+    lockstep: bool = False
     parameters: dict = field(default_factory=dict)  # causality parameter: name -> FMI type (Real, Integer, ...)
+    inputs: dict = field(default_factory=dict)  # causality input: name -> FMI type (an --input table sets the Real ones)
+    fmi_version: str = "2.0"
+    can_interpolate_inputs: bool = False  # FMI 2.0 co-simulation's canInterpolateInputs (input derivatives)
+
+    @property
+    def real_inputs(self) -> list[str]:
+        """The Real (Float64) inputs, in the model's order: the columns of an ``--input`` table."""
+        return [n for n, t in self.inputs.items() if t == "Real"]
 
     @property
     def output_names(self) -> list[str]:
@@ -147,11 +157,13 @@ def inspect_fmu(path) -> FmuInfo:
         raise InputError(f"{path}: cannot read modelDescription.xml: {type(exc).__name__}: {exc}") from exc
     if md.coSimulation is None and md.modelExchange is None:
         raise InputError(f"{path}: neither co-simulation nor Model Exchange (only those FMUs are run)")
-    outputs, constants, params = [], {}, {}
+    outputs, constants, params, inputs = [], {}, {}, {}
     for v in md.modelVariables:
         typ = type_name(v)
         if v.causality == "parameter":
             params[v.name] = typ
+        if v.causality == "input" and not getattr(v, "dimensions", None):
+            inputs[v.name] = typ
         if v.causality != "output" or getattr(v, "dimensions", None):
             continue
         if typ == "Real" and v.variability != "constant":
@@ -184,8 +196,11 @@ def inspect_fmu(path) -> FmuInfo:
                    mechanism=facts.get("mechanism", ""), friction=facts.get("friction", ()),
                    eliminate=facts.get("eliminate"), motion_unique=motion_unique,
                    reaction_unique=reaction_unique,
-                   lockstep=params.get("solver.method") == "String" and params.get("solver.step") == "Real",
-                   parameters=params)
+                   lockstep=(params.get("solver.method") == "String" and params.get("solver.step") == "Real"
+                             and not (facts and any(t == "Real" for t in inputs.values()))),
+                   parameters=params, inputs=inputs, fmi_version=str(md.fmiVersion),
+                   can_interpolate_inputs=bool(md.coSimulation is not None and md.fmiVersion.startswith("2")
+                                               and getattr(md.coSimulation, "canInterpolateInputs", False)))
 
 
 def inspect_all(paths) -> list[FmuInfo]:

@@ -63,10 +63,11 @@ MAX_ROWS = 1_000_000  # the output-point bound of a run (overcon.params.MAX_OUTP
 MAX_BYTES = 256 * 1024 * 1024  # read whole into memory: bounded
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class InputTable:
     """An input table (module docstring): ``time`` (k,) strictly increasing, ``values`` input name
-    -> (k,) array (in the caller's order of names), ``path`` the file it came from (for messages)."""
+    -> (k,) array (in the caller's order of names), ``path`` the file it came from (for messages).
+    Compared by identity (``eq=False``: arrays have no single truth value)."""
 
     time: np.ndarray
     values: dict
@@ -125,6 +126,18 @@ class InputTable:
         (``t_n <= t``), as the FMU sees it (module docstring)."""
         value, slope = self.step(t_n, interpolation)
         return {n: value[n] + slope[n] * (float(t) - float(t_n)) for n in value}
+
+
+def write_input_table(table: InputTable, path) -> Path:
+    """Write ``table`` as an input table CSV (header ``"time","name",...``, every value as its
+    shortest round-trip ``repr``: read back bit for bit by :func:`read_input_table`)."""
+    path = Path(path)
+    with open(path, "w", encoding="utf-8", newline="") as f:
+        f.write(",".join(f'"{n}"' for n in ["time", *table.names]) + "\n")
+        cols = [table.time, *table.values.values()]
+        for r in range(len(table.time)):
+            f.write(",".join(repr(float(c[r])) for c in cols) + "\n")
+    return path
 
 
 def check_interpolation(interpolation: str) -> str:

@@ -23,7 +23,7 @@ from .compare import (Comparison, compare_group, compare_reference, failed_group
 from .fmus import FmuInfo, inspect_all, inspect_fmu
 from .report import console_table, markdown, plot_comparison, verdict_line
 from .run import (Experiment, Job, RunResult, along_path, check_unique_models, experiment, read_series, run_fmus,
-                  run_jobs, start_values_for)
+                  run_jobs, start_values_for, with_inputs)
 
 
 def _echo(s: str) -> None:
@@ -36,12 +36,15 @@ def _same_experiment(a: Experiment, b: Experiment) -> bool:
 
 
 def run_paths(paths, out_dir, *, stop_time=None, step=None, jobs: int = 2, echo=_echo,
-              settings: dict | None = None) -> list[RunResult]:
+              settings: dict | None = None, input_table=None, interpolation: str = "hold") -> list[RunResult]:
     """``overcon run``: every FMU (files, or the *.fmu of directories) to ``out_dir/<model>.csv``;
-    ``settings`` (``--set``): FMU parameters set in every run."""
+    ``settings`` (``--set``): FMU parameters (or inputs' start values) set in every run;
+    ``input_table`` (``--input``, a CSV path): the table of every FMU's inputs, held over each
+    communication step or, ``interpolation`` "linear", linear in it (:mod:`overcon.tooling.inputs`)."""
     infos = inspect_all(paths)
-    exps = {i.model: dataclasses.replace(experiment(i, stop_time=stop_time, step=step),
-                                         start_values=tuple(start_values_for(i, settings or {}).items()))
+    exps = {i.model: with_inputs(i, dataclasses.replace(experiment(i, stop_time=stop_time, step=step),
+                                                        start_values=tuple(start_values_for(i, settings or {}).items())),
+                                 input_table, interpolation)
             for i in infos}
     return run_fmus(infos, out_dir, jobs=jobs, echo=echo, experiments=exps)
 
@@ -107,11 +110,13 @@ def _check_lockstep_step(h: float | None) -> float | None:
 
 def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experiment], out_dir: Path, *,
                      jobs: int, lockstep_step: float | None, tolerance: float | None,
-                     echo, settings: dict | None = None) -> tuple[list[Comparison], dict[str, RunResult]]:
+                     echo, settings: dict | None = None, input_table=None,
+                     interpolation: str = "hold") -> tuple[list[Comparison], dict[str, RunResult]]:
     """Run every FMU of every group (adaptive, into ``out_dir/<model>.csv``) and, for groups whose
     FMUs all take the lockstep parameters and unless ``lockstep_step`` is None, once more on the
     lockstep grid (``out_dir/lockstep/<model>.csv``); compare each group. ``settings``: FMU
-    parameters set in every run (``--set``; the lockstep runs' ``solver.method``/``solver.step`` win).
+    parameters set in every run (``--set``; the lockstep runs' ``solver.method``/``solver.step`` win);
+    ``input_table``, ``interpolation``: the ``--input`` table of every run, adaptive and lockstep.
 
     Failures: a failed deciding run (lockstep; adaptive without lockstep) makes its group a failed
     comparison with the reason; a failed adaptive run beside successful lockstep runs keeps the
@@ -126,11 +131,15 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
         use_lock = lockstep_step is not None and all(i.lockstep for i in items)
         if use_lock:
             lock_groups.add(g)
+        elif lockstep_step is not None and any(i.real_inputs and i.motion_unique is not None for i in items):
+            echo(f"{g}: FMUs with inputs refuse rk4, the method of the lockstep runs: verdict from the adaptive "
+                 "runs (not lockstep)")
         elif lockstep_step is not None:
             echo(f"{g}: not every FMU has the parameters solver.method and solver.step: verdict from the "
                  "adaptive runs (not lockstep)")
         for i in items:
-            ex = dataclasses.replace(exps[i.model], start_values=tuple(user[i.model].items()))
+            ex = with_inputs(i, dataclasses.replace(exps[i.model], start_values=tuple(user[i.model].items())),
+                             input_table, interpolation)
             todo.append(Job(i.model, i, ex, out_dir / f"{i.model}.csv", along=True))
     grids = {g: LockstepGrid(lockstep_step) for g in lock_groups}
     todo += _lockstep_jobs({g: groups[g] for g in lock_groups}, grids, todo, user, out_dir)
@@ -242,12 +251,14 @@ def _group_experiments(groups: dict[str, list[FmuInfo]], stop_time, step) -> dic
 def compare_paths(paths, out_dir, *, group: str | None = None, one_group: bool = False,
                   tolerance: float | None = None, stop_time=None, step=None, jobs: int = 2, plots="worst",
                   echo=_echo, title: str = "overcon compare",
-                  lockstep_step: float | None = LOCKSTEP_STEP, settings: dict | None = None) -> CompareOutcome:
+                  lockstep_step: float | None = LOCKSTEP_STEP, settings: dict | None = None,
+                  input_table=None, interpolation: str = "hold") -> CompareOutcome:
     """``overcon compare``: group the FMUs by scene group (``one_group``: all of them together),
     run them (adaptive, and in lockstep for the verdict unless ``lockstep_step`` is None), compare
     each group, write ``out_dir/report.md`` and the PNGs. FMUs of one group share a
     DefaultExperiment (or ``--stop-time``/``--step`` put them on one grid). A failed run does not
-    stop the others: its group is reported as FAILED (``CompareOutcome.failed``)."""
+    stop the others: its group is reported as FAILED (``CompareOutcome.failed``). ``input_table``
+    (``--input``), ``interpolation``: as :func:`run_paths`, the same table for every FMU."""
     if tolerance is not None and not (math.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"--tolerance {tolerance!r}: must be a positive finite number")
     _check_lockstep_step(lockstep_step)
@@ -259,7 +270,8 @@ def compare_paths(paths, out_dir, *, group: str | None = None, one_group: bool =
     groups, invalid = _valid_groups(groups, echo)  # before any run: outputs, one friction set, one prediction
     exps = _group_experiments(groups, stop_time, step)
     comparisons, results = _run_and_compare(groups, exps, out_dir, jobs=jobs, lockstep_step=lockstep_step,
-                                            tolerance=tolerance, echo=echo, settings=settings)
+                                            tolerance=tolerance, echo=echo, settings=settings,
+                                            input_table=input_table, interpolation=interpolation)
     comparisons += invalid
     plot_files = {c.group: plot_comparison(c, out_dir, plots) for c in comparisons}
     report = out_dir / "report.md"
@@ -290,9 +302,11 @@ def _reference_grid(ref_time: np.ndarray, ref_path: Path) -> tuple[float, float]
 
 
 def compare_with_reference(fmu, ref_csv, out_dir, *, tolerance: float | None = None, stop_time=None,
-                           step=None, plots="worst", echo=_echo) -> CompareOutcome:
+                           step=None, plots="worst", echo=_echo, input_table=None,
+                           interpolation: str = "hold") -> CompareOutcome:
     """``overcon compare FMU --ref CSV``: run the FMU on the reference's grid (its last time and
-    spacing, unless ``--stop-time``/``--step`` are given) and compare every common output."""
+    spacing, unless ``--stop-time``/``--step`` are given) and compare every common output
+    (``input_table``, ``interpolation``: the FMU's ``--input``, as :func:`run_paths`)."""
     if tolerance is not None and not (math.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"--tolerance {tolerance!r}: must be a positive finite number")
     out_dir = Path(out_dir)
@@ -312,6 +326,7 @@ def compare_with_reference(fmu, ref_csv, out_dir, *, tolerance: float | None = N
         raise InputError(f"mismatched time grids: {ref_csv} has {len(ref.time)} points, t = {ref.time[0]:g}.."
                          f"{ref.time[-1]:g} s every {ref_step:g} s; {info.path} would run t = {ex.start:g}.."
                          f"{ex.stop:g} s every {ex.step:g} s (no interpolation)")
+    ex = with_inputs(info, ex, input_table, interpolation)
     results = run_fmus([info], out_dir, jobs=1, echo=echo, experiments={info.model: ex})
     res = read_series(results[0].csv)
     c = compare_reference(info, res, ref, ref_csv, tolerance=tolerance)

@@ -32,6 +32,7 @@ are unchanged)."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -49,6 +50,7 @@ import numpy as np
 from ..params import MAX_OUTPUT_POINTS, check_param
 from . import InputError, SimulationFailed
 from .fmus import FmuInfo, interface, type_name
+from .inputs import InputTable, check_interpolation, read_input_table, write_input_table
 
 RESULT_TAG = "OVERCON-RESULT "
 ALONG_SUFFIX = ".along.csv"  # <model>.along.csv: the discrete uniqueness outputs (module docstring)
@@ -58,12 +60,17 @@ PROGRESS_EVERY = 1.0  # s between progress lines of one FMU
 @dataclass(frozen=True)
 class Experiment:
     """Run settings: times (s), the output interval ``step`` (s) and FMU parameters to set
-    (``start_values``: name/value pairs, e.g. the lockstep grid of :mod:`overcon.verdict`)."""
+    (``start_values``: name/value pairs, e.g. the lockstep grid of :mod:`overcon.verdict`), the
+    input table given to fmpy's ``input=`` (``--input``, :mod:`overcon.tooling.inputs`; None: the
+    inputs keep their start values) and how the inputs move within a communication step
+    (``interpolation``: "hold", or "linear" with fmpy's ``set_input_derivatives``)."""
 
     start: float
     stop: float
     step: float
     start_values: tuple = ()
+    input_table: InputTable | None = None
+    interpolation: str = "hold"
 
     def n_points(self) -> int:
         return int(round((self.stop - self.start) / self.step)) + 1
@@ -88,6 +95,39 @@ def experiment(info: FmuInfo, *, stop_time: float | None = None, step: float | N
     return Experiment(info.start, stop, h)
 
 
+def with_inputs(info: FmuInfo, ex: Experiment, table_path=None, interpolation: str = "hold") -> Experiment:
+    """``ex`` with the ``--input`` table ``table_path`` read for ``info``'s Real inputs (every one a
+    column, no other column; :func:`overcon.tooling.inputs.read_input_table`) and the
+    ``--input-interpolation``. :class:`InputError` naming the FMU and the table for a bad table,
+    an FMU without inputs, an input also given a start value (``--set``, ``--param``: the table
+    would override it), and ``linear`` for an FMU that cannot interpolate inputs (fmpy sets
+    input derivatives through ``fmi2SetRealInputDerivatives`` only: FMI 2.0 co-simulation with
+    ``canInterpolateInputs="true"``). Without a table, ``ex`` unchanged ("linear" refused: there
+    is nothing to interpolate)."""
+    check_interpolation(interpolation)
+    if table_path is None:
+        if interpolation != "hold":
+            raise InputError(f"--input-interpolation {interpolation}: given without an --input table")
+        return ex
+    names = info.real_inputs
+    if not names:
+        raise InputError(f"{info.path}: --input {table_path}: the FMU has no Real input variable to set")
+    try:
+        table = read_input_table(table_path, names)
+    except InputError as exc:
+        raise InputError(f"{info.path}: {exc}") from exc
+    clash = [n for n, _ in ex.start_values if n in table.values]
+    if clash:
+        raise InputError(f"{info.path}: the input {clash[0]} has a start value (--set/--param) and a column in "
+                         f"{table_path}: the table sets it at every step; give it in one place")
+    if interpolation == "linear" and not info.can_interpolate_inputs:
+        why = ("an FMI 3.0 FMU (fmpy sets input derivatives for FMI 2.0 only)" if not info.fmi_version.startswith("2")
+               else "its co-simulation interface does not declare canInterpolateInputs=\"true\" (or it has none)")
+        raise InputError(f"{info.path}: --input-interpolation linear: the FMU cannot take input derivatives: "
+                         f"{why}; use --input-interpolation hold")
+    return dataclasses.replace(ex, input_table=table, interpolation=interpolation)
+
+
 def parse_settings(texts) -> dict[str, str]:
     """``["solver.method=radau", "joint4.mu=0.2"]`` (``--set``) -> {name: text}; :class:`InputError`
     naming the bad item."""
@@ -108,22 +148,28 @@ _CONVERT = {"Real": float, "Integer": int, "String": str,
 
 
 def start_values_for(info: FmuInfo, settings: dict[str, str]) -> dict:
-    """The ``--set`` values typed for ``info``'s parameters; :class:`InputError` naming the FMU and
+    """The ``--set`` values typed for ``info``'s parameters (and inputs: their start values, the
+    value they keep when no --input table sets them); :class:`InputError` naming the FMU and
     the parameter when it has no such parameter, the value does not fit its type, or (an overcon
     FMU) the value is outside the parameter's rule in :mod:`overcon.params` (the same rule the FMU
     applies, so the run is refused before anything starts rather than failing in it; another
     tool's FMU checks its ranges itself)."""
     out = {}
     for name, text in settings.items():
-        typ = info.parameters.get(name)
+        typ = info.parameters.get(name) or info.inputs.get(name)  # an input's start value: set like a parameter
         if typ not in _CONVERT:
             known = ", ".join(sorted(info.parameters)[:12]) or "none"
-            raise InputError(f"{info.path}: --set {name}: no such parameter (parameters: {known}"
-                             f"{', ...' if len(info.parameters) > 12 else ''})")
+            raise InputError(f"{info.path}: --set {name}: no such parameter or input (parameters: {known}"
+                             f"{', ...' if len(info.parameters) > 12 else ''}; inputs: "
+                             f"{', '.join(info.inputs) or 'none'})")
         try:
             out[name] = _CONVERT[typ](text)
         except (ValueError, KeyError) as exc:
             raise InputError(f"{info.path}: --set {name}={text}: not a valid {typ} value") from exc
+        if name in info.inputs:  # an input's start: any finite value (the host's to choose)
+            if isinstance(out[name], float) and not math.isfinite(out[name]):
+                raise InputError(f"{info.path}: --set {name}={text}: an input's start value must be finite")
+            continue
         if info.motion_unique is not None:  # an overcon FMU: its parameters obey overcon.params
             try:
                 reason = check_param(name, out[name])
@@ -273,11 +319,40 @@ def _release_logging_proxy() -> None:
     addLoggerProxy(byref(callbacks))
 
 
+@contextlib.contextmanager
+def _input_derivatives_buffers():
+    """fmpy's input derivatives for any number of inputs. fmpy (0.3.32: ``fmpy.simulation.Input``)
+    sizes the buffer of the derivatives it passes to ``fmi2SetRealInputDerivatives`` for exactly 9
+    inputs, so ``set_input_derivatives=True`` fails with "Can only assign sequence of same size"
+    for any other count. For the duration of a run, ``simulate_fmu`` builds its ``Input`` from a
+    subclass that sizes each buffer to its inputs (nothing else changes); a fixed fmpy already
+    sizes them so and is left alone."""
+    import fmpy.simulation as sim
+
+    base = sim.Input
+
+    class Input(base):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            if getattr(self, "t", None) is None:
+                return
+            self.continuous = [info._replace(derivatives=(info.derivatives._type_ * len(info.vrs))())
+                               if len(info.derivatives) != len(info.vrs) else info for info in self.continuous]
+
+    sim.Input = Input
+    try:
+        yield
+    finally:
+        sim.Input = base
+
+
 def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, step: float,
              outputs: list[str], progress: bool = True, label: str = "", start_values: dict | None = None,
-             along: bool = False) -> dict:
+             along: bool = False, input_table: InputTable | None = None, interpolation: str = "hold") -> dict:
     """One ``fmpy.simulate_fmu`` run; writes ``csv`` (and with ``along`` the along file, module
-    docstring). Returns {rows, sim_seconds, last_time}. Progress lines (``label: 42% ...``) go to
+    docstring). ``input_table`` goes to fmpy's ``input=`` (its structured array), with
+    ``set_input_derivatives`` when ``interpolation`` is "linear" (:mod:`overcon.tooling.inputs`).
+    Returns {rows, sim_seconds, last_time}. Progress lines (``label: 42% ...``) go to
     stderr at most every :data:`PROGRESS_EVERY` s."""
     import fmpy
     from fmpy.util import write_csv
@@ -311,9 +386,11 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
 
     kw = dict(start_time=start, stop_time=stop, output_interval=step, output=list(outputs) + discrete,
               step_finished=step_finished, start_values=dict(start_values or {}))
+    if input_table is not None:
+        kw.update(input=input_table.structured(), set_input_derivatives=check_interpolation(interpolation) == "linear")
     stable = None
     try:
-        with _instance(fmu, logger) as (where, md, instance, stable_step):
+        with _instance(fmu, logger) as (where, md, instance, stable_step), _input_derivatives_buffers():
             try:
                 result = fmpy.simulate_fmu(where, model_description=md, fmu_instance=instance, **kw) \
                     if instance is not None else fmpy.simulate_fmu(where, logger=logger, debug_logging=True, **kw)
@@ -351,9 +428,11 @@ def _worker(argv: list[str]) -> None:
     """``python -m overcon.tooling.run JSON``: run one FMU, print one result line, ``os._exit``."""
     job = json.loads(argv[0])
     try:
+        table = read_input_table(job["input"], job["input_names"]) if job.get("input") else None
         out = simulate(job["fmu"], job["csv"], start=job["start"], stop=job["stop"], step=job["step"],
                        outputs=job["outputs"], progress=job["progress"], label=job["label"],
-                       start_values=job.get("start_values"), along=job.get("along", False))
+                       start_values=job.get("start_values"), along=job.get("along", False),
+                       input_table=table, interpolation=job.get("interpolation", "hold"))
         out["error"] = ""
     except SimulationFailed as exc:
         out = {"error": str(exc), "stable_step": exc.stable_step}
@@ -385,13 +464,18 @@ def run_one(info: FmuInfo, ex: Experiment, csv: Path, progress: bool, timeout: f
     :mod:`overcon.tooling.sweep`."""
     job = {"fmu": str(info.path), "csv": str(csv), "start": ex.start, "stop": ex.stop, "step": ex.step,
            "outputs": info.output_names, "progress": progress, "label": label or info.model,
-           "start_values": dict(ex.start_values), "along": along}
+           "start_values": dict(ex.start_values), "along": along, "interpolation": ex.interpolation}
     t0 = time.perf_counter()
-    try:
-        proc = subprocess.run([sys.executable, "-m", "overcon.tooling.run", json.dumps(job)],
-                              stdout=subprocess.PIPE, stderr=None, text=True, timeout=timeout, env=_worker_env())
-    except subprocess.TimeoutExpired as exc:
-        raise SimulationFailed(f"{info.path}: no result within {timeout:g} s (killed)") from exc
+    with tempfile.TemporaryDirectory(prefix="overcon-input-") as tmp:
+        if ex.input_table is not None:  # to the worker as a file (a table may exceed an argument's size)
+            job["input"] = str(write_input_table(ex.input_table, Path(tmp) / "input.csv"))
+            job["input_names"] = ex.input_table.names
+        try:
+            proc = subprocess.run([sys.executable, "-m", "overcon.tooling.run", json.dumps(job)],
+                                  stdout=subprocess.PIPE, stderr=None, text=True, timeout=timeout,
+                                  env=_worker_env())
+        except subprocess.TimeoutExpired as exc:
+            raise SimulationFailed(f"{info.path}: no result within {timeout:g} s (killed)") from exc
     wall = time.perf_counter() - t0
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith(RESULT_TAG)]
     if not lines:

@@ -50,6 +50,15 @@ admissible range fails its rows, not the sweep: for overcon FMUs it is checked b
 against the FMU's own rule (:func:`overcon.fmu.variables.rule`), otherwise the FMU refuses it and
 the reason it logged is recorded.
 
+Inputs
+------
+``--input TABLE`` gives every run the same input table (:mod:`overcon.tooling.inputs`, through
+fmpy's ``input=``; ``--input-interpolation linear`` with input derivatives); ``sweep.json``
+records its path and SHA-256 and ``--resume`` refuses a table that changed. An input's start value
+is swept like a parameter (``--param motor=0:20:5``: a constant input per run), unless the table
+sets that input. An overcon FMU with inputs refuses rk4, the lockstep method: sweep it with
+``--lockstep-step 0``.
+
 Results and faults
 ------------------
 ``DIR/sweep.csv`` is written by the client only, one row per run, appended as soon as every

@@ -8,7 +8,7 @@ from pathlib import Path
 from ...verdict import LOCKSTEP_STEP
 from .. import InputError
 from ..compare import group_fmus, validate_group
-from ..run import check_unique_models
+from ..run import check_unique_models, with_inputs
 from .grid import grid, parse_param, set_ids
 from .inputs import _check_params, _load_fmu, _resolve_inputs
 from .rows import CSV_NAME, JSON_NAME, Sweep, _columns
@@ -21,18 +21,33 @@ def _lockstep_step(h) -> float | None:
     return float(h)
 
 
+def _sha(path: Path) -> str:
+    import hashlib
+
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the input table: {exc.strerror or exc}") from exc
+
+
 def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_time=None,
-            lockstep_step: float | None = LOCKSTEP_STEP, resume: bool = False, echo=print) -> Sweep:
+            lockstep_step: float | None = LOCKSTEP_STEP, resume: bool = False, echo=print,
+            input_table=None, interpolation: str = "hold") -> Sweep:
     """Resolve a sweep: a new one from the arguments (``out_dir`` must not hold one), or with
-    ``resume`` the one defined by ``out_dir/sweep.json`` (arguments must then be None)."""
+    ``resume`` the one defined by ``out_dir/sweep.json`` (arguments must then be None).
+    ``input_table`` (``--input``, a CSV path) and ``interpolation``: the inputs of every run
+    (:func:`overcon.tooling.run.with_inputs`); the definition records the table's path and SHA-256,
+    and a resumed sweep refuses a table that changed since. An input's start value is swept like a
+    parameter (``--param motor=0:20:5``), unless the table sets that input."""
     from ..pipeline import _group_experiments
 
     out_dir = Path(out_dir)
     jpath = out_dir / JSON_NAME
     if resume:
-        if inputs or params or samples is not None or seed is not None or stop_time is not None:
+        if (inputs or params or samples is not None or seed is not None or stop_time is not None
+                or input_table is not None or interpolation != "hold"):
             raise InputError("--resume DIR continues the sweep defined in DIR/sweep.json: give no scenes, "
-                             "--param, --samples, --seed or --stop-time with it")
+                             "--param, --samples, --seed, --stop-time or --input with it")
         if not jpath.is_file():
             raise InputError(f"{jpath}: no such file: {out_dir} holds no sweep to resume")
         try:
@@ -52,11 +67,20 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
         definition = {"inputs": [str(Path(p).resolve()) for p in inputs], "params": list(params),
                       "samples": samples, "seed": (0 if seed is None else seed) if samples is not None else None,
                       "stop_time": stop_time, "lockstep_step": _lockstep_step(lockstep_step)}
+        if input_table is not None:
+            definition.update(input_table=str(Path(input_table).resolve()), input_sha256=_sha(Path(input_table)),
+                              input_interpolation=interpolation)
+        elif interpolation != "hold":
+            raise InputError(f"--input-interpolation {interpolation}: given without an --input table")
     specs = [parse_param(t) for t in definition["params"]]
     lstep = definition["lockstep_step"]
     paths = _resolve_inputs(definition["inputs"], out_dir, echo)
     fmus = [_load_fmu(p) for p in paths]
     check_unique_models([f.info for f in fmus], out_dir)
+    with_inputs_ = [str(f.info.path) for f in fmus if f.info.real_inputs and f.info.motion_unique is not None]
+    if lstep is not None and with_inputs_:
+        raise InputError(f"{', '.join(with_inputs_)}: an FMU with inputs refuses rk4, the method of the lockstep runs; "
+                         "give --lockstep-step 0 (the FMUs' own solver settings)")
     types = _check_params(specs, fmus, lstep is not None)
     values = grid(specs, types, samples=definition["samples"], seed=definition["seed"])
     sets = list(zip(set_ids(values, definition["samples"] is not None), values))
@@ -75,6 +99,17 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
         if len(members) >= 2:
             validate_group(g, [f.info for f in members])
     exps = _group_experiments({g: [f.info for f in v] for g, v in groups.items()}, definition["stop_time"], None)
+    table = definition.get("input_table")
+    if table is not None:
+        if resume and _sha(Path(table)) != definition.get("input_sha256"):
+            raise InputError(f"{jpath}: the input table {table} changed since the sweep started (SHA-256 differs): "
+                             "the rows would mix two inputs; start a new sweep")
+        exps = {f.info.model: with_inputs(f.info, exps[f.info.model], table, definition["input_interpolation"])
+                for f in fmus}
+        swept = [s.name for s in specs if s.name in next(iter(exps.values())).input_table.values]
+        if swept:
+            raise InputError(f"--param {swept[0]}: the input {swept[0]} has a column in {table}, which sets it at every "
+                             "step: sweep its start value without a table, or sweep another input")
     columns = _columns([s.name for s in specs], fmus)
     if not resume:
         out_dir.mkdir(parents=True, exist_ok=True)

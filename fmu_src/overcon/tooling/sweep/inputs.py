@@ -17,7 +17,7 @@ LOCKSTEP_FIXED = ("solver.method", "solver.step", "solver.tolerance", "solver.ma
 @dataclass(frozen=True)
 class SweepFmu:
     """An FMU of the sweep: its description (outputs restricted to those compared), parameters
-    (name -> FMI type), GUID, bytes and their SHA-256."""
+    and inputs (name -> FMI type: what ``--param`` can set), GUID, bytes and their SHA-256."""
 
     info: FmuInfo
     params: dict
@@ -31,7 +31,8 @@ def _load_fmu(path: Path) -> SweepFmu:
 
     info = inspect_fmu(path)
     md = read_model_description(str(path), validate=False)
-    params = {v.name: type_name(v) for v in md.modelVariables if v.causality == "parameter"}
+    # what --param can set: parameters, and inputs (their start values: a constant input per run)
+    params = {v.name: type_name(v) for v in md.modelVariables if v.causality in ("parameter", "input")}
     positions = tuple(o for o in info.outputs if o.kind == "position") or info.outputs
     data = Path(path).read_bytes()
     return SweepFmu(dataclasses.replace(info, outputs=positions), params, md.guid, data,

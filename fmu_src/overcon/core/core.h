@@ -247,6 +247,8 @@ typedef struct {
     double rtol, max_step, step, newton_tol;
     double t, h, t0, t_old, h_old, stable_step; /* radau: h is its h_abs */
     double h_abs_old, error_norm_old, lu_h; /* radau: the last accepted step's size and error; the LU's h */
+    double t_bound;  /* no step ends past it (sim.c: a communication point where inputs keep changing;
+                      * INFINITY otherwise); not state */
     double *y, *f, *y_old, *f_old; /* n each */
     double *K;       /* the stages of the last step: dopri5 7 n; dop853 16 n (12 stages, f_new, 3 dense
                       * stages); rk4 rows 0-3 scratch */
@@ -367,6 +369,7 @@ typedef struct {
     long long along_certified;     /* its evaluations the watch's bounds decided (unique.c) */
     double t_comm;                 /* inputs: the target of the last ovk_sim_advance (the host's communication
                                     * point, where ovk_sim_set_inputs changes them), the start before one */
+    double t_changed;              /* inputs: the communication point where they last changed (-inf: never) */
 } ovk_sim;
 #define OVK_SIM_NINFO 18
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,

@@ -282,12 +282,16 @@ int ovk_radau_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg) {
     char why[OVK_MSG] = "";
     newton nt = {0, 0, 0, 0.0};
     if (h_abs > rk->max_step) h_abs = rk->max_step, has_old = 0;
+    int bounded = t + h_abs >= rk->t_bound; /* the step ends at t_bound (inputs change there: sim.c) */
+    if (bounded) h_abs = rk->t_bound - t, has_old = 0;
+    h = h_abs;
     for (;;) {
         if (!(h_abs >= min_step)) {
             int len = snprintf(msg, OVK_MSG, "t = %.9g s: step size %.3g s below the minimum", t, h_abs);
             if (why[0] && len > 0 && len < OVK_MSG) snprintf(msg + len, (size_t)(OVK_MSG - len), " (last failure: %s)", why);
             return OVK_STEP_SMALL;
         }
+        if (h != h_abs) bounded = 0; /* a smaller step than the bounded one */
         h = h_abs;
         if (!rk->has_K) {
             memset(rk->Z0, 0, 3 * (size_t)n * sizeof(double));
@@ -358,7 +362,7 @@ int ovk_radau_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg) {
         factor_h = 1.0;
     else
         rk->has_lu = 0;
-    double t_new = t + h;
+    double t_new = bounded ? rk->t_bound : t + h;
     /* the last evaluation of the step, at the accepted state, into F's first row (then f) */
     if ((status = fun(ctx, t_new, rk->ynew, rk->F))) return status;
     rk->nfev++;

@@ -159,6 +159,7 @@ int ovk_rk_start(ovk_rk *rk, const ovk_rk_opts *o, int n, double *mem, double t0
     rk->Q = p; p += (size_t)rk->nQ * n;
     if (rk->method == OVK_METHOD_RADAU) ovk_radau_layout(rk, p);
     rk->t = rk->t0 = rk->t_old = t0;
+    rk->t_bound = INFINITY;
     for (int i = 0; i < n; i++) rk->y[i] = y0[i];
     int status = fun(ctx, t0, rk->y, rk->f);
     if (status) return status;
@@ -281,6 +282,8 @@ static int erk_step(ovk_rk *rk, const erk_tableau *tb, ovk_rhs_fn fun, void *ctx
     int n = rk->n;
     double t = rk->t, min_step = 10.0 * fabs(nextafter(t, INFINITY) - t);
     double h = rk->h < rk->max_step ? rk->h : rk->max_step;
+    int bounded = t + h >= rk->t_bound; /* the step ends at t_bound (inputs change there: sim.c) */
+    if (bounded) h = rk->t_bound - t;
     for (;;) {
         if (!(h >= min_step))
             return rk_msg(msg, OVK_STEP_SMALL, "t = %.9g s: step size %.3g s below the minimum", t, h, 0.0);
@@ -301,13 +304,14 @@ static int erk_step(ovk_rk *rk, const erk_tableau *tb, ovk_rhs_fn fun, void *ctx
             rk->has_K = 1;
             rk->dense_ready = 0;
             rk->dense_status = OVK_OK;
-            rk->t = t + h;
+            rk->t = bounded ? rk->t_bound : t + h;
             rk->h = h * factor;
             rk->nsteps++;
             return stiffness_test(rk, tb, h, msg);
         }
         double g = SAFETY * pow(err, tb->exponent);
         h *= g > MIN_FACTOR ? g : MIN_FACTOR;
+        bounded = 0;
     }
 }
 /* The rk4 stability guard (integrators.RK4._check_stability): h rho from stages 1 to 3. */

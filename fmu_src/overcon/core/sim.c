@@ -215,6 +215,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->min_ratio = INFINITY;
     s->t_prev = t0;
     s->t_comm = t0;
+    s->t_changed = -INFINITY;
     s->along_unique = calloc(2 * (size_t)M->nj + 1, sizeof(int));
     s->along_work = malloc(ovk_unique_doubles(s->m, s->nh) * sizeof(double) + 1);
     s->bsv_work = malloc(ovk_bsv_doubles(s->m, s->nh) * sizeof(double) + 1);
@@ -378,7 +379,12 @@ int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max
     double eps = 1e-12 * (fabs(t_target) > 1.0 ? fabs(t_target) : 1.0), started = ovk_now();
     long long n0 = rk->nsteps;
     int status = OVK_OK;
+    /* inputs that changed where this interval starts are likely to change where it ends: its steps
+     * end there (exactly, as a host's grid); otherwise they run past it, and a change there takes
+     * the run back (ovk_sim_set_inputs) */
+    if (s->M->nu && s->t_changed == s->t_comm && t_target > rk->t) rk->t_bound = t_target;
     while (!status && rk->t < t_target - eps) status = step_checked(s, started, n0, max_steps, max_wall_time);
+    rk->t_bound = INFINITY;
     s->wall_time += ovk_now() - started;
     if (status) return status;
     if (rk->t - t_target < -eps || !isfinite(t_target))
@@ -521,14 +527,14 @@ int ovk_sim_use_kept(ovk_sim *s, const int *retained) {
 
 /* The run taken back to (t, y) inside its last step (y: its dense output there, not in the
  * integrator's arrays): the integrator started anew there with its step size and counters kept,
- * no warm starts, the ledger's work interpolated to t (ovk_sim_energy_rewind). */
+ * the friction warm starts kept (their histories interpolate back to t), the ledger's work
+ * interpolated to t (ovk_sim_energy_rewind). */
 static int rewind_to(ovk_sim *s, double t, const double *y) {
     ovk_rk *rk = &s->rk;
     double w[2] = {0.0, 0.0}, h = rk->h;
     if (s->o.energy) ovk_sim_work_at(s, t, w);
     long long nsteps = rk->nsteps, nfev = rk->nfev, stiff = rk->stiff_steps, njev = rk->njev, nlu = rk->nlu;
-    s->has_lam = s->has_last = 0;
-    s->warm.count = s->step_warm.count = 0;
+    s->has_last = 0;
     int status = ovk_rk_start(rk, &s->o.rk, s->ny, rk->y, t, y, sim_rhs, s, s->msg);
     rk->nsteps = nsteps, rk->nfev += nfev, rk->stiff_steps = stiff, rk->njev += njev, rk->nlu += nlu;
     if (h > 0.0 && isfinite(h)) rk->h = h < rk->max_step ? h : rk->max_step;
@@ -543,7 +549,9 @@ static int rewind_to(ovk_sim *s, double t, const double *y) {
  * points. When they change, the run goes on from the communication point with them: from the step
  * end there, the first stage of the next step and the ledger's powers evaluated again; from inside
  * the last step (the integrator stepped past it), taken back to its dense output there
- * (rewind_to). Either way the outputs read there after the change see the new values. */
+ * (rewind_to). Either way the outputs read there after the change see the new values. Inputs
+ * that keep changing (changed at the last communication point) make the next advance end its
+ * steps at its target (ovk_sim_advance), so a host changing them at every point costs no rewinds. */
 int ovk_sim_set_inputs(ovk_sim *s, const double *u, const double *du) {
     if (!s) return OVK_NOMEM;
     if (s->status) return s->status;
@@ -558,6 +566,7 @@ int ovk_sim_set_inputs(ovk_sim *s, const double *u, const double *du) {
     if (same) return OVK_OK;
     int status = ovk_set_inputs(M, s->d, u, du, t);
     if (status) return snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d)), status;
+    s->t_changed = t;
     double eps = 1e-12 * (fabs(t) > 1.0 ? fabs(t) : 1.0);
     if (fabs(s->rk.t - t) <= eps) { /* at the step's end (advance gave its state there) */
         status = sim_rhs(s, s->rk.t, s->rk.y, s->rk.f);

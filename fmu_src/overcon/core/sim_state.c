@@ -79,6 +79,7 @@ static void io_rk(codec *c, ovk_rk *rk) {
 static void io_inputs(codec *c, ovk_sim *s) {
     io(c, s->d->u, (2 * (size_t)s->M->nu + 1) * sizeof(double));
     io(c, &s->t_comm, sizeof s->t_comm);
+    io(c, &s->t_changed, sizeof s->t_changed);
 }
 
 /* The header and every field of the run, in order. */

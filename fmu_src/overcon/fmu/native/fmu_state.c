@@ -58,6 +58,7 @@ static void snapshot(fmu_inst *c, fmu_saved *s) {
     memcpy(s->y, c->y, (size_t)fm->ny * sizeof(double));
     if (s->has_sim) ovk_sim_get_state(c->sim, s->sim, s->sim_size);
     memcpy(s->uval, c->uval, 2 * (size_t)fm->M.nu * sizeof(double)); /* inputs */
+    s->u_flags[0] = c->u_dirty, s->u_flags[1] = c->u_pending;
 }
 
 fmi2Status fmu_state_get(fmu_inst *c, const char *fn, fmi2FMUstate *state) {
@@ -89,7 +90,6 @@ static fmi2Status restore(fmu_inst *c, const char *fn, const fmu_saved *s) {
         if (!isfinite(s->uval[k])) return fmu_log(c, fmi2Error, "%s: input entry %d of the state is not finite", fn, k),
                                           fmi2Error;
     memcpy(c->uval, s->uval, 2 * (size_t)fm->M.nu * sizeof(double));
-    c->u_dirty = 1;
     memcpy(c->pval, s->pval, (size_t)fm->nparam * sizeof(double));
     memcpy(c->pset, s->pset, (size_t)fm->nparam * sizeof(int));
     c->start_time = s->start_time, c->tol_source = s->tol_source;
@@ -105,6 +105,7 @@ static fmi2Status restore(fmu_inst *c, const char *fn, const fmu_saved *s) {
         ovk_sim_free(c->sim);
         c->sim = NULL;
     }
+    c->u_dirty = s->u_flags[0], c->u_pending = s->u_flags[1]; /* inputs: the run's bytes hold those it ran with */
     c->mode = s->mode, c->t = s->t;
     memcpy(c->outputs, s->outputs, (size_t)fm->nout * sizeof(double));
     memcpy(c->y, s->y, (size_t)fm->ny * sizeof(double));
@@ -163,7 +164,10 @@ static void io_saved(codec *k, const fmu_inst *c, fmu_saved *s) {
     io(k, s->pset, (size_t)fm->nparam * sizeof(int));
     io(k, s->outputs, (size_t)fm->nout * sizeof(double));
     io(k, s->y, (size_t)fm->ny * sizeof(double));
-    if (fm->M.nu) io(k, s->uval, 2 * (size_t)fm->M.nu * sizeof(double)); /* inputs */
+    if (fm->M.nu) { /* inputs */
+        io(k, s->uval, 2 * (size_t)fm->M.nu * sizeof(double));
+        io(k, s->u_flags, sizeof s->u_flags);
+    }
     io(k, &sim_size, sizeof sim_size);
     if (k->r && !k->bad) {
         s->mode = ints[0], s->tol_source = ints[1], s->have_outputs = ints[2], s->derived_stale = ints[3];

@@ -185,6 +185,9 @@ def test_simulate_input_equals_fmpy_with_the_input_table(tmp_path, fmi):
     md = fmpy.read_model_description(str(res.fmu))
     motor = [v for v in md.modelVariables if v.name == "motor"][0]
     assert (motor.causality, motor.variability, float(motor.start)) == ("input", "continuous", 0.0)
+    deps = {u.variable.name: u.dependencies for u in md.outputs}  # ModelStructure (None: depends on every known)
+    assert motor not in (deps["hinge1.angle"] or [None]) and motor not in (deps["door.x"] or [None])
+    assert deps["hinge1.angle"] is not None and deps["hinge1.Fx"] is None and deps["hinge1.friction"] is None
     table = _table(tmp_path, [(0.0, 5.0), (0.1, 5.0), (0.1 + 1e-9, -4.0), (0.3, -4.0)])
     ours = _simulate(DOOR_MOTOR, table, tmp_path / "ours.csv", "--stop-time", "0.3")
     outs = ["door.x", "door.y", "door.z", "hinge1.angle", "hinge1.rate", "hinge1.friction"]

@@ -35,7 +35,7 @@ def layout(data: bytes, guid: str, nparam: int, nR: int, nj: int) -> dict[str, t
     at["start_time"], at["t"], at["stable_step"] = (payload + 28, "d"), (payload + 36, "d"), (payload + 44, "d")
     sim = data.index(b"OVKSIM\0\0", payload)
     _, method, ny, ncols, m = struct.unpack_from("5i", data, sim + 8)
-    rest = sim - payload - 52 - 12 * nparam - 8 * ny  # the outputs
+    rest = sim - payload - 52 - 12 * nparam - 8 * ny - 8  # the outputs (then y, and u_dirty, u_pending: no inputs)
     assert rest >= 0 and rest % 8 == 0, "the fields before the run do not add up"
     nout = rest // 8
     for k in range(nparam):

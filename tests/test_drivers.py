@@ -202,3 +202,29 @@ def test_harmonic_driver_on_the_carriage_guide_and_its_effort(tmp_path, capsys):
     path = _carriage(tmp_path, '[[drivers]]\nname = "twist"\njoint = "rod"\nmotion = "constant_speed"\nspeed = 0.0\n')
     assert main(["check", str(path)]) == 2
     assert "driver twist" in capsys.readouterr().err
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("friction", ["[]", '["hinge1"]'])
+def test_compare_decides_a_driven_group_on_its_efforts(tmp_path, friction):
+    """overcon compare of the driven door under two eliminations (a group): the positions agree
+    (the motion is prescribed), the efforts decide; predicted by effort_unique: unique without
+    friction, not unique with friction in hinge1, and observed so."""
+    pytest.importorskip("fmpy")
+    from overcon.fmu.build import build_all
+    from overcon.tooling.pipeline import compare_paths
+
+    scenes = []
+    for name, elim in (("dr_a", '["hinge2"]'), ("dr_b", "[3, 4, 5, 9, 10]")):
+        path = _driven(tmp_path, friction=friction, eliminate=elim, name=name, stop=0.5, energy=False)
+        path.write_text(path.read_text().replace(f'name = "{name}"\n', f'name = "{name}"\ngroup = "driven"\n', 1))
+        scenes.append(path)
+    code, res = build_all(scenes, tmp_path / "fmus", allow_nonunique=True, refs=False, validate=False,
+                          echo=lambda s: None, echo_err=lambda s: None)
+    assert code == 0, [m for r in res for m in r.messages]
+    out = compare_paths([tmp_path / "fmus"], tmp_path / "cmp", echo=lambda s: None)
+    c = {c.group: c for c in out.comparisons}["driven"]
+    assert c.failure is None and c.predicted is (friction == "[]")
+    deciding = [d.name for d in c.diffs if d.decides]
+    assert deciding == ["motor.effort"]
+    assert c.observed is c.predicted and c.matches

@@ -185,6 +185,9 @@ def test_simulate_input_equals_fmpy_with_the_input_table(tmp_path, fmi):
     md = fmpy.read_model_description(str(res.fmu))
     motor = [v for v in md.modelVariables if v.name == "motor"][0]
     assert (motor.causality, motor.variability, float(motor.start)) == ("input", "continuous", 0.0)
+    deps = {u.variable.name: u.dependencies for u in md.outputs}  # ModelStructure (None: depends on every known)
+    assert motor not in (deps["hinge1.angle"] or [None]) and motor not in (deps["door.x"] or [None])
+    assert deps["hinge1.angle"] is not None and deps["hinge1.Fx"] is None and deps["hinge1.friction"] is None
     table = _table(tmp_path, [(0.0, 5.0), (0.1, 5.0), (0.1 + 1e-9, -4.0), (0.3, -4.0)])
     ours = _simulate(DOOR_MOTOR, table, tmp_path / "ours.csv", "--stop-time", "0.3")
     outs = ["door.x", "door.y", "door.z", "hinge1.angle", "hinge1.rate", "hinge1.friction"]
@@ -318,3 +321,20 @@ def test_force_inputs_on_the_carriage_accelerate_it_along_its_guide(tmp_path, in
     kern, _ = kernel_mod.select(model, spec.solver)
     ydot = kern.evaluate(0.0, np.concatenate([model.q0, model.h0]))[0]
     assert ydot[model.n] == pytest.approx(accel, abs=1e-12)
+
+
+def test_inputs_changing_at_output_points_keep_the_energy_balance_and_equal_ones_cost_nothing(tmp_path):
+    """A torque table that changes at every output point (the run taken back to each one, its steps
+    spanning them otherwise): kinetic + potential - applied stays constant to 1e-8 J; a table equal
+    to the start value everywhere gives the run without a table, bit for bit and step for step."""
+    spec = scene.load(_door_scene(tmp_path, stop=1.0))
+    model = compile_checked(spec)
+    rows = [(k * 0.01, 3.0 + 2.0 * float(np.sin(7.0 * k * 0.01))) for k in range(101)]
+    res = run(model, spec.solver, inputs=read_input_table(_table(tmp_path, rows), ["motor"]))
+    col = res.column
+    total = col("energy.kinetic") + col("energy.potential") - col("energy.applied")
+    assert np.max(np.abs(total - total[0])) <= 1e-8
+    flat = run(model, spec.solver, inputs=read_input_table(_table(tmp_path, [(0.0, 3.0), (1.0, 3.0)]), ["motor"]))
+    free = run(model, spec.solver)
+    assert np.array_equal(flat.values, free.values) and flat.steps == free.steps
+    assert res.steps > free.steps  # the changes cost steps

@@ -137,9 +137,9 @@ class PrecheckResult:
     problems: tuple[str, ...]
     warnings: tuple[str, ...]
     methods_run: tuple[str, ...] = ("rank", "svd", "qr")  # the tests that ran (each joint's ``methods`` keys)
+    redundancy: str = "eliminate"  # the scene's method (spec.REDUNDANCY_METHODS); the verdicts are the rigid theory's
     drivers: tuple[str, ...] = ()  # scene [[drivers]]: their equations are in the numbers and the joints above
     effort_unique: bool = True  # every driver's effort is unique (effort_verdicts)
-    redundancy: str = "eliminate"  # the scene's method (spec.REDUNDANCY_METHODS); the verdicts are the rigid theory's
 
     def to_json(self) -> dict:
         """JSON-ready dict (lists, plain types), keys in field order."""

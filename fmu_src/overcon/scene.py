@@ -57,6 +57,9 @@ What is validated
   :mod:`overcon.params` (with the types above), and the bounded-work relations of
   :func:`overcon.params.check_relations` (output points, fewest internal steps), reported against
   the solver field, or ``scene.stop_time`` when the file does not give that field.
+* Scene ``[[inputs]]`` (:func:`_scene_inputs`), ``[[drivers]]`` (:func:`_scene_drivers`) and
+  ``[outputs] joints`` (:func:`_scene_sensors`): docs/coupling.md; every problem names the file
+  and the field (``inputs[0].joint``, ``drivers[1].t1``, ``outputs.joints[0]``).
 * Files (bounded work): only regular files are read (a FIFO would block, ``/dev/zero`` never
   ends: both are refused without opening them), at most :data:`MAX_FILE_BYTES` (1 MiB), and within
   the key depth, key length, key count and nesting of :func:`toml_prescan` (:data:`MAX_KEY_DEPTH` ...)

@@ -15,7 +15,7 @@
 
 #include "core.h"
 
-#define NFIELDS 35
+#define NFIELDS 38 /* the arrays of ovk_model: 25, the redundancy block 10, the inputs 3 */
 #define MAX_ITEMS (1 << 24)
 
 typedef struct {
@@ -120,6 +120,10 @@ static int read_model(reader *r, model_t *m) {
     M->watch = keep(m, r, I);
     M->full = keep(m, r, I);
     M->formulation = rd_i32(r);
+    M->nu = rd_i32(r); /* the inputs (core/inputs.c) */
+    M->ukind = keep(m, r, I);
+    M->uidx = keep(m, r, I);
+    M->up = keep(m, r, D);
     if (r->bad) return 0;
     for (int w = 0; w < 2; w++) {
         m->d[w] = ovk_make_data(M);

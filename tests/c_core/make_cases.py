@@ -44,6 +44,7 @@ import numpy as np
 
 from overcon import kernel, scene as scene_mod
 from overcon.checks import compile_checked
+from overcon.spec import DriverSpec
 from overcon.fmu.cmodel import watch_rows
 
 MECH = Path(__file__).resolve().parents[2] / "mechanisms"
@@ -77,13 +78,18 @@ class Writer:
                           + struct.pack("=2d", *(getattr(cm, n) for n in FLOATS)))
         red = set(kernel.REDUNDANCY_COUNTS + kernel.REDUNDANCY_ARRAYS)
         for name, ctype in cm._fields_:
-            if name in COUNTS or name in FLOATS or name in red or name == "formulation":
+            if name in COUNTS or name in FLOATS or name in red or name in ("formulation", "nu") \
+                    or name in kernel.INPUT_ARRAYS:
                 continue
             (self.doubles if name in DOUBLE_FIELDS else self.ints)(by_address[getattr(cm, name)])
         self.parts.append(struct.pack("=5i", *(getattr(cm, n) for n in kernel.REDUNDANCY_COUNTS)))
         for name in kernel.REDUNDANCY_ARRAYS:
             (self.doubles if name in kernel.REDUNDANCY_DOUBLES else self.ints)(by_address[getattr(cm, name)])
         self.parts.append(struct.pack("=i", cm.formulation))
+        self.parts.append(struct.pack("=i", cm.nu))  # the inputs (core/inputs.c)
+        self.ints(by_address[cm.ukind])
+        self.ints(by_address[cm.uidx])
+        self.doubles(by_address[cm.up])
         self.kernel = k
         self.counts["models"] += 1
         return k
@@ -271,6 +277,26 @@ def build(tmp: Path) -> Writer:
         w.run(model, spec.solver, "dopri5", 0.2)
         if name == "door_h1_wo_hinge2":
             w.run(model, spec.solver, "radau", 0.2)
+    # inputs (core/inputs.c: a joint torque at its start value) and drivers (core/drivers.c: a rotation,
+    # constant speed; a planar displacement, a quintic ramp; a spatial displacement, harmonic)
+    spec = spec_of(MECH / "examples" / "motor_door.toml")
+    spec = dataclasses.replace(spec, inputs=tuple(dataclasses.replace(u, start=5.0) for u in spec.inputs))
+    for spec in (spec, spec_of(MECH / "examples" / "driven_door.toml")):
+        model = compile_checked(spec)
+        w.model(model, spec.solver)
+        random_states(w, model, 4, seed=3)
+        w.run(dataclasses.replace(model, energy_outputs=True), spec.solver, "dopri5", 0.2)
+    for path, driver in ((MECH / "planar_none_wo4.toml", ("joint1", "ramp", {"from": 0.0, "to": 0.3, "t0": 0.0,
+                                                                               "t1": 0.5})),
+                         (MECH / "examples" / "carriage_none_wo_rod.toml",
+                          ("guide", "harmonic", {"amplitude": 0.5 / (2 * np.pi), "frequency": 1.0, "phase": 0.0,
+                                                 "offset": 0.0}))):
+        spec = spec_of(path)
+        spec = dataclasses.replace(spec, drivers=(DriverSpec("d", driver[0], driver[1], driver[2], "displacement"),))
+        model = compile_checked(spec)
+        w.model(model, spec.solver)
+        random_states(w, model, 4, seed=3)
+        w.run(model, spec.solver, "dopri5", 0.2)
     # redundancy "min-norm" (kkt_minnorm.c) and "compliant" (compliance.c: scalar and per-axis
     # values, friction on compliant joints), evaluations and runs
     for path, redundancy in ((MECH / "planar_f1_wo4.toml", "min-norm"), (MECH / "examples" / "door_h1_wo_hinge2.toml",

@@ -249,7 +249,8 @@ typedef struct {
     double rtol, max_step, step, newton_tol;
     double t, h, t0, t_old, h_old, stable_step; /* radau: h is its h_abs */
     double h_abs_old, error_norm_old, lu_h; /* radau: the last accepted step's size and error; the LU's h */
-    double t_bound;  /* no step ends past it (inputs: the communication point; INFINITY otherwise); no state */
+    double t_bound;  /* no step ends past it (sim.c: a communication point where inputs keep changing;
+                      * INFINITY otherwise); not state */
     double *y, *f, *y_old, *f_old; /* n each */
     double *K;       /* the stages of the last step: dopri5 7 n; dop853 16 n (12 stages, f_new, 3 dense
                       * stages); rk4 rows 0-3 scratch */
@@ -375,6 +376,9 @@ typedef struct {
     /* the output rows (sim_out.c): scratch made at the first row, not state */
     double *out_mem;               /* the one allocation behind out_y (ny), out_reac (nj OVK_NREAC), out_fric (nj) */
     double *out_y, *out_reac, *out_fric;
+    double t_comm;                 /* inputs: the target of the last ovk_sim_advance (the host's communication
+                                    * point, where ovk_sim_set_inputs changes them), the start before one */
+    double t_changed;              /* inputs: the communication point where they last changed (-inf: never) */
 } ovk_sim;
 #define OVK_SIM_NINFO 18
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
@@ -383,6 +387,8 @@ OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hi
 OVK_HIDDEN int ovk_sim_energy_start(ovk_sim *s, double t0, const double *y0);
 OVK_HIDDEN int ovk_sim_energy_step(ovk_sim *s);
 OVK_HIDDEN int ovk_sim_energy_inputs(ovk_sim *s);
+OVK_HIDDEN int ovk_sim_energy_rewind(ovk_sim *s, double t, const double *y, const double *w);
+OVK_HIDDEN void ovk_sim_work_at(const ovk_sim *s, double t, double *out);
 OVK_HIDDEN void ovk_compliant_energy(const ovk_model *M, ovk_data *d, const double *q, const double *h,
                                      double *elastic, double *damping);
 /* watch.c: the singularity watch after each step; the expiry behind a failed step */

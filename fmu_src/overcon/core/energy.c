@@ -137,8 +137,23 @@ int ovk_sim_energy_inputs(ovk_sim *s) {
     return powers(s, s->work_t[1], s->rk.y, s->work_p[1]);
 }
 
+/* The ledger taken back to (t, y) inside the last step, its work there w (ovk_sim_work_at before
+ * the integrator was taken back): the inputs changed at t (sim.c ovk_sim_set_inputs). */
+int ovk_sim_energy_rewind(ovk_sim *s, double t, const double *y, const double *w) {
+    if (!s->o.energy) return OVK_OK;
+    double p[2];
+    int status = powers(s, t, y, p);
+    if (status) return status;
+    for (int k = 0; k < 2; k++) {
+        s->work_t[k] = t;
+        s->work_w[k][0] = w[0], s->work_w[k][1] = w[1];
+        s->work_p[k][0] = p[0], s->work_p[k][1] = p[1];
+    }
+    return OVK_OK;
+}
+
 /* The work [dissipated, applied] at t inside the last step (_WorkLedger.at). */
-static void work_at(const ovk_sim *s, double t, double *out) {
+void ovk_sim_work_at(const ovk_sim *s, double t, double *out) {
     double t0 = s->work_t[0], t1 = s->work_t[1];
     if (t1 <= t0 || t >= t1) {
         out[0] = s->work_w[1][0], out[1] = s->work_w[1][1];
@@ -193,7 +208,7 @@ int ovk_sim_energy(ovk_sim *s, double t, const double *y, double *out) {
     pot += elastic;
     out[0] = 0.5 * kin;
     out[1] = pot;
-    if (s->o.energy) work_at(s, t, out + 2);
+    if (s->o.energy) ovk_sim_work_at(s, t, out + 2);
     else out[2] = out[3] = 0.0;
     return OVK_OK;
 }

@@ -282,7 +282,7 @@ int ovk_radau_step(ovk_rk *rk, ovk_rhs_fn fun, void *ctx, char *msg) {
     char why[OVK_MSG] = "";
     newton nt = {0, 0, 0, 0.0};
     if (h_abs > rk->max_step) h_abs = rk->max_step, has_old = 0;
-    int bounded = t + h_abs >= rk->t_bound; /* the step ends at t_bound (an input may change there) */
+    int bounded = t + h_abs >= rk->t_bound; /* the step ends at t_bound (inputs change there: sim.c) */
     if (bounded) h_abs = rk->t_bound - t, has_old = 0;
     h = h_abs;
     for (;;) {

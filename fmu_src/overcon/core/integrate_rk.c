@@ -324,7 +324,7 @@ static int erk_step(ovk_rk *rk, const erk_tableau *tb, ovk_rhs_fn fun, void *ctx
     int n = rk->n;
     double t = rk->t, min_step = 10.0 * fabs(nextafter(t, INFINITY) - t);
     double h = rk->h < rk->max_step ? rk->h : rk->max_step;
-    int bounded = t + h >= rk->t_bound; /* the step ends at t_bound (an input may change there) */
+    int bounded = t + h >= rk->t_bound; /* the step ends at t_bound (inputs change there: sim.c) */
     if (bounded) h = rk->t_bound - t;
     for (;;) {
         if (!(h >= min_step))

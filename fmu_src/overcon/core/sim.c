@@ -214,6 +214,8 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     layout(s);
     s->min_ratio = INFINITY;
     s->t_prev = t0;
+    s->t_comm = t0;
+    s->t_changed = -INFINITY;
     s->along_unique = calloc(2 * (size_t)M->nj + 1, sizeof(int));
     s->along_work = malloc(ovk_unique_doubles(s->m, s->nh) * sizeof(double) + 1);
     s->bsv_work = malloc(ovk_bsv_doubles(s->m, s->nh) * sizeof(double) + 1);
@@ -378,7 +380,10 @@ int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max
     double eps = 1e-12 * (fabs(t_target) > 1.0 ? fabs(t_target) : 1.0), started = ovk_now();
     long long n0 = rk->nsteps;
     int status = OVK_OK;
-    if (s->M->nu && t_target > rk->t) rk->t_bound = t_target; /* the inputs may change there */
+    /* inputs that changed where this interval starts are likely to change where it ends: its steps
+     * end there (exactly, as a host's grid); otherwise they run past it, and a change there takes
+     * the run back (ovk_sim_set_inputs) */
+    if (s->M->nu && s->t_changed == s->t_comm && t_target > rk->t) rk->t_bound = t_target;
     while (!status && rk->t < t_target - eps) status = step_checked(s, started, n0, max_steps, max_wall_time);
     rk->t_bound = INFINITY;
     s->wall_time += ovk_now() - started;
@@ -390,6 +395,7 @@ int ovk_sim_advance(ovk_sim *s, double t_target, long long max_steps, double max
             return memcpy(s->msg, rk->dense_msg, sizeof s->msg), stopped(s, status, "integration stopped", rk->t);
     } else
         memcpy(y, rk->y, (size_t)s->ny * sizeof(double));
+    s->t_comm = t_target;
     return OVK_OK;
 }
 
@@ -520,18 +526,40 @@ int ovk_sim_use_kept(ovk_sim *s, const int *retained) {
     return OVK_OK;
 }
 
-/* The inputs' values u (nu) and slopes du (nu, per s; NULL: held) from the run's time on
- * (inputs.c): an integrator step never ends past the target of ovk_sim_advance while the model
- * has inputs, so the run stands at the communication point where they change. When they change,
- * the right-hand side there (the first stage of the next step, the multipliers of the outputs)
- * and the ledger's powers are evaluated again with them; equal values cost nothing. */
+/* The run taken back to (t, y) inside its last step (y: its dense output there, not in the
+ * integrator's arrays): the integrator started anew there with its step size and counters kept,
+ * the friction warm starts kept (their histories interpolate back to t), the ledger's work
+ * interpolated to t (ovk_sim_energy_rewind). */
+static int rewind_to(ovk_sim *s, double t, const double *y) {
+    ovk_rk *rk = &s->rk;
+    double w[2] = {0.0, 0.0}, h = rk->h;
+    if (s->o.energy) ovk_sim_work_at(s, t, w);
+    long long nsteps = rk->nsteps, nfev = rk->nfev, stiff = rk->stiff_steps, njev = rk->njev, nlu = rk->nlu;
+    s->has_last = 0;
+    int status = ovk_rk_start(rk, &s->o.rk, s->ny, rk->y, t, y, sim_rhs, s, s->msg);
+    rk->nsteps = nsteps, rk->nfev += nfev, rk->stiff_steps = stiff, rk->njev += njev, rk->nlu += nlu;
+    if (h > 0.0 && isfinite(h)) rk->h = h < rk->max_step ? h : rk->max_step;
+    s->t_prev = t;
+    if (!status) status = ovk_sim_energy_rewind(s, t, rk->y, w);
+    return status;
+}
+
+/* The inputs' values u (nu) and slopes du (nu, per s; NULL: held) from the host's communication
+ * point on (inputs.c; t_comm: the target of the last ovk_sim_advance, the start before one).
+ * Equal values cost nothing: the run goes on as it was, its steps free to span communication
+ * points. When they change, the run goes on from the communication point with them: from the step
+ * end there, the first stage of the next step and the ledger's powers evaluated again; from inside
+ * the last step (the integrator stepped past it), taken back to its dense output there
+ * (rewind_to). Either way the outputs read there after the change see the new values. Inputs
+ * that keep changing (changed at the last communication point) make the next advance end its
+ * steps at its target (ovk_sim_advance), so a host changing them at every point costs no rewinds. */
 int ovk_sim_set_inputs(ovk_sim *s, const double *u, const double *du) {
     if (!s) return OVK_NOMEM;
     if (s->status) return s->status;
     const ovk_model *M = s->M;
     int nu = M->nu, same = 1;
     if (!nu) return OVK_OK;
-    double *cur = s->d->u, t = s->rk.t;
+    double *cur = s->d->u, t = s->t_comm;
     for (int k = 0; k < nu && same; k++) {
         double now = cur[k] + cur[nu + k] * (t - cur[2 * nu]);
         same = now == u[k] && cur[nu + k] == (du ? du[k] : 0.0);
@@ -539,9 +567,21 @@ int ovk_sim_set_inputs(ovk_sim *s, const double *u, const double *du) {
     if (same) return OVK_OK;
     int status = ovk_set_inputs(M, s->d, u, du, t);
     if (status) return snprintf(s->msg, sizeof s->msg, "%s", ovk_message(s->d)), status;
-    status = sim_rhs(s, t, s->rk.y, s->rk.f);
-    s->rk.dense_ready = 0;
-    if (!status) status = ovk_sim_energy_inputs(s);
+    s->t_changed = t;
+    double eps = 1e-12 * (fabs(t) > 1.0 ? fabs(t) : 1.0);
+    if (fabs(s->rk.t - t) <= eps) { /* at the step's end (advance gave its state there) */
+        status = sim_rhs(s, s->rk.t, s->rk.y, s->rk.f);
+        s->rk.dense_ready = 0;
+        if (!status) status = ovk_sim_energy_inputs(s);
+    } else if (t < s->rk.t_old - eps || t > s->rk.t) { /* a step taken since the advance (ovk_sim_step) */
+        status = OVK_INVALID;
+        snprintf(s->msg, sizeof s->msg, "inputs: the run stands at t = %.9g s, past the communication point t = "
+                 "%.9g s where they were set (set inputs after ovk_sim_advance)", s->rk.t, t);
+    } else if (!(status = ovk_rk_dense(&s->rk, t, s->ystar))) {
+        status = rewind_to(s, t, s->ystar);
+    } else {
+        memcpy(s->msg, s->rk.dense_msg, sizeof s->msg);
+    }
     if (status) s->status = stopped(s, status, "inputs", t);
     return status;
 }

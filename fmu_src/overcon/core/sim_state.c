@@ -77,7 +77,11 @@ static void io_rk(codec *c, ovk_rk *rk) {
 
 /* The inputs (inputs.c): values, slopes and their time, as the host last set them (only in the
  * state of a model with inputs: the others' states are as before). */
-static void io_inputs(codec *c, ovk_sim *s) { io(c, s->d->u, (2 * (size_t)s->M->nu + 1) * sizeof(double)); }
+static void io_inputs(codec *c, ovk_sim *s) {
+    io(c, s->d->u, (2 * (size_t)s->M->nu + 1) * sizeof(double));
+    io(c, &s->t_comm, sizeof s->t_comm);
+    io(c, &s->t_changed, sizeof s->t_changed);
+}
 
 /* The header and every field of the run, in order. */
 static void io_sim(codec *c, ovk_sim *s) {

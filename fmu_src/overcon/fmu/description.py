@@ -146,12 +146,15 @@ def _fmi2_structure(root, table: list[Var]) -> None:
     ms = ET.SubElement(root, "ModelStructure")
     outputs = ET.SubElement(ms, "Outputs")
     initial = []
+    states = " ".join(str(i) for i, v in enumerate(table, start=1) if v.key and v.key[0] == "state")
     for i, v in enumerate(table, start=1):
         if v.causality != "output":
             continue
         a = {"index": str(i)}
         if v.variability == "constant":
             a["dependencies"] = ""
+        elif v.feedthrough is False:  # a function of the state: no direct dependency on the inputs
+            a["dependencies"] = states
         ET.SubElement(outputs, "Unknown", a)
         if v.initial in ("approx", "calculated"):
             initial.append(i)
@@ -212,10 +215,12 @@ def _fmi3(scene, table: list[Var], *, guid: str, generation_tool: str, version: 
         if v.size != 1:
             ET.SubElement(el, "Dimension", {"start": str(v.size)})
     ms = ET.SubElement(root, "ModelStructure")
+    states = " ".join(str(vr) for vr, v in enumerate(table) if v.key and v.key[0] == "state")
     for vr, v in enumerate(table):
         if v.causality == "output":
-            ET.SubElement(ms, "Output", {"valueReference": str(vr), **({"dependencies": ""}
-                                                                        if v.variability == "constant" else {})})
+            deps = "" if v.variability == "constant" else states if v.feedthrough is False else None
+            ET.SubElement(ms, "Output", {"valueReference": str(vr), **({"dependencies": deps}
+                                                                        if deps is not None else {})})
     for vr, v in enumerate(table):
         if v.derivative is not None:
             ET.SubElement(ms, "ContinuousStateDerivative", {"valueReference": str(vr)})

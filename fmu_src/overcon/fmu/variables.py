@@ -131,6 +131,9 @@ class Var:
     key: tuple = ()
     derivative: int | None = None  # a state's derivative: the 0-based table index of that state
     size: int = 1  # an array variable's number of elements (FMI 3.0)
+    # an output of a scene with inputs: False when it does not depend directly on them (a function of
+    # the state: positions, velocities, energies, sensors; ModelStructure says so), None otherwise
+    feedthrough: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -288,6 +291,12 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
                               bool(start), len(model.joints)))
     out += [Var(u.name, "Real", "input", "continuous", "", f"input: {INPUT_TEXT[u.type]}", unit=u.unit,
                 start=float(u.start), key=("input", n)) for n, u in enumerate(model.inputs)]
+    if model.inputs:  # the outputs of the state do not depend directly on the inputs
+        direct = {name for j in model.reaction_joints for name in
+                  ([f"{model.joints[j].name}.{c}" for c in model.joints[j].components])}
+        direct |= {f"{model.joints[j].name}.friction" for j in model.friction_outputs}
+        out = [dataclasses.replace(v, feedthrough=False) if v.causality == "output" and v.type == "Real"
+               and v.key and v.key[0] == "output" and v.name not in direct else v for v in out]
     return out + _interface_variables(model, out, states, fmi3)
 
 

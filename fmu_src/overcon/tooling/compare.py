@@ -29,6 +29,9 @@ Rules (also stated in every report, :func:`rules_text`):
   differ by 6e-7 m but the reactions of M, N by 8e-3 N, 1000 × a force tolerance derived like
   the position one. They are reported per joint, with the pre-check's ``reaction_unique``. FMUs
   with no position outputs (other tools' FMUs): every common output decides.
+* **Driven groups** (FMUs of scenes with ``[[drivers]]``, which carry ``effort_unique``): the drivers
+  prescribe the motion, so the positions agree whatever the elimination; the efforts
+  ``<driver>.effort`` decide, and the prediction is ``effort_unique`` (docs/coupling.md, "Drivers").
 * **Reference mode** (one FMU against a CSV): every common output decides.
 * **Prediction**: the FMUs' constant ``motion_unique`` outputs (the pre-check); all FMUs of a
   group must agree. FMUs without it: the group is expected to be unique.
@@ -292,7 +295,8 @@ def validate_group(group: str, infos: list[FmuInfo]) -> tuple[list[str], bool | 
                              + "; ".join(f"{i.path.name}: {key(i)}" for i in infos)
                              + "): a group is one friction set of one mechanism under different eliminations; "
                              "give the scenes separate group names")
-    preds = {i.motion_unique for i in infos}
+    # a driven group (drivers prescribe the motion) is decided on its efforts (issue 38)
+    preds = {i.effort_unique if i.effort_unique is not None else i.motion_unique for i in infos}
     if len(preds) > 1:
         raise InputError(f"group {group}: the FMUs disagree on the pre-check's motion_unique ("
                          + ", ".join(f"{i.path.name}: {i.motion_unique}" for i in infos)
@@ -319,6 +323,8 @@ def compare_group(group: str, infos: list[FmuInfo], series: list[Series] | None,
     meta = {o.name: o for o in infos[0].outputs}
     has_positions = any(meta[n].kind == "position" for n in names)
     deciding = [n for n in names if (meta[n].kind == "position" if has_positions else True)]
+    if any(meta[n].kind == "effort" for n in names):  # driven: the motion is prescribed, the efforts decide
+        deciding = [n for n in names if meta[n].kind == "effort"]
     decisive = series
     if lockstep is not None:
         check_grids(lockstep, [s + " (lockstep run)" for s in sources])

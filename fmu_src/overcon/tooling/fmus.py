@@ -106,6 +106,7 @@ class FmuInfo:
     friction: tuple[str, ...] = ()
     eliminate: tuple[int, ...] | str | None = None
     motion_unique: bool | None = None  # pre-check prediction (None: not an overcon FMU)
+    effort_unique: bool | None = None  # a driven scene's prediction for its efforts (None: no drivers)
     reaction_unique: dict = field(default_factory=dict)  # joint -> bool
     # parameters solver.method and solver.step: can run on the lockstep grid (rk4); an overcon FMU
     # with inputs refuses rk4 (its fixed steps could step over the instant an input changes)
@@ -238,6 +239,8 @@ def inspect_fmu(path) -> FmuInfo:
             constants[v.name] = _bool(v.start)
     if not outputs:
         raise InputError(f"{path}: the FMU has no Real outputs to record")
+    if "effort_unique" in constants:  # a driven scene: its drivers' efforts (N or N.m) decide a group
+        outputs = [Output(o.name, o.unit, "effort") if o.name.endswith(".effort") else o for o in outputs]
     ex = md.defaultExperiment
     start = float(ex.startTime) if ex is not None and ex.startTime is not None else 0.0
     stop = float(ex.stopTime) if ex is not None and ex.stopTime is not None else start + 1.0
@@ -260,6 +263,7 @@ def inspect_fmu(path) -> FmuInfo:
                    outputs=tuple(outputs), group=facts.get("group", OTHER_GROUP), label=facts.get("label", model),
                    mechanism=facts.get("mechanism", ""), friction=facts.get("friction", ()),
                    eliminate=facts.get("eliminate"), motion_unique=motion_unique,
+                   effort_unique=constants.get("effort_unique"),
                    reaction_unique=reaction_unique,
                    lockstep=(params.get("solver.method") == "String" and params.get("solver.step") == "Real"
                              and not (facts and any(t == "Real" for t in inputs.values()))),

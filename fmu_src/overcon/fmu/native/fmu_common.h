@@ -135,6 +135,7 @@ typedef struct fmu_saved {
     int *pset;          /* nparam: set by the host */
     double *outputs, *y; /* nout, ny */
     double *uval;       /* 2 nu: the inputs as the host set them (fmu_inst.uval) */
+    int u_dirty, u_pending; /* fmu_inst.u_dirty, u_pending */
     unsigned char *sim; /* the run's state bytes */
     size_t sim_size;
 } fmu_saved;
@@ -167,7 +168,8 @@ typedef struct {
     int events_logged;  /* events of the run already logged (fmu_run.c) */
     double *uval;       /* 2 nu + 1: the inputs' values and first derivatives as the host set them (the
                          * derivatives for the next communication step only) */
-    int u_dirty;        /* uval changed since the run last took them (fmu_apply_inputs) */
+    int u_dirty;        /* uval changed by the host since the run last took them (fmu_apply_inputs) */
+    int u_pending;      /* co-simulation: the last step ran with derivatives, the next holds (fmu_do_step) */
 } fmu_inst;
 
 FMU_HIDDEN void fmu_log(fmu_inst *c, fmi2Status status, const char *fmt, ...)
@@ -212,7 +214,7 @@ FMU_HIDDEN int fmu_check_refs(fmu_inst *c, const char *fn, const fmi2ValueRefere
 FMU_HIDDEN int fmu_value_of(fmu_inst *c, const char *fn, const fmu_var *v, double *out);
 FMU_HIDDEN int fmu_set_param(fmu_inst *c, const char *fn, int k, double x, const char *s);
 FMU_HIDDEN int fmu_set_input(fmu_inst *c, const char *fn, int k, double x, int order);
-FMU_HIDDEN int fmu_apply_inputs(fmu_inst *c);
+FMU_HIDDEN int fmu_apply_inputs(fmu_inst *c, int at_step);
 FMU_HIDDEN int fmu_param_refuses(const fmu_param *p, double x, const char *shown, char *why, size_t size);
 /* fmu_state.c */
 FMU_HIDDEN void fmu_saved_free(fmu_saved *s);

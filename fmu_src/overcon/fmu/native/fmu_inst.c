@@ -144,6 +144,7 @@ void fmu_init_fields(fmu_inst *c) {
         c->uval[fm->M.nu + k] = 0.0;
     }
     c->u_dirty = 1;
+    c->u_pending = 0;
 }
 
 void fmu_free_inst(fmu_inst *c) {

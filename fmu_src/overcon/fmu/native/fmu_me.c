@@ -28,7 +28,7 @@
 int fmu_me_eval(fmu_inst *c) {
     if (c->dx_valid) return 1;
     if (!c->sim_valid && !fmu_ensure_sim(c, 0)) return 0;
-    if (!fmu_apply_inputs(c)) return 0;
+    if (!fmu_apply_inputs(c, 0)) return 0;
     const fmu_model *fm = &c->fm;
     ovk_hist cold = {0, {0.0, 0.0}, {NULL, NULL}}; /* no forces to extrapolate: a cold start */
     int its = 0, status = ovk_sim_solve(c->sim, c->t, c->y, &cold, NULL, c->dx, &its);

@@ -139,7 +139,7 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
         }
         c->sim_valid = 1;
         c->u_dirty = 1; /* the inputs as set so far (their start values otherwise) */
-        if (!fmu_apply_inputs(c)) return 0;
+        if (!fmu_apply_inputs(c, 1)) return 0;
         c->events_logged = 0;
         c->dx_valid = 0;
         c->t = c->start_time;
@@ -164,7 +164,7 @@ int fmu_ensure_sim(fmu_inst *c, int compute_outputs) {
  * skipped them, and in every later step. 0 with the reason in c->msg on failure. */
 int fmu_read_derived(fmu_inst *c) {
     c->derived_read = 1;
-    if (!fmu_apply_inputs(c)) return 0;
+    if (!fmu_apply_inputs(c, 0)) return 0;
     if (!c->derived_stale) return 1;
     if (!c->sim) return snprintf(c->msg, sizeof c->msg, "reactions and friction forces: no run to compute them"), 0;
     int status = fmu_derived_outputs(c, c->t, c->y, NULL, c->outputs);
@@ -378,7 +378,7 @@ fmi2Status fmu_do_step(fmu_inst *c, const char *fn, double currentCommunicationP
     double *y = malloc(((size_t)fm->ny + (size_t)fm->nout + 1) * sizeof(double));
     int ok = y != NULL;
     if (!ok) snprintf(c->msg, sizeof c->msg, "MemoryError: out of memory");
-    ok = ok && fmu_apply_inputs(c) && step(c, currentCommunicationPoint, communicationStepSize, y);
+    ok = ok && fmu_apply_inputs(c, 1) && step(c, currentCommunicationPoint, communicationStepSize, y);
     double *out = y ? y + fm->ny : NULL;
     ok = ok && step_outputs(c, t_new, y, out);
     if (!ok) {
@@ -400,10 +400,11 @@ fmi2Status fmu_do_step(fmu_inst *c, const char *fn, double currentCommunicationP
     c->dx_valid = 0;
     c->have_outputs = c->has_y = 1;
     c->derived_stale = !c->derived_read && fm->nout > fm->nstate_out;
-    if (fm->M.nu) { /* the derivatives were for this step: the next one holds the values unless set again */
-        memset(c->uval + fm->M.nu, 0, (size_t)fm->M.nu * sizeof(double));
-        c->u_dirty = 1;
-    }
+    for (int k = 0; k < fm->M.nu; k++) /* the derivatives were for this step: the next holds unless set again */
+        if (c->uval[fm->M.nu + k] != 0.0) {
+            c->uval[fm->M.nu + k] = 0.0;
+            c->u_pending = 1;
+        }
     free(y);
     return fmi2OK;
 }

@@ -59,6 +59,8 @@ static const state_field STATE_FIELDS[] = {
     ARRAY(outputs, FT_DOUBLE, FN_OUT, CK_ANY, 0), /* finite when have_outputs (fields_refused) */
     ARRAY(y, FT_DOUBLE, FN_Y, CK_ANY, 0),         /* finite when has_y */
     ARRAY(uval, FT_DOUBLE, FN_U, CK_FINITE, 1),   /* the inputs' values, then their first derivatives */
+    SCALAR(u_dirty, FT_INT, CK_FLAG, 0),          /* inputs: the run's bytes hold those it ran with */
+    SCALAR(u_pending, FT_INT, CK_FLAG, 0),
 };
 #define NFIELDS (sizeof STATE_FIELDS / sizeof STATE_FIELDS[0])
 
@@ -174,7 +176,6 @@ fmi2Status fmu_state_get(fmu_inst *c, const char *fn, fmi2FMUstate *state) {
  * and given the state's bytes; 0 with the reason in c->msg. */
 static int restore(fmu_inst *c, const fmu_saved *s) {
     copy_fields(c, (fmu_saved *)s, 0, 1);
-    c->u_dirty = 1; /* the restored inputs go to the run when it next needs them (fmu_apply_inputs) */
     c->sim_valid = 0;
     if (s->has_sim) {
         if (!fmu_ensure_sim(c, 0)) return 0;

@@ -85,17 +85,20 @@ int fmu_set_input(fmu_inst *c, const char *fn, int k, double x, int order) {
 }
 
 /* The inputs as the host set them given to the run (Model Exchange: at the current time, held;
- * co-simulation: from the current communication point, with the derivatives set for the step).
+ * co-simulation: from the current communication point, with the derivatives set for the step),
+ * when the host set any since the run last took them, or at_step (fmi2DoStep) after a step that
+ * ran with derivatives: the next holds the values unless new derivatives are set. Reading outputs
+ * between steps takes only the host's new values (the outputs after a step see the step's).
  * 0 with the reason in c->msg. */
-int fmu_apply_inputs(fmu_inst *c) {
+int fmu_apply_inputs(fmu_inst *c, int at_step) {
     int nu = c->fm.M.nu;
-    if (!nu || !c->u_dirty || !c->sim) return 1;
+    if (!nu || !c->sim || !(c->u_dirty || (at_step && c->u_pending))) return 1;
     int status = c->me ? ovk_set_inputs(&c->M, c->sim->d, c->uval, NULL, c->t)
                        : ovk_sim_set_inputs(c->sim, c->uval, c->uval + nu);
     if (status)
         return snprintf(c->msg, sizeof c->msg, "SimulationError: %s", c->me ? ovk_message(c->sim->d)
                                                                              : ovk_sim_message(c->sim)), 0;
-    c->u_dirty = 0;
+    c->u_dirty = c->u_pending = 0;
     return 1;
 }
 

@@ -177,7 +177,9 @@ typedef struct {
  * ovk_make_data, and the last failure's message. */
 typedef struct {
     ovk_frames f;
-    double *J;     /* m x nh: Phi_h */
+    double *J;     /* Phi_h by its nonzeros: m rows of 2 nh_b (OVK_JROW): row r's velocities of its
+                    * joint's body i, then of body j (the order of rbody and al_rows; body j's slots
+                    * unused when it is the base or body i, body i's when it is the base) */
     double *phi;   /* m */
     double *gam;   /* m */
     double *S;     /* S = J_R M^-1 J_R^T in band order (band storage of linalg.c: nR x (sb.band + 1)),
@@ -210,6 +212,13 @@ typedef struct {
     int *al_rows;  /* every equation (m), then its two bodies (2 m): the row set of ovk_project */
     int *piv;      /* nx: the row interchanges of the friction solves' LU (friction.c, friction_robust.c) */
 } ovk_data;
+
+/* Row r of Phi_h stored by its nonzeros (ovk_data.J, or a copy laid out alike): 2 nh_b doubles, slot s
+ * (0, 1) the nh_b velocities of the row's body rbody[2 r + s] (joints.c writes them) */
+#define OVK_JROW(M, J, r) ((J) + (size_t)(r) * 2 * (size_t)(M)->nh_b)
+/* Row `row` of Phi_h stored by its nonzeros (Jb laid out as d->J), its bodies bi, bj (-1 the base),
+ * written densely into out (nh doubles, zeros outside the two bodies) */
+OVK_HIDDEN void ovk_row_dense(const ovk_model *M, const double *Jb, int row, int bi, int bj, double *out);
 
 /* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, dop853, rk4);
  * integrate_radau.c: its implicit Radau IIA of order 5 (radau) */
@@ -496,6 +505,8 @@ OVK_HIDDEN void ovk_kkt_al_columns(const ovk_model *M, ovk_data *d);
 /* kkt_al.c: the augmented Lagrangian solve over the kept rows (formulation AL), banded */
 typedef struct { int n; const int *rows, *rbody; } ovk_rowset; /* rows of Phi_h, each with its two bodies */
 OVK_HIDDEN ovk_rowset ovk_al_kept(const ovk_model *M);
+OVK_HIDDEN void ovk_rowset_times(const ovk_model *M, const ovk_data *d, const ovk_rowset *rs, const double *v,
+                                 double *y); /* y = Phi_h v over the rows of rs (their two bodies) */
 OVK_HIDDEN ovk_rowset ovk_al_all(const ovk_model *M, const ovk_data *d);
 OVK_HIDDEN void ovk_al_make_rows(const ovk_model *M, ovk_data *d);
 OVK_HIDDEN int ovk_al_half_band(const ovk_model *M);

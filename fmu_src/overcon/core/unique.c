@@ -121,8 +121,9 @@ int ovk_unique_judged(const ovk_model *M) {
     return M->redundancy == OVK_COMPLIANT ? k : M->m;
 }
 
-/* The judged rows of J into A (m x nh, in judged order) and each one's two bodies into blk (2 m);
- * 1 when one is not finite on its bodies' columns (the only ones a row fills). */
+/* The judged rows of J (Phi_h by its nonzeros, laid out as ovk_data.J: OVK_JROW) into A (m x nh,
+ * dense, in judged order) and each one's two bodies into blk (2 m); 1 when one is not finite on
+ * its bodies' columns (the only ones a row fills). */
 static int judged_rows(const ovk_model *M, const double *J, double *A, int *blk) {
     int nh = M->nb * M->nh_b, kh = M->nh_b, body;
     /* under "compliant" the compliant equations are forces, not constraints: the rigid rest is
@@ -132,7 +133,7 @@ static int judged_rows(const ovk_model *M, const double *J, double *A, int *blk)
             int k = judged_position(M, M->jrows[(size_t)j * OVK_MAXEQ + e]);
             if (k < 0) continue;
             blk[2 * k] = M->jbi[j], blk[2 * k + 1] = M->jbj[j];
-            memcpy(A + (size_t)k * nh, J + (size_t)M->jrows[(size_t)j * OVK_MAXEQ + e] * nh, (size_t)nh * sizeof(double));
+            ovk_row_dense(M, J, M->jrows[(size_t)j * OVK_MAXEQ + e], M->jbi[j], M->jbj[j], A + (size_t)k * nh);
             IN_BLOCKS(k, c, body) if (!isfinite(A[(size_t)k * nh + c])) return 1;
         }
     return 0;
@@ -232,15 +233,14 @@ int ovk_unique(const ovk_model *M, ovk_data *d, const double *y, int *rank, int 
     if (!M || !d || !y || !rank || !unique) return OVK_INVALID;
     if (d->status) return d->status;
     int m = M->m, nh = M->nb * M->nh_b;
-    double *mem = malloc((2 * (size_t)m + (size_t)m * nh + ovk_unique_doubles(m, nh) + 1) * sizeof(double));
-    if (!mem) return ovk_fail(d, OVK_NOMEM, "uniqueness: out of memory (%d equations, %d velocities)", m, nh);
-    double *phi = mem, *gam = phi + m, *J = gam + m, *work = J + (size_t)m * nh;
-    int status = ovk_rows(M, d, y, phi, J, gam);
+    double *work = malloc((ovk_unique_doubles(m, nh) + 1) * sizeof(double));
+    if (!work) return ovk_fail(d, OVK_NOMEM, "uniqueness: out of memory (%d equations, %d velocities)", m, nh);
+    int status = ovk_rows_in(M, d, y); /* Phi_h at y in d->J, by its nonzeros */
     if (!status) {
-        status = ovk_unique_rows(M, J, work, rank, unique);
+        status = ovk_unique_rows(M, d->J, work, rank, unique);
         if (status) ovk_fail(d, status, "uniqueness: a non-finite entry in the constraint Jacobian");
     }
-    free(mem);
+    free(work);
     return status;
 }
 
@@ -280,7 +280,7 @@ int ovk_pack_kept(const ovk_model *M, const int *retained, int nR, int *xrows, i
     return nx;
 }
 
-/* The equations an automatic elimination keeps at the rows J (m x nh), as
+/* The equations an automatic elimination keeps at the rows J (Phi_h by its nonzeros, OVK_JROW), as
  * overcon.analysis.independent_columns: the first r pivots of the column-pivoted Householder QR
  * of the equilibrated A = Phi_h^T (the pivot: the largest remaining column norm, the first of
  * equals, as LAPACK's dgeqp3), r its rank by the rule of ovk_unique_rows. kept: m flags; work:

@@ -52,11 +52,13 @@ static int weighted(ovk_sim *s, const double *y, const int *rows, int k, double 
     const ovk_model *M = s->M;
     int nh = s->nh, status = ovk_rows_in(M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
+    const int *body = s->d->al_rows + M->m; /* each equation's two bodies */
     for (int i = 0; i < k; i++) {
-        const double *row = s->d->J + (size_t)(rows ? rows[i] : i) * nh;
+        int r = rows ? rows[i] : i;
         double *o = out + (size_t)i * nh, norm2 = 0.0;
+        ovk_row_dense(M, s->d->J, r, body[2 * r], body[2 * r + 1], o);
         for (int c = 0; c < nh; c++) {
-            o[c] = row[c] * sqrt(M->Minv[c]);
+            o[c] = o[c] * sqrt(M->Minv[c]);
             norm2 += o[c] * o[c];
         }
         double norm = sqrt(norm2);
@@ -408,9 +410,9 @@ static void eliminated_flags(const ovk_sim *s, int *gone) {
  * of ovk_choose_kept at y (watch.reselected). */
 static int chosen_gone(ovk_sim *s, const double *y, int *gone, char *msg) {
     int *iwork = s->kept + 7 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj, rank = 0;
-    int status = ovk_rows(s->M, s->d, y, s->phi, s->J, s->gam);
+    int status = ovk_rows_in(s->M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
-    if ((status = ovk_choose_kept(s->M, s->J, s->along_work, iwork, gone, &rank))) return status;
+    if ((status = ovk_choose_kept(s->M, s->d->J, s->along_work, iwork, gone, &rank))) return status;
     for (int r = 0; r < s->m; r++) gone[r] = !gone[r];
     return OVK_OK;
 }
@@ -432,7 +434,7 @@ static int valid_eliminations(ovk_sim *s, const double *y, char *out, size_t siz
     for (int c = 0; c < candidates && found < 10; c++) {
         if (singles) {
             for (int r = 0; r < m; r++) gone[r] = r == c;
-        } else if ((status = chosen_gone(s, y, gone, msg))) { /* its rows at y into s->J again: J1 */
+        } else if ((status = chosen_gone(s, y, gone, msg))) { /* (s->J keeps the rows at y: J1) */
             return status;
         }
         int same = 1;
@@ -455,8 +457,8 @@ static int valid_eliminations(ovk_sim *s, const double *y, char *out, size_t siz
 static int nonunique_friction(ovk_sim *s, const double *y, char *out, size_t size, char *msg) {
     const ovk_model *M = s->M;
     int rank = 0, *u = s->along_unique + M->nj, count = 0;
-    int status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
-    if (!status) status = ovk_unique_rows(M, s->J, s->along_work, &rank, u);
+    int status = ovk_rows_in(M, s->d, y);
+    if (!status) status = ovk_unique_rows(M, s->d->J, s->along_work, &rank, u);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), -status;
     size_t len = 0;
     out[0] = '\0';

@@ -120,17 +120,19 @@ void ovk_eig_order(ovk_watch_eig *e, const int *rows) {
  * bodies' columns in band order, into w (nR x 2 nh_b). The frames at y stay in the workspace. */
 int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, char *msg) {
     ovk_watch_eig *e = s->eig;
-    int nR = e->nR, kh = e->kh, nh = s->nh, status = ovk_rows_in(s->M, s->d, y);
+    int nR = e->nR, kh = e->kh, status = ovk_rows_in(s->M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
     if (memcmp(rows, e->rows, (size_t)nR * sizeof(int))) /* other kept rows: their order, a cold start */
         make_order(e, rows), e->have = 0;
+    const int *rbody = s->d->al_rows + s->M->m; /* each equation's two bodies: its slots of d->J */
     for (int k = 0; k < nR; k++) {
-        const double *row = s->d->J + (size_t)rows[e->order[k]] * nh;
+        int r = rows[e->order[k]];
+        const double *row = OVK_JROW(s->M, s->d->J, r);
         double *o = w + (size_t)k * 2 * kh, norm2 = 0.0;
         for (int t = 0; t < 2; t++) {
-            int b = e->body[2 * k + t];
+            int b = e->body[2 * k + t], slot = b == rbody[2 * r] ? 0 : 1;
             for (int c = 0; c < kh; c++) {
-                o[t * kh + c] = b < 0 ? 0.0 : row[b * kh + c] * e->scale[b * kh + c];
+                o[t * kh + c] = b < 0 ? 0.0 : row[slot * kh + c] * e->scale[b * kh + c];
                 norm2 += o[t * kh + c] * o[t * kh + c];
             }
         }

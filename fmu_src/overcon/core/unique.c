@@ -153,8 +153,8 @@ static int judged_rows(const ovk_model *M, const double *J, double *B, int *blk)
  * equilibration's row scalings times W's row norms, R = its column scalings over sqrt(Minv), P
  * the projection off the columns the equilibration zeroed (each of round-off only), so
  * sigma_min(A^T) >= min L min R (wmin_low - |W (I - P)|_F) and sigma_1(A^T) <= max L max R
- * wmax_up. 1 when proven; 0 when not (then the factorisation decides). O(m nh) for the copy,
- * O(m nh_b) the rest. */
+ * wmax_up. 1 when proven; 0 when not (then the factorisation decides). O(m nh_b) in all: the rows
+ * are copied and equilibrated by their nonzeros (work: ovk_unique_cert_doubles). */
 size_t ovk_unique_cert_doubles(int m, int nh, int kh) {
     return (size_t)m * (2 * (size_t)kh + 4) + 2 * (size_t)nh + 1; /* B (m x 2 kh), cn, dc, wn, blk; rn, dr */
 }

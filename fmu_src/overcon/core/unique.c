@@ -144,6 +144,10 @@ static int judged_rows(const ovk_model *M, const double *J, double *B, int *blk)
     return 0;
 }
 
+size_t ovk_unique_cert_doubles(int m, int nh, int kh) {
+    return (size_t)m * (2 * (size_t)kh + 4) + 2 * (size_t)nh + 1; /* B (m x 2 kh), cn, dc, wn, blk; rn, dr */
+}
+
 /* Whether the rule's answer at J is known without the factorisation: the judged rows are the
  * equations W holds (the watch's kept rows, W = their rows of Phi_h M^-1/2 scaled to unit norm),
  * and W's certified singular value bounds at the same state (wmin_low <= sigma_min(W),
@@ -155,10 +159,6 @@ static int judged_rows(const ovk_model *M, const double *J, double *B, int *blk)
  * sigma_min(A^T) >= min L min R (wmin_low - |W (I - P)|_F) and sigma_1(A^T) <= max L max R
  * wmax_up. 1 when proven; 0 when not (then the factorisation decides). O(m nh_b) in all: the rows
  * are copied and equilibrated by their nonzeros (work: ovk_unique_cert_doubles). */
-size_t ovk_unique_cert_doubles(int m, int nh, int kh) {
-    return (size_t)m * (2 * (size_t)kh + 4) + 2 * (size_t)nh + 1; /* B (m x 2 kh), cn, dc, wn, blk; rn, dr */
-}
-
 int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up) {
     int nh = M->nb * M->nh_b, kh = M->nh_b, m = ovk_unique_judged(M), big = m > nh ? m : nh, body;
     if (!(wmin_low > 0.0) || !(wmax_up < INFINITY) || m > nh || !m) return 0;

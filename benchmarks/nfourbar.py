@@ -11,6 +11,9 @@ evaluation as N grows.
                                             the C runs only, with their watch's share
     python benchmarks/nfourbar.py --q0-cost [N ...] [--repeat R]
                                             the core's evaluation at q0 only, both acceleration solves
+    python benchmarks/nfourbar.py --error-table [N ...] [--methods M ...] [--tolerances TOL ...]
+                                            B0's error over the run against the tolerance (default
+                                            N = 2, dop853 and dopri5, 1e-6 ... 1e-12)
 
 For each N the scene (tolerance 1e-9 or --tolerance, dopri5) is run in process (one BLAS thread) through
 ``overcon.simulate.Simulation`` (``overcon simulate``'s path: the core's run, core/sim.c, behind
@@ -39,6 +42,9 @@ eliminated form (``[solver] singular = "stop"``: S = J_R M^-1 J_R^T in band orde
 Cholesky factor, core/kkt.c) and in the augmented Lagrangian form (``"pass"``, core/kkt_al.c),
 one line per N: the best of 5 rounds of R evaluations (default 300), so that a busy machine's
 slower rounds do not count. The main table prints the same two figures (``elim q0``, ``AL q0``).
+``--error-table``: for each N, method and tolerance, the in-process run's error of B0's x against
+the exact branch (max over the 0.01 s grid), its wall time, steps and evaluations: what a user gets
+for a tolerance through the singular positions (docs/benchmarks.md, "Error against tolerance").
 ``--plot``: the core's cost per evaluation and the in-process run's wall time per evaluation
 against N, log-log, with slopes 1 and 3 for reference. The figures go to docs/benchmarks.md
 ("The N-four-bar") by hand.
@@ -202,6 +208,29 @@ def measure(n: int, tmp: Path, stop: float, c_max: int, tolerance: float = 1e-9)
             "us_elim_q0": q0_cost(n, tmp, "stop"), "us_al_q0": q0_cost(n, tmp, "pass")}
 
 
+def error_table(ns: list[int], methods: list[str], tolerances: list[float], stop: float) -> None:
+    """``--error-table``: B0's error against the tolerance, one line per N, method and tolerance."""
+    print(f"{'N':>4} {'method':>7} {'tolerance':>9} {'error m':>9} {'wall s':>7} {'steps':>6} {'evals':>6} {'sing':>4}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in ns:
+            _, path = _generator().write(n, Path(tmp) / f"e{n}", stop_time=stop, singular="pass")
+            spec = scene.as_scene(scene.load(path))
+            model = compile_checked(spec)
+            times = np.round(np.arange(1, int(round(stop / 0.01)) + 1) * 0.01, 10)
+            ref = reference_x(n, times)
+            for method in methods:
+                for tol in tolerances:
+                    solver = dataclasses.replace(spec.solver, method=method, tolerance=tol)
+                    try:
+                        r = in_process(model, solver, times)
+                    except Exception as exc:  # a run that stopped is reported as such, not as a figure
+                        print(f"{n:>4} {method:>7} {tol:>9.0e} stopped: {exc}", flush=True)
+                        continue
+                    err = float(np.max(np.abs(r["x"] - ref)))
+                    print(f"{n:>4} {method:>7} {tol:>9.0e} {err:>9.2e} {r['wall']:>7.3f} {r['steps']:>6} "
+                          f"{r['evaluations']:>6} {r['singular']:>4}", flush=True)
+
+
 def plot(rows: list[dict], path: Path, stop: float, tolerance: float) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -226,7 +255,7 @@ def plot(rows: list[dict], path: Path, stop: float, tolerance: float) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("n", type=int, nargs="*", default=[2, 10, 40, 100])
+    ap.add_argument("n", type=int, nargs="*", help="N (default 2 10 40 100; --error-table: 2)")
     ap.add_argument("--stop-time", type=float, default=20.0)
     ap.add_argument("--tolerance", type=float, default=1e-9,
                     help="the runs' tolerance (default 1e-9; the 1e-12 column stays at 1e-12)")
@@ -238,7 +267,15 @@ def main(argv=None) -> int:
     ap.add_argument("--q0-cost", action="store_true",
                     help="only the core's evaluation at q0, eliminated form and AL (microseconds)")
     ap.add_argument("--repeat", type=int, default=300, help="with --q0-cost: evaluations per round (default 300)")
+    ap.add_argument("--error-table", action="store_true",
+                    help="B0's error against the tolerance (default N = 2; --methods, --tolerances)")
+    ap.add_argument("--methods", nargs="+", default=["dop853", "dopri5"])
+    ap.add_argument("--tolerances", type=float, nargs="+", default=[1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12])
     args = ap.parse_args(argv)
+    if args.error_table:
+        error_table(args.n or [2], args.methods, args.tolerances, args.stop_time)
+        return 0
+    args.n = args.n or [2, 10, 40, 100]
     if args.q0_cost:
         q0_table(args.n, args.repeat)
         return 0

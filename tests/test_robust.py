@@ -167,14 +167,21 @@ def chain(n: int, path: Path) -> Path:
     return path
 
 
-def test_2000_extra_bodies_refused_at_once(tmp_path):
+def test_2000_extra_bodies_refused_at_once(tmp_path, monkeypatch):
+    """Bodies and joints over their limits are both reported (the limits lowered to 2000 here, so
+    that the file stays small: the real ones are 20,000 and 40,000, docs/limits.md)."""
+    monkeypatch.setattr(scene, "MAX_BODIES", 2000)
+    monkeypatch.setattr(scene, "MAX_JOINTS", 2000)
     path = chain(2004, tmp_path / "big.toml")
     code, _, err = cli("check", path)
     assert code == 2 and f"{path}: bodies: 2004 entries; at most {scene.MAX_BODIES}" in err
     assert f"{path}: joints: 2004 entries; at most {scene.MAX_JOINTS}" in err
 
 
-def test_mechanism_at_the_body_limit_is_accepted(tmp_path):
+def test_mechanism_at_the_body_limit_is_accepted(tmp_path, monkeypatch):
+    """At the limit accepted, one over refused (the limit lowered to 1000 to keep the file small;
+    a 10,000-body chain at the real limits: tests/test_sparse_scale.py)."""
+    monkeypatch.setattr(scene, "MAX_BODIES", 1000)
     path = chain(scene.MAX_BODIES, tmp_path / "limit.toml")
     spec = scene.load(path)
     assert len(spec.bodies) == scene.MAX_BODIES

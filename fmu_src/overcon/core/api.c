@@ -181,10 +181,10 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     size_t n_frames = (nb + 1) * (2 * dim + dim * dim + wd) + 4 * nb;
     size_t n_work = 4 * nx + nx * nc                          /* lam0x, x, x0, Wx */
                     + 4 * nx + nc * nx + nx * nx + nc + nx;   /* r, Dq, Mx, dx, xn, qn, rn (damped Newton) */
-    size_t need = n_frames + m * nh + 3 * m + nS + nR * (nc ? nc : 1) + 2 * nR + nh + nR * nc
+    size_t need = n_frames + m * 2 * (size_t)M->nh_b + 3 * m + nS + nR * (nc ? nc : 1) + 2 * nR + nh + nR * nc
                   + 6 * OVK_MAXEQ * nj + n_work + (OVK_MAXEQ + 12) * nfj + ovk_robust_doubles(M->nx, M->ncols)
                   + ovk_redundancy_doubles(M);
-    d->mem = calloc(need ? need : 1, sizeof(double)); /* zeros: Phi_h outside its rows' blocks stays so (joints.c) */
+    d->mem = calloc(need ? need : 1, sizeof(double)); /* zeros: Phi_h's unused slots stay so (joints.c) */
     d->ctx = calloc(nfj ? nfj : 1, sizeof(ovk_fctx));
     d->piv = calloc(nx ? nx : 1, sizeof(int));
     if (!d->mem || !d->ctx || !d->piv) {
@@ -204,7 +204,7 @@ ovk_data *ovk_make_data(const ovk_model *M) {
     d->f.R = p; p += (nb + 1) * dim * dim;
     d->f.w = p; p += (nb + 1) * wd;
     d->f.sb = p; p += nb; d->f.cb = p; p += nb; d->f.sg = p; p += nb; d->f.cg = p; p += nb;
-    d->J = p; p += m * nh;
+    d->J = p; p += m * 2 * (size_t)M->nh_b;
     d->phi = p; p += m;
     d->gam = p; p += m;
     d->phit = p; p += m;
@@ -336,10 +336,11 @@ int ovk_rows_in(const ovk_model *M, ovk_data *d, const double *y) {
 int ovk_rows(const ovk_model *M, ovk_data *d, const double *y, double *phi, double *J, double *gam) {
     int status = ovk_rows_in(M, d, y), nh = M->nb * M->nh_b;
     if (status) return status;
+    const int *body = d->al_rows + M->m; /* each equation's two bodies (kkt_al.c ovk_al_make_rows) */
     for (int r = 0; r < M->m; r++) {
         phi[r] = d->phi[r];
         gam[r] = d->gam[r];
-        for (int k = 0; k < nh; k++) J[(size_t)r * nh + k] = d->J[(size_t)r * nh + k];
+        ovk_row_dense(M, d->J, r, body[2 * r], body[2 * r + 1], J + (size_t)r * nh);
     }
     return OVK_OK;
 }

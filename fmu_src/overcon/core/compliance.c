@@ -68,12 +68,13 @@ int ovk_check_redundancy(const ovk_model *M, ovk_data *d) {
 
 /* Phi_h h of the retained row at position p (the row's bodies only: it is zero elsewhere). */
 double ovk_row_rate(const ovk_model *M, const ovk_data *d, int p, const double *h) {
-    int nh = M->nb * M->nh_b, kh = M->nh_b, row = M->retained[p];
+    int kh = M->nh_b, row = M->retained[p];
+    const double *Jr = OVK_JROW(M, d->J, row);
     double s = 0.0;
     for (int s2 = 0; s2 < 2; s2++) {
         int b = M->rbody[2 * p + s2];
         if (b < 0 || (s2 == 1 && b == M->rbody[2 * p])) continue;
-        for (int k = b * kh; k < (b + 1) * kh; k++) s += d->J[(size_t)row * nh + k] * h[k];
+        for (int k = 0; k < kh; k++) s += Jr[s2 * kh + k] * h[b * kh + k];
     }
     return s;
 }
@@ -86,14 +87,15 @@ int ovk_axis_group(const ovk_model *M, const ovk_data *d, int a, int rot, const 
                    double *phi, double *rate) {
     const int *ai = M->axi + OVK_NAXI * a;
     const double *ap = M->axp + OVK_NAXP * a, *Ri = d->f.R + 9 * ovk_slot(M, ai[0]);
-    int b = ai[0] >= 0 ? ai[0] : ai[1], nh = M->nb * M->nh_b, n = ai[2 + rot];
+    int b = ai[0] >= 0 ? ai[0] : ai[1], n = ai[2 + rot];
     const int *pos = ai + 4 + 3 * rot;
     const double *Rb = d->f.R + 9 * b;
     double F[9];
     for (int r = 0; r < 3; r++)
         for (int c = 0; c < 3; c++) F[3 * r + c] = Ri[3 * r] * ap[c] + Ri[3 * r + 1] * ap[3 + c] + Ri[3 * r + 2] * ap[6 + c];
     for (int e = 0; e < n; e++) {
-        const double *Je = d->J + (size_t)M->retained[pos[e]] * nh + 6 * b + 3 * rot;
+        int row = M->retained[pos[e]], slot = M->rbody[2 * pos[e]] == b ? 0 : 1; /* body b's slot of the row */
+        const double *Je = OVK_JROW(M, d->J, row) + (size_t)slot * M->nh_b + 3 * rot;
         double u[3];
         for (int x = 0; x < 3; x++) u[x] = rot ? Rb[3 * x] * Je[0] + Rb[3 * x + 1] * Je[1] + Rb[3 * x + 2] * Je[2] : Je[x];
         for (int x = 0; x < 3; x++) FU[x][e] = F[x] * u[0] + F[3 + x] * u[1] + F[6 + x] * u[2];
@@ -163,11 +165,11 @@ int ovk_compliant_solve(const ovk_model *M, ovk_data *d, const double *h) {
     memcpy(dr.Q, d->Q, sizeof(double) * nh);
     for (int p = 0; p < nR; p++) { /* Q - J_c^T lam_c */
         if (!M->ckind[p]) continue;
-        const double *Jp = d->J + (size_t)M->retained[p] * nh;
+        const double *Jp = OVK_JROW(M, d->J, M->retained[p]);
         for (int s2 = 0; s2 < 2; s2++) {
             int b = M->rbody[2 * p + s2];
             if (b < 0 || (s2 == 1 && b == M->rbody[2 * p])) continue;
-            for (int k = b * kh; k < (b + 1) * kh; k++) dr.Q[k] -= Jp[k] * d->lamR[p];
+            for (int k = 0; k < kh; k++) dr.Q[b * kh + k] -= Jp[s2 * kh + k] * d->lamR[p];
         }
     }
     for (int i = 0; i < M->nrig; i++) dr.g[i] = d->g[M->rigpos[i]];

@@ -189,7 +189,9 @@ typedef struct {
  * ovk_make_data, and the last failure's message. */
 typedef struct {
     ovk_frames f;
-    double *J;     /* m x nh: Phi_h */
+    double *J;     /* Phi_h by its nonzeros: m rows of 2 nh_b (OVK_JROW): row r's velocities of its
+                    * joint's body i, then of body j (the order of rbody and al_rows; body j's slots
+                    * unused when it is the base or body i, body i's when it is the base) */
     double *phi;   /* m */
     double *gam;   /* m */
     double *S;     /* S = J_R M^-1 J_R^T in band order (band storage of linalg.c: nR x (sb.band + 1)),
@@ -224,6 +226,13 @@ typedef struct {
     double *phit;  /* m: Phi_t of the drivers' equations (0 elsewhere), with Phi at d->f.t (joints.c) */
     double *u;     /* inputs: 2 nu + 1: the values at u_t, their slopes (per s), then u_t (inputs.c) */
 } ovk_data;
+
+/* Row r of Phi_h stored by its nonzeros (ovk_data.J, or a copy laid out alike): 2 nh_b doubles, slot s
+ * (0, 1) the nh_b velocities of the row's body rbody[2 r + s] (joints.c writes them) */
+#define OVK_JROW(M, J, r) ((J) + (size_t)(r) * 2 * (size_t)(M)->nh_b)
+/* Row `row` of Phi_h stored by its nonzeros (Jb laid out as d->J), its bodies bi, bj (-1 the base),
+ * written densely into out (nh doubles, zeros outside the two bodies) */
+OVK_HIDDEN void ovk_row_dense(const ovk_model *M, const double *Jb, int row, int bi, int bj, double *out);
 
 /* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, dop853, rk4);
  * integrate_radau.c: its implicit Radau IIA of order 5 (radau) */
@@ -342,8 +351,11 @@ typedef struct {
     long long friction_iterations, evaluations;
     double max_drift, min_ratio, t_prev, wall_time;
     double *ev_lam, *ev_qf, *guess, *yout; /* scratch: m, ncols, max(m, ncols), ny */
-    double *phi, *J, *gam;         /* scratch: m, m nh, m */
-    double *W, *W2;                /* watch scratch: weighted rows, their forward difference (m nh each) */
+    double *phi, *gam;             /* scratch: m, m */
+    /* the watch's rare whole-Jacobian paths (an expiring or reselected elimination, a rank or
+     * uniqueness by factorisation: bandsvd.c, unique.c), which take the rows dense: m nh each,
+     * allocated by ovk_sim_dense when first needed (a run that never needs them stays O(nonzeros)) */
+    double *J, *W, *W2, *dense;    /* dense rows at a state, weighted rows, another set; their allocation */
     double *T;                     /* watch scratch: the tracked vectors kept aside (2 m) */
     double *ywatch, *ystar, *qwatch; /* watch scratch: states (ny each), coordinate rates (n) */
     double rate, ratio;            /* watch: dr/dt and r of the kept equations at the last check */
@@ -355,8 +367,9 @@ typedef struct {
     /* uniqueness along the motion (unique.c, evaluated by watch.c) and the run's events */
     int along_rank;                /* the whole Jacobian's rank at the last evaluation (pre-check rule) */
     int *along_unique;             /* nj: each joint's reaction unique there */
-    double *along_work;            /* ovk_unique_doubles(m, nh) */
-    double *bsv_work;              /* ovk_bsv_doubles(m, nh): the watch's whole-Jacobian ranks (bandsvd.c) */
+    double *along_work;            /* ovk_unique_doubles(m, nh) (ovk_sim_dense) */
+    double *bsv_work;              /* ovk_bsv_doubles(m, nh): the watch's whole-Jacobian ranks (ovk_sim_dense) */
+    double *cert_work;             /* ovk_unique_cert_doubles: the certified uniqueness (O(nonzeros)) */
     ovk_event *events;             /* nevents of cap_events, in the order they happened */
     int nevents, cap_events;
     /* the kept equations chosen again during the run (watch.c, sim.c) */
@@ -400,11 +413,17 @@ OVK_HIDDEN int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, d
 OVK_HIDDEN int ovk_sim_push_event(ovk_sim *s, double t, int kind, const char *detail);
 /* unique.c: rank and per-joint reaction uniqueness from the whole Jacobian (the pre-check's rule) */
 OVK_HIDDEN size_t ovk_unique_doubles(int m, int nh);
+OVK_HIDDEN size_t ovk_unique_cert_doubles(int m, int nh, int kh); /* ovk_unique_certified's work */
 OVK_HIDDEN int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank, int *unique);
 OVK_HIDDEN int ovk_choose_kept(const ovk_model *M, const double *J, double *work, int *iwork, int *kept, int *rank);
 OVK_HIDDEN int ovk_unique_judged(const ovk_model *M);
 OVK_HIDDEN int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up);
 /* sim.c: the run goes on from (t, y) under the kept equations `kept` (m flags), its integrator anew */
+/* sim.c: the dense scratch of the watch's rare paths (J, W, W2, along_work, bsv_work), made on first
+ * use; OVK_NOMEM with its size in msg when it cannot be */
+OVK_HIDDEN int ovk_sim_dense(ovk_sim *s, char *msg);
+/* watch.c: the uniqueness along the motion at the run's start (certified where it can be) */
+OVK_HIDDEN int ovk_sim_along_start(ovk_sim *s, double t0, const double *y0, char *msg);
 OVK_HIDDEN int ovk_sim_restart(ovk_sim *s, const int *kept, double t, const double *y);
 OVK_HIDDEN int ovk_sim_use_kept(ovk_sim *s, const int *retained);
 /* watch.c: an expired elimination chosen again (or the stop), a degrading one chosen again */
@@ -541,6 +560,8 @@ OVK_HIDDEN void ovk_kkt_al_columns(const ovk_model *M, ovk_data *d);
 /* kkt_al.c: the augmented Lagrangian solve over the kept rows (formulation AL), banded */
 typedef struct { int n; const int *rows, *rbody; } ovk_rowset; /* rows of Phi_h, each with its two bodies */
 OVK_HIDDEN ovk_rowset ovk_al_kept(const ovk_model *M);
+OVK_HIDDEN void ovk_rowset_times(const ovk_model *M, const ovk_data *d, const ovk_rowset *rs, const double *v,
+                                 double *y); /* y = Phi_h v over the rows of rs (their two bodies) */
 OVK_HIDDEN ovk_rowset ovk_al_all(const ovk_model *M, const ovk_data *d);
 OVK_HIDDEN void ovk_al_make_rows(const ovk_model *M, ovk_data *d);
 OVK_HIDDEN int ovk_al_half_band(const ovk_model *M);

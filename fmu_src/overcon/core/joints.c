@@ -17,23 +17,29 @@ void ovk_joint_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi,
     }
 }
 
-/* Zeros in joint j's rows of Phi_h (m x nh) at its two bodies' columns. */
+/* Zeros in joint j's rows of Phi_h (both slots of each, OVK_JROW). */
 static void clear_blocks(const ovk_model *M, double *J, int j) {
-    int nh = M->nb * M->nh_b, kh = M->nh_b;
-    for (int e = 0; e < M->jneq[j]; e++) {
-        int row = M->jrows[OVK_MAXEQ * j + e];
-        if (M->jbi[j] >= 0) memset(J + (size_t)row * nh + (size_t)M->jbi[j] * kh, 0, sizeof(double) * kh);
-        if (M->jbj[j] >= 0) memset(J + (size_t)row * nh + (size_t)M->jbj[j] * kh, 0, sizeof(double) * kh);
-    }
+    for (int e = 0; e < M->jneq[j]; e++)
+        memset(OVK_JROW(M, J, M->jrows[OVK_MAXEQ * j + e]), 0, sizeof(double) * 2 * (size_t)M->nh_b);
+}
+
+void ovk_row_dense(const ovk_model *M, const double *Jb, int row, int bi, int bj, double *out) {
+    int kh = M->nh_b, nh = M->nb * kh;
+    const double *r = OVK_JROW(M, Jb, row);
+    memset(out, 0, sizeof(double) * (size_t)nh);
+    if (bi >= 0)
+        for (int k = 0; k < kh; k++) out[bi * kh + k] = r[k];
+    if (bj >= 0 && bj != bi)
+        for (int k = 0; k < kh; k++) out[bj * kh + k] = r[kh + k];
 }
 
 /* d->phi, d->J (Phi_h), d->gam from the frames in d->f, and every joint's (J_X)_i block in
  * d->Jblk (the friction setup needs it). Each row of Phi_h is nonzero on its joint's two bodies'
- * columns only, and only these blocks are written here (nothing else writes d->J): they are
- * cleared, all of them before any is filled, and the rest of the array keeps the zeros of the
- * workspace's allocation (ovk_make_data), so the cost is the blocks', not m x nh. */
+ * columns only, and only these are stored (d->J, OVK_JROW: slot 0 body i's, slot 1 body j's; a
+ * joint of a body with itself adds both into slot 0): cleared, all of them before any is filled,
+ * so the cost and the memory are the nonzeros', not m x nh. */
 void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
-    int nh = M->nb * M->nh_b, kh = M->nh_b;
+    int kh = M->nh_b;
     double *J = d->J;
     for (int j = 0; j < M->nj; j++) clear_blocks(M, J, j);
     double blkJ[6 * OVK_MAXEQ], ph[OVK_MAXEQ], gm[OVK_MAXEQ];
@@ -47,14 +53,16 @@ void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
             ph[1] = pi - pj - M->jconst[NJC * j + 6];
         }
         if (M->jtype[j] == J_DRIVER) d->phit[M->jrows[OVK_MAXEQ * j]] = ovk_driver_phit(M, j, d->f.t);
+        int same = M->jbj[j] == M->jbi[j];
         for (int e = 0; e < ne; e++) {
             int row = M->jrows[OVK_MAXEQ * j + e];
+            double *Jr = OVK_JROW(M, J, row);
             d->phi[row] = ph[e];
             d->gam[row] = gm[e];
             if (M->jbi[j] >= 0)
-                for (int k = 0; k < kh; k++) J[(size_t)row * nh + M->jbi[j] * kh + k] += blkI[e * kh + k];
+                for (int k = 0; k < kh; k++) Jr[k] += blkI[e * kh + k];
             if (M->jbj[j] >= 0)
-                for (int k = 0; k < kh; k++) J[(size_t)row * nh + M->jbj[j] * kh + k] += blkJ[e * kh + k];
+                for (int k = 0; k < kh; k++) Jr[(same ? 0 : kh) + k] += blkJ[e * kh + k];
         }
     }
 }

@@ -17,7 +17,7 @@
 
 /* d->g: gamma of the retained rows, with Baumgarte stabilisation (-2 a Phi_h h - a^2 Phi) for a > 0. */
 void ovk_kkt_rhs(const ovk_model *M, ovk_data *d, const double *h) {
-    int nh = M->nb * M->nh_b, kh = M->nh_b;
+    int kh = M->nh_b;
     const int *rb = M->rbody;
     double a = M->baumgarte;
     for (int i = 0; i < M->nR; i++) {
@@ -25,10 +25,11 @@ void ovk_kkt_rhs(const ovk_model *M, ovk_data *d, const double *h) {
         d->g[i] = d->gam[row];
         if (a > 0.0) {
             double ph_h = 0.0;
+            const double *Jr = OVK_JROW(M, d->J, row);
             for (int s2 = 0; s2 < 2; s2++) {
                 int b = rb[2 * i + s2];
-                if (b < 0) continue;
-                for (int k = b * kh; k < (b + 1) * kh; k++) ph_h += d->J[(size_t)row * nh + k] * h[k];
+                if (b < 0 || (s2 == 1 && b == rb[2 * i])) continue;
+                for (int k = 0; k < kh; k++) ph_h += Jr[s2 * kh + k] * h[b * kh + k];
             }
             if (d->phit[row] != 0.0) ph_h += d->phit[row]; /* a driver: Phi' = Phi_h h + Phi_t */
             d->g[i] = d->g[i] - 2.0 * a * ph_h - a * a * d->phi[row];
@@ -52,21 +53,23 @@ static void band_solve(const ovk_model *M, ovk_data *d, double *B, int nc) {
  * OVK_SINGULAR when S is not positive definite (a singular position), OVK_NONFINITE on a
  * non-finite S or right-hand side; both name the retained row (its equation) where it showed. */
 int ovk_kkt_solve(const ovk_model *M, ovk_data *d) {
-    int nR = M->nR, nh = M->nb * M->nh_b, kh = M->nh_b, p = d->sb.band, w = p + 1;
+    int nR = M->nR, kh = M->nh_b, p = d->sb.band, w = p + 1;
     const int *rb = M->rbody, *order = d->sb.order, *body = d->sb.body;
     const double *J = d->J;
     double *S = d->S;
     for (int a = 0; a < nR; a++) { /* row a of the band: columns a..a+p */
-        const double *Ja = J + (size_t)M->retained[order[a]] * nh;
+        int ia = order[a];
+        const double *Ja = OVK_JROW(M, J, M->retained[ia]);
         int last = a + p < nR - 1 ? a + p : nR - 1;
         for (int b = a; b <= last; b++) { /* S_ab over the bodies of row b (rbody's order) that row a shares */
             int i = order[b];
-            const double *Jb = J + (size_t)M->retained[i] * nh;
+            const double *Jb = OVK_JROW(M, J, M->retained[i]);
             double s = 0.0;
             for (int s2 = 0; s2 < 2; s2++) {
                 int c = rb[2 * i + s2];
                 if (c < 0 || (s2 == 1 && c == rb[2 * i]) || (c != body[2 * a] && c != body[2 * a + 1])) continue;
-                for (int k = c * kh; k < (c + 1) * kh; k++) s += Jb[k] * (M->Minv[k] * Ja[k]);
+                int sa = c == rb[2 * ia] ? 0 : 1; /* row a's slot of body c */
+                for (int k = 0; k < kh; k++) s += Jb[s2 * kh + k] * (M->Minv[c * kh + k] * Ja[sa * kh + k]);
             }
             if (!isfinite(s))
                 return ovk_fail(d, OVK_NONFINITE, "non-finite number in S = Phi_h M^-1 Phi_h^T (row %d)",
@@ -80,12 +83,12 @@ int ovk_kkt_solve(const ovk_model *M, ovk_data *d) {
                         "(Cholesky pivot %d of %d, retained row %d)", col - 1, nR, M->retained[order[col - 1]]);
     if (M->redundancy == OVK_MIN_NORM && (status = ovk_minnorm_factor(M, d))) return status; /* S^+ in d->S */
     for (int i = 0; i < nR; i++) {
-        const double *Ji = J + (size_t)M->retained[i] * nh;
+        const double *Ji = OVK_JROW(M, J, M->retained[i]);
         double s = 0.0;
         for (int s2 = 0; s2 < 2; s2++) {
             int b = rb[2 * i + s2];
             if (b < 0 || (s2 == 1 && b == rb[2 * i])) continue;
-            for (int k = b * kh; k < (b + 1) * kh; k++) s += M->Minv[k] * Ji[k] * d->Q[k];
+            for (int k = 0; k < kh; k++) s += M->Minv[b * kh + k] * Ji[s2 * kh + k] * d->Q[b * kh + k];
         }
         d->lamR[i] = s - d->g[i];
     }
@@ -111,16 +114,20 @@ void ovk_kkt_friction_columns(const ovk_model *M, ovk_data *d) {
         ovk_kkt_al_columns(M, d);
         return;
     }
-    int nR = M->nR, nc = M->ncols, nh = M->nb * M->nh_b;
+    int nR = M->nR, nc = M->ncols, kh = M->nh_b;
     if (M->redundancy == OVK_COMPLIANT) { /* redundancy: the rigid rows' columns (compliance.c) */
         ovk_compliant_columns(M, d);
         return;
     }
-    for (int i = 0; i < nR; i++)
-        for (int c = 0; c < nc; c++) {
-            int k = M->cols[c];
-            d->W[i * nc + c] = M->Minv[k] * d->J[(size_t)M->retained[i] * nh + k];
+    for (int i = 0; i < nR; i++) {
+        const double *Ji = OVK_JROW(M, d->J, M->retained[i]);
+        int b0 = M->rbody[2 * i], b1 = M->rbody[2 * i + 1];
+        for (int c = 0; c < nc; c++) { /* the row's entry at velocity k: zero off its two bodies */
+            int k = M->cols[c], b = k / kh;
+            double v = b == b0 ? Ji[k - b * kh] : b == b1 ? Ji[kh + k - b * kh] : 0.0;
+            d->W[i * nc + c] = M->Minv[k] * v;
         }
+    }
     if (M->redundancy == OVK_MIN_NORM)
         ovk_minnorm_solve_many(M, d, d->W, nc);
     else
@@ -135,11 +142,11 @@ void ovk_kkt_accelerations(const ovk_model *M, ovk_data *d, double *lam, double 
     for (int i = 0; i < nR; i++) lam[M->retained[i]] = d->lamR[i];
     memset(hdot, 0, sizeof(double) * nh); /* J_R lam_R first */
     for (int i = 0; i < nR; i++) {
-        const double *Ji = d->J + (size_t)M->retained[i] * nh;
+        const double *Ji = OVK_JROW(M, d->J, M->retained[i]);
         for (int s2 = 0; s2 < 2; s2++) {
             int b = rb[2 * i + s2];
             if (b < 0 || (s2 == 1 && b == rb[2 * i])) continue;
-            for (int k = b * kh; k < (b + 1) * kh; k++) hdot[k] += Ji[k] * d->lamR[i];
+            for (int k = 0; k < kh; k++) hdot[b * kh + k] += Ji[s2 * kh + k] * d->lamR[i];
         }
     }
     for (int k = 0; k < nh; k++) hdot[k] = M->Minv[k] * (d->Q[k] - hdot[k]);

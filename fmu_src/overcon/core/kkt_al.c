@@ -110,27 +110,30 @@ size_t ovk_al_doubles(const ovk_model *M) {
 
 /* y = J v (rs->n) and v += c J^T u (nh): the rows of rs over their two bodies' coordinates. */
 static void rows_times(const ovk_model *M, const ovk_data *d, const ovk_rowset *rs, const double *v, double *y) {
-    int nh = M->nb * M->nh_b, kh = M->nh_b;
+    int kh = M->nh_b;
     for (int i = 0; i < rs->n; i++) {
-        const double *Ji = d->J + (size_t)rs->rows[i] * nh;
+        const double *Ji = OVK_JROW(M, d->J, rs->rows[i]);
         double s = 0.0;
         for (int s2 = 0; s2 < 2; s2++) {
             int b = rs->rbody[2 * i + s2];
             if (b < 0 || (s2 == 1 && b == rs->rbody[2 * i])) continue;
-            for (int k = b * kh; k < (b + 1) * kh; k++) s += Ji[k] * v[k];
+            for (int k = 0; k < kh; k++) s += Ji[s2 * kh + k] * v[b * kh + k];
         }
         y[i] = s;
     }
 }
+void ovk_rowset_times(const ovk_model *M, const ovk_data *d, const ovk_rowset *rs, const double *v, double *y) {
+    rows_times(M, d, rs, v, y);
+}
 static void rows_t_add(const ovk_model *M, const ovk_data *d, const ovk_rowset *rs, const double *u, double c,
                        double *v) {
-    int nh = M->nb * M->nh_b, kh = M->nh_b;
+    int kh = M->nh_b;
     for (int i = 0; i < rs->n; i++) {
-        const double *Ji = d->J + (size_t)rs->rows[i] * nh;
+        const double *Ji = OVK_JROW(M, d->J, rs->rows[i]);
         for (int s2 = 0; s2 < 2; s2++) {
             int b = rs->rbody[2 * i + s2];
             if (b < 0 || (s2 == 1 && b == rs->rbody[2 * i])) continue;
-            for (int k = b * kh; k < (b + 1) * kh; k++) v[k] += c * Ji[k] * u[i];
+            for (int k = 0; k < kh; k++) v[b * kh + k] += c * Ji[s2 * kh + k] * u[i];
         }
     }
 }
@@ -147,7 +150,7 @@ int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double 
         if (1.0 / M->Minv[k] > mmax) mmax = 1.0 / M->Minv[k];
     memset(A, 0, sizeof(double) * (size_t)nh * (size_t)w);
     for (int i = 0; i < rs->n; i++) { /* J^T J, its upper band; the diagonal gives alpha's scale */
-        const double *Ji = d->J + (size_t)rs->rows[i] * nh;
+        const double *Ji = OVK_JROW(M, d->J, rs->rows[i]);
         int b0 = rs->rbody[2 * i], b1 = rs->rbody[2 * i + 1];
         for (int s2 = 0; s2 < 2; s2++) {
             int a = s2 ? b1 : b0;
@@ -157,7 +160,7 @@ int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double 
                 if (b < 0 || (t2 == 1 && b == b0) || b < a) continue;
                 for (int k = a * kh; k < (a + 1) * kh; k++)
                     for (int l = b * kh; l < (b + 1) * kh; l++)
-                        if (l >= k) A[(size_t)k * w + (l - k)] += Ji[k] * Ji[l];
+                        if (l >= k) A[(size_t)k * w + (l - k)] += Ji[s2 * kh + k - a * kh] * Ji[t2 * kh + l - b * kh];
             }
         }
     }

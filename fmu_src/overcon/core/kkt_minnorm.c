@@ -22,14 +22,21 @@ int ovk_minnorm_factor(const ovk_model *M, ovk_data *d) {
     int nR = M->nR, nh = M->nb * M->nh_b, rows_short = nR <= nh;
     int k = rows_short ? nR : nh, len = rows_short ? nh : nR; /* Jacobi on k vectors of length len */
     double *T = d->red, *U = T + (size_t)nR * nh, *sv = U + (size_t)nR * nR, *P = d->S;
-    for (int i = 0; i < nR; i++) {
-        const double *Ji = d->J + (size_t)M->retained[i] * nh;
-        for (int c = 0; c < nh; c++) {
-            double b = Ji[c] * sqrt(M->Minv[c]);
-            if (rows_short)
-                T[(size_t)i * nh + c] = b;
-            else
-                T[(size_t)c * nR + i] = b;
+    for (int i = 0; i < nR; i++) { /* B = J_R M^-1/2, row i written densely from its two bodies' slots */
+        if (rows_short) {
+            double *Ti = T + (size_t)i * nh;
+            ovk_row_dense(M, d->J, M->retained[i], M->rbody[2 * i], M->rbody[2 * i + 1], Ti);
+            for (int c = 0; c < nh; c++) Ti[c] = Ti[c] * sqrt(M->Minv[c]);
+            continue;
+        }
+        const double *Ji = OVK_JROW(M, d->J, M->retained[i]);
+        int kh = M->nh_b;
+        for (int c = 0; c < nh; c++) T[(size_t)c * nR + i] = 0.0;
+        for (int s2 = 0; s2 < 2; s2++) {
+            int b = M->rbody[2 * i + s2];
+            if (b < 0 || (s2 == 1 && b == M->rbody[2 * i])) continue;
+            for (int k = 0; k < kh; k++)
+                T[(size_t)(b * kh + k) * nR + i] = Ji[s2 * kh + k] * sqrt(M->Minv[b * kh + k]);
         }
     }
     /* rows_short: T := U^T B (rows s_i v_i^T), U's rows u_i; else T := V^T B^T (rows s_i u_i^T). The

@@ -67,11 +67,9 @@ int ovk_project(const ovk_model *M, ovk_data *d, double t, double *y, double tol
      * dh (J dh = -J h, least M-norm) is solved for, not h* itself, so that the round-off is the
      * correction's, not the velocity's */
     if ((status = ovk_al_factor(M, d, &all, OVK_AL_ALPHA_PROJ))) return status;
-    for (int i = 0; i < M->m; i++) {
-        const double *Ji = d->J + (size_t)i * nh;
-        double s = 0.0;
-        for (int k = 0; k < nh; k++) s += Ji[k] * h[k];
-        g[i] = -s;
+    {
+        ovk_rowset_times(M, d, &all, h, g); /* J h over each row's two bodies, then its negative */
+        for (int i = 0; i < M->m; i++) g[i] = -g[i];
     }
     ovk_al_solve(M, d, &all, zero, g, dh, mu);
     for (int k = 0; k < nh; k++) h[k] += dh[k];

@@ -7,7 +7,7 @@
  * slot: a body that is the base) and vals[r * 2 kh + k]: body i's kh columns, then body j's
  * (body j's slots unused when it is body i). */
 int ovk_rows_sparse(const ovk_model *M, ovk_data *d, const double *y, double *phi, int *cols, double *vals) {
-    int status = ovk_rows_in(M, d, y), nh = M->nb * M->nh_b, kh = M->nh_b, w = 2 * M->nh_b;
+    int status = ovk_rows_in(M, d, y), kh = M->nh_b, w = 2 * M->nh_b;
     if (status) return status;
     for (int r = 0; r < M->m * w; r++) {
         cols[r] = -1;
@@ -23,7 +23,7 @@ int ovk_rows_sparse(const ovk_model *M, ovk_data *d, const double *y, double *ph
                 for (int k = 0; k < kh; k++) {
                     int c = body[s] * kh + k;
                     cols[(size_t)row * w + s * kh + k] = c;
-                    vals[(size_t)row * w + s * kh + k] = d->J[(size_t)row * nh + c];
+                    vals[(size_t)row * w + s * kh + k] = OVK_JROW(M, d->J, row)[s * kh + k];
                 }
             }
         }

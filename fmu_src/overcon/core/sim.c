@@ -134,10 +134,7 @@ static void layout(ovk_sim *s) {
     s->guess = p; p += m > nc ? m : nc;
     s->yout = p; p += ny;
     s->phi = p; p += m;
-    s->J = p; p += m * nh;
     s->gam = p; p += m;
-    s->W = p; p += m * nh;
-    s->W2 = p; p += m * nh;
     s->T = p; p += 2 * m;
     s->ywatch = p; p += ny;
     s->ystar = p; p += ny;
@@ -203,7 +200,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->m = M->m;
     s->ncols = M->ncols;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh;
-    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 3 * m * nh + 2 * m + (size_t)s->n +
+    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 2 * m + (size_t)s->n +
                   nh + ovk_rk_doubles(o->rk.method, s->ny);
     s->mem = calloc(need, sizeof(double));
     if (!s->mem) {
@@ -217,11 +214,10 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->t_comm = t0;
     s->t_changed = -INFINITY;
     s->along_unique = calloc(2 * (size_t)M->nj + 1, sizeof(int));
-    s->along_work = malloc(ovk_unique_doubles(s->m, s->nh) * sizeof(double) + 1);
-    s->bsv_work = malloc(ovk_bsv_doubles(s->m, s->nh) * sizeof(double) + 1);
+    s->cert_work = malloc(ovk_unique_cert_doubles(s->m, s->nh, M->nh_b) * sizeof(double) + 1);
     s->kept = calloc(8 * (size_t)s->m + 2 * OVK_MAXEQ * (size_t)M->nfj + (size_t)M->nj + 1, sizeof(int));
     s->y0 = malloc((size_t)s->ny * sizeof(double) + 1);
-    if (!s->along_unique || !s->along_work || !s->bsv_work || !s->kept || !s->y0) {
+    if (!s->along_unique || !s->cert_work || !s->kept || !s->y0) {
         s->status = OVK_NOMEM;
         snprintf(s->msg, sizeof s->msg, "cannot start: out of memory (uniqueness along the motion)");
         return s;
@@ -235,7 +231,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     int status = ovk_rk_start(&s->rk, &o->rk, s->ny, s->rk.y, t0, y0, sim_rhs, s, s->msg);
     s->rk.dense_fun = sim_rhs_dense, s->rk.dense_ctx = s;
     if (!status) status = ovk_sim_monitor(s, t0, s->rk.y, NULL, 1, s->msg);
-    if (!status) status = ovk_sim_along(s, t0, s->rk.y, 1, 0.0, INFINITY, s->msg);
+    if (!status) status = ovk_sim_along_start(s, t0, s->rk.y, s->msg);
     if (!status) status = ovk_sim_energy_start(s, t0, s->rk.y);
     if (status) s->status = stopped(s, status, "cannot start", t0);
     return s;
@@ -248,12 +244,28 @@ void ovk_sim_free(ovk_sim *s) {
     free(s->along_unique);
     free(s->along_work);
     free(s->bsv_work);
+    free(s->cert_work);
+    free(s->dense);
     free(s->events);
     free(s->kept);
     free(s->y0);
     free(s->out_mem);
     ovk_eig_free(s->eig);
     free(s);
+}
+
+int ovk_sim_dense(ovk_sim *s, char *msg) {
+    if (s->dense && s->along_work && s->bsv_work) return OVK_OK;
+    size_t mn = (size_t)s->m * (size_t)s->nh, a = ovk_unique_doubles(s->m, s->nh), b = ovk_bsv_doubles(s->m, s->nh);
+    if (!s->dense) s->dense = malloc(3 * mn * sizeof(double) + 1);
+    if (!s->along_work) s->along_work = malloc(a * sizeof(double) + 1);
+    if (!s->bsv_work) s->bsv_work = malloc(b * sizeof(double) + 1);
+    if (!s->dense || !s->along_work || !s->bsv_work)
+        return snprintf(msg, OVK_MSG, "out of memory: the singularity watch's whole-Jacobian factorisation needs %zu "
+                        "bytes (%d equations x %d velocities, dense)", (3 * mn + a + b) * sizeof(double), s->m, s->nh),
+               OVK_NOMEM;
+    s->J = s->dense, s->W = s->dense + mn, s->W2 = s->dense + 2 * mn;
+    return OVK_OK;
 }
 
 int ovk_sim_status(const ovk_sim *s) { return s ? s->status : OVK_NOMEM; }

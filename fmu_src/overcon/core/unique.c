@@ -33,21 +33,25 @@
 #define EPS 2.220446049250313e-16
 
 /* The equilibrated A^T (m x nh: kept for ovk_choose_kept), the factorisation's scratch (also
- * ovk_choose_kept's m x nh), the null basis (m x m at most), the Ruiz scratch (m + nh). */
+ * ovk_choose_kept's m x nh, and first the rows by their nonzeros), the null basis (m x m at most),
+ * the Ruiz scratch (m + nh). ovk_unique_certified needs ovk_unique_cert_doubles only. */
 size_t ovk_unique_doubles(int m, int nh) {
-    size_t M = (size_t)m, n = (size_t)nh, f = ovk_bsv_doubles(m, nh);
-    return M * n + (f > M * n ? f : M * n) + M * M + M + n + 1;
+    size_t M = (size_t)m, n = (size_t)nh, f = ovk_bsv_doubles(m, nh), s = f > M * n ? f : M * n;
+    s = s > 2 * 6 * M ? s : 2 * 6 * M; /* also the rows by their nonzeros (2 nh_b <= 12 each) */
+    return M * n + s + M * M + M + n + 1;
 }
 
-/* B = A^T (m rows of nh): round-off rows and columns of A zeroed, then Ruiz. Row e is nonzero
- * only in the columns of its joint's bodies blk[2e], blk[2e + 1] (kh each; -1: none, the ground),
- * so only those are visited. cn (m) and rn (nh): scratch for the max-norms of A's columns (B's
+/* B = A^T (m rows, each by its nonzeros: 2 kh entries, OVK_JROW's layout): round-off rows and
+ * columns of A zeroed, then Ruiz. Row e is nonzero only in the columns of its joint's bodies
+ * blk[2e], blk[2e + 1] (kh each, slots 0 and 1; -1: none, the ground), so only those are stored
+ * and visited (BE: the entry of row e at column c inside IN_BLOCKS). cn (m) and rn (nh): scratch for the max-norms of A's columns (B's
  * rows) and A's rows (B's columns). Returns the round-off floor (0 for A = 0): every entry of a
  * zeroed row or column was at most that. */
 #define IN_BLOCKS(e, c, body)                                                                           \
     for (int t_ = 0; t_ < 2; t_++)                                                                     \
         if ((body = blk[2 * (e) + t_]) >= 0 && !(t_ == 1 && body == blk[2 * (e)]))                      \
             for (int c = body * kh; c < (body + 1) * kh; c++)
+#define BE(e, c) B[(size_t)(e) * 2 * kh + t_ * kh + (c) - body * kh]
 static double equilibrate(double *B, int m, int nh, int kh, const int *blk, double *cn, double *rn, double *dc,
                           double *dr) {
     double amax = 0.0;
@@ -56,19 +60,19 @@ static double equilibrate(double *B, int m, int nh, int kh, const int *blk, doub
         for (int e = 0; e < m; e++) dc[e] = 1.0;
     if (dr)
         for (int c = 0; c < nh; c++) dr[c] = 1.0;
-    for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) amax = fabs(B[(size_t)e * nh + c]) > amax ? fabs(B[(size_t)e * nh + c]) : amax;
+    for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) amax = fabs(BE(e, c)) > amax ? fabs(BE(e, c)) : amax;
     if (amax == 0.0) return 0.0;
     double floor = UNIQUE_NOISE * (m > nh ? m : nh) * EPS * amax;
     for (int c = 0; c < nh; c++) rn[c] = 0.0;
-    for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) rn[c] = fabs(B[(size_t)e * nh + c]) > rn[c] ? fabs(B[(size_t)e * nh + c]) : rn[c];
+    for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) rn[c] = fabs(BE(e, c)) > rn[c] ? fabs(BE(e, c)) : rn[c];
     for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) /* A's rows (coordinates) of round-off only */
-        if (rn[c] <= floor) B[(size_t)e * nh + c] = 0.0;
+        if (rn[c] <= floor) BE(e, c) = 0.0;
     for (int c = 0; dr && c < nh; c++)
         if (rn[c] <= floor) dr[c] = 0.0;
     for (int e = 0; e < m; e++) { /* A's columns (equations) of round-off only */
         double x = 0.0;
-        IN_BLOCKS(e, c, body) x = fabs(B[(size_t)e * nh + c]) > x ? fabs(B[(size_t)e * nh + c]) : x;
-        if (x <= floor) IN_BLOCKS(e, c, body) B[(size_t)e * nh + c] = 0.0;
+        IN_BLOCKS(e, c, body) x = fabs(BE(e, c)) > x ? fabs(BE(e, c)) : x;
+        if (x <= floor) IN_BLOCKS(e, c, body) BE(e, c) = 0.0;
         if (x <= floor && dc) dc[e] = 0.0;
     }
     for (int sweep = 0; sweep < RUIZ_SWEEPS; sweep++) {
@@ -77,7 +81,7 @@ static double equilibrate(double *B, int m, int nh, int kh, const int *blk, doub
         for (int e = 0; e < m; e++) {
             cn[e] = 0.0;
             IN_BLOCKS(e, c, body) {
-                double a = fabs(B[(size_t)e * nh + c]);
+                double a = fabs(BE(e, c));
                 cn[e] = a > cn[e] ? a : cn[e];
                 rn[c] = a > rn[c] ? a : rn[c];
             }
@@ -89,7 +93,7 @@ static double equilibrate(double *B, int m, int nh, int kh, const int *blk, doub
         if (dev <= RUIZ_TOL) break;
         for (int c = 0; c < nh; c++) rn[c] = rn[c] > 0.0 ? 1.0 / sqrt(rn[c]) : 1.0;
         for (int e = 0; e < m; e++) cn[e] = cn[e] > 0.0 ? 1.0 / sqrt(cn[e]) : 1.0;
-        for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) B[(size_t)e * nh + c] = rn[c] * B[(size_t)e * nh + c] * cn[e];
+        for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) BE(e, c) = rn[c] * BE(e, c) * cn[e];
         for (int e = 0; dc && e < m; e++) dc[e] *= cn[e];
         for (int c = 0; dr && c < nh; c++) dr[c] *= rn[c];
     }
@@ -121,10 +125,11 @@ int ovk_unique_judged(const ovk_model *M) {
     return M->redundancy == OVK_COMPLIANT ? k : M->m;
 }
 
-/* The judged rows of J into A (m x nh, in judged order) and each one's two bodies into blk (2 m);
- * 1 when one is not finite on its bodies' columns (the only ones a row fills). */
-static int judged_rows(const ovk_model *M, const double *J, double *A, int *blk) {
-    int nh = M->nb * M->nh_b, kh = M->nh_b, body;
+/* The judged rows of J (Phi_h by its nonzeros, laid out as ovk_data.J: OVK_JROW) into B (m rows
+ * of 2 kh, the same layout, in judged order) and each one's two bodies into blk (2 m); 1 when one
+ * is not finite on its bodies' columns (the only ones a row fills). */
+static int judged_rows(const ovk_model *M, const double *J, double *B, int *blk) {
+    int kh = M->nh_b, body;
     /* under "compliant" the compliant equations are forces, not constraints: the rigid rest is
      * judged (precheck.analyse_model) and a compliant joint's reaction is unique (its deformation) */
     for (int j = 0; j < M->nj; j++)
@@ -132,10 +137,15 @@ static int judged_rows(const ovk_model *M, const double *J, double *A, int *blk)
             int k = judged_position(M, M->jrows[(size_t)j * OVK_MAXEQ + e]);
             if (k < 0) continue;
             blk[2 * k] = M->jbi[j], blk[2 * k + 1] = M->jbj[j];
-            memcpy(A + (size_t)k * nh, J + (size_t)M->jrows[(size_t)j * OVK_MAXEQ + e] * nh, (size_t)nh * sizeof(double));
-            IN_BLOCKS(k, c, body) if (!isfinite(A[(size_t)k * nh + c])) return 1;
+            memcpy(B + (size_t)k * 2 * kh, OVK_JROW(M, J, M->jrows[(size_t)j * OVK_MAXEQ + e]),
+                   sizeof(double) * 2 * (size_t)kh);
+            IN_BLOCKS(k, c, body) if (!isfinite(BE(k, c))) return 1;
         }
     return 0;
+}
+
+size_t ovk_unique_cert_doubles(int m, int nh, int kh) {
+    return (size_t)m * (2 * (size_t)kh + 4) + 2 * (size_t)nh + 1; /* B (m x 2 kh), cn, dc, wn, blk; rn, dr */
 }
 
 /* Whether the rule's answer at J is known without the factorisation: the judged rows are the
@@ -147,21 +157,21 @@ static int judged_rows(const ovk_model *M, const double *J, double *A, int *blk)
  * equilibration's row scalings times W's row norms, R = its column scalings over sqrt(Minv), P
  * the projection off the columns the equilibration zeroed (each of round-off only), so
  * sigma_min(A^T) >= min L min R (wmin_low - |W (I - P)|_F) and sigma_1(A^T) <= max L max R
- * wmax_up. 1 when proven; 0 when not (then the factorisation decides). O(m nh) for the copy,
- * O(m nh_b) the rest. */
+ * wmax_up. 1 when proven; 0 when not (then the factorisation decides). O(m nh_b) in all: the rows
+ * are copied and equilibrated by their nonzeros (work: ovk_unique_cert_doubles). */
 int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up) {
     int nh = M->nb * M->nh_b, kh = M->nh_b, m = ovk_unique_judged(M), big = m > nh ? m : nh, body;
     if (!(wmin_low > 0.0) || !(wmax_up < INFINITY) || m > nh || !m) return 0;
-    double *A = work, *cn = A + (size_t)m * nh, *rn = cn + m, *dc = rn + nh, *dr = dc + m, *wn = dr + nh;
+    double *B = work, *cn = B + (size_t)m * 2 * kh, *rn = cn + m, *dc = rn + nh, *dr = dc + m, *wn = dr + nh;
     int *blk = (int *)(wn + m);
-    if (judged_rows(M, J, A, blk)) return 0;
+    if (judged_rows(M, J, B, blk)) return 0;
     for (int e = 0; e < m; e++) { /* W's row norms |Phi_h,e M^-1/2|, as given */
         double n2 = 0.0;
-        IN_BLOCKS(e, c, body) n2 += A[(size_t)e * nh + c] * A[(size_t)e * nh + c] * M->Minv[c];
+        IN_BLOCKS(e, c, body) n2 += BE(e, c) * BE(e, c) * M->Minv[c];
         wn[e] = sqrt(n2);
         if (!(wn[e] > 0.0)) return 0;
     }
-    double floor = equilibrate(A, m, nh, kh, blk, cn, rn, dc, dr); /* a zeroed column's entries are below it */
+    double floor = equilibrate(B, m, nh, kh, blk, cn, rn, dc, dr); /* a zeroed column's entries are below it */
     double lmin = INFINITY, lmax = 0.0, rmin = INFINITY, rmax = 0.0, zf2 = 0.0;
     for (int e = 0; e < m; e++) {
         if (dc[e] == 0.0) return 0; /* a row of round-off only: the rank is not m */
@@ -185,10 +195,14 @@ int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank
     int nh = M->nb * M->nh_b;
     int m = ovk_unique_judged(M), big = m > nh ? m : nh;
     size_t fd = ovk_bsv_doubles(m, nh), scratch = fd > (size_t)m * nh ? fd : (size_t)m * nh;
+    scratch = scratch > 2 * 6 * (size_t)m ? scratch : 2 * 6 * (size_t)m; /* as ovk_unique_doubles */
     double *A = work, *F = A + (size_t)m * nh, *N = F + scratch, *cn = N + (size_t)m * m, *rn = cn + m;
-    int *blk = (int *)N, kh = M->nh_b; /* the judged rows' bodies, in N until the null basis */
-    if (judged_rows(M, J, A, blk)) return OVK_NONFINITE;
-    equilibrate(A, m, nh, kh, blk, cn, rn, NULL, NULL); /* A^T equilibrated: its rows are the equations */
+    int *blk = (int *)N, kh = M->nh_b, body; /* the judged rows' bodies, in N until the null basis */
+    double *B = F; /* the rows by their nonzeros (m x 2 kh <= m x nh), equilibrated there, then A dense */
+    if (judged_rows(M, J, B, blk)) return OVK_NONFINITE;
+    equilibrate(B, m, nh, kh, blk, cn, rn, NULL, NULL); /* A^T equilibrated: its rows are the equations */
+    memset(A, 0, sizeof(double) * (size_t)m * nh);
+    for (int e = 0; e < m; e++) IN_BLOCKS(e, c, body) A[(size_t)e * nh + c] = BE(e, c);
     ovk_bsv f;
     int status = ovk_bsv_factor(A, m, nh, F, &f);
     if (status) return status;
@@ -232,15 +246,14 @@ int ovk_unique(const ovk_model *M, ovk_data *d, const double *y, int *rank, int 
     if (!M || !d || !y || !rank || !unique) return OVK_INVALID;
     if (d->status) return d->status;
     int m = M->m, nh = M->nb * M->nh_b;
-    double *mem = malloc((2 * (size_t)m + (size_t)m * nh + ovk_unique_doubles(m, nh) + 1) * sizeof(double));
-    if (!mem) return ovk_fail(d, OVK_NOMEM, "uniqueness: out of memory (%d equations, %d velocities)", m, nh);
-    double *phi = mem, *gam = phi + m, *J = gam + m, *work = J + (size_t)m * nh;
-    int status = ovk_rows(M, d, y, phi, J, gam);
+    double *work = malloc((ovk_unique_doubles(m, nh) + 1) * sizeof(double));
+    if (!work) return ovk_fail(d, OVK_NOMEM, "uniqueness: out of memory (%d equations, %d velocities)", m, nh);
+    int status = ovk_rows_in(M, d, y); /* Phi_h at y in d->J, by its nonzeros */
     if (!status) {
-        status = ovk_unique_rows(M, J, work, rank, unique);
+        status = ovk_unique_rows(M, d->J, work, rank, unique);
         if (status) ovk_fail(d, status, "uniqueness: a non-finite entry in the constraint Jacobian");
     }
-    free(mem);
+    free(work);
     return status;
 }
 
@@ -280,7 +293,7 @@ int ovk_pack_kept(const ovk_model *M, const int *retained, int nR, int *xrows, i
     return nx;
 }
 
-/* The equations an automatic elimination keeps at the rows J (m x nh), as
+/* The equations an automatic elimination keeps at the rows J (Phi_h by its nonzeros, OVK_JROW), as
  * overcon.analysis.independent_columns: the first r pivots of the column-pivoted Householder QR
  * of the equilibrated A = Phi_h^T (the pivot: the largest remaining column norm, the first of
  * equals, as LAPACK's dgeqp3), r its rank by the rule of ovk_unique_rows. kept: m flags; work:

@@ -52,11 +52,13 @@ static int weighted(ovk_sim *s, const double *y, const int *rows, int k, double 
     const ovk_model *M = s->M;
     int nh = s->nh, status = ovk_rows_in(M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
+    const int *body = s->d->al_rows + M->m; /* each equation's two bodies */
     for (int i = 0; i < k; i++) {
-        const double *row = s->d->J + (size_t)(rows ? rows[i] : i) * nh;
+        int r = rows ? rows[i] : i;
         double *o = out + (size_t)i * nh, norm2 = 0.0;
+        ovk_row_dense(M, s->d->J, r, body[2 * r], body[2 * r + 1], o);
         for (int c = 0; c < nh; c++) {
-            o[c] = row[c] * sqrt(M->Minv[c]);
+            o[c] = o[c] * sqrt(M->Minv[c]);
             norm2 += o[c] * o[c];
         }
         double norm = sqrt(norm2);
@@ -67,7 +69,8 @@ static int weighted(ovk_sim *s, const double *y, const int *rows, int k, double 
 
 /* The whole Jacobian's weighted rows at y factored (bandsvd.c) into *f. */
 static int full_values(ovk_sim *s, const double *y, ovk_bsv *f, char *msg) {
-    int status = weighted(s, y, full_rows(s->M), n_full(s->M), s->W2, msg);
+    int status = ovk_sim_dense(s, msg);
+    if (!status) status = weighted(s, y, full_rows(s->M), n_full(s->M), s->W2, msg);
     if (!status && (status = ovk_bsv_factor(s->W2, n_full(s->M), s->nh, s->bsv_work, f)))
         snprintf(msg, OVK_MSG, "the singularity watch: a non-finite constraint Jacobian");
     return status;
@@ -239,10 +242,12 @@ static int along(ovk_sim *s, double t, const double *y, int first, double wmin_l
     int status = ovk_rows_in(M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
     const double *J = s->d->J;
-    if (n_kept(M) == ovk_unique_judged(M) && ovk_unique_certified(M, J, s->along_work, wmin_low, wmax_up)) {
+    if (n_kept(M) == ovk_unique_judged(M) && ovk_unique_certified(M, J, s->cert_work, wmin_low, wmax_up)) {
         rank = n_kept(M); /* the kept rows are every judged one and certified regular: no dependency */
         for (int j = 0; j < nj; j++) now[j] = 1;
         s->along_certified++;
+    } else if ((status = ovk_sim_dense(s, msg))) {
+        return status;
     } else if ((status = ovk_unique_rows(M, J, s->along_work, &rank, now)))
         return say(msg, status, "t = %.9g s: uniqueness along the motion: a non-finite constraint Jacobian", t);
     if (!first && rank != s->along_rank) {
@@ -278,6 +283,14 @@ int ovk_sim_along(ovk_sim *s, double t, const double *y, int first, double wmin_
     int status = along(s, t, y, first, wmin_low, wmax_up, msg);
     s->along_time += ovk_now() - started;
     return status;
+}
+
+/* The uniqueness at the run's start (t0, y0), after the watch's start (monitor, first = 1): with
+ * the watch's certified bounds at y0 (no search moved them), so that where the kept rows are every
+ * equation and regular the factorisation is skipped (ovk_unique_certified, O(nonzeros): a long
+ * chain, whose dense factorisation would cost O(m nh) memory). */
+int ovk_sim_along_start(ovk_sim *s, double t0, const double *y0, char *msg) {
+    return ovk_sim_along(s, t0, y0, 1, s->eig->smin_low, s->eig->smax_up, msg);
 }
 
 /* The watch at (t, y) (SingularityMonitor.check and, first = 1, its start at t0: no minimum
@@ -357,7 +370,8 @@ int ovk_sim_expiring(ovk_sim *s, int failed, char *msg) {
     char why[OVK_MSG];
     memcpy(why, msg, OVK_MSG);
     why[OVK_MSG - 1] = '\0';
-    if (ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam) || ovk_rates(s->M, s->d, rk->y, rk->y + n, s->qwatch))
+    if (ovk_sim_dense(s, msg) || ovk_rows(s->M, s->d, rk->y, s->phi, s->J, s->gam) ||
+        ovk_rates(s->M, s->d, rk->y, rk->y + n, s->qwatch))
         return failed;
     memcpy(s->ystar, rk->y, (size_t)s->ny * sizeof(double));
     for (int i = 0; i < n; i++) s->ystar[i] = rk->y[i] + dt * s->qwatch[i];
@@ -408,9 +422,10 @@ static void eliminated_flags(const ovk_sim *s, int *gone) {
  * of ovk_choose_kept at y (watch.reselected). */
 static int chosen_gone(ovk_sim *s, const double *y, int *gone, char *msg) {
     int *iwork = s->kept + 7 * s->m + 2 * OVK_MAXEQ * s->Mrun.nfj, rank = 0;
-    int status = ovk_rows(s->M, s->d, y, s->phi, s->J, s->gam);
-    if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
-    if ((status = ovk_choose_kept(s->M, s->J, s->along_work, iwork, gone, &rank))) return status;
+    int status = ovk_sim_dense(s, msg);
+    if (status) return status;
+    if ((status = ovk_rows_in(s->M, s->d, y))) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
+    if ((status = ovk_choose_kept(s->M, s->d->J, s->along_work, iwork, gone, &rank))) return status;
     for (int r = 0; r < s->m; r++) gone[r] = !gone[r];
     return OVK_OK;
 }
@@ -420,7 +435,9 @@ static int chosen_gone(ovk_sim *s, const double *y, int *gone, char *msg) {
  * chosen at y if it qualifies at the start too; "none found" when none. */
 static int valid_eliminations(ovk_sim *s, const double *y, char *out, size_t size, char *msg) {
     int m = s->m, *gone = s->kept + 5 * m + 2 * OVK_MAXEQ * s->Mrun.nfj, *current = gone + m;
-    int status = ovk_rows(s->M, s->d, s->y0, s->phi, s->W2, s->gam); /* J at the start into W2 */
+    int status = ovk_sim_dense(s, msg);
+    if (status) return status;
+    status = ovk_rows(s->M, s->d, s->y0, s->phi, s->W2, s->gam); /* J at the start into W2 */
     if (!status) status = ovk_rows(s->M, s->d, y, s->phi, s->J, s->gam);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
     int count = 0, rank = raw_rank(s, s->W2, NULL, &count), found = 0;
@@ -432,7 +449,7 @@ static int valid_eliminations(ovk_sim *s, const double *y, char *out, size_t siz
     for (int c = 0; c < candidates && found < 10; c++) {
         if (singles) {
             for (int r = 0; r < m; r++) gone[r] = r == c;
-        } else if ((status = chosen_gone(s, y, gone, msg))) { /* its rows at y into s->J again: J1 */
+        } else if ((status = chosen_gone(s, y, gone, msg))) { /* (s->J keeps the rows at y: J1) */
             return status;
         }
         int same = 1;
@@ -455,8 +472,9 @@ static int valid_eliminations(ovk_sim *s, const double *y, char *out, size_t siz
 static int nonunique_friction(ovk_sim *s, const double *y, char *out, size_t size, char *msg) {
     const ovk_model *M = s->M;
     int rank = 0, *u = s->along_unique + M->nj, count = 0;
-    int status = ovk_rows(M, s->d, y, s->phi, s->J, s->gam);
-    if (!status) status = ovk_unique_rows(M, s->J, s->along_work, &rank, u);
+    int status = ovk_sim_dense(s, msg);
+    if (status) return -status;
+    if (!(status = ovk_rows_in(M, s->d, y))) status = ovk_unique_rows(M, s->d->J, s->along_work, &rank, u);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), -status;
     size_t len = 0;
     out[0] = '\0';

@@ -56,6 +56,26 @@
 #define CERT_FLOOR 1e-12  /* sigma_min is certified the smallest down to l_min = CERT_FLOOR l_max */
 #define CERT_ROUND 1e-13  /* G's round-off taken off the certified bounds, relative to l_max (many eps) */
 
+/* The half bandwidth of the band order of all m equations (linalg.c), or -1 out of memory. */
+static int band_bound(const ovk_model *M) {
+    int m = M->m, *bodies = malloc((5 * (size_t)m + 2 * (size_t)M->nb + 1) * sizeof(int));
+    long long *key = malloc(((size_t)m + 1) * sizeof(long long));
+    int band = -1;
+    if (bodies && key) {
+        int *order = bodies + 2 * (size_t)m, *obody = order + m, *span = obody + 2 * (size_t)m;
+        for (int r = 0; r < 2 * m; r++) bodies[r] = -1;
+        for (int j = 0; j < M->nj; j++)
+            for (int k = 0; k < M->jneq[j]; k++) {
+                int r = M->jrows[OVK_MAXEQ * j + k];
+                bodies[2 * r] = M->jbi[j], bodies[2 * r + 1] = M->jbj[j];
+            }
+        band = ovk_band_order(m, M->nb, bodies, NULL, 0, order, obody, key, span);
+    }
+    free(bodies);
+    free(key);
+    return band;
+}
+
 int ovk_eig_make(ovk_sim *s) {
     const ovk_model *M = s->M;
     int nR = M->redundancy ? M->nwatch : M->nR, kh = M->nh_b, nb = M->nb, m = M->m, nh = nb * kh;
@@ -63,7 +83,14 @@ int ovk_eig_make(ovk_sim *s) {
     if (!e) return OVK_NOMEM;
     s->eig = e;
     e->nR = nR, e->kh = kh, e->nb = nb;
-    size_t nd = 2 * (size_t)nR * 2 * kh + 4 * (size_t)nR + 2 * (size_t)nh + 2 * (size_t)nR * nR + 1;
+    /* G and its factor F in band storage, nR x (p + 1): p at most the band order's half bandwidth of
+     * every equation (a set of kept rows, in its own band order, is no wider: the order sorts by the
+     * rows' bodies, so the rows between two that share a body are among the whole set's between
+     * them), so that the kept rows chosen again during the run fit too: O(nR p), not nR^2 */
+    int pmax = band_bound(M);
+    if (pmax < 0) return OVK_NOMEM;
+    pmax = pmax < nR - 1 ? pmax : (nR > 0 ? nR - 1 : 0);
+    size_t nd = 2 * (size_t)nR * 2 * kh + 4 * (size_t)nR + 2 * (size_t)nh + 2 * (size_t)nR * (size_t)(pmax + 1) + 1;
     size_t ni = 4 * (size_t)nR + 2 * (size_t)m + 2 * (size_t)nb + 1;
     e->mem = malloc(nd * sizeof(double));
     e->imem = malloc(ni * sizeof(int));
@@ -77,7 +104,7 @@ int ovk_eig_make(ovk_sim *s) {
     e->x = p, p += 2 * (size_t)nR; /* x and the Gershgorin sums */
     e->scale = p, p += nh;
     e->z = p, p += nh;
-    e->G = p, p += (size_t)nR * nR;
+    e->G = p, p += (size_t)nR * (size_t)(pmax + 1);
     e->F = p;
     int *q = e->imem;
     e->order = q, q += nR;
@@ -120,17 +147,19 @@ void ovk_eig_order(ovk_watch_eig *e, const int *rows) {
  * bodies' columns in band order, into w (nR x 2 nh_b). The frames at y stay in the workspace. */
 int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, char *msg) {
     ovk_watch_eig *e = s->eig;
-    int nR = e->nR, kh = e->kh, nh = s->nh, status = ovk_rows_in(s->M, s->d, y);
+    int nR = e->nR, kh = e->kh, status = ovk_rows_in(s->M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
     if (memcmp(rows, e->rows, (size_t)nR * sizeof(int))) /* other kept rows: their order, a cold start */
         make_order(e, rows), e->have = 0;
+    const int *rbody = s->d->al_rows + s->M->m; /* each equation's two bodies: its slots of d->J */
     for (int k = 0; k < nR; k++) {
-        const double *row = s->d->J + (size_t)rows[e->order[k]] * nh;
+        int r = rows[e->order[k]];
+        const double *row = OVK_JROW(s->M, s->d->J, r);
         double *o = w + (size_t)k * 2 * kh, norm2 = 0.0;
         for (int t = 0; t < 2; t++) {
-            int b = e->body[2 * k + t];
+            int b = e->body[2 * k + t], slot = b == rbody[2 * r] ? 0 : 1;
             for (int c = 0; c < kh; c++) {
-                o[t * kh + c] = b < 0 ? 0.0 : row[b * kh + c] * e->scale[b * kh + c];
+                o[t * kh + c] = b < 0 ? 0.0 : row[slot * kh + c] * e->scale[b * kh + c];
                 norm2 += o[t * kh + c] * o[t * kh + c];
             }
         }
@@ -283,9 +312,19 @@ int ovk_eig_extremes(ovk_sim *s, const double *w, double *smin, double *smax) {
     int low = track(e, w, e->umin, s->nh, 0, lmax, smin, &cmin);
     if (low < 0) *smin = 0.0;
     /* G's round-off (a few eps l_max for unit rows) off the bounds: what is left holds for W itself */
+    /* An estimate that missed its accuracy (a cluster of small eigenvalues, a long chain's, slows
+     * the inverse iteration) is no certificate; bounds still follow at little cost: l_max below
+     * Gershgorin's bound, and l_min above c = l_est / 4 when G - c I has a Cholesky factor (then
+     * G - c I is positive definite): what the uniqueness's certificate (unique.c) needs to skip its
+     * dense factorisation on such mechanisms. */
+    if (top != 0) cmax = gershgorin(e);
+    if (low != 0) {
+        double c = 0.25 * *smin * *smin;
+        cmin = c > 0.0 && shifted(e, 1.0, -c) ? c : 0.0;
+    }
     cmin -= CERT_ROUND * cmax;
-    e->smin_low = top == 0 && low == 0 && cmin > 0.0 ? sqrt(cmin) : 0.0;
-    e->smax_up = top == 0 && isfinite(cmax) ? sqrt(cmax * (1.0 + CERT_ROUND)) : INFINITY;
+    e->smin_low = cmin > 0.0 ? sqrt(cmin) : 0.0;
+    e->smax_up = isfinite(cmax) ? sqrt(cmax * (1.0 + CERT_ROUND)) : INFINITY;
     s->watch_capped += (top != 0) + (low != 0);
     return OVK_OK;
 }

@@ -114,9 +114,9 @@ fmi2Status fmu_me_event_indicators(fmu_inst *c, const char *fn, double z[], size
  * next derivative then says why). */
 static double drift(const fmu_inst *c) {
     ovk_sim *s = c->sim;
-    if (!s || s->M->redundancy == OVK_COMPLIANT || ovk_rows(s->M, s->d, c->y, s->phi, s->J, s->gam)) return 0.0;
+    if (!s || s->M->redundancy == OVK_COMPLIANT || ovk_rows_in(s->M, s->d, c->y)) return 0.0;
     double worst = 0.0;
-    for (int i = 0; i < s->M->m; i++) worst = fabs(s->phi[i]) > worst ? fabs(s->phi[i]) : worst;
+    for (int i = 0; i < s->M->m; i++) worst = fabs(s->d->phi[i]) > worst ? fabs(s->d->phi[i]) : worst;
     return worst;
 }
 

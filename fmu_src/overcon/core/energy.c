@@ -83,9 +83,13 @@ static int powers(ovk_sim *s, double t, const double *y, double *p) {
     s->evaluations++;
     for (int j = 0; drivers && j < M->nj; j++) { /* a driver's power: its effort -lam times the rate Phi_h h */
         if (M->jtype[j] != J_DRIVER) continue;
-        int row = M->jrows[OVK_MAXEQ * j];
+        int row = M->jrows[OVK_MAXEQ * j], kh = M->nh_b, bi = M->jbi[j], bj = M->jbj[j];
+        const double *Jr = OVK_JROW(M, s->d->J, row); /* body i's slot, then body j's (joints.c) */
         double rate = 0.0;
-        for (int k = 0; k < s->nh; k++) rate += s->d->J[(size_t)row * s->nh + k] * h[k];
+        if (bi >= 0)
+            for (int k = 0; k < kh; k++) rate += Jr[k] * h[bi * kh + k];
+        if (bj >= 0 && bj != bi)
+            for (int k = 0; k < kh; k++) rate += Jr[kh + k] * h[bj * kh + k];
         p[1] += -s->ev_lam[row] * rate;
     }
     if (!M->nfj) return OVK_OK;

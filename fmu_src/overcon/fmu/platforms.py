@@ -28,7 +28,7 @@ Every binary exports the FMI functions alone (``-fvisibility=hidden -DOVK_FMU_BI
 the version script ``native/exports.map``; on Windows ``__declspec(dllexport)`` of the FMI
 functions only, so the DLL needs no .def file) and Linux binaries need nothing newer than glibc
 2.17 (zig links against glibc 2.17's symbols; a native build on a newer glibc binds libm's exp,
-pow and hypot to their first versions: core/libm_pins.h). :func:`check` reads each compiled
+pow and hypot to their first versions: ``-DOVK_GLIBC_PINS``, core/libm_pins.h). :func:`check` reads each compiled
 binary (:mod:`overcon.fmu.binfmt`) and refuses one that breaks a rule (wrong architecture, another
 export, a newer glibc, another library), so a toolchain that changed cannot fill the cache with a
 bad binary.
@@ -61,8 +61,9 @@ EXPORTS_MAP = NATIVE_DIR / "exports.map"
 CFLAGS = ["-O2", "-ffp-contract=off", "-fno-fast-math", "-std=c11", "-Wall", "-Wextra", "-Werror"]
 """The flags of every compilation of the core (setup.py uses these): no fused multiply-add, no
 reassociation, so the results do not depend on the CPU's FMA support."""
-FMU_FLAGS = ["-fvisibility=hidden", "-DOVK_FMU_BINARY"]
-"""Added for an FMU binary: every symbol internal but the FMI functions (FMU_EXPORT)."""
+FMU_FLAGS = ["-fvisibility=hidden", "-DOVK_FMU_BINARY", "-DOVK_GLIBC_PINS"]
+"""Added for an FMU binary: every symbol internal but the FMI functions (FMU_EXPORT); on glibc,
+libm's exp, pow and hypot bound to their first versions (core/libm_pins.h)."""
 
 
 @dataclasses.dataclass(frozen=True)

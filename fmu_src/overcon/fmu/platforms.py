@@ -176,8 +176,9 @@ def source_files(fmi: int) -> list[tuple[str, Path]]:
 
 def compile_command(compiler: list[str], target: str | None, p: Platform, fmi: int, out: Path) -> list[str]:
     """The command compiling the binary of ``p`` for FMI ``fmi`` into ``out`` (``target``: zig's
-    -target, None for a native compiler)."""
-    cmd = [*compiler, *(["-target", target] if target else []), *CFLAGS, *FMU_FLAGS, "-shared"]
+    -target, None for a native compiler). Zig's binaries are stripped (``-s``: no debug
+    information or local symbol table; it would triple a Linux binary's size)."""
+    cmd = [*compiler, *(["-target", target, "-s"] if target else []), *CFLAGS, *FMU_FLAGS, "-shared"]
     if p.fmt != "pe":
         cmd.append("-fPIC")
     if p.fmt == "elf":
@@ -213,8 +214,10 @@ def zig_version() -> str:
 def cache_key(p: Platform, fmi: int, overcon_version: str) -> str:
     """SHA-256 (hex, 20 digits) over what makes the bytes of the binary (module docstring)."""
     h = hashlib.sha256()
-    for part in (f"overcon {overcon_version}", f"zig {zig_version()}", f"target {p.zig}", f"fmi {fmi}",
-                 " ".join(CFLAGS + FMU_FLAGS), EXPORTS_MAP.read_text(encoding="utf-8")):
+    flags = compile_command(["zig", "cc"], p.zig, p, fmi, Path("out"))
+    for part in (f"overcon {overcon_version}", f"zig {zig_version()}", f"fmi {fmi}",
+                 " ".join(f.replace(str(EXPORTS_MAP), "exports.map") for f in flags if not f.endswith(".c")),
+                 EXPORTS_MAP.read_text(encoding="utf-8")):
         h.update(len(part).to_bytes(8, "little") + part.encode())
     for rel, f in source_files(fmi):
         data = f.read_bytes()
@@ -246,6 +249,7 @@ def binary(p: Platform, fmi: int, overcon_version: str, native_binary=None, echo
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".part")
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, 0o644)  # mkstemp's 0600: the cache may be shared by the users of one machine
         os.replace(tmp, path)
     return data
 

@@ -46,7 +46,16 @@ under the default kind (said in the build output) and refused (exit 2) under an 
 me|both``.
 
 The GUID is a SHA-256 over the scene file, the mechanism file, the overcon source (Python) and the
-binary, so rebuilding unchanged inputs gives the same GUID and the same bytes.
+binaries (each with its folder), so rebuilding unchanged inputs gives the same GUID and the same
+bytes.
+
+Platforms (``platforms``; ``overcon build --platforms LIST``, default ``native``): the FMU carries a
+binary for each platform of the list (:mod:`overcon.fmu.platforms`: linux64, aarch64-linux, win64,
+darwin64, aarch64-darwin, or all), under the folder names of its FMI version; FMI 2.0 has none for
+the aarch64 platforms, which it leaves out (said in the build output). This machine's binary is the
+installed one; the others are cross-compiled by zig (``pip install 'overcon[platforms]'``) once per
+platform, FMI version and overcon version, and cached, before the first FMU is written. Without
+zig, or for an unknown name, the build is refused (exit 2) naming the fix. docs/platforms.md.
 
 Compatibility information (FMI cross-check convention) next to each FMU, unless ``refs=False``:
 ``<scene>_ref.csv`` (time and every Real output, simulated through ``fmpy.simulate_fmu`` at the

@@ -96,14 +96,18 @@ static int hexval(char ch) {
                                              : ch >= 'A' && ch <= 'F' ? ch - 'A' + 10 : -1;
 }
 
+#if defined(_WIN32)
 static int drive_letter(const char *p) { /* "C:/" or "C:\\": a Windows path's drive */
     return ((p[0] >= 'A' && p[0] <= 'Z') || (p[0] >= 'a' && p[0] <= 'z')) && p[1] == ':' &&
            (p[2] == '/' || p[2] == '\\');
 }
+#else
+#define drive_letter(p) 0 /* elsewhere /C:/dir is a path like any other */
+#endif
 
-/* The resources folder of a file: URI (or a plain absolute path), percent escapes decoded. A
- * Windows URI file:///C:/dir names the path C:/dir (not /C:/dir); a plain Windows path (FMI 3.0's
- * resourcePath, C:\dir\ or C:/dir/) is taken as it is. */
+/* The resources folder of a file: URI (or a plain absolute path), percent escapes decoded. On
+ * Windows, the URI file:///C:/dir names the path C:/dir (not /C:/dir) and a plain path with a drive
+ * (FMI 3.0's resourcePath, C:\dir\ or C:/dir/) is taken as it is. */
 int fmu_resource_dir(const char *uri, char *out, size_t size) {
     const char *p = uri;
     if (!strncmp(p, "file://localhost/", 17)) p += 16;

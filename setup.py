@@ -18,6 +18,7 @@ it must take gcc-style flags (gcc, clang). ``CFLAGS`` from the environment is no
 are part of the numbers (``-ffp-contract=off -fno-fast-math``: no fused multiply-add, no
 reassociation, so the results do not depend on the CPU's FMA support).
 """
+import importlib.util
 import os
 import shlex
 import shutil
@@ -38,7 +39,11 @@ FMI_COMMON = sorted(str(p.as_posix()) for p in FMI.glob("fmu_*.c"))
 FMI_SOURCES = FMI_COMMON + sorted(str(p.as_posix()) for p in FMI.glob("fmi2_*.c"))
 FMI3_SOURCES = FMI_COMMON + sorted(str(p.as_posix()) for p in FMI.glob("fmi3_*.c"))
 FMI_HEADERS = sorted(str(p.as_posix()) for p in FMI.glob("*.h"))
-CFLAGS = ["-O2", "-ffp-contract=off", "-fno-fast-math", "-std=c11", "-Wall", "-Wextra", "-Werror"]
+_spec = importlib.util.spec_from_file_location("_overcon_platforms", Path("fmu_src") / "overcon" / "fmu" / "platforms.py")
+PLATFORMS = sys.modules[_spec.name] = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(PLATFORMS)  # stdlib only at import: the flags shared with the cross-compiled binaries
+CFLAGS = PLATFORMS.CFLAGS
+FMU_FLAGS = PLATFORMS.FMU_FLAGS  # an FMU binary exports the FMI functions alone
 SHARED = ["-shared", "-fPIC"]
 LIBS = ["-lm"]
 
@@ -71,7 +76,12 @@ class BuildCore(build_ext):
         if not cc or shutil.which(cc[0]) is None:
             raise CompileError(f"overcon's C core needs a C compiler: {' '.join(cc) or 'cc'} not found "
                                "(install gcc or clang, or set CC)")
-        cmd = [*cc, *CFLAGS, *SHARED, "-o", str(out), *ext.sources, *LIBS]
+        fmu = []
+        if ext.name.startswith("overcon.fmu."):
+            fmu = list(FMU_FLAGS)
+            if sys.platform.startswith("linux"):
+                fmu.append(f"-Wl,--version-script={PLATFORMS.EXPORTS_MAP}")
+        cmd = [*cc, *CFLAGS, *fmu, *SHARED, "-o", str(out), *ext.sources, *LIBS]
         print(shlex.join(cmd))
         run = subprocess.run(cmd, capture_output=True, text=True)
         if run.returncode != 0:
@@ -83,8 +93,8 @@ class BuildCore(build_ext):
 setup(
     ext_modules=[Extension("overcon.core.libovercore", sources=SOURCES, depends=HEADERS),
                  Extension("overcon.fmu.native.libovercon_fmi2", sources=SOURCES + FMI_SOURCES,
-                           depends=HEADERS + FMI_HEADERS),
+                           depends=HEADERS + FMI_HEADERS + [str(PLATFORMS.EXPORTS_MAP)]),
                  Extension("overcon.fmu.native.libovercon_fmi3", sources=SOURCES + FMI3_SOURCES,
-                           depends=HEADERS + FMI_HEADERS)],
+                           depends=HEADERS + FMI_HEADERS + [str(PLATFORMS.EXPORTS_MAP)])],
     cmdclass={"build_ext": BuildCore},
 )

@@ -3,7 +3,8 @@
  * the types it uses are declared below, as in the FMI 2.0 standard's fmi2FunctionTypes.h /
  * fmi2TypesPlatform.h).
  *
- * It dlopen()s <unzipdir>/binaries/linux64/<model_identifier>.so with RTLD_LOCAL, instantiates the
+ * It dlopen()s <unzipdir>/binaries/linux64/<model_identifier>.so with RTLD_LOCAL (compiled for
+ * Windows: LoadLibrary of binaries/win64/<model_identifier>.dll, host_platform.h), instantiates the
  * FMU with the resource location file://<unzipdir>/resources, sets up the experiment, steps from
  * START to STOP with communication step STEP (grid points START + k*STEP, the last one clamped to
  * STOP, as fmpy.simulate_fmu does) and prints time and the requested Real variables as CSV (FMI
@@ -28,7 +29,7 @@
  * mapped with -n, 5 a run from a restored state that differs (-S).
  * Build: cc -O2 -o fmu_host fmu_host.c -ldl -lm
  */
-#include <dlfcn.h>
+#include "host_platform.h"
 #include <limits.h>
 #include <math.h>
 #include <stdarg.h>
@@ -222,14 +223,14 @@ int main(int argc, char **argv)
         fprintf(stderr, "fmu_host: no such directory %s\n", dir);
         return 2;
     }
-    snprintf(so, sizeof so, "%s/binaries/linux64/%s.so", absdir, id);
+    snprintf(so, sizeof so, "%s/binaries/" HOST_FMI2_FOLDER "/%s" HOST_SUFFIX, absdir, id);
     void *lib = dlopen(so, RTLD_NOW | RTLD_LOCAL);
     if (!lib) {
         fprintf(stderr, "fmu_host: cannot load %s: %s\n", so, dlerror());
         return 2;
     }
     /* file:// URI of the resources folder; spaces percent-encoded */
-    char *u = uri + sprintf(uri, four_slashes ? "file:///" : "file://");
+    char *u = uri + sprintf(uri, four_slashes ? "file:///" : HOST_URI_PREFIX);
     for (const char *c = absdir; *c; c++)
         u += (*c == ' ') ? sprintf(u, "%%20") : sprintf(u, "%c", *c);
     sprintf(u, "/resources");

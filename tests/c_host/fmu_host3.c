@@ -3,7 +3,8 @@
  * the types it uses are declared below, as in the FMI 3.0 standard's fmi3FunctionTypes.h /
  * fmi3PlatformTypes.h). The FMI 3.0 counterpart of fmu_host.c.
  *
- * It dlopen()s <unzipdir>/binaries/<arch>-linux/<model_identifier>.so with RTLD_LOCAL, instantiates
+ * It dlopen()s <unzipdir>/binaries/<arch>-linux/<model_identifier>.so with RTLD_LOCAL (compiled for
+ * Windows: LoadLibrary of binaries/<arch>-windows/<model_identifier>.dll, host_platform.h), instantiates
  * the FMU for co-simulation with the resource path <unzipdir>/resources/, enters initialization
  * mode with the experiment, steps from START to STOP with communication step STEP (grid points
  * START + k*STEP, the last one clamped to STOP, as fmpy.simulate_fmu does) and prints time and the
@@ -26,7 +27,7 @@
  * mapped with -n, 5 a run from a restored state that differs (-S).
  * Build: cc -O2 -o fmu_host3 fmu_host3.c -ldl -lm
  */
-#include <dlfcn.h>
+#include "host_platform.h"
 #include <limits.h>
 #include <math.h>
 #include <stdbool.h>
@@ -233,7 +234,7 @@ int main(int argc, char **argv) {
 #else
     const char *arch = "unknown";
 #endif
-    snprintf(so, sizeof so, "%s/binaries/%s-linux/%s.so", absdir, arch, id);
+    snprintf(so, sizeof so, "%s/binaries/%s-" HOST_FMI3_OS "/%s" HOST_SUFFIX, absdir, arch, id);
     snprintf(resources, sizeof resources, "%s/resources/", absdir);
     void *lib = dlopen(so, RTLD_NOW | RTLD_LOCAL);
     if (!lib) {

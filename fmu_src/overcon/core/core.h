@@ -54,6 +54,8 @@
 
 #include <stddef.h>
 
+#include "libm_pins.h"
+
 #define OVK_ABI 11 /* the layout of ovk_model and the entry points' signatures (overcon.kernel.ABI) */
 
 enum {
@@ -95,7 +97,12 @@ enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 #define OVK_PROJ_MAX_ITER 20 /* position corrections of that projection at most (overcon.kernel.PROJECTION_MAX_ITER) */
 #define OVK_MSG 1024        /* bytes of the failure message, with its terminating zero */
 
-#if defined(__GNUC__)
+/* OVK_EXPORT: the entry points of libovercore (loaded by overcon.kernel); inside an FMU binary
+ * (compiled with -DOVK_FMU_BINARY) they are internal: the FMU exports the FMI API alone. */
+#if defined(__GNUC__) && defined(OVK_FMU_BINARY)
+#define OVK_EXPORT __attribute__((visibility("hidden")))
+#define OVK_HIDDEN __attribute__((visibility("hidden")))
+#elif defined(__GNUC__)
 #define OVK_EXPORT __attribute__((visibility("default")))
 #define OVK_HIDDEN __attribute__((visibility("hidden")))
 #else

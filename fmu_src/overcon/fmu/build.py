@@ -10,7 +10,12 @@ refused (the pre-check's reasons are printed) unless ``allow_nonunique``. Each F
     binaries/<platform>/<scene>.so    the FMI layer over the core (native/fmu_*.c with fmi2_*.c or
                                       fmi3_*.c, and core/*.c), compiled once at the package
                                       installation (setup.py): :data:`C_RUNTIME_LIBRARY`,
-                                      :data:`C_RUNTIME_LIBRARY3`, copied; C11 and libm, no libpython
+                                      :data:`C_RUNTIME_LIBRARY3`, copied; C11 and libm, no libpython;
+                                      with ``platforms`` (``--platforms``) one folder per platform,
+                                      the others cross-compiled once and cached (overcon.fmu.platforms)
+    sources/core/*.c, *.h             the C sources of that binary (source FMU: a tool compiles it
+    sources/fmu/native/*.c, *.h       for a platform not shipped): listed in FMI 2.0's <SourceFiles>,
+    sources/buildDescription.xml      FMI 3.0's build description (with -DOVK_FMU_BINARY)
     resources/overcon_model.bin       the packed model, output plan, variables and parameter rules
                                       (overcon.fmu.cmodel, its format versioned)
     resources/overcon_fmu.json        GUID, scene path, pre-check verdicts and warnings, binary facts
@@ -41,7 +46,16 @@ under the default kind (said in the build output) and refused (exit 2) under an 
 me|both``.
 
 The GUID is a SHA-256 over the scene file, the mechanism file, the overcon source (Python) and the
-binary, so rebuilding unchanged inputs gives the same GUID and the same bytes.
+binaries (each with its folder), so rebuilding unchanged inputs gives the same GUID and the same
+bytes.
+
+Platforms (``platforms``; ``overcon build --platforms LIST``, default ``native``): the FMU carries a
+binary for each platform of the list (:mod:`overcon.fmu.platforms`: linux64, aarch64-linux, win64,
+darwin64, aarch64-darwin, or all), under the folder names of its FMI version; FMI 2.0 has none for
+the aarch64 platforms, which it leaves out (said in the build output). This machine's binary is the
+installed one; the others are cross-compiled by zig (``pip install 'overcon[platforms]'``) once per
+platform, FMI version and overcon version, and cached, before the first FMU is written. Without
+zig, or for an unknown name, the build is refused (exit 2) naming the fix. docs/platforms.md.
 
 Compatibility information (FMI cross-check convention) next to each FMU, unless ``refs=False``:
 ``<scene>_ref.csv`` (time and every Real output, simulated through ``fmpy.simulate_fmu`` at the
@@ -79,11 +93,11 @@ from ..checks import compile_checked
 from ..precheck import PrecheckResult, precheck
 from ..spec import SceneSpec
 from ..precheck import friction_warnings
-from . import cmodel, description, facts, variables
+from . import cmodel, description, facts, platforms as platforms_mod, variables
 
 EXIT_OK, EXIT_NONUNIQUE, EXIT_INPUT, EXIT_RUNTIME = 0, 1, 2, 3
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
-FORMAT_VERSION = "overcon-fmu-2"  # bump when the FMU layout changes (enters the GUID)
+FORMAT_VERSION = "overcon-fmu-3"  # bump when the FMU layout changes (enters the GUID): 3 added sources/
 RUNTIMES = ("c", "python")
 """The accepted values of ``--runtime``: ``python`` is a deprecated alias of ``c`` (module docstring)."""
 FMI_VERSIONS = (2, 3)
@@ -210,10 +224,13 @@ class _NotBuilt(Exception):
 
 
 def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, validate: bool = True,
-                echo=print, sources=None, runtime: str = "c", fmi: int = 2, kind: str | None = None) -> BuildResult:
+                echo=print, sources=None, runtime: str = "c", fmi: int = 2, kind: str | None = None,
+                binaries=None) -> BuildResult:
     """Build the FMU of one scene file (see the module docstring); never raises for bad input.
     ``runtime``: one of :data:`RUNTIMES`, every one building the C runtime (:func:`build_all` says
-    that ``python`` is deprecated); ``kind`` None: the default (both)."""
+    that ``python`` is deprecated); ``kind`` None: the default (both); ``binaries``: (binaries/
+    folder, file extension, bytes) of every platform the FMU carries (:func:`platform_binaries`),
+    None for this machine's alone."""
     if runtime not in RUNTIMES:
         raise ValueError(f"runtime {runtime!r}: one of {', '.join(RUNTIMES)}")
     t0 = time.perf_counter()
@@ -230,7 +247,7 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
                                        "anyway)")
         kinds = _kinds(spec, model, fmi, kind, echo)
         fmu, guid, table = _write_fmu(path, out_dir, spec, model, report, sources=sources, validate=validate,
-                                      fmi=fmi, kinds=kinds)
+                                      fmi=fmi, kinds=kinds, binaries=binaries)
     except _NotBuilt as exc:
         res.status = exc.status
         res.messages.extend(exc.messages)
@@ -318,7 +335,7 @@ def _finish(path: Path, tmp: Path, fmu: Path, validate: bool) -> None:
 
 
 def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: PrecheckResult, *, sources,
-               validate: bool, fmi: int = 2, kinds=("cs", "me")):
+               validate: bool, fmi: int = 2, kinds=("cs", "me"), binaries=None):
     """Write ``<out_dir>/<scene>.fmu`` (module docstring) through a ``.fmu.part`` file, validated
     with fmpy unless ``validate`` is false. Returns (FMU path, GUID, variable table);
     :class:`_NotBuilt` ("failed") naming the scene file otherwise."""
@@ -330,9 +347,12 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
         plat, ext = _fmi_platform()
         if fmi == 3:
             plat = _fmi3_platform()
-        binary = c_runtime_library(fmi)
-        digest = _digest((FORMAT_VERSION.encode(), b"runtime c", binary, scene_zip.encode(), scene_bytes,
-                          mech_zip.encode(), mech_bytes)
+        if binaries is None:
+            binaries = [(plat, ext, c_runtime_library(fmi))]
+        c_files = c_sources(fmi)
+        digest = _digest((FORMAT_VERSION.encode(), b"runtime c",
+                          *(f"{folder}.{e}".encode() + b"\0" + data for folder, e, data in binaries),
+                          scene_zip.encode(), scene_bytes, mech_zip.encode(), mech_bytes)
                          + ((f"fmi {fmi} kinds {','.join(kinds)}".encode(),) if (fmi, kinds) != (2, ("cs",)) else ()),
                          sources)
         guid = "{" + str(uuid.UUID(digest[:32])) + "}"
@@ -341,7 +361,8 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
         overcon_version = _overcon_version()
         xml = description.model_description(
             spec, table, guid=guid, version=overcon_version, fmi=fmi, kinds=kinds,
-            generation_tool=f"overcon {overcon_version} build_fmu (C runtime: the compiled core, no Python)")
+            generation_tool=f"overcon {overcon_version} build_fmu (C runtime: the compiled core, no Python)",
+            source_files=[rel for rel, _ in c_files if rel.endswith(".c")] if fmi == 2 else ())
         warnings = [(1, text) for text in friction_warnings(model)]
         model_bin = cmodel.model_file(model, spec.solver, table, guid, warnings)
         manifest = {"scene": scene_zip, "guid": guid, "runtime": "c", "model_identifier": spec.name,
@@ -351,6 +372,7 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
                     "binary": {"platform": plat,
                                "library": (C_RUNTIME_LIBRARY3 if fmi == 3 else C_RUNTIME_LIBRARY).name,
                                "source": f"overcon/core, overcon/fmu/native/fmu_*.c, fmi{fmi}_*.c"},
+                    "platforms": [folder for folder, _, _ in binaries],
                     "model_file": {"path": "resources/overcon_model.bin", "format": cmodel.FORMAT}}
         out_dir.mkdir(parents=True, exist_ok=True)
         fmu = out_dir / f"{spec.name}.fmu"
@@ -358,7 +380,12 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
         try:  # the .part removed on any way out but the rename (Ctrl-C included: overcon.outfiles)
             with zipfile.ZipFile(tmp, "w") as zf:
                 _zip_write(zf, "modelDescription.xml", xml)
-                _zip_write(zf, f"binaries/{plat}/{spec.name}.{ext}", binary, 0o755)
+                for folder, e, data in binaries:
+                    _zip_write(zf, f"binaries/{folder}/{spec.name}.{e}", data, 0o755)
+                for rel, data in c_files:
+                    _zip_write(zf, f"sources/{rel}", data)
+                if fmi == 3:
+                    _zip_write(zf, "sources/buildDescription.xml", build_description(spec.name, c_files))
                 _zip_write(zf, "resources/overcon_model.bin", model_bin)
                 _zip_write(zf, "resources/overcon_fmu.json", json.dumps(manifest, indent=1).encode())
                 _zip_write(zf, facts.PATH, facts.encode(facts.record(spec, model, report)))
@@ -373,6 +400,57 @@ def _write_fmu(path: Path, out_dir: Path, spec: SceneSpec, model, report: Preche
     except (OSError, ValueError, KeyError, RuntimeError) as exc:
         raise _NotBuilt("failed", f"{path}: build failed: {type(exc).__name__}: {exc}") from exc
     return fmu, guid, table
+
+
+def c_sources(fmi: int) -> list[tuple[str, bytes]]:
+    """(path under sources/, bytes) of the C files and headers of the FMU binary of FMI ``fmi``
+    (overcon.fmu.platforms.source_files)."""
+    return [(rel, f.read_bytes()) for rel, f in platforms_mod.source_files(fmi)]
+
+
+def build_description(model_identifier: str, c_files) -> bytes:
+    """FMI 3.0's sources/buildDescription.xml: the C files of ``c_files`` (C11), compiled with
+    OVK_FMU_BINARY defined (the FMI functions alone exported under GCC and Clang) and linked with
+    libm."""
+    import xml.etree.ElementTree as ET  # noqa: PLC0415
+
+    root = ET.Element("fmiBuildDescription", {"fmiVersion": "3.0"})
+    bc = ET.SubElement(root, "BuildConfiguration", {"modelIdentifier": model_identifier})
+    sfs = ET.SubElement(bc, "SourceFileSet", {"language": "C11"})
+    for rel, _ in c_files:
+        if rel.endswith(".c"):
+            ET.SubElement(sfs, "SourceFile", {"name": rel})
+    ET.SubElement(sfs, "PreprocessorDefinition", {
+        "name": "OVK_FMU_BINARY", "value": "1",
+        "description": "the core's entry points stay internal: the binary exports the FMI functions alone"})
+    ET.SubElement(bc, "Library", {"name": "m", "description": "the C math library (libm)"})
+    ET.indent(root)
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n").encode()
+
+
+def platform_binaries(platforms: str, fmi: int, echo=print) -> list[tuple[str, str, bytes]]:
+    """(binaries/ folder, extension, bytes) of every platform of the ``--platforms`` list
+    ``platforms`` that FMI ``fmi`` names (overcon.fmu.platforms: this machine's is the installed
+    binary, checked; the others cross-compiled once and cached); the platforms FMI 2.0 has no
+    folder for are left out, said through ``echo``. Raises
+    :class:`overcon.fmu.platforms.PlatformsUnavailable` (bad input, exit 2) or
+    :class:`overcon.fmu.platforms.PlatformBuildError` / :class:`BuildError`."""
+    chosen = platforms_mod.parse(platforms)
+    kept, left = platforms_mod.folders(chosen, fmi)
+    if left:
+        echo(f"build: FMI {fmi}.0 names no binaries folder for {', '.join(p.name for p in left)}: left out "
+             f"(FMI 3.0 carries them: --fmi 3)")
+    if not kept:
+        raise platforms_mod.PlatformsUnavailable(f"--platforms {platforms}: none of these has an FMI {fmi}.0 "
+                                                 "binaries folder")
+    platforms_mod.require_cross(kept)
+    version = _overcon_version()
+    out = []
+    for p in kept:
+        data = platforms_mod.binary(p, fmi, version, native_binary=lambda: c_runtime_library(fmi), echo=echo)
+        platforms_mod.check(p, fmi, data)
+        out.append((p.folder(fmi), p.ext, data))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -485,11 +563,14 @@ def _reference_job(fmu: str) -> tuple[str, str, float]:
 
 def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = True,
               validate: bool = True, jobs: int | None = None, echo=None, echo_err=None,
-              runtime: str = "c", fmi: int = 2, kind: str | None = None) -> tuple[int, list[BuildResult]]:
+              runtime: str = "c", fmi: int = 2, kind: str | None = None,
+              platforms: str = "native") -> tuple[int, list[BuildResult]]:
     """Build every scene in ``paths`` (files or directories) into ``out_dir``; print progress with
     ``echo`` (problems with ``echo_err``). ``runtime``: "c", or "python", a deprecated alias of it
     (said through ``echo_err``; module docstring); ``fmi`` 2 or 3 and ``kind`` "cs", "me", "both"
-    or None (the default: both; module docstring). Returns (exit code, results)."""
+    or None (the default: both; module docstring); ``platforms``: the ``--platforms`` list
+    (:func:`platform_binaries`; every binary is made before the first FMU). Returns (exit code,
+    results)."""
     if runtime not in RUNTIMES:
         raise ValueError(f"runtime {runtime!r}: one of {', '.join(RUNTIMES)}")
     if fmi not in FMI_VERSIONS or kind not in (None, *KINDS):
@@ -506,11 +587,19 @@ def build_all(paths, out_dir, *, allow_nonunique: bool = False, refs: bool = Tru
     if runtime == "python":
         echo_err("build: WARNING: --runtime python is deprecated: the FMU that embedded Python is retired, and "
                  "this builds the C runtime (no Python in the FMU), as --runtime c does")
+    try:
+        binaries = None if platforms == "native" else platform_binaries(platforms, fmi, echo)
+    except platforms_mod.PlatformsUnavailable as exc:
+        echo_err(f"build: {exc}")
+        return EXIT_INPUT, results
+    except (platforms_mod.PlatformBuildError, BuildError, OSError) as exc:
+        echo_err(f"build: the binaries of --platforms {platforms} failed: {exc}")
+        return EXIT_INPUT, results
     sources = _source_files()
     names: dict[str, str] = {}
     for f in files:
         r = build_scene(f, out_dir, allow_nonunique=allow_nonunique, validate=validate, echo=echo,
-                        sources=sources, runtime=runtime, fmi=fmi, kind=kind)
+                        sources=sources, runtime=runtime, fmi=fmi, kind=kind, binaries=binaries)
         if r.status == "built" and r.name in names:
             r.status = "failed"
             r.messages.append(f"{f}: scene name {r.name} already built from {names[r.name]} "
@@ -586,6 +675,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="FMI version of the FMUs: 2 (FMI 2.0) or 3 (FMI 3.0) (default 2)")
     p.add_argument("--kind", choices=KINDS, default=None,
                    help="interfaces the FMU offers: cs (co-simulation), me (Model Exchange) or both (default both)")
+    p.add_argument("--platforms", default="native", metavar="LIST",
+                   help="the binaries the FMU carries, comma separated: native (default: this machine's), "
+                        + ", ".join(platforms_mod.PLATFORMS) + " or all; other platforms than this machine's are "
+                        f"cross-compiled once and cached (needs {platforms_mod.EXTRA}); FMI 2.0 leaves out "
+                        "aarch64-linux and aarch64-darwin (docs/platforms.md)")
 
 
 
@@ -593,7 +687,7 @@ def run_args(args) -> int:
     code, _ = build_all(args.paths, args.out, allow_nonunique=args.allow_nonunique,
                         refs=not args.no_ref, validate=not args.no_validate, jobs=args.jobs,
                         runtime=getattr(args, "runtime", "c"), fmi=getattr(args, "fmi", 2),
-                        kind=getattr(args, "kind", None))
+                        kind=getattr(args, "kind", None), platforms=getattr(args, "platforms", "native"))
     return code
 
 

@@ -46,10 +46,12 @@ KINDS = ("cs", "me")
 
 
 def model_description(scene, table: list[Var], *, guid: str, generation_tool: str,
-                      version: str = "", fmi: int = 2, kinds=("cs",)) -> bytes:
+                      version: str = "", fmi: int = 2, kinds=("cs",), source_files=()) -> bytes:
     """The XML document (UTF-8 bytes) for ``scene`` (name, description and the default
     experiment, from its solver options) with the variables of ``table``, for FMI ``fmi`` (2 or 3)
-    offering ``kinds`` (a subset of :data:`KINDS`, not empty)."""
+    offering ``kinds`` (a subset of :data:`KINDS`, not empty). ``source_files``: the C files under
+    the FMU's ``sources/`` (paths relative to it) listed in FMI 2.0's ``<SourceFiles>`` of each
+    interface (FMI 3.0 lists them in ``sources/buildDescription.xml`` instead)."""
     if fmi not in (2, 3) or not kinds or set(kinds) - set(KINDS):
         raise ValueError(f"model_description: fmi {fmi!r}, kinds {kinds!r}: FMI 2 or 3, kinds among {KINDS}")
     if fmi == 3:
@@ -64,7 +66,7 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
         attrib["numberOfEventIndicators"] = "0"
     root = ET.Element("fmiModelDescription", attrib)
     if "me" in kinds:
-        ET.SubElement(root, "ModelExchange", {
+        me = ET.SubElement(root, "ModelExchange", {
             "modelIdentifier": scene.name,
             "needsExecutionTool": "false",
             "completedIntegratorStepNotNeeded": "false",
@@ -74,10 +76,11 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
             "canSerializeFMUstate": "true",
             "providesDirectionalDerivative": "false",
         })
+        _source_files(me, source_files)
     if "cs" in kinds:
-        ET.SubElement(root, "CoSimulation", {
+        cs = ET.SubElement(root, "CoSimulation", {
             "modelIdentifier": scene.name,
-            "needsExecutionTool": "true",  # a Python interpreter with numpy and scipy
+            "needsExecutionTool": "false",  # the compiled binary alone (C11 and libm)
             "canHandleVariableCommunicationStepSize": "true",
             "canInterpolateInputs": "true" if any(v.causality == "input" for v in table) else "false",
             "maxOutputDerivativeOrder": "0",
@@ -88,6 +91,7 @@ def model_description(scene, table: list[Var], *, guid: str, generation_tool: st
             "canSerializeFMUstate": "true",
             "providesDirectionalDerivative": "false",
         })
+        _source_files(cs, source_files)
     _units_categories_experiment(root, scene, table, "fmi2")
     mv = ET.SubElement(root, "ModelVariables")
     for vr, v in enumerate(table):
@@ -171,6 +175,14 @@ def _fmi2_structure(root, table: list[Var]) -> None:
 
 
 _FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String", "Enumeration": "Int32"}
+
+
+def _source_files(interface, files) -> None:
+    """FMI 2.0's ``<SourceFiles>`` of an interface element: one ``<File>`` per C file of sources/."""
+    if files:
+        sf = ET.SubElement(interface, "SourceFiles")
+        for name in files:
+            ET.SubElement(sf, "File", {"name": name})
 
 
 def _fmi3(scene, table: list[Var], *, guid: str, generation_tool: str, version: str, kinds) -> bytes:

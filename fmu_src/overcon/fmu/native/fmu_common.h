@@ -59,7 +59,13 @@ typedef struct {
     const fmi2ComponentEnvironment componentEnvironment;
 } fmi2CallbackFunctions;
 
+/* The FMI functions, the only symbols an FMU binary exports (every other one is hidden: it is
+ * compiled with -fvisibility=hidden -DOVK_FMU_BINARY, and linked with native/exports.map on ELF). */
+#if defined(_WIN32)
+#define FMU_EXPORT __declspec(dllexport)
+#else
 #define FMU_EXPORT __attribute__((visibility("default")))
+#endif
 #define FMU_HIDDEN __attribute__((visibility("hidden")))
 
 enum { T_REAL = 0, T_INTEGER = 1, T_BOOLEAN = 2, T_STRING = 3 };

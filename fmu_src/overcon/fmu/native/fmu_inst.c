@@ -96,15 +96,27 @@ static int hexval(char ch) {
                                              : ch >= 'A' && ch <= 'F' ? ch - 'A' + 10 : -1;
 }
 
+#if defined(_WIN32)
+static int drive_letter(const char *p) { /* "C:/" or "C:\\": a Windows path's drive */
+    return ((p[0] >= 'A' && p[0] <= 'Z') || (p[0] >= 'a' && p[0] <= 'z')) && p[1] == ':' &&
+           (p[2] == '/' || p[2] == '\\');
+}
+#else
+#define drive_letter(p) 0 /* elsewhere /C:/dir is a path like any other */
+#endif
+
 /* The resources folder of a file: URI (or a plain absolute path), percent escapes decoded; 0 for
- * one that is not, or whose escapes hold %00 (a NUL would silently cut the path there). */
+ * one that is not, or whose escapes hold %00 (a NUL would silently cut the path there). On
+ * Windows, the URI file:///C:/dir names the path C:/dir (not /C:/dir) and a plain path with a drive
+ * (FMI 3.0's resourcePath, C:\dir\ or C:/dir/) is taken as it is. */
 int fmu_resource_dir(const char *uri, char *out, size_t size) {
     const char *p = uri;
     if (!strncmp(p, "file://localhost/", 17)) p += 16;
     else if (!strncmp(p, "file:///", 8)) p += 7;
     else if (!strncmp(p, "file:/", 6)) p += 5;
-    else if (p[0] != '/') return 0;
+    else if (p[0] != '/' && !drive_letter(p)) return 0;
     while (p[0] == '/' && p[1] == '/') p++;
+    if (p[0] == '/' && drive_letter(p + 1)) p++;
     size_t j = 0;
     for (; *p && j + 1 < size; p++) {
         if (*p == '%' && hexval(p[1]) >= 0 && hexval(p[2]) >= 0) {
@@ -115,7 +127,7 @@ int fmu_resource_dir(const char *uri, char *out, size_t size) {
             out[j++] = *p;
         }
     }
-    while (j > 1 && out[j - 1] == '/') j--;
+    while (j > 1 && (out[j - 1] == '/' || (out[j - 1] == '\\' && drive_letter(out)))) j--;
     out[j] = '\0';
     return 1;
 }

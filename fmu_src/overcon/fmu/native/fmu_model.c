@@ -237,7 +237,7 @@ static int check_tables(const fmu_model *fm, char *err, size_t errsize) {
     for (int k = 0; k < fm->nparam; k++) {
         const fmu_param *p = &fm->par[k];
         if (p->target < P_MU || (p->target <= P_VSTRIBECK && (p->joint < 0 || p->joint >= fm->M.nj)) ||
-            p->target > P_REDUNDANCY || (p->target > P_MAX_WALL_TIME && p->target < P_REDUNDANCY) ||
+            p->target > P_REDUNDANCY || (p->target > P_VSTRIBECK && p->target < P_METHOD) ||
             (p->rule == RULE_CHOICE && p->nchoices < 1))
             return snprintf(err, errsize, "parameter %s: target %d, joint %d out of range", p->name, p->target,
                             p->joint), 0;

@@ -275,7 +275,10 @@ typedef struct {
     int *span;            /* 2 nb: scratch (first, last ordered row touching a body) */
     long long *key;       /* nR: scratch (the sort) */
     double *w, *w2;       /* nR x 2 kh each: weighted rows on their bodies' columns (w2: the rate's) */
-    double *scale;        /* nh: sqrt(Minv) */
+    double *scale;        /* nh: the column scaling of the last rows equilibrated (watch_scale.c) */
+    double *scale_y;      /* nh: the scaling at the state whose certified bounds the watch passes on */
+    double *fscale;       /* nh: the column scaling of the whole Jacobian's rows (watch.c) */
+    double *sscr;         /* nh + m: watch_scale.c's scratch */
     double *umin, *umax;  /* nR: the tracked left singular vectors (state) */
     double *x, *z;        /* nR, nh: scratch */
     double *G, *F;        /* nR x nR each at most: the band of G, a shifted copy factored */
@@ -373,7 +376,8 @@ OVK_HIDDEN size_t ovk_unique_doubles(int m, int nh);
 OVK_HIDDEN int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank, int *unique);
 OVK_HIDDEN int ovk_choose_kept(const ovk_model *M, const double *J, double *work, int *iwork, int *kept, int *rank);
 OVK_HIDDEN int ovk_unique_judged(const ovk_model *M);
-OVK_HIDDEN int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up);
+OVK_HIDDEN int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up,
+                                    const double *scale);
 /* sim.c: the run goes on from (t, y) under the kept equations `kept` (m flags), its integrator anew */
 OVK_HIDDEN int ovk_sim_restart(ovk_sim *s, const int *kept, double t, const double *y);
 OVK_HIDDEN int ovk_sim_use_kept(ovk_sim *s, const int *retained);
@@ -383,12 +387,18 @@ OVK_HIDDEN int ovk_sim_degraded(ovk_sim *s);
 /* watch_eig.c: the tracked extremes (status; their message in msg) */
 OVK_HIDDEN int ovk_eig_make(ovk_sim *s);
 OVK_HIDDEN void ovk_eig_free(ovk_watch_eig *e);
-OVK_HIDDEN int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, char *msg);
+OVK_HIDDEN int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, int fresh, char *msg);
 OVK_HIDDEN int ovk_eig_extremes(ovk_sim *s, const double *w, double *smin, double *smax);
 OVK_HIDDEN void ovk_eig_order(ovk_watch_eig *e, const int *rows);
 OVK_HIDDEN void ovk_sim_watch_adopt(ovk_sim *s);
 OVK_HIDDEN double ovk_eig_rate(const ovk_sim *s, const double *u, double sigma, double dt);
 OVK_HIDDEN double ovk_now(void);
+/* watch_scale.c: the watch's rows equilibrated (rows of `width` values; body NULL: dense, else two
+ * bodies' kh columns each), their column scaling into scale (nh; work: nh + k doubles), or a given
+ * scaling applied; rows to unit 2-norm */
+OVK_HIDDEN void ovk_watch_scale(double *w, int k, int width, const int *body, int kh, int nh, double *scale,
+                                double *work);
+OVK_HIDDEN void ovk_watch_apply(double *w, int k, int width, const int *body, int kh, const double *scale);
 /* svd.c: one-sided Jacobi */
 OVK_HIDDEN int ovk_jacobi_rows(double *B, int k, int r, double *Q);
 /* bandsvd.c: the singular values and trailing right singular vectors of rows with narrow windows */

@@ -714,9 +714,9 @@ class Run:
         return self._y.copy()
 
     def watch_extremes(self, y: np.ndarray, *, cold: bool = False) -> tuple[float, float]:
-        """(sigma_min, sigma_max) of the watched rows at state ``y`` (Phi_h equilibrated, core/watch_scale.c, unit-norm rows:
-        core/watch_eig.c's estimate, to its relative accuracy 1e-9 with a floor of 1e-13 sigma_max),
-        warm-started from the run's tracked vectors, or from the fixed start with ``cold``; the run
+        """(sigma_min, sigma_max) of the watched rows at state ``y`` (Phi_h equilibrated by
+        core/watch_scale.c, unit-norm rows: core/watch_eig.c's estimate, to its relative accuracy
+        1e-9 with a floor of 1e-13 sigma_max), warm-started from the run's tracked vectors, or from the fixed start with ``cold``; the run
         is left as it was."""
         y = np.ascontiguousarray(y, float)
         if y.shape != (self.ny,):

@@ -716,8 +716,8 @@ class Run:
     def watch_extremes(self, y: np.ndarray, *, cold: bool = False) -> tuple[float, float]:
         """(sigma_min, sigma_max) of the watched rows at state ``y`` (Phi_h equilibrated by
         core/watch_scale.c, unit-norm rows: core/watch_eig.c's estimate, to its relative accuracy
-        1e-9 with a floor of 1e-13 sigma_max), warm-started from the run's tracked vectors, or from the fixed start with ``cold``; the run
-        is left as it was."""
+        1e-9 with a floor of 1e-13 sigma_max), warm-started from the run's tracked vectors, or
+        from the fixed start with ``cold``; the run is left as it was."""
         y = np.ascontiguousarray(y, float)
         if y.shape != (self.ny,):
             raise ValueError(f"watch_extremes: a state of {self.ny} entries, got shape {y.shape}")

@@ -22,7 +22,7 @@
  *   lu.c                complex LU with partial pivoting (radau's complex Newton matrix)
  *   outputs.c           reported reactions and friction forces
  *   rates.c             coordinate rates q' from h
- *   integrate_rk.c      the explicit integrators of overcon.integrators: dopri5, dop853 (dense output), rk4
+ *   integrate_rk.c      the explicit integrators: dopri5, dop853 (dense output), rk4
  *   integrate_radau.c   its implicit Radau IIA of order 5 (radau), collocation dense output
  *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
  *                       work budgets, derived outputs at any point of the last step
@@ -30,7 +30,8 @@
  *   watch_eig.c         the watch's r: the kept rows' extreme singular values tracked from check to
  *                       check (inverse iterations on the banded G = W W^T)
  *   energy.c            the energy outputs: kinetic, potential, the work ledger of friction and loads
- *   watch.c             the singularity watch of overcon.watch: r and dr/dt after each step, the
+ *   watch_scale.c       the watch's rows equilibrated (the pre-check's rule, mass-free) and weighted
+ *   watch.c             the singularity watch: r and dr/dt after each step, the
  *                       minimum of r inside a step, singular position or expired/degrading elimination;
  *                       the uniqueness along the motion and its events
  *   unique.c            the whole Jacobian's rank and each joint's reaction uniqueness (the pre-check's
@@ -38,7 +39,7 @@
  *   sim_state.c         a run's state as plain bytes (FMI get/set/serialize FMU state)
  *   rows_sparse.c       Phi and Phi_h by their nonzeros (the pre-check's Jacobian), exported
  *   api.c               the other exported entry points (ovk_*), the only symbols of the library
- * Units and signs: SI, the paper's conventions (those of overcon.evaluation and overcon.joints).
+ * Units and signs: SI, the paper's conventions (those of overcon.joints and docs/scene-format.md).
  *
  * Every failure is a status (OVK_*) plus a message kept in the workspace (ovk_message); the core
  * never aborts or exits, and has no global mutable state (two workspaces never share memory).
@@ -211,7 +212,7 @@ typedef struct {
     int *piv;      /* nx: the row interchanges of the friction solves' LU (friction.c, friction_robust.c) */
 } ovk_data;
 
-/* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, dop853, rk4);
+/* integrate_rk.c: the explicit integrators (dopri5, dop853, rk4);
  * integrate_radau.c: its implicit Radau IIA of order 5 (radau) */
 enum { OVK_METHOD_DOPRI5 = 0, OVK_METHOD_RK4 = 1, OVK_METHOD_DOP853 = 2, OVK_METHOD_RADAU = 3 };
 /* The right-hand side y' = f(t, y) of an integrator: a status (its message written by the callee). */

@@ -1,5 +1,5 @@
-/* The singularity watch of a C run, as overcon.watch.SingularityMonitor with the run's checks of
- * overcon.simulate.Simulation._watch, _recover, _expired and _degraded: after every accepted step
+/* The singularity watch of a run (sim.c; the retired Python watch's names are kept in the
+ * parentheses below, as the messages are): after every accepted step
  * r = sigma_min / sigma_max of the kept Jacobian J_R equilibrated (watch_scale.c: mass-free, as the
  * pre-check's decision matrix; unit-norm rows) and its rate dr/dt
  * (ds_k/dt = u_k^T J' v_k, J' by a forward difference of J along q' = the integrator's
@@ -182,7 +182,10 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
     if (full < nR && (status = ovk_sim_along(s, t, y, 0, 0.0, INFINITY, msg))) return status; /* the events at that instant */
     if (full < nR)
         return snprintf(msg, OVK_MSG, "%s: the mechanism's constraint Jacobian is rank deficient (rank %d < %d; "
-                        "kept equations' sigma_min/sigma_max %s, below %g)", where, full, nR, rs, s->o.ratio_tol),
+                        "kept equations' sigma_min/sigma_max %s, below %g); to go on through it, run with "
+                        "--singular pass (scene: [solver] singular = \"pass\"), which solves the kept equations in "
+                        "the augmented Lagrangian form and projects the state back onto the constraints after every "
+                        "step", where, full, nR, rs, s->o.ratio_tol),
                OVK_SINGULAR_POSITION;
     if (s->M->redundancy == OVK_MIN_NORM) /* the watched set is chosen at the start only (checks.watch_rows) */
         return say(msg, OVK_ELIMINATION, "%s: the equations watched under redundancy 'min-norm' are no longer "

@@ -62,7 +62,8 @@ PROJECTION_SLACK = 10.0  # OVK_PROJ_SLACK of core/core.h: near a singular positi
 
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
-           ("spatial", "spatial_cylindrical"): 6, ("spatial", "spatial_universal"): 7, ("spatial", "spatial_fixed"): 8}
+           ("spatial", "spatial_cylindrical"): 6, ("spatial", "spatial_universal"): 7, ("spatial", "spatial_fixed"): 8,
+           ("planar", "distance"): 9, ("spatial", "spatial_distance"): 9}
 _ROTATIONS = ("euler_zxz", "quaternion")
 _AXIS_SIZES = {"spatial_revolute": ("radius", "length", "collar_radius"), "spatial_prismatic": ("length", "radius"),
                "spatial_cylindrical": ("length", "radius")}
@@ -240,7 +241,10 @@ def _redundancy_block(model, watch=None) -> dict:
 def _joint_constants(model, c) -> np.ndarray:
     out = np.zeros(NJC)
     p = c.p
-    if c.type == "translational":
+    if c.type in ("distance", "spatial_distance"):  # core/joints_distance.c: s_i, s_j at 0 and 3, L at 6
+        k = model.dim
+        out[0:k], out[3:3 + k], out[6] = p["s_i"], p["s_j"], p["length"]
+    elif c.type == "translational":
         out[0:2], out[2:4], out[4:6] = p["s_A"], p["s_B"], p["v"]
         out[6] = p["psi"]
         out[7:11] = np.asarray(p["B"], float).reshape(-1)

@@ -289,6 +289,7 @@ def compile_model(scene: SceneSpec) -> Model:
     slot = {name: i for i, name in enumerate(names)}
     slot[BASE] = -1
     nb = len(names)
+    particle = {b.name: b.particle for b in mech.bodies}
     mass = np.array([b.mass for b in mech.bodies], float)
     inertia = np.array([b.inertia for b in mech.bodies], float).reshape(nb, -1)
     M = np.concatenate([np.concatenate([np.full(dim, mass[i]), inertia[i]]) for i in range(nb)])
@@ -320,7 +321,8 @@ def compile_model(scene: SceneSpec) -> Model:
         elimination_mode="pending", friction_joints=(),
         position_outputs=tuple((p, coord_index[p]) for p in scene.positions),
         velocity_outputs=tuple((f"{b}.{v}", slot[b] * VELOCITIES_PER_BODY[kind] + i) for b in scene.velocities
-                               for i, (v, _) in enumerate(VELOCITY_OUTPUTS[kind])),
+                               for i, (v, _) in enumerate(VELOCITY_OUTPUTS[kind])
+                               if not (particle[b] and i >= dim)),  # a particle: no rates of its frozen orientation
         energy_outputs=scene.energy)
     R0 = _rotations(bodies, q0)
     friction_on = set(scene.friction)

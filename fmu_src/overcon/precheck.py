@@ -13,6 +13,7 @@ from . import analysis
 from .checks import analysed_rows, factored_q0
 from .joints import TYPES
 from .model import Model
+from .spec import frozen_coordinates
 
 
 def joint_groups(model: Model) -> dict[str, list[int]]:
@@ -163,6 +164,11 @@ def precheck(model: Model, source: str = "", methods: str = "auto") -> PrecheckR
     :func:`analyse_model`)."""
     res = analyse_model(model, methods)
     summary = analysis.to_json(res)
+    # a particle's frozen orientation (spec.BodySpec) is no coordinate of the mechanism: its
+    # columns of the Jacobian are zero, so the rank stays and the count and DOF leave it out
+    frozen = frozen_coordinates(model.scene.mechanism)
+    summary["n_coordinates"] -= frozen
+    summary["dof"] -= frozen
     types = {c.name: TYPES[c.type].name for c in model.joints}  # the files' type names
     verdicts = {j["name"]: JointVerdict(type=types[j["name"]], **j) for j in summary.pop("joints")}
     # under redundancy "compliant" the numbers and verdicts are the rigid joints' (the compliant

@@ -8,6 +8,7 @@
  *   joints.c            the joint table: dispatch by type, and the assembly of Phi, Phi_h, gamma
  *   joints_planar.c     planar revolute and translational joints: rows, friction setup and forces
  *   joints_spherical.c  spatial spherical joints: the same
+ *   joints_distance.c   distance joints (planar and spatial): the rows of a massless link
  *   joints_spatial.c    spatial axis joints (revolute, prismatic, cylindrical, universal, fixed): the
  *                       row primitives of overcon.joints.spatial_rows, reactions, friction
  *   loads.c             applied forces: gravity, gyroscopic, force, torque, spring
@@ -76,6 +77,7 @@ enum {
 };
 enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
+enum { J_DISTANCE = 9 }; /* planar and spatial: a massless link (joints_distance.c), no friction */
 enum { LAW_NONE = 0, LAW_REGULARISED = 1, LAW_STRIBECK = 2 };
 enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 
@@ -456,6 +458,10 @@ OVK_HIDDEN void ovk_planar_friction_forces(const ovk_model *M, int j, const ovk_
 OVK_HIDDEN void ovk_planar_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
                                         double *dQi, double *dQj);
 OVK_HIDDEN double ovk_planar_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
+
+/* joints_distance.c */
+OVK_HIDDEN void ovk_distance_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji,
+                                  double *Jj, double *gam);
 
 /* joints_spherical.c */
 OVK_HIDDEN void ovk_spherical_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji,

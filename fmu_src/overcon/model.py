@@ -62,7 +62,13 @@ GLOBAL_COMPONENTS = {"planar": ("Fx0", "Fy0"), "spatial": ("Fx0", "Fy0", "Fz0")}
 
 
 class ModelError(ValueError):
-    """A scene that parses but cannot be simulated as asked (e.g. a bad elimination)."""
+    """A scene that parses but cannot be simulated as asked (e.g. a bad elimination). ``details``:
+    data for ``check --json``'s error document (keys added beside ``file`` and ``error``; e.g. a
+    refused elimination's ``valid_eliminations`` and ``joint_equations``)."""
+
+    def __init__(self, message: str, details: dict | None = None):
+        super().__init__(message)
+        self.details = dict(details or {})
 
 
 class InconsistentInitialState(ModelError):

@@ -248,7 +248,7 @@ def singular_pass(w: "Writer", tmp: Path) -> None:
 
 
 PARTICLES = {
-    "planar": ('kind = "planar"\ngravity = [0.0, -9.81]\n', "[0.5, 0.0, 0.3]", "0.1", "[1.0, 0.2]",
+    "planar": ('kind = "planar"\ngravity = [0.0, -9.81]\n', "[0.5, 0.0, 0.0]", "0.1", "[1.0, 0.2]",
                "[0.0, 0.0]", "[0.5, 0.0]", "revolute"),
     "spatial": ('kind = "spatial"\nrotation = "quaternion"\ngravity = [0.0, 0.0, -9.81]\n',
                 "[0.5, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]", "[0.01, 0.1, 0.1]", "[1.0, 0.2, 0.0]", "[0.0, 0.0, 0.0]",

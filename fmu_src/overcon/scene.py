@@ -23,7 +23,10 @@ What is validated
 * Mechanism: ``name`` an identifier (letter, then letters/digits/_), ``kind`` in
   ``spec.KINDS``; at least one body; body names identifiers, unique, not ``base``; mass > 0;
   inertia > 0 (planar: one number, stored as a 1-tuple; spatial: 3 numbers); ``h0`` defaults to
-  zeros. ``rotation`` (spatial only; a planar mechanism giving it is an error) in
+  zeros. ``kind`` in ``spec.BODY_KINDS`` (default ``rigid``); a ``particle`` has no ``inertia``
+  (refused), ``q0``/``h0`` of the position and velocity only (2 planar, 3 spatial), stored in the
+  rigid layout with a frozen orientation (``spec.BodySpec``); its joints, points, friction and
+  loads are checked by ``_check_particles``. ``rotation`` (spatial only; a planar mechanism giving it is an error) in
   ``spec.ROTATIONS``, default ``euler_zxz``; with ``quaternion`` a body's ``q0`` is
   ``[x, y, z, e0, e1, e2, e3]`` whose quaternion norm must be within ``spec.QUATERNION_NORM_TOL``
   of 1 (refused with the norm otherwise) and is stored normalised. Joints: names identifiers and

@@ -107,4 +107,7 @@ def test_pendulum_runs_clean_whatever_its_inertia(tmp_path, inertia):
     ref = Simulation(compile_checked(ref_spec), ref_spec.solver)
     ref.advance(10.0)
     assert ref.info["min_ratio"] > 0.5
-    assert sim.info["min_ratio"] == pytest.approx(ref.info["min_ratio"], rel=1e-9)
+    # equal up to the equilibration's own tolerance (Ruiz to unit max-norms within 1e-3, as the
+    # pre-check; the swings pass the same configurations at other instants); without it the
+    # ratios of J = 1e-12 and J = 1 differed by six orders of magnitude
+    assert sim.info["min_ratio"] == pytest.approx(ref.info["min_ratio"], rel=1e-2)

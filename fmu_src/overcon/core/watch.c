@@ -106,11 +106,12 @@ static int ratio_and_rate(ovk_sim *s, const double *y, const double *qdot, doubl
     return OVK_OK;
 }
 
-/* r of the kept equations at tau on the last step's dense output (the state into s->ywatch). */
+/* r of the kept equations at tau on the last step's dense output (the state into s->ywatch),
+ * weighted by the scaling of the step's end (watch_scale.c: one scaling along the search). */
 static int ratio_at(ovk_sim *s, double tau, double *r, char *msg) {
     double smin = 1.0, smax = 1.0;
     ovk_rk_dense(&s->rk, tau, s->ywatch);
-    int status = ovk_eig_rows(s, s->ywatch, kept_rows(s->M), s->eig->w, 1, msg);
+    int status = ovk_eig_rows(s, s->ywatch, kept_rows(s->M), s->eig->w, 0, msg);
     if (!status) status = ovk_eig_extremes(s, s->eig->w, &smin, &smax);
     if (!status) *r = smax > 0.0 ? smin / smax : 0.0;
     return status;

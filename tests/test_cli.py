@@ -198,7 +198,7 @@ def test_check_json_is_the_typed_precheck_result_in_its_key_order(capsys):
                          "kind", "methods_agree", "friction", "friction_on_nonunique", "friction_set_unique",
                          "motion_unique", "eliminated", "elimination_mode", "problems", "warnings", "methods_run", "redundancy",
                          "drivers", "effort_unique"]
-    assert list(rep["joints"][0]) == ["name", "unique", "methods", "rank_defect", "agree", "type"]
+    assert list(rep["joints"][0]) == ["name", "unique", "methods", "rank_defect", "agree", "type", "equations"]  # extended, issue 37
     result = precheck(compile_checked(scene.load(MECH / "planar_f45_wo4.toml")), str(MECH / "planar_f45_wo4.toml"))
     assert isinstance(result, PrecheckResult) and result.to_json() == rep
     assert result.motion_unique is rep["motion_unique"] and result.reaction_unique["joint4"] is True

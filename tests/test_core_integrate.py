@@ -312,7 +312,7 @@ def test_expired_elimination_is_chosen_again_and_the_motion_is_the_valid_elimina
 
 
 def test_degrading_elimination_is_chosen_again_whatever_the_method():
-    """The Bricard linkage eliminating Phi2: near 1.206 s the kept equations become ill-conditioned
+    """The Bricard linkage eliminating Phi2: near 1.23 s the kept equations become ill-conditioned
     (r < 1e-3) while the whole Jacobian is not; dopri5 and radau each choose the elimination again
     at a step's end (the event names the ratio) and go on to 1.3 s, where their positions agree
     within two runs' global errors."""

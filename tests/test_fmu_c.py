@@ -328,9 +328,9 @@ def test_energy_outputs_are_built_for_the_c_runtime_and_equal_the_in_process_run
 
 def test_degrading_elimination_is_chosen_again_by_the_c_fmu(tmp_path):
     """The Bricard linkage eliminating Phi2 (energy outputs on): as the in-process run, the C FMU
-    chooses the elimination again when it degrades (about 1.206 s; one elimination-reselected
-    event, logged under logEvents), completes 10 s and moves as the in-process run does
-    (<= 1e-8 m)."""
+    chooses the elimination again when it degrades (at the in-process run's instant, about 1.23 s;
+    one elimination-reselected event, logged under logEvents), completes 10 s and moves as the
+    in-process run does (<= 1e-8 m)."""
     path = ROOT / "tests" / "data" / "bricard" / "bricard_wo2.toml"
     lines = []
     code, results = fmu_build.build_all([str(path)], tmp_path / "out", refs=False, allow_nonunique=True, runtime="c",
@@ -354,5 +354,8 @@ def test_degrading_elimination_is_chosen_again_by_the_c_fmu(tmp_path):
     fmu.freeInstance()
     assert worst <= 1e-8
     events = [m for _, _, m in logs.records if ": event " in m]
-    assert len(events) == 1 and events[0].startswith("t = 1.20634626 s: event elimination-reselected: eliminated [2] -> [")
     assert [e[1] for e in ref.events] == ["elimination-reselected"]
+    t_event = ref.events[0][0]  # where the kept rows' (equilibrated) ratio falls below 1e-3
+    assert 1.15 < t_event < 1.3
+    assert len(events) == 1 and events[0].startswith(f"t = {t_event:.9g} s: event elimination-reselected: "
+                                                     "eliminated [2] -> [")

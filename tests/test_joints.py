@@ -118,8 +118,9 @@ def write_single_type(tmp: Path, jtype: str, seed: int, friction: str = "") -> P
     pair left out chosen by the seed), so that the planar mechanisms move (three planar joints of
     two rows hold two bodies fixed)."""
     rng = np.random.default_rng(seed)
-    kind = "spatial" if jtype == "spherical" else "planar"
+    kind = "spatial" if jtype in ("spherical", "spatial_distance") else "planar"
     d = 3 if kind == "spatial" else 2
+    fname = "distance" if jtype == "spatial_distance" else jtype  # the type's name in files
     lines = ["[mechanism]", f'name = "single_{jtype}"', f'kind = "{kind}"',
              f"gravity = {_fmt(np.r_[np.zeros(d - 1), -9.81])}", ""]
     for b in ("b1", "b2"):
@@ -135,7 +136,7 @@ def write_single_type(tmp: Path, jtype: str, seed: int, friction: str = "") -> P
     if friction:
         del pairs[seed % 3]
     for k, (bi, bj) in enumerate(pairs):
-        lines += ["[[joints]]", f'name = "J{k}"', f'type = "{jtype}"', f'body_i = "{bi}"',
+        lines += ["[[joints]]", f'name = "J{k}"', f'type = "{fname}"', f'body_i = "{bi}"',
                   f'body_j = "{bj}"']
         if jtype == "translational":
             lines += [f"s_A = {_fmt(rng.uniform(-1, 1, 2))}", f"s_B = {_fmt(rng.uniform(-1, 1, 2))}",
@@ -143,6 +144,8 @@ def write_single_type(tmp: Path, jtype: str, seed: int, friction: str = "") -> P
                       f"psi = {rng.uniform(-1.5, 1.5)!r}"]
         else:
             lines += [f"s_i = {_fmt(rng.uniform(-1, 1, d))}", f"s_j = {_fmt(rng.uniform(-1, 1, d))}"]
+        if fname == "distance":
+            lines += [f"length = {rng.uniform(0.5, 2.0)!r}"]
         if friction:
             lines += ["[joints.friction]", friction]
         lines.append("")
@@ -152,6 +155,7 @@ def write_single_type(tmp: Path, jtype: str, seed: int, friction: str = "") -> P
 
 
 TYPES = ["translational", "revolute", "spherical"]
+ROW_TYPES = TYPES + ["distance", "spatial_distance"]  # the rows' tests also take the types without friction
 
 
 @pytest.fixture(scope="module")
@@ -172,7 +176,7 @@ def single(tmp_path_factory):
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("jtype", TYPES)
+@pytest.mark.parametrize("jtype", ROW_TYPES)
 def test_single_type_derivatives(single, jtype, seed):
     spec, model = single(jtype, seed)
     assert [c.type for c in model.joints] == [jtype] * 3
@@ -183,7 +187,7 @@ def test_single_type_derivatives(single, jtype, seed):
         check_derivatives(k, model, q, random_h(model, rng))
 
 
-@pytest.mark.parametrize("jtype", TYPES)
+@pytest.mark.parametrize("jtype", ROW_TYPES)
 def test_single_type_shapes(single, jtype):
     """The core's rows: Phi (m), Phi_h (m, nh), gamma (m), each joint its type's equations; its
     outputs: a row of reaction components per joint, the type's components then zeros."""
@@ -191,7 +195,7 @@ def test_single_type_shapes(single, jtype):
     k = kernel_for(model, spec.solver)
     y = np.concatenate([model.q0, model.h0])
     phi, J, gam = k.rows(y)
-    ne = {"translational": 2, "revolute": 2, "spherical": 3}[jtype]
+    ne = {"translational": 2, "revolute": 2, "spherical": 3, "distance": 1, "spatial_distance": 1}[jtype]
     assert phi.shape == gam.shape == (model.m,) == (3 * ne,) and J.shape == (model.m, model.nh)
     assert all(len(c.rows) == ne for c in model.joints)
     reac, fric = k.outputs(y, np.ones(model.m))

@@ -127,12 +127,13 @@ def test_type_names_resolve_per_mechanism_kind():
     assert resolve("spatial", "revolute") == "spatial_revolute"
     assert resolve("planar", "prismatic") is None
     assert resolve("spatial", "translational") is None
-    assert names("spatial") == ("spherical", "revolute", "prismatic", "cylindrical", "universal", "fixed")
-    assert names("planar") == ("translational", "revolute")
+    assert names("spatial") == ("spherical", "revolute", "prismatic", "cylindrical", "universal", "fixed",
+                                "distance")
+    assert names("planar") == ("translational", "revolute", "distance")
     for key, jt in TYPES.items():
         assert resolve(jt.kind, jt.name) == key
         if jt.kind == "spatial":
-            assert jt.n_equations == N_ROWS[jt.name]
+            assert jt.n_equations == {**N_ROWS, "distance": 1}[jt.name]
 
 
 def test_type_not_allowed_names_the_field(tmp_path):
@@ -141,7 +142,7 @@ def test_type_not_allowed_names_the_field(tmp_path):
     (tmp_path / "m.toml").write_text(text)
     with pytest.raises(SceneError, match=r"m\.toml: joints\[0\] \(J\)\.type: joint type 'translational' is not "
                                          r"allowed in a spatial mechanism \(allowed: spherical, revolute, "
-                                         r"prismatic, cylindrical, universal, fixed\)") as e:
+                                         r"prismatic, cylindrical, universal, fixed, distance\)") as e:
         load(tmp_path / "m.toml")
     [p] = e.value.problems
     assert (p.field, p.name) == ("joints[0].type", "J")  # the field stays the path; the name is shown

@@ -37,6 +37,10 @@ def _first_flat_stop(tmp_path: Path, n: int, tolerance: float) -> float:
     spec = _scene(scene)
     with pytest.raises(SimulationError, match=r"the mechanism's constraint Jacobian is rank deficient") as exc:
         run(compile_checked(spec), spec.solver)
+    # the stop says the way on and what it does (issue 37, item 4)
+    assert ('to go on through it, run with --singular pass (scene: [solver] singular = "pass"), which solves the '
+            'kept equations in the augmented Lagrangian form and projects the state back onto the constraints '
+            'after every step') in str(exc.value)
     return float(exc.value.partial.time[-1]), str(exc.value)
 
 

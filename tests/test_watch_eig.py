@@ -1,5 +1,5 @@
 """The C run's watch without a full SVD (core/watch_eig.c): the tracked sigma_min and sigma_max of
-the weighted kept rows (Phi_h M^-1/2, unit-norm rows) equal a dense SVD's to the accuracy the file
+the weighted kept rows (Phi_h equilibrated as core/watch_scale.c states, unit-norm rows) equal a dense SVD's to the accuracy the file
 states, along a paper scene and near the N-four-bar's flat position, warm-started as the run does
 and from a cold start; and the N-four-bar still stops at its first flat position at the same time
 whatever the tolerance (issue 26's acceptance, on the C run)."""
@@ -34,11 +34,31 @@ def _nfourbar(tmp_path: Path, n: int, tolerance: float, singular: str | None):
     return _spec(path)
 
 
+def _equilibrated(W: np.ndarray) -> np.ndarray:
+    """core/watch_scale.c's rule written again on a dense array: round-off rows and columns
+    (max-norm <= 100 max(k, n) eps max|W|) zeroed, Ruiz sweeps to unit max-norms within 1e-3 (at
+    most 50), then unit-norm rows."""
+    W = W.copy()
+    amax = np.abs(W).max()
+    floor = 100 * max(W.shape) * np.finfo(float).eps * amax
+    W[:, np.abs(W).max(axis=0) <= floor] = 0.0
+    W[np.abs(W).max(axis=1) <= floor, :] = 0.0
+    for _ in range(50):
+        rn, cn = np.abs(W).max(axis=1), np.abs(W).max(axis=0)
+        dev = max(np.abs(1 - rn[rn > 0]).max(initial=0.0), np.abs(1 - cn[cn > 0]).max(initial=0.0))
+        if dev <= 1e-3:
+            break
+        rf = np.where(rn > 0, 1 / np.sqrt(np.where(rn > 0, rn, 1)), 1.0)
+        cf = np.where(cn > 0, 1 / np.sqrt(np.where(cn > 0, cn, 1)), 1.0)
+        W = rf[:, None] * W * cf[None, :]
+    norms = np.linalg.norm(W, axis=1)
+    return W / np.where(norms > 0, norms, 1.0)[:, None]
+
+
 def _dense(run: kernel.Run, model, y: np.ndarray) -> np.ndarray:
     """The singular values of the watched rows at y by LAPACK, largest first."""
     _, J, _ = run.kernel.rows(y)
-    W = J[list(model.retained)] * np.sqrt(model.Minv)[None, :]
-    W /= np.linalg.norm(W, axis=1)[:, None]
+    W = _equilibrated(J[list(model.retained)])
     return np.linalg.svd(W, compute_uv=False)
 
 

@@ -9,6 +9,8 @@
 """
 from __future__ import annotations
 
+import itertools
+
 from dataclasses import replace
 
 import numpy as np
@@ -265,14 +267,69 @@ def resolve_elimination(model: Model, eliminate, field: str = "scene.eliminate",
     r_kept = analysis.numerical_rank(J[:, kept]) if kept else 0
     listed = ", ".join(f"Phi{i}" for i in removed) or "nothing"
     if r_kept < r:
-        raise ModelError(
-            f"{field}: eliminating {listed} removes an independent equation: rank of the kept equations is "
-            f"{r_kept} < rank {r} of all {model.m}; the mechanism would gain {r - r_kept} DOF")
+        why = (f"{field}: eliminating {listed} removes an independent equation: rank of the kept equations is "
+               f"{r_kept} < rank {r} of all {model.m}; the mechanism would gain {r - r_kept} DOF")
+        raise _refused(model, J, r, why)
     if r_kept < len(kept):
-        raise ModelError(
-            f"{field}: eliminating {listed} leaves {len(kept)} equations of rank {r_kept}: "
-            f"{len(kept) - r_kept} more must be eliminated (the mechanism has {model.m - r} redundant)")
+        why = (f"{field}: eliminating {listed} leaves {len(kept)} equations of rank {r_kept}: "
+               f"{len(kept) - r_kept} more must be eliminated (the mechanism has {model.m - r} redundant)")
+        raise _refused(model, J, r, why)
     return removed, "given"
+
+
+VALID_SHOWN = 10
+"""A refused elimination lists at most this many valid ones (and says when there are more)."""
+
+VALID_TRIED = 2000
+"""...found among at most this many candidate sets, in order (decided: each costs an SVD of the
+Jacobian at q0; with one redundant equation every single equation is a candidate, so a mechanism
+of up to 2000 equations is listed in full)."""
+
+
+def valid_eliminations(model: Model, J: np.ndarray | None = None, r: int | None = None) -> tuple[list, bool]:
+    """The eliminations the mechanism admits at q0 (1-based equation lists): the sets of
+    m - rank equations whose removal keeps the rank, in lexicographic order, at most
+    :data:`VALID_SHOWN` of them from at most :data:`VALID_TRIED` candidates; and whether the
+    search stopped before the end (more may exist). ``J``, ``r``: the Jacobian at q0 (nh x m) and
+    its rank, when at hand."""
+    J = _jacobian_q0(model) if J is None else J
+    r = analysis.numerical_rank(J) if r is None else r
+    k = model.m - r
+    if k <= 0:
+        return [], False
+    found, tried = [], 0
+    for gone in itertools.combinations(range(model.m), k):
+        if tried >= VALID_TRIED or len(found) >= VALID_SHOWN:
+            return found, True
+        tried += 1
+        kept = [i for i in range(model.m) if i not in gone]
+        if analysis.numerical_rank(J[:, kept]) == r:
+            found.append([i + 1 for i in gone])
+    return found, False
+
+
+def joint_equations(model: Model) -> dict[str, list[int]]:
+    """Joint name -> its 1-based equation numbers (what ``eliminate`` counts)."""
+    return {c.name: [r + 1 for r in c.rows] for c in model.joints}
+
+
+def _refused(model: Model, J: np.ndarray, r: int, why: str) -> ModelError:
+    """The refusal of an elimination: ``why``, then the valid eliminations at q0 and each joint's
+    equations, in the message and as data (``check --json``: keys ``valid_eliminations``,
+    ``valid_eliminations_complete``, ``joint_equations``)."""
+    valid, cut = valid_eliminations(model, J, r)
+    shown = "; ".join("[" + ", ".join(map(str, v)) + "]" for v in valid) or "none"
+    more = " (the first found; there may be more)" if cut else ""
+    per_joint = ", ".join(f"{name} {_numbers(eqs)}" for name, eqs in joint_equations(model).items())
+    text = (f"{why}. Valid eliminations at q0{more}: {shown}, or eliminate = \"auto\". "
+            f"Equations per joint: {per_joint}")
+    return ModelError(text, {"valid_eliminations": valid, "valid_eliminations_complete": not cut,
+                             "joint_equations": joint_equations(model)})
+
+
+def _numbers(eqs: list[int]) -> str:
+    """1-based equations as ``Phi3`` or ``Phi3-Phi5`` (consecutive, as a joint's are)."""
+    return f"Phi{eqs[0]}" if len(eqs) == 1 else f"Phi{eqs[0]}-Phi{eqs[-1]}"
 
 
 def watch_rows(model) -> tuple[list[int], list[int]]:

@@ -457,7 +457,9 @@ def _input_error(exc, args=None) -> int:
     stdout, so that a script parsing the JSON gets a document for bad input too."""
     print(f"overcon: {exc}", file=sys.stderr)
     if args is not None and getattr(args, "json", False):
-        print(json.dumps({"file": getattr(args, "file", ""), "error": str(exc)}, indent=2))
+        doc = {"file": getattr(args, "file", ""), "error": str(exc)}
+        doc.update(getattr(exc, "details", None) or {})  # e.g. a refused elimination's valid ones
+        print(json.dumps(doc, indent=2))
     return EXIT_INPUT
 
 
@@ -811,6 +813,8 @@ def main(argv=None) -> int:
     except (ModelError, InconsistentInitialState, KernelUnavailable, ValueError, OSError) as exc:
         # KernelUnavailable: no compiled core to evaluate the scene with (its message names the fix)
         where = getattr(args, "file", None)
+        if where and isinstance(exc, ModelError):
+            return _input_error(ModelError(f"{where}: {exc}", exc.details), args)
         return _input_error(f"{where}: {exc}" if where else exc, args)
 
 

@@ -64,7 +64,8 @@ PROJECTION_SLACK = 10.0  # OVK_PROJ_SLACK of core/core.h: near a singular positi
 _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial", "spherical"): 3,
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
            ("spatial", "spatial_cylindrical"): 6, ("spatial", "spatial_universal"): 7, ("spatial", "spatial_fixed"): 8,
-           ("planar", "driver"): 9, ("spatial", "driver"): 9}
+           ("planar", "driver"): 9, ("spatial", "driver"): 9,
+           ("planar", "distance"): 10, ("spatial", "spatial_distance"): 10}
 _ROTATIONS = ("euler_zxz", "quaternion")
 _AXIS_SIZES = {"spatial_revolute": ("radius", "length", "collar_radius"), "spatial_prismatic": ("length", "radius"),
                "spatial_cylindrical": ("length", "radius")}
@@ -263,6 +264,9 @@ def _joint_constants(model, c) -> np.ndarray:
         out[0], out[1], out[2] = p["joint"], p["coordinate"], p["motion"]
         params = list(p["params"]) + ([p["start_time"]] if p["motion"] == 1 else [])
         out[3:3 + len(params)] = params
+    elif c.type in ("distance", "spatial_distance"):  # core/joints_distance.c: s_i, s_j at 0 and 3, L at 6
+        k = model.dim
+        out[0:k], out[3:3 + k], out[6] = p["s_i"], p["s_j"], p["length"]
     elif c.type == "translational":
         out[0:2], out[2:4], out[4:6] = p["s_A"], p["s_B"], p["v"]
         out[6] = p["psi"]
@@ -814,10 +818,10 @@ class Run:
         return self._y.copy()
 
     def watch_extremes(self, y: np.ndarray, *, cold: bool = False) -> tuple[float, float]:
-        """(sigma_min, sigma_max) of the watched rows at state ``y`` (Phi_h M^-1/2, unit-norm rows:
-        core/watch_eig.c's estimate, to its relative accuracy 1e-9 with a floor of 1e-13 sigma_max),
-        warm-started from the run's tracked vectors, or from the fixed start with ``cold``; the run
-        is left as it was."""
+        """(sigma_min, sigma_max) of the watched rows at state ``y`` (Phi_h equilibrated by
+        core/watch_scale.c, unit-norm rows: core/watch_eig.c's estimate, to its relative accuracy
+        1e-9 with a floor of 1e-13 sigma_max), warm-started from the run's tracked vectors, or
+        from the fixed start with ``cold``; the run is left as it was."""
         y = np.ascontiguousarray(y, float)
         if y.shape != (self.ny,):
             raise ValueError(f"watch_extremes: a state of {self.ny} entries, got shape {y.shape}")

@@ -64,7 +64,13 @@ GLOBAL_COMPONENTS = {"planar": ("Fx0", "Fy0"), "spatial": ("Fx0", "Fy0", "Fz0")}
 
 
 class ModelError(ValueError):
-    """A scene that parses but cannot be simulated as asked (e.g. a bad elimination)."""
+    """A scene that parses but cannot be simulated as asked (e.g. a bad elimination). ``details``:
+    data for ``check --json``'s error document (keys added beside ``file`` and ``error``; e.g. a
+    refused elimination's ``valid_eliminations`` and ``joint_equations``)."""
+
+    def __init__(self, message: str, details: dict | None = None):
+        super().__init__(message)
+        self.details = dict(details or {})
 
 
 class InconsistentInitialState(ModelError):
@@ -320,6 +326,7 @@ def compile_model(scene: SceneSpec) -> Model:
     slot = {name: i for i, name in enumerate(names)}
     slot[BASE] = -1
     nb = len(names)
+    particle = {b.name: b.particle for b in mech.bodies}
     mass = np.array([b.mass for b in mech.bodies], float)
     inertia = np.array([b.inertia for b in mech.bodies], float).reshape(nb, -1)
     M = np.concatenate([np.concatenate([np.full(dim, mass[i]), inertia[i]]) for i in range(nb)])
@@ -351,7 +358,8 @@ def compile_model(scene: SceneSpec) -> Model:
         elimination_mode="pending", friction_joints=(),
         position_outputs=tuple((p, coord_index[p]) for p in scene.positions),
         velocity_outputs=tuple((f"{b}.{v}", slot[b] * VELOCITIES_PER_BODY[kind] + i) for b in scene.velocities
-                               for i, (v, _) in enumerate(VELOCITY_OUTPUTS[kind])),
+                               for i, (v, _) in enumerate(VELOCITY_OUTPUTS[kind])
+                               if not (particle[b] and i >= dim)),  # a particle: no rates of its frozen orientation
         energy_outputs=scene.energy)
     R0 = _rotations(bodies, q0)
     friction_on = set(scene.friction)

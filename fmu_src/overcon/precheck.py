@@ -7,12 +7,13 @@ non-singular configuration gives the same answer, paper App. B); a singular q0 i
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 from . import analysis
 from .checks import analysed_rows, factored_q0
 from .joints import TYPES
 from .model import Model
+from .spec import frozen_coordinates
 
 
 def joint_groups(model: Model) -> dict[str, list[int]]:
@@ -110,6 +111,7 @@ class JointVerdict:
     rank_defect: int
     agree: bool
     type: str
+    equations: tuple[int, ...] = ()  # its 1-based equation numbers (Phi_k, what ``eliminate`` counts)
 
 
 @dataclass(frozen=True)
@@ -165,12 +167,18 @@ def precheck(model: Model, source: str = "", methods: str = "auto") -> PrecheckR
     :func:`analyse_model`)."""
     res = analyse_model(model, methods)
     summary = analysis.to_json(res)
+    # a particle's frozen orientation (spec.BodySpec) is no coordinate of the mechanism: its
+    # columns of the Jacobian are zero, so the rank stays and the count and DOF leave it out
+    frozen = frozen_coordinates(model.scene.mechanism)
+    summary["n_coordinates"] -= frozen
+    summary["dof"] -= frozen
     types = {c.name: "driver" if c.type == "driver" else TYPES[c.type].name for c in model.joints}  # the files'
     verdicts = {j["name"]: JointVerdict(type=types[j["name"]], **j) for j in summary.pop("joints")}
     # under redundancy "compliant" the numbers and verdicts are the rigid joints' (the compliant
     # joints' equations are forces there); a compliant joint's reaction is unique (no tests run)
     compliant = compliant_joints(model)
-    joints = tuple(verdicts.get(c.name) or JointVerdict(c.name, True, {}, 0, True, types[c.name])
+    joints = tuple(replace(verdicts.get(c.name) or JointVerdict(c.name, True, {}, 0, True, types[c.name]),
+                           equations=tuple(r + 1 for r in c.rows))
                    for c in model.joints)
     friction = [model.joints[j].name for j in model.friction_joints]
     acting = [model.joints[j].name for j in model.friction_joints if not frictionless(model.joints[j].law)]
@@ -253,6 +261,13 @@ def run_warnings(result: PrecheckResult) -> list[str]:
     return out + list(result.warnings)
 
 
+def _equations_text(eqs) -> str:
+    """A joint's 1-based equations for the table: ``3``, or ``3-5`` (a joint's are consecutive)."""
+    if not eqs:
+        return "-"
+    return str(eqs[0]) if len(eqs) == 1 else f"{eqs[0]}-{eqs[-1]}"
+
+
 def format_table(result: PrecheckResult) -> str:
     """The human-readable table of ``check`` (from the JSON document of ``result``)."""
     report = result.to_json()
@@ -264,7 +279,10 @@ def format_table(result: PrecheckResult) -> str:
         "",
     ]
     w = max([10, *(len(j["name"]) for j in report["joints"])])  # 10, or the longest name
-    lines.append(f"{'joint':<{w}} {'type':<14} {'unique':<7} {'rank':<6} {'svd':<6} {'qr':<6} friction")
+    eqs = {j["name"]: _equations_text(j["equations"]) for j in report["joints"]}
+    we = max([9, *(len(e) for e in eqs.values())])
+    lines.append(f"{'joint':<{w}} {'type':<14} {'equations':<{we}} {'unique':<7} {'rank':<6} {'svd':<6} {'qr':<6} "
+                 "friction")
     yn = {True: "yes", False: "no"}
     for j in report["joints"]:
         m = {k: yn[v] for k, v in j["methods"].items()}  # a test that did not run: "-"
@@ -272,7 +290,8 @@ def format_table(result: PrecheckResult) -> str:
         flag = "  <-- friction on a non-unique reaction" if j["name"] in report["friction_on_nonunique"] else ""
         if report["redundancy"] == "compliant" and not j["methods"]:
             flag += "  (compliant: its reaction comes from its deformation)"
-        lines.append(f"{j['name']:<{w}} {j['type']:<14} {yn[j['unique']]:<7} {m.get('rank', '-'):<6} "
+        lines.append(f"{j['name']:<{w}} {j['type']:<14} {eqs[j['name']]:<{we}} {yn[j['unique']]:<7} "
+                     f"{m.get('rank', '-'):<6} "
                      f"{m.get('svd', '-'):<6} {m.get('qr', '-'):<6} {fr}{flag}")
     lines.append("")
     lines.append(motion_verdict(result))

@@ -23,7 +23,10 @@ What is validated
 * Mechanism: ``name`` an identifier (letter, then letters/digits/_), ``kind`` in
   ``spec.KINDS``; at least one body; body names identifiers, unique, not ``base``; mass > 0;
   inertia > 0 (planar: one number, stored as a 1-tuple; spatial: 3 numbers); ``h0`` defaults to
-  zeros. ``rotation`` (spatial only; a planar mechanism giving it is an error) in
+  zeros. ``kind`` in ``spec.BODY_KINDS`` (default ``rigid``); a ``particle`` has no ``inertia``
+  (refused), ``q0``/``h0`` of the position and velocity only (2 planar, 3 spatial), stored in the
+  rigid layout with a frozen orientation (``spec.BodySpec``); its joints, points, friction and
+  loads are checked by ``_check_particles``. ``rotation`` (spatial only; a planar mechanism giving it is an error) in
   ``spec.ROTATIONS``, default ``euler_zxz``; with ``quaternion`` a body's ``q0`` is
   ``[x, y, z, e0, e1, e2, e3]`` whose quaternion norm must be within ``spec.QUATERNION_NORM_TOL``
   of 1 (refused with the norm otherwise) and is stored normalised. Joints: names identifiers and
@@ -112,7 +115,7 @@ CLI_SOURCE = "<command line>"
 # overcon.params (one source for the validator and the editors' schema).
 MECHANISM_SECTIONS = ("mechanism", "bodies", "joints", "loads")
 MECHANISM_KEYS = ("name", "kind", "gravity", "description", "rotation")
-BODY_KEYS = ("name", "mass", "inertia", "q0", "h0")
+BODY_KEYS = ("name", "kind", "mass", "inertia", "q0", "h0")
 SCENE_SECTIONS = ("scene", "outputs", "solver", "inputs", "drivers")
 OUTPUT_KEYS = ("positions", "reactions", "friction", "velocities", "energy", "joints")
 FILE_FIELD = "(file)"
@@ -557,12 +560,65 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
     bodies = _check_bodies(doc, ctx, head, body_names)
     joints = _check_joints(doc, ctx, head, body_names)
     loads = _check_loads(doc, ctx, head, body_names)
+    if len(ctx.problems) == n_problems:  # every item valid: joints[k] and loads[k] are the file's
+        _check_particles(ctx, bodies, joints, loads, head.kind)
     if len(ctx.problems) > n_problems:
         _name_items(doc, ctx, n_problems)
         return None
     return MechanismSpec(name=head.name, kind=head.kind, gravity=head.gravity, bodies=tuple(bodies),
                          joints=tuple(joints), loads=tuple(loads), source=ctx.file,
                          description=head.description, rotation=head.rotation or "euler_zxz")
+
+
+def particle_friction_reason(jtype: str, body: str) -> str:
+    """Why friction in a revolute or spherical joint on a particle is refused (decided): a point
+    mass has no rotational inertia, so a pin or ball on it turns with the other body and carries
+    no friction moment; a friction moment on it would meet no inertia at all. Friction on a
+    particle belongs to a joint it slides in."""
+    return (f"friction in a {JOINT_TYPES[jtype].name} joint on particle '{body}' is refused: a point mass has "
+            "no rotational inertia, so the joint turns freely with the other body and carries no friction "
+            "moment (model the body as a rigid body with its inertia to have pin friction)")
+
+
+def _particle_of(bodies: dict, js: JointSpec) -> list[tuple[str, str]]:
+    """(side ``i``/``j``, body name) of the particles a joint connects."""
+    return [(side, b) for side, b in (("i", js.body_i), ("j", js.body_j)) if b in bodies and bodies[b].particle]
+
+
+def _check_particles(ctx: _Ctx, bodies: list, joints: list, loads: list, kind: str | None) -> None:
+    """What a particle (``kind = "particle"``, spec.BodySpec) takes: joints of
+    :data:`overcon.spec.PARTICLE_JOINTS` acting at its position (their point on it is 0), no
+    friction moment on it (:func:`particle_friction_reason`), no torque load, springs attached at
+    its position. Each refusal names the body and the joint or load."""
+    by_name = {b.name: b for b in bodies}
+    zero = "[0, 0]" if kind == "planar" else "[0, 0, 0]"
+    for k, js in enumerate(joints):
+        p, jt = f"joints[{k}]", JOINT_TYPES[js.type]
+        for side, body in _particle_of(by_name, js):
+            if jt.name not in S.PARTICLE_JOINTS:
+                allowed = ", ".join(n for n in S.PARTICLE_JOINTS if resolve_joint_type(kind, n) is not None)
+                ctx.add(f"{p}.body_{side}", f"joint {js.name}: body '{body}' is a particle (no orientation), and a "
+                                            f"{jt.name} joint holds its body's orientation; a particle takes "
+                                            f"{allowed} joints")
+                continue
+            point = f"s_{side}"
+            if any(x != 0.0 for x in js.params[point]):
+                ctx.add(f"{p}.{point}", f"joint {js.name}: must be {zero} on particle '{body}': a joint acts at a "
+                                        "particle's position (it has no body frame to offset the point in)")
+            if js.friction is not None and jt.friction_size is not None:
+                ctx.add(f"{p}.friction", f"joint {js.name}: {particle_friction_reason(js.type, body)}")
+    for k, ld in enumerate(loads):
+        p = f"loads[{k}]"
+        if ld.type == "torque" and ld.params.get("body") in by_name and by_name[ld.params["body"]].particle:
+            ctx.add(f"{p}.body", f"body '{ld.params['body']}' is a particle: a point mass takes no torque (apply "
+                                 "a force)")
+        if ld.type == "spring":
+            for side in ("i", "j"):
+                body = ld.params.get(f"body_{side}")
+                at = ld.params.get(f"s_{side}")
+                if body in by_name and by_name[body].particle and at is not None and any(x != 0.0 for x in at):
+                    ctx.add(f"{p}.s_{side}", f"must be {zero} on particle '{body}': a spring acts at a particle's "
+                                             "position")
 
 
 def _name_items(doc: dict, ctx: _Ctx, since: int) -> None:
@@ -626,6 +682,15 @@ def _check_body(bt: dict, p: str, ctx: _Ctx, head: _MechHeader, body_names: dict
     nvel = S.VELOCITIES_PER_BODY.get(kind)
     _unknown_keys(ctx, bt, p, BODY_KEYS)
     bname = mass = inertia = q0 = None
+    body_kind = "rigid"
+    v = _get(ctx, bt, "kind", p, required=False)
+    if v is not _MISSING:
+        body_kind = _choice(ctx, v, f"{p}.kind", S.BODY_KINDS)
+        if body_kind is None:
+            return None
+    particle = body_kind == "particle"
+    if particle:  # a point mass: its position and velocity only (spec.BodySpec)
+        ncoord = nvel = head.dim
     h0 = tuple(0.0 for _ in range(nvel)) if nvel else None
     v = _get(ctx, bt, "name", p)
     if v is not _MISSING:
@@ -637,20 +702,33 @@ def _check_body(bt: dict, p: str, ctx: _Ctx, head: _MechHeader, body_names: dict
     v = _get(ctx, bt, "mass", p)
     if v is not _MISSING:
         mass = _num(ctx, v, f"{p}.mass", _POSITIVE)
-    v = _get(ctx, bt, "inertia", p)
-    if v is not _MISSING:
-        inertia = _inertia(ctx, v, f"{p}.inertia", kind)
+    if particle:
+        if "inertia" in bt:
+            ctx.add(f"{p}.inertia", "a particle (kind = \"particle\") is a point mass: it has no inertia (give a "
+                                    "rigid body for a body whose rotation matters)")
+            return None
+    else:
+        v = _get(ctx, bt, "inertia", p)
+        if v is not _MISSING:
+            inertia = _inertia(ctx, v, f"{p}.inertia", kind)
     v = _get(ctx, bt, "q0", p)
     if v is not _MISSING:
         q0 = _vec(ctx, v, f"{p}.q0", ncoord)
-        if q0 is not None and kind == "spatial" and rotation == "quaternion":
+        if q0 is not None and kind == "spatial" and rotation == "quaternion" and not particle:
             q0 = _unit_quaternion(ctx, q0, f"{p}.q0", bname)
     v = _get(ctx, bt, "h0", p, required=False)
     if v is not _MISSING:
         h0 = _vec(ctx, v, f"{p}.h0", nvel)
+    if particle and None not in (mass, q0, h0) and kind is not None and rotation is not None:
+        # the rigid layout with a frozen orientation (spec.BodySpec): its placeholder inertia is
+        # never multiplied by a non-zero rate
+        nrot = S.VELOCITIES_PER_BODY[kind] - head.dim
+        inertia = (mass,) * (1 if kind == "planar" else 3)
+        q0 = tuple(q0) + S.particle_orientation(kind, rotation)
+        h0 = tuple(h0) + (0.0,) * nrot
     if None in (bname, mass, inertia, q0, h0):
         return None
-    return BodySpec(bname, mass, inertia, q0, h0)
+    return BodySpec(bname, mass, inertia, q0, h0, body_kind)
 
 
 def _inertia(ctx: _Ctx, v, field: str, kind: str | None):
@@ -863,9 +941,12 @@ def _check_load(lt: dict, p: str, ctx: _Ctx, head: _MechHeader, body_names: dict
 
 
 def _shaped(ctx: _Ctx, value, field: str, shape: str, kind: str | None):
-    """A value of shape code ``vec`` / ``dir`` / ``rot`` / ``scalar`` (:class:`overcon.joints.JointType`)."""
+    """A value of shape code ``vec`` / ``dir`` / ``rot`` / ``scalar`` / ``positive`` (a scalar > 0)
+    (:class:`overcon.joints.JointType`)."""
     if shape in ("scalar", "angle"):
         return _num(ctx, value, field)
+    if shape == "positive":
+        return _num(ctx, value, field, _POSITIVE)
     if shape == "vec":
         return _vec(ctx, value, field, _DIM.get(kind))
     if shape == "dir":
@@ -911,7 +992,7 @@ def _n_equations(mech: MechanismSpec) -> int:
 
 
 def _all_positions(mech: MechanismSpec) -> tuple[str, ...]:
-    return tuple(f"{b.name}.{c}" for b in mech.bodies for c in S.coordinates(mech.kind, mech.rotation))
+    return tuple(f"{b.name}.{c}" for b in mech.bodies for c in S.body_coordinates(mech.kind, mech.rotation, b))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1008,11 +1089,17 @@ def _check_friction_list(ctx: _Ctx, value, field: str, mech: MechanismSpec | Non
         return None
     types = {j.name: j.type for j in mech.joints} if mech is not None else None
 
+    particles = {b.name for b in mech.bodies if b.particle} if mech is not None else set()
+    ends = {j.name: (j.body_i, j.body_j) for j in mech.joints} if mech is not None else {}
+
     def late(s):
         if types is None:
             return None
         if JOINT_TYPES[types[s]].friction_size is None:
             return f"joint '{s}': {_no_friction_model(types[s])}"
+        on = [b for b in ends[s] if b in particles]
+        if on:
+            return f"joint '{s}': {particle_friction_reason(types[s], on[0])}"
         if not has_params(s):
             return (f"joint '{s}' has no friction parameters (no [joints.friction] table in "
                     f"the mechanism and no scene friction_params.{s})")
@@ -1441,10 +1528,12 @@ def _pos_message(mech: MechanismSpec | None):
         body, dot, coord = s.partition(".")
         if not dot:
             return f"{_short(s)} is not of the form '<body>.<coordinate>'"
-        if mech is not None and body not in {b.name for b in mech.bodies}:
+        bodies = {b.name: b for b in mech.bodies} if mech is not None else {}
+        if mech is not None and body not in bodies:
             return f"unknown body {_short(body)}"
-        coords = S.coordinates(mech.kind, mech.rotation) if mech is not None else ()
-        return f"unknown coordinate {_short(coord)} (allowed: {', '.join(coords)})"
+        coords = S.body_coordinates(mech.kind, mech.rotation, bodies[body]) if mech is not None else ()
+        what = " (a particle has no orientation)" if mech is not None and bodies[body].particle else ""
+        return f"unknown coordinate {_short(coord)} (allowed: {', '.join(coords)}){what}"
     return message
 
 

@@ -15,6 +15,8 @@ Shape codes used in the tables: ``"vec"`` a vector of the mechanism's dimension 
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -140,16 +142,68 @@ class FrictionSpec:
 
 @dataclass(frozen=True)
 class BodySpec:
-    """A moving rigid body. ``inertia``: planar (J,) in kg.m^2; spatial principal moments
-    (Jx, Jy, Jz) about the body axes (kg.m^2). Origin at the centre of mass. ``q0`` in the
-    order of :func:`coordinates` (a quaternion stored normalised), ``h0`` the velocities
-    (:data:`VELOCITIES_PER_BODY`)."""
+    """A moving body. ``inertia``: planar (J,) in kg.m^2; spatial principal moments (Jx, Jy, Jz)
+    about the body axes (kg.m^2). Origin at the centre of mass. ``q0`` in the order of
+    :func:`coordinates` (a quaternion stored normalised), ``h0`` the velocities
+    (:data:`VELOCITIES_PER_BODY`).
+
+    ``kind``: ``"rigid"`` or ``"particle"`` (:data:`BODY_KINDS`). A particle (a point mass, no
+    orientation) is held in the same layout as a rigid body, so every later stage (packing, the
+    core, the FMU) reads it unchanged: its orientation coordinates are frozen at
+    :func:`particle_orientation`, its angular velocities are 0, and its ``inertia`` is a
+    placeholder (its mass, numerically) that nothing ever multiplies by a non-zero rate. That
+    holds because the loader lets no force or moment reach a particle's rotation: joints on a
+    particle act at its position (s = 0 there) and are of :data:`PARTICLE_JOINTS`, no torque load
+    and no spring off its position, no friction moment (scene.py); the constraint Jacobian's
+    columns of those coordinates are then zero, and a particle counts ``dim`` coordinates in the
+    pre-check (:func:`frozen_coordinates`)."""
 
     name: str
     mass: float
     inertia: tuple[float, ...]
     q0: tuple[float, ...]
     h0: tuple[float, ...]
+    kind: str = "rigid"
+
+    @property
+    def particle(self) -> bool:
+        return self.kind == "particle"
+
+
+BODY_KINDS = ("rigid", "particle")
+"""``[[bodies]] kind``: a rigid body (default) or a particle (a point mass: ``mass``, no
+``inertia``, ``q0``/``h0`` of the position and velocity only)."""
+
+PARTICLE_JOINTS = ("revolute", "spherical", "distance")
+"""The joint types (file names) a particle may take: those that act at a point and need no
+orientation of the particle (the planar revolute and the spherical joint at its position, the
+distance joint from its position). The others hold the body's orientation (a guide's angle row,
+an axis): refused on a particle, naming the body and the joint."""
+
+
+def particle_orientation(kind: str, rotation: str = "euler_zxz") -> tuple[float, ...]:
+    """The frozen orientation coordinates of a particle: planar phi = 0; spatial z-x-z Euler
+    angles (0, pi/2, 0) (away from the parametrisation's singularity at sin(beta) = 0), or the
+    identity quaternion (1, 0, 0, 0)."""
+    if kind == "planar":
+        return (0.0,)
+    if rotation == "quaternion":
+        return (1.0, 0.0, 0.0, 0.0)
+    return (0.0, math.pi / 2, 0.0)
+
+
+def body_coordinates(kind: str, rotation: str, body: BodySpec) -> tuple[str, ...]:
+    """The coordinates of ``body`` a scene may output: all of :func:`coordinates`, or a particle's
+    position only (x, y, and z spatial)."""
+    coords = coordinates(kind, rotation)
+    return coords[:2 if kind == "planar" else 3] if body.particle else coords
+
+
+def frozen_coordinates(mech) -> int:
+    """How many velocity coordinates the particles' frozen orientations add (planar 1, spatial 3
+    each): the pre-check's coordinate count and DOF leave them out."""
+    per = 1 if mech.kind == "planar" else 3
+    return per * sum(1 for b in mech.bodies if b.particle)
 
 
 @dataclass(frozen=True)

@@ -253,10 +253,42 @@ def singular_pass(w: "Writer", tmp: Path) -> None:
     w.run(model, spec.solver, "dopri5", 0.2)
 
 
+PARTICLES = {
+    "planar": ('kind = "planar"\ngravity = [0.0, -9.81]\n', "[0.5, 0.0, 0.0]", "0.1", "[1.0, 0.2]",
+               "[0.0, 0.0]", "[0.5, 0.0]", "revolute"),
+    "spatial": ('kind = "spatial"\nrotation = "quaternion"\ngravity = [0.0, 0.0, -9.81]\n',
+                "[0.5, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]", "[0.01, 0.1, 0.1]", "[1.0, 0.2, 0.0]", "[0.0, 0.0, 0.0]",
+                "[0.5, 0.0, 0.0]", "spherical"),
+}
+
+
+def particles(w: Writer, tmp: Path) -> None:
+    """A rod pinned to the base (planar revolute, spatial spherical) with a particle on a distance
+    joint of 0.2 m from its free end (joints_distance.c, a particle's frozen orientation), planar
+    and spatial: evaluations at random states and a run."""
+    for kind, (head, q_rod, inertia, q_p, zero, tip, pin) in PARTICLES.items():
+        mech = (f'[mechanism]\nname = "p_{kind}"\n{head}'
+                f'[[bodies]]\nname = "rod"\nmass = 2.0\ninertia = {inertia}\nq0 = {q_rod}\n'
+                f'[[bodies]]\nname = "bob"\nkind = "particle"\nmass = 0.5\nq0 = {q_p}\n'
+                f'[[joints]]\nname = "pivot"\ntype = "{pin}"\nbody_i = "rod"\nbody_j = "base"\n'
+                f's_i = {tip.replace("0.5", "-0.5", 1)}\ns_j = {zero}\n'
+                f'[[joints]]\nname = "link"\ntype = "distance"\nbody_i = "bob"\nbody_j = "rod"\n'
+                f's_i = {zero}\ns_j = {tip}\nlength = 0.2\n')
+        (tmp / f"p_{kind}.toml").write_text(mech)
+        (tmp / f"p_{kind}_scene.toml").write_text(f'[scene]\nname = "p_{kind}_scene"\nmechanism = "p_{kind}.toml"\n'
+                                                  'friction = []\neliminate = []\nstop_time = 1.0\n')
+        spec = spec_of(tmp / f"p_{kind}_scene.toml")
+        model = compile_checked(spec)
+        w.model(model, spec.solver)
+        random_states(w, model, 4, seed=5)
+        w.run(model, spec.solver, "dopri5", 0.2)
+
+
 def build(tmp: Path) -> Writer:
     w = Writer()
     singular_pass(w, tmp)
     watch_stops(w, tmp)
+    particles(w, tmp)
     for name, n in (("planar_f145_wo6", 12), ("spatial_MN_wo5", 12), ("spatial_GH_wo9", 30), ("spatial_GHMN_wo18", 30)):
         spec = spec_of(MECH / f"{name}.toml")
         model = compile_checked(spec)

@@ -8,6 +8,7 @@
  *   joints.c            the joint table: dispatch by type, and the assembly of Phi, Phi_h, gamma
  *   joints_planar.c     planar revolute and translational joints: rows, friction setup and forces
  *   joints_spherical.c  spatial spherical joints: the same
+ *   joints_distance.c   distance joints (planar and spatial): the rows of a massless link
  *   joints_spatial.c    spatial axis joints (revolute, prismatic, cylindrical, universal, fixed): the
  *                       row primitives of overcon.joints.spatial_rows, reactions, friction
  *   loads.c             applied forces: gravity, gyroscopic, force, torque, spring
@@ -22,7 +23,7 @@
  *   lu.c                complex LU with partial pivoting (radau's complex Newton matrix)
  *   outputs.c           reported reactions and friction forces
  *   rates.c             coordinate rates q' from h
- *   integrate_rk.c      the explicit integrators of overcon.integrators: dopri5, dop853 (dense output), rk4
+ *   integrate_rk.c      the explicit integrators: dopri5, dop853 (dense output), rk4
  *   integrate_radau.c   its implicit Radau IIA of order 5 (radau), collocation dense output
  *   sim.c               a run (overcon.simulate.Simulation): friction warm starts, step-end checks,
  *                       work budgets, derived outputs at any point of the last step
@@ -31,7 +32,8 @@
  *   watch_eig.c         the watch's r: the kept rows' extreme singular values tracked from check to
  *                       check (inverse iterations on the banded G = W W^T)
  *   energy.c            the energy outputs: kinetic, potential, the work ledger of friction and loads
- *   watch.c             the singularity watch of overcon.watch: r and dr/dt after each step, the
+ *   watch_scale.c       the watch's rows equilibrated (the pre-check's rule, mass-free) and weighted
+ *   watch.c             the singularity watch: r and dr/dt after each step, the
  *                       minimum of r inside a step, singular position or expired/degrading elimination;
  *                       the uniqueness along the motion and its events
  *   unique.c            the whole Jacobian's rank and each joint's reaction uniqueness (the pre-check's
@@ -39,7 +41,7 @@
  *   sim_state.c         a run's state as plain bytes (FMI get/set/serialize FMU state)
  *   rows_sparse.c       Phi and Phi_h by their nonzeros (the pre-check's Jacobian), exported
  *   api.c               the other exported entry points (ovk_*), the only symbols of the library
- * Units and signs: SI, the paper's conventions (those of overcon.evaluation and overcon.joints).
+ * Units and signs: SI, the paper's conventions (those of overcon.joints and docs/scene-format.md).
  *
  * Every failure is a status (OVK_*) plus a message kept in the workspace (ovk_message); the core
  * never aborts or exits, and has no global mutable state (two workspaces never share memory).
@@ -79,6 +81,7 @@ enum {
 enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar, spatial */
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
 enum { J_DRIVER = 9 }; /* a driver (drivers.c): one rheonomic equation on a joint's coordinate, planar or spatial */
+enum { J_DISTANCE = 10 }; /* planar and spatial: a massless link (joints_distance.c), no friction */
 enum { LAW_NONE = 0, LAW_REGULARISED = 1, LAW_STRIBECK = 2 };
 enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 
@@ -241,7 +244,7 @@ typedef struct {
  * written densely into out (nh doubles, zeros outside the two bodies) */
 OVK_HIDDEN void ovk_row_dense(const ovk_model *M, const double *Jb, int row, int bi, int bj, double *out);
 
-/* integrate_rk.c: the explicit integrators of overcon.integrators (dopri5, dop853, rk4);
+/* integrate_rk.c: the explicit integrators (dopri5, dop853, rk4);
  * integrate_radau.c: its implicit Radau IIA of order 5 (radau) */
 enum { OVK_METHOD_DOPRI5 = 0, OVK_METHOD_RK4 = 1, OVK_METHOD_DOP853 = 2, OVK_METHOD_RADAU = 3 };
 /* The right-hand side y' = f(t, y) of an integrator: a status (its message written by the callee). */
@@ -312,7 +315,10 @@ typedef struct {
     int *span;            /* 2 nb: scratch (first, last ordered row touching a body) */
     long long *key;       /* nR: scratch (the sort) */
     double *w, *w2;       /* nR x 2 kh each: weighted rows on their bodies' columns (w2: the rate's) */
-    double *scale;        /* nh: sqrt(Minv) */
+    double *scale;        /* nh: the column scaling of the last rows equilibrated (watch_scale.c) */
+    double *scale_y;      /* nh: the scaling at the state whose certified bounds the watch passes on */
+    double *fscale;       /* nh: the column scaling of the whole Jacobian's rows (watch.c) */
+    double *sscr;         /* nh + m: watch_scale.c's scratch */
     double *umin, *umax;  /* nR: the tracked left singular vectors (state) */
     double *x, *z;        /* nR, nh: scratch */
     double *G, *F;        /* nR x nR each at most: the band of G, a shifted copy factored */
@@ -424,7 +430,8 @@ OVK_HIDDEN size_t ovk_unique_cert_doubles(int m, int nh, int kh); /* ovk_unique_
 OVK_HIDDEN int ovk_unique_rows(const ovk_model *M, const double *J, double *work, int *rank, int *unique);
 OVK_HIDDEN int ovk_choose_kept(const ovk_model *M, const double *J, double *work, int *iwork, int *kept, int *rank);
 OVK_HIDDEN int ovk_unique_judged(const ovk_model *M);
-OVK_HIDDEN int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up);
+OVK_HIDDEN int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up,
+                                    const double *scale);
 /* sim.c: the run goes on from (t, y) under the kept equations `kept` (m flags), its integrator anew */
 /* sim.c: the dense scratch of the watch's rare paths (J, W, W2, along_work, bsv_work), made on first
  * use; OVK_NOMEM with its size in msg when it cannot be */
@@ -439,12 +446,18 @@ OVK_HIDDEN int ovk_sim_degraded(ovk_sim *s);
 /* watch_eig.c: the tracked extremes (status; their message in msg) */
 OVK_HIDDEN int ovk_eig_make(ovk_sim *s);
 OVK_HIDDEN void ovk_eig_free(ovk_watch_eig *e);
-OVK_HIDDEN int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, char *msg);
+OVK_HIDDEN int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, int fresh, char *msg);
 OVK_HIDDEN int ovk_eig_extremes(ovk_sim *s, const double *w, double *smin, double *smax);
 OVK_HIDDEN void ovk_eig_order(ovk_watch_eig *e, const int *rows);
 OVK_HIDDEN void ovk_sim_watch_adopt(ovk_sim *s);
 OVK_HIDDEN double ovk_eig_rate(const ovk_sim *s, const double *u, double sigma, double dt);
 OVK_HIDDEN double ovk_now(void);
+/* watch_scale.c: the watch's rows equilibrated (rows of `width` values; body NULL: dense, else two
+ * bodies' kh columns each), their column scaling into scale (nh; work: nh + k doubles), or a given
+ * scaling applied; rows to unit 2-norm */
+OVK_HIDDEN void ovk_watch_scale(double *w, int k, int width, const int *body, int kh, int nh, double *scale,
+                                double *work);
+OVK_HIDDEN void ovk_watch_apply(double *w, int k, int width, const int *body, int kh, const double *scale);
 /* svd.c: one-sided Jacobi */
 OVK_HIDDEN int ovk_jacobi_rows(double *B, int k, int r, double *Q);
 /* bandsvd.c: the singular values and trailing right singular vectors of rows with narrow windows */
@@ -501,6 +514,10 @@ OVK_HIDDEN void ovk_planar_friction_forces(const ovk_model *M, int j, const ovk_
 OVK_HIDDEN void ovk_planar_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
                                         double *dQi, double *dQj);
 OVK_HIDDEN double ovk_planar_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
+
+/* joints_distance.c */
+OVK_HIDDEN void ovk_distance_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji,
+                                  double *Jj, double *gam);
 
 /* joints_spherical.c */
 OVK_HIDDEN void ovk_spherical_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji,

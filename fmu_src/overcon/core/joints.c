@@ -1,5 +1,5 @@
-/* Stage: the joint table. Dispatch by joint type to joints_planar.c, joints_spherical.c and
- * joints_spatial.c, and the
+/* Stage: the joint table. Dispatch by joint type to joints_planar.c, joints_spherical.c,
+ * joints_distance.c and joints_spatial.c, and the
  * assembly of every joint's rows into Phi (m), Phi_h (m x nh) and gamma (m). */
 #include <string.h>
 
@@ -13,6 +13,7 @@ void ovk_joint_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi,
     case J_TRANSLATIONAL: ovk_translational_rows(M, f, j, phi, Ji, Jj, gam); break;
     case J_SPHERICAL: ovk_spherical_rows(M, f, j, phi, Ji, Jj, gam); break;
     case J_DRIVER: ovk_driver_rows(M, f, j, phi, Ji, Jj, gam); break;
+    case J_DISTANCE: ovk_distance_rows(M, f, j, phi, Ji, Jj, gam); break;
     default: ovk_axis_rows(M, f, j, phi, Ji, Jj, gam); break;
     }
 }
@@ -67,6 +68,8 @@ void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
     }
 }
 
+/* The friction of joint j (a distance joint has none: check_model in api.c refuses a law on one,
+ * so these are never called for it). */
 void ovk_joint_friction_setup(const ovk_model *M, const ovk_frames *f, int j, const double *Ji, ovk_fctx *cx) {
     if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_setup(M, f, j, cx);
     else if (M->jtype[j] >= J_SREVOLUTE) ovk_axis_friction_setup(M, f, j, Ji, cx);

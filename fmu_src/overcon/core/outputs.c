@@ -1,6 +1,6 @@
 /* Stage: the reported reactions and friction forces at y and the multipliers lam (m)
  * (overcon.evaluation.physical_reactions and friction_output): per joint j, reac[OVK_NREAC j ...] =
- * -A_i fi in its auxiliary frame (planar Fx, Fy, T; spherical Fx, Fy, Fz; the axis joints their
+ * -A_i fi in its auxiliary frame (planar Fx, Fy, T; spherical Fx, Fy, Fz; distance its tension; the axis joints their
  * type's components of [Fx, Fy, Fz, Tx, Ty, Tz] in the joint frame), then -fi[:dim] in the global
  * frame, fi = (J_X)_i^T lam_X, zeros after; fric[j] = the friction output of a joint with friction
  * (else 0). */
@@ -11,6 +11,12 @@
 static int auxiliary(const ovk_model *M, const ovk_frames *f, int j, const double *blkI, const double *fi,
                      double *out) {
     int bi = ovk_slot(M, M->jbi[j]);
+    if (M->jtype[j] == J_DISTANCE) { /* the tension: fi's force part is lam u, blkI's first dim entries u */
+        double t = 0.0;
+        for (int k = 0; k < M->dim; k++) t += fi[k] * blkI[k];
+        out[0] = t;
+        return 1;
+    }
     if (M->jtype[j] == J_SPHERICAL) {
         double t[3];
         mat3tvec(f->R + 9 * bi, fi, t);

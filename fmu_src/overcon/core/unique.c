@@ -149,25 +149,27 @@ size_t ovk_unique_cert_doubles(int m, int nh, int kh) {
 }
 
 /* Whether the rule's answer at J is known without the factorisation: the judged rows are the
- * equations W holds (the watch's kept rows, W = their rows of Phi_h M^-1/2 scaled to unit norm),
+ * equations W holds (the watch's kept rows, W = their rows of Phi_h diag(sc) scaled to unit norm, sc
+ * the watch's column scaling at that state, watch_scale.c),
  * and W's certified singular value bounds at the same state (wmin_low <= sigma_min(W),
  * wmax_up >= sigma_max(W); watch_eig.c) prove every singular value of the equilibrated A^T above
  * ten times the rank threshold: then the rank is m, null(A) is empty and every reaction is unique,
  * which is what ovk_unique_rows would find. The proof: A^T = diag(L) (W P) diag(R) with L = the
- * equilibration's row scalings times W's row norms, R = its column scalings over sqrt(Minv), P
+ * equilibration's row scalings times W's row norms, R = its column scalings over sc, P
  * the projection off the columns the equilibration zeroed (each of round-off only), so
  * sigma_min(A^T) >= min L min R (wmin_low - |W (I - P)|_F) and sigma_1(A^T) <= max L max R
  * wmax_up. 1 when proven; 0 when not (then the factorisation decides). O(m nh_b) in all: the rows
  * are copied and equilibrated by their nonzeros (work: ovk_unique_cert_doubles). */
-int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up) {
+int ovk_unique_certified(const ovk_model *M, const double *J, double *work, double wmin_low, double wmax_up,
+                         const double *sc) {
     int nh = M->nb * M->nh_b, kh = M->nh_b, m = ovk_unique_judged(M), big = m > nh ? m : nh, body;
     if (!(wmin_low > 0.0) || !(wmax_up < INFINITY) || m > nh || !m) return 0;
     double *B = work, *cn = B + (size_t)m * 2 * kh, *rn = cn + m, *dc = rn + nh, *dr = dc + m, *wn = dr + nh;
     int *blk = (int *)(wn + m);
     if (judged_rows(M, J, B, blk)) return 0;
-    for (int e = 0; e < m; e++) { /* W's row norms |Phi_h,e M^-1/2|, as given */
+    for (int e = 0; e < m; e++) { /* W's row norms |Phi_h,e diag(sc)|, as given */
         double n2 = 0.0;
-        IN_BLOCKS(e, c, body) n2 += BE(e, c) * BE(e, c) * M->Minv[c];
+        IN_BLOCKS(e, c, body) n2 += BE(e, c) * BE(e, c) * (sc[c] * sc[c]);
         wn[e] = sqrt(n2);
         if (!(wn[e] > 0.0)) return 0;
     }
@@ -179,10 +181,11 @@ int ovk_unique_certified(const ovk_model *M, const double *J, double *work, doub
         lmin = l < lmin ? l : lmin, lmax = l > lmax ? l : lmax;
         IN_BLOCKS(e, c, body) {
             if (dr[c] == 0.0) { /* W's entry in a zeroed column, bounded by the floor */
-                zf2 += floor * floor * M->Minv[c] / (wn[e] * wn[e]);
+                zf2 += floor * floor * (sc[c] * sc[c]) / (wn[e] * wn[e]);
                 continue;
             }
-            double r = dr[c] / sqrt(M->Minv[c]);
+            if (sc[c] == 0.0) return 0; /* a column W dropped as round-off: no bound through W */
+            double r = dr[c] / sc[c];
             rmin = r < rmin ? r : rmin, rmax = r > rmax ? r : rmax;
         }
     }

@@ -1,6 +1,7 @@
-/* The singularity watch of a C run, as overcon.watch.SingularityMonitor with the run's checks of
- * overcon.simulate.Simulation._watch, _recover, _expired and _degraded: after every accepted step
- * r = sigma_min / sigma_max of the kept Jacobian J_R M^-1/2 (unit-norm rows) and its rate dr/dt
+/* The singularity watch of a run (sim.c; the retired Python watch's names are kept in the
+ * parentheses below, as the messages are): after every accepted step
+ * r = sigma_min / sigma_max of the kept Jacobian J_R equilibrated (watch_scale.c: mass-free, as the
+ * pre-check's decision matrix; unit-norm rows) and its rate dr/dt
  * (ds_k/dt = u_k^T J' v_k, J' by a forward difference of J along q' = the integrator's
  * derivative); a step that starts with r falling and ends with r rising holds a minimum of r,
  * located by golden section on the dense output; r below ratio_tol is a singular position,
@@ -46,24 +47,18 @@ static int say(char *msg, int status, const char *fmt, ...) {
     return status;
 }
 
-/* Rows `rows` (k of them; NULL: all m) of Phi_h at y times M^-1/2, each scaled to unit norm,
- * into out (k x nh) (watch.weighted_rows). The frames at y stay in the workspace. */
+/* Rows `rows` (k of them; NULL: all m) of Phi_h at y, equilibrated as the watch's kept rows are
+ * (watch_scale.c: mass-free, invariant to the units of the coordinates), each of unit norm, into
+ * out (k x nh). The frames at y stay in the workspace. */
 static int weighted(ovk_sim *s, const double *y, const int *rows, int k, double *out, char *msg) {
-    const ovk_model *M = s->M;
-    int nh = s->nh, status = ovk_rows_in(M, s->d, y);
+    int nh = s->nh, status = ovk_rows_in(s->M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
-    const int *body = s->d->al_rows + M->m; /* each equation's two bodies */
+    const int *body = s->d->al_rows + s->M->m; /* each equation's two bodies */
     for (int i = 0; i < k; i++) {
         int r = rows ? rows[i] : i;
-        double *o = out + (size_t)i * nh, norm2 = 0.0;
-        ovk_row_dense(M, s->d->J, r, body[2 * r], body[2 * r + 1], o);
-        for (int c = 0; c < nh; c++) {
-            o[c] = o[c] * sqrt(M->Minv[c]);
-            norm2 += o[c] * o[c];
-        }
-        double norm = sqrt(norm2);
-        for (int c = 0; c < nh; c++) o[c] /= norm;
+        ovk_row_dense(s->M, s->d->J, r, body[2 * r], body[2 * r + 1], out + (size_t)i * nh);
     }
+    ovk_watch_scale(out, k, nh, NULL, s->M->nh_b, nh, s->eig->fscale, s->eig->sscr);
     return OVK_OK;
 }
 
@@ -96,7 +91,7 @@ static int ratio_and_rate(ovk_sim *s, const double *y, const double *qdot, doubl
     const ovk_model *M = s->M;
     int n = s->n;
     double smin = 1.0, smax = 1.0;
-    int status = ovk_eig_rows(s, y, kept_rows(M), s->eig->w, msg);
+    int status = ovk_eig_rows(s, y, kept_rows(M), s->eig->w, 1, msg);
     if (!status && !qdot) {
         if ((status = ovk_rates(M, s->d, y, y + n, s->qwatch)))
             return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
@@ -108,18 +103,19 @@ static int ratio_and_rate(ovk_sim *s, const double *y, const double *qdot, doubl
     double dt = 1e-7 / (most > 1.0 ? most : 1.0);
     memcpy(s->ywatch, y, (size_t)s->ny * sizeof(double));
     for (int i = 0; i < n; i++) s->ywatch[i] = y[i] + dt * qdot[i];
-    if ((status = ovk_eig_rows(s, s->ywatch, kept_rows(M), s->eig->w2, msg))) return status;
+    if ((status = ovk_eig_rows(s, s->ywatch, kept_rows(M), s->eig->w2, 0, msg))) return status;
     double ds_min = ovk_eig_rate(s, s->eig->umin, smin, dt), ds_max = ovk_eig_rate(s, s->eig->umax, smax, dt);
     *r = smax > 0.0 ? smin / smax : 0.0;
     *rate = smax > 0.0 ? (ds_min - *r * ds_max) / smax : 0.0;
     return OVK_OK;
 }
 
-/* r of the kept equations at tau on the last step's dense output (the state into s->ywatch). */
+/* r of the kept equations at tau on the last step's dense output (the state into s->ywatch),
+ * weighted by the scaling of the step's end (watch_scale.c: one scaling along the search). */
 static int ratio_at(ovk_sim *s, double tau, double *r, char *msg) {
     double smin = 1.0, smax = 1.0;
     ovk_rk_dense(&s->rk, tau, s->ywatch);
-    int status = ovk_eig_rows(s, s->ywatch, kept_rows(s->M), s->eig->w, msg);
+    int status = ovk_eig_rows(s, s->ywatch, kept_rows(s->M), s->eig->w, 0, msg);
     if (!status) status = ovk_eig_extremes(s, s->eig->w, &smin, &smax);
     if (!status) *r = smax > 0.0 ? smin / smax : 0.0;
     return status;
@@ -191,7 +187,10 @@ static int judge(ovk_sim *s, double t, double r, const double *y, int passed, do
     if (full < nR && (status = ovk_sim_along(s, t, y, 0, 0.0, INFINITY, msg))) return status; /* the events at that instant */
     if (full < nR)
         return snprintf(msg, OVK_MSG, "%s: the mechanism's constraint Jacobian is rank deficient (rank %d < %d; "
-                        "kept equations' sigma_min/sigma_max %s, below %g)", where, full, nR, rs, s->o.ratio_tol),
+                        "kept equations' sigma_min/sigma_max %s, below %g); to go on through it, run with "
+                        "--singular pass (scene: [solver] singular = \"pass\"), which solves the kept equations in "
+                        "the augmented Lagrangian form and projects the state back onto the constraints after every "
+                        "step", where, full, nR, rs, s->o.ratio_tol),
                OVK_SINGULAR_POSITION;
     if (s->M->redundancy == OVK_MIN_NORM) /* the watched set is chosen at the start only (checks.watch_rows) */
         return say(msg, OVK_ELIMINATION, "%s: the equations watched under redundancy 'min-norm' are no longer "
@@ -242,7 +241,7 @@ static int along(ovk_sim *s, double t, const double *y, int first, double wmin_l
     int status = ovk_rows_in(M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
     const double *J = s->d->J;
-    if (n_kept(M) == ovk_unique_judged(M) && ovk_unique_certified(M, J, s->cert_work, wmin_low, wmax_up)) {
+    if (n_kept(M) == ovk_unique_judged(M) && ovk_unique_certified(M, J, s->cert_work, wmin_low, wmax_up, s->eig->scale_y)) {
         rank = n_kept(M); /* the kept rows are every judged one and certified regular: no dependency */
         for (int j = 0; j < nj; j++) now[j] = 1;
         s->along_certified++;
@@ -301,6 +300,7 @@ static int monitor(ovk_sim *s, double t, const double *y, const double *qdot, in
     int status = ratio_and_rate(s, y, qdot, &r, &rate, msg);
     if (status) return status;
     double wmin_low = s->eig->smin_low, wmax_up = s->eig->smax_up; /* at y: the searches below move them */
+    memcpy(s->eig->scale_y, s->eig->scale, (size_t)s->nh * sizeof(double)); /* the rows' scaling at y, with them */
     s->ratio = r;
     if (!first && s->rate < 0.0 && 0.0 < rate && t > s->t_prev) {
         double t_min = t, r_min = r;
@@ -344,7 +344,7 @@ int ovk_sim_watch_extremes(ovk_sim *s, const double *y, int cold, double *out) {
     memcpy(keep + nR, e->umax, (size_t)nR * sizeof(double));
     if (cold) e->have = 0;
     char msg[OVK_MSG];
-    int status = ovk_eig_rows(s, y, kept_rows(s->M), e->w, msg);
+    int status = ovk_eig_rows(s, y, kept_rows(s->M), e->w, 1, msg);
     if (!status) status = ovk_eig_extremes(s, e->w, out, out + 1);
     if (status) snprintf(s->msg, sizeof s->msg, "watch extremes: %.900s", msg);
     memcpy(e->umin, keep, (size_t)nR * sizeof(double));

@@ -1,5 +1,6 @@
 /* The watch's r = sigma_min / sigma_max (watch.c) without a full SVD: the extreme singular values
- * of the weighted kept rows W (nR x nh: the rows of Phi_h times M^-1/2, each scaled to unit norm)
+ * of the weighted kept rows W (nR x nh: the rows of Phi_h equilibrated by watch_scale.c, each scaled
+ * to unit norm)
  * are tracked from one check to the next as the extreme eigenvalues of G = W W^T (nR x nR):
  *   sigma_max^2: inverse iteration on s I - G with s just above the largest Rayleigh quotient seen
  *                (s = rho (1 + SHIFT_REL), raised until s I - G admits a Cholesky factor, at last
@@ -53,6 +54,7 @@
 #define SHIFT_REL 1e-4    /* the shift's distance from the last Rayleigh quotient, relative */
 #define TAU 1e-13         /* sigma_min's last shift: G + TAU l_max I, factored whatever the rank */
 #define LADDER 7          /* shifts tried at SHIFT_REL 4^k from the quotient before the last one */
+#define CLOSE 6           /* a settled quotient whose vector is not yet accurate: the ladder starts at 4^-CLOSE */
 #define CERT_FLOOR 1e-12  /* sigma_min is certified the smallest down to l_min = CERT_FLOOR l_max */
 #define CERT_ROUND 1e-13  /* G's round-off taken off the certified bounds, relative to l_max (many eps) */
 
@@ -90,7 +92,7 @@ int ovk_eig_make(ovk_sim *s) {
     int pmax = band_bound(M);
     if (pmax < 0) return OVK_NOMEM;
     pmax = pmax < nR - 1 ? pmax : (nR > 0 ? nR - 1 : 0);
-    size_t nd = 2 * (size_t)nR * 2 * kh + 4 * (size_t)nR + 2 * (size_t)nh + 2 * (size_t)nR * (size_t)(pmax + 1) + 1;
+    size_t nd = 2 * (size_t)nR * 2 * kh + 4 * (size_t)nR + 6 * (size_t)nh + (size_t)m + 2 * (size_t)nR * (size_t)(pmax + 1) + 1;
     size_t ni = 4 * (size_t)nR + 2 * (size_t)m + 2 * (size_t)nb + 1;
     e->mem = malloc(nd * sizeof(double));
     e->imem = malloc(ni * sizeof(int));
@@ -103,6 +105,9 @@ int ovk_eig_make(ovk_sim *s) {
     e->umax = p, p += nR;
     e->x = p, p += 2 * (size_t)nR; /* x and the Gershgorin sums */
     e->scale = p, p += nh;
+    e->scale_y = p, p += nh;
+    e->fscale = p, p += nh;
+    e->sscr = p, p += nh + (size_t)m;
     e->z = p, p += nh;
     e->G = p, p += (size_t)nR * (size_t)(pmax + 1);
     e->F = p;
@@ -112,7 +117,7 @@ int ovk_eig_make(ovk_sim *s) {
     e->body = q, q += 2 * (size_t)nR;
     e->eqbody = q, q += 2 * (size_t)m;
     e->span = q;
-    for (int c = 0; c < nh; c++) e->scale[c] = sqrt(M->Minv[c]);
+    for (int c = 0; c < nh; c++) e->scale[c] = e->scale_y[c] = 1.0;
     for (int r = 0; r < 2 * m; r++) e->eqbody[r] = -1;
     for (int j = 0; j < M->nj; j++)
         for (int k = 0; k < M->jneq[j]; k++) {
@@ -143,29 +148,30 @@ void ovk_eig_order(ovk_watch_eig *e, const int *rows) {
     if (memcmp(rows, e->rows, (size_t)e->nR * sizeof(int))) make_order(e, rows);
 }
 
-/* The kept rows `rows` (k = e->nR of them) of Phi_h at y, weighted and of unit norm, on their
- * bodies' columns in band order, into w (nR x 2 nh_b). The frames at y stay in the workspace. */
-int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, char *msg) {
+/* The kept rows `rows` (k = e->nR of them) of Phi_h at y, equilibrated (watch_scale.c: fresh, a
+ * new column scaling into e->scale) or weighted by the last one (fresh = 0: the rate's rows at a
+ * nearby state), of unit norm, on their bodies' columns in band order, into w (nR x 2 nh_b). The
+ * frames at y stay in the workspace. */
+int ovk_eig_rows(ovk_sim *s, const double *y, const int *rows, double *w, int fresh, char *msg) {
     ovk_watch_eig *e = s->eig;
-    int nR = e->nR, kh = e->kh, status = ovk_rows_in(s->M, s->d, y);
+    int nR = e->nR, kh = e->kh, nh = s->nh, status = ovk_rows_in(s->M, s->d, y);
     if (status) return snprintf(msg, OVK_MSG, "%s", ovk_message(s->d)), status;
     if (memcmp(rows, e->rows, (size_t)nR * sizeof(int))) /* other kept rows: their order, a cold start */
-        make_order(e, rows), e->have = 0;
+        make_order(e, rows), e->have = 0, fresh = 1;
     const int *rbody = s->d->al_rows + s->M->m; /* each equation's two bodies: its slots of d->J */
     for (int k = 0; k < nR; k++) {
         int r = rows[e->order[k]];
         const double *row = OVK_JROW(s->M, s->d->J, r);
-        double *o = w + (size_t)k * 2 * kh, norm2 = 0.0;
+        double *o = w + (size_t)k * 2 * kh;
         for (int t = 0; t < 2; t++) {
             int b = e->body[2 * k + t], slot = b == rbody[2 * r] ? 0 : 1;
-            for (int c = 0; c < kh; c++) {
-                o[t * kh + c] = b < 0 ? 0.0 : row[slot * kh + c] * e->scale[b * kh + c];
-                norm2 += o[t * kh + c] * o[t * kh + c];
-            }
+            for (int c = 0; c < kh; c++) o[t * kh + c] = b < 0 ? 0.0 : row[slot * kh + c];
         }
-        double norm = sqrt(norm2);
-        for (int c = 0; c < 2 * kh; c++) o[c] /= norm;
     }
+    if (fresh)
+        ovk_watch_scale(w, nR, 2 * kh, e->body, kh, nh, e->scale, e->sscr);
+    else
+        ovk_watch_apply(w, nR, 2 * kh, e->body, kh, e->scale);
     return OVK_OK;
 }
 
@@ -275,8 +281,13 @@ static int track(ovk_watch_eig *e, const double *w, double *u, int nh, int top, 
             factored = 0;                                       /* the extreme lies beyond: on */
         }
         if (it == EIG_MAX_ITER) return 1;
-        if (factored && dir * (s - rho) > 10.0 * SHIFT_REL * rho) factored = 0; /* the shift left far behind */
-        for (int k = 0; !factored && k <= LADDER; k++) {
+        /* the quotient settled while the residual did not: the extreme lies in a cluster of values
+         * closer than SHIFT_REL (the equal loops of the N-four-bar, equilibrated), where a shift at
+         * SHIFT_REL converges at 1 - gap / SHIFT_REL an iteration; shifts from SHIFT_REL 4^-CLOSE on
+         * separate the cluster (a shift inside the spectrum has no Cholesky factor: the next one) */
+        int first = it > 0 && settled ? -CLOSE : 0;
+        if (factored && dir * (s - rho) > 10.0 * SHIFT_REL * pow(4.0, first) * rho) factored = 0; /* the shift far behind */
+        for (int k = first; !factored && k <= LADDER; k++) {
             if (k < LADDER)
                 s = rho * (1.0 + dir * SHIFT_REL * pow(4.0, k));
             else

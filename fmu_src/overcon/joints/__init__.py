@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Mapping
 
-from . import (cylindrical, fixed, prismatic, revolute, spatial_revolute, spatial_rows, spherical, translational,
-               universal)
+from . import (cylindrical, distance, fixed, prismatic, revolute, spatial_revolute, spatial_rows, spherical,
+               translational, universal)
 
 
 @dataclass(frozen=True)
@@ -43,9 +43,10 @@ class JointType:
     ``required``: field -> (shape code, description); ``optional``: field -> (shape code,
     description, default). Shape codes: ``"vec"`` a vector of the mechanism's dimension,
     ``"dir"`` the same but not the zero vector, ``"rot"`` a rotation quantity (planar scalar,
-    spatial 3-vector), ``"scalar"``, ``"angle"`` (a scalar angle in radians; the file may give it
-    in degrees as ``<field>_deg``). ``name``: the type's name in files and in every message and
-    output (several types share a name, one per mechanism kind: :func:`resolve`).
+    spatial 3-vector), ``"scalar"``, ``"positive"`` (a scalar > 0), ``"angle"`` (a scalar angle in
+    radians; the file may give it in degrees as ``<field>_deg``). ``name``: the type's name in
+    files and in every message and output (several types share a name, one per mechanism kind:
+    :func:`resolve`).
     ``friction_size``: (key of the friction table, description) of the size stored as
     ``FrictionSpec.size``, None for a type without friction (refused by the loader);
     ``friction_extra``: further size keys, key -> (description, default), default None for a
@@ -186,6 +187,14 @@ TYPES: Mapping[str, JointType] = {
                                     "default [0, 0, 1]", None),
                   "axis_j": ("dir", "the same axis on body j, in body j frame (parallel to axis_i "
                                     "at q0); default: the image of axis_i at q0", None)},
+        friction_size=None, sliding_unit="", friction_unit="", friction_text=""),
+    "distance": JointType(
+        module=distance, kind="planar", name="distance", n_equations=1, reaction=(("tension", "N"),),
+        required={**_point_fields("link end"), "length": ("positive", "link length L (m, > 0)")},
+        friction_size=None, sliding_unit="", friction_unit="", friction_text=""),
+    "spatial_distance": JointType(
+        module=distance, kind="spatial", name="distance", n_equations=1, reaction=(("tension", "N"),),
+        required={**_point_fields("link end"), "length": ("positive", "link length L (m, > 0)")},
         friction_size=None, sliding_unit="", friction_unit="", friction_text=""),
 }
 """Joint type key -> its facts and module: the one place a joint type is declared. The

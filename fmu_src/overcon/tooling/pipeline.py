@@ -146,17 +146,23 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
     grids = {g: LockstepGrid(lockstep_step) for g in lock_groups}
     todo += _lockstep_jobs({g: groups[g] for g in lock_groups}, grids, todo, user, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    results, failures = run_jobs(_longest_first(todo), workers=jobs, echo=echo)
+    results, failures = run_jobs(_longest_first(todo), workers=jobs, echo=echo, announce_failures=False)
+    announced: set[str] = set()
     while True:
+        steps = {g: grids[g].step for g in lock_groups}
         retry = {g: groups[g] for g in lock_groups if _lockstep_retry(grids[g], groups[g], failures, echo, g)}
+        for g, items in retry.items():
+            for i in items:
+                key = f"lockstep/{i.model}"
+                if key in failures:  # not a failure of the comparison: the run is taken again
+                    echo(f"{key}: repeated at step {grids[g].step:g} s (rk4 unstable at {steps[g]:g} s)")
+                failures.pop(key, None)
+                results.pop(key, None)
+        _announce(failures, announced, echo)
         if not retry:
             break
-        for items in retry.values():
-            for i in items:
-                failures.pop(f"lockstep/{i.model}", None)
-                results.pop(f"lockstep/{i.model}", None)
         more, more_failures = run_jobs(_longest_first(_lockstep_jobs(retry, grids, todo, user, out_dir)),
-                                       workers=jobs, echo=echo)
+                                       workers=jobs, echo=echo, announce_failures=False)
         results.update(more)
         failures.update(more_failures)
     comparisons = []
@@ -179,6 +185,15 @@ def _run_and_compare(groups: dict[str, list[FmuInfo]], exps: dict[str, Experimen
         c.wall_seconds = [] if adaptive_failed else [results[i.model].sim_seconds for i in items]
         comparisons.append(c)
     return comparisons, results
+
+
+def _announce(failures: dict, announced: set, echo) -> None:
+    """Say each failed run that is not taken again, once: its group has no verdict (or, for an
+    adaptive run beside lockstep ones, a reported failure); the reason follows in the report."""
+    for key in failures:
+        if key not in announced:
+            announced.add(key)
+            echo(f"{key}: FAILED (reason below)")
 
 
 def _along(items: list[FmuInfo], out_dir: Path, failures: dict, *, adaptive: bool) -> list:
@@ -549,7 +564,9 @@ def reproduce(out_dir, *, mechanisms="mechanisms", jobs: int = 2, echo=_echo, st
         "(reaction uniqueness of the friction joints, paper Eq. 17), carried by each FMU as the "
         "constant output `motion_unique`. *Observed*: whether the simulated positions of the lockstep "
         "runs (every elimination on one fixed grid) agree across the eliminations within the tolerance "
-        "below; the adaptive runs' largest difference is given beside it. Wall time: simulation seconds "
+        "below, stated by the deciding output whose largest difference is the largest multiple of its "
+        "tolerance (with its unit); the adaptive runs' largest difference per unit is given beside it. "
+        "Wall time: simulation seconds "
         "per variant, adaptive run (inside `simulate_fmu`).",
         "",
         f"Total wall time {total:.1f} s on {os.cpu_count()} CPU(s), {jobs} worker process(es) "

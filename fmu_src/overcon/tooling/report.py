@@ -15,13 +15,35 @@ def _unit(d: OutputDiff) -> str:
     return d.unit or ""
 
 
+MEASURE = "largest difference relative to its tolerance"
+"""What the verdict's figure is (decided, issue 37): the deciding output whose largest absolute
+difference between the variants is the largest multiple of its own tolerance, the output that
+decides the verdict; shown with its unit and tolerance. An output with a larger absolute difference
+in a looser tolerance (or another unit) is not that figure: the table lists every output, and the
+adaptive runs' figure is given per unit."""
+
+
+def adaptive_text(c: Comparison) -> str | None:
+    """The adaptive runs' largest absolute difference per unit, each with its output, e.g. ``0.012 m
+    in slider1.x, 17.2 rad in crank.phi`` (units never mixed in one figure); None without them."""
+    if not c.adaptive_diff:
+        return None
+    unit_of = {d.name: _unit(d) for d in c.diffs}
+    best: dict[str, tuple[float, str]] = {}
+    for name, value in c.adaptive_diff.items():
+        u = unit_of.get(name, "")
+        if u not in best or value > best[u][0]:
+            best[u] = (value, name)
+    return ", ".join(f"{v:.3g}{' ' + u if u else ''} in {n}" for u, (v, n) in sorted(best.items()))
+
+
 def _second_figure(c: Comparison) -> str:
     if c.adaptive_failure is not None:
         return f"; ADAPTIVE RUN FAILED (verdict from the lockstep runs): {c.adaptive_failure}"
-    a = c.adaptive_max()
+    a = adaptive_text(c)
     if c.mode != "lockstep" or a is None:
         return ""
-    return f"; adaptive runs differ by {a:.3g}"
+    return f"; adaptive runs' largest difference (not deciding): {a}"
 
 
 def verdict_line(c: Comparison) -> str:
@@ -32,7 +54,7 @@ def verdict_line(c: Comparison) -> str:
         return f"!!! FAILED !!! {c.group}: no verdict, a run failed: {c.failure}"
     w = c.worst()
     how = f" ({c.mode})" if c.reference is None else ""
-    worst = (f"; largest difference{how} {w.max_abs:.3g} {_unit(w)} in {w.name} (tolerance {w.tolerance:.3g})"
+    worst = (f"; {MEASURE}{how}: {w.max_abs:.3g} {_unit(w)} in {w.name} (tolerance {w.tolerance:.3g} {_unit(w)})"
              f"{_second_figure(c)}" if w else "")
     if c.reference is not None:
         head = f"{c.group}: {c.infos[0].path.name} vs {c.reference}: {c.verdict_text().upper()}"
@@ -58,7 +80,7 @@ def console_table(c: Comparison) -> str:
                               else ", ".join(f"{i.model} ({lab})" for i, lab in zip(c.infos, c.labels)))]
     if c.mode == "lockstep":
         second = (f"FAILED: {c.adaptive_failure}" if c.adaptive_failure is not None else
-                  f"largest position difference {c.adaptive_max():.3g} (reported, not deciding)")
+                  f"largest difference {adaptive_text(c) or '—'} (reported, not deciding)")
         lines.append(f"  verdict from lockstep runs (rk4, step {c.lockstep_step:g} s); adaptive runs: {second}")
         if c.lockstep_note:
             lines.append(f"  {c.lockstep_note}")
@@ -137,8 +159,8 @@ def _rel(path: Path, base: Path) -> str:
 def summary_rows(comparisons: list[Comparison]) -> list[str]:
     """Markdown table: mechanism, group / friction set, eliminations, predicted, observed, max
     difference, simulation wall time."""
-    rows = ["| mechanism | group (friction set) | eliminations | predicted | observed | max difference "
-            "(deciding output, tolerance) | adaptive runs' max difference | wall time (s) |",
+    rows = ["| mechanism | group (friction set) | eliminations | predicted | observed | "
+            f"{MEASURE} (output, tolerance, runs) | adaptive runs' largest difference per unit | wall time (s) |",
             "|---|---|---|---|---|---|---|---|"]
     for c in comparisons:
         i0 = c.infos[0]
@@ -152,9 +174,9 @@ def summary_rows(comparisons: list[Comparison]) -> list[str]:
         else:
             obs = c.verdict_text() + ("" if c.matches else " **MISMATCH**")
         w = c.worst()
-        md = f"{w.max_abs:.3g} {_unit(w)} ({w.name}, {w.tolerance:.2g}, {c.mode})" if w else "—"
+        md = f"{w.max_abs:.3g} {_unit(w)} ({w.name}, {w.tolerance:.2g} {_unit(w)}, {c.mode})" if w else "—"
         second = ("**FAILED**" if c.adaptive_failure is not None else
-                  f"{c.adaptive_max():.3g}" if c.mode == "lockstep" and c.adaptive_max() is not None else "—")
+                  adaptive_text(c) or "—" if c.mode == "lockstep" else "—")
         wall = " + ".join(f"{s:.1f}" for s in c.wall_seconds) if c.wall_seconds else "—"
         rows.append(f"| {i0.mechanism or '—'} | {c.group} ({fr}) | {elim} | {pred} | {obs} | {md} | {second} | {wall} |")
     return rows
@@ -231,7 +253,7 @@ def group_section(c: Comparison, base: Path, plots: list[Path]) -> list[str]:
                   "```", c.adaptive_failure, "```"]
     elif c.mode == "lockstep":
         lines += ["", f"Differences below are from the lockstep runs (rk4, step {c.lockstep_step:g} s, identical steps "
-                  f"for every variant); the adaptive runs' largest position difference is {c.adaptive_max():.3g} "
+                  f"for every variant); the adaptive runs' largest difference per unit is {adaptive_text(c) or '—'} "
                   "(reported, not deciding)."]
     lines += ["", "| output | unit | max abs | max rel | tolerance | first t > tol (s) | decides |",
               "|---|---|---|---|---|---|---|"]

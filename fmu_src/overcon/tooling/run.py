@@ -533,10 +533,12 @@ class Job:
 
 
 def run_jobs(jobs: list[Job], *, workers: int = 2, progress: bool = True, timeout: float | None = None,
-             echo=None) -> tuple[dict[str, RunResult], dict[str, SimulationFailed]]:
+             echo=None, announce_failures: bool = True) -> tuple[dict[str, RunResult], dict[str, SimulationFailed]]:
     """Run every job (``workers`` processes at a time, in the order given) and return
     (results by key, failures by key: the reason and, as data, an unstable step's stable step):
-    a failed run never stops the others."""
+    a failed run never stops the others. ``announce_failures``: say "<key>: FAILED (reason below)"
+    as a run fails (False: the caller says what happens to it, e.g. a lockstep run repeated at a
+    smaller step, :func:`overcon.tooling.pipeline.run_groups`)."""
     echo = echo or (lambda s: print(s, flush=True))
     results: dict[str, RunResult] = {}
     failures: dict[str, SimulationFailed] = {}
@@ -547,7 +549,8 @@ def run_jobs(jobs: list[Job], *, workers: int = 2, progress: bool = True, timeou
             r = run_one(job.info, ex, job.csv, progress, timeout, label=job.key, along=job.along)
         except SimulationFailed as exc:
             failures[job.key] = exc
-            echo(f"{job.key}: FAILED (reason below)")
+            if announce_failures:
+                echo(f"{job.key}: FAILED (reason below)")
             return
         results[job.key] = r
         echo(f"{job.key}: {r.rows} points, t = {ex.start:g}..{ex.stop:g} s every {ex.step:g} s -> {r.csv}; "

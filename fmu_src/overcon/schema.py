@@ -150,15 +150,24 @@ def _load(dim: int) -> dict:
 def _body(kind: str, dim: int, quaternion: bool) -> dict:
     ncoord = len(S.coordinates(kind, "quaternion" if quaternion else "euler_zxz"))
     positive = {**NUMBER, "exclusiveMinimum": 0}
-    return _keys({"type": "object", "additionalProperties": False, "required": ["name", "mass", "inertia", "q0"],
+    return _keys({"type": "object", "additionalProperties": False, "required": ["name", "mass", "q0"],
+            # a rigid body needs its inertia; a particle (a point mass) has none and only its position
+            "if": {"not": {"properties": {"kind": {"const": "particle"}}, "required": ["kind"]}},
+            "then": {"required": ["inertia"]},
+            "else": {"not": {"required": ["inertia"]},
+                     "properties": {"q0": _vec(dim, desc="initial position of the point mass, global frame"),
+                                    "h0": _vec(dim, desc="initial velocity (default zeros)")}},
             "properties": {
                 "name": {**IDENT, "not": {"const": S.BASE}},
+                "kind": {"enum": list(S.BODY_KINDS), "description": 'body kind (default "rigid")'},
                 "mass": {**positive, "description": "kg"},
                 "inertia": ({**positive, "description": "J about the centre of mass (kg m^2)"} if dim == 2 else
                             _vec(3, positive, "principal inertias about the centre of mass, body axes (kg m^2)")),
-                "q0": _vec(ncoord, desc="initial coordinates: the centre of mass in the global frame, then the "
-                                        "orientation"),
-                "h0": _vec(S.VELOCITIES_PER_BODY[kind], desc="initial velocities (default zeros)")}}, sc.BODY_KEYS)
+                "q0": {"anyOf": [_vec(ncoord), _vec(dim)],
+                       "description": "initial coordinates: the centre of mass in the global frame, then the "
+                                      "orientation (a particle: its position only)"},
+                "h0": {"anyOf": [_vec(S.VELOCITIES_PER_BODY[kind]), _vec(dim)],
+                       "description": "initial velocities (default zeros)"}}}, sc.BODY_KEYS)
 
 
 def _mechanism_of(kind: str, quaternion: bool = False) -> dict:
@@ -237,11 +246,34 @@ def scene_schema() -> dict:
     _keys(head, sc._SCENE_KEYS)
     outputs = {"type": "object", "additionalProperties": False, "properties": {
         "positions": _names("<body>.<coordinate>"), "reactions": _names("joints"),
-        "friction": _names("friction joints"), "velocities": _names("bodies"), "energy": {"type": "boolean"}}}
+        "friction": _names("friction joints"), "velocities": _names("bodies"), "energy": {"type": "boolean"},
+        "joints": _names("joints whose sensors are outputs (<joint>.angle, .rate, .displacement, .speed)")}}
     _keys(outputs, sc.OUTPUT_KEYS)
     solver = {"type": "object", "additionalProperties": False,
               "properties": {k: _rule(f"solver.{k}") for k in params.SOLVER_FIELDS}}
-    sections = {"scene": head, "outputs": outputs, "solver": solver}
+    inputs = {"type": "array", "maxItems": sc.MAX_INPUTS, "items": {
+        "type": "object", "additionalProperties": False, "required": ["name", "type"],
+        "properties": {"name": {**IDENT, "description": "the FMU input variable and the CSV column"},
+                       "type": {"enum": list(S.INPUT_TYPES)},
+                       "joint": {"type": "string", "description": "joint_torque, joint_force: the joint"},
+                       "body": {"type": "string", "description": "force, torque: the body it acts on"},
+                       "point": {"type": "array", "items": NUMBER, "minItems": 2, "maxItems": 3,
+                                 "description": "force: where, in body coordinates (default the origin)"},
+                       "direction": {"type": "array", "items": NUMBER, "minItems": 2, "maxItems": 3,
+                                     "description": "force, torque: the unit direction"},
+                       "frame": {"enum": list(S.INPUT_FRAMES)},
+                       "start": {**NUMBER, "description": "the value before the host sets one (N or N m)"}}}}
+    _keys(inputs["items"], sc._INPUT_KEYS)
+    drivers = {"type": "array", "maxItems": sc.MAX_DRIVERS, "items": {
+        "type": "object", "additionalProperties": False, "required": ["name", "joint", "motion"],
+        "properties": {"name": IDENT, "joint": {"type": "string"}, "motion": {"enum": list(S.DRIVER_MOTIONS)},
+                       "coordinate": {"enum": ["angle", "displacement"]},
+                       **{k: NUMBER for k in sc._DRIVER_KEYS[4:]}},
+        "allOf": [{"if": {"properties": {"motion": {"const": m}}, "required": ["motion"]},
+                   "then": {"required": [k for k in keys if k not in sc._DRIVER_DEFAULTS]}}
+                  for m, keys in S.DRIVER_MOTIONS.items()]}}
+    _keys(drivers["items"], sc._DRIVER_KEYS)
+    sections = {"scene": head, "outputs": outputs, "solver": solver, "inputs": inputs, "drivers": drivers}
     sections = _keys({"properties": sections}, sc.SCENE_SECTIONS)["properties"]
     return {"$schema": DRAFT, "title": "overcon scene file",
             "description": "A run of a mechanism: friction set, elimination, times, outputs, solver "

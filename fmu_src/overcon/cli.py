@@ -272,7 +272,8 @@ def cmd_regress(args) -> int:
         if args.junit:
             return _input_error("--junit: only for the check (--regenerate writes baselines, it checks nothing)")
         return rg.regenerate(args.scenes, mechanisms=args.dir, baselines=args.baselines, out=args.out,
-                             jobs=args.jobs, stop_time=args.stop_time, step=args.step).code
+                             jobs=args.jobs, stop_time=args.stop_time, step=args.step,
+                             tolerances=args.tolerances).code
     if args.stop_time is not None or args.step is not None:
         return _input_error("--stop-time/--step only with --regenerate (the check runs on each baseline's grid)")
     out = rg.regress(args.scenes, mechanisms=args.dir, baselines=args.baselines, tolerances=args.tolerances,
@@ -508,12 +509,12 @@ def cmd_simulate(args) -> int:
     from .outfiles import check_outputs
 
     outputs = {"--out": args.out, "--events": args.events}
-    why = check_outputs(outputs, {"scene file": args.file})
+    why = check_outputs(outputs, {"scene file": args.file, "--input": args.input})
     if why:
         return _input_error(why)
     spec, model = _load(args)
     mechanism = getattr(spec.mechanism, "source", None)
-    why = check_outputs(outputs, {"scene file": args.file, "mechanism file": mechanism})
+    why = check_outputs(outputs, {"scene file": args.file, "mechanism file": mechanism, "--input": args.input})
     if why:
         return _input_error(why)
     for w in run_warnings(precheck(model, args.file)):
@@ -647,13 +648,14 @@ def cmd_run(args) -> int:
     from .tooling.pipeline import run_paths
     from .tooling.run import parse_settings
 
-    from .outfiles import check_out_dir
+    from .outfiles import check_input_outside, check_out_dir
     from .tooling import InputError
 
     def go():
         start = time.perf_counter()
         _use_archive_flags(args)
-        why = check_out_dir("--out", args.out, {f"FMU {f}": f for f in args.fmus})
+        why = (check_out_dir("--out", args.out, {f"FMU {f}": f for f in args.fmus})
+               or check_input_outside("--out", args.out, "--input", args.input_table))
         if why:
             raise InputError(why)
         res = run_paths(args.fmus, args.out, stop_time=args.stop_time, step=args.step, jobs=args.jobs,
@@ -669,7 +671,7 @@ def cmd_compare(args) -> int:
     from .tooling.pipeline import compare_paths, compare_with_reference
     from .tooling.run import parse_settings
 
-    from .outfiles import check_out_dir
+    from .outfiles import check_input_outside, check_out_dir
     from .tooling import InputError
 
     plots = args.plot if args.plot in ("worst", "all") else [n for n in args.plot.split(",") if n]
@@ -677,7 +679,8 @@ def cmd_compare(args) -> int:
     def go():
         start = time.perf_counter()
         _use_archive_flags(args)
-        why = check_out_dir("--out", args.out, {**{f"FMU {f}": f for f in args.fmus}, "--ref": args.ref})
+        why = (check_out_dir("--out", args.out, {**{f"FMU {f}": f for f in args.fmus}, "--ref": args.ref})
+               or check_input_outside("--out", args.out, "--input", args.input_table))
         if why:
             raise InputError(why)
         if args.ref is not None:
@@ -750,6 +753,12 @@ def cmd_sweep(args) -> int:
         if args.scheduler is not None and args.workers is not None:
             print("overcon: --workers sizes the local cluster; with --scheduler the cluster's own workers run the "
                   "tasks (start more with dask worker)", file=sys.stderr)
+            return EXIT_INPUT
+        from .outfiles import check_input_outside
+        why = check_input_outside("--resume" if args.out is None else "--out", args.resume or args.out,
+                                  "--input", args.input_table)
+        if why:
+            print(f"overcon: {why}", file=sys.stderr)
             return EXIT_INPUT
         if args.resume is not None:
             if args.lockstep_step != LOCKSTEP_STEP:

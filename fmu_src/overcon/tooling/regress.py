@@ -63,6 +63,7 @@ import json
 import math
 import os
 import platform
+import shlex
 import shutil
 import time
 import tomllib
@@ -183,12 +184,14 @@ def write_opt(path: Path, start: float, stop: float, step: float, rel_tol: float
 
 def regenerate_command(names: list[str], mechanisms: Path, baselines: Path) -> str:
     """The command that writes these scenes' baselines (printed where one is missing or differs)."""
-    cmd = "overcon regress --regenerate --scenes " + " ".join(names)
+    # DIR first and --scenes last: ``--scenes NAME [NAME ...]`` would take a DIR after it as a name
+    cmd = "overcon regress"
     if Path(mechanisms).resolve() != DEFAULT_MECHANISMS.resolve():
-        cmd += f" {mechanisms}"
+        cmd += f" {shlex.quote(str(mechanisms))}"
+    cmd += " --regenerate"
     if Path(baselines).resolve() != DEFAULT_BASELINES.resolve():
-        cmd += f" --baselines {baselines}"
-    return cmd
+        cmd += f" --baselines {shlex.quote(str(baselines))}"
+    return cmd + " --scenes " + " ".join(names)
 
 
 def load_provenance(baselines: Path) -> dict:
@@ -300,8 +303,19 @@ class ToleranceTable:
             return table[u], f"{self.path.name} [{tier}] {u}"
         if "default" in table:
             return table["default"], f"{self.path.name} [{tier}] default"
-        raise BadInput(f"{self.path}: no tolerance for output {output} of scene {scene} (unit "
-                       f"{unit or 'none'!r}) in [{tier}]: add a key {u or 'default'!r} (or 'default') there")
+        raise BadInput(no_tolerance_message(self.path, tier, scene, output, unit))
+
+
+def no_tolerance_message(path: Path, tier: str, scene: str, output: str, unit: str | None) -> str:
+    """What to do when the table at ``path`` has no tolerance for an output: give one in the user's
+    own table with ``--tolerances FILE`` (never edit the installed package's file; no tolerance is
+    made up for a unit the table does not know)."""
+    u = unit or ""
+    where = "the packaged tolerance table" if Path(path).resolve() == PACKAGED_TOLERANCES else str(path)
+    return (f"scene {scene}: no tolerance for output {output} (unit {unit or 'none'!r}) in [{tier}] of "
+            f"{where}: give a tolerance for it with --tolerances FILE, your own table (a copy of "
+            f"{PACKAGED_TOLERANCES.name} with the key {u or 'default'!r} in [{tier}], or a [[{tier}.rule]] "
+            f"with outputs = [{output!r}])")
 
 
 def _positive_float(v, where: str, path: Path) -> float:
@@ -799,8 +813,10 @@ def _regress_summary(r: _Regress) -> None:
 
 def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS, baselines=DEFAULT_BASELINES,
                out=DEFAULT_OUT, jobs: int | None = None, stop_time: float | None = None,
-               step: float | None = None, echo=_echo) -> Outcome:
-    """Write the baselines of the selected scenes (all when None); see the module docstring."""
+               step: float | None = None, tolerances=DEFAULT_TOLERANCES, echo=_echo) -> Outcome:
+    """Write the baselines of the selected scenes (all when None); see the module docstring. A
+    scene with an output that the tolerance table (``tolerances``, as in :func:`regress`) has no
+    tolerance for in some tier gets no baseline (exit 2): every later check of it would fail."""
     t0 = time.perf_counter()
     mechanisms, baselines, out = Path(mechanisms), Path(baselines), Path(out)
     jobs = jobs or os.cpu_count() or 2
@@ -812,6 +828,7 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
         all_scenes, problems = discover_scenes(mechanisms)
         names = select_scenes(all_scenes, scenes)
         provenance = load_provenance(baselines)
+        table = load_tolerances(tolerance_file(tolerances))
     except BadInput as exc:
         outcome.problems.append(str(exc))
         problems, names = [], []
@@ -822,7 +839,7 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
         outcome.code = EXIT_INPUT
         return outcome
     fmus, build_problems = _build(names, all_scenes, out / "fmus")
-    todo = [x for x in (_regenerate_plan(outcome, n, fmus, build_problems, baselines, stop_time, step)
+    todo = [x for x in (_regenerate_plan(outcome, n, fmus, build_problems, baselines, stop_time, step, table)
                         for n in names) if x is not None]
     for c in outcome.checks.values():
         for m in c.messages:
@@ -841,7 +858,7 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
 
 
 def _regenerate_plan(outcome: Outcome, n: str, fmus: dict, build_problems: dict, baselines: Path,
-                     stop_time: float | None, step: float | None):
+                     stop_time: float | None, step: float | None, table: ToleranceTable):
     """(scene, FmuInfo, Experiment) to run for a new baseline, or None (the reason in its check)."""
     from . import InputError
     from .fmus import inspect_fmu
@@ -862,6 +879,15 @@ def _regenerate_plan(outcome: Outcome, n: str, fmus: dict, build_problems: dict,
     except (BadInput, InputError) as exc:
         check.status = "input"
         check.messages.append(f"{n}: {exc}")
+        return None
+    for o in info.outputs:
+        for tier in TIERS:
+            try:
+                table.lookup(tier, n, o.name, o.unit)
+            except BadInput as exc:
+                check.status = "input"
+                check.messages.append(f"{n}: baseline NOT written: {exc}")
+    if check.status == "input":
         return None
     start = info.start
     stop = stop_time if stop_time is not None else old.get("StopTime", info.stop)

@@ -112,6 +112,11 @@ def test_regenerate_hint_puts_dir_before_scenes(tmp_path):
     assert cmd == f"overcon regress {tmp_path / 'reg'} --regenerate --baselines {tmp_path / 'bl'} --scenes pend_drive"
     cmd = regress.regenerate_command(["a", "b"], regress.DEFAULT_MECHANISMS, regress.DEFAULT_BASELINES)
     assert cmd == "overcon regress --regenerate --scenes a b"
+    cmd = regress.regenerate_command(["a"], tmp_path / "reg", regress.DEFAULT_BASELINES, tmp_path / "tol.toml")
+    assert cmd == f"overcon regress {tmp_path / 'reg'} --regenerate --tolerances {tmp_path / 'tol.toml'} --scenes a"
+    cmd = regress.regenerate_command(["a"], regress.DEFAULT_MECHANISMS, regress.DEFAULT_BASELINES,
+                                     regress.PACKAGED_TOLERANCES)
+    assert cmd == "overcon regress --regenerate --scenes a"
 
 
 def test_no_tolerance_points_at_a_users_table_never_the_packaged_file():

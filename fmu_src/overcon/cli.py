@@ -244,7 +244,7 @@ def _regress_parser(sub) -> None:
                    help=f"directory of the baselines <scene>_ref.csv/.opt and provenance.json (default: {DEFAULT_BASELINES})")
     g.add_argument("--tolerances", default=str(DEFAULT_TOLERANCES), metavar="FILE",
                    help=f"tolerance table (default: {DEFAULT_TOLERANCES} if it exists, else the package's per-unit "
-                        "defaults)")
+                        "defaults); --regenerate refuses a scene with an output it has no tolerance for")
     g.add_argument("--scenes", nargs="+", metavar="NAME", help="scene names or shell globs (default: every scene)")
     g.add_argument("--out", default=str(DEFAULT_OUT), metavar="DIR",
                    help=f"work directory: FMUs, result CSVs, report.md (default: {DEFAULT_OUT})")

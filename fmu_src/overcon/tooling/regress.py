@@ -1,7 +1,7 @@
 """``overcon regress``: the regression check of scene FMUs against committed baselines.
 
     overcon regress [DIR] [--baselines DIR] [--scenes NAME|GLOB ...] [--junit FILE]   # the check (CI)
-    overcon regress [DIR] --regenerate [--scenes ...] [--stop-time T] [--step S]      # by hand only
+    overcon regress [DIR] --regenerate [--tolerances FILE] [--stop-time T] [--step S] [--scenes ...]  # by hand only
 
 ``DIR`` (default ``mechanisms``) is any directory of scene files; ``--baselines`` (default
 ``ci/baselines``) the directory of their baselines; ``--tolerances`` (default
@@ -182,8 +182,10 @@ def write_opt(path: Path, start: float, stop: float, step: float, rel_tol: float
     path.write_text(text, encoding="utf-8")
 
 
-def regenerate_command(names: list[str], mechanisms: Path, baselines: Path) -> str:
-    """The command that writes these scenes' baselines (printed where one is missing or differs)."""
+def regenerate_command(names: list[str], mechanisms: Path, baselines: Path, tolerances=None) -> str:
+    """The command that writes these scenes' baselines (printed where one is missing or differs);
+    ``tolerances``: the table of the check, passed on unless it is a default one (--regenerate
+    refuses an output it has no tolerance for)."""
     # DIR first and --scenes last: ``--scenes NAME [NAME ...]`` would take a DIR after it as a name
     cmd = "overcon regress"
     if Path(mechanisms).resolve() != DEFAULT_MECHANISMS.resolve():
@@ -191,7 +193,15 @@ def regenerate_command(names: list[str], mechanisms: Path, baselines: Path) -> s
     cmd += " --regenerate"
     if Path(baselines).resolve() != DEFAULT_BASELINES.resolve():
         cmd += f" --baselines {shlex.quote(str(baselines))}"
+    if tolerances is not None and Path(tolerances).resolve() not in (DEFAULT_TOLERANCES.resolve(),
+                                                                      PACKAGED_TOLERANCES.resolve()):
+        cmd += f" --tolerances {shlex.quote(str(tolerances))}"
     return cmd + " --scenes " + " ".join(names)
+
+
+def _table_path(r) -> Path | None:
+    """The tolerance table a check read (None: none read)."""
+    return r.table.path if r.table is not None else None
 
 
 def load_provenance(baselines: Path) -> dict:
@@ -683,7 +693,7 @@ def _baselines_present(r: _Regress, names: list[str], full_set: bool) -> list[st
         check = SceneCheck(n, "input")
         msg = (f"{n}: no baseline ({', '.join(_rel(r.baselines / x) for x in lacking)} missing): scene "
                f"{_rel(r.scenes[n])} has never been baselined; create it deliberately with\n"
-               f"    {regenerate_command([n], r.mechanisms, r.baselines)}\n"
+               f"    {regenerate_command([n], r.mechanisms, r.baselines, _table_path(r))}\n"
                f"  then review and commit {_rel(r.baselines)}/{n}_ref.csv, {n}_ref.opt and {PROVENANCE}")
         check.messages.append(msg)
         r.outcome.checks[n] = check
@@ -731,7 +741,7 @@ def _prepare_scene(r: _Regress, n: str, fmus: dict, build_problems: dict):
         parts = ([f"outputs not in the baseline: {', '.join(new)}"] if new else []) + \
                 ([f"baseline outputs the FMU no longer has: {', '.join(gone)}"] if gone else [])
         r.fail(check, "regression", f"{n}: the FMU's outputs changed ({'; '.join(parts)}); if intended, "
-               f"regenerate: {regenerate_command([n], r.mechanisms, r.baselines)}", "REGRESSION")
+               f"regenerate: {regenerate_command([n], r.mechanisms, r.baselines, _table_path(r))}", "REGRESSION")
     if "RelTol" in opt and info.tolerance is not None and not math.isclose(opt["RelTol"], info.tolerance):
         check.messages.append(f"{n}: note: the FMU's solver tolerance is {info.tolerance:g}, the baseline's "
                               f"RelTol {opt['RelTol']:g}")
@@ -805,7 +815,7 @@ def _regress_summary(r: _Regress) -> None:
     if outcome.code == EXIT_REGRESSION:
         echo("regress: FAILED. If the change is intended, regenerate deliberately: "
              + regenerate_command(sorted(n for n, c in outcome.checks.items() if c.status == "regression"),
-                                  r.mechanisms, r.baselines))
+                                  r.mechanisms, r.baselines, _table_path(r)))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -244,7 +244,7 @@ def _regress_parser(sub) -> None:
                    help=f"directory of the baselines <scene>_ref.csv/.opt and provenance.json (default: {DEFAULT_BASELINES})")
     g.add_argument("--tolerances", default=str(DEFAULT_TOLERANCES), metavar="FILE",
                    help=f"tolerance table (default: {DEFAULT_TOLERANCES} if it exists, else the package's per-unit "
-                        "defaults)")
+                        "defaults); --regenerate refuses a scene with an output it has no tolerance for")
     g.add_argument("--scenes", nargs="+", metavar="NAME", help="scene names or shell globs (default: every scene)")
     g.add_argument("--out", default=str(DEFAULT_OUT), metavar="DIR",
                    help=f"work directory: FMUs, result CSVs, report.md (default: {DEFAULT_OUT})")
@@ -272,7 +272,8 @@ def cmd_regress(args) -> int:
         if args.junit:
             return _input_error("--junit: only for the check (--regenerate writes baselines, it checks nothing)")
         return rg.regenerate(args.scenes, mechanisms=args.dir, baselines=args.baselines, out=args.out,
-                             jobs=args.jobs, stop_time=args.stop_time, step=args.step).code
+                             jobs=args.jobs, stop_time=args.stop_time, step=args.step,
+                             tolerances=args.tolerances).code
     if args.stop_time is not None or args.step is not None:
         return _input_error("--stop-time/--step only with --regenerate (the check runs on each baseline's grid)")
     out = rg.regress(args.scenes, mechanisms=args.dir, baselines=args.baselines, tolerances=args.tolerances,
@@ -510,12 +511,12 @@ def cmd_simulate(args) -> int:
     from .outfiles import check_outputs
 
     outputs = {"--out": args.out, "--events": args.events}
-    why = check_outputs(outputs, {"scene file": args.file})
+    why = check_outputs(outputs, {"scene file": args.file, "--input": args.input})
     if why:
         return _input_error(why)
     spec, model = _load(args)
     mechanism = getattr(spec.mechanism, "source", None)
-    why = check_outputs(outputs, {"scene file": args.file, "mechanism file": mechanism})
+    why = check_outputs(outputs, {"scene file": args.file, "mechanism file": mechanism, "--input": args.input})
     if why:
         return _input_error(why)
     for w in run_warnings(precheck(model, args.file)):
@@ -649,13 +650,14 @@ def cmd_run(args) -> int:
     from .tooling.pipeline import run_paths
     from .tooling.run import parse_settings
 
-    from .outfiles import check_out_dir
+    from .outfiles import check_input_outside, check_out_dir
     from .tooling import InputError
 
     def go():
         start = time.perf_counter()
         _use_archive_flags(args)
-        why = check_out_dir("--out", args.out, {f"FMU {f}": f for f in args.fmus})
+        why = (check_out_dir("--out", args.out, {f"FMU {f}": f for f in args.fmus})
+               or check_input_outside("--out", args.out, "--input", args.input_table))
         if why:
             raise InputError(why)
         res = run_paths(args.fmus, args.out, stop_time=args.stop_time, step=args.step, jobs=args.jobs,
@@ -671,7 +673,7 @@ def cmd_compare(args) -> int:
     from .tooling.pipeline import compare_paths, compare_with_reference
     from .tooling.run import parse_settings
 
-    from .outfiles import check_out_dir
+    from .outfiles import check_input_outside, check_out_dir
     from .tooling import InputError
 
     plots = args.plot if args.plot in ("worst", "all") else [n for n in args.plot.split(",") if n]
@@ -679,7 +681,8 @@ def cmd_compare(args) -> int:
     def go():
         start = time.perf_counter()
         _use_archive_flags(args)
-        why = check_out_dir("--out", args.out, {**{f"FMU {f}": f for f in args.fmus}, "--ref": args.ref})
+        why = (check_out_dir("--out", args.out, {**{f"FMU {f}": f for f in args.fmus}, "--ref": args.ref})
+               or check_input_outside("--out", args.out, "--input", args.input_table))
         if why:
             raise InputError(why)
         if args.ref is not None:
@@ -752,6 +755,12 @@ def cmd_sweep(args) -> int:
         if args.scheduler is not None and args.workers is not None:
             print("overcon: --workers sizes the local cluster; with --scheduler the cluster's own workers run the "
                   "tasks (start more with dask worker)", file=sys.stderr)
+            return EXIT_INPUT
+        from .outfiles import check_input_outside
+        why = check_input_outside("--resume" if args.out is None else "--out", args.resume or args.out,
+                                  "--input", args.input_table)
+        if why:
+            print(f"overcon: {why}", file=sys.stderr)
             return EXIT_INPUT
         if args.resume is not None:
             if args.lockstep_step != LOCKSTEP_STEP:

@@ -129,3 +129,24 @@ def check_out_dir(option: str, path, inputs: dict[str, object] | None = None) ->
     if not os.access(up, os.W_OK | os.X_OK):
         return f"{option} {d}: cannot write there ({up} is not writable)"
     return None
+
+
+def check_input_outside(option: str, out_dir, input_option: str, table) -> str | None:
+    """Why the input file ``table`` (``input_option``, None: not given) cannot be read by a command
+    that writes into the directory ``out_dir`` (``option``), or None. A command writing a directory
+    (run, compare, sweep) writes files named after its FMUs there and below (result and along CSVs,
+    lockstep/, the report, figures, sweep tables): an input anywhere inside it could be overwritten,
+    so it is refused before any work, whatever its name."""
+    if table is None:
+        return None
+    t, d = Path(table), Path(out_dir)
+    if not t.exists():
+        return None  # the reader of the table says that it is missing
+    if _same(d, t):
+        return f"{option} {d}: is the input {input_option} {t} (refused: it would be overwritten)"
+    try:
+        t.resolve().relative_to(d.resolve())
+    except ValueError:
+        return None
+    return (f"{input_option} {t}: is inside the output directory {option} {d}, whose files this command writes "
+            "(refused: it could be overwritten); keep the input table outside it")

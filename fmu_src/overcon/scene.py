@@ -1425,6 +1425,9 @@ def _scene_inputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None) -> tuple:
 DRIVER_JOINTS = {"angle": ("revolute", "spatial_revolute", "spatial_cylindrical"),
                  "displacement": ("translational", "spatial_prismatic", "spatial_cylindrical")}
 """The joint types a driver's coordinate is prescribed on (rotation about, displacement along the axis)."""
+DRIVABLE = ("drivable joints: revolute (planar or spatial) and cylindrical by their angle, translational "
+            "(planar), prismatic and cylindrical by their displacement")
+"""The list of :data:`DRIVER_JOINTS` in words, said where a driver names another joint type."""
 MAX_DRIVERS = 1000
 _DRIVER_KEYS = ("name", "joint", "motion", "coordinate", "speed", "from", "to", "t0", "t1", "amplitude", "frequency",
                 "phase", "offset")
@@ -1470,9 +1473,12 @@ def _scene_drivers(ctx: _Ctx, doc: dict, mech: MechanismSpec | None, input_names
                 if "coordinate" not in it and jt not in DRIVER_JOINTS["angle"]:
                     coordinate = "displacement"
                 if coordinate is not None and jt not in DRIVER_JOINTS[coordinate]:
-                    kinds = ", ".join(sorted({JOINT_TYPES[t].name for t in DRIVER_JOINTS[coordinate]}))
-                    ctx.add(f"{p}.joint", f"joint '{jn}' is a {JOINT_TYPES[jt].name} joint: a driver's {coordinate} "
-                                          f"is that of a {kinds} joint")
+                    what = f"{JOINT_TYPES[jt].kind} {JOINT_TYPES[jt].name}"
+                    if not any(jt in ts for ts in DRIVER_JOINTS.values()):
+                        msg = f"joint '{jn}' is a {what} joint, which a driver cannot drive"
+                    else:
+                        msg = f"joint '{jn}' is a {what} joint, which has no driven {coordinate}"
+                    ctx.add(f"{p}.joint", f"{msg}; {DRIVABLE}")
                     jn = None
                 elif (jn, coordinate) in driven:
                     ctx.add(f"{p}.joint", f"joint '{jn}' has a driver of its {coordinate} already")

@@ -197,14 +197,51 @@ def _scene_layout(scene_path: Path, mech_ref: str) -> tuple[str, str]:
 # ---------------------------------------------------------------------------------------------
 # one FMU
 
+def _bad_efforts(report: PrecheckResult) -> list[str]:
+    """The drivers whose effort the pre-check finds not unique (its "effort not unique" problems)."""
+    return [d for d in report.drivers if any(p.startswith(f"effort not unique: driver {d}:") for p in report.problems)]
+
+
+def _prescribed(report: PrecheckResult) -> bool:
+    """The drivers prescribe the whole motion (DOF 0): the elimination can change efforts and
+    reactions, not the motion (as :func:`overcon.precheck.motion_verdict` says)."""
+    return bool(report.drivers) and report.dof == 0
+
+
 def _verdict(report: PrecheckResult) -> str:
+    """The build's one-line pre-check summary; with drivers, their efforts' verdict too, in the
+    words of ``check`` (a prescribed motion is unique while its efforts may not be)."""
+    bad_efforts = _bad_efforts(report)
+    effort = ""
+    if report.drivers:
+        effort = (f", effort NOT UNIQUE (driver {', '.join(bad_efforts)})" if bad_efforts else ", effort UNIQUE")
+    if _prescribed(report):
+        fr = ", ".join(report.friction)
+        reactions = (f"reaction of {', '.join(report.friction_on_nonunique)} NOT unique"
+                     if report.friction_on_nonunique else "reactions unique")
+        head = f"friction in {fr}: {reactions}, " if report.friction else "no friction: "
+        return f"{head}motion prescribed by the drivers (unique){effort}"
     if not report.friction:
-        return "no friction: motion unique"
+        return "no friction: motion unique" + effort
     fr = ", ".join(report.friction)
     if report.motion_unique:
-        return f"friction in {fr}: reactions unique, motion UNIQUE"
+        return f"friction in {fr}: reactions unique, motion UNIQUE{effort}"
     bad = ", ".join(report.friction_on_nonunique) or fr
-    return f"friction in {fr}: friction on non-unique reaction(s) of {bad}, motion NOT UNIQUE"
+    return f"friction in {fr}: friction on non-unique reaction(s) of {bad}, motion NOT UNIQUE{effort}"
+
+
+def _refusal(path: Path, report: PrecheckResult) -> str:
+    """Why ``build`` refuses friction on a non-unique reaction: the motion depends on the
+    eliminated equations, or under a prescribed motion (drivers, DOF 0) the drivers' efforts."""
+    head = (f"{path}: refused: friction on a joint whose reaction is not unique "
+            f"({', '.join(report.friction_on_nonunique)}); ")
+    if _prescribed(report):
+        drivers = ", ".join(_bad_efforts(report) or report.drivers)
+        why = (f"the motion is prescribed by the drivers, but the effort of driver {drivers} would depend on the "
+               "eliminated equations (effort NOT UNIQUE)")
+    else:
+        why = "the simulated motion would depend on the eliminated equations"
+    return head + why + " (--allow-nonunique builds it anyway)"
 
 
 def _zip_write(zf: zipfile.ZipFile, name: str, data: bytes, mode: int = 0o644) -> None:
@@ -241,10 +278,7 @@ def build_scene(path: Path, out_dir: Path, *, allow_nonunique: bool = False, val
         report = _precheck_scene(path, spec, model, allow_nonunique, echo)
         res.motion_unique = bool(report.motion_unique)
         if report.friction_on_nonunique and not allow_nonunique:
-            raise _NotBuilt("refused", f"{path}: refused: friction on a joint whose reaction is not unique "
-                                       f"({', '.join(report.friction_on_nonunique)}); the simulated motion "
-                                       "would depend on the eliminated equations (--allow-nonunique builds it "
-                                       "anyway)")
+            raise _NotBuilt("refused", _refusal(path, report))
         kinds = _kinds(spec, model, fmi, kind, echo)
         fmu, guid, table = _write_fmu(path, out_dir, spec, model, report, sources=sources, validate=validate,
                                       fmi=fmi, kinds=kinds, binaries=binaries)

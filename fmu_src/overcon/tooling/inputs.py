@@ -219,8 +219,8 @@ def read_input_table(path, names) -> InputTable:
     bad = np.flatnonzero(np.diff(t) <= 0.0)
     if bad.size:
         r = int(bad[0]) + 1
-        raise InputError(f"{path}: column 'time', row {data[r][0]}: time {t[r]!r} does not increase "
-                         f"(previous row {data[r - 1][0]}: {t[r - 1]!r}); times must strictly increase")
+        raise InputError(f"{path}: column 'time', row {data[r][0]}: time {float(t[r])!r} does not increase "
+                         f"(previous row {data[r - 1][0]}: {float(t[r - 1])!r}); times must strictly increase")
     values = {n: table[:, seen[n]].copy() for n in names}
     for a in (t, *values.values()):
         a.setflags(write=False)

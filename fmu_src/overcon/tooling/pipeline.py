@@ -330,14 +330,15 @@ def compare_with_reference(fmu, ref_csv, out_dir, *, tolerance: float | None = N
     ref_csv = Path(ref_csv)
     ref = read_series(ref_csv)
     info = inspect_fmu(fmu)
-    from ..outfiles import check_out_dir, check_outputs
-    why = check_out_dir("--out", out_dir, {"--ref": ref_csv})
+    from ..outfiles import check_input_outside, check_out_dir, check_outputs
+    why = (check_out_dir("--out", out_dir, {"--ref": ref_csv, "--input": input_table})
+           or check_input_outside("--out", out_dir, "--input", input_table))
     if why:
         raise InputError(why)
     written = {"the result CSV": out_dir / f"{info.model}.csv", "the along CSV": along_path(out_dir / f"{info.model}.csv"),
                "the report": out_dir / "report.md"}
     # a missing --out is made later (check_out_dir above): its files can be no input, nor exist
-    why = check_outputs(written, {"--ref": ref_csv}) if out_dir.is_dir() else None
+    why = check_outputs(written, {"--ref": ref_csv, "--input": input_table}) if out_dir.is_dir() else None
     if why:
         raise InputError(why)
     common = [n for n in ref.names if n in info.output_names]

@@ -1,7 +1,7 @@
 """``overcon regress``: the regression check of scene FMUs against committed baselines.
 
     overcon regress [DIR] [--baselines DIR] [--scenes NAME|GLOB ...] [--junit FILE]   # the check (CI)
-    overcon regress [DIR] --regenerate [--scenes ...] [--stop-time T] [--step S]      # by hand only
+    overcon regress [DIR] --regenerate [--tolerances FILE] [--stop-time T] [--step S] [--scenes ...]  # by hand only
 
 ``DIR`` (default ``mechanisms``) is any directory of scene files; ``--baselines`` (default
 ``ci/baselines``) the directory of their baselines; ``--tolerances`` (default
@@ -63,6 +63,7 @@ import json
 import math
 import os
 import platform
+import shlex
 import shutil
 import time
 import tomllib
@@ -181,14 +182,26 @@ def write_opt(path: Path, start: float, stop: float, step: float, rel_tol: float
     path.write_text(text, encoding="utf-8")
 
 
-def regenerate_command(names: list[str], mechanisms: Path, baselines: Path) -> str:
-    """The command that writes these scenes' baselines (printed where one is missing or differs)."""
-    cmd = "overcon regress --regenerate --scenes " + " ".join(names)
+def regenerate_command(names: list[str], mechanisms: Path, baselines: Path, tolerances=None) -> str:
+    """The command that writes these scenes' baselines (printed where one is missing or differs);
+    ``tolerances``: the table of the check, passed on unless it is a default one (--regenerate
+    refuses an output it has no tolerance for)."""
+    # DIR first and --scenes last: ``--scenes NAME [NAME ...]`` would take a DIR after it as a name
+    cmd = "overcon regress"
     if Path(mechanisms).resolve() != DEFAULT_MECHANISMS.resolve():
-        cmd += f" {mechanisms}"
+        cmd += f" {shlex.quote(str(mechanisms))}"
+    cmd += " --regenerate"
     if Path(baselines).resolve() != DEFAULT_BASELINES.resolve():
-        cmd += f" --baselines {baselines}"
-    return cmd
+        cmd += f" --baselines {shlex.quote(str(baselines))}"
+    if tolerances is not None and Path(tolerances).resolve() not in (DEFAULT_TOLERANCES.resolve(),
+                                                                      PACKAGED_TOLERANCES.resolve()):
+        cmd += f" --tolerances {shlex.quote(str(tolerances))}"
+    return cmd + " --scenes " + " ".join(names)
+
+
+def _table_path(r) -> Path | None:
+    """The tolerance table a check read (None: none read)."""
+    return r.table.path if r.table is not None else None
 
 
 def load_provenance(baselines: Path) -> dict:
@@ -300,8 +313,19 @@ class ToleranceTable:
             return table[u], f"{self.path.name} [{tier}] {u}"
         if "default" in table:
             return table["default"], f"{self.path.name} [{tier}] default"
-        raise BadInput(f"{self.path}: no tolerance for output {output} of scene {scene} (unit "
-                       f"{unit or 'none'!r}) in [{tier}]: add a key {u or 'default'!r} (or 'default') there")
+        raise BadInput(no_tolerance_message(self.path, tier, scene, output, unit))
+
+
+def no_tolerance_message(path: Path, tier: str, scene: str, output: str, unit: str | None) -> str:
+    """What to do when the table at ``path`` has no tolerance for an output: give one in the user's
+    own table with ``--tolerances FILE`` (never edit the installed package's file; no tolerance is
+    made up for a unit the table does not know)."""
+    u = unit or ""
+    where = "the packaged tolerance table" if Path(path).resolve() == PACKAGED_TOLERANCES else str(path)
+    return (f"scene {scene}: no tolerance for output {output} (unit {unit or 'none'!r}) in [{tier}] of "
+            f"{where}: give a tolerance for it with --tolerances FILE, your own table (a copy of "
+            f"{PACKAGED_TOLERANCES.name} with the key {u or 'default'!r} in [{tier}], or a [[{tier}.rule]] "
+            f"with outputs = [{output!r}])")
 
 
 def _positive_float(v, where: str, path: Path) -> float:
@@ -669,7 +693,7 @@ def _baselines_present(r: _Regress, names: list[str], full_set: bool) -> list[st
         check = SceneCheck(n, "input")
         msg = (f"{n}: no baseline ({', '.join(_rel(r.baselines / x) for x in lacking)} missing): scene "
                f"{_rel(r.scenes[n])} has never been baselined; create it deliberately with\n"
-               f"    {regenerate_command([n], r.mechanisms, r.baselines)}\n"
+               f"    {regenerate_command([n], r.mechanisms, r.baselines, _table_path(r))}\n"
                f"  then review and commit {_rel(r.baselines)}/{n}_ref.csv, {n}_ref.opt and {PROVENANCE}")
         check.messages.append(msg)
         r.outcome.checks[n] = check
@@ -717,7 +741,7 @@ def _prepare_scene(r: _Regress, n: str, fmus: dict, build_problems: dict):
         parts = ([f"outputs not in the baseline: {', '.join(new)}"] if new else []) + \
                 ([f"baseline outputs the FMU no longer has: {', '.join(gone)}"] if gone else [])
         r.fail(check, "regression", f"{n}: the FMU's outputs changed ({'; '.join(parts)}); if intended, "
-               f"regenerate: {regenerate_command([n], r.mechanisms, r.baselines)}", "REGRESSION")
+               f"regenerate: {regenerate_command([n], r.mechanisms, r.baselines, _table_path(r))}", "REGRESSION")
     if "RelTol" in opt and info.tolerance is not None and not math.isclose(opt["RelTol"], info.tolerance):
         check.messages.append(f"{n}: note: the FMU's solver tolerance is {info.tolerance:g}, the baseline's "
                               f"RelTol {opt['RelTol']:g}")
@@ -791,7 +815,7 @@ def _regress_summary(r: _Regress) -> None:
     if outcome.code == EXIT_REGRESSION:
         echo("regress: FAILED. If the change is intended, regenerate deliberately: "
              + regenerate_command(sorted(n for n, c in outcome.checks.items() if c.status == "regression"),
-                                  r.mechanisms, r.baselines))
+                                  r.mechanisms, r.baselines, _table_path(r)))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -799,8 +823,10 @@ def _regress_summary(r: _Regress) -> None:
 
 def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS, baselines=DEFAULT_BASELINES,
                out=DEFAULT_OUT, jobs: int | None = None, stop_time: float | None = None,
-               step: float | None = None, echo=_echo) -> Outcome:
-    """Write the baselines of the selected scenes (all when None); see the module docstring."""
+               step: float | None = None, tolerances=DEFAULT_TOLERANCES, echo=_echo) -> Outcome:
+    """Write the baselines of the selected scenes (all when None); see the module docstring. A
+    scene with an output that the tolerance table (``tolerances``, as in :func:`regress`) has no
+    tolerance for in some tier gets no baseline (exit 2): every later check of it would fail."""
     t0 = time.perf_counter()
     mechanisms, baselines, out = Path(mechanisms), Path(baselines), Path(out)
     jobs = jobs or os.cpu_count() or 2
@@ -812,6 +838,7 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
         all_scenes, problems = discover_scenes(mechanisms)
         names = select_scenes(all_scenes, scenes)
         provenance = load_provenance(baselines)
+        table = load_tolerances(tolerance_file(tolerances))
     except BadInput as exc:
         outcome.problems.append(str(exc))
         problems, names = [], []
@@ -822,7 +849,7 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
         outcome.code = EXIT_INPUT
         return outcome
     fmus, build_problems = _build(names, all_scenes, out / "fmus")
-    todo = [x for x in (_regenerate_plan(outcome, n, fmus, build_problems, baselines, stop_time, step)
+    todo = [x for x in (_regenerate_plan(outcome, n, fmus, build_problems, baselines, stop_time, step, table)
                         for n in names) if x is not None]
     for c in outcome.checks.values():
         for m in c.messages:
@@ -841,7 +868,7 @@ def regenerate(scenes: list[str] | None = None, *, mechanisms=DEFAULT_MECHANISMS
 
 
 def _regenerate_plan(outcome: Outcome, n: str, fmus: dict, build_problems: dict, baselines: Path,
-                     stop_time: float | None, step: float | None):
+                     stop_time: float | None, step: float | None, table: ToleranceTable):
     """(scene, FmuInfo, Experiment) to run for a new baseline, or None (the reason in its check)."""
     from . import InputError
     from .fmus import inspect_fmu
@@ -862,6 +889,15 @@ def _regenerate_plan(outcome: Outcome, n: str, fmus: dict, build_problems: dict,
     except (BadInput, InputError) as exc:
         check.status = "input"
         check.messages.append(f"{n}: {exc}")
+        return None
+    for o in info.outputs:
+        for tier in TIERS:
+            try:
+                table.lookup(tier, n, o.name, o.unit)
+            except BadInput as exc:
+                check.status = "input"
+                check.messages.append(f"{n}: baseline NOT written: {exc}")
+    if check.status == "input":
         return None
     start = info.start
     stop = stop_time if stop_time is not None else old.get("StopTime", info.stop)

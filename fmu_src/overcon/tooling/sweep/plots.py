@@ -66,7 +66,8 @@ def plot(sw: Sweep, rows: list[dict]) -> Path:
         ax.set_xlabel(name or "")
         ax.set_ylabel("max position difference between eliminations (m)")
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:  # no labelled line (no set measured): no empty legend box
+            ax.legend(fontsize=7)
     mode = (f"lockstep runs, rk4 {sw.lockstep_step:g} s" if sw.lockstep_step is not None
             else "the FMUs' own solver settings")
     title = f"overcon sweep: non-uniqueness of the motion\n({mode}"

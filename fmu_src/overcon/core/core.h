@@ -487,6 +487,14 @@ OVK_HIDDEN void ovk_friction_joint_list(const ovk_model *M, char *out, size_t si
 
 /* frames.c */
 OVK_HIDDEN int ovk_slot(const ovk_model *M, int b);
+/* drivers.c: a planar translational joint's slide at the frames (the drivers' displacement and the
+ * sensors', one formula): its points' offsets ai = R_i s_A, bv = R_j s_B, the guide's normal u =
+ * R_j g (g = Omega^T v / |v|) and its rate, the gap dd = r_i + ai - r_j - bv and its rate, the bodies'
+ * angular velocities; the displacement is dd . u */
+typedef struct {
+    double ai[2], bv[2], u[2], udot[2], dd[2], ddot[2], wi, wj;
+} ovk_slide;
+OVK_HIDDEN void ovk_planar_slide(const ovk_model *M, const ovk_frames *f, int j, ovk_slide *s);
 OVK_HIDDEN void ovk_frames_build(const ovk_model *M, const double *q, const double *h, ovk_frames *f);
 
 /* joints.c: the joint table */

@@ -47,6 +47,20 @@ void ovk_driver_motion(const double *c, double t, double *out) {
     }
 }
 
+void ovk_planar_slide(const ovk_model *M, const ovk_frames *f, int j, ovk_slide *s) {
+    int si = ovk_slot(M, M->jbi[j]), sj = ovk_slot(M, M->jbj[j]);
+    const double *c = M->jconst + NJC * j, *sA = c, *sB = c + 2, *v = c + 4;
+    double nv = sqrt(v[0] * v[0] + v[1] * v[1]), g[2] = {v[1] / nv, -v[0] / nv}; /* OMEGA^T v / |v| */
+    mat2vec(f->R + 4 * si, sA, s->ai);
+    mat2vec(f->R + 4 * sj, sB, s->bv);
+    mat2vec(f->R + 4 * sj, g, s->u);
+    s->wi = f->w[si], s->wj = f->w[sj];
+    for (int e = 0; e < 2; e++) s->dd[e] = f->r[2 * si + e] + s->ai[e] - f->r[2 * sj + e] - s->bv[e];
+    s->ddot[0] = f->v[2 * si] - s->wi * s->ai[1] - f->v[2 * sj] + s->wj * s->bv[1];
+    s->ddot[1] = f->v[2 * si + 1] + s->wi * s->ai[0] - f->v[2 * sj + 1] - s->wj * s->bv[0];
+    s->udot[0] = -s->wj * s->u[1], s->udot[1] = s->wj * s->u[0];
+}
+
 /* The driven coordinate's raw value and its equation's Jacobian blocks (body i, body j: nh_b
  * each) and velocity remainder (Phi_h)' h at the frames f. */
 static double coordinate(const ovk_model *M, const ovk_frames *f, int j, const double *c, double *Ji, double *Jj,
@@ -63,17 +77,10 @@ static double coordinate(const ovk_model *M, const ovk_frames *f, int j, const d
             *rem = 0.0;
             return 0.0;
         }
-        const double *sA = k, *sB = k + 2, *v = k + 4;
-        double nv = sqrt(v[0] * v[0] + v[1] * v[1]), g[2] = {v[1] / nv, -v[0] / nv};
-        double ai[2], bv[2], u[2], dd[2], ddot[2], udot[2];
-        mat2vec(f->R + 4 * si, sA, ai);
-        mat2vec(f->R + 4 * sj, sB, bv);
-        mat2vec(f->R + 4 * sj, g, u);
-        double wi = f->w[si], wj = f->w[sj];
-        for (int e = 0; e < 2; e++) dd[e] = f->r[2 * si + e] + ai[e] - f->r[2 * sj + e] - bv[e];
-        ddot[0] = f->v[2 * si] - wi * ai[1] - f->v[2 * sj] + wj * bv[1];
-        ddot[1] = f->v[2 * si + 1] + wi * ai[0] - f->v[2 * sj + 1] - wj * bv[0];
-        udot[0] = -wj * u[1], udot[1] = wj * u[0];
+        ovk_slide sl;
+        ovk_planar_slide(M, f, jd, &sl);
+        const double *ai = sl.ai, *bv = sl.bv, *u = sl.u, *dd = sl.dd, *ddot = sl.ddot, *udot = sl.udot;
+        double wi = sl.wi, wj = sl.wj;
         Ji[0] = u[0], Ji[1] = u[1], Ji[2] = -ai[1] * u[0] + ai[0] * u[1];
         Jj[0] = -u[0], Jj[1] = -u[1];
         Jj[2] = (bv[1] * u[0] - bv[0] * u[1]) + (-dd[0] * u[1] + dd[1] * u[0]);

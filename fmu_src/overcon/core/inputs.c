@@ -155,20 +155,10 @@ static void planar_sensor(const ovk_model *M, const ovk_frames *f, const double 
     out[1] = (bi >= 0 ? h[bi * kh + 2] : 0.0) - (bj >= 0 ? h[bj * kh + 2] : 0.0);
     out[2] = out[3] = 0.0;
     if (M->jtype[j] != J_TRANSLATIONAL) return;
-    const double *c = M->jconst + NJC * j, *sA = c, *sB = c + 2, *v = c + 4;
-    int si = ovk_slot(M, bi), sj = ovk_slot(M, bj);
-    double nv = sqrt(v[0] * v[0] + v[1] * v[1]), g[2] = {v[1] / nv, -v[0] / nv}; /* OMEGA^T v / |v| */
-    double ai[2], bv[2], u[2], dd[2], ddot[2];
-    mat2vec(f->R + 4 * si, sA, ai);
-    mat2vec(f->R + 4 * sj, sB, bv);
-    mat2vec(f->R + 4 * sj, g, u);
-    double wi = f->w[si], wj = f->w[sj];
-    for (int k = 0; k < 2; k++) dd[k] = f->r[2 * si + k] + ai[k] - f->r[2 * sj + k] - bv[k];
-    ddot[0] = f->v[2 * si] - wi * ai[1] - f->v[2 * sj] + wj * bv[1];
-    ddot[1] = f->v[2 * si + 1] + wi * ai[0] - f->v[2 * sj + 1] - wj * bv[0];
-    double udot[2] = {-wj * u[1], wj * u[0]};
-    out[2] = dd[0] * u[0] + dd[1] * u[1];
-    out[3] = ddot[0] * u[0] + ddot[1] * u[1] + dd[0] * udot[0] + dd[1] * udot[1];
+    ovk_slide s; /* drivers.c: the one slide formula */
+    ovk_planar_slide(M, f, j, &s);
+    out[2] = s.dd[0] * s.u[0] + s.dd[1] * s.u[1];
+    out[3] = s.ddot[0] * s.u[0] + s.ddot[1] * s.u[1] + s.dd[0] * s.udot[0] + s.dd[1] * s.udot[1];
 }
 
 /* Joint j's sensors at y from their values at y0 (NULL: raw) into out[4]: angle (rad), rate (rad/s),

@@ -281,12 +281,14 @@ def along_path(csv: str | Path) -> Path:
     return csv.with_name(stem + ALONG_SUFFIX)
 
 
-def _write_along(path: Path, result, names: list[str], held: dict | None = None, step: float = 0.0) -> None:
+def _write_along(path: Path, result, names: list[str], held: dict | None = None, step: float = 0.0,
+                 start: float = 0.0) -> None:
     """The along file (module docstring): ``result``'s rows of ``names`` as integers, then, when
-    ``held`` (name -> value after a failure) is given, one row at the last time + ``step``."""
+    ``held`` (name -> value after a failure) is given, one row at the last time + ``step`` (at
+    ``start`` when the run failed before its first output point: every time in the file is finite)."""
     rows = [[float(r["time"])] + [int(r[n]) for n in names] for r in result]
     if held is not None:
-        t = rows[-1][0] + step if rows else float("nan")
+        t = rows[-1][0] + step if rows else float(start)
         rows.append([t] + [int(held[n]) for n in names])
     with atomic(path, "w", encoding="utf-8") as f:
         f.write(",".join(f'"{n}"' for n in ["time", *names]) + "\n")
@@ -430,7 +432,7 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
                 if held is not None:  # else no file: its last row would not be the stop's
                     with contextlib.suppress(Exception):  # the failure is what the caller reports
                         done = recorder[0].result() if recorder[0] is not None else []
-                        _write_along(along_file, done, discrete, held, step)
+                        _write_along(along_file, done, discrete, held, step, start)
                 raise
     except Exception as exc:
         why = "; ".join(messages[-3:])

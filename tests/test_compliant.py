@@ -94,7 +94,7 @@ def test_friction_on_a_non_unique_joint_gives_one_motion(tmp_path, capsys):
     assert main(["check", str(wo4)]) == 0
     out = capsys.readouterr().out
     assert "motion with friction in joint1: UNIQUE" in out
-    assert "joint1     translational  yes     -      -      -      ON  (compliant: its reaction comes from its " \
+    assert "joint1     translational  1-2       yes     -      -      -      ON  (compliant: its reaction comes from its " \
            "deformation)" in out
     assert "warning: scene.eliminate (Phi4) does not apply under redundancy = 'compliant'" in out
 

@@ -312,6 +312,31 @@ def _pack_redundancy(m: _CModel, red: dict, arr) -> None:
         setattr(m, name, arr(red.get(name, ()), float if name in REDUNDANCY_DOUBLES else np.int32))
 
 
+def _joint_rows(joints) -> np.ndarray:
+    """(joints, MAXEQ) the equation rows of each joint, padded with -1."""
+    rows = np.full((len(joints), MAXEQ), -1)
+    for n, c in enumerate(joints):
+        rows[n, :len(c.rows)] = c.rows
+    return rows
+
+
+def _friction_packing(plan, nh_b: int) -> tuple:
+    """(fj, fgroup, fci, fcj) of the packed model: the friction joints group by group, the groups'
+    bounds in it, and each joint's friction columns of its two bodies (6 a row, padded with the
+    number of friction columns)."""
+    fj = [j for g in plan.friction for j in g.joints]
+    fgroup = np.cumsum([0] + [len(g.joints) for g in plan.friction])
+
+    def pad_cols(a):
+        out = np.full((len(a), 6), len(plan.friction_cols))
+        out[:, :nh_b] = a
+        return out
+
+    fci = np.concatenate([pad_cols(g.col_i) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
+    fcj = np.concatenate([pad_cols(g.col_j) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
+    return fj, fgroup, fci, fcj
+
+
 class Kernel:
     """The kernel bound to one model and solver settings: packed arrays, the core's workspace
     (``ovk_data``: one per instance, so instances never share memory) and output buffers made
@@ -338,21 +363,9 @@ class Kernel:
             return a.ctypes.data
 
         joints = model.joints
-        rows = np.full((len(joints), MAXEQ), -1)
-        for n, c in enumerate(joints):
-            rows[n, :len(c.rows)] = c.rows
-        fj = [j for g in plan.friction for j in g.joints]
-        fgroup = np.cumsum([0] + [len(g.joints) for g in plan.friction])
-        nh_b = model.nh_b
-
-        def pad_cols(a):
-            out = np.full((len(a), 6), len(plan.friction_cols))
-            out[:, :nh_b] = a
-            return out
-
-        fci = np.concatenate([pad_cols(g.col_i) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
-        fcj = np.concatenate([pad_cols(g.col_j) for g in plan.friction]) if plan.friction else np.zeros((0, 6))
-        m = _CModel(dim=model.dim, nb=model.nb, nq_b=model.nq_b, nh_b=nh_b, m=model.m, nR=len(model.retained),
+        rows = _joint_rows(joints)
+        fj, fgroup, fci, fcj = _friction_packing(plan, model.nh_b)
+        m = _CModel(dim=model.dim, nb=model.nb, nq_b=model.nq_b, nh_b=model.nh_b, m=model.m, nR=len(model.retained),
                     nj=len(joints), nl=len(model.loads), nx=0, ncols=len(plan.friction_cols),
                     nfj=len(fj), nfg=len(plan.friction), max_iter=solver.friction_max_iter,
                     baumgarte=solver.baumgarte, tol=solver.friction_tol,
@@ -386,6 +399,13 @@ class Kernel:
         self._pm = ctypes.addressof(m)
         self._data = self._workspace(lib)
         lib.ovk_set_time(self._data, float(model.scene.start_time))  # the drivers' equations at the start
+        self._make_buffers(model)
+        self._set_driver_references(jconst)
+
+    def _make_buffers(self, model) -> None:
+        """The state, output and guess buffers the core writes into, made once, and the pointers
+        to them that every call passes."""
+        plan, joints = model.plan, model.joints
         n_y = model.n + model.nh
         self._y = np.zeros(n_y)
         self._ydot = np.zeros(n_y)
@@ -404,8 +424,12 @@ class Kernel:
         self._fric = np.zeros(len(joints))
         self._lam_in = np.zeros(model.m)
         self._out_ptrs = (self._lam_in.ctypes.data, self._reac.ctypes.data, self._fric.ctypes.data)
+
+    def _set_driver_references(self, jconst) -> None:
+        """Writes each driver's reference into the packed joint constants ``jconst`` the core reads."""
+        model = self.model
         y0 = np.concatenate([model.q0, model.h0])
-        for c in joints:  # a driver's reference: its coordinate's raw value at q0 (core/inputs.c ovk_sensors)
+        for c in model.joints:  # a driver's reference: its coordinate's raw value at q0 (core/inputs.c ovk_sensors)
             if c.type == "driver" and not (model.dim == 3 and c.p["coordinate"] == 0):
                 raw = self.sensors(y0, None, c.p["joint"])
                 jconst[c.index * NJC + 8] = raw[0] if c.p["coordinate"] == 0 else raw[2]

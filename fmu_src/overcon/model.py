@@ -330,19 +330,7 @@ def compile_model(scene: SceneSpec) -> Model:
     mass = np.array([b.mass for b in mech.bodies], float)
     inertia = np.array([b.inertia for b in mech.bodies], float).reshape(nb, -1)
     M = np.concatenate([np.concatenate([np.full(dim, mass[i]), inertia[i]]) for i in range(nb)])
-    loads = []
-    for ld in mech.loads:
-        p = ld.params
-        if ld.type in ("force", "torque"):
-            loads.append(CompiledLoad(ld.type, slot[p["body"]], -1,
-                                      value=_read_only(np.array(p["value"], float))))
-        else:
-            zero = np.zeros(dim)
-            loads.append(CompiledLoad(
-                "spring", slot[p["body_i"]], slot[p["body_j"]], stiffness=float(p["stiffness"]),
-                free_length=float(p["free_length"]),
-                s_i=_read_only(zero if p.get("s_i") is None else np.array(p["s_i"], float)),
-                s_j=_read_only(zero.copy() if p.get("s_j") is None else np.array(p["s_j"], float))))
+    loads = _compile_loads(mech, slot, dim)
     q0 = np.concatenate([np.asarray(b.q0, float) for b in mech.bodies])
     h0 = np.concatenate([np.asarray(b.h0, float) for b in mech.bodies])
     coord_index = {}
@@ -361,11 +349,50 @@ def compile_model(scene: SceneSpec) -> Model:
                                for i, (v, _) in enumerate(VELOCITY_OUTPUTS[kind])
                                if not (particle[b] and i >= dim)),  # a particle: no rates of its frozen orientation
         energy_outputs=scene.energy)
-    R0 = _rotations(bodies, q0)
+    joints = _mechanism_joints(scene, slot, _rotations(bodies, q0))
+    joint_index = {c.name: c.index for c in joints}
+    sensors = tuple((f"{name}.{what}", joint_index[name], SENSOR_INDEX[what]) for name in scene.sensors
+                    for what in SENSOR_JOINTS[joints[joint_index[name]].type])
+    n_mech = len(joints)
+    joints += _driver_joints(scene, joints, joint_index)
+    row = sum(len(c.rows) for c in joints)  # the equations: each joint's and driver's, numbered in order
+    base = replace(
+        bodies, joints=tuple(joints), m=row, retained=np.arange(row), **_compliance(scene, joints, row),
+        friction_joints=tuple(c.index for c in joints if c.law is not None),
+        reaction_joints=tuple(joint_index[j] for j in scene.reactions) + tuple(range(n_mech, len(joints))),
+        friction_outputs=tuple(joint_index[j] for j in
+                               (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
+        inputs=tuple(_compile_input(u, joints, joint_index, slot) for u in scene.inputs), sensor_outputs=sensors,
+    )
+    return base
+
+
+def _compile_loads(mech: MechanismSpec, slot: dict, dim: int) -> list[CompiledLoad]:
+    """The mechanism's loads with their bodies as slots (-1: the base)."""
+    loads = []
+    for ld in mech.loads:
+        p = ld.params
+        if ld.type in ("force", "torque"):
+            loads.append(CompiledLoad(ld.type, slot[p["body"]], -1,
+                                      value=_read_only(np.array(p["value"], float))))
+        else:
+            zero = np.zeros(dim)
+            loads.append(CompiledLoad(
+                "spring", slot[p["body_i"]], slot[p["body_j"]], stiffness=float(p["stiffness"]),
+                free_length=float(p["free_length"]),
+                s_i=_read_only(zero if p.get("s_i") is None else np.array(p["s_i"], float)),
+                s_j=_read_only(zero.copy() if p.get("s_j") is None else np.array(p["s_j"], float))))
+    return loads
+
+
+def _mechanism_joints(scene: SceneSpec, slot: dict, R0) -> list[CompiledJoint]:
+    """The mechanism's joints, their equations numbered in order from row 0, their constants from
+    the bodies' rotation matrices ``R0`` at q0, a friction law on each joint of ``scene.friction``."""
     friction_on = set(scene.friction)
+    global_components = GLOBAL_COMPONENTS[scene.mechanism.kind]
     joints = []
     row = 0
-    for idx, js in enumerate(mech.joints):
+    for idx, js in enumerate(scene.mechanism.joints):
         jt = TYPES[js.type]
         ne = jt.n_equations
         law = None
@@ -376,15 +403,20 @@ def compile_model(scene: SceneSpec) -> Model:
         joints.append(CompiledJoint(
             name=js.name, type=js.type, index=idx, bi=bi, bj=bj, rows=tuple(range(row, row + ne)),
             p=_read_only(jt.module.constants(js.params, InitialFrames(R0[bi], R0[bj]))), law=law,
-            components=jt.reaction_components + GLOBAL_COMPONENTS[kind]))
+            components=jt.reaction_components + global_components))
         row += ne
-    joint_index = {c.name: c.index for c in joints}
-    sensors = tuple((f"{name}.{what}", joint_index[name], SENSOR_INDEX[what]) for name in scene.sensors
-                    for what in SENSOR_JOINTS[joints[joint_index[name]].type])
+    return joints
+
+
+def _driver_joints(scene: SceneSpec, joints: list, joint_index: dict) -> list[CompiledJoint]:
+    """The scene's drivers, one equation each, numbered after the mechanism ``joints``' (their
+    efforts: outputs)."""
     n_mech = len(joints)
-    for k, dv in enumerate(scene.drivers):  # one equation each, after the joints' (their efforts: outputs)
+    row = sum(len(c.rows) for c in joints)
+    out = []
+    for k, dv in enumerate(scene.drivers):
         c = joints[joint_index[dv.joint]]
-        joints.append(CompiledJoint(
+        out.append(CompiledJoint(
             name=dv.name, type=DRIVER, index=n_mech + k, bi=c.bi, bj=c.bj, rows=(row,),
             p=_read_only({"joint": c.index, "coordinate": 0 if dv.coordinate == "angle" else 1,
                           "motion": DRIVER_MOTION_CODES[dv.motion],
@@ -392,15 +424,7 @@ def compile_model(scene: SceneSpec) -> Model:
                           "start_time": float(scene.start_time)}),
             law=None, components=("effort",)))
         row += 1
-    base = replace(
-        bodies, joints=tuple(joints), m=row, retained=np.arange(row), **_compliance(scene, joints, row),
-        friction_joints=tuple(c.index for c in joints if c.law is not None),
-        reaction_joints=tuple(joint_index[j] for j in scene.reactions) + tuple(range(n_mech, len(joints))),
-        friction_outputs=tuple(joint_index[j] for j in
-                               (scene.friction if scene.friction_outputs == "all" else scene.friction_outputs)),
-        inputs=tuple(_compile_input(u, joints, joint_index, slot) for u in scene.inputs), sensor_outputs=sensors,
-    )
-    return base
+    return out
 
 
 SENSOR_INDEX = {"angle": 0, "rate": 1, "displacement": 2, "speed": 3}

@@ -1348,13 +1348,7 @@ def _scene_inputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None) -> tuple:
     for k, it in items:
         p = f"inputs[{k}]"
         _unknown_keys(ctx, it, p, _INPUT_KEYS)
-        name = _get(ctx, it, "name", p)
-        name = None if name is _MISSING else _register_name(ctx, _ident(ctx, name, f"{p}.name"), f"{p}.name", seen,
-                                                            p, "input")
-        if name in RESERVED_NAMES:
-            ctx.add(f"{p}.name", f"'{name}' is the name of another FMU variable (reserved: "
-                                 f"{', '.join(RESERVED_NAMES)})")
-            name = None
+        name = _input_name(ctx, it, p, seen)
         typ = _get(ctx, it, "type", p)
         typ = None if typ is _MISSING else _choice(ctx, typ, f"{p}.type", tuple(S.INPUT_TYPES))
         start = 0.0
@@ -1363,63 +1357,95 @@ def _scene_inputs(ctx: _Ctx, doc: dict, mech: MechanismSpec | None) -> tuple:
         ok = name is not None and typ is not None and start is not None
         fields = {}
         if typ in INPUT_JOINTS:
-            for key in ("body", "point", "direction", "frame"):
-                if key in it:
-                    ctx.add(f"{p}.{key}", f"a {typ} input acts along or about its joint's axis: it takes no {key}")
-                    ok = False
-            v = _get(ctx, it, "joint", p)
-            jn = None if v is _MISSING else _str(ctx, v, f"{p}.joint")
-            if jn is not None and joints is not None:
-                if jn not in joints:
-                    ctx.add(f"{p}.joint", f"unknown joint {_short(jn)}")
-                    jn = None
-                elif joints[jn] not in INPUT_JOINTS[typ]:
-                    allowed = ", ".join(sorted({JOINT_TYPES[t].name for t in INPUT_JOINTS[typ]}))
-                    ctx.add(f"{p}.joint", f"joint '{jn}' is a {JOINT_TYPES[joints[jn]].name} joint: a {typ} input "
-                                          f"acts on {allowed} joints")
-                    jn = None
-            ok = ok and jn is not None
-            fields["joint"] = jn
+            fields, fields_ok = _joint_input_fields(ctx, it, p, typ, joints)
+            ok = ok and fields_ok
         elif typ is not None:
-            if "joint" in it:
-                ctx.add(f"{p}.joint", f"a {typ} input acts on a body: give body (not joint)")
-                ok = False
-            v = _get(ctx, it, "body", p)
-            body = None if v is _MISSING else _str(ctx, v, f"{p}.body")
-            if body is not None and bodies is not None and body not in bodies:
-                ctx.add(f"{p}.body", f"unknown body {_short(body)} (an input acts on a moving body, not the base)")
-                body = None
-            fields["body"] = body
-            ok = ok and body is not None
-            frame = "global"
-            if "frame" in it:
-                frame = _choice(ctx, it["frame"], f"{p}.frame", S.INPUT_FRAMES)
-                ok = ok and frame is not None
-            fields["frame"] = frame
-            if typ == "torque" and kind == "planar":
-                if "direction" in it:
-                    ctx.add(f"{p}.direction", "a planar torque acts about z (counter-clockwise positive): no direction")
-                    ok = False
-            else:
-                v = _get(ctx, it, "direction", p)
-                d = None if v is _MISSING else _shaped(ctx, v, f"{p}.direction", "dir", kind)
-                if d is not None:
-                    norm = math.sqrt(math.fsum(x * x for x in d))
-                    d = tuple(x / norm for x in d)
-                ok = ok and d is not None
-                fields["direction"] = d
-            if typ == "force":
-                pt = tuple(0.0 for _ in range(_DIM.get(kind, 0)))
-                if "point" in it:
-                    pt = _shaped(ctx, it["point"], f"{p}.point", "vec", kind)
-                fields["point"] = pt
-                ok = ok and pt is not None
-            elif "point" in it:
-                ctx.add(f"{p}.point", "a torque has no point of application")
-                ok = False
+            fields, fields_ok = _body_input_fields(ctx, it, p, typ, kind, bodies)
+            ok = ok and fields_ok
         if ok:
             out.append(S.InputSpec(name=name, type=typ, start=float(start), **fields))
     return tuple(out)
+
+
+def _input_name(ctx: _Ctx, it: dict, p: str, seen: dict) -> str | None:
+    """The name of input ``p``: an identifier, unique among inputs (``seen``), not a reserved
+    variable name; None (reported) otherwise."""
+    name = _get(ctx, it, "name", p)
+    name = None if name is _MISSING else _register_name(ctx, _ident(ctx, name, f"{p}.name"), f"{p}.name", seen,
+                                                        p, "input")
+    if name in RESERVED_NAMES:
+        ctx.add(f"{p}.name", f"'{name}' is the name of another FMU variable (reserved: "
+                             f"{', '.join(RESERVED_NAMES)})")
+        name = None
+    return name
+
+
+def _joint_input_fields(ctx: _Ctx, it: dict, p: str, typ: str, joints: dict | None) -> tuple[dict, bool]:
+    """({"joint": name}, whether it is valid) of the joint input ``p`` of type ``typ``: a joint of
+    ``joints`` (None: the mechanism is unknown) of a type in :data:`INPUT_JOINTS`, and no body,
+    point, direction or frame."""
+    ok = True
+    for key in ("body", "point", "direction", "frame"):
+        if key in it:
+            ctx.add(f"{p}.{key}", f"a {typ} input acts along or about its joint's axis: it takes no {key}")
+            ok = False
+    v = _get(ctx, it, "joint", p)
+    jn = None if v is _MISSING else _str(ctx, v, f"{p}.joint")
+    if jn is not None and joints is not None:
+        if jn not in joints:
+            ctx.add(f"{p}.joint", f"unknown joint {_short(jn)}")
+            jn = None
+        elif joints[jn] not in INPUT_JOINTS[typ]:
+            allowed = ", ".join(sorted({JOINT_TYPES[t].name for t in INPUT_JOINTS[typ]}))
+            ctx.add(f"{p}.joint", f"joint '{jn}' is a {JOINT_TYPES[joints[jn]].name} joint: a {typ} input "
+                                  f"acts on {allowed} joints")
+            jn = None
+    return {"joint": jn}, ok and jn is not None
+
+
+def _body_input_fields(ctx: _Ctx, it: dict, p: str, typ: str, kind: str | None,
+                       bodies: dict | None) -> tuple[dict, bool]:
+    """(fields, whether they are valid) of the force or torque input ``p``: a moving body of
+    ``bodies`` (None: the mechanism is unknown), the frame, the direction (normalised; none for a
+    planar torque) and a force's point."""
+    ok = True
+    if "joint" in it:
+        ctx.add(f"{p}.joint", f"a {typ} input acts on a body: give body (not joint)")
+        ok = False
+    v = _get(ctx, it, "body", p)
+    body = None if v is _MISSING else _str(ctx, v, f"{p}.body")
+    if body is not None and bodies is not None and body not in bodies:
+        ctx.add(f"{p}.body", f"unknown body {_short(body)} (an input acts on a moving body, not the base)")
+        body = None
+    fields = {"body": body}
+    ok = ok and body is not None
+    frame = "global"
+    if "frame" in it:
+        frame = _choice(ctx, it["frame"], f"{p}.frame", S.INPUT_FRAMES)
+        ok = ok and frame is not None
+    fields["frame"] = frame
+    if typ == "torque" and kind == "planar":
+        if "direction" in it:
+            ctx.add(f"{p}.direction", "a planar torque acts about z (counter-clockwise positive): no direction")
+            ok = False
+    else:
+        v = _get(ctx, it, "direction", p)
+        d = None if v is _MISSING else _shaped(ctx, v, f"{p}.direction", "dir", kind)
+        if d is not None:
+            norm = math.sqrt(math.fsum(x * x for x in d))
+            d = tuple(x / norm for x in d)
+        ok = ok and d is not None
+        fields["direction"] = d
+    if typ == "force":
+        pt = tuple(0.0 for _ in range(_DIM.get(kind, 0)))
+        if "point" in it:
+            pt = _shaped(ctx, it["point"], f"{p}.point", "vec", kind)
+        fields["point"] = pt
+        ok = ok and pt is not None
+    elif "point" in it:
+        ctx.add(f"{p}.point", "a torque has no point of application")
+        ok = False
+    return fields, ok
 
 
 DRIVER_JOINTS = {"angle": ("revolute", "spatial_revolute", "spatial_cylindrical"),
@@ -1614,6 +1640,35 @@ keys: every key and table header of the file (a mechanism at the body and joint 
 count only bounds a linear cost, the file's size already bounds it too); nesting: arrays and inline tables inside each other."""
 
 
+def _skip_toml_string(text: str, i: int) -> int:
+    """The index after the string that opens at ``text[i]`` (a quote; triple-quoted: up to its
+    closing triple, else up to the closing quote or the line's end)."""
+    n = len(text)
+    q = text[i]
+    if text.startswith(q * 3, i):
+        end = text.find(q * 3, i + 3)
+        return n if end < 0 else end + 3
+    j = i + 1
+    while j < n and text[j] != q and text[j] != "\n":
+        j += 2 if q == '"' and text[j] == "\\" else 1
+    return j + 1
+
+
+def _toml_key_path(text: str, i: int, stop: str) -> tuple[int, int, int]:
+    """(index after the key, its parts, its length) of a key of ``text`` starting at ``i`` and
+    ending before one of ``stop`` or the line's end."""
+    n = len(text)
+    parts, start = 1, i
+    while i < n and text[i] not in stop and text[i] != "\n":
+        if text[i] in "\"'":
+            i = _skip_toml_string(text, i)
+            continue
+        if text[i] == ".":
+            parts += 1
+        i += 1
+    return i, parts, i - start
+
+
 def toml_prescan(text: str) -> str | None:
     """Why ``text`` is refused before parsing (one linear pass: strings and comments skipped, key
     paths and nesting counted), or None. Not a TOML parser: a file it lets through may still be
@@ -1622,29 +1677,6 @@ def toml_prescan(text: str) -> str | None:
     stack: list[str] = []  # open [ and { of values
     header_parts = 0  # parts of the current table header
     line = 1
-
-    def skip_string(i: int) -> int:
-        q = text[i]
-        if text.startswith(q * 3, i):
-            end = text.find(q * 3, i + 3)
-            return n if end < 0 else end + 3
-        j = i + 1
-        while j < n and text[j] != q and text[j] != "\n":
-            j += 2 if q == '"' and text[j] == "\\" else 1
-        return j + 1
-
-    def key_path(i: int, stop: str) -> tuple[int, int, int]:
-        """(index after the key, its parts, its length) of a key ending before one of stop."""
-        parts, start = 1, i
-        while i < n and text[i] not in stop and text[i] != "\n":
-            if text[i] in "\"'":
-                i = skip_string(i)
-                continue
-            if text[i] == ".":
-                parts += 1
-            i += 1
-        return i, parts, i - start
-
     expect_key = True
     while i < n:
         ch = text[i]
@@ -1662,7 +1694,7 @@ def toml_prescan(text: str) -> str | None:
             i = n if j < 0 else j
             continue
         if expect_key and not stack and ch == "[":  # a table header
-            j, parts, length = key_path(i + (2 if text.startswith("[[", i) else 1), "]")
+            j, parts, length = _toml_key_path(text, i + (2 if text.startswith("[[", i) else 1), "]")
             header_parts = parts
             keys += 1
             if parts > MAX_KEY_DEPTH or length > MAX_KEY_LENGTH:
@@ -1671,7 +1703,7 @@ def toml_prescan(text: str) -> str | None:
             i, expect_key = j + 1, False
             continue
         if expect_key:
-            j, parts, length = key_path(i, "=}")
+            j, parts, length = _toml_key_path(text, i, "=}")
             keys += 1
             depth = parts + header_parts + sum(1 for c in stack if c == "{")
             if depth > MAX_KEY_DEPTH or length > MAX_KEY_LENGTH:
@@ -1682,7 +1714,7 @@ def toml_prescan(text: str) -> str | None:
             i, expect_key = j + 1, False
             continue
         if ch in "\"'":
-            i = skip_string(i)
+            i = _skip_toml_string(text, i)
             continue
         if ch in "[{":
             stack.append(ch)

@@ -37,6 +37,7 @@ import numpy as np
 from . import kernel as kernel_mod
 from .params import MAX_OUTPUT_POINTS, check_param, output_points
 from .checks import check_initial_state, watch_rows
+from .interpolation import check_interpolation
 from .model import InconsistentInitialState, Model, ModelError, normalized_coordinates  # noqa: F401
 from .spec import SceneSpec, SolverSpec
 
@@ -320,12 +321,12 @@ def run(model: Model, solver: SolverSpec, *, stop_time: float | None = None, out
     ``inputs`` an input table (:class:`overcon.tooling.inputs.InputTable`, a column per input of
     ``model.inputs``) set at every output point as a co-simulation host sets them at its
     communication points, ``input_interpolation`` "hold" (the default: the value there, held over the
-    interval) or "linear" (with fmpy's first derivative there: :meth:`InputTable.step`); the outputs
+    interval) or "linear" (with fmpy's first derivative there: :meth:`InputTable.step`; another
+    name is a ``ValueError``: :func:`overcon.interpolation.check_interpolation`); the outputs
     at an output point see the values of the interval that ends there (the start's: its own), as an
     FMU's after fmi2DoStep; ``progress(t)``, if given, is called at every output point (``overcon
     simulate``'s bar); ``settings`` go to :class:`Simulation`."""
     if inputs is not None:
-        from .tooling.inputs import check_interpolation
         check_interpolation(input_interpolation)
     scene = model.scene
     stop = scene.stop_time if stop_time is None else stop_time

@@ -194,56 +194,77 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
     verdict per joint name; ``motion_unique``, ``rank``: the scene's (start values; the run
     updates them, see the module docstring); ``states``: the continuous states and their
     derivatives (Model Exchange); ``fmi3``: the reaction arrays and ``time`` (FMI 3.0)."""
-    out: list[Var] = []
+    out = [Var(name, "Real", "output", "continuous", "calculated", text, unit=unit, key=("output", k))
+           for k, (name, text, unit) in enumerate(_output_specs(model))]
+    out += _reaction_unique_vars(model, reaction_unique)
+    out.append(_along_var("motion_unique", "Boolean", "the motion is unique: no friction on a joint whose reaction "
+                          "is not unique (paper Eq. 17)", bool(motion_unique), "motion"))
+    out += _parameter_vars(model, solver)
+    out.append(Var("solver.stable_step", "Real", "local", "discrete", "calculated",
+                   "the largest stable fixed step that rk4 named when it refused a step as unstable (s); 0 until it "
+                   "does. Readable after the failed fmi2DoStep: the lockstep comparison repeats its runs with it",
+                   unit="s", key=("stable_step", None)))
+    out.append(redundancy_var(model))
+    out += _along_outputs(model, reaction_unique, rank)
+    out += _effort_unique_vars(model, reaction_unique)
+    out += [Var(u.name, "Real", "input", "continuous", "", f"input: {INPUT_TEXT[u.type]}", unit=u.unit,
+                start=float(u.start), key=("input", n)) for n, u in enumerate(model.inputs)]
+    if model.inputs:
+        out = _without_direct_feedthrough(model, out)
+    return out + _interface_variables(model, out, states, fmi3)
+
+
+def _output_specs(model) -> list[tuple[str, str, str]]:
+    """(name, description, unit) of every Real output of the state, in the table's order: positions,
+    the other state outputs, reactions (a driver's effort), friction, sensors."""
     body_of = {i: name for i, name in enumerate(model.body_names)}
-    k = 0
+    out = []
     for name, _ in model.position_outputs:
         body, coord = name.rsplit(".", 1)
-        out.append(Var(name, "Real", "output", "continuous", "calculated",
-                       f"{body}: {COORDINATE_TEXT[coord]}", unit=COORDINATE_UNITS[coord],
-                       key=("output", k)))
-        k += 1
+        out.append((name, f"{body}: {COORDINATE_TEXT[coord]}", COORDINATE_UNITS[coord]))
     for name, unit in state_outputs_beyond_positions(model):
-        out.append(Var(name, "Real", "output", "continuous", "calculated", STATE_OUTPUT_TEXT[name.rsplit(".", 1)[1]],
-                       unit=unit, key=("output", k)))
-        k += 1
+        out.append((name, STATE_OUTPUT_TEXT[name.rsplit(".", 1)[1]], unit))
     for j in model.reaction_joints:
-        c = model.joints[j]
-        bi = body_of.get(c.bi, "base")
-        if c.type == "driver":  # its effort (core/drivers.c)
-            driven = model.joints[c.p["joint"]]
-            rot = c.p["coordinate"] == 0
-            out.append(Var(f"{c.name}.effort", "Real", "output", "continuous", "calculated",
-                           f"driver {c.name}: the {'torque about' if rot else 'force along'} the axis of joint "
-                           f"{driven.name} that its motor exerts on body {bi} (its reaction on the other body) to "
-                           "impose the motion", unit="N.m" if rot else "N", key=("output", k)))
-            k += 1
-            continue
-        units = dict(TYPES[c.type].reaction)
-        for comp in c.components:
-            frame = "global frame" if comp.endswith("0") else f"auxiliary frame of the {TYPES[c.type].name} joint"
-            what = "moment" if comp.startswith("T") else "force"
-            out.append(Var(f"{c.name}.{comp}", "Real", "output", "continuous", "calculated",
-                           f"reaction {what} of joint {c.name} on body {bi}, component {comp}, {frame}",
-                           unit=units.get(comp, "N"), key=("output", k)))
-            k += 1
+        out += _reaction_output_specs(model, model.joints[j], body_of.get(model.joints[j].bi, "base"))
     for j in model.friction_outputs:
         c = model.joints[j]
-        unit = TYPES[c.type].friction_unit
-        out.append(Var(f"{c.name}.friction", "Real", "output", "continuous", "calculated",
-                       f"friction {TYPES[c.type].friction_text} of joint {c.name} on body {body_of.get(c.bi, 'base')} "
-                       f"({c.law.name} law)", unit=unit, key=("output", k)))
-        k += 1
+        out.append((f"{c.name}.friction",
+                    f"friction {TYPES[c.type].friction_text} of joint {c.name} on body {body_of.get(c.bi, 'base')} "
+                    f"({c.law.name} law)", TYPES[c.type].friction_unit))
     for name, j, what in model.sensor_outputs:
         sensor = SENSOR_NAMES[what]
-        out.append(Var(name, "Real", "output", "continuous", "calculated",
-                       f"joint {model.joints[j].name}: {SENSOR_TEXT[sensor]}", unit=JOINT_SENSORS[sensor],
-                       key=("output", k)))
-        k += 1
+        out.append((name, f"joint {model.joints[j].name}: {SENSOR_TEXT[sensor]}", JOINT_SENSORS[sensor]))
+    return out
+
+
+def _reaction_output_specs(model, c, bi: str) -> list[tuple[str, str, str]]:
+    """(name, description, unit) of the reaction outputs of joint ``c`` on body ``bi``: one per
+    reaction component, or a driver's effort (core/drivers.c)."""
+    if c.type == "driver":
+        driven = model.joints[c.p["joint"]]
+        rot = c.p["coordinate"] == 0
+        return [(f"{c.name}.effort",
+                 f"driver {c.name}: the {'torque about' if rot else 'force along'} the axis of joint "
+                 f"{driven.name} that its motor exerts on body {bi} (its reaction on the other body) to "
+                 "impose the motion", "N.m" if rot else "N")]
+    units = dict(TYPES[c.type].reaction)
+    out = []
+    for comp in c.components:
+        frame = "global frame" if comp.endswith("0") else f"auxiliary frame of the {TYPES[c.type].name} joint"
+        what = "moment" if comp.startswith("T") else "force"
+        out.append((f"{c.name}.{comp}", f"reaction {what} of joint {c.name} on body {bi}, component {comp}, {frame}",
+                    units.get(comp, "N")))
+    return out
+
+
+def _reaction_unique_vars(model, reaction_unique: dict[str, bool]) -> list[Var]:
+    """The pre-check's verdict per reaction joint (a driver's is ``effort_unique``): a constant, or
+    an along-the-run output for a joint with friction."""
+    out = []
     friction = set(model.friction_joints)
     for j in model.reaction_joints:
         if model.joints[j].type == "driver":
-            continue  # effort_unique (below)
+            continue  # effort_unique (_effort_unique_vars)
         name = model.joints[j].name
         val = bool(reaction_unique[name])
         if j in friction:
@@ -252,8 +273,12 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
         out.append(Var(f"{name}.reaction_unique", "Boolean", "output", "constant", "exact",
                        f"pre-check: the reaction of joint {name} is unique (does not depend on the "
                        "eliminated equations)", start=val, key=("constant", val)))
-    out.append(_along_var("motion_unique", "Boolean", "the motion is unique: no friction on a joint whose reaction "
-                          "is not unique (paper Eq. 17)", bool(motion_unique), "motion"))
+    return out
+
+
+def _parameter_vars(model, solver) -> list[Var]:
+    """The parameters: each friction joint's law, then the solver options and the work budgets."""
+    out = []
     for j in model.friction_joints:
         c = model.joints[j]
         for p in _friction_param_names(c.law):
@@ -274,30 +299,32 @@ def table(model, solver, reaction_unique: dict[str, bool], motion_unique: bool, 
         rng = rule(f"solver.{p}").range_text()
         out.append(Var(f"solver.{p}", typ, "parameter", "tunable", "exact", f"{text} ({rng})", unit=unit,
                        start=value, key=("param", f"solver.{p}")))
-    out.append(Var("solver.stable_step", "Real", "local", "discrete", "calculated",
-                   "the largest stable fixed step that rk4 named when it refused a step as unstable (s); 0 until it "
-                   "does. Readable after the failed fmi2DoStep: the lockstep comparison repeats its runs with it",
-                   unit="s", key=("stable_step", None)))
-    out.append(redundancy_var(model))
-    out += _along_outputs(model, reaction_unique, rank)
+    return out
+
+
+def _effort_unique_vars(model, reaction_unique: dict[str, bool]) -> list[Var]:
+    """``effort_unique`` when the model has drivers (none otherwise): its start value is every
+    driver's and every acting friction joint's pre-check verdict."""
     drivers = [c for c in model.joints if c.type == "driver"]
-    if drivers:
-        acting = [model.joints[j].name for j in model.friction_joints
-                  if not (model.joints[j].law.mu == 0 and not model.joints[j].law.mu_static)]
-        start = all(reaction_unique.get(c.name, True) for c in drivers) and \
-            all(reaction_unique.get(n, True) for n in acting)
-        out.append(_along_var("effort_unique", "Boolean", "every driver's effort is unique: its equation a direct "
-                              "summand of span(J) and no friction on a joint whose reaction is not unique",
-                              bool(start), len(model.joints)))
-    out += [Var(u.name, "Real", "input", "continuous", "", f"input: {INPUT_TEXT[u.type]}", unit=u.unit,
-                start=float(u.start), key=("input", n)) for n, u in enumerate(model.inputs)]
-    if model.inputs:  # the outputs of the state do not depend directly on the inputs
-        direct = {name for j in model.reaction_joints for name in
-                  ([f"{model.joints[j].name}.{c}" for c in model.joints[j].components])}
-        direct |= {f"{model.joints[j].name}.friction" for j in model.friction_outputs}
-        out = [dataclasses.replace(v, feedthrough=False) if v.causality == "output" and v.type == "Real"
-               and v.key and v.key[0] == "output" and v.name not in direct else v for v in out]
-    return out + _interface_variables(model, out, states, fmi3)
+    if not drivers:
+        return []
+    acting = [model.joints[j].name for j in model.friction_joints
+              if not (model.joints[j].law.mu == 0 and not model.joints[j].law.mu_static)]
+    start = all(reaction_unique.get(c.name, True) for c in drivers) and \
+        all(reaction_unique.get(n, True) for n in acting)
+    return [_along_var("effort_unique", "Boolean", "every driver's effort is unique: its equation a direct "
+                       "summand of span(J) and no friction on a joint whose reaction is not unique",
+                       bool(start), len(model.joints))]
+
+
+def _without_direct_feedthrough(model, out: list[Var]) -> list[Var]:
+    """``out`` with ``feedthrough=False`` on the Real outputs of the state: they do not depend
+    directly on the inputs (the reactions and friction forces do)."""
+    direct = {name for j in model.reaction_joints for name in
+              ([f"{model.joints[j].name}.{c}" for c in model.joints[j].components])}
+    direct |= {f"{model.joints[j].name}.friction" for j in model.friction_outputs}
+    return [dataclasses.replace(v, feedthrough=False) if v.causality == "output" and v.type == "Real"
+            and v.key and v.key[0] == "output" and v.name not in direct else v for v in out]
 
 
 def _interface_variables(model, out: list[Var], states: bool, fmi3: bool) -> list[Var]:

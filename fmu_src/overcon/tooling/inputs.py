@@ -57,8 +57,8 @@ from pathlib import Path
 import numpy as np
 
 from . import InputError
-
-INTERPOLATIONS = ("hold", "linear")
+from ..interpolation import INTERPOLATIONS  # noqa: F401  (re-exported: the tooling's name for it)
+from ..interpolation import check_interpolation as _check_interpolation
 MAX_ROWS = 1_000_000  # the output-point bound of a run (overcon.params.MAX_OUTPUT_POINTS)
 MAX_BYTES = 256 * 1024 * 1024  # read whole into memory: bounded
 
@@ -141,9 +141,9 @@ def write_input_table(table: InputTable, path) -> Path:
 
 
 def check_interpolation(interpolation: str) -> str:
-    if interpolation not in INTERPOLATIONS:
-        raise InputError(f"input interpolation {interpolation!r}: expected one of {', '.join(INTERPOLATIONS)}")
-    return interpolation
+    """``interpolation`` when it is a known mode (:func:`overcon.interpolation.check_interpolation`),
+    else :class:`overcon.tooling.InputError`: bad input, exit 2."""
+    return _check_interpolation(interpolation, InputError)
 
 
 def _finite_time(t) -> float:

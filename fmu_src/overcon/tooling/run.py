@@ -367,6 +367,58 @@ def _input_derivatives_buffers():
         sim.Input = base
 
 
+def _check_fmu_archive(fmu: str | Path) -> None:
+    """The archive limits of the zipped FMU ``fmu``, before fmpy reads anything of it."""
+    import zipfile
+
+    from .fmus import check_archive
+    with zipfile.ZipFile(fmu) as zf:
+        check_archive(Path(fmu), zf)
+
+
+def _message_logger(messages: list[str]):
+    """An fmpy logger that appends each warning, discard, error or fatal message of the FMU to
+    ``messages`` ("ERROR: text")."""
+    def logger(*args):  # FMI 2.0: (env, instance, status, category, message); FMI 3.0: (env, status, ...)
+        status, message = args[-3], args[-1]
+        if status >= 1:  # warning, discard, error, fatal
+            text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
+            messages.append(["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][min(status, 5)] + ": " + text)
+
+    return logger
+
+
+def _step_callback(recorder: list, label: str, start: float, stop: float, t0: float, progress: bool):
+    """fmpy's ``step_finished``: keeps its recorder in ``recorder[0]`` and, with ``progress``,
+    prints a progress line to stderr at most every :data:`PROGRESS_EVERY` s (``t0``: the run's
+    start on ``time.perf_counter``)."""
+    last = [None]  # time of the last progress line (first: the first step, after instantiation)
+
+    def step_finished(t, rec):
+        recorder[0] = rec
+        now = time.perf_counter()
+        if last[0] is None:
+            last[0] = now
+        elif progress and now - last[0] >= PROGRESS_EVERY:
+            last[0] = now
+            pct = 100.0 * (t - start) / (stop - start)
+            print(f"  {label}: {pct:5.1f}% (t = {t:.4g} of {stop:g} s, {now - t0:.0f} s)", file=sys.stderr, flush=True)
+        return True
+
+    return step_finished
+
+
+def _reached_stop(fmu, result, start: float, stop: float, messages: list[str]) -> float:
+    """The last time of fmpy's ``result`` (``start`` when it is empty); :class:`SimulationFailed`
+    when it ends before ``stop``, with the FMU's last logged ``messages``."""
+    last_time = float(result["time"][-1]) if len(result) else start
+    if last_time < stop - 1e-9 * max(1.0, abs(stop)):
+        why = "; ".join(messages[-3:]) or "no reason logged"
+        raise SimulationFailed(f"{fmu}: the simulation stopped at t = {last_time:g} s, before the stop "
+                               f"time {stop:g} s: {why}")
+    return last_time
+
+
 def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, step: float,
              outputs: list[str], progress: bool = True, label: str = "", start_values: dict | None = None,
              along: bool = False, input_table: InputTable | None = None, interpolation: str = "hold",
@@ -383,39 +435,16 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
     along_file = along_path(csv)
     along_file.unlink(missing_ok=True)  # never a stale one from an earlier run
     if not Path(fmu).is_dir():
-        import zipfile
-
-        from .fmus import check_archive
-        with zipfile.ZipFile(fmu) as zf:  # the limits before fmpy reads anything of it
-            check_archive(Path(fmu), zf)
+        _check_fmu_archive(fmu)
     discrete = along_outputs(fmpy.read_model_description(str(fmu), validate=False)) if along else []
     recorder = [None]  # fmpy's recorder, for the points before a failure
     messages: list[str] = []
-
-    def logger(*args):  # FMI 2.0: (env, instance, status, category, message); FMI 3.0: (env, status, ...)
-        status, message = args[-3], args[-1]
-        if status >= 1:  # warning, discard, error, fatal
-            text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
-            messages.append(["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][min(status, 5)] + ": " + text)
-
+    logger = _message_logger(messages)
     t0 = time.perf_counter()
-    last = [None]  # time of the last progress line (first: the first step, after instantiation)
     # progress lines on a terminal only: a CI log or a pipe gets the result lines alone (overcon.progress)
     from ..progress import _terminal
 
-    progress = progress and _terminal()
-
-    def step_finished(t, rec):
-        recorder[0] = rec
-        now = time.perf_counter()
-        if last[0] is None:
-            last[0] = now
-        elif progress and now - last[0] >= PROGRESS_EVERY:
-            last[0] = now
-            pct = 100.0 * (t - start) / (stop - start)
-            print(f"  {label}: {pct:5.1f}% (t = {t:.4g} of {stop:g} s, {now - t0:.0f} s)", file=sys.stderr, flush=True)
-        return True
-
+    step_finished = _step_callback(recorder, label, start, stop, t0, progress and _terminal())
     kw = dict(start_time=start, stop_time=stop, output_interval=step, output=list(outputs) + discrete,
               step_finished=step_finished, start_values=dict(start_values or {}))
     if input_table is not None:
@@ -441,11 +470,7 @@ def simulate(fmu: str | Path, csv: str | Path, *, start: float, stop: float, ste
     finally:
         _release_logging_proxy()
     sim_seconds = time.perf_counter() - t0
-    last_time = float(result["time"][-1]) if len(result) else start
-    if last_time < stop - 1e-9 * max(1.0, abs(stop)):
-        why = "; ".join(messages[-3:]) or "no reason logged"
-        raise SimulationFailed(f"{fmu}: the simulation stopped at t = {last_time:g} s, before the stop "
-                               f"time {stop:g} s: {why}")
+    last_time = _reached_stop(fmu, result, start, stop, messages)
     csv = Path(csv)
     csv.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(csv) as part:

@@ -52,6 +52,69 @@ def _sha(path: Path) -> str:
         raise InputError(f"{path}: cannot read the input table: {exc.strerror or exc}") from exc
 
 
+def _read_definition(out_dir: Path, jpath: Path) -> dict:
+    """The definition of the sweep to resume in ``out_dir``: ``jpath`` (its sweep.json), checked
+    against :data:`DEFINITION_SCHEMA`."""
+    if not jpath.is_file():
+        raise InputError(f"{jpath}: no such file: {out_dir} holds no sweep to resume")
+    from ...formats import SchemaError, load_json, validate
+    try:
+        definition = load_json(jpath.read_bytes(), str(jpath))
+        validate(definition, DEFINITION_SCHEMA, str(jpath))
+    except SchemaError as exc:
+        raise InputError(f"unreadable sweep definition: {exc}") from exc
+    return definition
+
+
+def _new_definition(out_dir: Path, jpath: Path, inputs, params, samples, seed, stop_time, lockstep_step,
+                    input_table, interpolation: str) -> dict:
+    """The definition of a new sweep in ``out_dir`` (which must hold none) from :func:`prepare`'s
+    arguments; its FMUs' GUIDs are added once they are loaded."""
+    if (out_dir / CSV_NAME).exists() or jpath.exists():
+        raise InputError(f"{out_dir}: already holds a sweep ({CSV_NAME}/{JSON_NAME}); continue it with "
+                         f"--resume {out_dir} or choose another --out")
+    if not inputs:
+        raise InputError("no scene file or FMU given")
+    if not params:
+        raise InputError("no --param given: nothing to sweep")
+    if seed is not None and samples is None:
+        raise InputError(f"--seed {seed}: seeds the random parameter sets of --samples, which is not given")
+    definition = {"inputs": [str(Path(p).resolve()) for p in inputs], "params": list(params),
+                  "samples": samples, "seed": (0 if seed is None else seed) if samples is not None else None,
+                  "stop_time": stop_time, "lockstep_step": _lockstep_step(lockstep_step)}
+    if input_table is not None:
+        definition.update(input_table=str(Path(input_table).resolve()), input_sha256=_sha(Path(input_table)),
+                          input_interpolation=interpolation)
+    elif interpolation != "hold":
+        raise InputError(f"--input-interpolation {interpolation}: given without an --input table")
+    return definition
+
+
+def _check_guids(definition: dict, guids: dict, jpath: Path) -> None:
+    """A resumed sweep's FMUs (model -> GUID ``guids``) must be those it started with."""
+    changed = [m for m, g in definition.get("guids", {}).items() if guids.get(m) != g]
+    if changed or set(guids) != set(definition.get("guids", {})):
+        raise InputError(f"{jpath}: the FMU(s) {', '.join(changed or sorted(set(guids) ^ set(definition['guids'])))} "
+                         "changed since the sweep started (GUID differs): the rows would mix two models; "
+                         "start a new sweep")
+
+
+def _with_input_table(definition: dict, exps: dict, fmus: list, specs: list, jpath: Path, resume: bool) -> dict:
+    """The experiments ``exps`` with the definition's input table (unchanged since the sweep
+    started, when ``resume``); no swept parameter may be an input the table sets."""
+    table = definition["input_table"]
+    if resume and _sha(Path(table)) != definition.get("input_sha256"):
+        raise InputError(f"{jpath}: the input table {table} changed since the sweep started (SHA-256 differs): "
+                         "the rows would mix two inputs; start a new sweep")
+    exps = {f.info.model: with_inputs(f.info, exps[f.info.model], table, definition["input_interpolation"])
+            for f in fmus}
+    swept = [s.name for s in specs if s.name in next(iter(exps.values())).input_table.values]
+    if swept:
+        raise InputError(f"--param {swept[0]}: the input {swept[0]} has a column in {table}, which sets it at every "
+                         "step: sweep its start value without a table, or sweep another input")
+    return exps
+
+
 def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_time=None,
             lockstep_step: float | None = LOCKSTEP_STEP, resume: bool = False, echo=print,
             input_table=None, interpolation: str = "hold") -> Sweep:
@@ -70,32 +133,10 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
                 or input_table is not None or interpolation != "hold"):
             raise InputError("--resume DIR continues the sweep defined in DIR/sweep.json: give no scenes, "
                              "--param, --samples, --seed, --stop-time or --input with it")
-        if not jpath.is_file():
-            raise InputError(f"{jpath}: no such file: {out_dir} holds no sweep to resume")
-        from ...formats import SchemaError, load_json, validate
-        try:
-            definition = load_json(jpath.read_bytes(), str(jpath))
-            validate(definition, DEFINITION_SCHEMA, str(jpath))
-        except SchemaError as exc:
-            raise InputError(f"unreadable sweep definition: {exc}") from exc
+        definition = _read_definition(out_dir, jpath)
     else:
-        if (out_dir / CSV_NAME).exists() or jpath.exists():
-            raise InputError(f"{out_dir}: already holds a sweep ({CSV_NAME}/{JSON_NAME}); continue it with "
-                             f"--resume {out_dir} or choose another --out")
-        if not inputs:
-            raise InputError("no scene file or FMU given")
-        if not params:
-            raise InputError("no --param given: nothing to sweep")
-        if seed is not None and samples is None:
-            raise InputError(f"--seed {seed}: seeds the random parameter sets of --samples, which is not given")
-        definition = {"inputs": [str(Path(p).resolve()) for p in inputs], "params": list(params),
-                      "samples": samples, "seed": (0 if seed is None else seed) if samples is not None else None,
-                      "stop_time": stop_time, "lockstep_step": _lockstep_step(lockstep_step)}
-        if input_table is not None:
-            definition.update(input_table=str(Path(input_table).resolve()), input_sha256=_sha(Path(input_table)),
-                              input_interpolation=interpolation)
-        elif interpolation != "hold":
-            raise InputError(f"--input-interpolation {interpolation}: given without an --input table")
+        definition = _new_definition(out_dir, jpath, inputs, params, samples, seed, stop_time, lockstep_step,
+                                     input_table, interpolation)
     specs = [parse_param(t) for t in definition["params"]]
     lstep = definition["lockstep_step"]
     paths = _resolve_inputs(definition["inputs"], out_dir, echo)
@@ -110,11 +151,7 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
     sets = list(zip(set_ids(values, definition["samples"] is not None), values))
     guids = {f.info.model: f.guid for f in fmus}
     if resume:
-        changed = [m for m, g in definition.get("guids", {}).items() if guids.get(m) != g]
-        if changed or set(guids) != set(definition.get("guids", {})):
-            raise InputError(f"{jpath}: the FMU(s) {', '.join(changed or sorted(set(guids) ^ set(definition['guids'])))} "
-                             "changed since the sweep started (GUID differs): the rows would mix two models; "
-                             "start a new sweep")
+        _check_guids(definition, guids, jpath)
     else:
         definition["guids"] = guids
     by_model = {f.info.model: f for f in fmus}
@@ -123,17 +160,8 @@ def prepare(out_dir, *, inputs=None, params=None, samples=None, seed=None, stop_
         if len(members) >= 2:
             validate_group(g, [f.info for f in members])
     exps = _group_experiments({g: [f.info for f in v] for g, v in groups.items()}, definition["stop_time"], None)
-    table = definition.get("input_table")
-    if table is not None:
-        if resume and _sha(Path(table)) != definition.get("input_sha256"):
-            raise InputError(f"{jpath}: the input table {table} changed since the sweep started (SHA-256 differs): "
-                             "the rows would mix two inputs; start a new sweep")
-        exps = {f.info.model: with_inputs(f.info, exps[f.info.model], table, definition["input_interpolation"])
-                for f in fmus}
-        swept = [s.name for s in specs if s.name in next(iter(exps.values())).input_table.values]
-        if swept:
-            raise InputError(f"--param {swept[0]}: the input {swept[0]} has a column in {table}, which sets it at every "
-                             "step: sweep its start value without a table, or sweep another input")
+    if definition.get("input_table") is not None:
+        exps = _with_input_table(definition, exps, fmus, specs, jpath, resume)
     columns = _columns([s.name for s in specs], fmus)
     if not resume:
         out_dir.mkdir(parents=True, exist_ok=True)

@@ -44,6 +44,9 @@ CHILD = textwrap.dedent("""
     from overcon.checks import compile_checked
     from overcon.cli import main
     from overcon.simulate import Simulation
+    def peak_kb():  # this program's own peak (VmHWM); ru_maxrss would count the forking parent's too
+        with open("/proc/self/status") as f:
+            return int(next(l for l in f if l.startswith("VmHWM")).split()[1])
     out = Path({tmp!r})
     path = chain(10_000, out / "chain.toml")
     report = io.StringIO()
@@ -58,7 +61,7 @@ CHILD = textwrap.dedent("""
     y = sim.advance(1.0)
     print(json.dumps({{"code": code, "t": sim.t, "wall": sim.info["wall_time"], "evaluations": sim.evaluations, "drift": sim.max_drift, "steps": sim.steps,
                       "y_finite": bool(all(v == v for v in y)),
-                      "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}}))
+                      "peak_mb": peak_kb() / 1024}}))
 """)
 
 

@@ -29,15 +29,8 @@ def part_path(path) -> Path:
 def atomic(path, mode: str = "w", **kw):
     """``open(<path>.part, mode)``; renamed over ``path`` when the block ends normally, removed when
     it raises (KeyboardInterrupt included)."""
-    part = part_path(path)
-    try:
-        with open(part, mode, **kw) as fh:
-            yield fh
-        os.replace(part, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            part.unlink()
-        raise
+    with atomic_path(path) as part, open(part, mode, **kw) as fh:
+        yield fh
 
 
 @contextlib.contextmanager

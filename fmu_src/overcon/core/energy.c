@@ -101,16 +101,8 @@ static int powers(ovk_sim *s, double t, const double *y, double *p) {
 
 /* The ledger at the start t0 (y0): no work yet, the powers there. */
 int ovk_sim_energy_start(ovk_sim *s, double t0, const double *y0) {
-    if (!s->o.energy) return OVK_OK;
-    double p[2];
-    int status = powers(s, t0, y0, p);
-    if (status) return status;
-    for (int k = 0; k < 2; k++) {
-        s->work_t[k] = t0;
-        s->work_w[k][0] = s->work_w[k][1] = 0.0;
-        s->work_p[k][0] = p[0], s->work_p[k][1] = p[1];
-    }
-    return OVK_OK;
+    const double none[2] = {0.0, 0.0};
+    return ovk_sim_energy_rewind(s, t0, y0, none); /* the ledger started anew at (t0, y0) */
 }
 
 /* The ledger after the accepted step (t_old, t] (_WorkLedger.step): Simpson on its powers. */

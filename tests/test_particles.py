@@ -161,7 +161,7 @@ LINK = ('[[joints]]\nname = "link"\ntype = "distance"\nbody_i = "bob"\nbody_j = 
     (PLANAR + BOB + '[[joints]]\nname = "guide"\ntype = "translational"\nbody_i = "bob"\nbody_j = "base"\n'
      's_A = [0.0, 0.0]\ns_B = [0.0, 0.0]\nv = [0.0, 1.0]\n', "joints[0] (guide).body_i",
      "joint guide: body 'bob' is a particle (no orientation), and a translational joint holds its body's "
-     "orientation; a particle takes revolute, distance joints"),
+     "orientation; a particle takes revolute, distance, point_on_line joints"),
     (PLANAR + BOB + '[[joints]]\nname = "pin"\ntype = "revolute"\nbody_i = "bob"\nbody_j = "base"\n'
      's_i = [0.1, 0.0]\ns_j = [1.1, 0.0]\n', "joints[0] (pin).s_i",
      "joint pin: must be [0, 0] on particle 'bob': a joint acts at a particle's position"),

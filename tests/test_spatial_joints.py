@@ -128,12 +128,12 @@ def test_type_names_resolve_per_mechanism_kind():
     assert resolve("planar", "prismatic") is None
     assert resolve("spatial", "translational") is None
     assert names("spatial") == ("spherical", "revolute", "prismatic", "cylindrical", "universal", "fixed",
-                                "distance")
-    assert names("planar") == ("translational", "revolute", "distance")
+                                "distance", "point_on_line")
+    assert names("planar") == ("translational", "revolute", "distance", "point_on_line")
     for key, jt in TYPES.items():
         assert resolve(jt.kind, jt.name) == key
         if jt.kind == "spatial":
-            assert jt.n_equations == {**N_ROWS, "distance": 1}[jt.name]
+            assert jt.n_equations == {**N_ROWS, "distance": 1, "point_on_line": 2}[jt.name]
 
 
 def test_type_not_allowed_names_the_field(tmp_path):
@@ -142,7 +142,7 @@ def test_type_not_allowed_names_the_field(tmp_path):
     (tmp_path / "m.toml").write_text(text)
     with pytest.raises(SceneError, match=r"m\.toml: joints\[0\] \(J\)\.type: joint type 'translational' is not "
                                          r"allowed in a spatial mechanism \(allowed: spherical, revolute, "
-                                         r"prismatic, cylindrical, universal, fixed, distance\)") as e:
+                                         r"prismatic, cylindrical, universal, fixed, distance, point_on_line\)") as e:
         load(tmp_path / "m.toml")
     [p] = e.value.problems
     assert (p.field, p.name) == ("joints[0].type", "J")  # the field stays the path; the name is shown

@@ -65,7 +65,8 @@ _JOINTS = {("planar", "revolute"): 1, ("planar", "translational"): 2, ("spatial"
            ("spatial", "spatial_revolute"): 4, ("spatial", "spatial_prismatic"): 5,
            ("spatial", "spatial_cylindrical"): 6, ("spatial", "spatial_universal"): 7, ("spatial", "spatial_fixed"): 8,
            ("planar", "driver"): 9, ("spatial", "driver"): 9,
-           ("planar", "distance"): 10, ("spatial", "spatial_distance"): 10}
+           ("planar", "distance"): 10, ("spatial", "spatial_distance"): 10,
+           ("planar", "point_on_line"): 11, ("spatial", "spatial_point_on_line"): 11}
 _ROTATIONS = ("euler_zxz", "quaternion")
 _AXIS_SIZES = {"spatial_revolute": ("radius", "length", "collar_radius"), "spatial_prismatic": ("length", "radius"),
                "spatial_cylindrical": ("length", "radius")}
@@ -267,6 +268,10 @@ def _joint_constants(model, c) -> np.ndarray:
     elif c.type in ("distance", "spatial_distance"):  # core/joints_distance.c: s_i, s_j at 0 and 3, L at 6
         k = model.dim
         out[0:k], out[3:3 + k], out[6] = p["s_i"], p["s_j"], p["length"]
+    elif c.type == "point_on_line":  # core/joints_planar.c: s_i, s_j, n_j, a_j
+        out[0:2], out[2:4], out[4:6], out[6:8] = p["s_i"], p["s_j"], p["n_j"], p["a_j"]
+    elif c.type == "spatial_point_on_line":  # core/joints_spatial.c: s_i, s_j, a_j, b1_j, b2_j at their places
+        out[0:3], out[3:6], out[9:12], out[12:15], out[15:18] = p["s_i"], p["s_j"], p["a_j"], p["b1_j"], p["b2_j"]
     elif c.type == "translational":
         out[0:2], out[2:4], out[4:6] = p["s_A"], p["s_B"], p["v"]
         out[6] = p["psi"]
@@ -287,7 +292,7 @@ def _joint_constants(model, c) -> np.ndarray:
 def _law_constants(law) -> np.ndarray:
     if law is None:
         return np.zeros(NLP)
-    return np.array([law.mu, law.v_reg, law.size, law.mu_static if law.mu_static is not None else 0.0,
+    return np.array([law.mu, law.v_reg, law.size if law.size is not None else 0.0, law.mu_static if law.mu_static is not None else 0.0,
                      law.v_stribeck if law.v_stribeck is not None else 1.0])
 
 

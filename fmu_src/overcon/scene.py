@@ -40,7 +40,8 @@ What is validated
   ``v_reg`` (default 1e-3), ``mu_static``, ``v_stribeck`` by :mod:`overcon.params`, the type's size key (``length`` for translational, ``radius`` for
   revolute/spherical; stored as ``FrictionSpec.size``) > 0 and no other size key (spatial
   revolute, prismatic, cylindrical: their further size keys ``friction_extra``, stored as
-  ``FrictionSpec.extra``; universal and fixed joints take no friction table); ``stribeck``
+  ``FrictionSpec.extra``; point_on_line has no size key, ``FrictionSpec.size`` None; universal,
+  fixed and distance joints take no friction table); ``stribeck``
   needs ``mu_static`` (>= ``mu``, :func:`overcon.params.check_mu_static`) and ``v_stribeck``,
   which other laws do not take. Loads:
   ``type`` in ``spec.LOAD_FIELDS`` with its fields; force/torque act on a moving body; a spring
@@ -393,9 +394,9 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
     ``jtype`` None (unknown joint type): either size key is accepted and none is required.
     ``jtype`` is a key of :data:`overcon.joints.TYPES`: its friction size keys are the primary
     one (stored as ``size``) and the type's ``friction_extra`` (stored in ``extra`` when given;
-    required unless they have a default). A type without friction is refused here, naming the
-    table."""
-    if jtype is not None and JOINT_TYPES[jtype].friction_size is None:
+    required unless they have a default); a type with ``sizeless_friction`` has none (``size``
+    None). A type without friction is refused here, naming the table."""
+    if jtype is not None and not JOINT_TYPES[jtype].has_friction:
         ctx.add(prefix, _no_friction_model(jtype))
         return None
     size_keys = ("length", "radius") if jtype is None else JOINT_TYPES[jtype].friction_keys
@@ -410,7 +411,7 @@ def _friction(ctx: _Ctx, table: dict, prefix: str, jtype: str | None,
     if extra:
         given["extra"] = tuple({**dict(base.extra if base is not None else ()), **extra}.items())
     if base is None:
-        if "size" not in given:  # unknown joint type: cannot build a spec
+        if "size" not in given and jtype is None:  # unknown joint type: cannot build a spec
             return None
         result = FrictionSpec(**given)
     else:
@@ -425,7 +426,9 @@ def _friction_keys(ctx: _Ctx, table: dict, prefix: str, jtype: str | None, size_
         for other in ("length", "radius"):
             if other not in size_keys:
                 hint[other] = (f"unknown key: the friction size of a {JOINT_TYPES[jtype].name} joint is "
-                               f"'{size_keys[0]}', not '{other}'")
+                               f"'{size_keys[0]}', not '{other}'" if size_keys else
+                               f"unknown key: the friction of a {JOINT_TYPES[jtype].name} joint has no size "
+                               "(a force at a point contact, no lever arm)")
     _unknown_keys(ctx, table, prefix, _FRICTION_KEYS + size_keys, hint)
 
 
@@ -465,7 +468,7 @@ def _friction_required(ctx: _Ctx, table: dict, prefix: str, jtype: str | None, s
     if "mu" not in table:
         ctx.add(_join(prefix, "mu"), "missing required field")
         ok = False
-    required_sizes = () if jtype is None else (size_keys[0], *(
+    required_sizes = () if jtype is None or not size_keys else (size_keys[0], *(
         key for key, (_text, default) in JOINT_TYPES[jtype].friction_extra.items() if default is None))
     for key in required_sizes:
         if key not in table:
@@ -503,7 +506,7 @@ def _no_friction_model(jtype: str) -> str:
 
 def _has_friction(name: str) -> bool:
     """Whether some joint type called ``name`` has a friction model."""
-    return any(jt.friction_size is not None for jt in JOINT_TYPES.values() if jt.name == name)
+    return any(jt.has_friction for jt in JOINT_TYPES.values() if jt.name == name)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -570,6 +573,13 @@ def _check_mechanism(doc: dict, ctx: _Ctx) -> MechanismSpec | None:
                          description=head.description, rotation=head.rotation or "euler_zxz")
 
 
+def particle_friction_refused(jtype: str) -> bool:
+    """Whether friction in a joint of ``jtype`` (a key of :data:`overcon.joints.TYPES`) on a
+    particle is refused: a friction with a size (a pin's or ball's radius: a friction moment about
+    the particle) is; a sizeless friction (the point-on-line joint's force at the contact) is not."""
+    return JOINT_TYPES[jtype].friction_size is not None
+
+
 def particle_friction_reason(jtype: str, body: str) -> str:
     """Why friction in a revolute or spherical joint on a particle is refused (decided): a point
     mass has no rotational inertia, so a pin or ball on it turns with the other body and carries
@@ -601,11 +611,16 @@ def _check_particles(ctx: _Ctx, bodies: list, joints: list, loads: list, kind: s
                                             f"{jt.name} joint holds its body's orientation; a particle takes "
                                             f"{allowed} joints")
                 continue
+            if side == "j" and jt.name in S.PARTICLE_BODY_I_ONLY:
+                ctx.add(f"{p}.body_j", f"joint {js.name}: body '{body}' is a particle (no orientation), and body j "
+                                       f"of a {jt.name} joint carries its direction (axis_j); put the particle as "
+                                       "body i and the line on a rigid body or the base")
+                continue
             point = f"s_{side}"
             if any(x != 0.0 for x in js.params[point]):
                 ctx.add(f"{p}.{point}", f"joint {js.name}: must be {zero} on particle '{body}': a joint acts at a "
                                         "particle's position (it has no body frame to offset the point in)")
-            if js.friction is not None and jt.friction_size is not None:
+            if js.friction is not None and particle_friction_refused(js.type):
                 ctx.add(f"{p}.friction", f"joint {js.name}: {particle_friction_reason(js.type, body)}")
     for k, ld in enumerate(loads):
         p = f"loads[{k}]"
@@ -1095,9 +1110,9 @@ def _check_friction_list(ctx: _Ctx, value, field: str, mech: MechanismSpec | Non
     def late(s):
         if types is None:
             return None
-        if JOINT_TYPES[types[s]].friction_size is None:
+        if not JOINT_TYPES[types[s]].has_friction:
             return f"joint '{s}': {_no_friction_model(types[s])}"
-        on = [b for b in ends[s] if b in particles]
+        on = [b for b in ends[s] if b in particles] if particle_friction_refused(types[s]) else []
         if on:
             return f"joint '{s}': {particle_friction_reason(types[s], on[0])}"
         if not has_params(s):

@@ -77,7 +77,8 @@ def _rule(name: str) -> dict:
 def _friction_table(jt, required: bool) -> dict:
     """A joint type's friction table; ``required``: mu and the size keys without a default (a
     mechanism's table; a scene's ``friction_params`` are merged onto it and need none)."""
-    sizes = {key: {**NUMBER, "exclusiveMinimum": 0, "description": text} for key, text in [jt.friction_size]}
+    sizes = {key: {**NUMBER, "exclusiveMinimum": 0, "description": text}
+             for key, text in ([jt.friction_size] if jt.friction_size is not None else [])}
     sizes.update({key: {**NUMBER, "exclusiveMinimum": 0, "description": text}
                   for key, (text, _default) in jt.friction_extra.items()})
     props = {"law": {"enum": list(S.FRICTION_LAWS), "description": "friction law (paper Fig. 1: coulomb A, "
@@ -88,7 +89,7 @@ def _friction_table(jt, required: bool) -> dict:
            "then": {"required": ["mu_static", "v_stribeck"]},
            "else": {"not": {"anyOf": [{"required": ["mu_static"]}, {"required": ["v_stribeck"]}]}}}
     if required:
-        out["required"] = ["mu", jt.friction_size[0]] + [k for k, (_t, d) in jt.friction_extra.items() if d is None]
+        out["required"] = ["mu", *jt.friction_keys[:1]] + [k for k, (_t, d) in jt.friction_extra.items() if d is None]
     return out
 
 
@@ -116,7 +117,7 @@ def _joint(kind: str, dim: int) -> dict:
         deg = {n + sc.DEG_SUFFIX: {**NUMBER, "description": f"{n} in degrees"}
                for n, (shape, *_r) in {**jt.required, **jt.optional}.items() if shape == "angle"}
         props.update(deg)
-        if jt.friction_size is not None:
+        if jt.has_friction:
             props["friction"] = _friction_table(jt, required=True)
         required = ["name", "type", "body_i", "body_j"] + [
             n for n, (shape, _d) in jt.required.items() if shape != "angle"]

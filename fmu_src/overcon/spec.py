@@ -125,14 +125,15 @@ class FrictionSpec:
 
     ``size`` is the joint's geometric friction size: translational slider length l, revolute shaft
     radius a, spherical ball radius rho, the spatial types' first size key of
-    :data:`overcon.joints.TYPES` (all m); ``extra`` the further size keys given (key, value in m),
+:data:`overcon.joints.TYPES` (all m), None for a type whose friction needs no size
+    (the point-on-line joint: a force at a point contact); ``extra`` the further size keys given (key, value in m),
     e.g. a spatial revolute joint's ``length`` (defaults are filled in at compile time). ``v_reg`` is the regularisation velocity of law B
     (m/s for sliding, rad/s for the revolute relative angular velocity). ``mu_static`` and
     ``v_stribeck`` are used by law C only.
     """
 
     mu: float
-    size: float
+    size: float | None = None
     law: str = "regularised"
     v_reg: float = 1e-3
     mu_static: float | None = None
@@ -174,11 +175,17 @@ BODY_KINDS = ("rigid", "particle")
 """``[[bodies]] kind``: a rigid body (default) or a particle (a point mass: ``mass``, no
 ``inertia``, ``q0``/``h0`` of the position and velocity only)."""
 
-PARTICLE_JOINTS = ("revolute", "spherical", "distance")
+PARTICLE_JOINTS = ("revolute", "spherical", "distance", "point_on_line")
 """The joint types (file names) a particle may take: those that act at a point and need no
 orientation of the particle (the planar revolute and the spherical joint at its position, the
-distance joint from its position). The others hold the body's orientation (a guide's angle row,
-an axis): refused on a particle, naming the body and the joint."""
+distance joint from its position, the point-on-line joint as its body i: the bead on a wire). The
+others hold the body's orientation (a guide's angle row, an axis): refused on a particle, naming
+the body and the joint."""
+
+PARTICLE_BODY_I_ONLY = ("point_on_line",)
+"""Joint types of :data:`PARTICLE_JOINTS` that take a particle as body i only: body j carries a
+direction fixed in its frame (the line), which a particle, without orientation, cannot carry
+(decided: a line "on" a particle would have its direction turned by the reactions)."""
 
 
 def particle_orientation(kind: str, rotation: str = "euler_zxz") -> tuple[float, ...]:

@@ -36,9 +36,11 @@ static int in_range(const int *a, int n, int lo, int hi) { /* every a[i] in [lo,
     return 1;
 }
 
-/* The equations of a joint type (overcon.joints.TYPES n_equations), 0 for an unknown type. */
-static int joint_equations(int type) {
+/* The equations of a joint type in dimension dim (overcon.joints.TYPES n_equations), 0 for an
+ * unknown type; the point-on-line joint has dim - 1 (its line's normals). */
+static int joint_equations(int type, int dim) {
     static const int n[] = {0, 2, 2, 3, 5, 5, 4, 4, 6, 1, 1}; /* by J_* */
+    if (type == J_POINT_LINE) return dim - 1;
     return type >= 0 && type <= J_DISTANCE ? n[type] : 0;
 }
 
@@ -84,10 +86,10 @@ static int check_model(const ovk_model *M, ovk_data *d) {
                         M->tol, M->baumgarte);
     int nh = M->nb * M->nh_b;
     for (int j = 0; j < M->nj; j++) {
-        int t = M->jtype[j], planar = t == J_REVOLUTE || t == J_TRANSLATIONAL || t == J_DISTANCE;
-        int spatial = t == J_SPHERICAL || (t >= J_SREVOLUTE && t <= J_FIXED) || t == J_DISTANCE;
+        int t = M->jtype[j], planar = t == J_REVOLUTE || t == J_TRANSLATIONAL || t == J_DISTANCE || t == J_POINT_LINE;
+        int spatial = t == J_SPHERICAL || (t >= J_SREVOLUTE && t <= J_FIXED) || t == J_DISTANCE || t == J_POINT_LINE;
         if (t == J_DRIVER && !driver_ok(M, j)) return ovk_fail(d, OVK_INVALID, "model: driver %d is not one the core takes", j);
-        if (!((M->dim == 2 && planar) || (M->dim == 3 && spatial) || t == J_DRIVER) || M->jneq[j] != joint_equations(t) ||
+        if (!((M->dim == 2 && planar) || (M->dim == 3 && spatial) || t == J_DRIVER) || M->jneq[j] != joint_equations(t, M->dim) ||
             M->jbi[j] < -1 || M->jbi[j] >= M->nb || M->jbj[j] < -1 || M->jbj[j] >= M->nb ||
             !in_range(M->jrows + OVK_MAXEQ * j, M->jneq[j], 0, M->m) || M->jlaw[j] < LAW_NONE ||
             M->jlaw[j] > LAW_STRIBECK || (t == J_DISTANCE && M->jlaw[j] != LAW_NONE))

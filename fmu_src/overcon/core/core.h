@@ -6,10 +6,11 @@
  * and the message of the last failure); stage functions that each do one job, one file each:
  *   frames.c            positions, rotations and velocities of the bodies (and the base)
  *   joints.c            the joint table: dispatch by type, and the assembly of Phi, Phi_h, gamma
- *   joints_planar.c     planar revolute and translational joints: rows, friction setup and forces
+ *   joints_planar.c     planar revolute, translational and point-on-line joints: rows, friction setup and forces
  *   joints_spherical.c  spatial spherical joints: the same
  *   joints_distance.c   distance joints (planar and spatial): the rows of a massless link
- *   joints_spatial.c    spatial axis joints (revolute, prismatic, cylindrical, universal, fixed): the
+ *   joints_spatial.c    spatial axis joints (revolute, prismatic, cylindrical, universal, fixed) and the
+ *                       spatial point-on-line joint: the
  *                       row primitives of overcon.joints.spatial_rows, reactions, friction
  *   loads.c             applied forces: gravity, gyroscopic, force, torque, spring
  *   kkt.c               the KKT solve with the scene's elimination (banded Cholesky of S) and h'
@@ -82,6 +83,7 @@ enum { J_REVOLUTE = 1, J_TRANSLATIONAL = 2, J_SPHERICAL = 3 }; /* planar, planar
 enum { J_SREVOLUTE = 4, J_PRISMATIC = 5, J_CYLINDRICAL = 6, J_UNIVERSAL = 7, J_FIXED = 8 }; /* spatial axis */
 enum { J_DRIVER = 9 }; /* a driver (drivers.c): one rheonomic equation on a joint's coordinate, planar or spatial */
 enum { J_DISTANCE = 10 }; /* planar and spatial: a massless link (joints_distance.c), no friction */
+enum { J_POINT_LINE = 11 }; /* planar (joints_planar.c) and spatial (joints_spatial.c): a point on a line, friction */
 enum { LAW_NONE = 0, LAW_REGULARISED = 1, LAW_STRIBECK = 2 };
 enum { LD_FORCE = 1, LD_TORQUE = 2, LD_SPRING = 3 };
 
@@ -522,6 +524,14 @@ OVK_HIDDEN void ovk_planar_friction_forces(const ovk_model *M, int j, const ovk_
 OVK_HIDDEN void ovk_planar_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam,
                                         double *dQi, double *dQj);
 OVK_HIDDEN double ovk_planar_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
+OVK_HIDDEN void ovk_line_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji, double *Jj,
+                              double *gam);
+OVK_HIDDEN void ovk_line_friction_setup(const ovk_model *M, const ovk_frames *f, int j, ovk_fctx *cx);
+OVK_HIDDEN void ovk_line_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *Qi,
+                                         double *Qj);
+OVK_HIDDEN void ovk_line_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *dQi,
+                                      double *dQj);
+OVK_HIDDEN double ovk_line_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam);
 
 /* joints_distance.c */
 OVK_HIDDEN void ovk_distance_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi, double *Ji,

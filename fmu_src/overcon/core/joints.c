@@ -1,5 +1,5 @@
-/* Stage: the joint table. Dispatch by joint type to joints_planar.c, joints_spherical.c,
- * joints_distance.c and joints_spatial.c, and the
+/* Stage: the joint table. Dispatch by joint type (and dimension: the point-on-line joint) to
+ * joints_planar.c, joints_spherical.c, joints_distance.c and joints_spatial.c, and the
  * assembly of every joint's rows into Phi (m), Phi_h (m x nh) and gamma (m). */
 #include <string.h>
 
@@ -14,6 +14,10 @@ void ovk_joint_rows(const ovk_model *M, const ovk_frames *f, int j, double *phi,
     case J_SPHERICAL: ovk_spherical_rows(M, f, j, phi, Ji, Jj, gam); break;
     case J_DRIVER: ovk_driver_rows(M, f, j, phi, Ji, Jj, gam); break;
     case J_DISTANCE: ovk_distance_rows(M, f, j, phi, Ji, Jj, gam); break;
+    case J_POINT_LINE:
+        if (M->dim == 2) ovk_line_rows(M, f, j, phi, Ji, Jj, gam);
+        else ovk_axis_rows(M, f, j, phi, Ji, Jj, gam);
+        break;
     default: ovk_axis_rows(M, f, j, phi, Ji, Jj, gam); break;
     }
 }
@@ -69,28 +73,35 @@ void ovk_constraint_rows(const ovk_model *M, ovk_data *d, const double *q) {
 }
 
 /* The friction of joint j (a distance joint has none: check_model in api.c refuses a law on one,
- * so these are never called for it). */
+ * so these are never called for it). The planar point-on-line joint's is joints_planar.c's
+ * ovk_line_*, the spatial one's the axis joints'. */
+static int planar_line(const ovk_model *M, int j) { return M->jtype[j] == J_POINT_LINE && M->dim == 2; }
+
 void ovk_joint_friction_setup(const ovk_model *M, const ovk_frames *f, int j, const double *Ji, ovk_fctx *cx) {
-    if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_setup(M, f, j, cx);
+    if (planar_line(M, j)) ovk_line_friction_setup(M, f, j, cx);
+    else if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_setup(M, f, j, cx);
     else if (M->jtype[j] >= J_SREVOLUTE) ovk_axis_friction_setup(M, f, j, Ji, cx);
     else ovk_planar_friction_setup(M, f, j, Ji, cx);
 }
 
 void ovk_joint_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *Qi,
                                double *Qj) {
-    if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_forces(M, j, cx, lam, Qi, Qj);
+    if (planar_line(M, j)) ovk_line_friction_forces(M, j, cx, lam, Qi, Qj);
+    else if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_forces(M, j, cx, lam, Qi, Qj);
     else if (M->jtype[j] >= J_SREVOLUTE) ovk_axis_friction_forces(M, j, cx, lam, Qi, Qj);
     else ovk_planar_friction_forces(M, j, cx, lam, Qi, Qj);
 }
 
 void ovk_joint_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *dQi,
                             double *dQj) {
-    if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_jac(M, j, cx, lam, dQi, dQj);
+    if (planar_line(M, j)) ovk_line_friction_jac(M, j, cx, lam, dQi, dQj);
+    else if (M->jtype[j] == J_SPHERICAL) ovk_spherical_friction_jac(M, j, cx, lam, dQi, dQj);
     else if (M->jtype[j] >= J_SREVOLUTE) ovk_axis_friction_jac(M, j, cx, lam, dQi, dQj);
     else ovk_planar_friction_jac(M, j, cx, lam, dQi, dQj);
 }
 
 double ovk_joint_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam) {
+    if (planar_line(M, j)) return ovk_line_friction_output(M, j, cx, lam);
     if (M->jtype[j] == J_SPHERICAL) return ovk_spherical_friction_output(M, j, cx, lam);
     if (M->jtype[j] >= J_SREVOLUTE) return ovk_axis_friction_output(M, j, cx, lam);
     return ovk_planar_friction_output(M, j, cx, lam);

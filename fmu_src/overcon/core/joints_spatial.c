@@ -1,5 +1,7 @@
 /* Stage: spatial axis joints (revolute, prismatic, cylindrical, universal, fixed; their constants
- * from overcon.joints.spatial_rows), each a tuple of row primitives (POINT: P_i - P_j, 3 rows;
+ * from overcon.joints.spatial_rows) and the spatial point-on-line joint (overcon.joints.point_on_line:
+ * s_i, s_j, a_j, b1_j, b2_j at their places below, its friction a force along R_j a_j at P_i), each a
+ * tuple of row primitives (POINT: P_i - P_j, 3 rows;
  * DOT: (R_i a)·(R_j b); POINTDOT: (P_i - P_j)·(R_j b)); the reaction in the joint frame and the
  * friction of the revolute (bearing and collar torque), prismatic (guide force) and cylindrical
  * (slip along (v_rel, a omega_rel)) joints. These types have no analytic friction Jacobian:
@@ -36,6 +38,9 @@ static const axis_type PRISMATIC = {5, {{ROW_POINTDOT, 0, V_B1}, {ROW_POINTDOT, 
 static const axis_type CYLINDRICAL = {4, {{ROW_POINTDOT, 0, V_B1}, {ROW_POINTDOT, 0, V_B2}, {ROW_DOT, V_AI, V_B1},
                                           {ROW_DOT, V_AI, V_B2}},
                                       4, {0, 1, 3, 4}};
+/* the point-on-line joint (overcon.joints.point_on_line): the cylindrical joint's point rows; its
+ * reaction is reported from its rows' normals (outputs.c), not from E */
+static const axis_type POINT_LINE = {2, {{ROW_POINTDOT, 0, V_B1}, {ROW_POINTDOT, 0, V_B2}}, 0, {0}};
 static const axis_type UNIVERSAL = {2, {{ROW_POINT, 0, 0}, {ROW_DOT, V_AI, V_AJ}}, 5, {0, 1, 2, 3, 4}};
 static const axis_type FIXED = {4, {{ROW_POINT, 0, 0}, {ROW_DOT, V_AI, V_B1}, {ROW_DOT, V_AI, V_B2},
                                     {ROW_DOT, V_CI, V_B2}},
@@ -47,6 +52,7 @@ static const axis_type *type_of(int jtype) {
     case J_PRISMATIC: return &PRISMATIC;
     case J_CYLINDRICAL: return &CYLINDRICAL;
     case J_UNIVERSAL: return &UNIVERSAL;
+    case J_POINT_LINE: return &POINT_LINE;
     default: return &FIXED;
     }
 }
@@ -193,7 +199,8 @@ void ovk_axis_friction_setup(const ovk_model *M, const ovk_frames *f, int j, con
     for (int a = 0; a < 3; a++)
         for (int b = 0; b < 3; b++) { cx->RiT[3 * a + b] = g.Ri[3 * b + a]; cx->RjT[3 * a + b] = g.Rj[3 * b + a]; }
     double t[3], x[3], y[3], P[3], vi[3], vj[3], dv[3];
-    mat3vec(g.Ri, c + V_AI, cx->u);
+    if (M->jtype[j] == J_POINT_LINE) mat3vec(g.Rj, c + V_AJ, cx->u); /* the line, fixed in body j */
+    else mat3vec(g.Ri, c + V_AI, cx->u);
     mat3vec(g.Rj, g.wj, x);
     mat3vec(g.Ri, g.wi, y);
     for (int k = 0; k < 3; k++) dv[k] = x[k] - y[k];
@@ -211,7 +218,7 @@ void ovk_axis_friction_setup(const ovk_model *M, const ovk_frames *f, int j, con
     cx->mu = cx->mos = 0.0;
     if (law == LAW_NONE) return;
     if (M->jtype[j] == J_SREVOLUTE) cx->mu = ovk_law_coefficient(lp, law, cx->spin);
-    else if (M->jtype[j] == J_PRISMATIC) cx->mu = ovk_law_coefficient(lp, law, cx->slide);
+    else if (M->jtype[j] == J_PRISMATIC || M->jtype[j] == J_POINT_LINE) cx->mu = ovk_law_coefficient(lp, law, cx->slide);
     else if (M->jtype[j] == J_CYLINDRICAL) {
         double s = hypot(cx->slide, c[V_SIZE + 1] * cx->spin);
         cx->mu = ovk_law_coefficient(lp, law, s);
@@ -250,6 +257,8 @@ static void reaction_at(const ovk_model *M, int j, const ovk_fctx *cx, const dou
 double ovk_axis_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam) {
     const double *sz = M->jconst + NJC * j + V_SIZE;
     double p[6];
+    /* point on line: mu(v) N along u, N = |(lam_1, lam_2)| the normal force (unit normals b1, b2) */
+    if (M->jtype[j] == J_POINT_LINE) return cx->mu * hypot(lam[0], lam[1]);
     reaction_at(M, j, cx, lam, p);
     switch (M->jtype[j]) {
     case J_SREVOLUTE: return cx->mu * (sz[0] * bearing_radial_load(p, sz[1]) + sz[2] * fabs(p[2]));
@@ -286,16 +295,32 @@ void ovk_axis_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, con
         return;
     }
     double out = ovk_axis_friction_output(M, j, cx, lam);
+    if (M->jtype[j] == J_POINT_LINE) { /* the force on body i at P_i along the line u = R_j a_j */
+        axial_loads(c, cx, out, 0.0, Qi, Qj);
+        return;
+    }
     if (M->jtype[j] == J_SREVOLUTE) axial_loads(c, cx, 0.0, out, Qi, Qj);
     else axial_loads(c, cx, out, 0.0, Qi, Qj);
 }
 
 /* d(Qi, Qj)/d lam (6 x neq each, row-major) by forward differences, as
- * overcon.dynamics._fd_friction_jacobian: step 1e-7 max(1, |lam_e|). */
+ * overcon.dynamics._fd_friction_jacobian: step 1e-7 max(1, |lam_e|); the point-on-line joint's
+ * analytically: its forces are |lam| times the loads of the force mu(v) u (v does not depend on
+ * lam), so d/d lam_e is those loads times lam_e / |lam| (0 at lam = 0). */
 void ovk_axis_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *dQi,
                            double *dQj) {
     int ne = M->jneq[j];
     double Qi[6], Qj[6], Pi[6], Pj[6], lp[OVK_MAXEQ];
+    if (M->jtype[j] == J_POINT_LINE) {
+        double N = hypot(lam[0], lam[1]);
+        axial_loads(M->jconst + NJC * j, cx, cx->mu, 0.0, Qi, Qj);
+        for (int k = 0; k < 6; k++)
+            for (int e = 0; e < 2; e++) {
+                dQi[2 * k + e] = N > 0.0 ? Qi[k] * (lam[e] / N) : 0.0;
+                dQj[2 * k + e] = N > 0.0 ? Qj[k] * (lam[e] / N) : 0.0;
+            }
+        return;
+    }
     ovk_axis_friction_forces(M, j, cx, lam, Qi, Qj);
     for (int e = 0; e < ne; e++) {
         double step = 1e-7 * fmax(1.0, fabs(lam[e]));

@@ -1,6 +1,7 @@
 /* Stage: the reported reactions and friction forces at y and the multipliers lam (m)
  * (overcon.evaluation.physical_reactions and friction_output): per joint j, reac[OVK_NREAC j ...] =
- * -A_i fi in its auxiliary frame (planar Fx, Fy, T; spherical Fx, Fy, Fz; distance its tension; the axis joints their
+ * -A_i fi in its auxiliary frame (planar Fx, Fy, T; spherical Fx, Fy, Fz; distance its tension; point on line its normal force
+ * along each of its rows' normals; the axis joints their
  * type's components of [Fx, Fy, Fz, Tx, Ty, Tz] in the joint frame), then -fi[:dim] in the global
  * frame, fi = (J_X)_i^T lam_X, zeros after; fric[j] = the friction output of a joint with friction
  * (else 0). */
@@ -16,6 +17,15 @@ static int auxiliary(const ovk_model *M, const ovk_frames *f, int j, const doubl
         for (int k = 0; k < M->dim; k++) t += fi[k] * blkI[k];
         out[0] = t;
         return 1;
+    }
+    if (M->jtype[j] == J_POINT_LINE) { /* the force on body i, -fi, along each row's unit normal (its force part) */
+        int ne = M->jneq[j], kh = M->nh_b;
+        for (int e = 0; e < ne; e++) {
+            double t = 0.0;
+            for (int k = 0; k < M->dim; k++) t += fi[k] * blkI[e * kh + k];
+            out[e] = -t;
+        }
+        return ne;
     }
     if (M->jtype[j] == J_SPHERICAL) {
         double t[3];

@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Mapping
 
-from . import (cylindrical, distance, fixed, prismatic, revolute, spatial_revolute, spatial_rows, spherical,
-               translational, universal)
+from . import (cylindrical, distance, fixed, point_on_line, prismatic, revolute, spatial_revolute, spatial_rows,
+               spherical, translational, universal)
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,9 @@ class JointType:
     files and in every message and output (several types share a name, one per mechanism kind:
     :func:`resolve`).
     ``friction_size``: (key of the friction table, description) of the size stored as
-    ``FrictionSpec.size``, None for a type without friction (refused by the loader);
+    ``FrictionSpec.size``, None for a type without friction (refused by the loader) or with a
+    friction that needs no size; ``sizeless_friction``: the type has friction and no size key
+    (``friction_size`` None, ``FrictionSpec.size`` None: a force at a point contact, no lever arm);
     ``friction_extra``: further size keys, key -> (description, default), default None for a
     required key or the name of the key whose value it takes (stored as ``FrictionSpec.extra``
     when given). ``reaction``: (component, unit) of the reported reaction in the auxiliary frame.
@@ -66,6 +68,12 @@ class JointType:
     friction_text: str
     optional: Mapping[str, tuple[str, str, object]] = field(default_factory=dict)
     friction_extra: Mapping[str, tuple[str, str | None]] = field(default_factory=dict)
+    sizeless_friction: bool = False
+
+    @property
+    def has_friction(self) -> bool:
+        """Whether the type has a friction model (with a size key, or ``sizeless_friction``)."""
+        return self.friction_size is not None or self.sizeless_friction
 
     @property
     def reaction_components(self) -> tuple[str, ...]:
@@ -73,7 +81,8 @@ class JointType:
 
     @property
     def friction_keys(self) -> tuple[str, ...]:
-        """Every friction size key of the type (the primary one first); () without friction."""
+        """Every friction size key of the type (the primary one first); () without friction or
+        with a sizeless one."""
         if self.friction_size is None:
             return ()
         return (self.friction_size[0], *self.friction_extra)
@@ -105,7 +114,9 @@ class JointType:
 
     def friction_sizes(self, spec) -> dict[str, float]:
         """Size key -> value (m) of a :class:`overcon.spec.FrictionSpec` of this type, defaults
-        filled in."""
+        filled in (none for a type with ``sizeless_friction``)."""
+        if self.friction_size is None:
+            return {}
         sizes = {self.friction_size[0]: spec.size, **dict(spec.extra)}
         for key, (_text, default) in self.friction_extra.items():
             if key not in sizes:
@@ -132,6 +143,16 @@ def _axis_fields(what: str) -> dict:
 def _spatial_reaction(*components: str) -> tuple[tuple[str, str], ...]:
     return tuple((c, "N" if c.startswith("F") else "N.m") for c in components)
 
+
+def _line_fields() -> dict:
+    """Required fields of a point-on-line joint (:mod:`overcon.joints.point_on_line`)."""
+    return {"s_i": ("vec", "point P on body i that stays on the line, in body i frame (m)"),
+            "s_j": ("vec", "a point of the line on body j, in body j frame (m)"),
+            "axis_j": ("dir", "direction of the line on body j, in body j frame (normalised)")}
+
+
+_LINE_FRICTION = ("force on body i along the line (positive along +axis_j, the way body j slides relative to "
+                  "body i at P)")
 
 _GUIDE_SIZES = {"radius": ("torsion arm r of the guide (m)", None)}
 
@@ -196,6 +217,14 @@ TYPES: Mapping[str, JointType] = {
         module=distance, kind="spatial", name="distance", n_equations=1, reaction=(("tension", "N"),),
         required={**_point_fields("link end"), "length": ("positive", "link length L (m, > 0)")},
         friction_size=None, sliding_unit="", friction_unit="", friction_text=""),
+    "point_on_line": JointType(
+        module=point_on_line, kind="planar", name="point_on_line", n_equations=1, reaction=(("N", "N"),),
+        required=_line_fields(), friction_size=None, sizeless_friction=True, sliding_unit="m/s",
+        friction_unit="N", friction_text=_LINE_FRICTION),
+    "spatial_point_on_line": JointType(
+        module=point_on_line, kind="spatial", name="point_on_line", n_equations=2,
+        reaction=(("Fx", "N"), ("Fy", "N")), required=_line_fields(), friction_size=None, sizeless_friction=True,
+        sliding_unit="m/s", friction_unit="N", friction_text=_LINE_FRICTION),
 }
 """Joint type key -> its facts and module: the one place a joint type is declared. The
 key is internal (CompiledJoint.type, JointSpec.type); files and outputs use ``name``, resolved per

@@ -264,8 +264,8 @@ def friction_law(model, spec, q, h, c, reac, output) -> tuple[float, float]:
     """(the friction output joint c must have, the friction power of joint c) from its law at its
     reaction outputs ``reac`` (the components of its type, then the global force) and its
     relative velocity at (q, h) (docs/joint-friction.md; paper App. A for the planar and spherical
-    joints): signed outputs for planar revolute/translational, spatial revolute and prismatic
-    (power -output v_rel), magnitudes for spherical and cylindrical (power -output |slip|).
+    joints): signed outputs for planar revolute/translational, spatial revolute and prismatic,
+    point on line (power -output v_rel), magnitudes for spherical and cylindrical (power -output |slip|).
     ``output`` (the core's) only enters the power."""
     law, p = c.law, c.p
     bi, bj = c.bi, c.bj
@@ -284,6 +284,12 @@ def friction_law(model, spec, q, h, c, reac, output) -> tuple[float, float]:
         ell = law.size
         want = coef(v) * (abs(Fy - T / ell) + abs(T / ell))
         return want, -output * v
+    if c.type in ("point_on_line", "spatial_point_on_line"):  # a force mu(v) N along the line at P_i
+        P = position(model, q, bi) + rotation(model, q, bi) @ np.asarray(p["s_i"], float)
+        u = rotation(model, q, bj) @ np.asarray(p["a_j"], float)
+        v = float((point_velocity(model, q, h, bj, P) - point_velocity(model, q, h, bi, P)) @ u)
+        N = float(np.linalg.norm(reac[:len(c.rows)]))  # planar |N|, spatial hypot(Fx, Fy)
+        return coef(v) * N, -output * v
     Ri = rotation(model, q, bi)
     if c.type == "spherical":
         F = np.asarray(reac[:3])

@@ -118,9 +118,9 @@ def write_single_type(tmp: Path, jtype: str, seed: int, friction: str = "") -> P
     pair left out chosen by the seed), so that the planar mechanisms move (three planar joints of
     two rows hold two bodies fixed)."""
     rng = np.random.default_rng(seed)
-    kind = "spatial" if jtype in ("spherical", "spatial_distance") else "planar"
+    kind = "spatial" if jtype in ("spherical", "spatial_distance", "spatial_point_on_line") else "planar"
     d = 3 if kind == "spatial" else 2
-    fname = "distance" if jtype == "spatial_distance" else jtype  # the type's name in files
+    fname = jtype.removeprefix("spatial_")  # the type's name in files
     lines = ["[mechanism]", f'name = "single_{jtype}"', f'kind = "{kind}"',
              f"gravity = {_fmt(np.r_[np.zeros(d - 1), -9.81])}", ""]
     for b in ("b1", "b2"):
@@ -146,6 +146,8 @@ def write_single_type(tmp: Path, jtype: str, seed: int, friction: str = "") -> P
             lines += [f"s_i = {_fmt(rng.uniform(-1, 1, d))}", f"s_j = {_fmt(rng.uniform(-1, 1, d))}"]
         if fname == "distance":
             lines += [f"length = {rng.uniform(0.5, 2.0)!r}"]
+        if fname == "point_on_line":
+            lines += [f"axis_j = {_fmt(rng.uniform(0.2, 1.5, d) * rng.choice([-1, 1], d))}"]
         if friction:
             lines += ["[joints.friction]", friction]
         lines.append("")
@@ -154,7 +156,7 @@ def write_single_type(tmp: Path, jtype: str, seed: int, friction: str = "") -> P
     return path
 
 
-TYPES = ["translational", "revolute", "spherical"]
+TYPES = ["translational", "revolute", "spherical", "point_on_line", "spatial_point_on_line"]
 ROW_TYPES = TYPES + ["distance", "spatial_distance"]  # the rows' tests also take the types without friction
 
 
@@ -195,7 +197,8 @@ def test_single_type_shapes(single, jtype):
     k = kernel_for(model, spec.solver)
     y = np.concatenate([model.q0, model.h0])
     phi, J, gam = k.rows(y)
-    ne = {"translational": 2, "revolute": 2, "spherical": 3, "distance": 1, "spatial_distance": 1}[jtype]
+    ne = {"translational": 2, "revolute": 2, "spherical": 3, "distance": 1, "spatial_distance": 1, "point_on_line": 1,
+          "spatial_point_on_line": 2}[jtype]
     assert phi.shape == gam.shape == (model.m,) == (3 * ne,) and J.shape == (model.m, model.nh)
     assert all(len(c.rows) == ne for c in model.joints)
     reac, fric = k.outputs(y, np.ones(model.m))
@@ -330,8 +333,9 @@ so the core has no Coulomb friction to evaluate."""
 
 
 def friction_table(jtype: str, law: str, mu: float | None = None) -> str:
-    text = LAWS[law].replace("radius = 0.1\n", "" if jtype == "translational" else "radius = 0.1\n")
-    text = text.replace("length = 0.1\n", "length = 0.1\n" if jtype == "translational" else "")
+    sizes = "length" if jtype == "translational" else "" if "point_on_line" in jtype else "radius"
+    text = LAWS[law].replace("radius = 0.1\n", "radius = 0.1\n" if sizes == "radius" else "")
+    text = text.replace("length = 0.1\n", "length = 0.1\n" if sizes == "length" else "")
     return text if mu is None else text.replace("mu = 0.3", f"mu = {mu}")
 
 
@@ -364,6 +368,38 @@ def test_friction_is_dissipative(single, jtype, law):
             assert abs(P - power) <= EQ_REL * scale and P <= EQ_REL * scale, (P, power)
             nonzero += power < -1e-9 * scale
     assert nonzero > 0  # the check is not vacuous
+
+
+@pytest.mark.parametrize("law", list(LAWS))
+@pytest.mark.parametrize("jtype", TYPES)
+def test_friction_jacobian_matches_differences_of_the_forces(single, jtype, law):
+    """The friction forces' Jacobian in the joint's multipliers that the core's Newton uses
+    (analytic: core/joints_planar.c, joints_spherical.c, joints_spatial.c's point on line;
+    Kernel.friction_joint_at) against central differences of the core's forces, at random states
+    and multipliers (speeds scaled into and beyond the laws' linear part), to 1e-6 of the forces'
+    scale; the forces are not all zero (the check is not vacuous)."""
+    spec, model = single(jtype, 1, friction_table(jtype, law))
+    k = kernel_for(model, spec.solver)
+    rng = np.random.default_rng(7000)
+    moved = 0
+    for trial in range(12):
+        y = _state(model, rng)
+        y[model.n:] *= 10.0 ** rng.uniform(-4, 0)
+        for j in model.friction_joints:
+            ne = len(model.joints[j].rows)
+            lam = rng.normal(size=ne) * 10.0
+            Q, dQ = k.friction_joint_at(y, j, lam)
+            fd = np.zeros_like(dQ)
+            for e in range(ne):
+                step = 1e-6 * max(1.0, abs(lam[e]))
+                lp, lm = lam.copy(), lam.copy()
+                lp[e] += step
+                lm[e] -= step
+                fd[:, e] = (k.friction_joint_at(y, j, lp)[0] - k.friction_joint_at(y, j, lm)[0]) / (2 * step)
+            scale = max(1.0, float(np.max(np.abs(Q))))
+            assert np.max(np.abs(dQ - fd)) <= 1e-6 * scale, (jtype, law, trial, dQ, fd)
+            moved += bool(np.any(Q))
+    assert moved >= 6, moved
 
 
 @pytest.mark.parametrize("jtype", TYPES)

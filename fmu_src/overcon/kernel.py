@@ -128,6 +128,7 @@ def _bind(path: Path) -> ctypes.CDLL:
                             ("ovk_sim_watch_extremes", i, [vp, vp, i, vp]),
                             ("ovk_band_svd", i, [vp, i, i, i, ctypes.c_double, vp, vp]),
                             ("ovk_law_eval", i, [vp, i, ctypes.c_double, vp, vp]),
+                            ("ovk_friction_joint_at", i, [vp, vp, vp, i, vp, vp, vp]),
                             ("ovk_set_inputs", i, [vp, vp, vp, vp, ctypes.c_double]),
                             ("ovk_sensors", i, [vp, vp, vp, vp, i, vp]),
                             ("ovk_sim_set_inputs", i, [vp, vp, vp]),
@@ -393,6 +394,7 @@ class Kernel:
         m.lp = arr([_load_constants(ld) for ld in model.loads], float)
         m.cols = arr(plan.friction_cols, I32)
         m.fj, m.fgroup = arr(fj, I32), arr(fgroup, I32)
+        self._friction_plan = tuple(int(j) for j in fj)  # the friction joints in the core's plan order
         m.fci, m.fcj = arr(fci, I32), arr(fcj, I32)
         xrows, fx, rbody = self._pack_kept(lib, m, model.retained)
         m.xrows, m.fx, m.rbody = arr(xrows, I32), arr(fx, I32), arr(rbody, I32)
@@ -537,6 +539,22 @@ class Kernel:
             raise RuntimeError(f"the compiled core's outputs failed ({STATUS.get(status, status)}): {self._message()}")
         return self._reac, self._fric
 
+    def friction_joint_at(self, y: np.ndarray, j: int, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(Q, dQ) of the friction joint ``j`` (an index of ``model.joints`` with a law) at y and its
+        multipliers ``lam`` (its equations; core/api.c ovk_friction_joint_at): Q = [Qi, Qj] (2 nh_b,
+        the generalized forces on body i and body j), dQ = dQ/dlam (2 nh_b, neq), the Jacobian the
+        friction solve's Newton uses (analytic; the spatial axis types' by differences) (new arrays)."""
+        n = self._friction_plan.index(j)
+        yy = np.ascontiguousarray(y, float)
+        lam = np.ascontiguousarray(lam, float)
+        kh = self.model.nh_b
+        Q, dQ = np.zeros(2 * kh), np.zeros((2 * kh, lam.size))
+        status = self._lib.ovk_friction_joint_at(self._pm, self._data, yy.ctypes.data, int(n), lam.ctypes.data,
+                                                 Q.ctypes.data, dQ.ctypes.data)
+        if status:
+            raise RuntimeError(f"the compiled core's friction_joint_at failed ({STATUS.get(status, status)}): "
+                               f"{self._message()}")
+        return Q, dQ
 
     def set_inputs(self, t: float, values, slopes=None) -> None:
         """The inputs' values at t (model.inputs order; N, N.m) and slopes (per s; None: held) for

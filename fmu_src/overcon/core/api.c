@@ -324,6 +324,36 @@ int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *
     return OVK_OK;
 }
 
+/* The friction forces of friction joint n (0 <= n < nfj, the plan's order M->fj) at y and its
+ * multipliers lam (its equations, in order): Q = [Qi, Qj] (2 nh_b: generalized forces on body i
+ * and body j) and their derivatives dQ = d Q / d lam (2 nh_b x neq, row-major), the Jacobian the
+ * friction solve's Newton uses (ovk_joint_friction_jac): the entry point that lets each type's
+ * Jacobian be checked against differences of its forces. */
+int ovk_friction_joint_at(const ovk_model *M, ovk_data *d, const double *y, int n, const double *lam, double *Q,
+                          double *dQ) {
+    if (!d) return OVK_NOMEM;
+    if (d->status) return d->status;
+    d->msg[0] = '\0';
+    if (n < 0 || n >= M->nfj || !y || !lam || !Q || !dQ)
+        return ovk_fail(d, OVK_INVALID, "friction_joint_at: friction joint %d of %d (or a null pointer)", n, M->nfj);
+    int j = M->fj[n], ne = M->jneq[j], kh = M->nh_b;
+    double blkI[6 * OVK_MAXEQ], blkJ[6 * OVK_MAXEQ], ph[OVK_MAXEQ], gm[OVK_MAXEQ];
+    double dQi[6 * OVK_MAXEQ], dQj[6 * OVK_MAXEQ];
+    for (int e = 0; e < ne; e++)
+        if (!isfinite(lam[e])) return ovk_fail(d, OVK_NONFINITE, "friction_joint_at: lam[%d] is not finite", e);
+    ovk_frames_build(M, y, y + M->nb * M->nq_b, &d->f);
+    ovk_joint_rows(M, &d->f, j, ph, blkI, blkJ, gm);
+    ovk_fctx cx;
+    ovk_joint_friction_setup(M, &d->f, j, blkI, &cx);
+    ovk_joint_friction_forces(M, j, &cx, lam, Q, Q + kh);
+    ovk_joint_friction_jac(M, j, &cx, lam, dQi, dQj);
+    for (int k = 0; k < kh * ne; k++) {
+        dQ[k] = dQi[k];
+        dQ[kh * ne + k] = dQj[k];
+    }
+    return OVK_OK;
+}
+
 /* Phi (m), Phi_h (m x nh, row-major) and gamma (m, without Baumgarte) at y (joints.c): the rows
  * the evaluation solves with, for the pre-check, the initial-state checks and the tests' finite
  * differences. */

@@ -670,6 +670,8 @@ OVK_HIDDEN int ovk_rows_in(const ovk_model *M, ovk_data *d, const double *y);
 OVK_EXPORT int ovk_rows_sparse(const ovk_model *M, ovk_data *d, const double *y, double *phi, int *cols, double *vals);
 OVK_EXPORT int ovk_evaluate_robust(const ovk_model *M, ovk_data *d, const double *y, const double *start, double *ydot,
                                    double *lam, double *qf, int *iterations);
+OVK_EXPORT int ovk_friction_joint_at(const ovk_model *M, ovk_data *d, const double *y, int n, const double *lam,
+                                     double *Q, double *dQ);
 OVK_EXPORT int ovk_outputs(const ovk_model *M, ovk_data *d, const double *y, const double *lam, double *reac,
                            double *fric);
 

@@ -605,8 +605,8 @@ def _check_particles(ctx: _Ctx, bodies: list, joints: list, loads: list, kind: s
     for k, js in enumerate(joints):
         p, jt = f"joints[{k}]", JOINT_TYPES[js.type]
         for side, body in _particle_of(by_name, js):
-            if jt.name not in S.PARTICLE_JOINTS:
-                allowed = ", ".join(n for n in S.PARTICLE_JOINTS if resolve_joint_type(kind, n) is not None)
+            if js.type not in S.PARTICLE_JOINTS:
+                allowed = ", ".join(JOINT_TYPES[t].name for t in S.PARTICLE_JOINTS if JOINT_TYPES[t].kind == kind)
                 ctx.add(f"{p}.body_{side}", f"joint {js.name}: body '{body}' is a particle (no orientation), and a "
                                             f"{jt.name} joint holds its body's orientation; a particle takes "
                                             f"{allowed} joints")

@@ -175,12 +175,13 @@ BODY_KINDS = ("rigid", "particle")
 """``[[bodies]] kind``: a rigid body (default) or a particle (a point mass: ``mass``, no
 ``inertia``, ``q0``/``h0`` of the position and velocity only)."""
 
-PARTICLE_JOINTS = ("revolute", "spherical", "distance", "point_on_line")
-"""The joint types (file names) a particle may take: those that act at a point and need no
-orientation of the particle (the planar revolute and the spherical joint at its position, the
-distance joint from its position, the point-on-line joint as its body i: the bead on a wire). The
-others hold the body's orientation (a guide's angle row, an axis): refused on a particle, naming
-the body and the joint."""
+PARTICLE_JOINTS = ("revolute", "spherical", "distance", "spatial_distance", "point_on_line", "spatial_point_on_line")
+"""The joint types (keys of :data:`overcon.joints.TYPES`: the planar ``revolute``, not the spatial
+one) a particle may take: those that act at a point and need no orientation of the particle (the
+planar revolute and the spherical joint at its position, the distance joint from its position, the
+point-on-line joint as its body i: the bead on a wire). The others hold the body's orientation (a
+guide's angle row, an axis: the spatial revolute too): refused on a particle, naming the body and
+the joint."""
 
 PARTICLE_BODY_I_ONLY = ("point_on_line",)
 """Joint types of :data:`PARTICLE_JOINTS` that take a particle as body i only: body j carries a

@@ -175,6 +175,24 @@ def test_min_norm_shares_the_normal_force_between_coincident_wires(tmp_path):
     _assert_slide(res.time, s, v, A, B, 1e-4, "min-norm")
 
 
+def test_compliant_wires_share_the_normal_force_by_their_stiffness(tmp_path):
+    """redundancy = "compliant", both wires spring-dampers of equal stiffness (1e6 N/m, damping
+    2e3 N s/m): once the start's transient has died out each carries half the normal force and
+    wire1's friction is -mu N / 2 (the friction of a compliant joint from its deformation's force)."""
+    comp = "[joints.compliance]\nstiffness = 1e6\nrotational_stiffness = 1e6\ndamping = 2e3\n"
+    path = _double_wire(tmp_path, "compliant", "[]")
+    mech = tmp_path / "double.toml"
+    text = mech.read_text().replace("[joints.friction]", comp + "[joints.friction]")
+    mech.write_text(text + comp)
+    path.write_text(path.read_text().replace("tolerance = 1e-12", 'tolerance = 1e-10\nmethod = "radau"'))
+    res = run_scene(scene_mod.as_scene(scene_mod.load(path)))
+    N = 0.5 * G * math.cos(math.radians(30.0))
+    late = res.time >= 0.2
+    for w in ("wire1", "wire2"):
+        assert np.allclose(res.column(f"{w}.N")[late], N / 2, rtol=1e-8), w
+    assert np.allclose(res.column("wire1.friction")[late], -0.2 * N / 2, rtol=1e-8)
+
+
 def _spin_scene(**solver):
     spec = scene_mod.as_scene(scene_mod.load(EXAMPLES / "bead_spin_slide.toml"), solver=solver or None)
     import dataclasses

@@ -11,6 +11,7 @@ the quaternion examples (door: spatial revolute joints; carriage: prismatic and 
 revolute and spherical, each with friction) and a random chain of every spatial joint type in
 Euler angles (universal and fixed joints too); redundancy "min-norm" (the paper's planar group, the door) and
 "compliant" (the door, the four-bar with per-axis values, the paper's group), evaluated and run;
+the point-on-line examples with friction on a particle (bead_wire_slide planar, bead_spin_slide spatial);
 spatial states where Newton gives up and damped Newton finishes; and every failure status: a
 singular position (tests/data/two_pins: two pins on one bar, rows exactly dependent), the friction solve giving up
 (friction_max_iter = 2), a non-finite state, an Euler singularity, a spring whose points coincide.
@@ -284,11 +285,24 @@ def particles(w: Writer, tmp: Path) -> None:
         w.run(model, spec.solver, "dopri5", 0.2)
 
 
+def beads(w: Writer) -> None:
+    """The point-on-line examples with friction (mechanisms/examples/bead_wire_slide.toml, planar,
+    joints_planar.c's line rows and friction; bead_spin_slide.toml, spatial, joints_spatial.c's):
+    evaluations at random states (friction solves at arbitrary sliding speeds) and a run."""
+    for name in ("bead_wire_slide", "bead_spin_slide"):
+        spec = spec_of(MECH / "examples" / f"{name}.toml")
+        model = compile_checked(spec)
+        w.model(model, spec.solver)
+        random_states(w, model, 6, seed=9)
+        w.run(model, spec.solver, "dopri5", 0.2)
+
+
 def build(tmp: Path) -> Writer:
     w = Writer()
     singular_pass(w, tmp)
     watch_stops(w, tmp)
     particles(w, tmp)
+    beads(w)
     for name, n in (("planar_f145_wo6", 12), ("spatial_MN_wo5", 12), ("spatial_GH_wo9", 30), ("spatial_GHMN_wo18", 30)):
         spec = spec_of(MECH / f"{name}.toml")
         model = compile_checked(spec)

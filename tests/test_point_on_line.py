@@ -273,6 +273,9 @@ def _line(bi: str, bj: str, d: int, axis: str, extra: str = "") -> str:
      "joints[0] (wire).friction.mu", "missing required field"),
     (PLANAR + BEAD2 + _line("bead", "base", 2, "[1.0, 0.0]").replace("axis_j = [1.0, 0.0]\n", ""),
      "joints[0] (wire)", "axis_j"),
+    (SPATIAL + BEAD3 + _line("bead", "base", 3, "[1.0, 0.0, 0.0]", "[joints.compliance]\nstiffness = [1e6, 1e6, 1e5]\n"
+                                                                  "rotational_stiffness = 1e6\n"),
+     "joints[0] (wire).compliance", "a point_on_line joint takes scalar (isotropic) compliance values only"),
 ])
 def test_refusals_name_the_body_joint_and_field(tmp_path, capsys, text, field, words):
     (tmp_path / "m.toml").write_text(text)

@@ -544,6 +544,8 @@ class Kernel:
         multipliers ``lam`` (its equations; core/api.c ovk_friction_joint_at): Q = [Qi, Qj] (2 nh_b,
         the generalized forces on body i and body j), dQ = dQ/dlam (2 nh_b, neq), the Jacobian the
         friction solve's Newton uses (analytic; the spatial axis types' by differences) (new arrays)."""
+        if j not in self._friction_plan:
+            raise ValueError(f"friction_joint_at: joint {j} has no friction law in this model")
         n = self._friction_plan.index(j)
         yy = np.ascontiguousarray(y, float)
         lam = np.ascontiguousarray(lam, float)

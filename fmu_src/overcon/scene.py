@@ -857,6 +857,10 @@ def _check_joint(jt: dict, p: str, ctx: _Ctx, kind: str | None, body_names: dict
     if v is not _MISSING and _table(ctx, v, f"{p}.friction") is not None:
         friction = _friction(ctx, v, f"{p}.friction", jtype if fields else None, None)
     compliance, good = _compliance(ctx, jt, p, kind)
+    if good and compliance is not None and compliance.per_axis and fields is not None and not fields.axis_compliance:
+        ctx.add(f"{p}.compliance", f"a {fields.name} joint takes scalar (isotropic) compliance values only: its "
+                                   "equations' directions are the line's normals on body j, not a frame on body i")
+        good = False
     if ok and good and None not in (jname, jtype, bi, bj):
         return JointSpec(jname, jtype, bi, bj, params, friction, compliance)
     return None

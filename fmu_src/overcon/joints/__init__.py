@@ -1,8 +1,8 @@
 """Joint types: ONE table of per-type facts, :data:`TYPES`, and one module per type holding what
 compiling a joint needs (paper Eq. 34, 36, 41; App. A). The rows of every type (Phi, Phi_h,
 gamma), its reactions and its friction are evaluated by the compiled core only
-(core/joints_planar.c, core/joints_spherical.c, core/joints_spatial.c, dispatched by
-core/joints.c); :mod:`overcon.kernel` packs each joint's constants for it. Adding a joint type is
+(core/joints_planar.c, core/joints_spherical.c, core/joints_distance.c, core/joints_spatial.c,
+dispatched by core/joints.c); :mod:`overcon.kernel` packs each joint's constants for it. Adding a joint type is
 one module, one entry here, its C rows and its packing (docs/adding-a-joint.md).
 
 A type's module offers:
@@ -14,7 +14,9 @@ A type's module offers:
 - optional ``ROW_KINDS``: per equation translational or rotational (:attr:`JointType.row_kinds`).
 
 The spatial axis types (revolute, prismatic, cylindrical, universal, fixed) share their constants,
-row meanings and reaction frame in :mod:`overcon.joints.spatial_rows`.
+row meanings and reaction frame in :mod:`overcon.joints.spatial_rows`; the point-on-line joint
+(:mod:`overcon.joints.point_on_line`) shares the completion rule and the row formulas (the
+cylindrical joint's point rows, the planar translational joint's first row).
 """
 from __future__ import annotations
 
@@ -54,7 +56,10 @@ class JointType:
     ``friction_extra``: further size keys, key -> (description, default), default None for a
     required key or the name of the key whose value it takes (stored as ``FrictionSpec.extra``
     when given). ``reaction``: (component, unit) of the reported reaction in the auxiliary frame.
-    ``sliding_unit``: unit of the friction law's velocity (``v_reg``, ``v_stribeck``)."""
+    ``sliding_unit``: unit of the friction law's velocity (``v_reg``, ``v_stribeck``).
+    ``axis_compliance``: a compliant joint of the type may give per-axis (3-vector) values, along
+    its reaction frame on body i (``E``) or body i's axes; False for the point-on-line joint, whose
+    directions are the line's on body j (decided: scalar values only)."""
 
     module: ModuleType
     kind: str
@@ -69,6 +74,7 @@ class JointType:
     optional: Mapping[str, tuple[str, str, object]] = field(default_factory=dict)
     friction_extra: Mapping[str, tuple[str, str | None]] = field(default_factory=dict)
     sizeless_friction: bool = False
+    axis_compliance: bool = True  # per-axis (3-vector) compliance values taken (their frame on body i)
 
     @property
     def has_friction(self) -> bool:
@@ -224,7 +230,7 @@ TYPES: Mapping[str, JointType] = {
     "spatial_point_on_line": JointType(
         module=point_on_line, kind="spatial", name="point_on_line", n_equations=2,
         reaction=(("Fx", "N"), ("Fy", "N")), required=_line_fields(), friction_size=None, sizeless_friction=True,
-        sliding_unit="m/s", friction_unit="N", friction_text=_LINE_FRICTION),
+        sliding_unit="m/s", friction_unit="N", friction_text=_LINE_FRICTION, axis_compliance=False),
 }
 """Joint type key -> its facts and module: the one place a joint type is declared. The
 key is internal (CompiledJoint.type, JointSpec.type); files and outputs use ``name``, resolved per

@@ -295,12 +295,8 @@ void ovk_axis_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, con
         return;
     }
     double out = ovk_axis_friction_output(M, j, cx, lam);
-    if (M->jtype[j] == J_POINT_LINE) { /* the force on body i at P_i along the line u = R_j a_j */
-        axial_loads(c, cx, out, 0.0, Qi, Qj);
-        return;
-    }
     if (M->jtype[j] == J_SREVOLUTE) axial_loads(c, cx, 0.0, out, Qi, Qj);
-    else axial_loads(c, cx, out, 0.0, Qi, Qj);
+    else axial_loads(c, cx, out, 0.0, Qi, Qj); /* prismatic, point on line (u = R_j a_j): a force at P_i */
 }
 
 /* d(Qi, Qj)/d lam (6 x neq each, row-major) by forward differences, as

@@ -1,5 +1,5 @@
 /* Stage: frames. Positions r, rotations R, velocities v and angular velocities w of every body from
- * q and h (overcon.evaluation.frames): planar (x, y, phi), spatial z-x-z Euler angles (nq_b 6) or
+ * q and h: planar (x, y, phi), spatial z-x-z Euler angles (nq_b 6) or
  * quaternions (nq_b 7, R of e / |e|: kinematics.quat_R_rows); slot nb is the base (at rest at the
  * origin). Euler bodies also keep sin/cos of beta and gamma (rates.c). */
 #include <math.h>

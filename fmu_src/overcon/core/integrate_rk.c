@@ -1,4 +1,4 @@
-/* Explicit integrators of overcon.integrators in C: Dormand-Prince 5(4) with its 4th-order dense
+/* The explicit integrators of a run (sim.c): Dormand-Prince 5(4) with its 4th-order dense
  * output and Dormand-Prince 8(5,3) (Hairer's DOP853) with its 7th-order dense output, both with the
  * step-size control of SciPy's RungeKutta loop and Hairer's stiffness test, and the classical
  * Runge-Kutta 4 with the fixed step, its stability guard and cubic Hermite dense output. The

@@ -1,4 +1,4 @@
-/* Stage: applied forces Q (nh) at the frames in d->f (overcon.evaluation.applied_forces): gravity,
+/* Stage: applied forces Q (nh) at the frames in d->f: gravity,
  * the gyroscopic term -w x (J w) of spatial bodies, forces and torques on one body, springs
  * between two bodies (or a body and the base). */
 #include <math.h>

@@ -1,5 +1,5 @@
 /* Stage: the reported reactions and friction forces at y and the multipliers lam (m)
- * (overcon.evaluation.physical_reactions and friction_output): per joint j, reac[OVK_NREAC j ...] =
+ * (the outputs' reactions and friction forces): per joint j, reac[OVK_NREAC j ...] =
  * -A_i fi in its auxiliary frame (planar Fx, Fy, T; spherical Fx, Fy, Fz; distance its tension; point on line its normal force
  * along each of its rows' normals; the axis joints their
  * type's components of [Fx, Fy, Fz, Tx, Ty, Tz] in the joint frame), then -fi[:dim] in the global

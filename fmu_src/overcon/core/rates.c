@@ -1,4 +1,4 @@
-/* Stage: coordinate rates q' from the velocities h (overcon.evaluation.coordinate_rates): planar
+/* Stage: coordinate rates q' from the velocities h: planar
  * q' = h; spatial positions' rates are the velocities, the z-x-z Euler angles' rates are
  * H(beta, gamma) w (kinematics.euler_H_rows), singular where sin beta = 0, and a quaternion's
  * e' = 1/2 e (x) (0, w) + QUAT_NORM_RATE / 2 (1 - |e|^2) e (kinematics.quat_rates_rows). */

@@ -199,7 +199,7 @@ void ovk_planar_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, cons
 }
 
 /* The reported friction output of planar joint j at its multipliers lam (2): the friction torque
- * (revolute) or force (translational) magnitude; the point-on-line joint has its own, ovk_line_friction_output). */
+ * (revolute) or force (translational) magnitude (the point-on-line joint's: ovk_line_friction_output). */
 double ovk_planar_friction_output(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam) {
     const double *lp = M->jlawp + NLP * j;
     double pa[3];

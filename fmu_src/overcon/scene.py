@@ -85,6 +85,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
 import stat
 import tomllib
 from dataclasses import dataclass
@@ -1640,17 +1641,25 @@ keys: every key and table header of the file (a mechanism at the body and joint 
 count only bounds a linear cost, the file's size already bounds it too); nesting: arrays and inline tables inside each other."""
 
 
+_BASIC_STRING = re.compile(r'[^"\\\n]*(?:\\[\s\S][^"\\\n]*)*')  # a "..." string's body: \ takes the next character
+_LITERAL_STRING = re.compile(r"[^'\n]*")
+_KEY_RUN = {stop: re.compile("[^" + re.escape(stop) + "\n\"'.]*") for stop in ("]", "=}")}
+_VALUE_RUN = re.compile(r"[^\n#\"'\[\]{},]+")  # characters a value goes through without a decision
+_BLANK_RUN = re.compile(r"[ \t\r]+")
+
+
 def _skip_toml_string(text: str, i: int) -> int:
     """The index after the string that opens at ``text[i]`` (a quote; triple-quoted: up to its
-    closing triple, else up to the closing quote or the line's end)."""
+    closing triple, else up to the closing quote or the line's end; in a "..." string a
+    backslash takes the next character, a last one goes past the end)."""
     n = len(text)
     q = text[i]
     if text.startswith(q * 3, i):
         end = text.find(q * 3, i + 3)
         return n if end < 0 else end + 3
-    j = i + 1
-    while j < n and text[j] != q and text[j] != "\n":
-        j += 2 if q == '"' and text[j] == "\\" else 1
+    j = (_BASIC_STRING if q == '"' else _LITERAL_STRING).match(text, i + 1).end()
+    if j < n and text[j] == "\\":  # a backslash as the text's last character
+        j += 2
     return j + 1
 
 
@@ -1659,12 +1668,15 @@ def _toml_key_path(text: str, i: int, stop: str) -> tuple[int, int, int]:
     ending before one of ``stop`` or the line's end."""
     n = len(text)
     parts, start = 1, i
-    while i < n and text[i] not in stop and text[i] != "\n":
+    run = _KEY_RUN[stop]
+    while i < n:
+        i = run.match(text, i).end()  # up to a stop, a line's end, a quote or a dot
+        if i >= n or text[i] in stop or text[i] == "\n":
+            break
         if text[i] in "\"'":
             i = _skip_toml_string(text, i)
             continue
-        if text[i] == ".":
-            parts += 1
+        parts += 1  # a dot
         i += 1
     return i, parts, i - start
 
@@ -1686,8 +1698,13 @@ def toml_prescan(text: str) -> str | None:
             if not stack:
                 expect_key = True
             continue
-        if ch in " \t\r":
-            i += 1
+        if not expect_key:
+            run = _VALUE_RUN.match(text, i)
+            if run:  # blanks and a value's characters: nothing to decide
+                i = run.end()
+                continue
+        elif ch in " \t\r":
+            i = _BLANK_RUN.match(text, i).end()
             continue
         if ch == "#":
             j = text.find("\n", i)

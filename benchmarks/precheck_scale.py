@@ -24,6 +24,16 @@ where said, CPU seconds (what other jobs on a loaded machine change least), medi
 The code measured is the ``overcon`` this Python imports: ``PYTHONPATH=OTHER/fmu_src`` measures
 another checkout (with its compiled core). The figures go to docs/benchmarks.md ("Pre-check at
 scale") and docs/reference/bounds.md by hand.
+
+    python benchmarks/precheck_scale.py --large [--against OTHER] [--repeat 3]
+
+The issue-40 sizes instead (docs/limits.md, docs/benchmarks.md "Memory and limits at scale"): a
+planar chain of 10,000 bodies and a coupler on 999 parallel cranks (1000 bodies, 1998 joints),
+``overcon check FILE --json --friction none`` in a fresh process: wall and CPU seconds (medians)
+and the child's peak resident size (its own ``ru_maxrss``, from ``wait4``). ``--against OTHER``
+runs the checkout at OTHER (``PYTHONPATH=OTHER/fmu_src``, its core compiled in place: ``python
+setup.py build_ext --inplace`` there) interleaved with this one, run by run, and says whether
+the two JSON reports are identical.
 """
 from __future__ import annotations
 
@@ -148,11 +158,64 @@ def main_(quick: bool, only: list[str]) -> None:
                   flush=True)
 
 
+class _Child(subprocess.Popen):
+    """A Popen that keeps the child's own rusage (wait4), not the sum over all children."""
+
+    cpu = peak_mb = float("nan")
+
+    def _try_wait(self, wait_flags):
+        pid, status, usage = os.wait4(self.pid, wait_flags)
+        if pid:
+            self.cpu = usage.ru_utime + usage.ru_stime
+            self.peak_mb = usage.ru_maxrss / 1024
+        return pid, status
+
+
+def large(against: str | None, repeat: int) -> None:
+    from test_precheck_methods import linkage
+    from test_robust import chain
+    codes = [("this", os.environ.copy())]
+    if against:
+        env = os.environ.copy()
+        env["PYTHONPATH"] = str(Path(against).resolve() / "fmu_src")
+        codes.append(("other", env))
+    with tempfile.TemporaryDirectory() as tmp:
+        cases = [("planar chain 10,000 bodies", chain(10_000, Path(tmp) / "chain10000.toml")),
+                 ("coupler on 999 parallel cranks", linkage(np.random.default_rng(1000), "planar", "cranks", 1000,
+                                                            Path(tmp) / "cranks.toml"))]
+        print(f"{'mechanism':<32} {'code':<6} {'wall s':>7} {'cpu s':>7} {'peak MB':>8}", flush=True)
+        for label, path in cases:
+            runs: dict = {name: [] for name, _ in codes}
+            outs: dict = {}
+            for _ in range(repeat):
+                for name, env in codes:  # interleaved: the machine's load falls on both alike
+                    t0 = time.perf_counter()
+                    child = _Child([sys.executable, "-m", "overcon.cli", "check", str(path), "--json", "--friction",
+                                    "none"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+                    out, err = child.communicate()
+                    if child.returncode not in (0, 1):
+                        raise RuntimeError(f"{name}: overcon check {path}: exit {child.returncode}: {err.decode()[-500:]}")
+                    runs[name].append((time.perf_counter() - t0, child.cpu, child.peak_mb))
+                    outs[name] = out
+            for name, _ in codes:
+                wall, cpu, peak = (statistics.median(r[k] for r in runs[name]) for k in range(3))
+                print(f"{label:<32} {name:<6} {wall:7.2f} {cpu:7.2f} {peak:8.0f}", flush=True)
+            if against:
+                print(f"{label:<32} reports identical: {outs['this'] == outs['other']}", flush=True)
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer and smaller mechanisms (chains of 100 and 1000 "
                     "bodies, the parallelograms of 99 and 500 cranks, the two trees with loops)")
     ap.add_argument("--only", nargs="*", default=[], metavar="SUBSTRING",
                     help="only the mechanisms whose label contains one of these")
+    ap.add_argument("--large", action="store_true", help="the 10,000-body chain and the 999 parallel cranks "
+                    "(issue 40), from the command line, with peak memory")
+    ap.add_argument("--against", metavar="OTHER", help="with --large: also the checkout at OTHER, interleaved")
+    ap.add_argument("--repeat", type=int, default=3, help="with --large: runs per mechanism and checkout (median)")
     args = ap.parse_args()
-    main_(args.quick, args.only)
+    if args.large:
+        large(args.against, args.repeat)
+    else:
+        main_(args.quick, args.only)

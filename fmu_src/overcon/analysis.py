@@ -280,11 +280,6 @@ def _ruiz(rr: np.ndarray, cc: np.ndarray, vals: np.ndarray, n: int, m: int):
     return keep, v, d_r, d_c
 
 
-#: A :meth:`_Sparse.sub` of at most this many entries is looked up entry by entry (the per-joint
-#: and per-leaf gathers of a large mechanism: thousands of them, each a few entries).
-_SMALL_SUB = 64
-
-
 class _Sparse:
     """A matrix held by its nonzeros, row-major (CSR: ``indptr``, ``indices``, ``data``): what the
     one factorisation gathers from (:func:`_sub`), without the dense n x m array."""
@@ -295,7 +290,6 @@ class _Sparse:
         self.indices = np.asarray(cc, dtype=np.intp)
         self.data = np.asarray(vals, dtype=float)
         self.data.setflags(write=False)
-        self._at: dict | None = None  # :meth:`_lookup`
         self._keys: tuple | None = None  # :meth:`stack`
 
     def nonzeros(self) -> tuple[np.ndarray, np.ndarray]:
@@ -317,13 +311,6 @@ class _Sparse:
         at = np.minimum(np.searchsorted(keys, q), keys.size - 1)
         return np.where(keys[at] == q, vals[at], 0.0)
 
-    def _lookup(self) -> dict:
-        """{i * m + c: A[i, c]} over the nonzeros (made on the first small :meth:`sub`)."""
-        if self._at is None:
-            rr, cc = self.nonzeros()
-            self._at = dict(zip((rr * self.shape[1] + cc).tolist(), self.data.tolist()))
-        return self._at
-
     def toarray(self) -> np.ndarray:
         out = np.zeros(self.shape)
         rr, cc = self.nonzeros()
@@ -331,14 +318,7 @@ class _Sparse:
         return out
 
     def sub(self, R, C) -> np.ndarray:
-        """The dense submatrix of rows R x columns C (in their order). A small one (at most
-        :data:`_SMALL_SUB` entries: a joint, a peeled leaf, a crank) is looked up entry by entry
-        in a hash of the nonzeros, made once; a large one is gathered from the rows' nonzeros."""
-        if len(R) * len(C) <= _SMALL_SUB:
-            at, m = self._lookup(), self.shape[1]
-            R = R.tolist() if isinstance(R, np.ndarray) else R
-            C = C.tolist() if isinstance(C, np.ndarray) else C
-            return np.array([[at.get(i * m + c, 0.0) for c in C] for i in R], dtype=float).reshape(len(R), len(C))
+        """The dense submatrix of rows R x columns C (in their order)."""
         R, C = np.asarray(R, dtype=np.intp).reshape(-1), np.asarray(C, dtype=np.intp).reshape(-1)
         out = np.zeros((R.size, C.size))
         if not R.size or not C.size:
@@ -1171,7 +1151,23 @@ class _Context:
         key = np.unique(np.repeat(owner, lens) * n + rows_sorted[at])  # (group, row) pairs, sorted
         split = np.searchsorted(key // n if key.size else key, np.arange(len(cols) + 1))
         rows = key % n if key.size else key
-        return [_sub(self.A, rows[split[g]:split[g + 1]], cols[g]) for g in range(len(cols))]
+        pieces = [(rows[split[g]:split[g + 1]], cols[g]) for g in range(len(cols))]
+        out: list = [None] * len(pieces)
+        by_shape: dict = {}
+        for g, (r, c) in enumerate(pieces):
+            by_shape.setdefault((r.size, c.size), []).append(g)
+        for (nr, nc), idx in by_shape.items():  # one gather per shape (a joint's block is small)
+            if nr * nc > _CHUNK:  # a block too large to stack (a group of many columns)
+                for g in idx:
+                    out[g] = _sub(self.A, *pieces[g])
+                continue
+            size = _CHUNK // max(1, nr * nc)
+            for lo in range(0, len(idx), size):
+                part = idx[lo:lo + size]
+                stack = _gather(self.A, [pieces[g][0] for g in part], [pieces[g][1] for g in part])
+                for g, b in zip(part, stack):
+                    out[g] = b
+        return out
 
     @property
     def cross_check(self) -> bool:

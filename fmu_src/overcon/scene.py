@@ -205,13 +205,12 @@ def _desc(value) -> str:
     return f"{kind} {_short(value)}"
 
 
+_IDENTIFIER = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+
+
 def _is_identifier(s: str) -> bool:
-    return (
-        bool(s)
-        and s[0].isascii()
-        and s[0].isalpha()
-        and all(c.isascii() and (c.isalnum() or c == "_") for c in s)
-    )
+    """An ASCII letter, then ASCII letters, digits or _."""
+    return _IDENTIFIER.fullmatch(s) is not None
 
 
 _POSITIVE = (lambda x: x > 0, "must be > 0")

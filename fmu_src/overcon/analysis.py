@@ -574,23 +574,38 @@ def _peel(A: np.ndarray, rows_of: list, cols_of: list, floor: float):
     (the peeled rows have no live column: a row with a live column outside C is not in R)."""
     n, m = A.shape
     order = _peel_order(n, m, rows_of, cols_of, None)  # the steps if every D has full rank
-    svds = _svds(A, order, full=False)  # one batched SVD per shape of D
-    if not all(sv[-1] > floor for _, sv, _ in svds.values()):  # walk again, skipping those that fail
+    pinvs, smallest = _pinvs(A, order)
+    if not all(s > floor for s in smallest):  # walk again, skipping the leaves that fail
+        known = {(tuple(R), tuple(C)): (P, s) for (R, C), P, s in zip(order, pinvs, smallest)}
+
         def full_rank(R: list, C: list) -> bool:
             key = (tuple(R), tuple(C))
-            if key not in svds:
-                svds[key] = np.linalg.svd(_sub(A, R, C), full_matrices=False)
-            return bool(svds[key][1][-1] > floor)
+            if key not in known:
+                P, s = _pinvs(A, [(R, C)])
+                known[key] = (P[0], s[0])
+            return bool(known[key][1] > floor)
+
         order = _peel_order(n, m, rows_of, cols_of, full_rank)
+        pinvs = [known[(tuple(R), tuple(C))][0] for R, C in order]
     live_r = np.ones(n, dtype=bool)
     live_c = np.ones(m, dtype=bool)
-    steps = []
     for R, C in order:
-        u, sv, vt = svds[(tuple(R), tuple(C))]
-        steps.append((R, C, (vt.T / sv) @ u.T))  # D^+ (D has full column rank)
         live_r[R] = False
         live_c[C] = False
-    return steps, live_r, live_c
+    return [(R, C, P) for (R, C), P in zip(order, pinvs)], live_r, live_c
+
+
+def _pinvs(A, pieces: list) -> tuple[list, list]:
+    """(D^+, the smallest singular value of D) of each D = A[R, C] of the pieces [(R, C)] (every
+    D at least as tall as wide), from thin SVDs stacked by shape (:func:`_svds`); D^+ = V S^-1
+    U^T, D's pseudo-inverse (its left inverse when D has full column rank)."""
+    got = _svds(A, pieces, full=False, index=True)
+    pinvs, smallest = [], []
+    for k in range(len(pieces)):
+        u, sv, vt = got(k)
+        pinvs.append((vt.T / sv) @ u.T)
+        smallest.append(sv[-1])
+    return pinvs, smallest
 
 
 def _peel_order(n: int, m: int, rows_of: list, cols_of: list, full_rank) -> list:
@@ -629,30 +644,40 @@ def _peel_order(n: int, m: int, rows_of: list, cols_of: list, full_rank) -> list
     return order
 
 
-def _svds(A, pieces, full: bool, vectors: bool = True) -> dict:
+def _svds(A, pieces, full: bool, vectors: bool = True, index: bool = False):
     """{(tuple(rows), tuple(cols)): np.linalg.svd(A[rows, cols])} for the pieces [(rows, cols)],
     one stacked (batched) SVD per shape: LAPACK factorises each matrix of a stack as it does one
     alone, so the factors are those of one SVD per piece, at the cost of one call per shape.
     ``full``: V^T square (``full_matrices`` when the piece is wider than tall, as
     :func:`_svd_full` takes it), else the thin SVD; ``vectors=False``: (None, s, None), the
-    singular values alone (as :func:`_svdvals`). Pieces with no rows or columns are left out."""
+    singular values alone (as :func:`_svdvals`). Pieces with no rows or columns are left out.
+    ``index``: a function of the piece's position in ``pieces`` instead of the dict (no entry
+    per piece held: the peeling of a long chain has one piece per body)."""
     by_shape: dict = {}
-    for rows, cols in pieces:
+    for k, (rows, cols) in enumerate(pieces):
         if len(rows) and len(cols):
-            by_shape.setdefault((len(rows), len(cols)), []).append((tuple(rows), tuple(cols)))
-    out = {}
-    for (nr, nc), keys in by_shape.items():
+            by_shape.setdefault((len(rows), len(cols)), []).append(k)
+    stacks, where = [], [None] * len(pieces)
+    for (nr, nc), idx in by_shape.items():
         size = max(1, _CHUNK // (nr * nc + nr * nr + nc * nc))  # entries of a stack and its factors
-        for lo in range(0, len(keys), size):
-            part = keys[lo:lo + size]
-            stack = _gather(A, [r for r, _ in part], [c for _, c in part])
+        for lo in range(0, len(idx), size):
+            part = idx[lo:lo + size]
+            stack = _gather(A, [pieces[k][0] for k in part], [pieces[k][1] for k in part])
             if vectors:
-                u, s, vh = np.linalg.svd(stack, full_matrices=full and nc > nr)
-                out.update((key, (u[k], s[k], vh[k])) for k, key in enumerate(part))
+                stacks.append(np.linalg.svd(stack, full_matrices=full and nc > nr))
             else:
-                s = np.linalg.svd(stack, compute_uv=False)
-                out.update((key, (None, s[k], None)) for k, key in enumerate(part))
-    return out
+                stacks.append((None, np.linalg.svd(stack, compute_uv=False), None))
+            for j, k in enumerate(part):
+                where[k] = (len(stacks) - 1, j)
+
+    def at(k: int) -> tuple:
+        g, j = where[k]
+        u, s, vh = stacks[g]
+        return (None if u is None else u[j], s[j], None if vh is None else vh[j])
+
+    if index:
+        return at
+    return {(tuple(rows), tuple(cols)): at(k) for k, (rows, cols) in enumerate(pieces) if where[k] is not None}
 
 
 def _left_inverse_bound(A: np.ndarray, steps: list, cols_of: list) -> float:
@@ -818,11 +843,7 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     floor = float(tol) if tol is not None else rtol_eff * float(np.sqrt(np.sum(_values(A, rr, cc) ** 2)))
     steps, live_r, live_c = _peel(A, rows_of, cols_of, floor)
     blocks = _blocks(A, live_r, live_c, rr, cc)
-    # per block: a _Hub, or its dense SVD (s, V^T or None)
-    parts = [_hub(A, rows, cols, rows_of, cols_of, live_c) for rows, cols in blocks]
-    dense = [b for b, p in enumerate(parts) if p is None]
-    for b, p in zip(dense, _block_svds(A, [blocks[b] for b in dense], vectors)):
-        parts[b] = p
+    parts = _block_parts(A, blocks, rows_of, cols_of, live_c, vectors)
     hubs = [b for b, p in enumerate(parts) if isinstance(p, _Hub)]
     top = max((float(s[0]) for p in parts for s in (p.sigmas() if isinstance(p, _Hub) else [p[0]]) if s.size),
               default=0.0)
@@ -853,6 +874,14 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     kappa = float(sigma1 / above[-1]) if above.size and np.isfinite(sigma1) else 1.0
     return _Factorisation(sigma1=sigma1, tol=t, r=r, N=N, sigma=sigma, kappa=kappa, peeled=peeled,
                           blocks=tuple(blocks), ranks=tuple(ranks), route=route)
+
+
+def _block_parts(A, blocks: list, rows_of: list, cols_of: list, live_c: np.ndarray, vectors: bool) -> list:
+    """Per block: a :class:`_Hub` (:func:`_hub`), or its dense SVD (s, V^T or None), the dense
+    SVDs stacked by shape (:func:`_block_svds`)."""
+    parts = [_hub(A, rows, cols, rows_of, cols_of, live_c) for rows, cols in blocks]
+    dense = iter(_block_svds(A, [b for b, p in zip(blocks, parts) if p is None], vectors))
+    return [p if p is not None else next(dense) for p in parts]
 
 
 def _assemble(blocks, parts, t: float, m: int, vectors: bool):

@@ -574,14 +574,14 @@ def _peel(A: np.ndarray, rows_of: list, cols_of: list, floor: float):
     (the peeled rows have no live column: a row with a live column outside C is not in R)."""
     n, m = A.shape
     order = _peel_order(n, m, rows_of, cols_of, None)  # the steps if every D has full rank
-    pinvs, smallest = _pinvs(A, order)
+    pinvs, smallest = _pinvs(A, order, floor)
     if not all(s > floor for s in smallest):  # walk again, skipping the leaves that fail
         known = {(tuple(R), tuple(C)): (P, s) for (R, C), P, s in zip(order, pinvs, smallest)}
 
         def full_rank(R: list, C: list) -> bool:
             key = (tuple(R), tuple(C))
             if key not in known:
-                P, s = _pinvs(A, [(R, C)])
+                P, s = _pinvs(A, [(R, C)], floor)
                 known[key] = (P[0], s[0])
             return bool(known[key][1] > floor)
 
@@ -595,15 +595,16 @@ def _peel(A: np.ndarray, rows_of: list, cols_of: list, floor: float):
     return [(R, C, P) for (R, C), P in zip(order, pinvs)], live_r, live_c
 
 
-def _pinvs(A, pieces: list) -> tuple[list, list]:
+def _pinvs(A, pieces: list, floor: float) -> tuple[list, list]:
     """(D^+, the smallest singular value of D) of each D = A[R, C] of the pieces [(R, C)] (every
     D at least as tall as wide), from thin SVDs stacked by shape (:func:`_svds`); D^+ = V S^-1
-    U^T, D's pseudo-inverse (its left inverse when D has full column rank)."""
+    U^T, D's left inverse, made only when the smallest singular value exceeds ``floor`` (else
+    None: that D is not peeled)."""
     got = _svds(A, pieces, full=False, index=True)
     pinvs, smallest = [], []
     for k in range(len(pieces)):
         u, sv, vt = got(k)
-        pinvs.append((vt.T / sv) @ u.T)
+        pinvs.append((vt.T / sv) @ u.T if sv[-1] > floor else None)
         smallest.append(sv[-1])
     return pinvs, smallest
 
@@ -1336,13 +1337,23 @@ def _b_defects(ctx: _Context, groups: Sequence, unique: Sequence[bool], blocks: 
         return out
     limit = ctx.b_rtol * ctx.sigma1
     got = ctx.blocks([groups[g] for g in todo]) if blocks is None else [blocks[g] for g in todo]
-    for idx, _ in _by_shape([(got[k], groups[g]) for k, g in enumerate(todo)]):
-        R = np.linalg.qr(np.stack([got[k] for k in idx]), mode="r")
-        N = ctx.N_svd[np.array([list(groups[todo[k]]) for k in idx], dtype=np.intp)]
-        s = _svdvals(R @ N) if N.shape[-1] else np.zeros((len(idx), 0))
-        for k, sv in zip(idx, s):
-            out[todo[k]] = max(1, int(np.count_nonzero(sv > limit)))
+    k_null = ctx.N_svd.shape[1]
+    for idx, ((nr, nc), _) in _by_shape([(got[k], groups[g]) for k, g in enumerate(todo)]):
+        step = max(1, _CHUNK // max(1, nr * nc + nc * max(k_null, nc)))  # bounds a stack's entries
+        for lo in range(0, len(idx), step):
+            part = idx[lo:lo + step]
+            R = np.linalg.qr(_stacked([got[k] for k in part]), mode="r")
+            N = ctx.N_svd[np.array([list(groups[todo[k]]) for k in part], dtype=np.intp)]
+            s = _svdvals(R @ N) if k_null else np.zeros((len(part), 0))
+            for k, sv in zip(part, s):
+                out[todo[k]] = max(1, int(np.count_nonzero(sv > limit)))
     return out
+
+
+def _stacked(arrays: list) -> np.ndarray:
+    """The arrays (of one shape) as one stack; one alone is viewed as a stack, not copied (the
+    block of a large set of joints)."""
+    return arrays[0][None] if len(arrays) == 1 else np.stack(arrays)
 
 
 def _by_shape(items: list):
@@ -1369,7 +1380,7 @@ def _joints(ctx: _Context, checked: Mapping[str, tuple[int, ...]]) -> dict:
         step = max(1, _CHUNK // max(1, nr * max(k_null, nc)))  # bounds the stacked B's entries
         for lo in range(0, len(idx), step):
             part = idx[lo:lo + step]
-            stack = np.stack([blocks[k] for k in part])
+            stack = _stacked([blocks[k] for k in part])
             for k, sv in zip(part, _svdvals(stack)):
                 rank_p[k] = int(np.count_nonzero(sv > ctx.tol))
             if k_null:

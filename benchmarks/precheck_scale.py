@@ -166,7 +166,8 @@ def main_(quick: bool, only: list[str]) -> None:
 
 
 class _Child(subprocess.Popen):
-    """A Popen that keeps the child's own rusage (wait4), not the sum over all children."""
+    """A Popen that keeps the child's own rusage (wait4), not the sum over all children
+    (CPython's Popen reaps its child in ``_try_wait``; another Python leaves the figures NaN)."""
 
     cpu = peak_mb = float("nan")
 
@@ -245,7 +246,8 @@ def large(against: str | None, repeat: int, with_stages: bool = False, with_run:
                                     "none"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
                     out, err = child.communicate()
                     if child.returncode not in (0, 1):
-                        raise RuntimeError(f"{name}: overcon check {path}: exit {child.returncode}: {err.decode()[-500:]}")
+                        raise RuntimeError(f"{name}: overcon check {path}: exit {child.returncode}: "
+                                           f"{err.decode()[-500:]}")
                     runs[name].append((time.perf_counter() - t0, child.cpu, child.peak_mb))
                     outs[name] = out
             for name, _ in codes:

@@ -188,3 +188,48 @@ def test_the_cores_sparse_rows_are_the_dense_rows_nonzeros(tmp_path, path):
         r0, c0 = np.nonzero(J)
         assert np.array_equal(phi, phi_s) and np.array_equal(rr, r0) and np.array_equal(cc, c0)
         assert np.array_equal(vals, J[r0, c0])
+
+
+@pytest.mark.parametrize("kind,shape,n,loops", [("spatial", "loops", 40, 4), ("planar", "cranks", 30, 0),
+                                               ("spatial", "forest", 30, 0)], ids=lambda v: str(v))
+def test_batched_joint_verdicts_are_each_joints_own(tmp_path, kind, shape, n, loops):
+    """The analysis takes every joint's block, rank(A_P), B_P row norms and defect stacked by shape
+    (analysis._joints, _b_defects): each joint's numbers are those it gets analysed alone (one
+    joint in a batch of one), to the last bit, whatever the other joints in its stack."""
+    model = _model(linkage(np.random.default_rng(n), kind, shape, n, tmp_path / "m.toml", loops))
+    groups = joint_groups(model)
+    fz = an.factorise(jacobian(model, model.q0).T)
+    together = an.analyse(fz, groups, methods="svd")
+    assert len({len(c) for c in groups.values()}) > 1 or shape == "cranks"  # stacks of several shapes
+    assert not all(v.unique for v in together.joints.values())  # the defects' batch is not empty
+    ctx = together._ctx
+    for name, cols in groups.items():
+        alone = an._joints(ctx, {name: tuple(cols)})[name]
+        v = together.joints[name]
+        assert (alone.rank_P, alone.b_ratio_svd, alone.rank_defect, alone.unique) == \
+            (v.rank_P, v.b_ratio_svd, v.rank_defect, v.unique), name
+        assert together.set_unique([name]).rank_defect == v.rank_defect
+
+
+def test_peeling_checks_every_leaf_at_once_and_walks_again_when_one_fails(monkeypatch):
+    """The peeling's order is walked on the pattern and its leaves' SVDs taken stacked; a leaf of
+    rank below its width (rows 0-1 on columns 0-1, rank 1) is not peeled, and the walk without it
+    peels what a leaf-by-leaf walk peels: the leaves (rows 2-3, 4-5) and not the rank-1 pair."""
+    A = np.zeros((6, 6))
+    A[:2, :2] = [[1.0, 2.0], [2.0, 4.0]]  # rank 1: fails its check
+    A[2:4, 2:4] = [[3.0, 1.0], [1.0, 2.0]]
+    A[4:, 4:] = [[1.0, 0.5], [0.0, 1.0]]
+    A[4, 3] = 0.25  # rows 4-5 touch column 3 of the step before: peeled after it
+    rr, cc = np.nonzero(A)
+    rows_of, cols_of = an._pattern(rr, cc, *A.shape)
+    walks = []
+    walk = an._peel_order
+    monkeypatch.setattr(an, "_peel_order", lambda *a: walks.append(a[-1]) or walk(*a))
+    steps, live_r, live_c = an._peel(A, rows_of, cols_of, 1e-9)
+    assert len(walks) == 2 and walks[0] is None  # on the pattern, then again with the rank checks
+    assert sorted(c for _, C, _ in steps for c in C) == [2, 3, 4, 5]
+    assert list(live_c) == [True, True, False, False, False, False] and list(live_r[:2]) == [True, True]
+    for R, C, P in steps:  # each D^+ is the pseudo-inverse of its D
+        np.testing.assert_allclose(P @ A[np.ix_(R, C)], np.eye(len(C)), atol=1e-14)
+    f = an._factorise(A, an.DEFAULT_RTOL)
+    assert f.r == 5 == np.linalg.matrix_rank(A) and sorted(f.peeled) == [2, 3, 4, 5]

@@ -587,3 +587,24 @@ def test_inconsistent_q0_names_the_joint_and_the_mechanism_file(tmp_path):
         compile_checked(scene.load(tmp_path / "s.toml"))
     text = str(exc.value)
     assert "Phi1 (joint joint1)" in text and str(tmp_path / "planar_sliders.toml") in text
+
+
+def test_prescan_counts_plain_lines_as_it_counts_any_other(monkeypatch):
+    """A plain ``key = value`` line (bare key; numbers, strings, flat arrays, a comment) is
+    pre-scanned in one match (scene.toml_prescan): its key still counts towards the limits, its
+    length and depth, its line number, and its arrays towards the nesting."""
+    long_key = "[mechanism]\nname = \"x\"\n" + "k" * 1025 + " = 1\n"
+    assert scene.toml_prescan(long_key) == ("line 3: a key of 2 parts (with its table's) and 1026 characters (at most "
+                                            f"{scene.MAX_KEY_DEPTH} parts and {scene.MAX_KEY_LENGTH} characters)")
+    plain = "a = 1\nb = [1.0, \"s\", 2]  # a comment, [ and {\nc = \"s\"\n"
+    assert scene.toml_prescan(plain) is None
+    monkeypatch.setattr(scene, "MAX_KEY_DEPTH", 2)
+    assert scene.toml_prescan(plain + "d.e.f = 1\n").startswith("line 4: a key of 3 parts (with its table's) and 6 ")
+    monkeypatch.setattr(scene, "MAX_KEYS", 3)
+    assert scene.toml_prescan("[mechanism]\n" + plain) == "more than 3 keys"
+    monkeypatch.setattr(scene, "MAX_KEYS", 1_000_000)
+    monkeypatch.setattr(scene, "MAX_NESTING", 1)
+    assert scene.toml_prescan(plain) is None
+    assert scene.toml_prescan(plain + "x = [[1]]\n") == "line 4: arrays and inline tables nested deeper than 1"
+    monkeypatch.setattr(scene, "MAX_NESTING", 0)
+    assert scene.toml_prescan(plain) == "line 2: arrays and inline tables nested deeper than 0"

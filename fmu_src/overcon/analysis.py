@@ -290,10 +290,26 @@ class _Sparse:
         self.indices = np.asarray(cc, dtype=np.intp)
         self.data = np.asarray(vals, dtype=float)
         self.data.setflags(write=False)
+        self._keys: tuple | None = None  # :meth:`stack`
 
     def nonzeros(self) -> tuple[np.ndarray, np.ndarray]:
         """``np.nonzero`` of the matrix (row-major, columns ascending in a row)."""
         return np.repeat(np.arange(self.shape[0]), np.diff(self.indptr)), self.indices
+
+    def stack(self, R: np.ndarray, C: np.ndarray) -> np.ndarray:
+        """The stack of the dense A[R[k]][:, C[k]] (R: (S, r), C: (S, c) indices): (S, r, c),
+        each entry looked up among the nonzeros' sorted keys i * m + c."""
+        if self._keys is None:
+            rr, cc = self.nonzeros()
+            keys = rr * self.shape[1] + cc
+            order = np.argsort(keys, kind="stable")
+            self._keys = (keys[order], self.data[order])
+        keys, vals = self._keys
+        q = R[:, :, None] * self.shape[1] + C[:, None, :]
+        if not keys.size:
+            return np.zeros(q.shape)
+        at = np.minimum(np.searchsorted(keys, q), keys.size - 1)
+        return np.where(keys[at] == q, vals[at], 0.0)
 
     def toarray(self) -> np.ndarray:
         out = np.zeros(self.shape)
@@ -323,6 +339,15 @@ def _sub(A, R, C) -> np.ndarray:
     if isinstance(A, np.ndarray):
         return A[np.ix_(list(R), list(C))]
     return A.sub(R, C)
+
+
+def _gather(A, R: list, C: list) -> np.ndarray:
+    """The stack of A[R[k]][:, C[k]] (each R[k] of one length, each C[k] of one length), A dense
+    or :class:`_Sparse`: one gather for many small pieces of one shape."""
+    R, C = np.array(R, dtype=np.intp), np.array(C, dtype=np.intp)
+    if isinstance(A, np.ndarray):
+        return A[R[:, :, None], C[:, None, :]]
+    return A.stack(R, C)
 
 
 def _nonzeros(A) -> tuple[np.ndarray, np.ndarray]:
@@ -547,15 +572,55 @@ def _peel(A: np.ndarray, rows_of: list, cols_of: list, floor: float):
     earlier steps' columns have nu = 0 already (induction), so D nu_C = 0, and D has full column
     rank, so nu_C = 0. Hence null(A) = {nu: nu_peeled = 0, A' nu_live = 0}, A' = A[live, live]
     (the peeled rows have no live column: a row with a live column outside C is not in R)."""
-    import heapq
-
     n, m = A.shape
+    order = _peel_order(n, m, rows_of, cols_of, None)  # the steps if every D has full rank
+    pinvs, smallest = _pinvs(A, order, floor)
+    if not all(s > floor for s in smallest):  # walk again, skipping the leaves that fail
+        known = {(tuple(R), tuple(C)): (P, s) for (R, C), P, s in zip(order, pinvs, smallest)}
+
+        def full_rank(R: list, C: list) -> bool:
+            key = (tuple(R), tuple(C))
+            if key not in known:
+                P, s = _pinvs(A, [(R, C)], floor)
+                known[key] = (P[0], s[0])
+            return bool(known[key][1] > floor)
+
+        order = _peel_order(n, m, rows_of, cols_of, full_rank)
+        pinvs = [known[(tuple(R), tuple(C))][0] for R, C in order]
     live_r = np.ones(n, dtype=bool)
     live_c = np.ones(m, dtype=bool)
-    count = np.array([len(c) for c in cols_of], dtype=int)
-    heap = [(int(count[i]), i) for i in range(n) if 0 < count[i] <= _PEEL_WIDTH]
+    for R, C in order:
+        live_r[R] = False
+        live_c[C] = False
+    return [(R, C, P) for (R, C), P in zip(order, pinvs)], live_r, live_c
+
+
+def _pinvs(A, pieces: list, floor: float) -> tuple[list, list]:
+    """(D^+, the smallest singular value of D) of each D = A[R, C] of the pieces [(R, C)] (every
+    D at least as tall as wide), from thin SVDs stacked by shape (:func:`_svds`); D^+ = V S^-1
+    U^T, D's left inverse, made only when the smallest singular value exceeds ``floor`` (else
+    None: that D is not peeled)."""
+    got = _svds(A, pieces, full=False, index=True)
+    pinvs, smallest = [], []
+    for k in range(len(pieces)):
+        u, sv, vt = got(k)
+        pinvs.append((vt.T / sv) @ u.T if sv[-1] > floor else None)
+        smallest.append(sv[-1])
+    return pinvs, smallest
+
+
+def _peel_order(n: int, m: int, rows_of: list, cols_of: list, full_rank) -> list:
+    """The steps [(R, C)] of :func:`_peel` in order, from the pattern alone: a step is taken when
+    ``full_rank(R, C)`` says D = A[R, C] has full column rank above the floor (None: taken;
+    :func:`_peel` then checks them all at once and walks again only when one fails)."""
+    import heapq
+
+    live_r = bytearray(b"\x01") * n
+    live_c = bytearray(b"\x01") * m
+    count = [len(c) for c in cols_of]
+    heap = [(k, i) for i, k in enumerate(count) if 0 < k <= _PEEL_WIDTH]
     heapq.heapify(heap)
-    steps = []
+    order = []
     while heap:
         k, i = heapq.heappop(heap)
         if not live_r[i] or count[i] != k:
@@ -564,22 +629,56 @@ def _peel(A: np.ndarray, rows_of: list, cols_of: list, floor: float):
         cand = sorted({j for c in C for j in rows_of[c] if live_r[j]})
         Cs = set(C)
         R = [j for j in cand if all(c in Cs for c in cols_of[j] if live_c[c])]
-        if len(R) < len(C):
+        if len(R) < len(C) or (full_rank is not None and not full_rank(R, C)):
             continue
-        D = _sub(A, R, C)
-        u, sv, vt = np.linalg.svd(D, full_matrices=False)
-        if sv[-1] <= floor:
-            continue
-        steps.append((R, C, (vt.T / sv) @ u.T))  # D^+ (D has full column rank)
-        live_r[R] = False
-        live_c[C] = False
+        order.append((R, C))
+        for j in R:
+            live_r[j] = 0
+        for c in C:
+            live_c[c] = 0
         for c in C:
             for j in rows_of[c]:
                 if live_r[j]:
                     count[j] -= 1
                     if 0 < count[j] <= _PEEL_WIDTH:
-                        heapq.heappush(heap, (int(count[j]), j))
-    return steps, live_r, live_c
+                        heapq.heappush(heap, (count[j], j))
+    return order
+
+
+def _svds(A, pieces, full: bool, vectors: bool = True, index: bool = False):
+    """{(tuple(rows), tuple(cols)): np.linalg.svd(A[rows, cols])} for the pieces [(rows, cols)],
+    one stacked (batched) SVD per shape: LAPACK factorises each matrix of a stack as it does one
+    alone, so the factors are those of one SVD per piece, at the cost of one call per shape.
+    ``full``: V^T square (``full_matrices`` when the piece is wider than tall, as
+    :func:`_svd_full` takes it), else the thin SVD; ``vectors=False``: (None, s, None), the
+    singular values alone (as :func:`_svdvals`). Pieces with no rows or columns are left out.
+    ``index``: a function of the piece's position in ``pieces`` instead of the dict (no entry
+    per piece held: the peeling of a long chain has one piece per body)."""
+    by_shape: dict = {}
+    for k, (rows, cols) in enumerate(pieces):
+        if len(rows) and len(cols):
+            by_shape.setdefault((len(rows), len(cols)), []).append(k)
+    stacks, where = [], [None] * len(pieces)
+    for (nr, nc), idx in by_shape.items():
+        size = max(1, _CHUNK // (nr * nc + nr * nr + nc * nc))  # entries of a stack and its factors
+        for lo in range(0, len(idx), size):
+            part = idx[lo:lo + size]
+            stack = _gather(A, [pieces[k][0] for k in part], [pieces[k][1] for k in part])
+            if vectors:
+                stacks.append(np.linalg.svd(stack, full_matrices=full and nc > nr))
+            else:
+                stacks.append((None, np.linalg.svd(stack, compute_uv=False), None))
+            for j, k in enumerate(part):
+                where[k] = (len(stacks) - 1, j)
+
+    def at(k: int) -> tuple:
+        g, j = where[k]
+        u, s, vh = stacks[g]
+        return (None if u is None else u[j], s[j], None if vh is None else vh[j])
+
+    if index:
+        return at
+    return {(tuple(rows), tuple(cols)): at(k) for k, (rows, cols) in enumerate(pieces) if where[k] is not None}
 
 
 def _left_inverse_bound(A: np.ndarray, steps: list, cols_of: list) -> float:
@@ -588,13 +687,31 @@ def _left_inverse_bound(A: np.ndarray, steps: list, cols_of: list) -> float:
     earlier columns p it touches, so its norm is at most ||(D^+)_k|| + sum_p |(D^+ X)_kp| l_p,
     l_p the earlier rows' bounds (triangle inequality). Exact for a single step; on a chain of
     equal links it grows like the chain's length, where the exact norm costs p_r x p_c."""
-    bound: dict[int, float] = {}
-    for R, C, P in steps:
+    prevs = []
+    for R, C, _ in steps:
         Cs = set(C)
-        prev = sorted({c for i in R for c in cols_of[i] if c not in Cs})
-        rows = np.sqrt(np.sum(P * P, axis=1))
-        if prev:
-            rows = rows + np.abs(P @ _sub(A, R, prev)) @ np.array([bound[c] for c in prev])
+        prevs.append(sorted({c for i in R for c in cols_of[i] if c not in Cs}))
+    # what does not depend on the earlier bounds, batched by shape: ||(D^+)_k|| and |D^+ X|
+    norms: list = [None] * len(steps)
+    px: list = [None] * len(steps)
+    by_shape: dict = {}
+    for k, (_, _, P) in enumerate(steps):
+        by_shape.setdefault((P.shape, len(prevs[k])), []).append(k)
+    for ((nc, nr), npv), idx in by_shape.items():
+        size = max(1, _CHUNK // (nc * nr + nr * npv + nc * npv))
+        for lo in range(0, len(idx), size):
+            part = idx[lo:lo + size]
+            P = np.stack([steps[k][2] for k in part])
+            rows = np.sqrt(np.sum(P * P, axis=2))
+            PX = np.abs(P @ _gather(A, [steps[k][0] for k in part], [prevs[k] for k in part])) if npv else None
+            for j, k in enumerate(part):
+                norms[k] = rows[j]
+                px[k] = PX[j] if npv else None
+    bound: dict[int, float] = {}
+    for k, (_, C, _) in enumerate(steps):
+        rows = norms[k]
+        if prevs[k]:
+            rows = rows + px[k] @ np.array([bound[c] for c in prevs[k]])
         for c, b in zip(C, rows.tolist()):
             bound[c] = b
     return float(np.sqrt(sum(b * b for b in bound.values())))
@@ -726,10 +843,8 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
     # ||A||_F >= ||A||_2, so this floor is at least tol: a peeled D is of full rank above tol
     floor = float(tol) if tol is not None else rtol_eff * float(np.sqrt(np.sum(_values(A, rr, cc) ** 2)))
     steps, live_r, live_c = _peel(A, rows_of, cols_of, floor)
-    blocks = _blocks(A, live_r, live_c, rows_of)
-    # per block: a _Hub, or its dense SVD (s, V^T or None)
-    parts = [_hub(A, rows, cols, rows_of, cols_of, live_c) or _block_svd(A, rows, cols, vectors)
-             for rows, cols in blocks]
+    blocks = _blocks(A, live_r, live_c, rr, cc)
+    parts = _block_parts(A, blocks, rows_of, cols_of, live_c, vectors)
     hubs = [b for b, p in enumerate(parts) if isinstance(p, _Hub)]
     top = max((float(s[0]) for p in parts for s in (p.sigmas() if isinstance(p, _Hub) else [p[0]]) if s.size),
               default=0.0)
@@ -762,6 +877,14 @@ def _factorise(A: np.ndarray, rtol: float, tol: float | None = None, vectors: bo
                           blocks=tuple(blocks), ranks=tuple(ranks), route=route)
 
 
+def _block_parts(A, blocks: list, rows_of: list, cols_of: list, live_c: np.ndarray, vectors: bool) -> list:
+    """Per block: a :class:`_Hub` (:func:`_hub`), or its dense SVD (s, V^T or None), the dense
+    SVDs stacked by shape (:func:`_block_svds`)."""
+    parts = [_hub(A, rows, cols, rows_of, cols_of, live_c) for rows, cols in blocks]
+    dense = iter(_block_svds(A, [b for b, p in zip(blocks, parts) if p is None], vectors))
+    return [p if p is not None else next(dense) for p in parts]
+
+
 def _assemble(blocks, parts, t: float, m: int, vectors: bool):
     """(each block's rank, the null basis (m, m - r) on the blocks' columns, the singular values
     computed, descending) from the blocks' factors: a dense SVD (s, V^T) or :class:`_HubFactors`."""
@@ -784,13 +907,17 @@ def _assemble(blocks, parts, t: float, m: int, vectors: bool):
 
 
 def _pattern(rr: np.ndarray, cc: np.ndarray, n: int, m: int) -> tuple[list, list]:
-    """(rows of each column, columns of each row) of the nonzeros at (rr, cc)."""
-    rows_of: list = [[] for _ in range(m)]
-    cols_of: list = [[] for _ in range(n)]
-    for i, c in zip(rr.tolist(), cc.tolist()):
-        rows_of[c].append(i)
-        cols_of[i].append(c)
-    return rows_of, cols_of
+    """(rows of each column, columns of each row) of the nonzeros at (rr, cc), each list in the
+    order the nonzeros come."""
+    rr, cc = np.asarray(rr, dtype=np.intp), np.asarray(cc, dtype=np.intp)
+
+    def split(key: np.ndarray, other: np.ndarray, size: int) -> list:
+        order = np.argsort(key, kind="stable")
+        ptr = np.concatenate([[0], np.cumsum(np.bincount(key, minlength=size))]).tolist()
+        vals = other[order].tolist()
+        return [vals[ptr[k]:ptr[k + 1]] for k in range(size)]
+
+    return split(cc, rr, m), split(rr, cc, n)
 
 
 def _peel_margin(A, rr, cc, steps, cols_of, t_hi) -> float | None:
@@ -812,41 +939,53 @@ def _peel_margin(A, rr, cc, steps, cols_of, t_hi) -> float | None:
     return (1.0 + x_f / beta) / (1.0 - t_hi / beta) * t_hi
 
 
-def _blocks(A: np.ndarray, live_r: np.ndarray, live_c: np.ndarray, rows_of: list) -> list:
+def _blocks(A: np.ndarray, live_r: np.ndarray, live_c: np.ndarray, rr: np.ndarray, cc: np.ndarray) -> list:
     """Connected components [(rows, cols)] of the live rows and columns of A (an edge per
-    nonzero), in order of their smallest column; a live column with no live row is a block of
-    its own (0 rows)."""
+    nonzero, at rows rr and columns cc), in order of their smallest column; a live column with no
+    live row is a block of its own (0 rows)."""
     n, m = A.shape
     cols = np.flatnonzero(live_c)
     if cols.size == 0:
         return []
-    label = _components(n + m, [(i, n + c) for c in cols.tolist() for i in rows_of[c] if live_r[i]])
+    edge = live_c[cc] & live_r[rr]
+    label = _components(n + m, rr[edge], n + cc[edge]).tolist()
     groups: dict[int, tuple[list, list]] = {}
     for c in cols.tolist():
-        groups.setdefault(int(label[n + c]), ([], []))[1].append(c)
+        groups.setdefault(label[n + c], ([], []))[1].append(c)
     for i in np.flatnonzero(live_r).tolist():
-        if int(label[i]) in groups:
-            groups[int(label[i])][0].append(i)
+        if label[i] in groups:
+            groups[label[i]][0].append(i)
     return [(tuple(rows), tuple(bcols)) for rows, bcols in groups.values()]
 
 
-def _components(nodes: int, edges: list) -> np.ndarray:
-    """The connected component label of each of ``nodes`` nodes joined by ``edges`` [(a, b)]."""
+def _components(nodes: int, a, b) -> np.ndarray:
+    """The connected component label of each of ``nodes`` nodes joined by the edges (a[k], b[k])."""
     import scipy.sparse
     import scipy.sparse.csgraph
 
-    a = np.array([e[0] for e in edges], dtype=int)
-    b = np.array([e[1] for e in edges], dtype=int)
-    g = scipy.sparse.coo_matrix((np.ones(len(edges)), (a, b)), shape=(nodes, nodes))
+    a, b = np.asarray(a, dtype=int), np.asarray(b, dtype=int)
+    g = scipy.sparse.coo_matrix((np.ones(a.size), (a, b)), shape=(nodes, nodes))
     return scipy.sparse.csgraph.connected_components(g, directed=False)[1]
 
 
 def _block_svd(A: np.ndarray, rows, cols, vectors: bool = True) -> tuple:
     """The dense SVD of A[rows, cols]: singular values, and V^T if ``vectors`` (else None)."""
-    if not rows:
-        return np.zeros(0), np.eye(len(cols))
-    sub = _sub(A, rows, cols)
-    return _svd_full(sub) if vectors else (_svdvals(sub), None)
+    return _block_svds(A, [(rows, cols)], vectors)[0]
+
+
+def _block_svds(A: np.ndarray, pieces: list, vectors: bool = True) -> list:
+    """:func:`_block_svd` of each piece (rows, cols), the SVDs batched by shape (:func:`_svds`)."""
+    got = _svds(A, pieces, full=True, vectors=vectors)
+    out = []
+    for rows, cols in pieces:
+        if not len(rows):
+            out.append((np.zeros(0), np.eye(len(cols))))
+        elif not len(cols):
+            out.append((np.zeros(0), np.eye(0) if vectors else None))
+        else:
+            _, s, vh = got[(tuple(rows), tuple(cols))]
+            out.append((s, vh))
+    return out
 
 
 #: A row (coordinate) of a block touched by more than this many equations is a hub: a body that
@@ -939,8 +1078,8 @@ def _hub(A: np.ndarray, rows: tuple, cols: tuple, rows_of: list, cols_of: list, 
     rest = [i for i in rows if i not in hub_rows]
     rpos = {i: k for k, i in enumerate(rest)}
     base = len(rest)
-    label = _components(base + len(cols), [(rpos[i], base + k) for k, c in enumerate(cols)
-                                           for i in rows_of[c] if i in rpos])
+    edges = [(rpos[i], base + k) for k, c in enumerate(cols) for i in rows_of[c] if i in rpos]
+    label = _components(base + len(cols), [a for a, _ in edges], [b for _, b in edges])
     groups: dict[int, tuple[list, list]] = {}
     for k, c in enumerate(cols):
         groups.setdefault(int(label[base + k]), ([], []))[1].append(c)
@@ -949,7 +1088,7 @@ def _hub(A: np.ndarray, rows: tuple, cols: tuple, rows_of: list, cols_of: list, 
     parts = tuple((tuple(r), tuple(c)) for r, c in groups.values())
     if len(parts) < 2 or max(len(c) for _, c in parts) > len(cols) // 2:
         return None
-    return _Hub(S=tuple(S), parts=parts, svds=tuple(_block_svd(A, r, c) for r, c in parts))
+    return _Hub(S=tuple(S), parts=parts, svds=tuple(_block_svds(A, list(parts))))
 
 
 # --------------------------------------------------------------------------- verdict types
@@ -1023,14 +1162,42 @@ class _Context:
     def block(self, cols) -> np.ndarray:
         """A[:, cols] without its zero rows (the rows no column of ``cols`` touches): the same
         singular values, R factor and B row norms, at the size of the joint, not of the mechanism."""
+        return self.blocks([cols])[0]
+
+    def blocks(self, groups: Sequence) -> list:
+        """:meth:`block` of each group of columns in ``groups``, the rows of all groups found at
+        once from the column-sorted nonzeros."""
         if "col_rows" not in self._lazy:
             rr, cc = self._lazy["nonzeros"] if "nonzeros" in self._lazy else np.nonzero(self.A)
             order = np.argsort(cc, kind="stable")
             self._lazy["col_rows"] = (rr[order], np.searchsorted(cc[order], np.arange(self.A.shape[1] + 1)))
         rows_sorted, ptr = self._lazy["col_rows"]
-        idx = list(cols)
-        rows = np.unique(np.concatenate([rows_sorted[ptr[c]:ptr[c + 1]] for c in idx])) if idx else np.zeros(0, int)
-        return _sub(self.A, rows, idx)
+        n = self.A.shape[0]
+        cols = [np.asarray(list(g), dtype=np.intp) for g in groups]
+        flat = np.concatenate([np.zeros(0, np.intp)] + cols)
+        owner = np.repeat(np.arange(len(cols)), [c.size for c in cols])
+        lens = ptr[flat + 1] - ptr[flat]
+        at = np.repeat(ptr[flat] - np.cumsum(lens) + lens, lens) + np.arange(int(lens.sum()))
+        key = np.unique(np.repeat(owner, lens) * n + rows_sorted[at])  # (group, row) pairs, sorted
+        split = np.searchsorted(key // n if key.size else key, np.arange(len(cols) + 1))
+        rows = key % n if key.size else key
+        pieces = [(rows[split[g]:split[g + 1]], cols[g]) for g in range(len(cols))]
+        out: list = [None] * len(pieces)
+        by_shape: dict = {}
+        for g, (r, c) in enumerate(pieces):
+            by_shape.setdefault((r.size, c.size), []).append(g)
+        for (nr, nc), idx in by_shape.items():  # one gather per shape (a joint's block is small)
+            if nr * nc > _CHUNK:  # a block too large to stack (a group of many columns)
+                for g in idx:
+                    out[g] = _sub(self.A, *pieces[g])
+                continue
+            size = _CHUNK // max(1, nr * nc)
+            for lo in range(0, len(idx), size):
+                part = idx[lo:lo + size]
+                stack = _gather(self.A, [pieces[g][0] for g in part], [pieces[g][1] for g in part])
+                for g, b in zip(part, stack):
+                    out[g] = b
+        return out
 
     @property
     def cross_check(self) -> bool:
@@ -1124,10 +1291,13 @@ def _B(M: np.ndarray, N: np.ndarray, cols: tuple[int, ...]) -> np.ndarray:
     return _readonly(M[:, idx] @ N[idx, :])
 
 
-def _b_ratio(ctx: _Context, B: np.ndarray, test: str = "svd") -> float:
-    if B.size == 0:
-        return 0.0
-    peak = float(np.linalg.norm(B, axis=1).max())
+def _peak(B: np.ndarray) -> float:
+    """The largest row 2-norm of B (0.0 for an empty B)."""
+    return float(np.linalg.norm(B, axis=1).max()) if B.size else 0.0
+
+
+def _b_ratio(ctx: _Context, peak: float, test: str = "svd") -> float:
+    """B's largest row norm ``peak`` (:func:`_peak`) over the B_P == 0 threshold of ``test``."""
     limit = ctx.b_rtol * ctx.sigma1 if test == "svd" else ctx.qr_b_rtol * (float(ctx.sigma[0]) if ctx.sigma.size else 0.0)
     if peak == 0.0:
         return 0.0
@@ -1146,43 +1316,104 @@ def _rank_defect(ctx: _Context, member_columns: Sequence[tuple[int, ...]]) -> in
 
 
 def _b_defect(ctx: _Context, cols: tuple[int, ...], unique: bool) -> int:
-    """rank_defect from the one factorisation: rank(A_P N) = rank(A_P) + rank(A_-P) - rank(A) in
-    exact arithmetic (both are dim(span(A_P) & span(A_-P)): a null vector nu gives A_P nu_P in
-    it, and one whose A_P nu_P = 0 also has A_-P nu_-P = 0). Numerically: 0 when the B test
-    says unique, else the count of B = A_P N_P's singular values above its threshold (at least
-    1), taken from R N_P with A_P = Q R (thin QR: Q has orthonormal columns, so the singular
-    values are B's; the SVD is of a |P| x (m - r) matrix, not of n x (m - r), which keeps the
-    pre-check one factorisation of J plus small work per joint)."""
-    if unique:
-        return 0
+    """rank_defect from the one factorisation (:func:`_b_defects` of one group of columns)."""
+    return _b_defects(ctx, [cols], [unique])[0]
+
+
+def _b_defects(ctx: _Context, groups: Sequence, unique: Sequence[bool], blocks: list | None = None) -> list:
+    """rank_defect from the one factorisation, for each group of columns in ``groups``:
+    rank(A_P N) = rank(A_P) + rank(A_-P) - rank(A) in exact arithmetic (both are
+    dim(span(A_P) & span(A_-P)): a null vector nu gives A_P nu_P in it, and one whose A_P nu_P =
+    0 also has A_-P nu_-P = 0). Numerically: 0 when the B test says unique, else the count of B =
+    A_P N_P's singular values above its threshold (at least 1), taken from R N_P with A_P = Q R
+    (thin QR: Q has orthonormal columns, so the singular values are B's; the SVD is of a |P| x
+    (m - r) matrix, not of n x (m - r), which keeps the pre-check one factorisation of J plus
+    small work per joint). The QRs and SVDs are batched by shape (each matrix of a stack is
+    factorised as it is alone); ``blocks``: the groups' :meth:`_Context.block` when the caller
+    has them."""
+    out = [0] * len(groups)
+    todo = [g for g, u in enumerate(unique) if not u]
+    if not todo:
+        return out
     limit = ctx.b_rtol * ctx.sigma1
-    idx = list(cols)
-    R = np.linalg.qr(ctx.block(idx), mode="r")
-    return max(1, int(np.count_nonzero(_svdvals(R @ ctx.N_svd[idx, :]) > limit)))
+    got = ctx.blocks([groups[g] for g in todo]) if blocks is None else [blocks[g] for g in todo]
+    k_null = ctx.N_svd.shape[1]
+    for idx, ((nr, nc), _) in _by_shape([(got[k], groups[g]) for k, g in enumerate(todo)]):
+        step = max(1, _CHUNK // max(1, nr * nc + nc * max(k_null, nc)))  # bounds a stack's entries
+        for lo in range(0, len(idx), step):
+            part = idx[lo:lo + step]
+            R = np.linalg.qr(_stacked([got[k] for k in part]), mode="r")
+            N = ctx.N_svd[np.array([list(groups[todo[k]]) for k in part], dtype=np.intp)]
+            s = _svdvals(R @ N) if k_null else np.zeros((len(part), 0))
+            for k, sv in zip(part, s):
+                out[todo[k]] = max(1, int(np.count_nonzero(sv > limit)))
+    return out
 
 
-def _joint(ctx: _Context, cols: tuple[int, ...]) -> JointVerdict:
-    B = _readonly(ctx.block(cols) @ ctx.N_svd[list(cols), :])  # B_P's nonzero rows: its row norms
-    ratio_svd = _b_ratio(ctx, B)
-    methods = {"svd": ratio_svd <= 1.0}
-    ratio_qr, defect = 0.0, _b_defect(ctx, cols, ratio_svd <= 1.0)
-    if ctx.cross_check:
-        defect = _rank_defect(ctx, [cols])
-        ratio_qr = _b_ratio(ctx, _B(ctx.A, ctx.basis("qr"), cols), "qr")
-        methods = {"rank": defect <= 0, "svd": methods["svd"], "qr": ratio_qr <= 1.0}
-    methods = {k: bool(v) for k, v in methods.items()}
-    return JointVerdict(
-        unique=methods["rank"] if ctx.cross_check else methods["svd"],
-        methods=methods,
-        rank_defect=int(defect),
-        B_svd=_B(ctx.J, ctx.basis("svd_raw"), cols) if ctx.cross_check else None,
-        B_qr=_B(ctx.J, ctx.basis("qr_raw"), cols) if ctx.cross_check else None,
-        agree=len(set(methods.values())) == 1,
-        columns=cols,
-        rank_P=_rank_abs(ctx.block(cols), ctx.tol),
-        b_ratio_svd=ratio_svd,
-        b_ratio_qr=ratio_qr,
-    )
+def _stacked(arrays: list) -> np.ndarray:
+    """The arrays (of one shape) as one stack; one alone is viewed as a stack, not copied (the
+    block of a large set of joints)."""
+    return arrays[0][None] if len(arrays) == 1 else np.stack(arrays)
+
+
+def _by_shape(items: list):
+    """(indices, shape) of the items [(block, cols)] that share a block shape and a column
+    count, in order of first appearance: the batches of a stacked QR, SVD or product."""
+    by: dict = {}
+    for k, (b, cols) in enumerate(items):
+        by.setdefault((b.shape, len(cols)), []).append(k)
+    return [(idx, shape) for shape, idx in by.items()]
+
+
+def _joints(ctx: _Context, checked: Mapping[str, tuple[int, ...]]) -> dict:
+    """{name: JointVerdict} of the joints (name -> columns): the SVD test for all joints at once
+    (each joint's block A_P, its B_P = A_P N_P row norms and rank(A_P) batched by shape), the
+    rank comparison and QR test joint by joint with the cross-check."""
+    names = list(checked)
+    blocks = ctx.blocks([checked[nm] for nm in names])
+    peak = [0.0] * len(names)
+    rank_p = [0] * len(names)
+    k_null = ctx.N_svd.shape[1]
+    for idx, ((nr, nc), _) in _by_shape([(b, checked[nm]) for b, nm in zip(blocks, names)]):
+        if not nr * nc:
+            continue
+        step = max(1, _CHUNK // max(1, nr * max(k_null, nc)))  # bounds the stacked B's entries
+        for lo in range(0, len(idx), step):
+            part = idx[lo:lo + step]
+            stack = _stacked([blocks[k] for k in part])
+            for k, sv in zip(part, _svdvals(stack)):
+                rank_p[k] = int(np.count_nonzero(sv > ctx.tol))
+            if k_null:
+                N = ctx.N_svd[np.array([list(checked[names[k]]) for k in part], dtype=np.intp)]
+                for k, row_norms in zip(part, np.linalg.norm(stack @ N, axis=2)):
+                    peak[k] = float(row_norms.max())
+    ratios = [_b_ratio(ctx, p) for p in peak]
+    defects = [0] * len(names)
+    if not ctx.cross_check:
+        defects = _b_defects(ctx, [checked[nm] for nm in names], [r <= 1.0 for r in ratios], blocks)
+    out = {}
+    for k, name in enumerate(names):
+        cols = checked[name]
+        methods = {"svd": ratios[k] <= 1.0}
+        ratio_qr, defect = 0.0, defects[k]
+        if ctx.cross_check:
+            defect = _rank_defect(ctx, [cols])
+            ratio_qr = _b_ratio(ctx, _peak(_B(ctx.A, ctx.basis("qr"), cols)), "qr")
+            methods = {"rank": defect <= 0, "svd": methods["svd"], "qr": ratio_qr <= 1.0}
+        methods = {key: bool(v) for key, v in methods.items()}
+        out[name] = JointVerdict(
+            unique=methods["rank"] if ctx.cross_check else methods["svd"],
+            methods=methods,
+            rank_defect=int(defect),
+            B_svd=_B(ctx.J, ctx.basis("svd_raw"), cols) if ctx.cross_check else None,
+            B_qr=_B(ctx.J, ctx.basis("qr_raw"), cols) if ctx.cross_check else None,
+            agree=len(set(methods.values())) == 1,
+            columns=cols,
+            rank_P=rank_p[k],
+            b_ratio_svd=ratios[k],
+            b_ratio_qr=ratio_qr,
+        )
+    return out
 
 
 def joint_uniqueness(
@@ -1200,7 +1431,8 @@ def joint_uniqueness(
     ``unique`` follows the rank method; ``agree`` is False if any method disagrees.
     """
     ctx = _context(J, rtol, b_rtol, equilibrate)
-    return _joint(ctx, _check_columns(columns, ctx.J.shape[1]))
+    cols = _check_columns(columns, ctx.J.shape[1])
+    return _joints(ctx, {"": cols})[""]
 
 
 # --------------------------------------------------------------------------- whole analysis
@@ -1308,7 +1540,7 @@ def analyse(
         rank=ctx.r,
         dof=n - ctx.r,
         redundant=m - ctx.r,
-        joints={name: _joint(ctx, cols) for name, cols in checked.items()},
+        joints=_joints(ctx, checked),
         singular_values=ctx.sigma,
         rank_tol=ctx.tol,
         b_rtol=ctx.b_rtol,

@@ -86,6 +86,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
 import stat
 import tomllib
 from dataclasses import dataclass
@@ -205,13 +206,12 @@ def _desc(value) -> str:
     return f"{kind} {_short(value)}"
 
 
+_IDENTIFIER = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+
+
 def _is_identifier(s: str) -> bool:
-    return (
-        bool(s)
-        and s[0].isascii()
-        and s[0].isalpha()
-        and all(c.isascii() and (c.isalnum() or c == "_") for c in s)
-    )
+    """An ASCII letter, then ASCII letters, digits or _."""
+    return _IDENTIFIER.fullmatch(s) is not None
 
 
 _POSITIVE = (lambda x: x > 0, "must be > 0")
@@ -804,10 +804,20 @@ def _joint_type(ctx: _Ctx, jt: dict, p: str, kind: str | None) -> tuple[str | No
 
 
 def _joint_keys(fields) -> tuple[str, ...]:
-    """The keys a joint table of type ``fields`` may have (``None``: of any type)."""
+    """The keys a joint table of type ``fields`` may have (``None``: of any type); made once per
+    type (a mechanism of 10,000 joints asked 10,000 times)."""
+    made = _JOINT_KEYS.get(id(fields)) if fields is not None else None
+    if made is not None and made[0] is fields:
+        return made[1]
     types = JOINT_TYPES.values() if fields is None else (fields,)
-    return _JOINT_COMMON + tuple(dict.fromkeys(
+    keys = _JOINT_COMMON + tuple(dict.fromkeys(
         f for d in types for f in (*d.required, *d.optional, *_deg_keys(d.required), *_deg_keys(d.optional))))
+    if fields is not None:
+        _JOINT_KEYS[id(fields)] = (fields, keys)
+    return keys
+
+
+_JOINT_KEYS: dict = {}  # id(fields) -> (fields, _joint_keys(fields))
 
 
 def _joint_params(ctx: _Ctx, jt: dict, p: str, fields, kind: str | None) -> dict | None:
@@ -1659,17 +1669,30 @@ keys: every key and table header of the file (a mechanism at the body and joint 
 count only bounds a linear cost, the file's size already bounds it too); nesting: arrays and inline tables inside each other."""
 
 
+_BASIC_STRING = re.compile(r'[^"\\\n]*(?:\\[\s\S][^"\\\n]*)*')  # a "..." string's body: \ takes the next character
+_LITERAL_STRING = re.compile(r"[^'\n]*")
+_KEY_RUN = {stop: re.compile("[^" + re.escape(stop) + "\n\"'.]*") for stop in ("]", "=}")}
+_VALUE_RUN = re.compile(r"[^\n#\"'\[\]{},]+")  # characters a value goes through without a decision
+_BLANK_RUN = re.compile(r"[ \t\r]+")
+_STRING_ON_LINE = r'"(?!"")[^"\\\n]*"'  # a "..." string with no escape, not a triple quote
+_SIMPLE_LINE = re.compile(  # key = value to the line's end (the alternatives differ in their first character)
+    r'(?P<key>[^=}\n"\'.]*)='
+    r'(?:[^\n#"\'\[\]{},]|' + _STRING_ON_LINE + r'|\[(?:[^\n#"\'\[\]{}]|' + _STRING_ON_LINE + r')*\])*'
+    r'(?:#[^\n]*)?(?:(?P<eol>\n)|\Z)')
+
+
 def _skip_toml_string(text: str, i: int) -> int:
     """The index after the string that opens at ``text[i]`` (a quote; triple-quoted: up to its
-    closing triple, else up to the closing quote or the line's end)."""
+    closing triple, else up to the closing quote or the line's end; in a "..." string a
+    backslash takes the next character, a last one goes past the end)."""
     n = len(text)
     q = text[i]
     if text.startswith(q * 3, i):
         end = text.find(q * 3, i + 3)
         return n if end < 0 else end + 3
-    j = i + 1
-    while j < n and text[j] != q and text[j] != "\n":
-        j += 2 if q == '"' and text[j] == "\\" else 1
+    j = (_BASIC_STRING if q == '"' else _LITERAL_STRING).match(text, i + 1).end()
+    if j < n and text[j] == "\\":  # a backslash as the text's last character
+        j += 2
     return j + 1
 
 
@@ -1678,12 +1701,15 @@ def _toml_key_path(text: str, i: int, stop: str) -> tuple[int, int, int]:
     ending before one of ``stop`` or the line's end."""
     n = len(text)
     parts, start = 1, i
-    while i < n and text[i] not in stop and text[i] != "\n":
+    run = _KEY_RUN[stop]
+    while i < n:
+        i = run.match(text, i).end()  # up to a stop, a line's end, a quote or a dot
+        if i >= n or text[i] in stop or text[i] == "\n":
+            break
         if text[i] in "\"'":
             i = _skip_toml_string(text, i)
             continue
-        if text[i] == ".":
-            parts += 1
+        parts += 1  # a dot
         i += 1
     return i, parts, i - start
 
@@ -1705,8 +1731,13 @@ def toml_prescan(text: str) -> str | None:
             if not stack:
                 expect_key = True
             continue
-        if ch in " \t\r":
-            i += 1
+        if not expect_key:
+            run = _VALUE_RUN.match(text, i)
+            if run:  # blanks and a value's characters: nothing to decide
+                i = run.end()
+                continue
+        elif ch in " \t\r":
+            i = _BLANK_RUN.match(text, i).end()
             continue
         if ch == "#":
             j = text.find("\n", i)
@@ -1722,15 +1753,27 @@ def toml_prescan(text: str) -> str | None:
             i, expect_key = j + 1, False
             continue
         if expect_key:
-            j, parts, length = _toml_key_path(text, i, "=}")
+            # the usual line, ``key = value`` with no dotted or quoted key, no inline table and
+            # no array in an array, is read to its end in one match: it opens and closes its
+            # arrays on the line (depth 1), so only its key counts
+            simple = _SIMPLE_LINE.match(text, i) if not stack and MAX_NESTING >= 1 else None
+            if simple is not None:
+                j, parts, length = simple.end("key"), 1, simple.end("key") - i
+            else:
+                j, parts, length = _toml_key_path(text, i, "=}")
             keys += 1
-            depth = parts + header_parts + sum(1 for c in stack if c == "{")
+            depth = parts + header_parts + (sum(1 for c in stack if c == "{") if stack else 0)
             if depth > MAX_KEY_DEPTH or length > MAX_KEY_LENGTH:
                 return (f"line {line}: a key of {depth} parts (with its table's) and {length} characters (at most "
                         f"{MAX_KEY_DEPTH} parts and {MAX_KEY_LENGTH} characters)")
             if keys > MAX_KEYS:
                 return f"more than {MAX_KEYS} keys"
-            i, expect_key = j + 1, False
+            if simple is None:
+                i, expect_key = j + 1, False
+            elif simple.group("eol"):  # the line's end too: the next line starts with a key
+                i, line = simple.end(), line + 1
+            else:
+                i, expect_key = simple.end(), False
             continue
         if ch in "\"'":
             i = _skip_toml_string(text, i)

@@ -334,6 +334,28 @@ static int pass_singular(ovk_sim *s, double r_before) {
     return status;
 }
 
+/* Formulation AL, at the end of an accepted step: the next step's acceleration solve (kkt_al.c's
+ * direct one allowed or not: the watch's r at the step's end, OVK_DIRECT_RATIO; step_checked sets
+ * the same again from the state, so a run taken from a saved state goes on alike). The explicit
+ * pairs take the next step's first stage from f at the step's end (FSAL; project_step's
+ * evaluation), made under this step's solve: where the solve changes, that f is evaluated again
+ * under the next one, after this step's dense output was made under its own, so that every stage
+ * of a step, the first too, has the same right-hand side. Without it each change (two per passage
+ * of a singular position, where the stalled AL iteration and the direct solve differ along the
+ * directions losing rank) failed the next step's error estimate until its size fell to about
+ * 1e-9 s, from where it had to grow again (N-four-bar N = 2, dop853, tolerance 1e-10 to 1e-12:
+ * 27-37% of the evaluations over the 20 s; docs/benchmarks.md, "Error against tolerance"). */
+static int next_solve(ovk_sim *s) {
+    ovk_rk *rk = &s->rk;
+    int allow = s->ratio >= OVK_DIRECT_RATIO, status;
+    if (s->M->formulation != OVK_FORM_AL || allow == s->d->al_allow_direct ||
+        !(rk->method == OVK_METHOD_DOPRI5 || rk->method == OVK_METHOD_DOP853))
+        return OVK_OK;
+    if ((status = ovk_rk_dense_prepare(rk))) return memcpy(s->msg, rk->dense_msg, sizeof s->msg), status;
+    s->d->al_allow_direct = allow;
+    return sim_rhs(s, rk->t, rk->y, rk->f);
+}
+
 /* One accepted step and its checks (the body of Simulation.advance's loop). */
 static int step_checked(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
     ovk_rk *rk = &s->rk;
@@ -371,6 +393,7 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     for (int r = 0; r < s->m; r++)
         if (fabs(s->d->phi[r]) > s->max_drift) s->max_drift = fabs(s->d->phi[r]);
     if (s->degrading && (status = ovk_sim_degraded(s))) return stopped(s, status, "integration stopped", rk->t);
+    if ((status = next_solve(s))) return stopped(s, status, "integration stopped", rk->t);
     return OVK_OK;
 }
 

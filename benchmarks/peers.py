@@ -141,6 +141,23 @@ def mujoco_door(step: float, integrator: str, free: bool = False):
     return built - start, time.perf_counter() - built, xyz
 
 
+def _exudyn_settings(exu, stop: float, step: float, rho: float, sensor_period: float):
+    """Exudyn's settings shared by both cases: generalized-alpha at the fixed step ``step`` (s) to
+    ``stop`` (s) with spectral radius ``rho``, singular Jacobians accepted (redundant joints), no
+    files or printing, the sensors stored every ``sensor_period`` (s)."""
+    ss = exu.SimulationSettings()
+    ss.timeIntegration.numberOfSteps = int(round(stop / step))
+    ss.timeIntegration.endTime = stop
+    ss.timeIntegration.verboseMode = 0
+    ss.timeIntegration.generalizedAlpha.spectralRadius = rho
+    ss.solution.file.write = False
+    ss.show.statistics = False
+    ss.show.computationTime = False
+    ss.linearSolver.ignoreSingularJacobian = True
+    ss.solution.sensors.writePeriod = sensor_period
+    return ss
+
+
 def exudyn_door(step: float):
     """Exudyn's door: both hinges (its revolute joints), generalized-alpha without numerical damping
     at the fixed step ``step``."""
@@ -159,19 +176,10 @@ def exudyn_door(step: float):
     sensor = mbs.AddSensor(SensorBody(bodyNumber=door, storeInternal=True,
                                       outputVariableType=exu.OutputVariableType.Position))
     mbs.Assemble()
-    ss = exu.SimulationSettings()
-    ss.timeIntegration.numberOfSteps = int(round(DOOR_STOP / step))
-    ss.timeIntegration.endTime = DOOR_STOP
-    ss.timeIntegration.verboseMode = 0
-    ss.timeIntegration.generalizedAlpha.spectralRadius = 1.0
+    ss = _exudyn_settings(exu, DOOR_STOP, step, 1.0, DOOR_DT)
     ss.timeIntegration.newton.relativeTolerance = 1e-12
     ss.timeIntegration.newton.absoluteTolerance = 1e-12
-    ss.solution.file.write = False
-    ss.show.statistics = False
-    ss.show.computationTime = False
     ss.linearSolver.solverType = exu.LinearSolverType.EigenDense
-    ss.linearSolver.ignoreSingularJacobian = True
-    ss.solution.sensors.writePeriod = DOOR_DT
     built = time.perf_counter()
     exu.SolveDynamic(mbs, ss)
     data = mbs.GetSensorStoredData(sensor)
@@ -318,17 +326,8 @@ def exudyn_nfourbar(n: int, step: float, rho: float = 0.9):
     sensor = mbs.AddSensor(SensorBody(bodyNumber=cranks[0], localPosition=[0.5, 0.0, 0.0], storeInternal=True,
                                       outputVariableType=exu.OutputVariableType.Position))
     mbs.Assemble()
-    ss = exu.SimulationSettings()
-    ss.timeIntegration.numberOfSteps = int(round(NFB_STOP / step))
-    ss.timeIntegration.endTime = NFB_STOP
-    ss.timeIntegration.verboseMode = 0
-    ss.timeIntegration.generalizedAlpha.spectralRadius = rho
+    ss = _exudyn_settings(exu, NFB_STOP, step, rho, NFB_DT)
     ss.timeIntegration.adaptiveStep = False
-    ss.solution.file.write = False
-    ss.show.statistics = False
-    ss.show.computationTime = False
-    ss.linearSolver.ignoreSingularJacobian = True
-    ss.solution.sensors.writePeriod = NFB_DT
     built = time.perf_counter()
     ok = exu.SolveDynamic(mbs, ss)
     if not ok:

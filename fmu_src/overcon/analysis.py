@@ -524,8 +524,26 @@ def auto_eliminate(J, rtol: float | None = None, *, equilibrate: bool = True) ->
 
 #: Peeling looks at rows with at most this many live columns (a spatial body has 6 coordinates).
 _PEEL_WIDTH = 6
-#: Entries of the left inverse held at once when bounding ||L||_F (8 bytes each: 64 MB).
+#: Entries of the left inverse held at once when bounding ||L||_F (8 bytes each: 64 MB), and of
+#: a stack of small matrices and its factors (:func:`_batches`).
 _CHUNK = 1 << 23
+
+
+def _batches(keys: list, cost) -> list[tuple[object, list]]:
+    """[(key, positions)]: the positions of ``keys`` that share a key (a shape; None: left out),
+    in order of the key's first appearance, cut into runs of at most max(1, _CHUNK // cost(key))
+    positions (``cost``: the entries one item adds to a stack and its factors). The batches of
+    every stacked SVD, QR, product and gather of the pre-check: LAPACK factorises each matrix of a
+    stack as it does one alone, so batching changes the cost, not the numbers."""
+    by: dict = {}
+    for k, key in enumerate(keys):
+        if key is not None:
+            by.setdefault(key, []).append(k)
+    out = []
+    for key, idx in by.items():
+        size = max(1, _CHUNK // cost(key))
+        out.extend((key, idx[lo:lo + size]) for lo in range(0, len(idx), size))
+    return out
 #: Lanczos steps of the lower bound on ||A||_2 when something was peeled (:func:`_sigma1_bounds`).
 _LANCZOS_STEPS = 100
 
@@ -654,22 +672,16 @@ def _svds(A, pieces, full: bool, vectors: bool = True, index: bool = False):
     singular values alone (as :func:`_svdvals`). Pieces with no rows or columns are left out.
     ``index``: a function of the piece's position in ``pieces`` instead of the dict (no entry
     per piece held: the peeling of a long chain has one piece per body)."""
-    by_shape: dict = {}
-    for k, (rows, cols) in enumerate(pieces):
-        if len(rows) and len(cols):
-            by_shape.setdefault((len(rows), len(cols)), []).append(k)
+    keys = [(len(rows), len(cols)) if len(rows) and len(cols) else None for rows, cols in pieces]
     stacks, where = [], [None] * len(pieces)
-    for (nr, nc), idx in by_shape.items():
-        size = max(1, _CHUNK // (nr * nc + nr * nr + nc * nc))  # entries of a stack and its factors
-        for lo in range(0, len(idx), size):
-            part = idx[lo:lo + size]
-            stack = _gather(A, [pieces[k][0] for k in part], [pieces[k][1] for k in part])
-            if vectors:
-                stacks.append(np.linalg.svd(stack, full_matrices=full and nc > nr))
-            else:
-                stacks.append((None, np.linalg.svd(stack, compute_uv=False), None))
-            for j, k in enumerate(part):
-                where[k] = (len(stacks) - 1, j)
+    for (nr, nc), part in _batches(keys, lambda key: key[0] * key[1] + key[0] ** 2 + key[1] ** 2):
+        stack = _gather(A, [pieces[k][0] for k in part], [pieces[k][1] for k in part])
+        if vectors:
+            stacks.append(np.linalg.svd(stack, full_matrices=full and nc > nr))
+        else:
+            stacks.append((None, np.linalg.svd(stack, compute_uv=False), None))
+        for j, k in enumerate(part):
+            where[k] = (len(stacks) - 1, j)
 
     def at(k: int) -> tuple:
         g, j = where[k]
@@ -694,19 +706,14 @@ def _left_inverse_bound(A: np.ndarray, steps: list, cols_of: list) -> float:
     # what does not depend on the earlier bounds, batched by shape: ||(D^+)_k|| and |D^+ X|
     norms: list = [None] * len(steps)
     px: list = [None] * len(steps)
-    by_shape: dict = {}
-    for k, (_, _, P) in enumerate(steps):
-        by_shape.setdefault((P.shape, len(prevs[k])), []).append(k)
-    for ((nc, nr), npv), idx in by_shape.items():
-        size = max(1, _CHUNK // (nc * nr + nr * npv + nc * npv))
-        for lo in range(0, len(idx), size):
-            part = idx[lo:lo + size]
-            P = np.stack([steps[k][2] for k in part])
-            rows = np.sqrt(np.sum(P * P, axis=2))
-            PX = np.abs(P @ _gather(A, [steps[k][0] for k in part], [prevs[k] for k in part])) if npv else None
-            for j, k in enumerate(part):
-                norms[k] = rows[j]
-                px[k] = PX[j] if npv else None
+    keys = [(P.shape, len(prevs[k])) for k, (_, _, P) in enumerate(steps)]
+    for ((nc, nr), npv), part in _batches(keys, lambda key: key[0][0] * key[0][1] + sum(key[0]) * key[1]):
+        P = np.stack([steps[k][2] for k in part])
+        rows = np.sqrt(np.sum(P * P, axis=2))
+        PX = np.abs(P @ _gather(A, [steps[k][0] for k in part], [prevs[k] for k in part])) if npv else None
+        for j, k in enumerate(part):
+            norms[k] = rows[j]
+            px[k] = PX[j] if npv else None
     bound: dict[int, float] = {}
     for k, (_, C, _) in enumerate(steps):
         rows = norms[k]
@@ -1183,20 +1190,14 @@ class _Context:
         rows = key % n if key.size else key
         pieces = [(rows[split[g]:split[g + 1]], cols[g]) for g in range(len(cols))]
         out: list = [None] * len(pieces)
-        by_shape: dict = {}
-        for g, (r, c) in enumerate(pieces):
-            by_shape.setdefault((r.size, c.size), []).append(g)
-        for (nr, nc), idx in by_shape.items():  # one gather per shape (a joint's block is small)
-            if nr * nc > _CHUNK:  # a block too large to stack (a group of many columns)
-                for g in idx:
-                    out[g] = _sub(self.A, *pieces[g])
+        keys = [(r.size, c.size) for r, c in pieces]
+        for (nr, nc), part in _batches(keys, lambda key: max(1, key[0] * key[1])):  # a joint's block is small
+            if nr * nc > _CHUNK:  # a block too large to stack (a group of many columns): one at a time
+                out[part[0]] = _sub(self.A, *pieces[part[0]])
                 continue
-            size = _CHUNK // max(1, nr * nc)
-            for lo in range(0, len(idx), size):
-                part = idx[lo:lo + size]
-                stack = _gather(self.A, [pieces[g][0] for g in part], [pieces[g][1] for g in part])
-                for g, b in zip(part, stack):
-                    out[g] = b
+            stack = _gather(self.A, [pieces[g][0] for g in part], [pieces[g][1] for g in part])
+            for g, b in zip(part, stack):
+                out[g] = b
         return out
 
     @property
@@ -1338,15 +1339,15 @@ def _b_defects(ctx: _Context, groups: Sequence, unique: Sequence[bool], blocks: 
     limit = ctx.b_rtol * ctx.sigma1
     got = ctx.blocks([groups[g] for g in todo]) if blocks is None else [blocks[g] for g in todo]
     k_null = ctx.N_svd.shape[1]
-    for idx, ((nr, nc), _) in _by_shape([(got[k], groups[g]) for k, g in enumerate(todo)]):
-        step = max(1, _CHUNK // max(1, nr * nc + nc * max(k_null, nc)))  # bounds a stack's entries
-        for lo in range(0, len(idx), step):
-            part = idx[lo:lo + step]
-            R = np.linalg.qr(_stacked([got[k] for k in part]), mode="r")
-            N = ctx.N_svd[np.array([list(groups[todo[k]]) for k in part], dtype=np.intp)]
-            s = _svdvals(R @ N) if k_null else np.zeros((len(part), 0))
-            for k, sv in zip(part, s):
-                out[todo[k]] = max(1, int(np.count_nonzero(sv > limit)))
+    def cost(shape):  # a stack's entries: the blocks and their R N_P
+        return max(1, shape[0] * shape[1] + shape[1] * max(k_null, shape[1]))
+
+    for _, part in _batches([b.shape for b in got], cost):
+        R = np.linalg.qr(_stacked([got[k] for k in part]), mode="r")
+        N = ctx.N_svd[np.array([list(groups[todo[k]]) for k in part], dtype=np.intp)]
+        s = _svdvals(R @ N) if k_null else np.zeros((len(part), 0))
+        for k, sv in zip(part, s):
+            out[todo[k]] = max(1, int(np.count_nonzero(sv > limit)))
     return out
 
 
@@ -1354,15 +1355,6 @@ def _stacked(arrays: list) -> np.ndarray:
     """The arrays (of one shape) as one stack; one alone is viewed as a stack, not copied (the
     block of a large set of joints)."""
     return arrays[0][None] if len(arrays) == 1 else np.stack(arrays)
-
-
-def _by_shape(items: list):
-    """(indices, shape) of the items [(block, cols)] that share a block shape and a column
-    count, in order of first appearance: the batches of a stacked QR, SVD or product."""
-    by: dict = {}
-    for k, (b, cols) in enumerate(items):
-        by.setdefault((b.shape, len(cols)), []).append(k)
-    return [(idx, shape) for shape, idx in by.items()]
 
 
 def _joints(ctx: _Context, checked: Mapping[str, tuple[int, ...]]) -> dict:
@@ -1374,19 +1366,15 @@ def _joints(ctx: _Context, checked: Mapping[str, tuple[int, ...]]) -> dict:
     peak = [0.0] * len(names)
     rank_p = [0] * len(names)
     k_null = ctx.N_svd.shape[1]
-    for idx, ((nr, nc), _) in _by_shape([(b, checked[nm]) for b, nm in zip(blocks, names)]):
-        if not nr * nc:
-            continue
-        step = max(1, _CHUNK // max(1, nr * max(k_null, nc)))  # bounds the stacked B's entries
-        for lo in range(0, len(idx), step):
-            part = idx[lo:lo + step]
-            stack = _stacked([blocks[k] for k in part])
-            for k, sv in zip(part, _svdvals(stack)):
-                rank_p[k] = int(np.count_nonzero(sv > ctx.tol))
-            if k_null:
-                N = ctx.N_svd[np.array([list(checked[names[k]]) for k in part], dtype=np.intp)]
-                for k, row_norms in zip(part, np.linalg.norm(stack @ N, axis=2)):
-                    peak[k] = float(row_norms.max())
+    keys = [b.shape if b.size else None for b in blocks]
+    for _, part in _batches(keys, lambda shape: max(1, shape[0] * max(k_null, shape[1]))):  # the stacked B's entries
+        stack = _stacked([blocks[k] for k in part])
+        for k, sv in zip(part, _svdvals(stack)):
+            rank_p[k] = int(np.count_nonzero(sv > ctx.tol))
+        if k_null:
+            N = ctx.N_svd[np.array([list(checked[names[k]]) for k in part], dtype=np.intp)]
+            for k, row_norms in zip(part, np.linalg.norm(stack @ N, axis=2)):
+                peak[k] = float(row_norms.max())
     ratios = [_b_ratio(ctx, p) for p in peak]
     defects = [0] * len(names)
     if not ctx.cross_check:

@@ -300,9 +300,9 @@ static int finish(const ovk_model *M, ovk_data *d, const double *y, double *ydot
 }
 
 /* The evaluation at y that ovk_evaluate left at OVK_FRICTION (Newton and damped Newton gave up),
- * finished by the robust path (friction_robust.c; start: lam_guess (m) or NULL, as
- * overcon.dynamics.evaluate's robust start). The same outputs as ovk_evaluate; qf: the friction
- * forces, which overcon.dynamics does not hand on as a warm start after this path. */
+ * finished by the robust path (friction_robust.c; start: lam_guess (m) or NULL, the frictionless
+ * multipliers). The same outputs as ovk_evaluate; qf: the friction forces, not handed on as the
+ * next evaluation's warm start after this path. */
 int ovk_evaluate_robust(const ovk_model *M, ovk_data *d, const double *y, const double *start, double *ydot,
                         double *lam, double *qf, int *iterations) {
     if (!d) return OVK_NOMEM;

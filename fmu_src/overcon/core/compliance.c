@@ -1,5 +1,5 @@
-/* Stage: the KKT solve of redundancy "compliant" (overcon.dynamics._compliant_solve and
- * _axis_forces). The equations of a compliant joint are not constraints but a spring-damper on
+/* Stage: the KKT solve of redundancy "compliant" (and its axis
+ * forces). The equations of a compliant joint are not constraints but a spring-damper on
  * their violation: their multipliers are known from the state,
  *   scalar values:   lam = k Phi + d Phi_h h           (per equation: N/m, N.s/m or N.m/rad, N.m.s/rad)
  *   per-axis values: lam = U^T K U Phi + U^T D U Phi_h h, K = F diag(k) F^T, D likewise,

@@ -1,5 +1,5 @@
 /* Stage: friction. The friction laws (overcon.friction_laws.Law: regularised, stribeck) and the
- * solve of the friction multipliers (overcon.dynamics._newton_reduced, _damped_newton_reduced):
+ * solve of the friction multipliers (Newton, then damped Newton, on the reduced problem):
  * with lam0x the frictionless multipliers of the friction rows and Wx their answer to unit
  * friction forces, find x = lam0x + Wx qf(x). Newton with the analytic Jacobian first (the LU kept
  * while the residual falls fast); if it gives up, damped Newton from the same start (a fresh

@@ -1,4 +1,4 @@
-/* The robust path of the friction solve (overcon.dynamics._robust_friction), after Newton and
+/* The robust path of the friction solve, after Newton and
  * damped Newton gave up (friction.c returned OVK_FRICTION, its reduced problem still in the
  * workspace): the Anderson-accelerated fixed point x <- lam0x + Wx qf(x) (depth 3, least squares
  * by a small Jacobi SVD with the relative cut-off 1e-12 of numpy's lstsq), then Newton with a
@@ -67,7 +67,7 @@ static void lstsq_small(const double *F, int k, int n, const double *b, double *
     }
 }
 
-/* The accelerated fixed point from x (overcon.dynamics._fixed_point); g ends as the map at the
+/* The accelerated fixed point from x; g ends as the map at the
  * last iterate. Returns 1 when converged; *its counts the iterations. */
 static int fixed_point(const ovk_model *M, ovk_data *d, const double *lam0x, const double *Wx, double *x, double *g,
                        double *w, int *its) {
@@ -121,7 +121,7 @@ static void F(const ovk_model *M, ovk_data *d, const double *lam0x, const double
     for (int a = 0; a < M->nx; a++) Fx[a] = x[a] - g[a];
 }
 
-/* Newton with a finite-difference Jacobian (overcon.dynamics._newton) from x. Returns 1 when
+/* Newton with a finite-difference Jacobian from x. Returns 1 when
  * converged; *its counts the iterations. */
 static int fd_newton(const ovk_model *M, ovk_data *d, const double *lam0x, const double *Wx, double *x, double *w,
                      int *its) {
@@ -159,7 +159,7 @@ static int fd_newton(const ovk_model *M, ovk_data *d, const double *lam0x, const
 size_t ovk_robust_doubles(int nx, int nc) { return (size_t)nc + (size_t)(6 + 3 * DEPTH) * nx + (size_t)nx * nx; }
 
 /* The robust path after ovk_friction returned OVK_FRICTION in this workspace: start (m, or NULL:
- * the frictionless multipliers) as lam_guess of overcon.dynamics.evaluate. On success the
+ * the frictionless multipliers) as the first guess of the multipliers. On success the
  * friction forces (qf, ncols) are added to d->Q and their answer to d->lamR, as ovk_friction does;
  * *iterations counts the fixed-point and Newton iterations. */
 int ovk_friction_robust(const ovk_model *M, ovk_data *d, const double *start, double *qf, int *iterations) {
@@ -172,7 +172,7 @@ int ovk_friction_robust(const ovk_model *M, ovk_data *d, const double *start, do
         ok = newton = fd_newton(M, d, lam0x, Wx, x, w, &its_nt);
     }
     *iterations = its_fp + its_nt;
-    if (!ok) { /* the residual at the last iterate, as overcon.dynamics reports it */
+    if (!ok) { /* the residual at the last iterate, for the message */
         double *q = w, *r = w + nc;
         G(M, d, lam0x, Wx, x, q, r);
         for (int a = 0; a < nx; a++) r[a] -= x[a];
@@ -183,7 +183,7 @@ int ovk_friction_robust(const ovk_model *M, ovk_data *d, const double *start, do
                         "damped Newton; %d friction multipliers of %s)", maxabs(r, nx), *iterations, nx, names);
     }
     /* lam_R: the map at the last iterate (the fixed point) or the Newton iterate on the friction
-     * rows; the forces at lam_R's friction rows (overcon.dynamics._robust_friction's return) */
+     * rows; the forces at lam_R's friction rows (what the path returns) */
     if (!newton) ovk_forces_reduced(M, d, x, qf); /* qf(x): lam_R = lam0 + W qf(x) */
     double *lr = w;                               /* the friction rows of lam_R */
     for (int a = 0; a < nx; a++) lr[a] = newton ? x[a] : g[a];

@@ -299,8 +299,8 @@ void ovk_axis_friction_forces(const ovk_model *M, int j, const ovk_fctx *cx, con
     else axial_loads(c, cx, out, 0.0, Qi, Qj); /* prismatic, point on line (u = R_j a_j): a force at P_i */
 }
 
-/* d(Qi, Qj)/d lam (6 x neq each, row-major) by forward differences, as
- * overcon.dynamics._fd_friction_jacobian: step 1e-7 max(1, |lam_e|); the point-on-line joint's
+/* d(Qi, Qj)/d lam (6 x neq each, row-major) by forward differences,
+ * step 1e-7 max(1, |lam_e|); the point-on-line joint's
  * analytically: its forces are |lam| times the loads of the force mu(v) u (v does not depend on
  * lam), so d/d lam_e is those loads times lam_e / |lam| (0 at lam = 0). */
 void ovk_axis_friction_jac(const ovk_model *M, int j, const ovk_fctx *cx, const double *lam, double *dQi,

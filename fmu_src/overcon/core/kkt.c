@@ -1,4 +1,4 @@
-/* Stage: the KKT solve with the scene's elimination (overcon.dynamics.evaluate). Only the retained
+/* Stage: the KKT solve with the scene's elimination. Only the retained
  * rows R of Phi_h enter: S = J_R M^-1 J_R^T (M diagonal, kept as Minv), lam_R = S^-1 (J_R M^-1 Q -
  * gamma_R), h' = M^-1 (Q - J_R^T lam_R). Each retained row touches at most two bodies (rbody), so
  * the products run over those bodies' coordinates only, and S_ab is nonzero only when rows a and

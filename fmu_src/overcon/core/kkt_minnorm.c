@@ -1,4 +1,4 @@
-/* Stage: the KKT solve of redundancy "min-norm" (overcon.dynamics._min_norm_inverse): every
+/* Stage: the KKT solve of redundancy "min-norm": every
  * equation is kept and S = J_R M^-1 J_R^T is singular by the redundancy, so in place of its
  * Cholesky factor the pseudo-inverse S^+ = sum_i u_i u_i^T / s_i^2 over the singular values s_i of
  * B = J_R M^-1/2 (rows: the retained equations) above MIN_NORM_RTOL s_1 (u_i its left singular

@@ -4,7 +4,7 @@ Value references are the positions in :func:`table` (0-based), in this order:
 
 1. outputs, exactly ``model.output_names()``: positions (m, rad; quaternion components 1), reaction components
    (N, N.m) and the friction forces ``<joint>.friction`` of the scene's friction joints (N, or
-   N.m for revolute joints; :func:`overcon.evaluation.friction_output`), causality output,
+   N.m for revolute joints; the core's friction output, core/outputs.c), causality output,
    variability continuous, initial calculated;
 2. uniqueness verdicts (Booleans, causality output, initial exact, the start value the pre-check's at
    t = 0): ``<joint>.reaction_unique`` per reaction joint of the scene (variability constant, the

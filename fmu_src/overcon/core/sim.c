@@ -334,6 +334,10 @@ static int pass_singular(ovk_sim *s, double r_before) {
     return status;
 }
 
+/* Whether a step from the state the watch last judged (r = s->ratio) may take kkt_al.c's direct
+ * solve: one rule for the step's start (step_checked) and its end (next_solve). */
+static int direct_allowed(const ovk_sim *s) { return s->ratio >= OVK_DIRECT_RATIO; }
+
 /* Formulation AL, at the end of an accepted step: the next step's acceleration solve (kkt_al.c's
  * direct one allowed or not: the watch's r at the step's end, OVK_DIRECT_RATIO; step_checked sets
  * the same again from the state, so a run taken from a saved state goes on alike). The explicit
@@ -347,7 +351,7 @@ static int pass_singular(ovk_sim *s, double r_before) {
  * 27-37% of the evaluations over the 20 s; docs/benchmarks.md, "Error against tolerance"). */
 static int next_solve(ovk_sim *s) {
     ovk_rk *rk = &s->rk;
-    int allow = s->ratio >= OVK_DIRECT_RATIO, status;
+    int allow = direct_allowed(s), status;
     if (s->M->formulation != OVK_FORM_AL || allow == s->d->al_allow_direct ||
         !(rk->method == OVK_METHOD_DOPRI5 || rk->method == OVK_METHOD_DOP853))
         return OVK_OK;
@@ -361,7 +365,7 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     ovk_rk *rk = &s->rk;
     double t_before = rk->t;
     int status = check_budget(s, started, n0, call_steps, call_wall);
-    s->d->al_allow_direct = s->ratio >= OVK_DIRECT_RATIO; /* the step's solve, the same at every stage */
+    s->d->al_allow_direct = direct_allowed(s); /* the step's solve, the same at every stage */
     if (status) return stopped(s, status, "integration stopped", rk->t);
     status = ovk_rk_step(rk, sim_rhs, s, s->msg);
     if (!status && !(rk->t > t_before)) {

@@ -803,21 +803,15 @@ def _joint_type(ctx: _Ctx, jt: dict, p: str, kind: str | None) -> tuple[str | No
     return jtype, True
 
 
-def _joint_keys(fields) -> tuple[str, ...]:
-    """The keys a joint table of type ``fields`` may have (``None``: of any type); made once per
-    type (a mechanism of 10,000 joints asked 10,000 times)."""
-    made = _JOINT_KEYS.get(id(fields)) if fields is not None else None
-    if made is not None and made[0] is fields:
-        return made[1]
-    types = JOINT_TYPES.values() if fields is None else (fields,)
-    keys = _JOINT_COMMON + tuple(dict.fromkeys(
+def _joint_keys(types) -> tuple[str, ...]:
+    """The keys a joint table of the joint types ``types`` may have."""
+    return _JOINT_COMMON + tuple(dict.fromkeys(
         f for d in types for f in (*d.required, *d.optional, *_deg_keys(d.required), *_deg_keys(d.optional))))
-    if fields is not None:
-        _JOINT_KEYS[id(fields)] = (fields, keys)
-    return keys
 
 
-_JOINT_KEYS: dict = {}  # id(fields) -> (fields, _joint_keys(fields))
+#: Joint type key -> the keys its table may have, and None -> the keys of any type: made once, at
+#: import (a mechanism of 10,000 joints asks for them 10,000 times).
+_JOINT_KEYS = {**{key: _joint_keys((jt,)) for key, jt in JOINT_TYPES.items()}, None: _joint_keys(JOINT_TYPES.values())}
 
 
 def _joint_params(ctx: _Ctx, jt: dict, p: str, fields, kind: str | None) -> dict | None:
@@ -845,7 +839,7 @@ def _check_joint(jt: dict, p: str, ctx: _Ctx, kind: str | None, body_names: dict
     jtype, ok = _joint_type(ctx, jt, p, kind)
     # a type not allowed for the kind is reported once; its fields are then not checked
     fields = JOINT_TYPES[jtype] if jtype and ok else None
-    _unknown_keys(ctx, jt, p, _joint_keys(fields))
+    _unknown_keys(ctx, jt, p, _JOINT_KEYS[jtype if fields is not None else None])
     v = _get(ctx, jt, "name", p)
     if v is not _MISSING:
         jname = _register_name(ctx, _ident(ctx, v, f"{p}.name"), f"{p}.name", joint_names, p, "joint")

@@ -402,6 +402,24 @@ def test_friction_jacobian_matches_differences_of_the_forces(single, jtype, law)
     assert moved >= 6, moved
 
 
+def test_friction_joint_at_refuses_arrays_of_the_wrong_size(single):
+    """The multipliers and the state are checked against the joint and the model before the core
+    reads them (a shorter lam would be read past its end): ValueError naming both sizes; a joint
+    without friction is refused by name."""
+    jtype = TYPES[0]
+    spec, model = single(jtype, 1, friction_table(jtype, list(LAWS)[0]))
+    k = kernel_for(model, spec.solver)
+    y = _state(model, np.random.default_rng(1))
+    j = model.friction_joints[0]
+    ne = len(model.joints[j].rows)
+    with pytest.raises(ValueError, match=f"lam of shape \\({ne - 1},\\).*has {ne} equations"):
+        k.friction_joint_at(y, j, np.zeros(ne - 1))
+    with pytest.raises(ValueError, match=f"y of shape \\({y.size + 1},\\)"):
+        k.friction_joint_at(np.zeros(y.size + 1), j, np.zeros(ne))
+    with pytest.raises(ValueError, match="has no friction law"):
+        k.friction_joint_at(y, len(model.joints), np.zeros(ne))
+
+
 @pytest.mark.parametrize("jtype", TYPES)
 def test_friction_zero_when_mu_zero(single, jtype):
     """mu = 0: every friction output is exactly 0 and the equations of motion hold without friction

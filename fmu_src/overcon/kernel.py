@@ -549,6 +549,11 @@ class Kernel:
         n = self._friction_plan.index(j)
         yy = np.ascontiguousarray(y, float)
         lam = np.ascontiguousarray(lam, float)
+        neq = len(self.model.joints[j].rows)
+        ny = self.model.n + self.model.nh
+        if lam.shape != (neq,) or yy.shape != (ny,):
+            raise ValueError(f"friction_joint_at: lam of shape {lam.shape} and y of shape {yy.shape}; joint {j} "
+                             f"has {neq} equations and the state {ny} entries")
         kh = self.model.nh_b
         Q, dQ = np.zeros(2 * kh), np.zeros((2 * kh, lam.size))
         status = self._lib.ovk_friction_joint_at(self._pm, self._data, yy.ctypes.data, int(n), lam.ctypes.data,

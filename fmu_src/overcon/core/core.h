@@ -233,6 +233,9 @@ typedef struct {
     int al_stalled;
     int al_allow_direct; /* a run's step may take the AL form's direct solve (sim.c, OVK_DIRECT_RATIO) */
     int al_direct;     /* the last AL-form solve was kkt.c's direct one (its S factor stands; kkt_al.c) */
+    int al_direct_only; /* sim_pass.c: the direct solve or OVK_SINGULAR with al_refused set, never the iteration */
+    int al_refused;    /* the last solve under al_direct_only found the kept rows too near a singular position */
+    double al_pivot_min; /* the direct solve's least pivot spread (0: OVK_PASS_REGULAR; kkt_al.c, sim_pass.c) */
     int *al_rows;  /* every equation (m), then its two bodies (2 m): the row set of ovk_project */
     int *piv;      /* nx: the row interchanges of the friction solves' LU (friction.c, friction_robust.c) */
     double *phit;  /* m: Phi_t of the drivers' equations (0 elsewhere), with Phi at d->f.t (joints.c) */
@@ -375,6 +378,9 @@ typedef struct {
     double *ywatch, *ystar, *qwatch; /* watch scratch: states (ny each), coordinate rates (n) */
     double rate, ratio;            /* watch: dr/dt and r of the kept equations at the last check */
     double *qload;                 /* energy: the constant loads' Q (nh) */
+    double *pass_y, *pass_f, *pass_qd, *pass_acc, *pass_lam; /* sim_pass.c scratch: ny, ny, n, nh, m */
+    int stepping, refused;         /* sim.c: inside ovk_rk_step; a stage of that step refused the direct solve */
+    long long passing;             /* right-hand sides sim_pass.c interpolated, not state */
     double work_t[2], work_w[2][2], work_p[2][2]; /* energy ledger: (t, work, powers) at the last two step ends */
     double *mem;                   /* the one allocation behind the arrays above and the integrator's */
     int status;
@@ -409,6 +415,7 @@ typedef struct {
     double t_changed;              /* inputs: the communication point where they last changed (-inf: never) */
 } ovk_sim;
 #define OVK_SIM_NINFO 18
+OVK_HIDDEN int ovk_sim_passing(ovk_sim *s, double t, const double *y, double *ydot);
 OVK_HIDDEN int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, const double *lam,
                              double *ydot, int *its);
 /* energy.c: the energy outputs' ledger */
@@ -614,6 +621,8 @@ enum { OVK_AL_SLOT_BASE, OVK_AL_SLOT_RHS, OVK_AL_SLOT_X, OVK_AL_SLOT_UNIT, OVK_A
 OVK_HIDDEN double *ovk_al_slot(const ovk_model *M, const ovk_data *d, int which);
 #define OVK_AL_ALPHA_PROJ 1e6 /* the projections' penalty, relative to M over J^T J (kkt_al.c) */
 #define OVK_DIRECT_RATIO 1e-3 /* sim.c: the watch's r at a step's start above which kkt_al.c may solve directly */
+#define OVK_PASS_REGULAR 2e-5 /* kkt_al.c: least spread of S's squared pivots for the direct solve (sim_pass.c) */
+#define OVK_PASS_AT_STATE 1e-4 /* sim_pass.c: that spread at a state's projection for its own direct solve */
 #define OVK_PROJ_SLACK 10.0   /* project.c: |Phi| up to this times tol is accepted once the corrections stall */
 OVK_HIDDEN int ovk_al_factor(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, double alpha_rel);
 OVK_HIDDEN void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const double *Q, const double *g,

@@ -237,17 +237,12 @@ void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const d
  * meets the AL's own stopping test (the residual at most AL_TOL of its scale): 1, with
  * d->al_direct set (the friction columns use the same factor). It is tried only where the run
  * allows it for the whole step (d->al_allow_direct: sim.c, from the watch's r at the step's start,
- * OVK_DIRECT_RATIO), so that every stage of a step near a singular position has the same
- * right-hand side (decided per evaluation, the switches between the two solves inside steps were
- * jumps in y' that a tolerance of 1e-12 could not step over, and the passages lost accuracy:
- * measured on the N-four-bar N = 2, B0's x 4e-2 m off after 20 s instead of 1.6e-5 m); a
- * Kernel outside a run keeps the iteration. 0 when not allowed, when S has no Cholesky factor or
- * its pivots spread by more than 1 / DIRECT_PIVOT (a direct lam's error along the directions
- * losing rank grows as 1 / pivot, and J_R^T carries into y' what it cannot cancel), or when the
- * test is not met: the iteration from lam = 0 decides, as it would alone (the minimum-norm
- * multipliers at a singular position). Only under redundancy "eliminate" (the AL's rows). */
+ * OVK_DIRECT_RATIO); a Kernel outside a run keeps the iteration. 0 when not allowed, when S has no
+ * Cholesky factor or its squared pivots spread by more than 1 / d->al_pivot_min (OVK_PASS_REGULAR
+ * unless the caller sets another: the direct acceleration's error along the directions losing rank
+ * grows as the inverse cube of their singular value, sim_pass.c), or when the test is not met.
+ * Only under redundancy "eliminate" (the AL's rows). */
 #define DIRECT_REFINE 2
-#define DIRECT_PIVOT 1e-8 /* the smallest pivot^2 against the largest for S's factor to be used at all */
 static int direct(const ovk_model *M, ovk_data *d, const ovk_rowset *kept) {
     d->al_direct = 0;
     if (!d->al_allow_direct) return 0;
@@ -260,7 +255,7 @@ static int direct(const ovk_model *M, ovk_data *d, const ovk_rowset *kept) {
         double u = d->S[(size_t)a * (d->sb.band + 1)];
         lo = u * u < lo ? u * u : lo, hi = u * u > hi ? u * u : hi;
     }
-    if (!(lo >= DIRECT_PIVOT * hi)) return 0;
+    if (!(lo >= (d->al_pivot_min > 0.0 ? d->al_pivot_min : OVK_PASS_REGULAR) * hi)) return 0;
     double *x = slot(M, d, SLOT_X), *res = slot(M, d, SLOT_RES), *lam = slot(M, d, SLOT_LAMC), rmax = 0.0,
            scale = 0.0;
     for (int k = 0;; k++) { /* h' of these multipliers (kkt.c), then the stopping test */
@@ -278,10 +273,17 @@ static int direct(const ovk_model *M, ovk_data *d, const ovk_rowset *kept) {
 
 /* Formulation AL in place of ovk_kkt_solve: the factor and lam_R without friction (d->lamR), from
  * d->Q and d->g (directly where the kept rows are regular: direct above). The same statuses, but
- * never OVK_SINGULAR at a singular position. */
+ * never OVK_SINGULAR at a singular position, except under d->al_direct_only (a run's step in pass
+ * mode, sim.c): there OVK_SINGULAR with d->al_refused set where the direct solve is refused, so that
+ * the run interpolates instead (sim_pass.c). */
 int ovk_kkt_al_solve(const ovk_model *M, ovk_data *d) {
     ovk_rowset kept = ovk_al_kept(M);
+    d->al_refused = 0;
     if (direct(M, d, &kept)) return OVK_OK;
+    if (d->al_direct_only) {
+        d->al_refused = 1;
+        return ovk_fail(d, OVK_SINGULAR, "the kept rows are too near a singular position for the direct solve");
+    }
     int status = ovk_al_factor(M, d, &kept, AL_ALPHA_DYN);
     if (status) return status;
     ovk_al_solve(M, d, &kept, d->Q, d->g, slot(M, d, SLOT_X), d->lamR);

@@ -90,10 +90,41 @@ int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, cons
     return status;
 }
 
+/* One right-hand side of the integration. Formulation AL under redundancy "eliminate" (pass mode):
+ * a step that may take the direct solve (d->al_allow_direct, from the watch's r at its start) takes
+ * it at every stage or, where a stage is too near a singular position for it, is taken again with
+ * every stage interpolated (sim_pass.c; in_step, inside ovk_rk_step: s->refused is set and
+ * OVK_SINGULAR returned to step_checked); a step that may not interpolates at every stage; the AL iteration is the fallback
+ * where the interpolation finds no nodes. Outside a step (dop853's dense stages, the step-end
+ * projection's new first stage) a refused state is interpolated at once: its step is taken already,
+ * or the next one decides again (next_solve). Otherwise ovk_sim_solve. */
+static int sim_eval(ovk_sim *s, double t, const double *y, double *ydot, int *its, int in_step) {
+    ovk_data *d = s->d;
+    const double *lam = s->has_lam ? s->lam : NULL;
+    if (s->M->formulation != OVK_FORM_AL || s->M->redundancy != OVK_ELIMINATE)
+        return ovk_sim_solve(s, t, y, &s->warm, lam, ydot, its);
+    if (d->al_allow_direct) {
+        d->al_direct_only = 1;
+        int status = ovk_sim_solve(s, t, y, &s->warm, lam, ydot, its);
+        d->al_direct_only = 0;
+        if (!(status == OVK_SINGULAR && d->al_refused)) return status;
+        if (in_step) return s->refused = 1, status;
+    }
+    if (!ovk_sim_passing(s, t, y, ydot)) {
+        s->robust = 1; /* the friction forces of the last node: not a warm start for the next solve */
+        return OVK_OK;
+    }
+    int allow = d->al_allow_direct;
+    d->al_allow_direct = 0;
+    int status = ovk_sim_solve(s, t, y, &s->warm, lam, ydot, its);
+    d->al_allow_direct = allow;
+    return status;
+}
+
 /* The integrator's right-hand side (Simulation._rhs). */
 static int sim_rhs(void *ctx, double t, const double *y, double *ydot) {
     ovk_sim *s = ctx;
-    int its = 0, status = ovk_sim_solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, ydot, &its);
+    int its = 0, status = sim_eval(s, t, y, ydot, &its, s->stepping);
     if (status) return status;
     if (s->M->nfj) {
         memcpy(s->lam, s->ev_lam, (size_t)s->m * sizeof(double));
@@ -113,7 +144,7 @@ static int sim_rhs(void *ctx, double t, const double *y, double *ydot) {
  * leaving the warm starts and the counters alone; a failure's message into rk.dense_msg. */
 static int sim_rhs_dense(void *ctx, double t, const double *y, double *ydot) {
     ovk_sim *s = ctx;
-    int its = 0, status = ovk_sim_solve(s, t, y, &s->warm, s->has_lam ? s->lam : NULL, ydot, &its);
+    int its = 0, status = sim_eval(s, t, y, ydot, &its, 0);
     if (status) memcpy(s->rk.dense_msg, s->msg, sizeof s->msg);
     return status;
 }
@@ -140,6 +171,11 @@ static void layout(ovk_sim *s) {
     s->ystar = p; p += ny;
     s->qwatch = p; p += (size_t)s->n;
     s->qload = p; p += nh;
+    s->pass_y = p; p += ny;
+    s->pass_f = p; p += ny;
+    s->pass_qd = p; p += (size_t)s->n;
+    s->pass_acc = p; p += nh;
+    s->pass_lam = p; p += m;
     s->rk.y = p; /* the integrator's block starts here: ovk_rk_start lays it out */
 }
 
@@ -200,8 +236,8 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->m = M->m;
     s->ncols = M->ncols;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh;
-    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 2 * m + (size_t)s->n +
-                  nh + ovk_rk_doubles(o->rk.method, s->ny);
+    size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 2 * m + (size_t)s->n + nh +
+                  (2 * ny + (size_t)s->n + nh + m) + ovk_rk_doubles(o->rk.method, s->ny);
     s->mem = calloc(need, sizeof(double));
     if (!s->mem) {
         s->status = OVK_NOMEM;
@@ -367,7 +403,15 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     int status = check_budget(s, started, n0, call_steps, call_wall);
     s->d->al_allow_direct = direct_allowed(s); /* the step's solve, the same at every stage */
     if (status) return stopped(s, status, "integration stopped", rk->t);
+    s->refused = 0, s->stepping = 1;
     status = ovk_rk_step(rk, sim_rhs, s, s->msg);
+    s->stepping = 0;
+    if (status == OVK_SINGULAR && s->refused) { /* a stage refused the direct solve: the step again, */
+        s->refused = 0;                           /* every stage interpolated (sim_eval), its first too */
+        s->d->al_allow_direct = 0;
+        status = sim_rhs(s, rk->t, rk->y, rk->f);
+        if (!status) status = ovk_rk_step(rk, sim_rhs, s, s->msg);
+    }
     if (!status && !(rk->t > t_before)) {
         snprintf(s->msg, sizeof s->msg, "t = %.9g s: time does not advance (step below the resolution of t)",
                  t_before);

@@ -211,7 +211,9 @@ def test_the_certified_skip_decides_as_the_factorisation(tmp_path):
     """Between flat positions the watch's certified bounds decide the uniqueness along the motion
     without a factorisation (unique.c, ovk_unique_certified): after every interval in which it
     did, the run reports full rank and every reaction unique, and the whole rule (Kernel.unique,
-    the banded factorisation) says the same at the run's step end; and the skip is taken."""
+    the banded factorisation) says the same at the run's step end; and the skip is taken (3 times
+    over the 1.5 s: the uniqueness is evaluated after steps ending with r < 1e-3, and the passages,
+    interpolated near the flat positions by core/sim_pass.c, take few of them; 29 before)."""
     _, path = _nfourbar().write(10, tmp_path, stop_time=1.5, singular="pass")
     spec = _scene(path)
     model = compile_checked(spec)
@@ -227,7 +229,7 @@ def test_the_certified_skip_decides_as_the_factorisation(tmp_path):
             assert rank == full == model.m and all(verdicts) and all(unique.values())
             checked += 1
         before = certified
-    assert run.info["along_certified"] > 10 and checked > 0
+    assert run.info["along_certified"] > 0 and checked > 0
 
 
 @pytest.mark.parametrize("name", ["planar_f45_wo4", "planar_f1_wo6", "spatial_GHMN_wo5", "examples/door_h1_wo_hinge2",

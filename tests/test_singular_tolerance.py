@@ -2,6 +2,7 @@
 (mechanisms/examples/nfourbar.py) with N = 2 and ``singular = "pass"`` over the benchmark's 20 s,
 20 flat positions, B0's x (crank0.x + 0.5 cos(crank0.phi)) against the exact branch (every crank
 at phi, I phi'' = -g c cos(phi), I = 3 kg m^2, c = 3.5 kg m; benchmarks/nfourbar.py's reference).
+Near each flat position the run interpolates y' along the motion (core/sim_pass.c).
 docs/benchmarks.md ("Error against tolerance through the singular positions") has the table and
 what was measured of the cause."""
 from __future__ import annotations
@@ -49,8 +50,11 @@ def _b0_x(model, y) -> float:
     return float(y[3 * b] + 0.5 * math.cos(y[3 * b + 2]))
 
 
-def _run(model, solver, method: str, tolerance: float) -> tuple[np.ndarray, Simulation]:
-    sim = Simulation(model, dataclasses.replace(solver, method=method, tolerance=tolerance), max_steps=200_000)
+def _run(model, solver, method: str, tolerance: float, max_step: float | None = None) -> tuple[np.ndarray, Simulation]:
+    solver = dataclasses.replace(solver, method=method, tolerance=tolerance)
+    if max_step is not None:
+        solver = dataclasses.replace(solver, max_step=max_step)
+    sim = Simulation(model, solver, max_steps=200_000)
     return np.array([_b0_x(model, sim.advance(float(t))) for t in TIMES]), sim
 
 
@@ -60,41 +64,58 @@ def nfourbar(tmp_path_factory):
     return model, solver, _reference()
 
 
-@pytest.mark.parametrize("method", ["dop853", "dopri5"])
-def test_every_tolerance_passes_the_20_flat_positions_within_the_measured_floor(nfourbar, method):
-    """Tolerances 1e-9, 1e-10 and 1e-12: all 20 flat positions passed, each once, and B0's x within
-    5e-5 m of the branch over the 20 s. Measured (docs/benchmarks.md): at most 2.7e-5 m; the error
-    that the passages leave is about 1e-5 m whatever the tolerance (the next test), and dopri5 at
-    1e-8 is above it by its own error (6.3e-5 m, ten times less per decade of the tolerance)."""
-    model, solver, ref = nfourbar
-    for tolerance in (1e-9, 1e-10, 1e-12):
-        x, sim = _run(model, solver, method, tolerance)
-        assert sum(1 for e in sim.events if e[1] == "singular") == 20, (method, tolerance)
-        assert np.max(np.abs(x - ref)) <= 5e-5, (method, tolerance, float(np.max(np.abs(x - ref))))
+TOLERANCES = (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 40 item 2 is not met: each passage loses about 1e-7 J to the "
-                   "step-end velocity projection whatever the tolerance (docs/benchmarks.md, 'Error against "
-                   "tolerance through the singular positions')")
-@pytest.mark.parametrize("method", ["dop853", "dopri5"])
-def test_the_error_falls_with_the_tolerance_through_the_flat_positions(nfourbar, method):
-    """Issue 40's acceptance: the error of B0's x over the 20 s falls at every step of the tolerance
-    from 1e-6 to 1e-12 and is at most 1e-8 m at 1e-12 (strict xfail: a fix makes it pass, and the
-    marker must then go)."""
+@pytest.fixture(scope="module")
+def errors(nfourbar):
+    """B0's largest error over the 20 s for each method and tolerance, max_step 1 s (the largest
+    allowed), so that the tolerance alone sets the steps: at the scene's 0.05 s dop853 takes only
+    0.05 s steps at 1e-6 and 1e-7, and the two runs are the same. Each run passes all 20 flat
+    positions, each once."""
     model, solver, ref = nfourbar
-    errors = [float(np.max(np.abs(_run(model, solver, method, tol)[0] - ref)))
-              for tol in (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12)]
-    assert all(b < a for a, b in zip(errors, errors[1:])), errors
-    assert errors[-1] <= 1e-8, errors
+    out = {}
+    for method in ("dop853", "dopri5"):
+        for tol in TOLERANCES:
+            x, sim = _run(model, solver, method, tol, max_step=1.0)
+            assert sum(1 for e in sim.events if e[1] == "singular") == 20, (method, tol)
+            out[method, tol] = float(np.max(np.abs(x - ref)))
+    return out
+
+
+@pytest.mark.parametrize("method", ["dop853", "dopri5"])
+def test_the_error_falls_with_the_tolerance_through_the_flat_positions(errors, method):
+    """Issue 40's acceptance, its part that holds with margin: the error of B0's x over the 20 s falls
+    at every step of the tolerance from 1e-6 to 1e-12, for both methods. Measured
+    (docs/benchmarks.md): dop853 1.1e-3, 7.9e-5, 9.6e-6, 8.2e-7, 9.0e-8, 7.7e-9, 1.7e-9 m;
+    dopri5 6.3e-3, 6.2e-4, 6.2e-5, 6.1e-6, 5.5e-7, 5.3e-8, 1.2e-8 m. Before the interpolation near the
+    flat positions (core/sim_pass.c) both stayed between 1e-6 and 3e-5 m below 1e-8."""
+    series = [errors[method, tol] for tol in TOLERANCES]
+    assert all(b < a for a, b in zip(series, series[1:])), series
+
+
+def test_dop853_is_within_1e_8_m_at_tolerance_1e_12(errors):
+    """The acceptance's bound for dop853: at most 1e-8 m at 1e-12 (measured 1.7e-9 m; over seven
+    tolerances within 0.5% of 1e-12, 2.6e-10 to 1.7e-9 m, docs/benchmarks.md)."""
+    assert errors["dop853", 1e-12] <= 1e-8, errors["dop853", 1e-12]
+
+
+@pytest.mark.xfail(strict=False, reason="issue 40: dopri5 at 1e-12 sits at the round-off floor of the direct "
+                   "solves near the flat positions plus its own error (5.3e-8 m at 1e-11): 1.2e-9 to 1.8e-8 m "
+                   "over tolerances within 0.5% of 1e-12 (docs/benchmarks.md), so 1e-8 m is not met with margin")
+def test_dopri5_is_within_1e_8_m_at_tolerance_1e_12(errors):
+    """The acceptance's bound for dopri5 (not met with margin: the reason above)."""
+    assert errors["dopri5", 1e-12] <= 1e-8, errors["dopri5", 1e-12]
 
 
 @pytest.mark.parametrize("saved_at", [0.7135, 0.7142, 0.7151])
 def test_a_run_restored_near_a_flat_position_goes_on_bit_for_bit(nfourbar, saved_at):
-    """The acceleration solve of a step (direct or AL, from the watch's r: core/sim.c) changes twice
-    around each flat position (0.7139 and 0.7151 s at tolerance 1e-10), and where it changes the
-    first stage of the next step is evaluated again under the new solve. That decision is taken
-    from the saved state alone: a run restored before, inside and after the AL's window goes on
-    exactly as the run that was not interrupted."""
+    """A step's right-hand side (the direct solve, or the interpolation along the motion of
+    core/sim_pass.c, from the watch's r at its start, and again interpolated where a stage refuses the
+    direct solve: core/sim.c) changes around each flat position (near 0.714 s), and where it changes
+    the first stage of the next step is evaluated again. Those decisions are taken from the saved
+    state alone, and the interpolation depends on the state alone: a run restored before, inside
+    and after the window goes on exactly as the run that was not interrupted."""
     model, solver, _ = nfourbar
     solver = dataclasses.replace(solver, method="dop853", tolerance=1e-10)
     sim = Simulation(model, solver)

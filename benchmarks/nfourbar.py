@@ -12,8 +12,10 @@ evaluation as N grows.
     python benchmarks/nfourbar.py --q0-cost [N ...] [--repeat R]
                                             the core's evaluation at q0 only, both acceleration solves
     python benchmarks/nfourbar.py --error-table [N ...] [--methods M ...] [--tolerances TOL ...]
+                                  [--max-step S]
                                             B0's error over the run against the tolerance (default
-                                            N = 2, dop853 and dopri5, 1e-6 ... 1e-12)
+                                            N = 2, dop853 and dopri5, 1e-6 ... 1e-12, the scene's
+                                            max_step 0.05 s)
 
 For each N the scene (tolerance 1e-9 or --tolerance, dopri5) is run in process (one BLAS thread) through
 ``overcon.simulate.Simulation`` (``overcon simulate``'s path: the core's run, core/sim.c, behind
@@ -45,6 +47,8 @@ slower rounds do not count. The main table prints the same two figures (``elim q
 ``--error-table``: for each N, method and tolerance, the in-process run's error of B0's x against
 the exact branch (max over the 0.01 s grid), its wall time, steps and evaluations: what a user gets
 for a tolerance through the singular positions (docs/benchmarks.md, "Error against tolerance").
+``--max-step 1`` lets the tolerance alone set the steps (at the scene's 0.05 s, dop853's steps at
+1e-6 and 1e-7 are all 0.05 s, and the two runs are the same).
 ``--plot``: the core's cost per evaluation and the in-process run's wall time per evaluation
 against N, log-log, with slopes 1 and 3 for reference. The figures go to docs/benchmarks.md
 ("The N-four-bar") by hand.
@@ -208,8 +212,10 @@ def measure(n: int, tmp: Path, stop: float, c_max: int, tolerance: float = 1e-9)
             "us_elim_q0": q0_cost(n, tmp, "stop"), "us_al_q0": q0_cost(n, tmp, "pass")}
 
 
-def error_table(ns: list[int], methods: list[str], tolerances: list[float], stop: float) -> None:
-    """``--error-table``: B0's error against the tolerance, one line per N, method and tolerance."""
+def error_table(ns: list[int], methods: list[str], tolerances: list[float], stop: float,
+                max_step: float | None = None) -> None:
+    """``--error-table``: B0's error against the tolerance, one line per N, method and tolerance
+    (max_step: the solver's, None for the scene's)."""
     print(f"{'N':>4} {'method':>7} {'tolerance':>9} {'error m':>9} {'wall s':>7} {'steps':>6} {'evals':>6} {'sing':>4}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in ns:
@@ -221,13 +227,15 @@ def error_table(ns: list[int], methods: list[str], tolerances: list[float], stop
             for method in methods:
                 for tol in tolerances:
                     solver = dataclasses.replace(spec.solver, method=method, tolerance=tol)
+                    if max_step is not None:
+                        solver = dataclasses.replace(solver, max_step=max_step)
                     try:
                         r = in_process(model, solver, times)
                     except Exception as exc:  # a run that stopped is reported as such, not as a figure
-                        print(f"{n:>4} {method:>7} {tol:>9.0e} stopped: {exc}", flush=True)
+                        print(f"{n:>4} {method:>7} {tol:>9.4g} stopped: {exc}", flush=True)
                         continue
                     err = float(np.max(np.abs(r["x"] - ref)))
-                    print(f"{n:>4} {method:>7} {tol:>9.0e} {err:>9.2e} {r['wall']:>7.3f} {r['steps']:>6} "
+                    print(f"{n:>4} {method:>7} {tol:>9.4g} {err:>9.2e} {r['wall']:>7.3f} {r['steps']:>6} "
                           f"{r['evaluations']:>6} {r['singular']:>4}", flush=True)
 
 
@@ -271,9 +279,10 @@ def main(argv=None) -> int:
                     help="B0's error against the tolerance (default N = 2; --methods, --tolerances)")
     ap.add_argument("--methods", nargs="+", default=["dop853", "dopri5"])
     ap.add_argument("--tolerances", type=float, nargs="+", default=[1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12])
+    ap.add_argument("--max-step", type=float, help="with --error-table: the solver's max_step (s; default the scene's)")
     args = ap.parse_args(argv)
     if args.error_table:
-        error_table(args.n or [2], args.methods, args.tolerances, args.stop_time)
+        error_table(args.n or [2], args.methods, args.tolerances, args.stop_time, args.max_step)
         return 0
     args.n = args.n or [2, 10, 40, 100]
     if args.q0_cost:

@@ -111,9 +111,10 @@ SINGULAR = ("stop", "pass")
 """``[solver] singular``: what a run does at a singular position of the mechanism (its constraint
 Jacobian loses rank). ``"stop"`` (default): the paper's eliminated form; the run stops there (exit 3).
 ``"pass"``: the augmented Lagrangian formulation over the kept equations with mass-orthogonal
-projections after every step (core/kkt_al.c, core/project.c; compiled kernel only): the run goes
-through and records a ``singular`` event; where the rank is regular its multipliers are the
-eliminated form's (docs/howto/singular.md)."""
+projections after every step (core/kkt_al.c, core/project.c; compiled kernel only), and near a
+singular position the acceleration interpolated along the motion from states where the direct
+solve is accurate (core/sim_pass.c): the run goes through and records a ``singular`` event; where
+the rank is regular its multipliers are the eliminated form's (docs/howto/singular.md)."""
 """Values of the solver setting ``kernel`` (:mod:`overcon.kernel`)."""
 """Integrators offered (the core's: core/integrate_rk.c, core/integrate_radau.c): adaptive explicit ``dopri5`` and
 ``dop853``, fixed-step ``rk4``, implicit (stiff) ``radau``."""

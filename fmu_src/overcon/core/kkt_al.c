@@ -21,8 +21,8 @@
  * result. The acceleration solve takes AL_ALPHA_DYN = 1e5: its result is the evaluation's y', so
  * its round-off matters (measured on six friction scenes: lam within about 1e-11 of the eliminated
  * form's, relative; with 1e6 it was 2e-10, and the round-off of y' showed as energy noise that kept
- * dopri5 at tolerance 1e-12 from converging); it only stalls near a singular position, where the
- * projections finish the work. The projections (project.c) take OVK_AL_ALPHA_PROJ = 1e6: they
+ * dopri5 at tolerance 1e-12 from converging); it only stalls near a singular position, where a
+ * run interpolates instead (sim_pass.c) and the iteration is the fallback. The projections (project.c) take OVK_AL_ALPHA_PROJ = 1e6: they
  * solve for small corrections, whose round-off is relative to the correction; a larger alpha
  * corrects the directions that lose rank harder, which measured worse (N-four-bar N = 2 at
  * tolerance 1e-12: B0's x 5e-5 m off the 1-DOF motion after 4 s with 1e8, 3e-7 m with 1e6), a

@@ -236,6 +236,7 @@ typedef struct {
     int al_direct_only; /* sim_pass.c: the direct solve or OVK_SINGULAR with al_refused set, never the iteration */
     int al_refused;    /* the last solve under al_direct_only found the kept rows too near a singular position */
     double al_pivot_min; /* the direct solve's least pivot spread (0: OVK_PASS_REGULAR; kkt_al.c, sim_pass.c) */
+    double al_spread;  /* the spread of S's squared pivots at the last direct attempt (0: none reached) */
     int *al_rows;  /* every equation (m), then its two bodies (2 m): the row set of ovk_project */
     int *piv;      /* nx: the row interchanges of the friction solves' LU (friction.c, friction_robust.c) */
     double *phit;  /* m: Phi_t of the drivers' equations (0 elsewhere), with Phi at d->f.t (joints.c) */

@@ -244,7 +244,7 @@ void ovk_al_solve(const ovk_model *M, ovk_data *d, const ovk_rowset *rs, const d
  * Only under redundancy "eliminate" (the AL's rows). */
 #define DIRECT_REFINE 2
 static int direct(const ovk_model *M, ovk_data *d, const ovk_rowset *kept) {
-    d->al_direct = 0;
+    d->al_direct = 0, d->al_spread = 0.0;
     if (!d->al_allow_direct) return 0;
     if (M->redundancy != OVK_ELIMINATE || ovk_kkt_solve(M, d)) {
         d->msg[0] = '\0'; /* a failed factor is no failure here: the iteration takes over */
@@ -255,6 +255,7 @@ static int direct(const ovk_model *M, ovk_data *d, const ovk_rowset *kept) {
         double u = d->S[(size_t)a * (d->sb.band + 1)];
         lo = u * u < lo ? u * u : lo, hi = u * u > hi ? u * u : hi;
     }
+    d->al_spread = hi > 0.0 ? lo / hi : 0.0;
     if (!(lo >= (d->al_pivot_min > 0.0 ? d->al_pivot_min : OVK_PASS_REGULAR) * hi)) return 0;
     double *x = slot(M, d, SLOT_X), *res = slot(M, d, SLOT_RES), *lam = slot(M, d, SLOT_LAMC), rmax = 0.0,
            scale = 0.0;

@@ -13,8 +13,10 @@
  *
  * What: the acceleration at a state y near the position is taken from states along the motion where
  * the direct solve is accurate, and interpolated back to y:
- *   g(s) = h'(Y(s)),   Y(s) = y with q shifted by s q'(y) and projected onto the constraints
- *                      (project.c, positions then velocities, at time t + s),
+ *   g(s) = h'(Y(s)),   Y(s) = P(y) with q shifted by s q' and projected onto the constraints
+ *                      (project.c, positions then velocities, at time t + s; P(y) is y projected
+ *                      so, and q' its coordinate rates: the nodes start off the constraints by
+ *                      their shift's curvature only),
  *   h'(y) := sum_k w_k g(s_k),  nodes s_k = +-a, +-2a, +-3a, +-4a, Lagrange weights at 0
  *                      w = 4/5, -2/5, 4/35, -1/70 (exact for polynomials of degree 7 in s),
  * with the smallest spacing a = PASS_SPACING_MIN PASS_GROW^k at which the direct solve accepts every
@@ -30,7 +32,10 @@
  * the constraints: every stage of a step near the position takes this form (sim.c: a step whose
  * stage refuses the direct solve is taken again so), and the step-end projection does the rest.
  *
- * Decided here, measured on the N-four-bar N = 2 over 20 s (docs/benchmarks.md): a fine ladder of
+ * Decided here, measured on the N-four-bar N = 2 over 20 s (docs/benchmarks.md): the nodes from
+ * P(y), not from y (from y, a stage state's own distance from the constraints entered each node's
+ * projection: dopri5 at tolerance 1e-12 spread from 1.2e-9 to 1.8e-8 m, from P(y) 6.3e-9 to
+ * 8.9e-9 m, and its nodes cost half as much); a fine ladder of
  * spacings (PASS_GROW = 2^(1/4); doubling changed y' in larger jumps between neighbouring states,
  * and the error at tolerance 1e-12 with them), 8 nodes (6 gave errors growing with the spacing as
  * a^6 at the spacings needed), OVK_PASS_REGULAR 2e-5 (5e-6 let the direct solve's error stop
@@ -95,11 +100,20 @@ static int too_near(const ovk_data *d, int status) {
  * s->pass_acc and s->pass_lam: doublings (four steps of PASS_GROW each) find the first accepted
  * one of them, then the three steps below it are tried in order. OVK_OK, or the status where none is accepted
  * up to PASS_SPACING_MAX (OVK_INVALID at rest: nothing moves the nodes). */
-static int spacing(ovk_sim *s, double t, const double *y) {
+static int spacing(ovk_sim *s, double t, const double *y, double spread0) {
     double speed = 0.0, a = PASS_SPACING_MIN;
     for (int k = 0; k < s->n; k++) speed = fmax(speed, fabs(s->pass_qd[k]));
     if (!(speed > 0.0)) return OVK_INVALID;
     int status = interpolate(s, t, y, a);
+    double spread1 = s->d->al_spread; /* at the node refused, a away from y */
+    if (status == OVK_SINGULAR && s->d->al_refused && spread0 > 0.0 && spread1 > 0.0) {
+        /* the doublings start near the spacing needed: sqrt(spread) grows about linearly with the
+         * distance from the singular instant, at the rate these two spreads give; half of what
+         * that rate says, so that the smallest accepted spacing is not passed over */
+        double rate = fabs(sqrt(spread1) - sqrt(spread0)) / a;
+        double want = rate > 0.0 ? 0.5 * (sqrt(OVK_PASS_REGULAR) + sqrt(spread0)) / rate : 0.0;
+        while (2.0 * a <= want && 4.0 * a <= PASS_SPACING_MAX) a *= 2.0;
+    }
     while (status && too_near(s->d, status) && a * 2.0 <= PASS_SPACING_MAX) {
         a *= 2.0;
         if ((status = interpolate(s, t, y, a))) continue;
@@ -126,7 +140,15 @@ int ovk_sim_passing(ovk_sim *s, double t, const double *y, double *ydot) {
         memcpy(s->pass_acc, s->pass_f + n, (size_t)nh * sizeof(double));
         memcpy(s->pass_lam, s->ev_lam, (size_t)s->m * sizeof(double));
     } else if (too_near(d, status)) {
-        status = spacing(s, t, y);
+        const double *base = y;
+        double spread0 = d->al_spread; /* at y's projection, where refused */
+        if (status == OVK_SINGULAR) { /* y's projection stands in pass_y: the nodes start from it (ydot as */
+            memcpy(ydot, s->pass_y, (size_t)s->ny * sizeof(double)); /* scratch), off the constraints by */
+            base = ydot;                                              /* their shift's curvature only */
+            ovk_frames_build(M, base, base + n, &d->f);
+            status = ovk_rates(M, d, base, base + n, s->pass_qd);
+        }
+        if (!status || too_near(d, status)) status = spacing(s, t, base, spread0);
     }
     d->al_allow_direct = allow, d->al_direct_only = 0;
     d->msg[0] = '\0';

@@ -377,17 +377,19 @@ static int pass_singular(ovk_sim *s, double r_before) {
  * solve: one rule for the step's start (step_checked) and its end (next_solve). */
 static int direct_allowed(const ovk_sim *s) { return s->ratio >= OVK_DIRECT_RATIO; }
 
-/* Formulation AL, at the end of an accepted step: the next step's acceleration solve (kkt_al.c's
- * direct one allowed or not: the watch's r at the step's end, OVK_DIRECT_RATIO; step_checked sets
- * the same again from the state, so a run taken from a saved state goes on alike). The explicit
- * pairs take the next step's first stage from f at the step's end (FSAL; project_step's
- * evaluation), made under this step's solve: where the solve changes, that f is evaluated again
- * under the next one, after this step's dense output was made under its own, so that every stage
- * of a step, the first too, has the same right-hand side. Without it each change (two per passage
- * of a singular position, where the stalled AL iteration and the direct solve differ along the
- * directions losing rank) failed the next step's error estimate until its size fell to about
- * 1e-9 s, from where it had to grow again (N-four-bar N = 2, dop853, tolerance 1e-10 to 1e-12:
- * 27-37% of the evaluations over the 20 s; docs/benchmarks.md, "Error against tolerance"). */
+/* Formulation AL, at the end of an accepted step: the next step's right-hand side (kkt_al.c's
+ * direct solve allowed or not, else sim_pass.c's interpolation: the watch's r at the step's end,
+ * OVK_DIRECT_RATIO; step_checked sets the same again from the state, so a run taken from a saved
+ * state goes on alike). The explicit pairs take the next step's first stage from f at the step's
+ * end (FSAL; project_step's evaluation), made under this step's form: where it changes, that f is
+ * evaluated again under the next one, after this step's dense output was made under its own, so
+ * that every stage of a step, the first too, has the same right-hand side. Without it each change
+ * (two per passage of a singular position, where the two forms differ by their round-off and
+ * interpolation errors; with the stalled AL iteration before sim_pass.c, along the directions
+ * losing rank) failed the next step's error estimate until its size fell to about 1e-9 s, from
+ * where it had to grow again (N-four-bar N = 2, dop853, tolerance 1e-10 to 1e-12: 27-37% of the
+ * evaluations over the 20 s, measured with the AL iteration; docs/benchmarks.md, "Error against
+ * tolerance"). */
 static int next_solve(ovk_sim *s) {
     ovk_rk *rk = &s->rk;
     int allow = direct_allowed(s), status;

@@ -22,11 +22,12 @@
  * its round-off matters (measured on six friction scenes: lam within about 1e-11 of the eliminated
  * form's, relative; with 1e6 it was 2e-10, and the round-off of y' showed as energy noise that kept
  * dopri5 at tolerance 1e-12 from converging); it only stalls near a singular position, where a
- * run interpolates instead (sim_pass.c) and the iteration is the fallback. The projections (project.c) take OVK_AL_ALPHA_PROJ = 1e6: they
- * solve for small corrections, whose round-off is relative to the correction; a larger alpha
- * corrects the directions that lose rank harder, which measured worse (N-four-bar N = 2 at
- * tolerance 1e-12: B0's x 5e-5 m off the 1-DOF motion after 4 s with 1e8, 3e-7 m with 1e6), a
- * smaller one (1e5) leaves the positions short of the constraints there.
+ * run interpolates instead (sim_pass.c) and the iteration is the fallback. The projections
+ * (project.c) take OVK_AL_ALPHA_PROJ = 1e6: they solve for small corrections, whose round-off is
+ * relative to the correction; a larger alpha corrects the directions that lose rank harder, which
+ * measured worse (N-four-bar N = 2 at tolerance 1e-12: B0's x 5e-5 m off the 1-DOF motion after
+ * 4 s with 1e8, 3e-7 m with 1e6), a smaller one (1e5) leaves the positions short of the
+ * constraints there.
  *
  * Structure: M is diagonal and each kept row touches at most two bodies (rbody), so the leading
  * matrix is banded in body order with half bandwidth (max |b_i - b_j| + 1) nh_b - 1 (ovk_al_half_band):

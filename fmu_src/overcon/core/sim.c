@@ -94,8 +94,8 @@ int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, cons
  * a step that may take the direct solve (d->al_allow_direct, from the watch's r at its start) takes
  * it at every stage or, where a stage is too near a singular position for it, is taken again with
  * every stage interpolated (sim_pass.c; in_step, inside ovk_rk_step: s->refused is set and
- * OVK_SINGULAR returned to step_checked); a step that may not interpolates at every stage; the AL iteration is the fallback
- * where the interpolation finds no nodes. Outside a step (dop853's dense stages, the step-end
+ * OVK_SINGULAR returned to step_checked); a step that may not interpolates at every stage; the AL
+ * iteration is the fallback where the interpolation finds no nodes. Outside a step (dop853's dense stages, the step-end
  * projection's new first stage) a refused state is interpolated at once: its step is taken already,
  * or the next one decides again (next_solve). Otherwise ovk_sim_solve. */
 static int sim_eval(ovk_sim *s, double t, const double *y, double *ydot, int *its, int in_step) {

@@ -59,20 +59,19 @@ static const double WEIGHT[PASS_NODES] = {0.8, 0.8, -0.4, -0.4, 4.0 / 35.0, 4.0 
 #define PASS_PROJ_MAX_ITER 60
 #define PASS_GROW 1.189207115002721 /* 2^(1/4): the ratio of neighbouring spacings (spacing) */
 
-/* The direct solve's h' (into f, ny) and multipliers (s->ev_lam) at the projection of y's positions
- * shifted by sk q' (qd), at time t + sk; its state in yn (ny). OVK_OK, OVK_SINGULAR with
- * d->al_refused where the direct solve is refused at threshold piv, or another failure. */
-static int node(ovk_sim *s, double t, const double *y, const double *qd, double sk, double piv, double *yn,
-                double *f) {
+/* The direct solve's y' (into s->pass_f) and multipliers (s->ev_lam) at the projection of y's
+ * positions shifted by sk s->pass_qd, at time t + sk; that state in s->pass_y. OVK_OK, OVK_SINGULAR
+ * with d->al_refused where the direct solve is refused at threshold piv, or another failure. */
+static int node(ovk_sim *s, double t, const double *y, double sk, double piv) {
     const ovk_model *M = s->M;
     ovk_data *d = s->d;
-    int n = M->nb * M->nq_b, its = 0, damped = 0, status;
-    double drift = 0.0;
+    int its = 0, damped = 0, status;
+    double drift = 0.0, *yn = s->pass_y;
     memcpy(yn, y, (size_t)s->ny * sizeof(double));
-    for (int k = 0; k < n; k++) yn[k] += sk * qd[k];
+    for (int k = 0; k < s->n; k++) yn[k] += sk * s->pass_qd[k];
     if ((status = ovk_project(M, d, t + sk, yn, PASS_PROJ_TOL, PASS_PROJ_MAX_ITER, &drift))) return status;
     d->al_pivot_min = piv;
-    status = ovk_evaluate(M, d, t + sk, yn, 0, NULL, f, s->ev_lam, s->ev_qf, &its, &damped);
+    status = ovk_evaluate(M, d, t + sk, yn, 0, NULL, s->pass_f, s->ev_lam, s->ev_qf, &its, &damped);
     d->al_pivot_min = 0.0;
     return status;
 }
@@ -84,7 +83,7 @@ static int interpolate(ovk_sim *s, double t, const double *y, double a) {
     memset(s->pass_acc, 0, (size_t)nh * sizeof(double));
     memset(s->pass_lam, 0, (size_t)m * sizeof(double));
     for (int j = 0; j < PASS_NODES; j++) {
-        if ((status = node(s, t, y, s->pass_qd, NODE[j] * a, OVK_PASS_REGULAR, s->pass_y, s->pass_f))) return status;
+        if ((status = node(s, t, y, NODE[j] * a, OVK_PASS_REGULAR))) return status;
         for (int k = 0; k < nh; k++) s->pass_acc[k] += WEIGHT[j] * s->pass_f[n + k];
         for (int k = 0; k < m; k++) s->pass_lam[k] += WEIGHT[j] * s->ev_lam[k];
     }
@@ -98,8 +97,9 @@ static int too_near(const ovk_data *d, int status) {
 
 /* The interpolation at the smallest accepted spacing of PASS_SPACING_MIN PASS_GROW^k, into
  * s->pass_acc and s->pass_lam: doublings (four steps of PASS_GROW each) find the first accepted
- * one of them, then the three steps below it are tried in order. OVK_OK, or the status where none is accepted
- * up to PASS_SPACING_MAX (OVK_INVALID at rest: nothing moves the nodes). */
+ * one of them, then the three steps below it are tried in order. OVK_OK, or the status where none
+ * is accepted up to PASS_SPACING_MAX (OVK_INVALID at rest: nothing moves the nodes). spread0: the
+ * spread at y's projection (0: unknown). */
 static int spacing(ovk_sim *s, double t, const double *y, double spread0) {
     double speed = 0.0, a = PASS_SPACING_MIN;
     for (int k = 0; k < s->n; k++) speed = fmax(speed, fabs(s->pass_qd[k]));
@@ -135,13 +135,13 @@ int ovk_sim_passing(ovk_sim *s, double t, const double *y, double *ydot) {
     if ((status = ovk_rates(M, d, y, y + n, s->pass_qd))) return status;
     int allow = d->al_allow_direct;
     d->al_allow_direct = 1, d->al_direct_only = 1;
-    status = node(s, t, y, s->pass_qd, 0.0, OVK_PASS_AT_STATE, s->pass_y, s->pass_f);
+    status = node(s, t, y, 0.0, OVK_PASS_AT_STATE);
     if (!status) {
         memcpy(s->pass_acc, s->pass_f + n, (size_t)nh * sizeof(double));
         memcpy(s->pass_lam, s->ev_lam, (size_t)s->m * sizeof(double));
     } else if (too_near(d, status)) {
         const double *base = y;
-        double spread0 = d->al_spread; /* at y's projection, where refused */
+        double spread0 = status == OVK_SINGULAR ? d->al_spread : 0.0; /* at y's projection, if it was reached */
         if (status == OVK_SINGULAR) { /* y's projection stands in pass_y: the nodes start from it (ydot as */
             memcpy(ydot, s->pass_y, (size_t)s->ny * sizeof(double)); /* scratch), off the constraints by */
             base = ydot;                                              /* their shift's curvature only */
@@ -159,6 +159,5 @@ int ovk_sim_passing(ovk_sim *s, double t, const double *y, double *ydot) {
     memcpy(s->ev_lam, s->pass_lam, (size_t)s->m * sizeof(double));
     for (int k = 0; k < n + nh; k++)
         if (!isfinite(ydot[k])) return OVK_NONFINITE;
-    s->passing++;
     return OVK_OK;
 }

@@ -68,3 +68,26 @@ def test_null_basis_spans_lapacks(k, n, rank):
 def test_bad_input_is_refused():
     with pytest.raises(ValueError, match="non-finite"):
         kernel.band_svd(np.array([[1.0, np.nan], [0.0, 1.0]]))
+
+
+@pytest.mark.parametrize("below,above", [(0.95, 1.05), (0.999, 1.001), (0.2, 50.0)])
+def test_null_basis_when_the_cut_falls_in_a_cluster(below, above):
+    """A rank cut between two close singular values (a mechanism near a flat position has a
+    cluster of small values drifting through the threshold): the basis must still be the p least
+    vectors' space, to the accuracy the gap allows (sin theta <= |E| / gap with |E| a few eps
+    sigma_1), and orthonormal. With one block of p vectors the iteration converged at the rate
+    (below / above)^2 per step and fell short of that at the first two cuts."""
+    rng = np.random.default_rng(11)
+    k, n, p, tol = 40, 44, 6, 1e-3
+    values = np.concatenate([np.geomspace(1.0, 20 * tol, k - p - 3), [4 * tol, 2 * tol, above * tol],
+                             [below * tol, 0.7 * tol, 0.5 * tol, 0.3 * tol, 0.1 * tol, 0.0]])
+    Uo = np.linalg.qr(rng.standard_normal((k, k)))[0]
+    Vo = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    B = Uo @ np.diag(values) @ Vo[:, :k].T  # B^T's null directions: Uo's last columns
+    sv, _ = assert_values(B)
+    assert int(np.sum(sv < tol)) == p
+    _, N = kernel.band_svd(B, p, 0.1 * tol)
+    assert np.allclose(N.T @ N, np.eye(p), atol=1e-12)
+    target = Uo[:, k - p:]
+    gap = (above - below) * tol
+    assert np.linalg.norm(N - target @ (target.T @ N), 2) <= 1e3 * EPS * max(k, n) / gap

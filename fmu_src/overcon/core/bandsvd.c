@@ -21,8 +21,11 @@
  *   4. The right singular vectors of the p smallest values (the dependencies among the rows) by
  *      subspace inverse iteration with R_mu, the triangular factor of [R; mu I] (R_mu^T R_mu =
  *      R^T R + mu^2 I: the same eigenvectors, and no division by R's zero pivots at an exact
- *      dependency), mu a tenth of the caller's threshold, until the subspace moves by at most
- *      NULL_TOL.
+ *      dependency), mu a tenth of the caller's threshold, on a block of b >= p vectors that reaches
+ *      every singular value up to NULL_GAP times the p-th, then a Rayleigh-Ritz step (Jacobi on the
+ *      b x b projection) that picks the p least. The block makes the convergence independent of the
+ *      gap at p: a rank cut inside a cluster of small values (a mechanism near a flat position)
+ *      takes the same few iterations as a clear one (block_size).
  * Fixed order of every sum and rotation: the results do not depend on the CPU. */
 #include <math.h>
 #include <stdlib.h>
@@ -32,8 +35,8 @@
 
 #define EPS 2.220446049250313e-16
 #define BISECT_STEPS 80   /* halvings of [0, bound]: past the double's resolution of any value */
-#define NULL_ITER 60      /* inverse iterations at most */
-#define NULL_TOL 1e-13    /* the subspace's move (Frobenius norm of the part outside the last one) */
+#define NULL_GAP 30.0    /* the block reaches the singular values up to 30 times the p-th (block_size) */
+#define JACOBI_SWEEPS 60  /* a bound never reached: cyclic Jacobi converges quadratically */
 
 /* Doubles for k rows of length n: A (max(n, k) x k), R_mu (k x k), the bidiagonal, the basis and
  * its last iterate (2 k^2), vectors; the ints (order, windows) ride in doubles at the end. */
@@ -237,16 +240,49 @@ static void orthonormal(double *Z, int k, int p) {
     }
 }
 
-int ovk_bsv_null(ovk_bsv *f, int p, double mu, double *N) {
+/* H (b x b, symmetric, row-major) to diagonal by cyclic Jacobi rotations in a fixed order, each
+ * accumulated into V (b x b, row-major; V := V G): H = V diag V^T. A pair is left alone once
+ * |h_ij| <= eps sqrt(h_ii h_jj) (H positive definite here: its eigenvalues are sigma^2 + mu^2). */
+static void jacobi(double *H, double *V, int b) {
+    for (int sweep = 0; sweep < JACOBI_SWEEPS; sweep++) {
+        int rotated = 0;
+        for (int i = 0; i < b; i++)
+            for (int j = i + 1; j < b; j++) {
+                double hij = H[(size_t)i * b + j], hii = H[(size_t)i * b + i], hjj = H[(size_t)j * b + j];
+                if (hij == 0.0 || fabs(hij) <= EPS * sqrt(fabs(hii * hjj))) continue;
+                rotated = 1;
+                double theta = (hjj - hii) / (2.0 * hij), t;
+                if (fabs(theta) > 1e150)
+                    t = 0.5 / theta;
+                else
+                    t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
+                double c = 1.0 / sqrt(t * t + 1.0), s = t * c;
+                for (int r = 0; r < b; r++) {
+                    if (r == i || r == j) continue;
+                    double hri = H[(size_t)r * b + i], hrj = H[(size_t)r * b + j];
+                    H[(size_t)r * b + i] = H[(size_t)i * b + r] = c * hri - s * hrj;
+                    H[(size_t)r * b + j] = H[(size_t)j * b + r] = s * hri + c * hrj;
+                }
+                H[(size_t)i * b + i] = hii - t * hij;
+                H[(size_t)j * b + j] = hjj + t * hij;
+                H[(size_t)i * b + j] = H[(size_t)j * b + i] = 0.0;
+                for (int r = 0; r < b; r++) {
+                    double vri = V[(size_t)r * b + i], vrj = V[(size_t)r * b + j];
+                    V[(size_t)r * b + i] = c * vri - s * vrj;
+                    V[(size_t)r * b + j] = s * vri + c * vrj;
+                }
+            }
+        if (!rotated) return;
+    }
+}
+
+/* R_mu into U (k x k, row-major, upper band w): the factor of [R; mu I], R from A's upper
+ * triangle, each row of mu I rotated in; t: k doubles of scratch. */
+static void shifted_factor(const ovk_bsv *f, double mu, double *U, double *t) {
     int k = f->k, rows = f->rows, w = f->w;
-    if (!p || !k) return 0;
-    double *U = f->A + (size_t)rows * k, *Z = f->basis, *Zold = Z + (size_t)k * p, *z = f->v; /* z: scratch k */
-    if (!(mu > 0.0)) mu = EPS * f->bound + 1e-300;
-    /* R_mu: the factor of [R; mu I] (R from A's upper triangle, band w), each row of mu I rotated in */
     memset(U, 0, (size_t)k * k * sizeof(double));
     for (int j = 0; j < k; j++)
         for (int i = j - w > 0 ? j - w : 0; i <= j; i++) U[(size_t)i * k + j] = f->A[(size_t)j * rows + i];
-    double *t = Zold; /* the row rotated in, k doubles (Zold is free until the iteration) */
     for (int i = 0; i < k; i++) {
         memset(t, 0, (size_t)k * sizeof(double));
         t[i] = mu;
@@ -263,44 +299,98 @@ int ovk_bsv_null(ovk_bsv *f, int p, double mu, double *N) {
             t[l] = 0.0;
         }
     }
-    for (int c = 0; c < p; c++)
-        for (int i = 0; i < k; i++) Z[(size_t)c * k + i] = 1.5 + cos(1.0 + 2.399963229728653 * (i + 31 * c));
-    orthonormal(Z, k, p);
-    int it = 0;
-    for (; it < NULL_ITER; it++) {
-        memcpy(Zold, Z, (size_t)k * p * sizeof(double));
-        for (int c = 0; c < p; c++) { /* Z[:, c] := (U^T U)^-1 Z[:, c] */
-            double *x = Z + (size_t)c * k;
-            for (int i = 0; i < k; i++) { /* U^T y = x */
-                double s = x[i];
-                for (int l = i - w > 0 ? i - w : 0; l < i; l++) s -= U[(size_t)l * k + i] * x[l];
-                x[i] = s / U[(size_t)i * k + i];
-            }
-            for (int i = k - 1; i >= 0; i--) { /* U z = y */
-                double s = x[i];
-                int end = i + w < k - 1 ? i + w : k - 1;
-                for (int l = i + 1; l <= end; l++) s -= U[(size_t)i * k + l] * x[l];
-                x[i] = s / U[(size_t)i * k + i];
-            }
-        }
-        orthonormal(Z, k, p);
-        double moved = 0.0; /* |Z - Zold Zold^T Z|_F */
-        for (int c = 0; c < p; c++) {
-            const double *x = Z + (size_t)c * k;
-            memcpy(z, x, (size_t)k * sizeof(double));
-            for (int b = 0; b < p; b++) {
-                const double *y = Zold + (size_t)b * k;
-                double dot = 0.0;
-                for (int i = 0; i < k; i++) dot += y[i] * x[i];
-                for (int i = 0; i < k; i++) z[i] -= dot * y[i];
-            }
-            for (int i = 0; i < k; i++) moved += z[i] * z[i];
-        }
-        if (sqrt(moved) <= NULL_TOL) break;
+}
+
+/* x := (U^T U)^-1 x, U (k x k) upper triangular with band w. */
+static void normal_solve(const double *U, int k, int w, double *x) {
+    for (int i = 0; i < k; i++) { /* U^T y = x */
+        double s = x[i];
+        for (int l = i - w > 0 ? i - w : 0; l < i; l++) s -= U[(size_t)l * k + i] * x[l];
+        x[i] = s / U[(size_t)i * k + i];
     }
+    for (int i = k - 1; i >= 0; i--) { /* U z = y */
+        double s = x[i];
+        int end = i + w < k - 1 ? i + w : k - 1;
+        for (int l = i + 1; l <= end; l++) s -= U[(size_t)i * k + l] * x[l];
+        x[i] = s / U[(size_t)i * k + i];
+    }
+}
+
+/* The block's size b and its inverse iterations: b the count of singular values below NULL_GAP
+ * sqrt(lambda_p) (lambda_i = sigma_i^2 + mu^2, the eigenvalues R_mu^T R_mu has, sigma_p the largest
+ * of the p smallest), at least p; each iteration takes the part of the block outside the p
+ * smallest vectors' space down by rho = lambda_p / lambda_(b+1) <= 1 / NULL_GAP^2 whatever the
+ * gap at p itself (Saad, Numerical Methods for Large Eigenvalue Problems, Thm 5.2), so the
+ * iterations that take it to eps, and one more, are enough. */
+static int block_size(const ovk_bsv *f, int p, double mu, int *iterations) {
+    int k = f->k;
+    double sp = ovk_bsv_value(f, k - p), lp = sp * sp + mu * mu;
+    int b = ovk_bsv_below(f, NULL_GAP * sqrt(lp));
+    b = b < p ? p : b > k ? k : b;
+    double rho = 0.0; /* b = k: the block is the whole space, one iteration and the Ritz step are exact */
+    if (b < k) {
+        double sn = ovk_bsv_value(f, k - b - 1);
+        rho = lp / (sn * sn + mu * mu);
+        rho = rho < 1.0 / (NULL_GAP * NULL_GAP) ? rho : 1.0 / (NULL_GAP * NULL_GAP);
+    }
+    *iterations = rho > 0.0 ? (int)ceil(log(EPS) / log(rho)) + 1 : 1;
+    return b;
+}
+
+/* N (k x p, row-major, the rows' own order): an orthonormal basis of the right singular vectors of
+ * the p smallest values (step 4 above). f's values (d, e) stay; its A and scratch do not. */
+void ovk_bsv_null(ovk_bsv *f, int p, double mu, double *N) {
+    int k = f->k, w = f->w, iterations;
+    if (!p || !k) return;
+    if (!(mu > 0.0)) mu = EPS * f->bound + 1e-300;
+    int b = block_size(f, p, mu, &iterations);
+    /* regions: U (R_mu) in the bidiagonal's scratch after A; Z (k x b) and T = U Z (k x b) in the
+     * basis's 2 k^2; H and the rows of Z V in A (free once U is built); V over U after T */
+    double *U = f->A + (size_t)f->rows * k, *Z = f->basis, *T = Z + (size_t)k * b, *H = f->A, *V = U, *z = f->v;
+    shifted_factor(f, mu, U, T);
+    for (int c = 0; c < b; c++)
+        for (int i = 0; i < k; i++) Z[(size_t)c * k + i] = 1.5 + cos(1.0 + 2.399963229728653 * (i + 31 * c));
+    orthonormal(Z, k, b);
+    for (int it = 0; it < iterations; it++) {
+        for (int c = 0; c < b; c++) normal_solve(U, k, w, Z + (size_t)c * k);
+        orthonormal(Z, k, b);
+    }
+    /* Rayleigh-Ritz: H = (U Z)^T (U Z) = V diag V^T, the Ritz vectors Z V, the p of least value */
+    for (int c = 0; c < b; c++)
+        for (int i = 0; i < k; i++) {
+            double s = 0.0;
+            int end = i + w < k - 1 ? i + w : k - 1;
+            for (int l = i; l <= end; l++) s += U[(size_t)i * k + l] * Z[(size_t)c * k + l];
+            T[(size_t)c * k + i] = s;
+        }
+    for (int c = 0; c < b; c++)
+        for (int d = c; d < b; d++) {
+            double s = 0.0;
+            for (int i = 0; i < k; i++) s += T[(size_t)c * k + i] * T[(size_t)d * k + i];
+            H[(size_t)c * b + d] = H[(size_t)d * b + c] = s;
+        }
+    memset(V, 0, (size_t)b * b * sizeof(double));
+    for (int c = 0; c < b; c++) V[(size_t)c * b + c] = 1.0;
+    jacobi(H, V, b);
+    for (int i = 0; i < k; i++) { /* row i of Z := row i of Z V */
+        for (int c = 0; c < b; c++) {
+            double s = 0.0;
+            for (int d = 0; d < b; d++) s += Z[(size_t)d * k + i] * V[(size_t)d * b + c];
+            z[c] = s;
+        }
+        for (int c = 0; c < b; c++) Z[(size_t)c * k + i] = z[c];
+    }
+    int *pick = (int *)T; /* the p columns of least Ritz value, in a fixed order: T is free */
+    for (int c = 0; c < b; c++) pick[c] = c;
+    for (int c = 0; c < p; c++)
+        for (int d = c + 1; d < b; d++)
+            if (H[(size_t)pick[d] * b + pick[d]] < H[(size_t)pick[c] * b + pick[c]]) {
+                int x = pick[c];
+                pick[c] = pick[d];
+                pick[d] = x;
+            }
     for (int c = 0; c < p; c++) /* into the rows' own order: N (k x p, row-major) */
-        for (int i = 0; i < k; i++) N[(size_t)f->order[i] * p + c] = Z[(size_t)c * k + i];
-    return it < NULL_ITER ? 0 : 1;
+        for (int i = 0; i < k; i++) N[(size_t)f->order[i] * p + c] = Z[(size_t)pick[c] * k + i];
 }
 
 /* For the tests (tests/test_bandsvd.py): the k singular values of the rows B (k x n, row-major),

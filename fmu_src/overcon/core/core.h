@@ -481,7 +481,7 @@ OVK_HIDDEN size_t ovk_bsv_doubles(int k, int n);
 OVK_HIDDEN int ovk_bsv_factor(const double *B, int k, int n, double *work, ovk_bsv *f);
 OVK_HIDDEN int ovk_bsv_below(const ovk_bsv *f, double x);
 OVK_HIDDEN double ovk_bsv_value(const ovk_bsv *f, int i);
-OVK_HIDDEN int ovk_bsv_null(ovk_bsv *f, int p, double mu, double *N);
+OVK_HIDDEN void ovk_bsv_null(ovk_bsv *f, int p, double mu, double *N);
 OVK_EXPORT int ovk_band_svd(const double *B, int k, int n, int p, double mu, double *sv, double *N);
 
 /* failures: the status, with its message written into d->msg (printf format) */

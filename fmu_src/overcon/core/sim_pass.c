@@ -41,6 +41,14 @@
  * a^6 at the spacings needed), OVK_PASS_REGULAR 2e-5 (5e-6 let the direct solve's error stop
  * dop853 at 1e-12; 5e-5 and 1e-4 give the same errors, at up to 1.2 times the cost on N = 40),
  * OVK_PASS_AT_STATE 1e-4 (the ladder everywhere costs N = 40 at 1e-7 about 40% more).
+ * A node's projection gets PASS_PROJ_MAX_ITER = 6 corrections: from the nodes' start Gauss-Newton
+ * takes 2 where the rows are regular (N = 40 at 1e-7: 487 of the 885 node projections that converged), and converges
+ * linearly, up to 57 corrections and past 60, only next to the position, where a wider spacing is
+ * what is needed anyway. Where y's own projection or the first node's failed, the spreads that
+ * start the doublings are taken at the unprojected positions (probe): without them the ladder
+ * climbed from PASS_SPACING_MIN in 10 to 14 refused attempts at most passages. Each of the two
+ * took about a seventh off N = 40's run and left the errors within their spread over nearby
+ * tolerances (docs/benchmarks.md).
  *
  * Where no spacing up to PASS_SPACING_MAX is accepted (a mechanism at rest at a singular position,
  * or one that stays singular), or a node's projection or solve fails otherwise, the caller falls
@@ -56,7 +64,7 @@ static const double WEIGHT[PASS_NODES] = {0.8, 0.8, -0.4, -0.4, 4.0 / 35.0, 4.0 
 #define PASS_SPACING_MIN 1e-5 /* s: the first spacing tried */
 #define PASS_SPACING_MAX 0.1  /* s: the last (nodes at most 0.3 s along the motion) */
 #define PASS_PROJ_TOL 1e-14   /* m or rad: max |Phi| of a node's projection */
-#define PASS_PROJ_MAX_ITER 60
+#define PASS_PROJ_MAX_ITER 6   /* corrections: a node that needs more is too near the position */
 #define PASS_GROW 1.189207115002721 /* 2^(1/4): the ratio of neighbouring spacings (spacing) */
 
 /* The direct solve's y' (into s->pass_f) and multipliers (s->ev_lam) at the projection of y's
@@ -90,6 +98,21 @@ static int interpolate(ovk_sim *s, double t, const double *y, double a) {
     return OVK_OK;
 }
 
+/* The spread of S's squared pivots at y's positions shifted by sk s->pass_qd, not projected: the
+ * hint of spacing where a projection failed (near the constraints the spread is its projection's to
+ * first order); 0 where the solve failed otherwise. */
+static double probe(ovk_sim *s, double t, const double *y, double sk) {
+    ovk_data *d = s->d;
+    int its = 0, damped = 0;
+    double *yn = s->pass_y;
+    memcpy(yn, y, (size_t)s->ny * sizeof(double));
+    for (int k = 0; k < s->n; k++) yn[k] += sk * s->pass_qd[k];
+    d->al_pivot_min = OVK_PASS_REGULAR;
+    int status = ovk_evaluate(s->M, d, t + sk, yn, 0, NULL, s->pass_f, s->ev_lam, s->ev_qf, &its, &damped);
+    d->al_pivot_min = 0.0;
+    return !status || (status == OVK_SINGULAR && d->al_refused) ? d->al_spread : 0.0;
+}
+
 /* Whether a node's failure only means "too near the singular position there": a wider spacing may do. */
 static int too_near(const ovk_data *d, int status) {
     return (status == OVK_SINGULAR && d->al_refused) || status == OVK_PROJECTION;
@@ -104,9 +127,13 @@ static int spacing(ovk_sim *s, double t, const double *y, double spread0) {
     double speed = 0.0, a = PASS_SPACING_MIN;
     for (int k = 0; k < s->n; k++) speed = fmax(speed, fabs(s->pass_qd[k]));
     if (!(speed > 0.0)) return OVK_INVALID;
-    int status = interpolate(s, t, y, a);
+    int status = interpolate(s, t, y, a), near = too_near(s->d, status);
     double spread1 = s->d->al_spread; /* at the node refused, a away from y */
-    if (status == OVK_SINGULAR && s->d->al_refused && spread0 > 0.0 && spread1 > 0.0) {
+    if (status == OVK_PROJECTION) { /* the spreads unprojected where the projections failed */
+        spread0 = spread0 > 0.0 ? spread0 : probe(s, t, y, 0.0);
+        spread1 = probe(s, t, y, a);
+    }
+    if (near && spread0 > 0.0 && spread1 > 0.0) {
         /* the doublings start near the spacing needed: sqrt(spread) grows about linearly with the
          * distance from the singular instant, at the rate these two spreads give; half of what
          * that rate says, so that the smallest accepted spacing is not passed over */

@@ -41,14 +41,14 @@
  * a^6 at the spacings needed), OVK_PASS_REGULAR 2e-5 (5e-6 let the direct solve's error stop
  * dop853 at 1e-12; 5e-5 and 1e-4 give the same errors, at up to 1.2 times the cost on N = 40),
  * OVK_PASS_AT_STATE 1e-4 (the ladder everywhere costs N = 40 at 1e-7 about 40% more).
- * A node's projection gets PASS_PROJ_MAX_ITER = 6 corrections: from the nodes' start Gauss-Newton
- * takes 2 where the rows are regular (N = 40 at 1e-7: 487 of the 885 node projections that converged), and converges
- * linearly, up to 57 corrections and past 60, only next to the position, where a wider spacing is
- * what is needed anyway. Where y's own projection or the first node's failed, the spreads that
- * start the doublings are taken at the unprojected positions (probe): without them the ladder
- * climbed from PASS_SPACING_MIN in 10 to 14 refused attempts at most passages. Each of the two
- * took about a seventh off N = 40's run and left the errors within their spread over nearby
- * tolerances (docs/benchmarks.md).
+ * Where y's own projection or the first node's failed, the spreads that start the doublings are
+ * taken at the unprojected positions (probe): without them the ladder climbed from
+ * PASS_SPACING_MIN in 10 to 14 refused attempts at most passages of the N-four-bar N = 40, each a
+ * projection that failed after PASS_PROJ_MAX_ITER corrections. The probes only start the ladder
+ * nearer the spacing it accepts: the runs are the same to the bit where the acceptance grows with
+ * the spacing. A lower PASS_PROJ_MAX_ITER (6: a node whose Gauss-Newton does not converge
+ * quadratically refused as too near) saved as much again on N = 40, but it moved the accepted
+ * spacings, and N = 10 under dop853 at 1e-11 went from 7.8e-9 to 2.5e-7 m (docs/benchmarks.md).
  *
  * Where no spacing up to PASS_SPACING_MAX is accepted (a mechanism at rest at a singular position,
  * or one that stays singular), or a node's projection or solve fails otherwise, the caller falls
@@ -64,7 +64,7 @@ static const double WEIGHT[PASS_NODES] = {0.8, 0.8, -0.4, -0.4, 4.0 / 35.0, 4.0 
 #define PASS_SPACING_MIN 1e-5 /* s: the first spacing tried */
 #define PASS_SPACING_MAX 0.1  /* s: the last (nodes at most 0.3 s along the motion) */
 #define PASS_PROJ_TOL 1e-14   /* m or rad: max |Phi| of a node's projection */
-#define PASS_PROJ_MAX_ITER 6   /* corrections: a node that needs more is too near the position */
+#define PASS_PROJ_MAX_ITER 60
 #define PASS_GROW 1.189207115002721 /* 2^(1/4): the ratio of neighbouring spacings (spacing) */
 
 /* The direct solve's y' (into s->pass_f) and multipliers (s->ev_lam) at the projection of y's

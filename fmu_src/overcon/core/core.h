@@ -381,6 +381,8 @@ typedef struct {
     double *qload;                 /* energy: the constant loads' Q (nh) */
     double *pass_y, *pass_f, *pass_qd, *pass_acc, *pass_lam; /* sim_pass.c scratch: ny, ny, n, nh, m */
     int stepping, refused;         /* sim.c: inside ovk_rk_step; a stage of that step refused the direct solve */
+    double *memo_y, *memo_f, *memo_lam, memo_t; /* sim.c: the last interpolated y' at (memo_t, memo_y) and */
+    int memo;                      /* its multipliers (ny, ny, m); memo: they hold, within one step_checked */
     double work_t[2], work_w[2][2], work_p[2][2]; /* energy ledger: (t, work, powers) at the last two step ends */
     double *mem;                   /* the one allocation behind the arrays above and the integrator's */
     int status;

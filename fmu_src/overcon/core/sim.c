@@ -95,9 +95,12 @@ int ovk_sim_solve(ovk_sim *s, double t, const double *y, const ovk_hist *h, cons
  * it at every stage or, where a stage is too near a singular position for it, is taken again with
  * every stage interpolated (sim_pass.c; in_step, inside ovk_rk_step: s->refused is set and
  * OVK_SINGULAR returned to step_checked); a step that may not interpolates at every stage; the AL
- * iteration is the fallback where the interpolation finds no nodes. Outside a step (dop853's dense stages, the step-end
- * projection's new first stage) a refused state is interpolated at once: its step is taken already,
- * or the next one decides again (next_solve). Otherwise ovk_sim_solve. */
+ * iteration is the fallback where the interpolation finds no nodes. Outside a step (dop853's dense
+ * stages, the step-end projection's new first stage) a refused state is interpolated at once: its
+ * step is taken already, or the next one decides again (next_solve). Otherwise ovk_sim_solve. The
+ * interpolation depends on (t, y) and the model alone, so the last one is kept (s->memo) and taken
+ * again for the same bits within one step (step_checked): next_solve evaluates the step's end again
+ * when the form changes, and a refused direct solve there meant sim_pass.c's whole search again. */
 static int sim_eval(ovk_sim *s, double t, const double *y, double *ydot, int *its, int in_step) {
     ovk_data *d = s->d;
     const double *lam = s->has_lam ? s->lam : NULL;
@@ -110,8 +113,18 @@ static int sim_eval(ovk_sim *s, double t, const double *y, double *ydot, int *it
         if (!(status == OVK_SINGULAR && d->al_refused)) return status;
         if (in_step) return s->refused = 1, status;
     }
+    if (s->memo && t == s->memo_t && !memcmp(y, s->memo_y, (size_t)s->ny * sizeof(double))) {
+        memcpy(ydot, s->memo_f, (size_t)s->ny * sizeof(double)); /* the same state interpolated again (memo) */
+        memcpy(s->ev_lam, s->memo_lam, (size_t)s->m * sizeof(double));
+        s->robust = 1;
+        return OVK_OK;
+    }
     if (!ovk_sim_passing(s, t, y, ydot)) {
         s->robust = 1; /* the friction forces of the last node: not a warm start for the next solve */
+        s->memo = 1, s->memo_t = t;
+        memcpy(s->memo_y, y, (size_t)s->ny * sizeof(double));
+        memcpy(s->memo_f, ydot, (size_t)s->ny * sizeof(double));
+        memcpy(s->memo_lam, s->ev_lam, (size_t)s->m * sizeof(double));
         return OVK_OK;
     }
     int allow = d->al_allow_direct;
@@ -176,6 +189,9 @@ static void layout(ovk_sim *s) {
     s->pass_qd = p; p += (size_t)s->n;
     s->pass_acc = p; p += nh;
     s->pass_lam = p; p += m;
+    s->memo_y = p; p += ny;
+    s->memo_f = p; p += ny;
+    s->memo_lam = p; p += m;
     s->rk.y = p; /* the integrator's block starts here: ovk_rk_start lays it out */
 }
 
@@ -237,7 +253,7 @@ ovk_sim *ovk_sim_new(const ovk_model *M, const ovk_sim_opts *o, double t0, const
     s->ncols = M->ncols;
     size_t m = (size_t)s->m, nc = (size_t)s->ncols, ny = (size_t)s->ny, nh = (size_t)s->nh;
     size_t need = 5 * m + 6 * nc + 4 * ny + (m > nc ? m : nc) + 2 * m + (size_t)s->n + nh +
-                  (2 * ny + (size_t)s->n + nh + m) + ovk_rk_doubles(o->rk.method, s->ny);
+                  (2 * ny + (size_t)s->n + nh + m) + (2 * ny + m) + ovk_rk_doubles(o->rk.method, s->ny);
     s->mem = calloc(need, sizeof(double));
     if (!s->mem) {
         s->status = OVK_NOMEM;
@@ -402,7 +418,7 @@ static int next_solve(ovk_sim *s) {
 }
 
 /* One accepted step and its checks (the body of Simulation.advance's loop). */
-static int step_checked(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
+static int step_body(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
     ovk_rk *rk = &s->rk;
     double t_before = rk->t;
     int status = check_budget(s, started, n0, call_steps, call_wall);
@@ -448,6 +464,16 @@ static int step_checked(ovk_sim *s, double started, long long n0, long long call
     if (s->degrading && (status = ovk_sim_degraded(s))) return stopped(s, status, "integration stopped", rk->t);
     if ((status = next_solve(s))) return stopped(s, status, "integration stopped", rk->t);
     return OVK_OK;
+}
+
+/* step_body with sim_eval's memo held within it only: between two steps the host may set inputs or
+ * parameters, restore a state or start again, and only within one step nothing but (t, y) changes
+ * what the interpolation gives (the kept set chosen again clears it too, watch.c). */
+static int step_checked(ovk_sim *s, double started, long long n0, long long call_steps, double call_wall) {
+    s->memo = 0;
+    int status = step_body(s, started, n0, call_steps, call_wall);
+    s->memo = 0;
+    return status;
 }
 
 int ovk_sim_step(ovk_sim *s) {

@@ -519,6 +519,7 @@ static int choose_again(ovk_sim *s, const double *y_at, double t_event, const ch
  * chosen again there and the run goes on from (t_from, y_from), the start of the step (OVK_OK),
  * or, when the choice is the elimination in use, it stops with the expiry. */
 int ovk_sim_expired(ovk_sim *s, double t_from, const double *y_from) {
+    s->memo = 0; /* another kept set: sim_eval's memo no longer holds */
     char names[OVK_MSG], valid[OVK_MSG], gone[OVK_MSG], why[96], scratch[OVK_MSG];
     double t_event = s->expired_t;
     memcpy(s->yout, y_from, (size_t)s->ny * sizeof(double)); /* the restart's state, apart */
@@ -545,6 +546,7 @@ int ovk_sim_expired(ovk_sim *s, double t_from, const double *y_from) {
  * does not depend on it, the equations are chosen again at the step's end and the run goes on
  * from there; else it keeps them (the run stops if they expire). The status. */
 int ovk_sim_degraded(ovk_sim *s) {
+    s->memo = 0; /* another kept set: sim_eval's memo no longer holds */
     const ovk_rk *rk = &s->rk;
     char names[OVK_MSG], why[96], rs[24], scratch[OVK_MSG];
     int count = nonunique_friction(s, rk->y, names, sizeof names, scratch);

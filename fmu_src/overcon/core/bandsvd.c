@@ -333,7 +333,10 @@ static int block_size(const ovk_bsv *f, int p, double mu, int *iterations) {
         rho = lp / (sn * sn + mu * mu);
         rho = rho < 1.0 / (NULL_GAP * NULL_GAP) ? rho : 1.0 / (NULL_GAP * NULL_GAP);
     }
-    *iterations = rho > 0.0 ? (int)ceil(log(EPS) / log(rho)) + 1 : 1;
+    int it = 1; /* the least with rho^it <= eps (rho <= 1 / NULL_GAP^2: a few), then one more; by products,
+                 * not log (whose libm version would raise the FMU binaries' glibc floor, libm_pins.h) */
+    for (double reach = rho; reach > EPS; reach *= rho) it++;
+    *iterations = rho > 0.0 ? it + 1 : 1;
     return b;
 }
 

@@ -3,10 +3,10 @@ over the benchmark's 20 s with ``[solver] singular = "pass"`` (the augmented Lag
 projections of core/kkt_al.c and core/project.c): its error, its wall time and the cost of an
 evaluation as N grows.
 
-    python benchmarks/nfourbar.py [N ...] [--stop-time T] [--tolerance TOL] [--c-max N]
-                                  [--plot docs/nfourbar_cost.png]
-                                            (default: 2 10 40 100, 20 s, tolerance 1e-9, C runs up
-                                            to N = 10)
+    python benchmarks/nfourbar.py [N ...] [--stop-time T] [--tolerance TOL] [--method M ...]
+                                  [--c-max N] [--plot docs/nfourbar_cost.png]
+                                            (default: 2 10 40 100, 20 s, tolerance 1e-9, dop853 and
+                                            dopri5, C runs up to N = 10)
     python benchmarks/nfourbar.py --watch [N ...] [--stop-time T] [--scenes]
                                             the C runs only, with their watch's share
     python benchmarks/nfourbar.py --q0-cost [N ...] [--repeat R]
@@ -17,7 +17,9 @@ evaluation as N grows.
                                             N = 2, dop853 and dopri5, 1e-6 ... 1e-12, the scene's
                                             max_step 0.05 s)
 
-For each N the scene (tolerance 1e-9 or --tolerance, dopri5) is run in process (one BLAS thread) through
+For each N and method (``--method``, default dop853 then dopri5: one line each, so that the two
+stand side by side in one run; the scene's own method is dopri5, the default of every scene, and
+benchmarks/peers.py runs dop853) the scene (tolerance 1e-9 or --tolerance) is run in process (one BLAS thread) through
 ``overcon.simulate.Simulation`` (``overcon simulate``'s path: the core's run, core/sim.c, behind
 the Python interface) and, up to ``--c-max``, as a bare ``kernel.Run`` (the same run without the
 Python wrapper: its wall time, and its states compared with the Simulation's), printed side by side:
@@ -192,23 +194,24 @@ def q0_table(ns: list[int], repeat: int) -> None:
                   flush=True)
 
 
-def measure(n: int, tmp: Path, stop: float, c_max: int, tolerance: float = 1e-9) -> dict:
-    _, path = _generator().write(n, tmp / f"n{n}", stop_time=stop, tolerance=tolerance, singular="pass")
+def measure(n: int, tmp: Path, stop: float, c_max: int, tolerance: float = 1e-9, method: str = "dop853") -> dict:
+    _, path = _generator().write(n, tmp / f"n{n}_{method}", stop_time=stop, tolerance=tolerance, singular="pass")
     spec = scene.as_scene(scene.load(path))
     model = compile_checked(spec)
+    solver = dataclasses.replace(spec.solver, method=method)
     times = np.round(np.arange(1, int(round(stop / 0.01)) + 1) * 0.01, 10)
     ref = reference_x(n, times)
-    py = in_process(model, spec.solver, times)
-    c = c_run(model, spec.solver, times) if n <= c_max else None
+    py = in_process(model, solver, times)
+    c = c_run(model, solver, times) if n <= c_max else None
     tight = None
     if n <= 10:
-        tight = in_process(model, dataclasses.replace(spec.solver, tolerance=1e-12), times)
-    return {"N": n, "coords": model.nh, "eqs": model.m, "py": py, "c": c,
+        tight = in_process(model, dataclasses.replace(solver, tolerance=1e-12), times)
+    return {"N": n, "method": method, "coords": model.nh, "eqs": model.m, "py": py, "c": c,
             "err_py": float(np.max(np.abs(py["x"] - ref))),
             "err_c": None if c is None else float(np.max(np.abs(c["x"] - ref))),
             "dy_c": None if c is None else float(max(np.max(np.abs(a - b)) for a, b in zip(py["states"], c["states"]))),
             "err_tight": None if tight is None else float(np.max(np.abs(tight["x"] - ref))),
-            "us_eval": eval_cost(model, spec.solver, py["states"]),
+            "us_eval": eval_cost(model, solver, py["states"]),
             "us_elim_q0": q0_cost(n, tmp, "stop"), "us_al_q0": q0_cost(n, tmp, "pass")}
 
 
@@ -243,12 +246,15 @@ def plot(rows: list[dict], path: Path, stop: float, tolerance: float) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    ns = np.array([r["N"] for r in rows], float)
-    core = np.array([r["us_eval"] for r in rows])
-    run = np.array([r["py"]["wall"] / r["py"]["evaluations"] * 1e6 for r in rows])
+    first = [r for r in rows if r["method"] == rows[0]["method"]]
+    ns = np.array([r["N"] for r in first], float)
+    core = np.array([r["us_eval"] for r in first])
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.loglog(ns, core, "o-", label="core evaluation (AL, banded)")
-    ax.loglog(ns, run, "s-", label="in-process run: wall / evaluations (with the watch)")
+    for method, marker in zip(dict.fromkeys(r["method"] for r in rows), "sD^v"):
+        mine = [r for r in rows if r["method"] == method]
+        ax.loglog([r["N"] for r in mine], [r["py"]["wall"] / r["py"]["evaluations"] * 1e6 for r in mine],
+                  marker + "-", label=f"in-process run, {method}: wall / evaluations (with the watch)")
     for slope, style in ((1, ":"), (3, "--")):
         ax.loglog(ns, core[0] * (ns / ns[0]) ** slope, "k" + style, lw=0.8, label=f"slope {slope}")
     ax.set_xlabel("N (loops)")
@@ -267,6 +273,8 @@ def main(argv=None) -> int:
     ap.add_argument("--stop-time", type=float, default=20.0)
     ap.add_argument("--tolerance", type=float, default=1e-9,
                     help="the runs' tolerance (default 1e-9; the 1e-12 column stays at 1e-12)")
+    ap.add_argument("--method", nargs="+", default=["dop853", "dopri5"],
+                    help="the main table's integrators, one line each (default dop853 dopri5)")
     ap.add_argument("--c-max", type=int, default=10,
                     help="largest N also run as a bare kernel.Run beside the Simulation (default 10)")
     ap.add_argument("--plot", type=Path)
@@ -291,14 +299,14 @@ def main(argv=None) -> int:
     if args.watch:
         watch_table(args.n, args.stop_time, args.scenes, args.tolerance)
         return 0
-    print(f"{'N':>4} {'coords':>6} {'eqs':>5} {'sing':>4} {'steps':>6} {'evals':>6} {'drift':>8} {'err py m':>9} "
+    print(f"{'N':>4} {'method':>7} {'coords':>6} {'eqs':>5} {'sing':>4} {'steps':>6} {'evals':>6} {'drift':>8} {'err py m':>9} "
           f"{'err C m':>9} {'|dy| C':>8} {'err 1e-12':>9} {'py s':>7} {'watch s':>7} {'along s':>7} {'C s':>7} "
           f"{'C watch':>7} "
           f"{'us/eval':>8} {'py us/ev':>8} {'elim q0':>8} {'AL q0':>8}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for n in args.n:
-            r = measure(n, Path(tmp), args.stop_time, args.c_max, args.tolerance)
+        for n, method in ((n, method) for n in args.n for method in args.method):
+            r = measure(n, Path(tmp), args.stop_time, args.c_max, args.tolerance, method)
             rows.append(r)
             py, c = r["py"], r["c"]
             tight = "" if r["err_tight"] is None else f"{r['err_tight']:.2e}"
@@ -306,7 +314,7 @@ def main(argv=None) -> int:
             dy_c = "" if c is None else f"{r['dy_c']:.1e}"
             c_wall = "" if c is None else f"{c['wall']:.2f}"
             c_watch = "" if c is None else f"{c['watch']:.2f}"
-            print(f"{n:>4} {r['coords']:>6} {r['eqs']:>5} {py['singular']:>4} {py['steps']:>6} {py['evaluations']:>6} "
+            print(f"{n:>4} {method:>7} {r['coords']:>6} {r['eqs']:>5} {py['singular']:>4} {py['steps']:>6} {py['evaluations']:>6} "
                   f"{py['drift']:>8.1e} {r['err_py']:>9.2e} {err_c:>9} {dy_c:>8} {tight:>9} {py['wall']:>7.2f} "
                   f"{py['watch']:>7.2f} {py['along']:>7.2f} {c_wall:>7} {c_watch:>7} {r['us_eval']:>8.1f} "
                   f"{py['wall'] / py['evaluations'] * 1e6:>8.1f} {r['us_elim_q0']:>8.1f} {r['us_al_q0']:>8.1f}",

@@ -687,8 +687,9 @@ def jacobian(model, q: np.ndarray) -> np.ndarray:
 def band_svd(B: np.ndarray, p: int = 0, mu: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
     """The singular values of the rows B (k, n), largest first, by the core's banded route
     (core/bandsvd.c: windowed QR, band-to-bidiagonal, bisection), and with p > 0 an orthonormal
-    basis (k, p) of the right singular vectors of the p smallest (inverse iteration with the
-    factor of [R; mu I]). Dimensionless: B as given."""
+    basis (k, p) of the right singular vectors of the p smallest (subspace inverse iteration with
+    the factor of [R; mu I] on a block reaching 30 times the p-th value, then a Rayleigh-Ritz
+    step). Dimensionless: B as given."""
     lib, reason = library()
     if lib is None:
         raise KernelUnavailable(reason, "the compiled core")

@@ -3,7 +3,7 @@ over the benchmark's 20 s with ``[solver] singular = "pass"`` (the augmented Lag
 projections of core/kkt_al.c and core/project.c): its error, its wall time and the cost of an
 evaluation as N grows.
 
-    python benchmarks/nfourbar.py [N ...] [--stop-time T] [--tolerance TOL] [--method M ...]
+    python benchmarks/nfourbar.py [N ...] [--stop-time T] [--tolerance TOL] [--methods M ...]
                                   [--c-max N] [--plot docs/nfourbar_cost.png]
                                             (default: 2 10 40 100, 20 s, tolerance 1e-9, dop853 and
                                             dopri5, C runs up to N = 10)
@@ -17,7 +17,7 @@ evaluation as N grows.
                                             N = 2, dop853 and dopri5, 1e-6 ... 1e-12, the scene's
                                             max_step 0.05 s)
 
-For each N and method (``--method``, default dop853 then dopri5: one line each, so that the two
+For each N and method (``--methods``, default dop853 then dopri5: one line each, so that the two
 stand side by side in one run; the scene's own method is dopri5, the default of every scene, and
 benchmarks/peers.py runs dop853) the scene (tolerance 1e-9 or --tolerance) is run in process (one BLAS thread) through
 ``overcon.simulate.Simulation`` (``overcon simulate``'s path: the core's run, core/sim.c, behind
@@ -273,8 +273,6 @@ def main(argv=None) -> int:
     ap.add_argument("--stop-time", type=float, default=20.0)
     ap.add_argument("--tolerance", type=float, default=1e-9,
                     help="the runs' tolerance (default 1e-9; the 1e-12 column stays at 1e-12)")
-    ap.add_argument("--method", nargs="+", default=["dop853", "dopri5"],
-                    help="the main table's integrators, one line each (default dop853 dopri5)")
     ap.add_argument("--c-max", type=int, default=10,
                     help="largest N also run as a bare kernel.Run beside the Simulation (default 10)")
     ap.add_argument("--plot", type=Path)
@@ -285,7 +283,8 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=300, help="with --q0-cost: evaluations per round (default 300)")
     ap.add_argument("--error-table", action="store_true",
                     help="B0's error against the tolerance (default N = 2; --methods, --tolerances)")
-    ap.add_argument("--methods", nargs="+", default=["dop853", "dopri5"])
+    ap.add_argument("--methods", nargs="+", default=["dop853", "dopri5"],
+                    help="the integrators, one line each in the main table and the error table (default dop853 dopri5)")
     ap.add_argument("--tolerances", type=float, nargs="+", default=[1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12])
     ap.add_argument("--max-step", type=float, help="with --error-table: the solver's max_step (s; default the scene's)")
     args = ap.parse_args(argv)
@@ -305,7 +304,7 @@ def main(argv=None) -> int:
           f"{'us/eval':>8} {'py us/ev':>8} {'elim q0':>8} {'AL q0':>8}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for n, method in ((n, method) for n in args.n for method in args.method):
+        for n, method in ((n, method) for n in args.n for method in args.methods):
             r = measure(n, Path(tmp), args.stop_time, args.c_max, args.tolerance, method)
             rows.append(r)
             py, c = r["py"], r["c"]

@@ -67,21 +67,32 @@ static const double WEIGHT[PASS_NODES] = {0.8, 0.8, -0.4, -0.4, 4.0 / 35.0, 4.0 
 #define PASS_PROJ_MAX_ITER 60
 #define PASS_GROW 1.189207115002721 /* 2^(1/4): the ratio of neighbouring spacings (spacing) */
 
-/* The direct solve's y' (into s->pass_f) and multipliers (s->ev_lam) at the projection of y's
- * positions shifted by sk s->pass_qd, at time t + sk; that state in s->pass_y. OVK_OK, OVK_SINGULAR
- * with d->al_refused where the direct solve is refused at threshold piv, or another failure. */
-static int node(ovk_sim *s, double t, const double *y, double sk, double piv) {
-    const ovk_model *M = s->M;
-    ovk_data *d = s->d;
-    int its = 0, damped = 0, status;
-    double drift = 0.0, *yn = s->pass_y;
+/* y's positions shifted by sk s->pass_qd, into s->pass_y (returned). */
+static double *shifted(ovk_sim *s, const double *y, double sk) {
+    double *yn = s->pass_y;
     memcpy(yn, y, (size_t)s->ny * sizeof(double));
     for (int k = 0; k < s->n; k++) yn[k] += sk * s->pass_qd[k];
-    if ((status = ovk_project(M, d, t + sk, yn, PASS_PROJ_TOL, PASS_PROJ_MAX_ITER, &drift))) return status;
+    return yn;
+}
+
+/* The direct solve at (t, s->pass_y), refused where S's squared pivots spread by more than 1 / piv:
+ * y' into s->pass_f, multipliers into s->ev_lam, the spread into d->al_spread. OVK_OK, OVK_SINGULAR
+ * with d->al_refused where refused, or another failure. */
+static int direct_at(ovk_sim *s, double t, double piv) {
+    ovk_data *d = s->d;
+    int its = 0, damped = 0;
     d->al_pivot_min = piv;
-    status = ovk_evaluate(M, d, t + sk, yn, 0, NULL, s->pass_f, s->ev_lam, s->ev_qf, &its, &damped);
+    int status = ovk_evaluate(s->M, d, t, s->pass_y, 0, NULL, s->pass_f, s->ev_lam, s->ev_qf, &its, &damped);
     d->al_pivot_min = 0.0;
     return status;
+}
+
+/* The direct solve (direct_at) at the projection of y's positions shifted by sk s->pass_qd, at
+ * time t + sk; that state in s->pass_y. A failed projection's status otherwise. */
+static int node(ovk_sim *s, double t, const double *y, double sk, double piv) {
+    double drift = 0.0;
+    int status = ovk_project(s->M, s->d, t + sk, shifted(s, y, sk), PASS_PROJ_TOL, PASS_PROJ_MAX_ITER, &drift);
+    return status ? status : direct_at(s, t + sk, piv);
 }
 
 /* The interpolation at spacing a into s->pass_acc (nh) and s->pass_lam (m); OVK_OK or the first
@@ -102,15 +113,9 @@ static int interpolate(ovk_sim *s, double t, const double *y, double a) {
  * hint of spacing where a projection failed (near the constraints the spread is its projection's to
  * first order); 0 where the solve failed otherwise. */
 static double probe(ovk_sim *s, double t, const double *y, double sk) {
-    ovk_data *d = s->d;
-    int its = 0, damped = 0;
-    double *yn = s->pass_y;
-    memcpy(yn, y, (size_t)s->ny * sizeof(double));
-    for (int k = 0; k < s->n; k++) yn[k] += sk * s->pass_qd[k];
-    d->al_pivot_min = OVK_PASS_REGULAR;
-    int status = ovk_evaluate(s->M, d, t + sk, yn, 0, NULL, s->pass_f, s->ev_lam, s->ev_qf, &its, &damped);
-    d->al_pivot_min = 0.0;
-    return !status || (status == OVK_SINGULAR && d->al_refused) ? d->al_spread : 0.0;
+    shifted(s, y, sk);
+    int status = direct_at(s, t + sk, OVK_PASS_REGULAR);
+    return !status || (status == OVK_SINGULAR && s->d->al_refused) ? s->d->al_spread : 0.0;
 }
 
 /* Whether a node's failure only means "too near the singular position there": a wider spacing may do. */
